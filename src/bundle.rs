@@ -1,0 +1,418 @@
+//! The job bundle: `part.dmdjob/` = `job.json` (the manifest) + `masks/*.png`.
+//!
+//! This module is the only thing the slicer and the executor share. The writer is
+//! atomic: everything goes into a hidden sibling directory that is renamed over the
+//! destination only when complete, so a reader sees the old bundle or the new one,
+//! never a mix, and a failed or interrupted run leaves nothing behind.
+
+use crate::error::{Error, Result};
+use crate::profile::Profile;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// Value of the manifest's `format` field.
+pub const FORMAT: &str = "dmdsl-job";
+/// Manifest version written by this build; readers accept this version only.
+pub const VERSION: u32 = 1;
+/// File name of the manifest inside a bundle.
+pub const MANIFEST: &str = "job.json";
+
+/// The manifest, `job.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Manifest version, [`VERSION`].
+    pub version: u32,
+    /// The program that wrote the bundle.
+    pub generator: Generator,
+    /// The part the job was compiled from.
+    pub source: Source,
+    /// Job-level settings (what the command line chose on top of the profile).
+    pub settings: Settings,
+    /// The fully resolved machine profile.
+    pub machine: Profile,
+    /// Totals over all layers.
+    pub totals: Totals,
+    /// Warnings raised while compiling the job (mesh defects, repairs, plan notes).
+    pub warnings: Vec<String>,
+    /// One record per layer, bottom first.
+    pub layers: Vec<Layer>,
+}
+
+/// Who wrote the bundle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Generator {
+    /// Program name, "dmdsl".
+    pub name: String,
+    /// Program version.
+    pub version: String,
+}
+
+impl Generator {
+    /// This build of dmdsl.
+    pub fn current() -> Self {
+        Generator {
+            name: "dmdsl".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+        }
+    }
+}
+
+/// The source model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Source {
+    /// File name of the model (no directories, so bundles are reproducible across paths).
+    pub file: String,
+    /// SHA-256 of the model file, hex.
+    pub sha256: String,
+    /// Number of triangles loaded.
+    pub triangles: u64,
+    /// Axis-aligned bounding box in the file's coordinates, mm: [min, max].
+    pub bbox_mm: [[f64; 3]; 2],
+    /// How the part was placed on the build plane.
+    pub placement: Placement,
+    /// Mesh validation report.
+    pub mesh: crate::mesh::MeshReport,
+}
+
+/// Placement of the part in build-plane coordinates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    /// "center" (XY box centred on the field, lowest point at z = 0) or "keep" (file coordinates).
+    pub mode: String,
+    /// Translation added to file coordinates, mm.
+    pub translate_mm: [f64; 3],
+}
+
+/// Job-level settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// Layer thickness, mm.
+    pub layer_height_mm: f64,
+    /// Binary (thresholded) masks instead of 8-bit coverage.
+    pub binary: bool,
+    /// Light compensation mode: "off", "zone" or "pixel".
+    pub compensation: String,
+}
+
+/// Totals over the job.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Totals {
+    /// Number of layers.
+    pub layers: u64,
+    /// Part height as printed, mm.
+    pub height_mm: f64,
+    /// Estimated print time from the planned steps, s.
+    pub print_time_s: f64,
+    /// Sum of layer exposures, s.
+    pub exposure_s: f64,
+    /// Cured resin volume, ml (sum of area × thickness).
+    pub resin_volume_ml: f64,
+}
+
+/// How a layer is printed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Stop, recoat/peel, expose while stationary.
+    Layered,
+    /// Exposed while the stage sweeps at constant speed.
+    Continuous,
+}
+
+/// One layer record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Layer {
+    /// 0-based layer index.
+    pub index: u64,
+    /// Height of the layer's top above the build plane, mm: (index + 1) × thickness for a
+    /// uniform job. This is also the stage coordinate at which the layer is exposed.
+    pub z_mm: f64,
+    /// Height of the cutting plane that produced the section, mm.
+    pub slice_z_mm: f64,
+    /// Layer thickness, mm.
+    pub thickness_mm: f64,
+    /// Printing mode.
+    pub mode: Mode,
+    /// Exposure the layer receives, s.
+    pub exposure_s: f64,
+    /// Area of the section, mm² (from anti-aliased coverage).
+    pub area_mm2: f64,
+    /// Mask image(s) of the layer, one per projector.
+    pub masks: Vec<MaskRef>,
+    /// Ordered machine steps that take the stage from where the previous layer left it to
+    /// this layer's exposure and expose it. The executor replays them literally.
+    pub steps: Vec<Step>,
+    /// Estimated duration of `steps`, s.
+    pub time_s: f64,
+}
+
+/// A mask file of a layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MaskRef {
+    /// Path relative to the bundle, e.g. "masks/00000.png".
+    pub file: String,
+    /// SHA-256 of the PNG file, hex.
+    pub sha256: String,
+    /// Index of the projector that shows it.
+    pub projector: u32,
+}
+
+/// One machine step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum Step {
+    /// Move the stage (light off) to `to_mm` with a trapezoidal profile.
+    Move {
+        /// Target stage coordinate, mm.
+        to_mm: f64,
+        /// Cruise speed, mm/s.
+        speed_mm_s: f64,
+        /// Acceleration, mm/s².
+        accel_mm_s2: f64,
+    },
+    /// Do nothing for `s` seconds (light off).
+    Wait {
+        /// Duration, s.
+        s: f64,
+    },
+    /// Show the layer's mask with the stage stationary for `s` seconds.
+    Expose {
+        /// Light-on duration, s.
+        s: f64,
+    },
+    /// Show the layer's mask while the stage moves at constant speed to `to_mm`.
+    Sweep {
+        /// Target stage coordinate, mm.
+        to_mm: f64,
+        /// Constant speed, mm/s.
+        speed_mm_s: f64,
+    },
+}
+
+/// SHA-256 of `bytes` as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    let d = Sha256::digest(bytes);
+    let mut s = String::with_capacity(64);
+    for b in d {
+        use std::fmt::Write;
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}
+
+impl Manifest {
+    /// Reads and checks `job.json` of the bundle at `dir`.
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        if !dir.is_dir() {
+            return Err(Error::Bundle {
+                path: dir.into(),
+                msg: "not a job bundle directory".into(),
+            });
+        }
+        let path = dir.join(MANIFEST);
+        let text = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let v: serde_json::Value = serde_json::from_slice(&text).map_err(|e| Error::Bundle {
+            path: path.clone(),
+            msg: format!("invalid JSON: {e}"),
+        })?;
+        match v.get("format").and_then(|f| f.as_str()) {
+            Some(FORMAT) => {}
+            other => {
+                return Err(Error::Bundle {
+                    path,
+                    msg: format!("format is {other:?}, expected \"{FORMAT}\""),
+                })
+            }
+        }
+        match v.get("version").and_then(|f| f.as_u64()) {
+            Some(n) if n == VERSION as u64 => {}
+            other => {
+                return Err(Error::Bundle {
+                    path,
+                    msg: format!(
+                        "unsupported version {other:?}; this dmdsl reads version {VERSION}"
+                    ),
+                })
+            }
+        }
+        serde_json::from_value(v).map_err(|e| Error::Bundle {
+            path,
+            msg: format!("invalid manifest: {e}"),
+        })
+    }
+}
+
+/// True if `dir` looks like a dmdsl bundle (has a `job.json` whose format is ours).
+pub fn is_bundle(dir: &Path) -> bool {
+    let Ok(text) = std::fs::read(dir.join(MANIFEST)) else {
+        return false;
+    };
+    serde_json::from_slice::<serde_json::Value>(&text)
+        .ok()
+        .and_then(|v| {
+            v.get("format")
+                .and_then(|f| f.as_str())
+                .map(|f| f == FORMAT)
+        })
+        .unwrap_or(false)
+}
+
+/// Writes a bundle atomically.
+///
+/// Files go into a hidden staging directory next to the destination; [`BundleWriter::finish`]
+/// writes the manifest last and renames the staging directory into place. Dropping the
+/// writer without finishing removes the staging directory.
+#[derive(Debug)]
+pub struct BundleWriter {
+    dest: PathBuf,
+    staging: PathBuf,
+    done: bool,
+}
+
+impl BundleWriter {
+    /// Prepares to write a bundle at `dest`. Fails if `dest` exists and is not a dmdsl bundle.
+    pub fn create(dest: &Path) -> Result<BundleWriter> {
+        if dest.exists() && !is_bundle(dest) {
+            return Err(Error::Bundle {
+                path: dest.into(),
+                msg: "exists and is not a dmdsl bundle; refusing to replace it".into(),
+            });
+        }
+        let name = dest
+            .file_name()
+            .ok_or_else(|| Error::Bundle {
+                path: dest.into(),
+                msg: "output path has no file name".into(),
+            })?
+            .to_string_lossy()
+            .into_owned();
+        let parent = match dest.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        if !parent.is_dir() {
+            return Err(Error::Bundle {
+                path: dest.into(),
+                msg: format!("parent directory {} does not exist", parent.display()),
+            });
+        }
+        let staging = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+        if staging.exists() {
+            let _ = std::fs::remove_dir_all(&staging);
+        }
+        std::fs::create_dir(&staging).map_err(|e| Error::io(&staging, e))?;
+        let w = BundleWriter {
+            dest: dest.to_path_buf(),
+            staging,
+            done: false,
+        };
+        w.create_dir("masks")?;
+        Ok(w)
+    }
+
+    /// The staging directory (where files are written until [`finish`](Self::finish)).
+    pub fn staging_dir(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Creates a subdirectory (relative path) in the staging directory.
+    pub fn create_dir(&self, rel: &str) -> Result<()> {
+        let p = self.staging.join(rel);
+        std::fs::create_dir_all(&p).map_err(|e| Error::io(&p, e))
+    }
+
+    /// Writes a file (relative path) into the staging directory.
+    pub fn write_file(&self, rel: &str, bytes: &[u8]) -> Result<()> {
+        let p = self.staging.join(rel);
+        std::fs::write(&p, bytes).map_err(|e| Error::io(&p, e))
+    }
+
+    /// Writes the manifest and moves the bundle into place, replacing an older bundle.
+    pub fn finish(mut self, manifest: &Manifest) -> Result<PathBuf> {
+        let mut json = serde_json::to_vec_pretty(manifest).expect("manifest serializes");
+        json.push(b'\n');
+        self.write_file(MANIFEST, &json)?;
+        let dest = self.dest.clone();
+        if dest.exists() {
+            // Re-check: it must still be a bundle we may replace.
+            if !is_bundle(&dest) {
+                return Err(Error::Bundle {
+                    path: dest,
+                    msg: "exists and is not a dmdsl bundle; refusing to replace it".into(),
+                });
+            }
+            let old = self.staging.with_file_name(format!(
+                "{}.old",
+                self.staging.file_name().unwrap().to_string_lossy()
+            ));
+            std::fs::rename(&dest, &old).map_err(|e| Error::io(&dest, e))?;
+            if let Err(e) = std::fs::rename(&self.staging, &dest) {
+                let _ = std::fs::rename(&old, &dest);
+                return Err(Error::io(&dest, e));
+            }
+            let _ = std::fs::remove_dir_all(&old);
+        } else {
+            std::fs::rename(&self.staging, &dest).map_err(|e| Error::io(&dest, e))?;
+        }
+        self.done = true;
+        Ok(dest)
+    }
+}
+
+impl Drop for BundleWriter {
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = std::fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_of_empty() {
+        assert_eq!(
+            sha256_hex(b""),
+            "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
+        );
+    }
+
+    #[test]
+    fn step_json_shape() {
+        let s = Step::Move {
+            to_mm: 1.5,
+            speed_mm_s: 2.0,
+            accel_mm_s2: 50.0,
+        };
+        assert_eq!(
+            serde_json::to_string(&s).unwrap(),
+            r#"{"kind":"move","to_mm":1.5,"speed_mm_s":2.0,"accel_mm_s2":50.0}"#
+        );
+        let e: Step = serde_json::from_str(r#"{"kind":"expose","s":8.0}"#).unwrap();
+        assert_eq!(e, Step::Expose { s: 8.0 });
+    }
+
+    #[test]
+    fn writer_refuses_foreign_dir_and_cleans_up() {
+        let tmp = std::env::temp_dir().join(format!("dmdsl-bw-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        std::fs::create_dir_all(tmp.join("foreign")).unwrap();
+        assert!(BundleWriter::create(&tmp.join("foreign")).is_err());
+        {
+            let w = BundleWriter::create(&tmp.join("a.dmdjob")).unwrap();
+            w.write_file("masks/x.png", b"123").unwrap();
+            // dropped without finish
+        }
+        let names: Vec<_> = std::fs::read_dir(&tmp)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("foreign")]);
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+}

@@ -1,0 +1,89 @@
+//! Typed errors of the library.
+//!
+//! Every error renders as one line that names the file (or profile, or bundle)
+//! and what is wrong with it. The binary maps them to exit codes with
+//! [`Error::exit_code`].
+
+use std::path::PathBuf;
+
+/// Result alias used throughout the library.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong in `dmdsl`.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An operating-system error while reading or writing `path`.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory involved.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An input file (mesh, CSV table, calibration) is malformed.
+    #[error("{}: {msg}", path.display())]
+    Input {
+        /// The offending file.
+        path: PathBuf,
+        /// What is wrong, e.g. "line 7: expected 4 columns, found 3".
+        msg: String,
+    },
+    /// A machine profile is invalid (unknown key, missing value, bad number).
+    #[error("profile {origin}: {msg}")]
+    Profile {
+        /// Profile name or file the problem comes from.
+        origin: String,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The part or the settings cannot produce a job (e.g. part larger than the field).
+    #[error("{}: {msg}", path.display())]
+    Job {
+        /// The part being sliced.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// A job bundle cannot be read or is not a dmdsl bundle.
+    #[error("{}: {msg}", path.display())]
+    Bundle {
+        /// The bundle (or a file inside it).
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// Bad command-line usage not caught by the argument parser.
+    #[error("{0}")]
+    Usage(String),
+    /// The user interrupted the command (Ctrl-C); nothing was written.
+    #[error("interrupted; nothing was written")]
+    Interrupted,
+}
+
+impl Error {
+    /// Helper building an [`Error::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// Helper building an [`Error::Input`].
+    pub fn input(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::Input {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+
+    /// Process exit code for this error: 130 for an interrupt, 2 for everything else
+    /// (usage and input errors; see README "Exit codes").
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Interrupted => 130,
+            _ => 2,
+        }
+    }
+}

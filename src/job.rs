@@ -1,0 +1,388 @@
+//! The slicing pipeline: load → place → slice → (per layer, in parallel) raster → encode →
+//! hash → write; then plan and write the manifest, atomically.
+//!
+//! Layers are processed in blocks of consecutive layers on rayon's pool; a worker keeps
+//! only its current mask (and the previous one), so memory does not grow with the
+//! number of layers. Every output byte depends only on the input and the settings, never
+//! on the thread count or timing.
+
+use crate::bundle::{
+    self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
+};
+use crate::error::{Error, Result};
+use crate::mesh::{self, Mesh, MeshReport};
+use crate::plan::{self, LayerInfo};
+use crate::profile::Profile;
+use crate::raster::{projector_view, Mask, Rasterizer, Scratch};
+use crate::slice::{self, Section};
+use crate::units::Positive;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Where the part goes on the build plane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlacementMode {
+    /// XY bounding box centred on the field, lowest point at z = 0.
+    Center,
+    /// File coordinates are build-plane coordinates.
+    Keep,
+}
+
+/// Options of [`slice_to_bundle`].
+pub struct SliceOptions<'a> {
+    /// The model file.
+    pub input: PathBuf,
+    /// Bundle path; `None`: `<input stem>.dmdjob` in the current directory.
+    pub output: Option<PathBuf>,
+    /// Machine profile (already resolved).
+    pub profile: Profile,
+    /// Overrides the profile's layer height.
+    pub layer_height_mm: Option<Positive>,
+    /// Overrides the profile's binary setting.
+    pub binary: Option<bool>,
+    /// Placement rule.
+    pub placement: PlacementMode,
+    /// Called with (layers done, layers total) as layers are written.
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
+    /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
+    pub cancel: Option<&'a AtomicBool>,
+}
+
+/// Wall time of each stage, s.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    /// Reading, welding and validating the mesh.
+    pub load_s: f64,
+    /// Cutting and chaining contours.
+    pub slice_s: f64,
+    /// Rasterizing, encoding, hashing and writing masks.
+    pub masks_s: f64,
+    /// Planning and writing the manifest.
+    pub finish_s: f64,
+    /// Everything.
+    pub total_s: f64,
+}
+
+/// What [`slice_to_bundle`] produced.
+#[derive(Debug, Clone, Serialize)]
+pub struct SliceSummary {
+    /// The bundle written.
+    pub bundle: PathBuf,
+    /// Number of layers.
+    pub layers: usize,
+    /// Warnings (mesh defects, repairs).
+    pub warnings: Vec<String>,
+    /// Mesh validation report.
+    pub mesh: MeshReport,
+    /// Totals as in the manifest.
+    pub totals: Totals,
+    /// Stage timings.
+    pub timings: Timings,
+}
+
+/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
+pub fn default_output(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "part".into());
+    PathBuf::from(format!("{stem}.dmdjob"))
+}
+
+/// Computes the translation that places `bbox` on the field, or an error if it cannot fit.
+pub fn placement(
+    path: &Path,
+    bbox: [[f64; 3]; 2],
+    field_w: f64,
+    field_h: f64,
+    mode: PlacementMode,
+) -> Result<[f64; 3]> {
+    let [lo, hi] = bbox;
+    let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+    if size[0] > field_w || size[1] > field_h {
+        return Err(Error::Job {
+            path: path.into(),
+            msg: format!(
+                "part is {:.3} x {:.3} mm but the build field is {:.3} x {:.3} mm",
+                size[0], size[1], field_w, field_h
+            ),
+        });
+    }
+    let t = match mode {
+        PlacementMode::Center => [
+            field_w / 2.0 - (lo[0] + hi[0]) / 2.0,
+            field_h / 2.0 - (lo[1] + hi[1]) / 2.0,
+            -lo[2],
+        ],
+        PlacementMode::Keep => {
+            let eps = 1e-9;
+            if lo[0] < -eps || lo[1] < -eps || hi[0] > field_w + eps || hi[1] > field_h + eps {
+                return Err(Error::Job {
+                    path: path.into(),
+                    msg: format!(
+                        "with --keep-position the part spans x {:.3}..{:.3}, y {:.3}..{:.3} mm, outside the build field 0..{:.3} x 0..{:.3} mm",
+                        lo[0], hi[0], lo[1], hi[1], field_w, field_h
+                    ),
+                });
+            }
+            if lo[2] < -eps {
+                return Err(Error::Job {
+                    path: path.into(),
+                    msg: format!(
+                        "with --keep-position the part reaches below the build plane (z min {:.3} mm)",
+                        lo[2]
+                    ),
+                });
+            }
+            [0.0, 0.0, 0.0]
+        }
+    };
+    Ok(t)
+}
+
+/// Encodes a mask as an 8-bit grayscale PNG (fast deflate; deterministic).
+pub fn encode_png(m: &Mask) -> Vec<u8> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::ImageEncoder;
+    let mut out = Vec::with_capacity(16 * 1024);
+    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
+        .write_image(&m.data, m.width, m.height, image::ExtendedColorType::L8)
+        .expect("encoding to memory cannot fail");
+    out
+}
+
+struct LayerOut {
+    area_mm2: f64,
+    masks: Vec<MaskRef>,
+}
+
+/// Slices a model into a job bundle. See the module docs for the pipeline.
+pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
+    let t0 = Instant::now();
+    let mut profile = opts.profile.clone();
+    if let Some(h) = opts.layer_height_mm {
+        profile.slicing.layer_height_mm = h;
+    }
+    if let Some(b) = opts.binary {
+        profile.slicing.binary = b;
+    }
+    let h = profile.slicing.layer_height_mm.get();
+    let field = profile.field();
+    let path = opts.input.as_path();
+
+    let bytes = std::fs::read(path).map_err(|e| {
+        if path.is_dir() {
+            Error::input(path, "is a directory, not a mesh file")
+        } else {
+            Error::io(path, e)
+        }
+    })?;
+    let sha = bundle::sha256_hex(&bytes);
+    let mut mesh: Mesh = mesh::load_bytes(path, &bytes)?;
+    drop(bytes);
+    let bbox = mesh.bbox();
+    let mode = opts.placement;
+    let t = placement(path, bbox, field.width_mm(), field.height_mm(), mode)?;
+    mesh.translate(t);
+    let z_top = bbox[1][2] + t[2];
+    let n = slice::layer_count(z_top, h);
+    if n == 0 {
+        return Err(Error::Job {
+            path: path.into(),
+            msg: format!(
+                "part is {:.4} mm tall, less than one layer ({h} mm): nothing to print",
+                bbox[1][2] - bbox[0][2]
+            ),
+        });
+    }
+    let mut warnings = mesh.report.warnings();
+    let t_load = t0.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let (sections, stats) = slice::slice(&mesh, h, n);
+    if stats.repaired_layers > 0 {
+        warnings.push(format!(
+            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
+            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
+        ));
+    }
+    let t_slice = t1.elapsed().as_secs_f64();
+
+    let t2 = Instant::now();
+    let out_path = opts.output.clone().unwrap_or_else(|| default_output(path));
+    let writer = BundleWriter::create(&out_path)?;
+    let tiled = profile.projector.len() > 1;
+    if tiled {
+        for k in 0..profile.projector.len() {
+            writer.create_dir(&format!("masks/p{k}"))?;
+        }
+    }
+    let raster = Rasterizer::new(field);
+    let done = AtomicUsize::new(0);
+    let px_area = field.pixel_mm * field.pixel_mm;
+    let binary = profile.slicing.binary;
+    let block = 4usize;
+    let blocks: Vec<Result<Vec<LayerOut>>> = (0..n.div_ceil(block))
+        .into_par_iter()
+        .map_init(Scratch::default, |scratch, b| {
+            let mut outs = Vec::with_capacity(block);
+            for i in b * block..((b + 1) * block).min(n) {
+                if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                    return Err(Error::Interrupted);
+                }
+                outs.push(layer_masks(
+                    &writer,
+                    &profile,
+                    &raster,
+                    scratch,
+                    &sections[i],
+                    i,
+                    binary,
+                    tiled,
+                    px_area,
+                )?);
+                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                if let Some(p) = opts.progress {
+                    p(d, n);
+                }
+            }
+            Ok(outs)
+        })
+        .collect();
+    let mut outs = Vec::with_capacity(n);
+    for b in blocks {
+        outs.extend(b?);
+    }
+    drop(sections);
+    let t_masks = t2.elapsed().as_secs_f64();
+
+    let t3 = Instant::now();
+    let infos: Vec<LayerInfo> = outs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| LayerInfo {
+            index: i,
+            z_mm: (i + 1) as f64 * h,
+            thickness_mm: h,
+            area_mm2: o.area_mm2,
+        })
+        .collect();
+    let plans = plan::plan(&profile, &infos);
+    let mut layers = Vec::with_capacity(n);
+    let mut totals = Totals {
+        layers: n as u64,
+        height_mm: n as f64 * h,
+        print_time_s: 0.0,
+        exposure_s: 0.0,
+        resin_volume_ml: 0.0,
+    };
+    for ((info, o), p) in infos.iter().zip(outs).zip(plans) {
+        totals.print_time_s += p.time_s;
+        totals.exposure_s += p.exposure_s;
+        totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
+        layers.push(Layer {
+            index: info.index as u64,
+            z_mm: info.z_mm,
+            slice_z_mm: slice::plane_z(info.index, h),
+            thickness_mm: h,
+            mode: p.mode,
+            exposure_s: p.exposure_s,
+            area_mm2: o.area_mm2,
+            masks: o.masks,
+            steps: p.steps,
+            time_s: p.time_s,
+        });
+    }
+    let manifest = Manifest {
+        format: bundle::FORMAT.into(),
+        version: bundle::VERSION,
+        generator: Generator::current(),
+        source: Source {
+            file: path
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            sha256: sha,
+            triangles: mesh.report.triangles_in_file,
+            bbox_mm: bbox,
+            placement: Placement {
+                mode: match mode {
+                    PlacementMode::Center => "center",
+                    PlacementMode::Keep => "keep",
+                }
+                .into(),
+                translate_mm: t,
+            },
+            mesh: mesh.report.clone(),
+        },
+        settings: Settings {
+            layer_height_mm: h,
+            binary,
+            compensation: "off".into(),
+        },
+        machine: profile.clone(),
+        totals: totals.clone(),
+        warnings: warnings.clone(),
+        layers,
+    };
+    if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+        return Err(Error::Interrupted);
+    }
+    let bundle_path = writer.finish(&manifest)?;
+    let t_finish = t3.elapsed().as_secs_f64();
+    Ok(SliceSummary {
+        bundle: bundle_path,
+        layers: n,
+        warnings,
+        mesh: mesh.report,
+        totals,
+        timings: Timings {
+            load_s: t_load,
+            slice_s: t_slice,
+            masks_s: t_masks,
+            finish_s: t_finish,
+            total_s: t0.elapsed().as_secs_f64(),
+        },
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn layer_masks(
+    writer: &BundleWriter,
+    profile: &Profile,
+    raster: &Rasterizer,
+    scratch: &mut Scratch,
+    section: &Section,
+    i: usize,
+    binary: bool,
+    tiled: bool,
+    px_area: f64,
+) -> Result<LayerOut> {
+    let cov = raster.coverage(&section.contours, scratch);
+    let area_mm2 = cov.lit_pixels() * px_area;
+    let field_mask = if binary {
+        raster.binary(&section.contours)
+    } else {
+        cov
+    };
+    let mut masks = Vec::with_capacity(profile.projector.len());
+    for (k, p) in profile.projector.iter().enumerate() {
+        let view = projector_view(&field_mask, p);
+        let png = encode_png(&view);
+        let file = if tiled {
+            format!("masks/p{k}/{i:05}.png")
+        } else {
+            format!("masks/{i:05}.png")
+        };
+        writer.write_file(&file, &png)?;
+        masks.push(MaskRef {
+            file,
+            sha256: bundle::sha256_hex(&png),
+            projector: k as u32,
+        });
+    }
+    Ok(LayerOut { area_mm2, masks })
+}

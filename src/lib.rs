@@ -1,0 +1,21 @@
+//! `dmdsl`: a build-job compiler and dry-run executor for DMD mask-projection
+//! stereolithography.
+//!
+//! The library follows the data (see `docs/ARCHITECTURE.md`):
+//! [`mesh`] (load, weld, validate) → [`slice`] (contours per layer) → [`raster`]
+//! (8-bit masks) → [`plan`] (exposure and stage steps) → [`bundle`] (the job bundle,
+//! written atomically), orchestrated by [`job`]. The executor reads only the bundle.
+#![warn(missing_docs)]
+
+pub mod bundle;
+pub mod error;
+pub mod job;
+pub mod mesh;
+pub mod motion;
+pub mod plan;
+pub mod profile;
+pub mod raster;
+pub mod slice;
+pub mod units;
+
+pub use error::{Error, Result};

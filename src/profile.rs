@@ -1,0 +1,379 @@
+//! Machine profiles: the projector(s), stage, shutter, DMD, exposure, resin and process
+//! settings a job is compiled for.
+//!
+//! Profiles are TOML. Built-in profiles are compiled into the binary from `profiles/*.toml`;
+//! `--profile NAME|FILE` picks one. Every key is required and unknown keys are errors, so a
+//! typo never silently falls back to a default. The fully resolved profile is copied into
+//! every job manifest, which is how the executor learns the machine it simulates.
+
+use crate::error::{Error, Result};
+use crate::units::{NonNegative, Positive};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Built-in profiles: (name, TOML source).
+pub const BUILTIN: &[(&str, &str)] = &[(
+    "xu2010-topdown",
+    include_str!("../profiles/xu2010-topdown.toml"),
+)];
+
+/// Name of the profile used when `--profile` is not given.
+pub const DEFAULT_PROFILE: &str = "xu2010-topdown";
+
+/// How the machine forms layers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Process {
+    /// Platform sinks into the vat; layers cure at the free resin surface (seeds/000).
+    TopDown,
+    /// Platform rises from a window; each layer is peeled off the window.
+    BottomUp,
+    /// Bottom-up over a liquid interface; continuous where resin can refill (seeds/001).
+    Hybrid,
+}
+
+/// A complete machine profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Profile {
+    /// Short identifier.
+    pub name: String,
+    /// One-line description.
+    pub description: String,
+    /// Layer-forming process.
+    pub process: Process,
+    /// The projectors (one DMD each); at least one.
+    pub projector: Vec<Projector>,
+    /// Slicing settings.
+    pub slicing: Slicing,
+    /// Lift stage.
+    pub stage: Stage,
+    /// Exposure shutter.
+    pub shutter: Shutter,
+    /// DMD timing.
+    pub dmd: Dmd,
+    /// Exposure times.
+    pub exposure: Exposure,
+    /// Resin working-curve parameters.
+    pub resin: Resin,
+    /// Top-down recoat settings (required when `process = "top-down"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recoat: Option<Recoat>,
+}
+
+/// One DMD projector.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Projector {
+    /// Name, used for mask folders when several projectors tile the field.
+    pub name: String,
+    /// Mirror columns.
+    pub width_px: u32,
+    /// Mirror rows.
+    pub height_px: u32,
+    /// Edge of one (square) pixel on the build plane, mm.
+    pub pixel_mm: Positive,
+    /// Offset of this projector's top-left pixel in the field's pixel grid (col, row).
+    pub offset_px: [u32; 2],
+    /// Mirror the image left-right (applied last).
+    pub mirror_x: bool,
+    /// Mirror the image top-bottom (applied last).
+    pub mirror_y: bool,
+}
+
+/// Slicing settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Slicing {
+    /// Layer thickness, mm.
+    pub layer_height_mm: Positive,
+    /// Threshold coverage at 50 % instead of writing 8-bit anti-aliased coverage.
+    pub binary: bool,
+}
+
+/// Lift stage limits and resolution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stage {
+    /// Lowest allowed stage coordinate, mm.
+    pub travel_min_mm: f64,
+    /// Highest allowed stage coordinate, mm.
+    pub travel_max_mm: f64,
+    /// Where homing leaves the stage, mm.
+    pub home_mm: f64,
+    /// Speed limit, mm/s.
+    pub max_speed_mm_s: Positive,
+    /// Acceleration limit, mm/s².
+    pub max_accel_mm_s2: Positive,
+    /// Position resolution, steps (or encoder counts) per mm.
+    pub steps_per_mm: Positive,
+}
+
+/// Exposure shutter timing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Shutter {
+    /// Opening latency, s.
+    pub open_s: NonNegative,
+    /// Closing latency, s.
+    pub close_s: NonNegative,
+}
+
+/// DMD timing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dmd {
+    /// Time to load one mask, s.
+    pub load_s: NonNegative,
+}
+
+/// Exposure times.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Exposure {
+    /// Normal layer exposure, s.
+    pub layer_s: Positive,
+    /// Number of bottom layers.
+    pub bottom_layers: u32,
+    /// Bottom layer exposure, s.
+    pub bottom_s: Positive,
+    /// Layers ramping linearly from `bottom_s` to `layer_s` after the bottom layers.
+    pub transition_layers: u32,
+}
+
+impl Exposure {
+    /// Exposure time of layer `index` from the bottom/transition/normal rule.
+    pub fn layer_exposure_s(&self, index: usize) -> f64 {
+        let b = self.bottom_layers as usize;
+        let t = self.transition_layers as usize;
+        if index < b {
+            self.bottom_s.get()
+        } else if index < b + t {
+            let k = (index - b + 1) as f64 / (t + 1) as f64;
+            self.bottom_s.get() + (self.layer_s.get() - self.bottom_s.get()) * k
+        } else {
+            self.layer_s.get()
+        }
+    }
+}
+
+/// Resin working-curve parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Resin {
+    /// Resin name.
+    pub name: String,
+    /// Penetration depth Dp, mm.
+    pub dp_mm: Positive,
+    /// Critical energy Ec, mJ/cm².
+    pub ec_mj_cm2: Positive,
+    /// Cure depth beyond the layer thickness, mm.
+    pub overcure_mm: NonNegative,
+    /// Dynamic viscosity, Pa·s.
+    pub viscosity_pa_s: Positive,
+}
+
+/// Top-down recoat (natural leveling).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recoat {
+    /// How much deeper than the next layer the stage dips, mm.
+    pub dip_mm: NonNegative,
+    /// Speed of the dip, mm/s.
+    pub dip_speed_mm_s: Positive,
+    /// Speed of the return to the next layer, mm/s.
+    pub return_speed_mm_s: Positive,
+    /// Leveling wait before exposure, s.
+    pub wait_s: NonNegative,
+}
+
+/// Size of the whole build field.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Field {
+    /// Field width in pixels (union of all projectors).
+    pub width_px: u32,
+    /// Field height in pixels.
+    pub height_px: u32,
+    /// Pixel edge, mm.
+    pub pixel_mm: f64,
+}
+
+impl Field {
+    /// Field width, mm.
+    pub fn width_mm(&self) -> f64 {
+        self.width_px as f64 * self.pixel_mm
+    }
+    /// Field height, mm.
+    pub fn height_mm(&self) -> f64 {
+        self.height_px as f64 * self.pixel_mm
+    }
+}
+
+impl Profile {
+    /// Loads a built-in profile by name or a TOML file by path.
+    ///
+    /// A value containing a path separator or ending in `.toml`, or naming an existing
+    /// file, is read as a file; anything else must be a built-in name.
+    pub fn resolve(name_or_path: &str) -> Result<Profile> {
+        if let Some((_, src)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+            return Profile::from_toml(src, name_or_path);
+        }
+        let p = Path::new(name_or_path);
+        if name_or_path.contains('/') || name_or_path.ends_with(".toml") || p.exists() {
+            let src = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            return Profile::from_toml(&src, &p.display().to_string());
+        }
+        Err(Error::Profile {
+            origin: name_or_path.to_string(),
+            msg: format!(
+                "no built-in profile or file of that name (built-in: {})",
+                builtin_names().join(", ")
+            ),
+        })
+    }
+
+    /// The built-in default profile.
+    pub fn default_profile() -> Profile {
+        Profile::resolve(DEFAULT_PROFILE).expect("built-in default profile is valid")
+    }
+
+    /// Parses and validates a profile from TOML text; `origin` names it in errors.
+    pub fn from_toml(src: &str, origin: &str) -> Result<Profile> {
+        let profile: Profile = toml::from_str(src).map_err(|e| Error::Profile {
+            origin: origin.to_string(),
+            msg: one_line(&e.to_string()),
+        })?;
+        profile.validate().map_err(|msg| Error::Profile {
+            origin: origin.to_string(),
+            msg,
+        })?;
+        Ok(profile)
+    }
+
+    /// The profile as TOML (used by `profile show` for files and in tests).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("profile serializes")
+    }
+
+    /// Checks the cross-field rules serde cannot express.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.projector.is_empty() {
+            return Err("at least one [[projector]] is required".into());
+        }
+        let px = self.projector[0].pixel_mm.get();
+        for p in &self.projector {
+            if p.width_px == 0 || p.height_px == 0 {
+                return Err(format!(
+                    "projector {}: width_px and height_px must be > 0",
+                    p.name
+                ));
+            }
+            if p.width_px > 16384 || p.height_px > 16384 {
+                return Err(format!("projector {}: resolution above 16384 px", p.name));
+            }
+            if (p.pixel_mm.get() - px).abs() > 1e-12 {
+                return Err("all projectors must have the same pixel_mm".into());
+            }
+        }
+        let s = &self.stage;
+        if !(s.travel_min_mm.is_finite() && s.travel_max_mm.is_finite() && s.home_mm.is_finite()) {
+            return Err("stage travel and home must be finite numbers".into());
+        }
+        if s.travel_min_mm >= s.travel_max_mm {
+            return Err("stage.travel_min_mm must be below stage.travel_max_mm".into());
+        }
+        if s.home_mm < s.travel_min_mm || s.home_mm > s.travel_max_mm {
+            return Err("stage.home_mm must lie inside the stage travel".into());
+        }
+        if self.process == Process::TopDown && self.recoat.is_none() {
+            return Err("process \"top-down\" needs a [recoat] section".into());
+        }
+        Ok(())
+    }
+
+    /// The build field covered by the union of the projectors.
+    pub fn field(&self) -> Field {
+        let w = self
+            .projector
+            .iter()
+            .map(|p| p.offset_px[0] + p.width_px)
+            .max()
+            .unwrap_or(0);
+        let h = self
+            .projector
+            .iter()
+            .map(|p| p.offset_px[1] + p.height_px)
+            .max()
+            .unwrap_or(0);
+        Field {
+            width_px: w,
+            height_px: h,
+            pixel_mm: self.projector[0].pixel_mm.get(),
+        }
+    }
+}
+
+/// Names of the built-in profiles.
+pub fn builtin_names() -> Vec<&'static str> {
+    BUILTIN.iter().map(|(n, _)| *n).collect()
+}
+
+/// TOML source of a built-in profile, with its comments.
+pub fn builtin_source(name: &str) -> Option<&'static str> {
+    BUILTIN.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtins_parse_and_default_matches_brief() {
+        for (name, src) in BUILTIN {
+            let p = Profile::from_toml(src, name).unwrap();
+            assert_eq!(&p.name, name);
+            // A profile survives a round trip through TOML unchanged.
+            assert_eq!(Profile::from_toml(&p.to_toml(), name).unwrap(), p);
+        }
+        let d = Profile::default_profile();
+        let f = d.field();
+        assert_eq!((f.width_px, f.height_px), (1024, 768));
+        assert_eq!(f.pixel_mm, 0.0634765625);
+        assert_eq!(f.width_mm(), 65.0);
+        assert_eq!(f.height_mm(), 48.75);
+        assert_eq!(d.slicing.layer_height_mm.get(), 0.05);
+        assert_eq!(d.exposure.layer_s.get(), 8.0);
+    }
+
+    #[test]
+    fn unknown_key_and_missing_value_are_errors() {
+        let src = builtin_source(DEFAULT_PROFILE).unwrap();
+        let bad = src.replace("binary = false", "binary = false\nbinnary = true");
+        let e = Profile::from_toml(&bad, "x.toml").unwrap_err().to_string();
+        assert!(e.contains("unknown field `binnary`"), "{e}");
+        let missing = src.replace("layer_height_mm = 0.05\n", "");
+        let e = Profile::from_toml(&missing, "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing field `layer_height_mm`"), "{e}");
+        let zero = src.replace("layer_height_mm = 0.05", "layer_height_mm = 0.0");
+        let e = Profile::from_toml(&zero, "x.toml").unwrap_err().to_string();
+        assert!(e.contains("must be a finite number > 0"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn exposure_ramp() {
+        let mut e = Profile::default_profile().exposure;
+        e.bottom_layers = 2;
+        e.transition_layers = 3;
+        e.bottom_s = Positive::new(16.0).unwrap();
+        e.layer_s = Positive::new(8.0).unwrap();
+        let v: Vec<f64> = (0..6).map(|i| e.layer_exposure_s(i)).collect();
+        assert_eq!(v, vec![16.0, 16.0, 14.0, 12.0, 10.0, 8.0]);
+    }
+}

@@ -1,0 +1,447 @@
+//! Slicing: cuts a welded mesh with the layer planes and chains the cut segments into
+//! closed, oriented contours.
+//!
+//! Layer `i` of height `h` is cut by the plane `z = (i + 0.5)·h`; a partial top layer is
+//! dropped (PrusaSlicer's rule). A vertex is "below" a plane when `z <= Z` and "above" when
+//! `z > Z`: the solid is treated as the half-open slab `z_min <= Z < z_max`, so a vertex
+//! lying exactly on a plane never produces duplicate or missing points, a bottom face
+//! lying on a plane is part of the section and a top face lying on a plane is not.
+//!
+//! Each triangle that straddles a plane yields one segment from the point on its
+//! "down" edge (above→below in the triangle's winding) to the point on its "up" edge,
+//! which orients outer contours counter-clockwise seen from +Z. The two end points are
+//! identified by mesh edge ids, and segments are chained through those ids, never
+//! through rounded coordinates. Intersection points are computed from the edge's
+//! endpoints in canonical (vertex id) order, so the two triangles sharing an edge agree
+//! on the point bit for bit.
+//!
+//! ## Repair rule for broken meshes
+//! 1. A segment whose facet is flipped is still chained through its edge ids; each
+//!    closed loop takes the orientation most of its segments agree with.
+//! 2. Chains that do not close (holes in the surface) are repaired greedily: a chain's end
+//!    is joined to the nearest end of another open chain if that is within [`MAX_GAP_MM`]
+//!    and nearer than the chain's own start; otherwise the chain is closed with a straight
+//!    edge back to its own start. Chains of fewer than three points or no area are
+//!    dropped. Joined, closed and dropped chains are counted in [`SliceStats`] and
+//!    reported as warnings.
+//! 3. The sections are filled with the nonzero winding rule, so overlapping and
+//!    touching shells union.
+
+use crate::mesh::Mesh;
+use rayon::prelude::*;
+
+/// Largest gap, mm, closed between the ends of open chains (see the module docs).
+pub const MAX_GAP_MM: f64 = 2.0;
+
+/// A closed contour: points in order, the closing edge implied. Counter-clockwise
+/// (seen from +Z, x right, y up) for outer boundaries, clockwise for holes.
+pub type Contour = Vec<[f64; 2]>;
+
+/// The section of one layer.
+#[derive(Debug, Clone, Default)]
+pub struct Section {
+    /// Closed contours.
+    pub contours: Vec<Contour>,
+    /// Contours closed from open chains (repair rule 2).
+    pub joined_chains: u32,
+    /// Open chains that were dropped (repair rule 2).
+    pub dropped_chains: u32,
+}
+
+/// Repair counts over the whole job.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SliceStats {
+    /// Layers that needed any repair.
+    pub repaired_layers: u32,
+    /// Open chains closed by joining.
+    pub joined_chains: u32,
+    /// Open chains dropped.
+    pub dropped_chains: u32,
+}
+
+/// Height of the cutting plane of layer `i`.
+#[inline]
+pub fn plane_z(i: usize, h: f64) -> f64 {
+    (i as f64 + 0.5) * h
+}
+
+/// Number of layers of a part whose top is at `z_max` (partial top layer dropped).
+pub fn layer_count(z_max: f64, h: f64) -> usize {
+    if z_max <= 0.0 {
+        return 0;
+    }
+    let mut n = (z_max / h).floor() as usize;
+    // Guard against floating error in the division.
+    while n > 0 && (n as f64) * h > z_max + 1e-12 {
+        n -= 1;
+    }
+    while ((n + 1) as f64) * h <= z_max {
+        n += 1;
+    }
+    n
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Seg {
+    from_edge: u32,
+    to_edge: u32,
+    p: [f64; 2],
+    q: [f64; 2],
+}
+
+/// Cuts `mesh` with `n` layer planes of height `h`; returns one segment list per layer.
+fn cut(mesh: &Mesh, h: f64, n: usize) -> Vec<Vec<Seg>> {
+    let chunk = 8192;
+    let parts: Vec<Vec<(u32, Seg)>> = mesh
+        .triangles
+        .par_chunks(chunk)
+        .enumerate()
+        .map(|(ci, tris)| {
+            let mut out = Vec::new();
+            for (k, t) in tris.iter().enumerate() {
+                let ti = ci * chunk + k;
+                let v = [
+                    mesh.vertices[t[0] as usize],
+                    mesh.vertices[t[1] as usize],
+                    mesh.vertices[t[2] as usize],
+                ];
+                let zmin = v[0][2].min(v[1][2]).min(v[2][2]);
+                let zmax = v[0][2].max(v[1][2]).max(v[2][2]);
+                // Planes with zmin <= Z < zmax; candidate range padded, then tested exactly.
+                let lo = ((zmin / h - 0.5).floor().max(0.0)) as usize;
+                let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
+                for i in lo..hi.min(n) {
+                    let z = plane_z(i, h);
+                    if !(zmin <= z && zmax > z) {
+                        continue;
+                    }
+                    if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
+                        out.push((i as u32, s));
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let mut layers: Vec<Vec<Seg>> = vec![Vec::new(); n];
+    for part in parts {
+        for (i, s) in part {
+            layers[i as usize].push(s);
+        }
+    }
+    layers
+}
+
+fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64) -> Option<Seg> {
+    let above = [v[0][2] > z, v[1][2] > z, v[2][2] > z];
+    let mut down = None; // edge k from above to below
+    let mut up = None; // edge k from below to above
+    for k in 0..3 {
+        let a = above[k];
+        let b = above[(k + 1) % 3];
+        if a && !b {
+            down = Some(k);
+        } else if !a && b {
+            up = Some(k);
+        }
+    }
+    let (d, u) = (down?, up?);
+    let point = |k: usize| -> [f64; 2] {
+        // Canonical order by vertex id so both triangles sharing the edge agree exactly.
+        let (i, j) = (t[k], t[(k + 1) % 3]);
+        let (i, j) = if i < j { (i, j) } else { (j, i) };
+        let a = mesh.vertices[i as usize];
+        let b = mesh.vertices[j as usize];
+        let s = (z - a[2]) / (b[2] - a[2]);
+        [a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1])]
+    };
+    let te = mesh.tri_edges[ti];
+    Some(Seg {
+        from_edge: te[d],
+        to_edge: te[u],
+        p: point(d),
+        q: point(u),
+    })
+}
+
+/// Chains one layer's segments into closed contours (see the module docs for the rule).
+fn chain(segs: &[Seg]) -> Section {
+    let n = segs.len();
+    let mut starts: Vec<(u32, u32)> = segs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.from_edge, i as u32))
+        .collect();
+    let mut ends: Vec<(u32, u32)> = segs
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.to_edge, i as u32))
+        .collect();
+    starts.sort_unstable();
+    ends.sort_unstable();
+    let mut used = vec![false; n];
+    let find = |tab: &[(u32, u32)], used: &[bool], e: u32| -> Option<u32> {
+        let mut k = tab.partition_point(|&(x, _)| x < e);
+        while k < tab.len() && tab[k].0 == e {
+            if !used[tab[k].1 as usize] {
+                return Some(tab[k].1);
+            }
+            k += 1;
+        }
+        None
+    };
+
+    let mut section = Section::default();
+    let mut open: Vec<Contour> = Vec::new();
+    for s0 in 0..n {
+        if used[s0] {
+            continue;
+        }
+        used[s0] = true;
+        let first = segs[s0];
+        let start_node = first.from_edge;
+        let mut pts = vec![first.p, first.q];
+        let mut agree: i64 = 1;
+        let mut node = first.to_edge;
+        let mut closed = node == start_node;
+        while !closed {
+            if let Some(s) = find(&starts, &used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                pts.push(sg.q);
+                node = sg.to_edge;
+                agree += 1;
+            } else if let Some(s) = find(&ends, &used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                pts.push(sg.p);
+                node = sg.from_edge;
+                agree -= 1;
+            } else {
+                break;
+            }
+            closed = node == start_node;
+        }
+        if closed {
+            pts.pop(); // last point equals the first
+            finish_loop(&mut pts, agree < 0);
+            if pts.len() >= 3 {
+                section.contours.push(pts);
+            }
+            continue;
+        }
+        // Open: extend backwards from the start node too.
+        let mut back: Vec<[f64; 2]> = Vec::new();
+        let mut node = start_node;
+        loop {
+            if let Some(s) = find(&ends, &used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                back.push(sg.p);
+                node = sg.from_edge;
+                agree += 1;
+            } else if let Some(s) = find(&starts, &used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                back.push(sg.q);
+                node = sg.to_edge;
+                agree -= 1;
+            } else {
+                break;
+            }
+        }
+        back.reverse();
+        back.extend(pts);
+        let mut chain = back;
+        if agree < 0 {
+            chain.reverse();
+        }
+        open.push(chain);
+    }
+    if !open.is_empty() {
+        join_open(open, &mut section);
+    }
+    section
+}
+
+fn finish_loop(pts: &mut Contour, reverse: bool) {
+    pts.dedup();
+    while pts.len() > 1 && pts.first() == pts.last() {
+        pts.pop();
+    }
+    if reverse {
+        pts.reverse();
+    }
+}
+
+fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+/// Repair rule 2: join open chains end-to-start by nearest distance within MAX_GAP_MM.
+fn join_open(mut open: Vec<Contour>, section: &mut Section) {
+    let max2 = MAX_GAP_MM * MAX_GAP_MM;
+    let mut alive = vec![true; open.len()];
+    for i in 0..open.len() {
+        if !alive[i] {
+            continue;
+        }
+        loop {
+            let end = *open[i].last().unwrap();
+            // Candidates: own start, other chains' starts (appended), other chains' ends
+            // (appended reversed: a flipped piece).
+            let d_self = dist2(end, open[i][0]);
+            let mut best: Option<(f64, usize, bool)> = Some((d_self, i, false));
+            for (j, c) in open.iter().enumerate() {
+                if j == i || !alive[j] {
+                    continue;
+                }
+                let ds = dist2(end, c[0]);
+                if ds <= max2 && best.is_none_or(|b| ds < b.0) {
+                    best = Some((ds, j, false));
+                }
+                let de = dist2(end, *c.last().unwrap());
+                if de <= max2 && best.is_none_or(|b| de < b.0) {
+                    best = Some((de, j, true));
+                }
+            }
+            match best {
+                Some((_, j, _)) if j == i => {
+                    let mut pts = std::mem::take(&mut open[i]);
+                    finish_loop(&mut pts, false);
+                    alive[i] = false;
+                    if pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
+                        section.contours.push(pts);
+                        section.joined_chains += 1;
+                    } else {
+                        section.dropped_chains += 1;
+                    }
+                    break;
+                }
+                Some((_, j, rev)) => {
+                    let mut other = std::mem::take(&mut open[j]);
+                    alive[j] = false;
+                    if rev {
+                        other.reverse();
+                    }
+                    open[i].extend(other);
+                }
+                None => unreachable!("own start is always a candidate"),
+            }
+        }
+    }
+}
+
+/// Slices `mesh` (already placed on the build plane) into `n` layers of height `h`.
+/// Layers are chained in parallel; the result is deterministic.
+pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
+    let segs = cut(mesh, h, n);
+    let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
+    let mut st = SliceStats::default();
+    for s in &sections {
+        if s.joined_chains + s.dropped_chains > 0 {
+            st.repaired_layers += 1;
+        }
+        st.joined_chains += s.joined_chains;
+        st.dropped_chains += s.dropped_chains;
+    }
+    (sections, st)
+}
+
+/// Signed area of a contour (positive when counter-clockwise).
+pub fn signed_area(c: &Contour) -> f64 {
+    let mut a = 0.0;
+    for i in 0..c.len() {
+        let p = c[i];
+        let q = c[(i + 1) % c.len()];
+        a += p[0] * q[1] - q[0] * p[1];
+    }
+    a * 0.5
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Mesh;
+
+    fn cube(s: f32, at: [f32; 3]) -> Vec<[[f32; 3]; 3]> {
+        let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
+        let v = [
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(1., 1., 0.),
+            p(0., 1., 0.),
+            p(0., 0., 1.),
+            p(1., 0., 1.),
+            p(1., 1., 1.),
+            p(0., 1., 1.),
+        ];
+        let f = [
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
+    }
+
+    #[test]
+    fn layer_count_rule() {
+        assert_eq!(layer_count(25.0, 0.05), 500);
+        assert_eq!(layer_count(0.049, 0.05), 0);
+        assert_eq!(layer_count(0.1, 0.05), 2);
+        assert_eq!(layer_count(0.12, 0.05), 2);
+    }
+
+    #[test]
+    fn cube_sections_are_ccw_squares() {
+        let m = Mesh::from_soup(&cube(10.0, [0.0; 3]), "t");
+        let (secs, st) = slice(&m, 0.5, 20);
+        assert_eq!(st, SliceStats::default());
+        assert_eq!(secs.len(), 20);
+        for s in &secs {
+            assert_eq!(s.contours.len(), 1);
+            assert!((signed_area(&s.contours[0]) - 100.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn plane_through_vertices_and_flat_faces() {
+        // Cube from z=0.25 to z=1.25 with h = 0.5: planes at 0.25 (bottom face on the plane:
+        // part of the section), 0.75, 1.25 (top face on the plane: not part of it).
+        let m = Mesh::from_soup(&cube(1.0, [0.0, 0.0, 0.25]), "t");
+        let (secs, _) = slice(&m, 0.5, 3);
+        assert_eq!(secs[0].contours.len(), 1);
+        assert!((signed_area(&secs[0].contours[0]) - 1.0).abs() < 1e-12);
+        assert_eq!(secs[1].contours.len(), 1);
+        assert!(secs[2].contours.is_empty());
+    }
+
+    #[test]
+    fn flipped_facet_and_hole_are_repaired() {
+        let mut s = cube(10.0, [0.0; 3]);
+        let t = s[6];
+        s[6] = [t[0], t[2], t[1]]; // flip a side facet
+        s.remove(10); // punch a hole in another side
+        let m = Mesh::from_soup(&s, "t");
+        let (secs, st) = slice(&m, 1.0, 10);
+        assert!(st.joined_chains > 0);
+        assert_eq!(st.dropped_chains, 0);
+        for s in &secs {
+            assert_eq!(s.contours.len(), 1);
+            assert!(
+                (signed_area(&s.contours[0]) - 100.0).abs() < 1e-9,
+                "{:?}",
+                s.contours
+            );
+        }
+    }
+}

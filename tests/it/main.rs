@@ -1,0 +1,5 @@
+//! Integration tests: one test binary that runs `dmdsl` as a user would and checks the
+//! files it writes. Each module covers one command.
+
+mod common;
+mod slice;
