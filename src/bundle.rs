@@ -4,6 +4,28 @@
 //! atomic: everything goes into a hidden sibling directory that is renamed over the
 //! destination only when complete, so a reader sees the old bundle or the new one,
 //! never a mix, and a failed or interrupted run leaves nothing behind.
+//!
+//! ## Step semantics and timing contract
+//! The planner estimates and the executor simulates the same machine, so both follow
+//! these rules (the planner's `time_s` is its estimate under them):
+//! * The job starts with the stage homed at `machine.stage.home_mm`, shutter closed.
+//!   Layer 0's steps start there; every later layer's steps start where the previous
+//!   layer's steps left the stage.
+//! * At the start of each layer the DMD loads that layer's mask(s), taking
+//!   `machine.dmd.load_s`, concurrently with the layer's first steps (light is off). An
+//!   `expose` or the first `sweep` of a run waits until the load is done.
+//! * `move {to_mm, speed_mm_s, accel_mm_s2}`: shutter closed, trapezoidal velocity profile
+//!   from rest to rest ([`crate::motion::move_time`]).
+//! * `wait {s}`: nothing happens for `s` seconds.
+//! * `expose {s}`: stage still; the shutter opens (`shutter.open_s`, light not yet on),
+//!   light is on for exactly `s`, the shutter closes (`shutter.close_s`). Duration
+//!   `open_s + s + close_s`; dose time `s`.
+//! * `sweep {to_mm, speed_mm_s}`: the stage moves at constant `speed_mm_s` (the
+//!   acceleration to that speed is taken as instantaneous; sweeps are slow) while the
+//!   layer's mask is shown. Consecutive sweeps (across layers) form one run: the shutter
+//!   opens before the run's first sweep (`open_s`, stage still) and closes after its last
+//!   (`close_s`); the next layer's mask is preloaded, so switching masks inside a run
+//!   takes no time. Duration of a sweep `|to_mm − from| / speed_mm_s`; dose time the same.
 
 use crate::error::{Error, Result};
 use crate::profile::Profile;
