@@ -13,6 +13,7 @@ pub mod job;
 pub mod mesh;
 pub mod motion;
 pub mod plan;
+pub mod plot;
 pub mod profile;
 pub mod raster;
 pub mod slice;
