@@ -361,13 +361,11 @@ fn layer_masks(
     tiled: bool,
     px_area: f64,
 ) -> Result<LayerOut> {
-    let cov = raster.coverage(&section.contours, scratch);
-    let area_mm2 = cov.lit_pixels() * px_area;
-    let field_mask = if binary {
-        raster.binary(&section.contours)
-    } else {
-        cov
-    };
+    let mut field_mask = raster.coverage(&section.contours, scratch);
+    let area_mm2 = field_mask.lit_pixels() * px_area;
+    if binary {
+        crate::raster::threshold(&mut field_mask);
+    }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {
         let view = projector_view(&field_mask, p);

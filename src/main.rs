@@ -54,7 +54,7 @@ struct SliceArgs {
     /// Layer height in mm (default: the profile's).
     #[arg(long, value_name = "MM")]
     layer_height: Option<f64>,
-    /// Binary masks: a pixel is lit when its centre is inside the section.
+    /// Binary masks: a pixel is lit when at least half of it is inside the section.
     #[arg(long)]
     binary: bool,
     /// Use the file's coordinates as build-plane coordinates instead of centring the part.

@@ -6,13 +6,15 @@
 //!
 //! * Anti-aliased masks (the default) hold the exact fraction of each pixel's area
 //!   inside the section, `round(255 · coverage)`, computed analytically with a signed-area
-//!   accumulation buffer (nonzero winding, clamped to 1). tiny-skia's anti-aliasing
-//!   quantizes coverage to 1/4 pixel (4× supersampling), which moves the 50 % level of
-//!   edge pixels by up to 1/8 pixel: too coarse for the 0.1 % agreement the masks must
-//!   meet on small parts (docs/ARCHITECTURE.md has the numbers).
-//! * Binary masks (`--binary`) are filled by tiny-skia without anti-aliasing, which lights
-//!   a pixel exactly when its centre is inside the section (nonzero winding): for straight
-//!   edges that is coverage > 50 %, and it is PrusaSlicer's rule.
+//!   accumulation buffer. Layers whose shells overlap (winding above 1 somewhere) are
+//!   redone with an exact-span nonzero-winding scanline fill on 32 sub-scanlines per row.
+//! * Binary masks (`--binary`) threshold that coverage at 50 %.
+//!
+//! Why not tiny-skia for masks: its anti-aliasing supersamples 4× (coverage quantized to
+//! 1/4 px), and its non-anti-aliased fill snaps edges to fixed point; measured against
+//! PrusaSlicer (docs/BENCHMARKS.md, "Mask agreement") both disagree on ~10× more pixels
+//! than the exact coverage does. tiny-skia draws the plots ([`crate::plot`]) and serves as
+//! the reference renderer in `benches/raster.rs`.
 
 use crate::profile::{Field, Projector};
 use crate::slice::Contour;
@@ -106,52 +108,149 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 + 1 <= stride);
+        let mut max_winding = 0.0f32;
         for r in r0..r1 {
             let row = &mut acc[r * stride..(r + 1) * stride];
             let dst = &mut out.data[r * w..(r + 1) * w];
             let mut sum = 0.0f32;
             for col in c0..c1.min(w) {
                 sum += row[col];
-                let v = sum.abs().min(1.0);
-                dst[col] = (v * 255.0 + 0.5) as u8;
+                let v = sum.abs();
+                max_winding = max_winding.max(v);
+                dst[col] = (v.min(1.0) * 255.0 + 0.5) as u8;
             }
             row[c0..(c1 + 1).min(stride)].fill(0.0);
+        }
+        if max_winding > 1.001 {
+            // Overlapping shells: the accumulated winding integral over-counts pixels where
+            // two boundaries meet; redo the layer with the exact nonzero rule.
+            self.coverage_nonzero(contours, &mut out);
         }
         out
     }
 
-    /// Binary mask: a pixel is 255 when its centre is inside the section (tiny-skia,
-    /// non-anti-aliased, nonzero winding), else 0.
-    pub fn binary(&self, contours: &[Contour]) -> Mask {
-        let w = self.field.width_px;
-        let h = self.field.height_px;
-        let mut out = Mask::zeros(w, h);
-        let mut pb = tiny_skia::PathBuilder::new();
+    /// Nonzero-winding coverage by analytic spans on [`SUBLINES`] sub-scanlines per pixel
+    /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for layers whose shells
+    /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
+    fn coverage_nonzero(&self, contours: &[Contour], out: &mut Mask) {
+        let w = self.field.width_px as usize;
+        let h = self.field.height_px as usize;
+        // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding).
+        let mut edges: Vec<(f64, f64, f64, f64, i32)> = Vec::new();
         for c in contours {
-            for (i, &p) in c.iter().enumerate() {
-                let (x, y) = self.to_px(p);
-                if i == 0 {
-                    pb.move_to(x as f32, y as f32);
+            for i in 0..c.len() {
+                let (x0, y0) = self.to_px(c[i]);
+                let (x1, y1) = self.to_px(c[(i + 1) % c.len()]);
+                if y0 == y1 {
+                    continue;
+                }
+                let (dir, xa, ya, xb, yb) = if y0 < y1 {
+                    (1, x0, y0, x1, y1)
                 } else {
-                    pb.line_to(x as f32, y as f32);
+                    (-1, x1, y1, x0, y0)
+                };
+                edges.push((xa, (xb - xa) / (yb - ya), ya, yb, dir));
+            }
+        }
+        edges.sort_by(|a, b| a.2.total_cmp(&b.2));
+        out.data.fill(0);
+        let mut diff = vec![0.0f64; w + 2];
+        let mut cover = vec![0.0f64; w + 1];
+        let mut active: Vec<usize> = Vec::new();
+        let mut next = 0;
+        let mut xs: Vec<(f64, i32)> = Vec::new();
+        let r_first = edges.first().map_or(h, |e| e.2.floor().max(0.0) as usize);
+        let inv = 1.0 / SUBLINES as f64;
+        for r in r_first..h {
+            if next >= edges.len() && active.is_empty() {
+                break;
+            }
+            while next < edges.len() && edges[next].2 < (r + 1) as f64 {
+                active.push(next);
+                next += 1;
+            }
+            active.retain(|&e| edges[e].3 > r as f64);
+            if active.is_empty() {
+                continue;
+            }
+            cover.fill(0.0);
+            diff.fill(0.0);
+            for s in 0..SUBLINES {
+                let y = r as f64 + (s as f64 + 0.5) * inv;
+                xs.clear();
+                for &e in &active {
+                    let (x, k, ya, yb, d) = edges[e];
+                    if ya <= y && y < yb {
+                        xs.push(((x + k * (y - ya)).clamp(0.0, w as f64), d));
+                    }
+                }
+                xs.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let mut wind = 0;
+                for j in 0..xs.len() {
+                    let before = wind;
+                    wind += xs[j].1;
+                    if before == 0 && wind != 0 {
+                        // span starts at xs[j].0; find where it ends
+                        let xa = xs[j].0;
+                        let mut wk = wind;
+                        let mut xb = xa;
+                        for x in &xs[j + 1..] {
+                            wk += x.1;
+                            if wk == 0 {
+                                xb = x.0;
+                                break;
+                            }
+                        }
+                        add_span(&mut cover, &mut diff, xa, xb, inv);
+                    }
                 }
             }
-            pb.close();
+            let dst = &mut out.data[r * w..(r + 1) * w];
+            let mut run = 0.0;
+            for (col, d) in dst.iter_mut().enumerate() {
+                run += diff[col];
+                let v = (cover[col] + run).clamp(0.0, 1.0);
+                *d = (v * 255.0 + 0.5) as u8;
+            }
         }
-        let Some(path) = pb.finish() else {
-            return out;
-        };
-        let mut m = tiny_skia::Mask::new(w, h).expect("field size is valid");
-        m.fill_path(
-            &path,
-            tiny_skia::FillRule::Winding,
-            false,
-            tiny_skia::Transform::identity(),
-        );
-        for (o, &v) in out.data.iter_mut().zip(m.data()) {
-            *o = if v >= 128 { 255 } else { 0 };
-        }
-        out
+    }
+
+    /// Binary mask: 255 where the anti-aliased coverage is at least 50 % (value ≥ 128),
+    /// else 0.
+    pub fn binary(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
+        let mut m = self.coverage(contours, scratch);
+        threshold(&mut m);
+        m
+    }
+}
+
+/// Thresholds a coverage mask at 50 % in place: values ≥ 128 become 255, others 0.
+pub fn threshold(m: &mut Mask) {
+    for v in &mut m.data {
+        *v = if *v >= 128 { 255 } else { 0 };
+    }
+}
+
+/// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
+const SUBLINES: usize = 32;
+
+/// Adds the horizontal span [xa, xb) with weight `wgt` to a pixel row: partial end pixels
+/// go to `cover`, whole pixels between them to the difference array `diff`.
+fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
+    if xb <= xa {
+        return;
+    }
+    let ia = xa.floor() as usize;
+    let ib = xb.floor() as usize;
+    if ia == ib {
+        cover[ia] += (xb - xa) * wgt;
+        return;
+    }
+    cover[ia] += ((ia + 1) as f64 - xa) * wgt;
+    diff[ia + 1] += wgt;
+    diff[ib] -= wgt;
+    if ib < cover.len() {
+        cover[ib] += (xb - ib as f64) * wgt;
     }
 }
 
@@ -280,7 +379,7 @@ mod tests {
         let c = rect(100.0 * p, 20.0 * p, 110.0 * p, 30.0 * p);
         let mut s = Scratch::default();
         let m = r.coverage(std::slice::from_ref(&c), &mut s);
-        let b = r.binary(std::slice::from_ref(&c));
+        let b = r.binary(std::slice::from_ref(&c), &mut Scratch::default());
         for row in 0..768 {
             for col in 0..1024 {
                 let inside = (100..110).contains(&col) && (738..748).contains(&row);
@@ -325,7 +424,7 @@ mod tests {
         let row = 767 - (20.0 / 0.0634765625) as u32;
         assert_eq!(m.get(col, row), 0);
         assert_eq!(m.get(col + (7.0 / 0.0634765625) as u32, row), 255);
-        let b = r.binary(&[outer, hole]);
+        let b = r.binary(&[outer, hole], &mut Scratch::default());
         let barea = b.lit_pixels() * px2;
         assert!((barea - exact).abs() / exact < 2e-3, "{barea} vs {exact}");
     }
@@ -335,9 +434,33 @@ mod tests {
         let r = Rasterizer::new(field());
         let a = rect(10.0, 10.0, 20.0, 20.0);
         let b = rect(15.0, 10.0, 25.0, 20.0);
-        let m = r.coverage(&[a, b], &mut Scratch::default());
+        let mut s = Scratch::default();
+        let m = r.coverage(&[a, b], &mut s);
         let area = m.lit_pixels() * 0.0634765625f64.powi(2);
-        assert!((area - 150.0).abs() < 0.15, "{area}");
+        assert!((area - 150.0).abs() < 0.05, "{area}");
+        // Same picture as the union drawn as one rectangle, to 1/32 of a level step.
+        let u = r.coverage(&[rect(10.0, 10.0, 25.0, 20.0)], &mut s);
+        let worst = m
+            .data
+            .iter()
+            .zip(&u.data)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap();
+        assert!(worst <= 8, "{worst}");
+        // Touching shells (shared edge at x = 15) need no fallback and are exact too.
+        let t = r.coverage(
+            &[rect(10.0, 10.0, 15.0, 20.0), rect(15.0, 10.0, 25.0, 20.0)],
+            &mut s,
+        );
+        let worst = t
+            .data
+            .iter()
+            .zip(&u.data)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap();
+        assert!(worst <= 1, "{worst}");
     }
 
     #[test]
