@@ -229,7 +229,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         .into_par_iter()
         .map_init(Scratch::default, |scratch, b| {
             let mut outs = Vec::with_capacity(block);
-            for i in b * block..((b + 1) * block).min(n) {
+            let end = ((b + 1) * block).min(n);
+            for (i, section) in sections.iter().enumerate().take(end).skip(b * block) {
                 if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                     return Err(Error::Interrupted);
                 }
@@ -238,7 +239,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                     &profile,
                     &raster,
                     scratch,
-                    &sections[i],
+                    section,
                     i,
                     binary,
                     tiled,

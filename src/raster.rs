@@ -71,7 +71,7 @@ impl Rasterizer {
     }
 
     #[inline]
-    fn to_px(&self, p: [f64; 2]) -> (f64, f64) {
+    fn px(&self, p: [f64; 2]) -> (f64, f64) {
         let s = 1.0 / self.field.pixel_mm;
         (p[0] * s, self.field.height_px as f64 - p[1] * s)
     }
@@ -93,8 +93,8 @@ impl Rasterizer {
         let (mut c0, mut c1) = (w, 0usize);
         for c in contours {
             for i in 0..c.len() {
-                let (x0, y0) = self.to_px(c[i]);
-                let (x1, y1) = self.to_px(c[(i + 1) % c.len()]);
+                let (x0, y0) = self.px(c[i]);
+                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
                 // Clamp into the field: the planner guarantees parts fit, this only guards.
                 let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
                 let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
@@ -107,7 +107,7 @@ impl Rasterizer {
         }
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
-        debug_assert!(c1 + 1 <= stride);
+        debug_assert!(c1 < stride);
         let mut max_winding = 0.0f32;
         for r in r0..r1 {
             let row = &mut acc[r * stride..(r + 1) * stride];
@@ -139,8 +139,8 @@ impl Rasterizer {
         let mut edges: Vec<(f64, f64, f64, f64, i32)> = Vec::new();
         for c in contours {
             for i in 0..c.len() {
-                let (x0, y0) = self.to_px(c[i]);
-                let (x1, y1) = self.to_px(c[(i + 1) % c.len()]);
+                let (x0, y0) = self.px(c[i]);
+                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
                 if y0 == y1 {
                     continue;
                 }
