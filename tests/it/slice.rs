@@ -117,9 +117,9 @@ fn cylinder_with_hole_ascii() {
             let y = (767.0 - row as f64 + 0.5) * P - 24.375;
             let r = (x * x + y * y).sqrt();
             let v = m[row * 1024 + col];
-            if r < 7.9 && r > 3.1 {
+            if (3.1..7.9).contains(&r) {
                 assert_eq!(v, 255, "({col},{row}) r={r}");
-            } else if r > 8.1 || r < 2.9 {
+            } else if !(2.9..=8.1).contains(&r) {
                 assert_eq!(v, 0, "({col},{row}) r={r}");
             }
         }
