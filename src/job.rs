@@ -235,15 +235,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                     return Err(Error::Interrupted);
                 }
                 outs.push(layer_masks(
-                    &writer,
-                    &profile,
-                    &raster,
-                    scratch,
-                    section,
-                    i,
-                    binary,
-                    tiled,
-                    px_area,
+                    &writer, &profile, &raster, scratch, section, i, binary, tiled, px_area,
                 )?);
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                 if let Some(p) = opts.progress {

@@ -21,8 +21,9 @@
 //! 2. Chains that do not close (holes in the surface) are repaired greedily: a chain's end
 //!    is joined to the nearest end of another open chain if that is within [`MAX_GAP_MM`]
 //!    and nearer than the chain's own start; otherwise the chain is closed with a straight
-//!    edge back to its own start. Chains of fewer than three points or no area are
-//!    dropped. Joined, closed and dropped chains are counted in [`SliceStats`] and
+//!    edge back to its own start, unless that edge is longer than [`MAX_GAP_MM`] and
+//!    crosses another contour of the layer (or the chain itself): such a chain is
+//!    dropped, as are chains of fewer than three points or no area. Joined, closed and dropped chains are counted in [`SliceStats`] and
 //!    reported as warnings.
 //! 3. The sections are filled with the nonzero winding rule, so overlapping and
 //!    touching shells union.
@@ -306,11 +307,13 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
                 }
             }
             match best {
-                Some((_, j, _)) if j == i => {
+                Some((d2, j, _)) if j == i => {
+                    let crossing =
+                        d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
                     let mut pts = std::mem::take(&mut open[i]);
                     finish_loop(&mut pts, false);
                     alive[i] = false;
-                    if pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
+                    if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
                         section.contours.push(pts);
                         section.joined_chains += 1;
                     } else {
@@ -330,6 +333,39 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
             }
         }
     }
+}
+
+/// True if the straight edge that would close open chain `i` (its end back to its start)
+/// properly crosses any other contour or chain of the layer, or chain `i` itself.
+fn closing_edge_crosses(open: &[Contour], alive: &[bool], i: usize, closed: &[Contour]) -> bool {
+    let a = *open[i].last().unwrap();
+    let b = open[i][0];
+    let crosses_poly = |c: &Contour, closed_loop: bool, skip_ends: bool| {
+        let n = c.len();
+        let m = if closed_loop { n } else { n.saturating_sub(1) };
+        (0..m).any(|k| {
+            if skip_ends && (k == 0 || k + 1 == m) {
+                return false;
+            }
+            segments_cross(a, b, c[k], c[(k + 1) % n])
+        })
+    };
+    closed.iter().any(|c| crosses_poly(c, true, false))
+        || open
+            .iter()
+            .enumerate()
+            .any(|(j, c)| j != i && alive[j] && crosses_poly(c, false, false))
+        || crosses_poly(&open[i], false, true)
+}
+
+/// Proper crossing of segments ab and cd (touching at an end point does not count).
+fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let orient = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| {
+        (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+    };
+    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+    o1 * o2 < 0.0 && o3 * o4 < 0.0
 }
 
 /// Slices `mesh` (already placed on the build plane) into `n` layers of height `h`.
@@ -443,5 +479,28 @@ mod tests {
                 s.contours
             );
         }
+    }
+
+    #[test]
+    fn open_chain_closing_across_another_contour_is_dropped() {
+        // A U-shaped open chain whose mouth (x = 0..10 at y = 0) is 10 mm wide.
+        let u: Contour = vec![[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]];
+        // Nothing in the way: closed into the square.
+        let mut s = Section::default();
+        join_open(vec![u.clone()], &mut s);
+        assert_eq!(
+            (s.contours.len(), s.joined_chains, s.dropped_chains),
+            (1, 1, 0)
+        );
+        // A closed contour straddling the mouth: closing would cut through it, so dropped.
+        let mut s = Section {
+            contours: vec![vec![[4.0, -1.0], [6.0, -1.0], [6.0, 1.0], [4.0, 1.0]]],
+            ..Section::default()
+        };
+        join_open(vec![u], &mut s);
+        assert_eq!(
+            (s.contours.len(), s.joined_chains, s.dropped_chains),
+            (1, 0, 1)
+        );
     }
 }
