@@ -90,47 +90,123 @@ struct Seg {
     q: [f64; 2],
 }
 
-/// Cuts `mesh` with `n` layer planes of height `h`; returns one segment list per layer.
-fn cut(mesh: &Mesh, h: f64, n: usize) -> Vec<Vec<Seg>> {
-    let chunk = 8192;
-    let parts: Vec<Vec<(u32, Seg)>> = mesh
-        .triangles
-        .par_chunks(chunk)
-        .enumerate()
-        .map(|(ci, tris)| {
-            let mut out = Vec::new();
-            for (k, t) in tris.iter().enumerate() {
-                let ti = ci * chunk + k;
-                let v = [
-                    mesh.vertices[t[0] as usize],
-                    mesh.vertices[t[1] as usize],
-                    mesh.vertices[t[2] as usize],
+/// Streams a mesh's sections window by window, so memory depends on the window size,
+/// not on the number of layers.
+///
+/// Triangles are sorted by their lowest z once; [`Slicer::window`] (called with increasing
+/// layer ranges) keeps the triangles that can reach the window active, cuts them in
+/// parallel and chains each layer in parallel. The result does not depend on the window
+/// size or the thread count.
+pub struct Slicer<'m> {
+    mesh: &'m Mesh,
+    h: f64,
+    n: usize,
+    zmin: Vec<f64>,
+    zmax: Vec<f64>,
+    order: Vec<u32>,
+    next: usize,
+    active: Vec<u32>,
+    /// Repair counts over the windows sliced so far.
+    pub stats: SliceStats,
+}
+
+impl<'m> Slicer<'m> {
+    /// Prepares to slice `mesh` (already placed) into `n` layers of height `h`.
+    pub fn new(mesh: &'m Mesh, h: f64, n: usize) -> Self {
+        let (zmin, zmax): (Vec<f64>, Vec<f64>) = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let z = [
+                    mesh.vertices[t[0] as usize][2],
+                    mesh.vertices[t[1] as usize][2],
+                    mesh.vertices[t[2] as usize][2],
                 ];
-                let zmin = v[0][2].min(v[1][2]).min(v[2][2]);
-                let zmax = v[0][2].max(v[1][2]).max(v[2][2]);
-                // Planes with zmin <= Z < zmax; candidate range padded, then tested exactly.
-                let lo = ((zmin / h - 0.5).floor().max(0.0)) as usize;
-                let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
-                for i in lo..hi.min(n) {
-                    let z = plane_z(i, h);
-                    if !(zmin <= z && zmax > z) {
-                        continue;
-                    }
-                    if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
-                        out.push((i as u32, s));
-                    }
-                }
-            }
-            out
-        })
-        .collect();
-    let mut layers: Vec<Vec<Seg>> = vec![Vec::new(); n];
-    for part in parts {
-        for (i, s) in part {
-            layers[i as usize].push(s);
+                (z[0].min(z[1]).min(z[2]), z[0].max(z[1]).max(z[2]))
+            })
+            .unzip();
+        let mut order: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
+        order.sort_by(|&a, &b| {
+            zmin[a as usize]
+                .total_cmp(&zmin[b as usize])
+                .then(a.cmp(&b))
+        });
+        Slicer {
+            mesh,
+            h,
+            n,
+            zmin,
+            zmax,
+            order,
+            next: 0,
+            active: Vec::new(),
+            stats: SliceStats::default(),
         }
     }
-    layers
+
+    /// Sections of layers `range` (must follow the previous call's range).
+    pub fn window(&mut self, range: std::ops::Range<usize>) -> Vec<Section> {
+        let range = range.start..range.end.min(self.n);
+        if range.is_empty() {
+            return Vec::new();
+        }
+        let z_lo = plane_z(range.start, self.h);
+        let z_hi = plane_z(range.end - 1, self.h);
+        while self.next < self.order.len() && self.zmin[self.order[self.next] as usize] <= z_hi {
+            self.active.push(self.order[self.next]);
+            self.next += 1;
+        }
+        let zmax = &self.zmax;
+        self.active.retain(|&t| zmax[t as usize] > z_lo);
+
+        let (mesh, h) = (self.mesh, self.h);
+        let chunk = 4096;
+        let parts: Vec<Vec<(u32, Seg)>> = self
+            .active
+            .par_chunks(chunk)
+            .map(|tris| {
+                let mut out = Vec::new();
+                for &ti in tris {
+                    let ti = ti as usize;
+                    let t = &mesh.triangles[ti];
+                    let v = [
+                        mesh.vertices[t[0] as usize],
+                        mesh.vertices[t[1] as usize],
+                        mesh.vertices[t[2] as usize],
+                    ];
+                    let (zmin, zmax) = (self.zmin[ti], self.zmax[ti]);
+                    // Planes with zmin <= Z < zmax; candidate range padded, then tested exactly.
+                    let lo = ((zmin / h - 0.5).floor().max(0.0) as usize).max(range.start);
+                    let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
+                    for i in lo..hi.min(range.end) {
+                        let z = plane_z(i, h);
+                        if !(zmin <= z && zmax > z) {
+                            continue;
+                        }
+                        if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
+                            out.push(((i - range.start) as u32, s));
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        let mut segs: Vec<Vec<Seg>> = vec![Vec::new(); range.len()];
+        for part in parts {
+            for (i, s) in part {
+                segs[i as usize].push(s);
+            }
+        }
+        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
+        for s in &sections {
+            if s.joined_chains + s.dropped_chains > 0 {
+                self.stats.repaired_layers += 1;
+            }
+            self.stats.joined_chains += s.joined_chains;
+            self.stats.dropped_chains += s.dropped_chains;
+        }
+        sections
+    }
 }
 
 fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64) -> Option<Seg> {
@@ -368,20 +444,12 @@ fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
     o1 * o2 < 0.0 && o3 * o4 < 0.0
 }
 
-/// Slices `mesh` (already placed on the build plane) into `n` layers of height `h`.
-/// Layers are chained in parallel; the result is deterministic.
+/// Slices `mesh` (already placed on the build plane) into `n` layers of height `h` at
+/// once (tests and small jobs; the pipeline streams with [`Slicer`]).
 pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
-    let segs = cut(mesh, h, n);
-    let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
-    let mut st = SliceStats::default();
-    for s in &sections {
-        if s.joined_chains + s.dropped_chains > 0 {
-            st.repaired_layers += 1;
-        }
-        st.joined_chains += s.joined_chains;
-        st.dropped_chains += s.dropped_chains;
-    }
-    (sections, st)
+    let mut s = Slicer::new(mesh, h, n);
+    let sections = s.window(0..n);
+    (sections, s.stats)
 }
 
 /// Signed area of a contour (positive when counter-clockwise).
@@ -502,5 +570,22 @@ mod tests {
             (s.contours.len(), s.joined_chains, s.dropped_chains),
             (1, 0, 1)
         );
+    }
+
+    #[test]
+    fn windows_give_the_same_sections() {
+        let mut soup = cube(10.0, [0.0; 3]);
+        soup.extend(cube(3.0, [20.0, 0.0, 4.0]));
+        let m = Mesh::from_soup(&soup, "t");
+        let (all, _) = slice(&m, 0.25, 40);
+        let mut s = Slicer::new(&m, 0.25, 40);
+        let mut win = Vec::new();
+        for a in (0..40).step_by(7) {
+            win.extend(s.window(a..a + 7));
+        }
+        assert_eq!(all.len(), win.len());
+        for (x, y) in all.iter().zip(&win) {
+            assert_eq!(x.contours, y.contours);
+        }
     }
 }
