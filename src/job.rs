@@ -143,15 +143,9 @@ pub fn placement(
     Ok(t)
 }
 
-/// Encodes a mask as an 8-bit grayscale PNG (fast deflate; deterministic).
+/// Encodes a mask as an 8-bit grayscale PNG ([`crate::png`]; deterministic).
 pub fn encode_png(m: &Mask) -> Vec<u8> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::ImageEncoder;
-    let mut out = Vec::with_capacity(16 * 1024);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
-        .write_image(&m.data, m.width, m.height, image::ExtendedColorType::L8)
-        .expect("encoding to memory cannot fail");
-    out
+    crate::png::encode_gray8(m.width, m.height, &m.data)
 }
 
 /// Layers sliced at a time: memory depends on this, not on the number of layers.
@@ -403,5 +397,6 @@ fn layer_masks(
             projector: k as u32,
         });
     }
+    scratch.recycle(field_mask);
     Ok(LayerOut { area_mm2, masks })
 }

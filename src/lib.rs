@@ -14,6 +14,7 @@ pub mod mesh;
 pub mod motion;
 pub mod plan;
 pub mod plot;
+pub mod png;
 pub mod profile;
 pub mod raster;
 pub mod slice;
