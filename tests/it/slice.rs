@@ -627,3 +627,47 @@ fn mirror_flags_flip_the_image() {
     let m = mask(&dir.join("m.dmdjob"), &job, 0);
     assert!(m == rect_mask(&[(1024 - 416, 1024 - 256, 192, 352)]));
 }
+
+#[test]
+fn ctrl_c_leaves_nothing_behind() {
+    let dir = tempdir("ctrlc");
+    let f = fixture("bunny00.stl");
+    let mut child = std::process::Command::new(bin())
+        .args([
+            "slice",
+            f.to_str().unwrap(),
+            "--layer-height",
+            "0.002",
+            "-o",
+            "x.dmdjob",
+        ])
+        .current_dir(&dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the job is writing masks into its staging directory, then interrupt it.
+    let staging = || {
+        std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .any(|e| e.file_name().to_string_lossy().starts_with(".x.dmdjob.tmp"))
+    };
+    let t = std::time::Instant::now();
+    while !staging() {
+        assert!(t.elapsed().as_secs() < 60, "no staging directory appeared");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let st = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    assert!(stderr(&out).contains("interrupted; nothing was written"));
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
