@@ -117,6 +117,9 @@ pub struct Settings {
     pub binary: bool,
     /// Light compensation mode: "off", "zone" or "pixel".
     pub compensation: String,
+    /// Distortion correction applied to the masks: its table and fit report.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<crate::geometry::distortion::FitReport>,
 }
 
 /// Totals over the job.

@@ -10,6 +10,7 @@ use crate::bundle::{
     self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
 };
 use crate::error::{Error, Result};
+use crate::geometry::distortion::{self, Correction, DistortionChoice, FitReport};
 use crate::mesh::{self, Mesh, MeshReport};
 use crate::plan::{self, LayerInfo};
 use crate::profile::Profile;
@@ -49,6 +50,8 @@ pub struct SliceOptions<'a> {
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
     /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
     pub cancel: Option<&'a AtomicBool>,
+    /// Lens distortion correction (`--distortion`; default: the profile's).
+    pub distortion: DistortionChoice,
 }
 
 /// Wall time of each stage, s.
@@ -81,6 +84,9 @@ pub struct SliceSummary {
     pub totals: Totals,
     /// Stage timings.
     pub timings: Timings,
+    /// Distortion fit report, when a correction was applied.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<FitReport>,
 }
 
 /// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
@@ -180,6 +186,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let h = profile.slicing.layer_height_mm.get();
     let field = profile.field();
     let path = opts.input.as_path();
+    let correction = distortion::for_job(&opts.distortion, &mut profile)?;
 
     let bytes = std::fs::read(path).map_err(|e| {
         if path.is_dir() {
@@ -249,7 +256,15 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         },
                     };
                     outs.push(layer_masks(
-                        &writer, &profile, &raster, scratch, &layer, binary, tiled, px_area,
+                        &writer,
+                        &profile,
+                        &raster,
+                        scratch,
+                        &layer,
+                        binary,
+                        tiled,
+                        px_area,
+                        (correction.as_ref(), path),
                     )?);
                     let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                     if let Some(p) = opts.progress {
@@ -271,6 +286,17 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         warnings.push(format!(
             "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
             stats.repaired_layers, stats.joined_chains, stats.dropped_chains
+        ));
+    }
+
+    let distortion_report = correction.as_ref().map(Correction::report);
+    if let Some(r) = distortion_report
+        .as_ref()
+        .filter(|r| r.extrapolated_points > 0)
+    {
+        warnings.push(format!(
+            "distortion: {} warped points lie outside the area the table ({}) measured; their correction is extrapolated",
+            r.extrapolated_points, r.source
         ));
     }
 
@@ -337,6 +363,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             layer_height_mm: h,
             binary,
             compensation: "off".into(),
+            distortion: distortion_report.clone(),
         },
         machine: profile.clone(),
         totals: totals.clone(),
@@ -361,6 +388,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             finish_s: t_finish,
             total_s: t0.elapsed().as_secs_f64(),
         },
+        distortion: distortion_report,
     })
 }
 
@@ -374,10 +402,21 @@ fn layer_masks(
     binary: bool,
     tiled: bool,
     px_area: f64,
+    (correction, model): (Option<&Correction>, &Path),
 ) -> Result<LayerOut> {
     let i = layer.index;
-    let mut field_mask = raster.coverage(&layer.section.contours, scratch);
-    let area_mm2 = field_mask.lit_pixels() * px_area;
+    let section = &layer.section.contours;
+    // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
+    let (warped, area_scale) = match correction {
+        Some(c) => {
+            let w = c.warp_section(section, model, i)?;
+            let s = distortion::area_scale(section, &w);
+            (Some(w), s)
+        }
+        None => (None, 1.0),
+    };
+    let mut field_mask = raster.coverage(warped.as_deref().unwrap_or(section), scratch);
+    let area_mm2 = field_mask.lit_pixels() * px_area * area_scale;
     if binary {
         crate::raster::threshold(&mut field_mask);
     }

@@ -5,6 +5,7 @@
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
+use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions};
 use dmdsl::profile::{self, Profile};
 use dmdsl::units::Positive;
@@ -66,6 +67,10 @@ struct SliceArgs {
     /// Print a machine-readable summary on stdout.
     #[arg(long)]
     json: bool,
+    /// Lens distortion correction table (CSV x_mm,y_mm,seen_x_mm,seen_y_mm), or `off` to
+    /// ignore the profile's [distortion] (default: the profile's, if any).
+    #[arg(long, value_name = "TABLE.csv|off")]
+    distortion: Option<PathBuf>,
 }
 
 #[derive(Subcommand)]
@@ -151,6 +156,11 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         },
         progress: if show_progress { Some(&progress) } else { None },
         cancel: Some(&cancel),
+        distortion: match &a.distortion {
+            None => DistortionChoice::Profile,
+            Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
+            Some(p) => DistortionChoice::Table(p.clone()),
+        },
     };
     let summary = job::slice_to_bundle(&opts)
         .with_context(|| format!("slice {} failed", a.input.display()))
@@ -169,12 +179,16 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             "mesh": summary.mesh,
             "totals": summary.totals,
             "timings": summary.timings,
+            "distortion": summary.distortion,
             "checks_failed": failed,
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else if !quiet {
         for w in &summary.warnings {
             eprintln!("dmdsl: warning: {w}");
+        }
+        if let Some(d) = &summary.distortion {
+            println!("{}", d.summary());
         }
         println!(
             "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",

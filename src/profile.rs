@@ -59,6 +59,9 @@ pub struct Profile {
     /// Top-down recoat settings (required when `process = "top-down"`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recoat: Option<Recoat>,
+    /// Lens distortion correction table (docs/GEOMETRY.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<crate::geometry::distortion::DistortionConfig>,
 }
 
 /// One DMD projector.
@@ -221,7 +224,14 @@ impl Profile {
         let p = Path::new(name_or_path);
         if name_or_path.contains('/') || name_or_path.ends_with(".toml") || p.exists() {
             let src = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
-            return Profile::from_toml(&src, &p.display().to_string());
+            let mut profile = Profile::from_toml(&src, &p.display().to_string())?;
+            // A distortion table is named relative to the profile file.
+            if let Some(t) = profile.distortion.as_mut().and_then(|d| d.table.as_mut()) {
+                if let Some(dir) = p.parent().filter(|_| Path::new(t.as_str()).is_relative()) {
+                    *t = dir.join(&*t).to_string_lossy().into_owned();
+                }
+            }
+            return Ok(profile);
         }
         Err(Error::Profile {
             origin: name_or_path.to_string(),
@@ -287,6 +297,9 @@ impl Profile {
         }
         if self.process == Process::TopDown && self.recoat.is_none() {
             return Err("process \"top-down\" needs a [recoat] section".into());
+        }
+        if let Some(d) = &self.distortion {
+            d.validate()?;
         }
         Ok(())
     }

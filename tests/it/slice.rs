@@ -632,7 +632,7 @@ fn mirror_flags_flip_the_image() {
 fn ctrl_c_leaves_nothing_behind() {
     let dir = tempdir("ctrlc");
     let f = fixture("bunny00.stl");
-    let mut child = std::process::Command::new(bin())
+    let child = std::process::Command::new(bin())
         .args([
             "slice",
             f.to_str().unwrap(),

@@ -1,0 +1,14 @@
+//! Projector geometry: where light lands and how projectors share the field.
+//!
+//! * [`distortion`]: a measured correction table (`x_mm,y_mm,seen_x_mm,seen_y_mm`) is fitted
+//!   by a least-squares polynomial plus a cross-validated natural-neighbour residual
+//!   interpolant; section contours are pre-warped (long edges densified) before they are
+//!   rasterized, so the part prints where the file says despite lens distortion and keystone.
+//! * [`blend`]: edge-blend ramps across projector overlaps whose weights sum to one in
+//!   irradiance, and the conversion of an irradiance fraction to a gray level through a
+//!   projector's (nonlinear) response curve.
+//!
+//! Method and limits: `docs/GEOMETRY.md`.
+
+pub mod blend;
+pub mod distortion;

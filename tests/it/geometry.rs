@@ -1,0 +1,428 @@
+//! Projector geometry as a user meets it: `slice --distortion TABLE.csv`, `[distortion]` in
+//! a profile, and the errors a bad table or an unreachable part give.
+//!
+//! The landing tests generate a known forward distortion (what the lens does), measure it
+//! into a table with noise (what the machine's owner does), slice 3 mm squares through the
+//! correction, decode the masks and push every lit pixel through the TRUE forward map: the
+//! squares' centroids must land within 0.05 mm (max) and 0.025 mm (RMS) of where the file
+//! put them.
+
+use crate::common::*;
+use serde_json::Value;
+use std::path::Path;
+
+const P: f64 = 65.0 / 1024.0;
+const W: f64 = 65.0;
+const H: f64 = 48.75;
+
+/// xorshift64* with Box–Muller: fixed seeds, no dependencies.
+struct Rng(u64);
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn gauss(&mut self) -> f64 {
+        let u = self.uniform().max(1e-300);
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * self.uniform()).cos()
+    }
+}
+
+/// A held-out "true" lens: where light aimed at `p` lands.
+#[derive(Clone, Copy, Debug)]
+enum Lens {
+    /// Radial about the centre, corners moved by `k` × the half-diagonal (k < 0: barrel).
+    Radial(f64),
+    /// Projective keystone (tilted projector) plus a small rotation and shift (assembly).
+    Keystone,
+}
+
+impl Lens {
+    fn forward(self, p: [f64; 2]) -> [f64; 2] {
+        let (cx, cy) = (W / 2.0, H / 2.0);
+        let (dx, dy) = (p[0] - cx, p[1] - cy);
+        match self {
+            Lens::Radial(k) => {
+                let r2 = (dx * dx + dy * dy) / (cx * cx + cy * cy);
+                let s = 1.0 + k * r2;
+                [cx + dx * s, cy + dy * s]
+            }
+            Lens::Keystone => {
+                let w = 1.0 + 0.01 * dx / cx + 0.04 * dy / cy;
+                let (x, y) = (dx / w, dy / w);
+                let a = 0.2f64.to_radians();
+                [
+                    cx + 0.3 + x * a.cos() - y * a.sin(),
+                    cy - 0.2 + x * a.sin() + y * a.cos(),
+                ]
+            }
+        }
+    }
+
+    /// |det J| of the forward map at `p`.
+    fn jacobian(self, p: [f64; 2]) -> f64 {
+        let e = 1e-4;
+        let fx0 = self.forward([p[0] - e, p[1]]);
+        let fx1 = self.forward([p[0] + e, p[1]]);
+        let fy0 = self.forward([p[0], p[1] - e]);
+        let fy1 = self.forward([p[0], p[1] + e]);
+        let a = (fx1[0] - fx0[0]) / (2.0 * e);
+        let b = (fy1[0] - fy0[0]) / (2.0 * e);
+        let c = (fx1[1] - fx0[1]) / (2.0 * e);
+        let d = (fy1[1] - fy0[1]) / (2.0 * e);
+        (a * d - b * c).abs()
+    }
+}
+
+/// The measured table: a 14 × 10 grid of aim points over the field (5 mm apart), each seen
+/// through the lens with Gaussian noise of `noise` mm per coordinate.
+fn write_table(path: &Path, lens: Lens, noise: f64, seed: u64) {
+    let mut rng = Rng(seed);
+    let mut s = String::from("x_mm,y_mm,seen_x_mm,seen_y_mm\n");
+    for j in 0..=9 {
+        for i in 0..=13 {
+            let aim = [i as f64 * W / 13.0, j as f64 * H / 9.0];
+            let f = lens.forward(aim);
+            s.push_str(&format!(
+                "{:.4},{:.4},{:.4},{:.4}\n",
+                aim[0],
+                aim[1],
+                f[0] + noise * rng.gauss(),
+                f[1] + noise * rng.gauss()
+            ));
+        }
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+/// Centres of the 3 mm test squares: a 5 × 4 grid from 8 mm to 57 × 40 mm.
+fn centres() -> Vec<[f64; 2]> {
+    let mut v = Vec::new();
+    for j in 0..4 {
+        for i in 0..5 {
+            v.push([8.0 + i as f64 * 12.25, 8.0 + j as f64 * 10.25]);
+        }
+    }
+    v
+}
+
+fn write_squares(path: &Path, centres: &[[f64; 2]]) {
+    let mut tris = Vec::new();
+    for c in centres {
+        tris.extend(box_tris(
+            [c[0] as f32 - 1.5, c[1] as f32 - 1.5, 0.0],
+            [c[0] as f32 + 1.5, c[1] as f32 + 1.5, 0.12],
+        ));
+    }
+    write_stl(path, &tris);
+}
+
+fn slice(dir: &Path, args: &[&str]) -> Value {
+    let o = run_in(dir, args);
+    assert!(o.status.success(), "dmdsl {args:?}: {}", stderr(&o));
+    let out = args.iter().position(|a| *a == "-o").unwrap() + 1;
+    serde_json::from_slice(&std::fs::read(dir.join(args[out]).join("job.json")).unwrap()).unwrap()
+}
+
+/// Landing error (mm) of each square's area centroid: every lit pixel, weighted by its
+/// coverage and the area the lens gives it, pushed through the true forward map, and
+/// assigned to the nearest intended centre.
+fn landing_errors(mask: &[u8], lens: Lens, centres: &[[f64; 2]]) -> Vec<f64> {
+    let mut acc = vec![[0.0f64; 3]; centres.len()];
+    for r in 0..768usize {
+        for c in 0..1024usize {
+            let v = mask[r * 1024 + c] as f64;
+            if v == 0.0 {
+                continue;
+            }
+            let p = [(c as f64 + 0.5) * P, H - (r as f64 + 0.5) * P];
+            let f = lens.forward(p);
+            let w = v * lens.jacobian(p);
+            let k = (0..centres.len())
+                .min_by(|&a, &b| {
+                    let da = (centres[a][0] - f[0]).hypot(centres[a][1] - f[1]);
+                    let db = (centres[b][0] - f[0]).hypot(centres[b][1] - f[1]);
+                    da.total_cmp(&db)
+                })
+                .unwrap();
+            acc[k][0] += w * f[0];
+            acc[k][1] += w * f[1];
+            acc[k][2] += w;
+        }
+    }
+    acc.iter()
+        .zip(centres)
+        .map(|(a, c)| {
+            assert!(a[2] > 0.0, "square at {c:?} missing");
+            (a[0] / a[2] - c[0]).hypot(a[1] / a[2] - c[1])
+        })
+        .collect()
+}
+
+fn layer0(dir: &Path, bundle: &str, job: &Value) -> Vec<u8> {
+    let f = job["layers"][0]["masks"][0]["file"].as_str().unwrap();
+    read_gray(&dir.join(bundle).join(f)).2
+}
+
+#[test]
+fn squares_land_within_0_05_mm_through_held_out_distortions() {
+    let dir = tempdir("geom-land");
+    let cs = centres();
+    write_squares(&dir.join("sq.stl"), &cs);
+    let mut all = Vec::new();
+    for (n, lens) in [Lens::Radial(-0.05), Lens::Radial(0.05), Lens::Keystone]
+        .into_iter()
+        .enumerate()
+    {
+        let corner = (0..4)
+            .map(|i| {
+                let p = [(i & 1) as f64 * W, (i >> 1) as f64 * H];
+                let f = lens.forward(p);
+                (f[0] - p[0]).hypot(f[1] - p[1])
+            })
+            .fold(0.0, f64::max);
+        assert!(
+            (1.5..=2.5).contains(&corner),
+            "{lens:?}: corners off by {corner}"
+        );
+        let table = format!("t{n}.csv");
+        write_table(&dir.join(&table), lens, 0.01, 17 + n as u64);
+        let out = format!("d{n}.dmdjob");
+        let job = slice(
+            &dir,
+            &[
+                "slice",
+                "sq.stl",
+                "--keep-position",
+                "--distortion",
+                &table,
+                "-q",
+                "-o",
+                &out,
+            ],
+        );
+        let rep = &job["settings"]["distortion"];
+        assert_eq!(rep["source"], table.as_str());
+        assert_eq!(rep["points"], 140);
+        assert!(rep["cv_rms_mm"].as_f64().unwrap() < 0.03, "{rep}");
+        let errs = landing_errors(&layer0(&dir, &out, &job), lens, &cs);
+        let max = errs.iter().cloned().fold(0.0, f64::max);
+        eprintln!("{lens:?}: corrected max landing error {max:.4} mm");
+        assert!(
+            max <= 0.05,
+            "{lens:?}: max landing error {max} mm: {errs:?}"
+        );
+        all.extend(errs);
+
+        // Without the correction the same squares land far off: the test can fail.
+        let raw = format!("r{n}.dmdjob");
+        let job = slice(
+            &dir,
+            &["slice", "sq.stl", "--keep-position", "-q", "-o", &raw],
+        );
+        let errs = landing_errors(&layer0(&dir, &raw, &job), lens, &cs);
+        let max = errs.iter().cloned().fold(0.0, f64::max);
+        eprintln!("{lens:?}: uncorrected max landing error {max:.3} mm");
+        assert!(max > 0.5, "{lens:?}: uncorrected max error only {max} mm");
+    }
+    let rms = (all.iter().map(|e| e * e).sum::<f64>() / all.len() as f64).sqrt();
+    eprintln!("RMS landing error over {} squares: {rms:.4} mm", all.len());
+    assert!(rms <= 0.025, "RMS landing error {rms} mm");
+}
+
+#[test]
+fn distortion_in_profile_relative_table_and_inline_points() {
+    let dir = tempdir("geom-profile");
+    std::fs::create_dir_all(dir.join("machine")).unwrap();
+    write_table(&dir.join("machine/lens.csv"), Lens::Radial(0.05), 0.0, 1);
+    let base = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    let src = stdout(&base);
+    std::fs::write(
+        dir.join("machine/p.toml"),
+        format!("{src}\n[distortion]\ntable = \"lens.csv\"\n"),
+    )
+    .unwrap();
+    write_squares(&dir.join("sq.stl"), &[[30.0, 20.0]]);
+    let a = slice(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--profile",
+            "machine/p.toml",
+            "-q",
+            "-o",
+            "a.dmdjob",
+        ],
+    );
+    assert_eq!(a["settings"]["distortion"]["source"], "lens.csv");
+    // The manifest's machine carries the points inline: the bundle is self-contained.
+    let pts = a["machine"]["distortion"]["points"].as_array().unwrap();
+    assert_eq!(pts.len(), 140);
+    assert!(a["machine"]["distortion"].get("table").is_none());
+
+    // The same points inline in a profile give the same masks.
+    let inline: Vec<String> = pts
+        .iter()
+        .map(|p| {
+            let v: Vec<String> = p
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.to_string())
+                .collect();
+            format!("[{}]", v.join(", "))
+        })
+        .collect();
+    std::fs::write(
+        dir.join("q.toml"),
+        format!("{src}\n[distortion]\npoints = [{}]\n", inline.join(", ")),
+    )
+    .unwrap();
+    let b = slice(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--profile",
+            "q.toml",
+            "-q",
+            "-o",
+            "b.dmdjob",
+        ],
+    );
+    assert_eq!(
+        a["layers"][0]["masks"][0]["sha256"],
+        b["layers"][0]["masks"][0]["sha256"]
+    );
+    assert_eq!(
+        b["settings"]["distortion"]["source"],
+        "profile xu2010-topdown"
+    );
+
+    // `--distortion off` ignores the profile's table; no correction → plain masks.
+    let c = slice(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--profile",
+            "machine/p.toml",
+            "--distortion",
+            "off",
+            "-q",
+            "-o",
+            "c.dmdjob",
+        ],
+    );
+    let d = slice(&dir, &["slice", "sq.stl", "-q", "-o", "d.dmdjob"]);
+    assert!(c["settings"].get("distortion").is_none());
+    assert!(c["machine"].get("distortion").is_none());
+    assert_eq!(
+        c["layers"][0]["masks"][0]["sha256"],
+        d["layers"][0]["masks"][0]["sha256"]
+    );
+    assert_ne!(
+        a["layers"][0]["masks"][0]["sha256"],
+        d["layers"][0]["masks"][0]["sha256"]
+    );
+    // The human summary reports the fit.
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--profile",
+            "machine/p.toml",
+            "-o",
+            "e.dmdjob",
+        ],
+    );
+    assert!(o.status.success());
+    assert!(
+        stdout(&o).contains("distortion lens.csv: 140 points, degree-"),
+        "{}",
+        stdout(&o)
+    );
+}
+
+#[test]
+fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
+    let dir = tempdir("geom-bad");
+    write_squares(&dir.join("sq.stl"), &[[1.6, 1.6]]);
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "cols.csv",
+            "x_mm,y_mm,seen_x_mm,seen_y_mm\n1,2,3,4\n5,6,7\n",
+            "cols.csv: line 3: expected 4 comma-separated columns",
+        ),
+        (
+            "num.csv",
+            "1,2,3,4\n5,6,seven,8\n",
+            "num.csv: line 2: column 3 (seen_x_mm): `seven` is not a finite number",
+        ),
+        (
+            "few.csv",
+            "1,2,3,4\n5,6,7,8\n",
+            "few.csv: a distortion table needs at least 6 points, found 2",
+        ),
+    ];
+    for (name, text, want) in cases {
+        std::fs::write(dir.join(name), text).unwrap();
+        let o = run_in(
+            &dir,
+            &[
+                "slice",
+                "sq.stl",
+                "--keep-position",
+                "--distortion",
+                name,
+                "-o",
+                "x.dmdjob",
+            ],
+        );
+        assert_eq!(o.status.code(), Some(2), "{name}");
+        let e = stderr(&o);
+        assert!(e.contains(want), "{name}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+        assert!(!dir.join("x.dmdjob").exists());
+    }
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--keep-position",
+            "--distortion",
+            "missing.csv",
+            "-o",
+            "x.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("missing.csv"), "{}", stderr(&o));
+
+    // Barrel: the corner square is outside what the projector can reach.
+    write_table(&dir.join("barrel.csv"), Lens::Radial(-0.05), 0.0, 1);
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "sq.stl",
+            "--keep-position",
+            "--distortion",
+            "barrel.csv",
+            "-o",
+            "x.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.contains("sq.stl: layer 0: build-plane point ("), "{e}");
+    assert!(e.contains(" mm cannot be reached: with the distortion correction (barrel.csv) the projector would have to aim at ("), "{e}");
+    assert!(e.contains("outside its field 0..65 x 0..48.75 mm"), "{e}");
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    assert!(!dir.join("x.dmdjob").exists());
+}
