@@ -1,0 +1,104 @@
+//! Cost of the projector-geometry stages on a real model (no test harness).
+//!
+//! `cargo bench --bench geometry -- [MODEL.stl] [TABLE.csv]`
+//! (default: fixtures/bunny00.stl, fixtures/lens_table.csv, 0.05 mm layers). Single-threaded,
+//! median of 5 runs, per layer: the distortion pre-warp of the section contours, the
+//! coverage raster of the plain and of the warped contours.
+
+use dmdsl::geometry::distortion::{Correction, Table};
+use dmdsl::job::{placement, PlacementMode};
+use dmdsl::profile::Profile;
+use dmdsl::raster::{Rasterizer, Scratch};
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let model = args
+        .first()
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("fixtures/bunny00.stl"));
+    let table = args
+        .get(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("fixtures/lens_table.csv"));
+    let h = 0.05;
+    let profile = Profile::default_profile();
+    let field = profile.field();
+    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
+    let bbox = mesh.bbox();
+    let tr = placement(
+        &model,
+        bbox,
+        field.width_mm(),
+        field.height_mm(),
+        PlacementMode::Center,
+    )
+    .unwrap();
+    mesh.translate(tr);
+    let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], h);
+    let sections = dmdsl::slice::slice(&mesh, h, n).0;
+
+    let t = Instant::now();
+    let tab = Table::read(&table).expect("table reads");
+    let corr = Correction::fit(&tab, [field.width_mm(), field.height_mm()], field.pixel_mm)
+        .expect("table fits");
+    let fit_s = t.elapsed().as_secs_f64();
+
+    let raster = Rasterizer::new(field);
+    let mut scratch = Scratch::default();
+    let (mut warp_t, mut cov_t, mut covw_t) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut v_in, mut v_out) = (0usize, 0usize);
+    let mut warped = Vec::new();
+    for _ in 0..5 {
+        let t = Instant::now();
+        warped = sections
+            .iter()
+            .map(|s| corr.warper().warp(&s.contours).expect("reachable"))
+            .collect::<Vec<_>>();
+        warp_t.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        for s in &sections {
+            let m = raster.coverage(&s.contours, &mut scratch);
+            scratch.recycle(m);
+        }
+        cov_t.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        for w in &warped {
+            let m = raster.coverage(w, &mut scratch);
+            scratch.recycle(m);
+        }
+        covw_t.push(t.elapsed().as_secs_f64());
+    }
+    for (s, w) in sections.iter().zip(&warped) {
+        v_in += s.contours.iter().map(Vec::len).sum::<usize>();
+        v_out += w.iter().map(Vec::len).sum::<usize>();
+    }
+    let per = |v: Vec<f64>| median(v) / n as f64 * 1e3;
+    println!(
+        "model {} ({} triangles), {n} layers of {h} mm; table {} ({} points)",
+        model.display(),
+        mesh.triangles.len(),
+        table.display(),
+        tab.pairs.len()
+    );
+    println!("{}", corr.report().summary());
+    println!("table fit (once)          {:8.2} ms", fit_s * 1e3);
+    println!(
+        "vertices per layer        {:8.0} -> {:.0} after densification",
+        v_in as f64 / n as f64,
+        v_out as f64 / n as f64
+    );
+    println!("distortion pre-warp       {:8.3} ms/layer", per(warp_t));
+    println!("coverage raster (plain)   {:8.3} ms/layer", per(cov_t));
+    println!("coverage raster (warped)  {:8.3} ms/layer", per(covw_t));
+}
