@@ -10,7 +10,9 @@ use crate::bundle::{
     self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
 };
 use crate::error::{Error, Result};
+use crate::geometry::blend::Response;
 use crate::geometry::distortion::{self, Correction, DistortionChoice, FitReport};
+use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh, MeshReport};
 use crate::plan::{self, LayerInfo};
 use crate::profile::Profile;
@@ -225,6 +227,16 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
     }
     let raster = Rasterizer::new(field);
+    // Tiling (geometry::tile): blend tables per projector, built once.
+    let tiler = tiled.then(|| {
+        let n = profile.projector.len();
+        Tiler::new(
+            &profile.projector,
+            &profile.blend.unwrap_or_default(),
+            &vec![Response::linear(); n],
+            &vec![None; n],
+        )
+    });
     let done = AtomicUsize::new(0);
     let px_area = field.pixel_mm * field.pixel_mm;
     let binary = profile.slicing.binary;
@@ -265,6 +277,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         tiled,
                         px_area,
                         (correction.as_ref(), path),
+                        tiler.as_ref(),
                     )?);
                     let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                     if let Some(p) = opts.progress {
@@ -403,6 +416,7 @@ fn layer_masks(
     tiled: bool,
     px_area: f64,
     (correction, model): (Option<&Correction>, &Path),
+    tiler: Option<&Tiler>,
 ) -> Result<LayerOut> {
     let i = layer.index;
     let section = &layer.section.contours;
@@ -422,7 +436,10 @@ fn layer_masks(
     }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {
-        let view = projector_view(&field_mask, p);
+        let view = match tiler {
+            Some(t) => std::borrow::Cow::Owned(t.render(k, &field_mask)),
+            None => projector_view(&field_mask, p),
+        };
         let png = encode_png(&view);
         let file = if tiled {
             format!("masks/p{k}/{i:05}.png")

@@ -12,10 +12,13 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Built-in profiles: (name, TOML source).
-pub const BUILTIN: &[(&str, &str)] = &[(
-    "xu2010-topdown",
-    include_str!("../profiles/xu2010-topdown.toml"),
-)];
+pub const BUILTIN: &[(&str, &str)] = &[
+    (
+        "xu2010-topdown",
+        include_str!("../profiles/xu2010-topdown.toml"),
+    ),
+    ("tiled-2x1", include_str!("../profiles/tiled-2x1.toml")),
+];
 
 /// Name of the profile used when `--profile` is not given.
 pub const DEFAULT_PROFILE: &str = "xu2010-topdown";
@@ -62,6 +65,9 @@ pub struct Profile {
     /// Lens distortion correction table (docs/GEOMETRY.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<crate::geometry::distortion::DistortionConfig>,
+    /// Edge blending across projector overlaps (default: raised cosine; docs/GEOMETRY.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blend: Option<crate::geometry::blend::BlendCurve>,
 }
 
 /// One DMD projector.
@@ -300,6 +306,9 @@ impl Profile {
         }
         if let Some(d) = &self.distortion {
             d.validate()?;
+        }
+        if let Some(b) = &self.blend {
+            b.validate()?;
         }
         Ok(())
     }

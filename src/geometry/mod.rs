@@ -7,8 +7,11 @@
 //! * [`blend`]: edge-blend ramps across projector overlaps whose weights sum to one in
 //!   irradiance, and the conversion of an irradiance fraction to a gray level through a
 //!   projector's (nonlinear) response curve.
+//! * [`tile`]: per job, LUT tables that split each layer's field coverage mask into one
+//!   blended, response-corrected gray mask per projector.
 //!
 //! Method and limits: `docs/GEOMETRY.md`.
 
 pub mod blend;
 pub mod distortion;
+pub mod tile;

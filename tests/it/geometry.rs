@@ -426,3 +426,110 @@ fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
     assert_eq!(e.trim_end().lines().count(), 1, "{e}");
     assert!(!dir.join("x.dmdjob").exists());
 }
+
+/// Slices a 30 × 20 mm plate across the seam of `tiled-2x1` (field columns ~788..1260; the
+/// overlap is 992..1024) with `profile`; returns the two projector masks of layer 0.
+fn tiled_plate(dir: &Path, profile: &str, out: &str) -> (Vec<u8>, Vec<u8>) {
+    write_stl(
+        &dir.join("plate.stl"),
+        &box_tris([50.0, 10.0, 0.0], [80.0, 30.0, 0.12]),
+    );
+    let job = slice(
+        dir,
+        &[
+            "slice",
+            "plate.stl",
+            "--keep-position",
+            "--profile",
+            profile,
+            "-q",
+            "-o",
+            out,
+        ],
+    );
+    let masks = job["layers"][0]["masks"].as_array().unwrap();
+    assert_eq!(masks.len(), 2);
+    let mut px = Vec::new();
+    for (k, m) in masks.iter().enumerate() {
+        assert_eq!(m["projector"], k);
+        assert_eq!(m["file"], format!("masks/p{k}/00000.png"));
+        let (w, h, data) = read_gray(&dir.join(out).join(m["file"].as_str().unwrap()));
+        assert_eq!((w, h), (1024, 768));
+        px.push(data);
+    }
+    let b = px.pop().unwrap();
+    (px.pop().unwrap(), b)
+}
+
+/// Field column `c` of row `r` as (p0 gray, p1 gray), 0 where a projector does not reach.
+fn at(a: &[u8], b: &[u8], r: usize, c: usize) -> (i32, i32) {
+    let va = if c < 1024 { a[r * 1024 + c] as i32 } else { 0 };
+    let vb = if c >= 992 {
+        b[r * 1024 + c - 992] as i32
+    } else {
+        0
+    };
+    (va, vb)
+}
+
+/// Plate columns and rows well inside its edges.
+const PLATE_COLS: std::ops::Range<usize> = 792..1256;
+const PLATE_ROWS: std::ops::Range<usize> = 300..450;
+
+#[test]
+fn tiled_2x1_seam_sums_to_255_and_is_smooth() {
+    let dir = tempdir("geom-tiled");
+    for (profile, name) in [("tiled-2x1", "default"), ("eehm.toml", "eehm")] {
+        if name == "eehm" {
+            let src = stdout(&run_in(&dir, &["profile", "show", "tiled-2x1"]));
+            let src = src.replace("curve = \"raised-cosine\"", "curve = \"eehm\"");
+            std::fs::write(dir.join("eehm.toml"), src).unwrap();
+        }
+        let (a, b) = tiled_plate(&dir, profile, &format!("{name}.dmdjob"));
+        let mut worst_sum = 0;
+        let mut worst_step = 0;
+        for r in PLATE_ROWS {
+            for c in PLATE_COLS {
+                let (va, vb) = at(&a, &b, r, c);
+                if (992..1024).contains(&c) {
+                    worst_sum = worst_sum.max((va + vb - 255).abs());
+                } else {
+                    assert_eq!(va + vb, 255, "{name}: col {c} outside the overlap");
+                }
+                if c + 1 < PLATE_COLS.end {
+                    let (na, nb) = at(&a, &b, r, c + 1);
+                    worst_step = worst_step.max((na - va).abs()).max((nb - vb).abs());
+                }
+            }
+        }
+        assert!(worst_sum <= 2, "{name}: overlap sum off by {worst_sum}");
+        // p0 fades out across the overlap while p1 fades in, crossing near the middle.
+        let (l, r) = (at(&a, &b, 400, 993), at(&a, &b, 400, 1022));
+        assert!(
+            l.0 > 220 && l.1 < 35 && r.0 < 35 && r.1 > 220,
+            "{name}: {l:?} {r:?}"
+        );
+        let m = at(&a, &b, 400, 1008);
+        assert!((m.0 - m.1).abs() < 40, "{name}: middle {m:?}");
+        assert!(worst_step <= 24, "{name}: column step {worst_step}");
+        eprintln!("{name}: overlap sum within ±{worst_sum}, largest column step {worst_step}");
+    }
+}
+
+#[test]
+fn tiled_2x1_without_blend_doubles_the_dose() {
+    let dir = tempdir("geom-noblend");
+    let src = stdout(&run_in(&dir, &["profile", "show", "tiled-2x1"]));
+    std::fs::write(
+        dir.join("none.toml"),
+        src.replace("curve = \"raised-cosine\"", "curve = \"none\""),
+    )
+    .unwrap();
+    let (a, b) = tiled_plate(&dir, "none.toml", "n.dmdjob");
+    // Linear response: gray is irradiance, so the overlap gets twice the light.
+    for r in PLATE_ROWS {
+        for c in 992..1024 {
+            assert_eq!(at(&a, &b, r, c), (255, 255));
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! Multi-projector tiling: one field coverage mask → one gray mask per projector.
+//!
+//! Built once per job: for every projector a per-pixel factor `f` (its irradiance share from
+//! [`blend::weight_maps`], times any compensation gain, ≤ 1) in fixed point, and a LUT that
+//! turns an irradiance fraction into a gray level through that projector's response
+//! ([`Response::inverse_lut`]). Per layer and projector each pixel costs one multiply, one
+//! shift and one table look-up: `gray = lut[(coverage · F + 2¹⁵) >> 16]` with
+//! `F = round(f · 16 · 2¹⁶)`, since the LUT has 255 · 16 steps (coverage 255 × share 1 →
+//! the last entry). Black pixels are skipped. Mirror flags are applied last.
+
+use super::blend::{self, BlendCurve, Rect, Response, LUT_STEPS};
+use crate::profile::Projector;
+use crate::raster::Mask;
+
+/// Fixed-point factor of a full share (f = 1).
+const FULL: u32 = 16 << 16;
+
+/// Per-projector tables of a job.
+#[derive(Debug, Clone)]
+struct Tile {
+    rect: Rect,
+    mirror_x: bool,
+    mirror_y: bool,
+    /// `F` per projector pixel (row-major, unmirrored), or None when every `F` is [`FULL`].
+    factor: Option<Vec<u32>>,
+    /// Irradiance fraction (in 1/LUT_STEPS) → gray.
+    lut: Vec<u8>,
+}
+
+/// Splits field coverage masks into blended, response-corrected projector masks.
+#[derive(Debug, Clone)]
+pub struct Tiler {
+    tiles: Vec<Tile>,
+}
+
+impl Tiler {
+    /// Tables for `projectors` blended with `curve`; `responses[k]` is projector k's gray →
+    /// irradiance curve, `gains[k]` an optional extra per-pixel factor ≤ 1 (compensation:
+    /// row-major over the projector's pixels, unmirrored).
+    pub fn new(
+        projectors: &[Projector],
+        curve: &BlendCurve,
+        responses: &[Response],
+        gains: &[Option<Vec<f32>>],
+    ) -> Tiler {
+        let rects: Vec<Rect> = projectors.iter().map(rect_of).collect();
+        let weights = blend::weight_maps(&rects, curve);
+        let tiles = projectors
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let gain = gains.get(k).and_then(|g| g.as_ref());
+                let w = &weights[k];
+                let factor: Vec<u32> = w
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &s)| {
+                        let g = gain.map_or(1.0, |g| g[i].clamp(0.0, 1.0));
+                        ((s as f64 * g as f64).clamp(0.0, 1.0) * FULL as f64).round() as u32
+                    })
+                    .collect();
+                let all_full = factor.iter().all(|&f| f == FULL);
+                Tile {
+                    rect: rects[k],
+                    mirror_x: p.mirror_x,
+                    mirror_y: p.mirror_y,
+                    factor: (!all_full).then_some(factor),
+                    lut: responses
+                        .get(k)
+                        .cloned()
+                        .unwrap_or_else(Response::linear)
+                        .inverse_lut(),
+                }
+            })
+            .collect();
+        Tiler { tiles }
+    }
+
+    /// Number of projectors.
+    pub fn len(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// True when there are no projectors.
+    pub fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    /// Projector `k`'s gray mask of a field coverage mask.
+    pub fn render(&self, k: usize, field: &Mask) -> Mask {
+        let t = &self.tiles[k];
+        let (w, h) = (
+            (t.rect.x1 - t.rect.x0) as usize,
+            (t.rect.y1 - t.rect.y0) as usize,
+        );
+        let fw = field.width as usize;
+        let mut out = Mask::zeros(w as u32, h as u32);
+        let lut = &t.lut[..];
+        debug_assert_eq!(lut.len(), LUT_STEPS + 1);
+        let black = lut[0];
+        // Gray of a pixel with full share at each coverage level.
+        let full: Vec<u8> = (0..=255usize).map(|v| lut[v * 16]).collect();
+        for r in 0..h {
+            let sr = if t.mirror_y { h - 1 - r } else { r };
+            let row0 = (t.rect.y0 as usize + r) * fw + t.rect.x0 as usize;
+            let src = &field.data[row0..row0 + w];
+            let dst = &mut out.data[sr * w..(sr + 1) * w];
+            match &t.factor {
+                None => {
+                    for (d, &v) in dst.iter_mut().zip(src) {
+                        *d = full[v as usize];
+                    }
+                }
+                Some(f) => {
+                    let fr = &f[r * w..(r + 1) * w];
+                    for ((d, &v), &f) in dst.iter_mut().zip(src).zip(fr) {
+                        *d = if v == 0 {
+                            black
+                        } else {
+                            lut[((v as u32 * f + 0x8000) >> 16) as usize]
+                        };
+                    }
+                }
+            }
+            if t.mirror_x {
+                dst.reverse();
+            }
+        }
+        out
+    }
+}
+
+/// A projector's footprint in field pixels.
+pub fn rect_of(p: &Projector) -> Rect {
+    Rect {
+        x0: p.offset_px[0],
+        y0: p.offset_px[1],
+        x1: p.offset_px[0] + p.width_px,
+        y1: p.offset_px[1] + p.height_px,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::profile::Profile;
+
+    fn two(w: u32, overlap: u32) -> Vec<Projector> {
+        let mut p = Profile::default_profile().projector[0].clone();
+        p.width_px = w;
+        p.height_px = 4;
+        let mut q = p.clone();
+        q.offset_px = [w - overlap, 0];
+        vec![p, q]
+    }
+
+    #[test]
+    fn full_plate_sums_to_255_across_the_seam() {
+        let ps = two(64, 16);
+        let t = Tiler::new(
+            &ps,
+            &BlendCurve::RaisedCosine,
+            &[Response::linear(), Response::linear()],
+            &[None, None],
+        );
+        let mut field = Mask::zeros(112, 4);
+        field.data.fill(255);
+        let a = t.render(0, &field);
+        let b = t.render(1, &field);
+        for c in 0..112u32 {
+            let va = if c < 64 { a.get(c, 2) as i32 } else { 0 };
+            let vb = if c >= 48 { b.get(c - 48, 2) as i32 } else { 0 };
+            assert!((va + vb - 255).abs() <= 1, "col {c}: {va} + {vb}");
+        }
+        assert_eq!(a.get(0, 0), 255);
+        assert_eq!(b.get(63, 0), 255);
+        // Coverage scales the shares: a half-covered field gives half the gray.
+        field.data.fill(128);
+        let a = t.render(0, &field);
+        assert_eq!(a.get(10, 1), 128);
+    }
+
+    #[test]
+    fn nonlinear_response_gray_gives_the_irradiance_share() {
+        let ps = two(64, 16);
+        let g = Response::gamma(2.2).unwrap();
+        let t = Tiler::new(
+            &ps,
+            &BlendCurve::Smoothstep,
+            &[g.clone(), g.clone()],
+            &[None, None],
+        );
+        let mut field = Mask::zeros(112, 4);
+        field.data.fill(255);
+        let a = t.render(0, &field);
+        let b = t.render(1, &field);
+        for c in 48..64u32 {
+            let e = g.irradiance(a.get(c, 0)) + g.irradiance(b.get(c - 48, 0));
+            assert!((e - 1.0).abs() < 0.02, "col {c}: {e}");
+            // ...and the grays themselves sum to well above 255.
+        }
+        let mid = a.get(56, 0) as u32 + b.get(8, 0) as u32;
+        assert!(mid > 300, "{mid}");
+    }
+
+    #[test]
+    fn mirror_and_gain() {
+        let mut ps = two(8, 0);
+        ps[1].mirror_x = true;
+        ps[1].offset_px = [8, 0];
+        let gain = vec![0.5f32; 32];
+        let t = Tiler::new(
+            &ps,
+            &BlendCurve::RaisedCosine,
+            &[Response::linear(), Response::linear()],
+            &[Some(gain), None],
+        );
+        let mut field = Mask::zeros(16, 4);
+        for c in 0..16 {
+            field.data[c] = (c * 10) as u8;
+        }
+        let a = t.render(0, &field);
+        let b = t.render(1, &field);
+        assert_eq!(a.get(4, 0), 20); // 40 × 0.5
+        assert_eq!(b.get(0, 0), 150); // mirrored: field column 15
+        assert_eq!(b.get(7, 0), 80);
+    }
+}
