@@ -3,9 +3,13 @@
 //! `cargo bench --bench geometry -- [MODEL.stl] [TABLE.csv]`
 //! (default: fixtures/bunny00.stl, fixtures/lens_table.csv, 0.05 mm layers). Single-threaded,
 //! median of 5 runs, per layer: the distortion pre-warp of the section contours, the
-//! coverage raster of the plain and of the warped contours.
+//! coverage raster of the plain and of the warped contours; then on `tiled-2x1` (model centred
+//! on the seam): the coverage raster of the 2016-px field and the blend/LUT split into the two
+//! projector masks, against the plain crop of the untiled profile.
 
+use dmdsl::geometry::blend::Response;
 use dmdsl::geometry::distortion::{Correction, Table};
+use dmdsl::geometry::tile::Tiler;
 use dmdsl::job::{placement, PlacementMode};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
@@ -101,4 +105,60 @@ fn main() {
     println!("distortion pre-warp       {:8.3} ms/layer", per(warp_t));
     println!("coverage raster (plain)   {:8.3} ms/layer", per(cov_t));
     println!("coverage raster (warped)  {:8.3} ms/layer", per(covw_t));
+
+    // Tiling.
+    let plain_view = |sections: &[dmdsl::slice::Section], scratch: &mut Scratch| {
+        let t = Instant::now();
+        for s in sections {
+            let m = raster.coverage(&s.contours, scratch);
+            std::hint::black_box(dmdsl::raster::projector_view(&m, &profile.projector[0]));
+            scratch.recycle(m);
+        }
+        t.elapsed().as_secs_f64()
+    };
+    let tiled = Profile::resolve("tiled-2x1").unwrap();
+    let tfield = tiled.field();
+    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
+    let tr = placement(
+        &model,
+        bbox,
+        tfield.width_mm(),
+        tfield.height_mm(),
+        PlacementMode::Center,
+    )
+    .unwrap();
+    mesh.translate(tr);
+    let tsections = dmdsl::slice::slice(&mesh, h, n).0;
+    let t = Instant::now();
+    let tiler = Tiler::new(
+        &tiled.projector,
+        &tiled.blend.unwrap_or_default(),
+        &[Response::linear(), Response::linear()],
+        &[None, None],
+    );
+    let tables_s = t.elapsed().as_secs_f64();
+    let traster = Rasterizer::new(tfield);
+    let (mut view_t, mut tcov_t, mut split_t) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..5 {
+        view_t.push(plain_view(&sections, &mut scratch));
+        let (mut c, mut s) = (0.0, 0.0);
+        let mut tscratch = Scratch::default();
+        for sec in &tsections {
+            let t = Instant::now();
+            let m = traster.coverage(&sec.contours, &mut tscratch);
+            c += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for k in 0..tiler.len() {
+                std::hint::black_box(tiler.render(k, &m));
+            }
+            s += t.elapsed().as_secs_f64();
+            tscratch.recycle(m);
+        }
+        tcov_t.push(c);
+        split_t.push(s);
+    }
+    println!("tiled-2x1 tables (once)   {:8.2} ms", tables_s * 1e3);
+    println!("untiled raster + view     {:8.3} ms/layer", per(view_t));
+    println!("tiled raster (2016 px)    {:8.3} ms/layer", per(tcov_t));
+    println!("tiled blend split (2 px.) {:8.3} ms/layer", per(split_t));
 }

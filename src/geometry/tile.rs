@@ -23,6 +23,8 @@ struct Tile {
     mirror_y: bool,
     /// `F` per projector pixel (row-major, unmirrored), or None when every `F` is [`FULL`].
     factor: Option<Vec<u32>>,
+    /// Per row, the columns `a..b` outside which every `F` is [`FULL`].
+    spans: Vec<(u32, u32)>,
     /// Irradiance fraction (in 1/LUT_STEPS) → gray.
     lut: Vec<u8>,
 }
@@ -60,11 +62,21 @@ impl Tiler {
                     })
                     .collect();
                 let all_full = factor.iter().all(|&f| f == FULL);
+                let w = p.width_px as usize;
+                let spans = factor
+                    .chunks(w)
+                    .map(|row| {
+                        let a = row.iter().position(|&f| f != FULL).unwrap_or(w);
+                        let b = row.iter().rposition(|&f| f != FULL).map_or(a, |b| b + 1);
+                        (a as u32, b as u32)
+                    })
+                    .collect();
                 Tile {
                     rect: rects[k],
                     mirror_x: p.mirror_x,
                     mirror_y: p.mirror_y,
                     factor: (!all_full).then_some(factor),
+                    spans,
                     lut: responses
                         .get(k)
                         .cloned()
@@ -100,26 +112,30 @@ impl Tiler {
         let black = lut[0];
         // Gray of a pixel with full share at each coverage level.
         let full: Vec<u8> = (0..=255usize).map(|v| lut[v * 16]).collect();
+        let identity = full.iter().enumerate().all(|(v, &g)| g as usize == v);
         for r in 0..h {
             let sr = if t.mirror_y { h - 1 - r } else { r };
             let row0 = (t.rect.y0 as usize + r) * fw + t.rect.x0 as usize;
             let src = &field.data[row0..row0 + w];
             let dst = &mut out.data[sr * w..(sr + 1) * w];
-            match &t.factor {
-                None => {
-                    for (d, &v) in dst.iter_mut().zip(src) {
-                        *d = full[v as usize];
-                    }
+            // Full share: a copy (linear response) or one look-up per pixel.
+            if identity {
+                dst.copy_from_slice(src);
+            } else {
+                for (d, &v) in dst.iter_mut().zip(src) {
+                    *d = full[v as usize];
                 }
-                Some(f) => {
-                    let fr = &f[r * w..(r + 1) * w];
-                    for ((d, &v), &f) in dst.iter_mut().zip(src).zip(fr) {
-                        *d = if v == 0 {
-                            black
-                        } else {
-                            lut[((v as u32 * f + 0x8000) >> 16) as usize]
-                        };
-                    }
+            }
+            // Shared or compensated pixels: coverage × F through the response LUT.
+            if let Some(f) = &t.factor {
+                let (a, b) = (t.spans[r].0 as usize, t.spans[r].1 as usize);
+                let fr = &f[r * w + a..r * w + b];
+                for ((d, &v), &f) in dst[a..b].iter_mut().zip(&src[a..b]).zip(fr) {
+                    *d = if v == 0 {
+                        black
+                    } else {
+                        lut[((v as u32 * f + 0x8000) >> 16) as usize]
+                    };
                 }
             }
             if t.mirror_x {
