@@ -533,3 +533,36 @@ fn tiled_2x1_without_blend_doubles_the_dose() {
         }
     }
 }
+
+#[test]
+fn distortion_command_reports_fit_reach_and_plots() {
+    let dir = tempdir("geom-cmd");
+    write_table(&dir.join("barrel.csv"), Lens::Radial(-0.05), 0.01, 3);
+    let o = run_in(
+        &dir,
+        &["distortion", "barrel.csv", "--plot", "b.png", "--json"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["report"]["points"], 140);
+    assert_eq!(v["report"]["source"], "barrel.csv");
+    // Barrel pulls the light inwards: the corners are out of reach.
+    let reach = v["reachable_fraction"].as_f64().unwrap();
+    assert!((0.8..0.99).contains(&reach), "{reach}");
+    let img = image::open(dir.join("b.png")).unwrap();
+    assert!(img.width() > 520 && img.height() > 392);
+    let o = run_in(&dir, &["distortion", "barrel.csv"]);
+    assert!(stdout(&o).contains("reachable: "), "{}", stdout(&o));
+    let o = run_in(&dir, &["distortion", "nope.csv"]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = run_in(
+        &dir,
+        &["distortion", "barrel.csv", "--profile", "tiled-2x1"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("profiles with 2 projectors cannot use one"),
+        "{}",
+        stderr(&o)
+    );
+}
