@@ -449,6 +449,7 @@ fn tiled_plate(dir: &Path, profile: &str, out: &str) -> (Vec<u8>, Vec<u8>) {
     );
     let masks = job["layers"][0]["masks"].as_array().unwrap();
     assert_eq!(masks.len(), 2);
+    dmdsl::bundle::Manifest::read(&dir.join(out)).expect("manifest reads back");
     let mut px = Vec::new();
     for (k, m) in masks.iter().enumerate() {
         assert_eq!(m["projector"], k);
