@@ -289,10 +289,13 @@ pub fn weight_maps(rects: &[Rect], curve: &BlendCurve) -> Vec<Vec<f32>> {
         .collect()
 }
 
-/// A projector's gray → relative irradiance curve, `R(255) = 1`, non-decreasing.
+/// A projector's gray → relative irradiance curve over its usable gray levels, normalized so
+/// the brightest level is 1. Levels are ascending in gray and strictly ascending in
+/// irradiance; gray levels outside a calibration's valid range are simply not usable.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Response {
-    r: [f64; 256],
+    gray: Vec<u8>,
+    r: Vec<f64>,
 }
 
 /// Resolution of [`Response::inverse_lut`]: irradiance fractions in steps of 1/`LUT_STEPS`.
@@ -309,40 +312,56 @@ impl Response {
         Self::from_fn(|g| (g / 255.0).powf(gamma))
     }
 
-    /// Builds a response from any function of gray (0..=255), normalized so R(255) = 1.
-    /// None if it is not finite, not non-decreasing, or R(255) ≤ 0.
+    /// Builds a response from any function of gray (all 256 levels usable), normalized so
+    /// R(255) = 1. None if it is not finite, not non-decreasing, or R(255) ≤ 0.
     pub fn from_fn(f: impl Fn(f64) -> f64) -> Option<Self> {
-        let mut r = [0.0; 256];
-        for (g, v) in r.iter_mut().enumerate() {
-            *v = f(g as f64);
-        }
-        let top = r[255];
-        if !(top.is_finite() && top > 0.0) {
+        let levels: Vec<(u8, f64)> = (0..=255u8).map(|g| (g, f(g as f64))).collect();
+        if levels.iter().any(|l| !l.1.is_finite()) || levels.windows(2).any(|w| w[1].1 < w[0].1) {
             return None;
         }
-        for v in &mut r {
-            *v /= top;
+        // Keep the first of equal levels (a flat stretch gives no extra light).
+        let mut kept: Vec<(u8, f64)> = Vec::with_capacity(256);
+        for l in levels {
+            if kept.last().is_none_or(|k| l.1 > k.1) {
+                kept.push(l);
+            }
         }
-        if r.iter().any(|v| !v.is_finite()) || r.windows(2).any(|w| w[1] < w[0]) {
+        Self::from_levels(&kept)
+    }
+
+    /// Builds a response from usable levels `(gray, irradiance)`, ascending in both (strictly
+    /// in irradiance), normalized so the last is 1. None if empty, not ascending, not finite,
+    /// or the brightest irradiance is ≤ 0.
+    pub fn from_levels(levels: &[(u8, f64)]) -> Option<Self> {
+        let top = levels.last()?.1;
+        if !(top.is_finite() && top > 0.0)
+            || levels
+                .windows(2)
+                .any(|w| w[1].0 <= w[0].0 || w[1].1 <= w[0].1)
+            || levels.iter().any(|l| !l.1.is_finite())
+        {
             return None;
         }
-        Some(Response { r })
+        Some(Response {
+            gray: levels.iter().map(|l| l.0).collect(),
+            r: levels.iter().map(|l| l.1 / top).collect(),
+        })
     }
 
-    /// Relative irradiance at `gray`.
-    pub fn irradiance(&self, gray: u8) -> f64 {
-        self.r[gray as usize]
+    /// Relative irradiance at `gray` (None if that level is not usable).
+    pub fn irradiance(&self, gray: u8) -> Option<f64> {
+        self.gray.binary_search(&gray).ok().map(|i| self.r[i])
     }
 
-    /// The gray whose irradiance is nearest to `fraction` (0..=1).
+    /// The usable gray whose irradiance is nearest to `fraction` (0..=1); ties go down.
     pub fn gray_for(&self, fraction: f64) -> u8 {
         let f = fraction.clamp(0.0, 1.0);
-        // First gray with R ≥ f, then the nearer of it and its predecessor.
-        let hi = self.r.partition_point(|&v| v < f).min(255);
+        let n = self.r.len();
+        let hi = self.r.partition_point(|&v| v < f).min(n - 1);
         if hi > 0 && (f - self.r[hi - 1]) <= (self.r[hi] - f) {
-            (hi - 1) as u8
+            self.gray[hi - 1]
         } else {
-            hi as u8
+            self.gray[hi]
         }
     }
 
@@ -500,7 +519,16 @@ mod tests {
         // Half the light needs far more than half the gray under gamma 2.2.
         let g = g22.gray_for(0.5);
         assert!((184..=187).contains(&g), "{g}");
-        assert!((g22.irradiance(g) - 0.5).abs() < 0.005);
+        assert!((g22.irradiance(g).unwrap() - 0.5).abs() < 0.005);
+        // Only usable levels are chosen: a response valid on 121..=255 plus 0 (off).
+        let mut lv = vec![(0u8, 0.0)];
+        lv.extend((121..=255u8).map(|g| (g, 0.2 + (g as f64 - 121.0) / 134.0)));
+        let z = Response::from_levels(&lv).unwrap();
+        assert_eq!(z.gray_for(0.05), 0);
+        assert_eq!(z.gray_for(0.15), 121);
+        assert_eq!(z.gray_for(1.0), 255);
+        assert_eq!(z.irradiance(60), None);
+        assert!(Response::from_levels(&[(3, 1.0), (2, 2.0)]).is_none());
         assert!(Response::from_fn(|g| 255.0 - g).is_none());
         assert!(Response::from_fn(|_| 0.0).is_none());
     }
@@ -509,11 +537,12 @@ mod tests {
     fn failure_modes_the_blend_fixes() {
         // No blending: two full projectors deliver twice the irradiance in the overlap.
         let lin = Response::linear();
-        let dose = lin.irradiance(255) + lin.irradiance(255);
+        let e = |r: &Response, g: u8| r.irradiance(g).unwrap();
+        let dose = e(&lin, 255) + e(&lin, 255);
         assert!((dose - 2.0).abs() < 1e-12);
         // Halving the gray under a nonlinear response does not give half the light each.
         let g22 = Response::gamma(2.2).unwrap();
-        let halves = 2.0 * g22.irradiance(128);
+        let halves = 2.0 * e(&g22, 128);
         assert!(
             halves < 0.5,
             "two half-gray projectors give {halves} of the dose"
@@ -522,7 +551,7 @@ mod tests {
         for i in 0..=32 {
             let t = (i as f64 + 0.5) / 33.0;
             let (a, b) = BlendCurve::RaisedCosine.pair(t);
-            let s = g22.irradiance(g22.gray_for(a)) + g22.irradiance(g22.gray_for(b));
+            let s = e(&g22, g22.gray_for(a)) + e(&g22, g22.gray_for(b));
             assert!((s - 1.0).abs() < 0.02, "{t}: {s}");
         }
     }
