@@ -45,6 +45,8 @@ pub struct SliceOptions<'a> {
     pub binary: Option<bool>,
     /// Placement rule.
     pub placement: PlacementMode,
+    /// Light compensation (mode, dithering).
+    pub optics: crate::optics::OpticsOptions,
     /// Called with (layers done, layers total) as layers are written.
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
     /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
@@ -170,6 +172,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         profile.slicing.binary = b;
     }
     let h = profile.slicing.layer_height_mm.get();
+    let optics = crate::optics::prepare(&mut profile, &opts.optics, h)?;
     let field = profile.field();
     let path = opts.input.as_path();
 
@@ -243,6 +246,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                     binary,
                     tiled,
                     px_area,
+                    optics.as_ref(),
                 )?);
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                 if let Some(p) = opts.progress {
@@ -296,6 +300,14 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             time_s: p.time_s,
         });
     }
+    let optics_record = match &optics {
+        Some(o) => {
+            let (record, w) = o.finish(&writer, &profile, encode_png)?;
+            warnings.extend(w);
+            Some(record)
+        }
+        None => None,
+    };
     let manifest = Manifest {
         format: bundle::FORMAT.into(),
         version: bundle::VERSION,
@@ -321,12 +333,15 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         settings: Settings {
             layer_height_mm: h,
             binary,
-            compensation: "off".into(),
+            compensation: optics_record
+                .as_ref()
+                .map_or("off".into(), |o| o.mode.clone()),
         },
         machine: profile.clone(),
         totals: totals.clone(),
         warnings: warnings.clone(),
         layers,
+        optics: optics_record,
     };
     if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
         return Err(Error::Interrupted);
@@ -360,11 +375,16 @@ fn layer_masks(
     binary: bool,
     tiled: bool,
     px_area: f64,
+    optics: Option<&crate::optics::JobOptics>,
 ) -> Result<LayerOut> {
     let mut field_mask = raster.coverage(&section.contours, scratch);
     let area_mm2 = field_mask.lit_pixels() * px_area;
     if binary {
         crate::raster::threshold(&mut field_mask);
+    }
+    if let Some(o) = optics {
+        // Coverage → gray through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
+        o.apply(&mut field_mask);
     }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {

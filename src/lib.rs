@@ -12,6 +12,7 @@ pub mod error;
 pub mod job;
 pub mod mesh;
 pub mod motion;
+pub mod optics;
 pub mod plan;
 pub mod plot;
 pub mod profile;

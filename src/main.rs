@@ -39,6 +39,63 @@ enum Cmd {
     /// Show or list machine profiles.
     #[command(subcommand)]
     Profile(ProfileCmd),
+    /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
+    #[command(after_help = EXIT_HELP)]
+    Calibrate(CalibrateArgs),
+}
+
+#[derive(Args)]
+struct CalibrateArgs {
+    /// Measurements: CSV with header x_mm,y_mm,gray,irradiance_mw_cm2 (zone centre from the
+    /// field's bottom-left corner, pixel value shown there (255 = fully on), irradiance).
+    input: PathBuf,
+    /// Calibration file to write (TOML); PNG plots are written next to it.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The irradiance column is in arbitrary units (exposure then comes from the profile).
+    #[arg(long)]
+    relative: bool,
+    /// Compensation zone edge, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    zone_mm: f64,
+    /// How far P is extrapolated beyond the measured area before it is held constant, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    extrapolate_mm: f64,
+    /// Degree of the polynomial P(x, y), 3..6 [default: 3 (the paper's cubic) unless
+    /// cross-validation on held-out zones shows a higher degree predicts better].
+    #[arg(long, value_name = "N")]
+    degree: Option<usize>,
+    /// Machine profile whose field the predictions are made for.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Do not write PNG plots.
+    #[arg(long)]
+    no_plots: bool,
+    /// Print a machine-readable report on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Dithering of compensated grays.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum DitherArg {
+    /// Zone mode mixes two grays only where one gray misses the target by > 0.75 %.
+    Auto,
+    /// Every zone mixes two grays; pixel mode diffuses the error.
+    On,
+    /// One gray per zone or pixel.
+    Off,
+}
+
+/// Light compensation mode.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CompensationArg {
+    /// One gray per zone (seeds/000).
+    Zone,
+    /// One gray per pixel from the smooth fit.
+    Pixel,
+    /// No compensation: pixel value = coverage.
+    Off,
 }
 
 #[derive(Args)]
@@ -63,6 +120,20 @@ struct SliceArgs {
     /// Exit with code 1 if the mesh has defects (the bundle is still written).
     #[arg(long)]
     strict: bool,
+    /// Light calibration file from `dmdsl calibrate`, replacing the profile's (repeatable:
+    /// PROJECTOR=FILE for a named projector).
+    #[arg(long, value_name = "[PROJECTOR=]FILE")]
+    calibration: Vec<String>,
+    /// Light compensation [default: zone when the profile or --calibration has a
+    /// calibration, else off].
+    #[arg(long, value_enum)]
+    compensation: Option<CompensationArg>,
+    /// Dithering of compensated grays, to beat 8-bit gray steps. auto: a zone whose
+    /// nearest gray misses the target by > 0.75 % mixes the two grays around it (ordered
+    /// pattern), pixel mode does not dither; on: every zone mixes, pixel mode diffuses
+    /// the error (Floyd-Steinberg); off: one gray per zone/pixel.
+    #[arg(long, value_enum, default_value = "auto")]
+    dither: DitherArg,
     /// Print a machine-readable summary on stdout.
     #[arg(long)]
     json: bool,
@@ -97,6 +168,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
         Cmd::Slice(a) => slice(a, cli.quiet),
+        Cmd::Calibrate(a) => calibrate(a, cli.quiet),
         Cmd::Profile(ProfileCmd::List) => {
             for (name, src) in profile::BUILTIN {
                 let p = Profile::from_toml(src, name)?;
@@ -115,7 +187,20 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
 }
 
 fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
-    let profile = Profile::resolve(&a.profile)?;
+    let mut profile = Profile::resolve(&a.profile)?;
+    dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    let optics = dmdsl::optics::OpticsOptions {
+        mode: a.compensation.map(|c| match c {
+            CompensationArg::Zone => dmdsl::optics::Mode::Zone,
+            CompensationArg::Pixel => dmdsl::optics::Mode::Pixel,
+            CompensationArg::Off => dmdsl::optics::Mode::Off,
+        }),
+        dither: match a.dither {
+            DitherArg::Auto => dmdsl::optics::Dither::Auto,
+            DitherArg::On => dmdsl::optics::Dither::On,
+            DitherArg::Off => dmdsl::optics::Dither::Off,
+        },
+    };
     let layer_height_mm = match a.layer_height {
         None => None,
         Some(v) => Some(Positive::new(v).ok_or_else(|| {
@@ -149,6 +234,7 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         } else {
             PlacementMode::Center
         },
+        optics,
         progress: if show_progress { Some(&progress) } else { None },
         cancel: Some(&cancel),
     };
@@ -191,6 +277,77 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             eprintln!("dmdsl: --strict: mesh has defects (see warnings); exit code 1");
         }
         return Ok(1);
+    }
+    Ok(0)
+}
+
+fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
+    use dmdsl::optics::report::{self, CalibrateOptions};
+    let field = Profile::resolve(&a.profile)?.field();
+    let r = report::calibrate(&CalibrateOptions {
+        input: a.input,
+        output: a.output,
+        units: if a.relative {
+            dmdsl::optics::Units::Relative
+        } else {
+            dmdsl::optics::Units::MwCm2
+        },
+        zone_mm: a.zone_mm,
+        extrapolate_mm: a.extrapolate_mm,
+        field,
+        degree: a.degree,
+        plots: !a.no_plots,
+    })?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(0);
+    }
+    if quiet {
+        return Ok(0);
+    }
+    for w in &r.warnings {
+        eprintln!("dmdsl: warning: {w}");
+    }
+    let u = if r.units == "relative" {
+        ""
+    } else {
+        " mW/cm²"
+    };
+    println!(
+        "{}: {} zones x {} gray levels ({} readings); residual RMS {:.2} %, max {:.2} % (line {})",
+        r.calibration.display(),
+        r.zones,
+        r.gray_levels,
+        r.readings,
+        r.residual_rms_pct,
+        r.residual_max_pct,
+        r.residual_max_line
+    );
+    let excluded = if r.excluded_grays.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; S stops falling below it, excluded levels {:?}",
+            r.excluded_grays
+        )
+    };
+    println!(
+        "valid gray {}..{}{excluded}",
+        r.valid_gray[0], r.valid_gray[1]
+    );
+    for (name, m) in [("zone", &r.zone), ("pixel", &r.pixel)] {
+        println!(
+            "{name} mode: target {:.4}{u} = {:.1} % of the mean; spread zone means {:.1} % -> {:.2} %, pixels {:.1} % -> {:.2} %",
+            m.target_irradiance,
+            m.throughput * 100.0,
+            m.spreads.before_zone_pct,
+            m.spreads.after_zone_pct,
+            m.spreads.before_pixel_pct,
+            m.spreads.after_pixel_pct
+        );
+    }
+    for p in &r.plots {
+        println!("plot: {}", p.display());
     }
     Ok(0)
 }

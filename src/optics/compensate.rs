@@ -1,0 +1,634 @@
+//! Applying a calibration: coverage → gray, per zone or per pixel.
+//!
+//! Everything that depends only on the calibration and the field is computed once per job
+//! in [`Compensator::new`]: P at every pixel centre, the target E*, and either one
+//! 256-entry lookup table per zone (zone mode) or the full-coverage gray, its level index
+//! and E*/P per pixel (pixel mode). [`Compensator::apply`] then rewrites a layer's coverage
+//! mask in place, touching only lit pixels:
+//!
+//! * coverage c = v/255 of a pixel asks for irradiance c·E*; the pixel gets the 8-bit level
+//!   whose S·P is nearest to it (so an anti-aliased edge pixel gets S⁻¹(c·E*/P), never
+//!   c × the full gray);
+//! * zone mode uses P averaged over the zone (one gray per zone for full coverage);
+//! * pixel mode uses P at the pixel centre; with dithering, the quantization error (in
+//!   irradiance) is diffused to the lit neighbours (Floyd–Steinberg, serpentine), row by
+//!   row within the layer, so the output does not depend on the thread count.
+
+use super::field::FieldModel;
+use super::response::Levels;
+use super::{Calibration, Dither, Mode};
+use crate::bundle::Spreads;
+use crate::profile::Field;
+use crate::raster::Mask;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Per-job compensation tables for one projector's calibration over the field.
+#[derive(Debug)]
+pub struct Compensator {
+    mode: Mode,
+    dither: Dither,
+    w: usize,
+    h: usize,
+    levels: Levels,
+    // Zone mode.
+    zcols: usize,
+    zone_of_col: Vec<u16>,
+    zone_of_row: Vec<u16>,
+    luts: Vec<[u8; 256]>,
+    /// Zone mode with dithering: (lower gray, upper gray, count of 64) per zone.
+    mix: Vec<(u8, u8, u8)>,
+    // Pixel mode.
+    full: Vec<u8>,
+    full_idx: Vec<u16>,
+    t: Vec<f32>,
+    // Calibrated area in pixels: rows [r0, r1), cols [c0, c1).
+    inside_rows: [usize; 2],
+    inside_cols: [usize; 2],
+    layers_outside: AtomicU64,
+    /// What the model predicts; see [`Prediction`].
+    pub prediction: Prediction,
+}
+
+/// What the calibration model predicts for a full-coverage field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prediction {
+    /// Target irradiance E* (calibration units).
+    pub target: f64,
+    /// Mean irradiance of the calibrated area at the brightest valid gray.
+    pub mean: f64,
+    /// Highest S (at the brightest valid gray).
+    pub s_max: f64,
+    /// Zone grid size (cols, rows).
+    pub zone_grid: (usize, usize),
+    /// Mean P of each zone, row 0 = top.
+    pub zone_p: Vec<f64>,
+    /// Zone centre inside the calibrated area, row 0 = top.
+    pub zone_inside: Vec<bool>,
+    /// Full-coverage gray of each zone (zone mode) or the zone mean of the pixel grays
+    /// rounded (pixel mode), row 0 = top.
+    pub zone_gray: Vec<u8>,
+    /// Predicted full-coverage irradiance, zone means, row 0 = top.
+    pub zone_after: Vec<f64>,
+    /// Spreads before/after over the calibrated area.
+    pub spreads: Spreads,
+    /// Zones with their centre outside the calibrated area.
+    pub zones_outside: u64,
+    /// Pixels outside the calibrated area.
+    pub pixels_outside: u64,
+    /// Zones (zone mode) or pixels (pixel mode) that cannot reach E*.
+    pub unreachable: u64,
+    /// Zones mixing two grays (zone mode).
+    pub mixed_zones: u64,
+}
+
+/// Zone mode with `Dither::Auto`: a zone whose nearest gray misses the target by more than
+/// this fraction mixes the two grays around the target.
+pub const MIX_TOLERANCE: f64 = 0.0075;
+
+/// 8×8 Bayer ordered-dither thresholds 0..63.
+const BAYER8: [[u8; 8]; 8] = [
+    [0, 32, 8, 40, 2, 34, 10, 42],
+    [48, 16, 56, 24, 50, 18, 58, 26],
+    [12, 44, 4, 36, 14, 46, 6, 38],
+    [60, 28, 52, 20, 62, 30, 54, 22],
+    [3, 35, 11, 43, 1, 33, 9, 41],
+    [51, 19, 59, 27, 49, 17, 57, 25],
+    [15, 47, 7, 39, 13, 45, 5, 37],
+    [63, 31, 55, 23, 61, 29, 53, 21],
+];
+
+/// The zone-mode target: among targets within 15 % of `emax` (the highest every inside
+/// zone can reach), the centre of the narrowest irradiance window that holds one
+/// achievable full-coverage value P̄·S(level) of every inside zone. One gray per zone
+/// cannot do better than that window's width; nearest rounding to `emax` alone can be
+/// up to one gray step worse. Falls back to `emax`.
+fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
+    let zones: Vec<usize> = (0..zone_p.len()).filter(|&z| inside[z]).collect();
+    let (lo_b, hi_b) = (emax * 0.85, emax * 1.15);
+    let mut pairs: Vec<(f64, usize)> = Vec::new();
+    for (k, &z) in zones.iter().enumerate() {
+        for &s in &lv.s {
+            let a = zone_p[z] * s;
+            if a >= lo_b && a <= hi_b {
+                pairs.push((a, k));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let n = zones.len();
+    let mut cnt = vec![0usize; n];
+    let (mut have, mut j) = (0usize, 0usize);
+    let mut best: Option<(f64, f64)> = None;
+    for i in 0..pairs.len() {
+        if cnt[pairs[i].1] == 0 {
+            have += 1;
+        }
+        cnt[pairs[i].1] += 1;
+        while have == n {
+            let (lo, hi) = (pairs[j].0, pairs[i].0);
+            let width = (hi - lo) / (hi + lo);
+            if best.map_or(true, |b| width < b.0 - 1e-15) {
+                best = Some((width, 0.5 * (lo + hi)));
+            }
+            let k = pairs[j].1;
+            cnt[k] -= 1;
+            if cnt[k] == 0 {
+                have -= 1;
+            }
+            j += 1;
+        }
+    }
+    best.map_or(emax, |b| b.1)
+}
+
+fn spread(v: impl Iterator<Item = f64>) -> f64 {
+    let (mut lo, mut hi, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
+    for x in v {
+        lo = lo.min(x);
+        hi = hi.max(x);
+        sum += x;
+        n += 1;
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    (hi - lo) / (sum / n as f64) * 100.0
+}
+
+/// P at every pixel centre of the field (row-major, top row first), following the
+/// extrapolation rule.
+fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
+    let (w, h) = (field.width_px as usize, field.height_px as usize);
+    let p = field.pixel_mm;
+    let mut out = vec![0f32; w * h];
+    for (r, row) in out.chunks_exact_mut(w).enumerate() {
+        let y = (h as f64 - r as f64 - 0.5) * p;
+        for (c, o) in row.iter_mut().enumerate() {
+            *o = fm.eval((c as f64 + 0.5) * p, y) as f32;
+        }
+    }
+    out
+}
+
+impl Compensator {
+    /// Precomputes the tables of `mode` (zone or pixel) for calibration `cal` over `field`.
+    ///
+    /// Fails (with a message for the caller to wrap) if the calibrated area contains no
+    /// pixel or zone centre of the field.
+    pub fn new(
+        cal: &Calibration,
+        field: &Field,
+        mode: Mode,
+        dither: Dither,
+    ) -> std::result::Result<Compensator, String> {
+        assert!(mode != Mode::Off, "no compensator for mode off");
+        let (w, h) = (field.width_px as usize, field.height_px as usize);
+        let p = field.pixel_mm;
+        let fm = &cal.field;
+        let [ax0, ay0, ax1, ay1] = fm.area_mm;
+        let levels = cal.response.levels();
+        let s_max = levels.s_max();
+
+        // Calibrated area in pixel index ranges (pixel centres inside the area).
+        let cols: Vec<usize> = (0..w)
+            .filter(|&c| {
+                let x = (c as f64 + 0.5) * p;
+                x >= ax0 && x <= ax1
+            })
+            .collect();
+        let rows: Vec<usize> = (0..h)
+            .filter(|&r| {
+                let y = (h as f64 - r as f64 - 0.5) * p;
+                y >= ay0 && y <= ay1
+            })
+            .collect();
+        let (Some(&c0), Some(&c1), Some(&r0), Some(&r1)) =
+            (cols.first(), cols.last(), rows.first(), rows.last())
+        else {
+            return Err(format!(
+                "the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm contains no pixel of the {:.3} x {:.3} mm field",
+                field.width_mm(),
+                field.height_mm()
+            ));
+        };
+        let (inside_cols, inside_rows) = ([c0, c1 + 1], [r0, r1 + 1]);
+        let pixels_inside = (c1 + 1 - c0) * (r1 + 1 - r0);
+        let pixels_outside = (w * h - pixels_inside) as u64;
+
+        let pp = pixel_p(fm, field);
+        let inside_iter = || (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * w + c));
+        let mean = inside_iter().map(|i| pp[i] as f64).sum::<f64>() / pixels_inside as f64 * s_max;
+
+        // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
+        // holding its centre. Zone rows are stored top first, like the image.
+        let zmm = cal.zone_mm.get();
+        let zcols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+        let zrows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+        let zone_of_col: Vec<u16> = (0..w)
+            .map(|c| (((c as f64 + 0.5) * p / zmm) as usize).min(zcols - 1) as u16)
+            .collect();
+        let zone_of_row: Vec<u16> = (0..h)
+            .map(|r| {
+                let zb = (((h as f64 - r as f64 - 0.5) * p / zmm) as usize).min(zrows - 1);
+                (zrows - 1 - zb) as u16
+            })
+            .collect();
+        let nz = zcols * zrows;
+        let mut zsum = vec![0f64; nz];
+        let mut zcnt = vec![0usize; nz];
+        for r in 0..h {
+            let zr = zone_of_row[r] as usize * zcols;
+            for c in 0..w {
+                let z = zr + zone_of_col[c] as usize;
+                zsum[z] += pp[r * w + c] as f64;
+                zcnt[z] += 1;
+            }
+        }
+        let zone_p: Vec<f64> = zsum
+            .iter()
+            .zip(&zcnt)
+            .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
+            .collect();
+        let zone_inside: Vec<bool> = (0..nz)
+            .map(|z| {
+                let (zr, zc) = (zrows - 1 - z / zcols, z % zcols);
+                let cx = (zc as f64 + 0.5) * zmm;
+                let xe = ((zc + 1) as f64 * zmm).min(field.width_mm());
+                let cx = cx.min(0.5 * (zc as f64 * zmm + xe));
+                let ye = ((zr + 1) as f64 * zmm).min(field.height_mm());
+                let cy = 0.5 * (zr as f64 * zmm + ye);
+                zcnt[z] > 0 && fm.inside(cx, cy)
+            })
+            .collect();
+        let zones_outside = zone_inside.iter().filter(|&&b| !b).count() as u64;
+        let before_zone = spread(
+            (0..nz)
+                .filter(|&z| zone_inside[z])
+                .map(|z| zone_p[z] * s_max),
+        );
+        let before_pixel = spread(inside_iter().map(|i| pp[i] as f64 * s_max));
+
+        let mut comp = Compensator {
+            mode,
+            dither,
+            w,
+            h,
+            levels,
+            zcols,
+            zone_of_col,
+            zone_of_row,
+            luts: Vec::new(),
+            mix: Vec::new(),
+            full: Vec::new(),
+            full_idx: Vec::new(),
+            t: Vec::new(),
+            inside_rows,
+            inside_cols,
+            layers_outside: AtomicU64::new(0),
+            prediction: Prediction {
+                target: 0.0,
+                mean,
+                s_max,
+                zone_grid: (zcols, zrows),
+                zone_p: zone_p.clone(),
+                zone_inside: zone_inside.clone(),
+                zone_gray: vec![0; nz],
+                zone_after: vec![0.0; nz],
+                spreads: Spreads {
+                    before_zone_pct: before_zone,
+                    before_pixel_pct: before_pixel,
+                    after_zone_pct: 0.0,
+                    after_pixel_pct: 0.0,
+                },
+                zones_outside,
+                pixels_outside,
+                unreachable: 0,
+                mixed_zones: 0,
+            },
+        };
+        let lv = &comp.levels;
+        let s_of = |g: u8| -> f64 {
+            let i = lv.gray.partition_point(|&x| x < g);
+            lv.s[i]
+        };
+        match mode {
+            Mode::Zone => {
+                let pmin = (0..nz)
+                    .filter(|&z| zone_inside[z])
+                    .map(|z| zone_p[z])
+                    .fold(f64::INFINITY, f64::min);
+                if !pmin.is_finite() {
+                    return Err(format!(
+                        "no {zmm} mm zone of the field has its centre in the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm"
+                    ));
+                }
+                let emax = pmin * s_max;
+                let target = if dither == Dither::On {
+                    emax
+                } else {
+                    best_window(lv, &zone_p, &zone_inside, emax)
+                };
+                let mut mixed = 0u64;
+                let mut unreachable = 0;
+                let mut luts = vec![[0u8; 256]; nz];
+                let mut mix = vec![(0u8, 0u8, 0u8); nz];
+                let mut zone_after = vec![0.0; nz];
+                for z in 0..nz {
+                    let pz = zone_p[z];
+                    let tz = if pz > 0.0 { target / pz } else { f64::INFINITY };
+                    if tz > s_max * (1.0 + 1e-9) {
+                        unreachable += 1;
+                    }
+                    for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
+                        *out = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                    }
+                    let g = luts[z][255];
+                    zone_after[z] = pz * s_of(g);
+                    mix[z] = (g, g, 0);
+                    let miss = (zone_after[z] / target - 1.0).abs();
+                    let mixing = match dither {
+                        Dither::On => true,
+                        Dither::Auto => miss > MIX_TOLERANCE && tz <= s_max,
+                        Dither::Off => false,
+                    };
+                    if mixing {
+                        mixed += 1;
+                        // Full coverage: mix the two levels around the target in the
+                        // fraction that puts the zone mean on it (ordered 8×8 pattern).
+                        let i = lv.s.partition_point(|&x| x <= tz).clamp(1, lv.s.len() - 1);
+                        let (s0, s1) = (lv.s[i - 1], lv.s[i]);
+                        let f = ((tz - s0) / (s1 - s0)).clamp(0.0, 1.0);
+                        let k = (f * 64.0).round() as u8;
+                        mix[z] = (lv.gray[i - 1], lv.gray[i], k);
+                        zone_after[z] = pz * (s0 + (s1 - s0) * k as f64 / 64.0);
+                    }
+                }
+                let zone_gray: Vec<u8> = mix
+                    .iter()
+                    .map(|&(g0, g1, k)| if k >= 32 { g1 } else { g0 })
+                    .collect();
+                let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
+                let after_pixel = spread(inside_iter().map(|i| {
+                    let (r, c) = (i / w, i % w);
+                    let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
+                    let (g0, g1, k) = mix[z];
+                    let g = if BAYER8[r % 8][c % 8] < k { g1 } else { g0 };
+                    pp[i] as f64 * s_of(g)
+                }));
+                comp.mix = mix;
+                comp.prediction.mixed_zones = mixed;
+                let pr = &mut comp.prediction;
+                pr.target = target;
+                pr.zone_gray = zone_gray;
+                pr.zone_after = zone_after;
+                pr.spreads.after_zone_pct = after_zone;
+                pr.spreads.after_pixel_pct = after_pixel;
+                pr.unreachable = unreachable;
+                comp.luts = luts;
+            }
+            Mode::Pixel => {
+                let pmin = inside_iter()
+                    .map(|i| pp[i] as f64)
+                    .fold(f64::INFINITY, f64::min);
+                let target = pmin * s_max;
+                let mut unreachable = 0;
+                let mut full = vec![0u8; w * h];
+                let mut full_idx = vec![0u16; w * h];
+                let mut t = vec![0f32; w * h];
+                let mut idx = lv.gray.len() - 1;
+                for i in 0..w * h {
+                    let ti = if pp[i] > 0.0 {
+                        target / pp[i] as f64
+                    } else {
+                        f64::INFINITY
+                    };
+                    if ti > s_max * (1.0 + 1e-6) {
+                        unreachable += 1;
+                    }
+                    idx = lv.nearest_from(idx, ti);
+                    full[i] = lv.gray[idx];
+                    full_idx[i] = idx as u16;
+                    t[i] = ti as f32;
+                }
+                let mut zs = vec![0f64; nz];
+                let mut zg = vec![0f64; nz];
+                for r in 0..h {
+                    for c in 0..w {
+                        let i = r * w + c;
+                        let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
+                        zs[z] += pp[i] as f64 * lv.s[full_idx[i] as usize];
+                        zg[z] += full[i] as f64;
+                    }
+                }
+                let zone_after: Vec<f64> = (0..nz).map(|z| zs[z] / zcnt[z].max(1) as f64).collect();
+                let zone_gray = (0..nz)
+                    .map(|z| (zg[z] / zcnt[z].max(1) as f64).round() as u8)
+                    .collect();
+                let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
+                let after_pixel =
+                    spread(inside_iter().map(|i| pp[i] as f64 * lv.s[full_idx[i] as usize]));
+                let pr = &mut comp.prediction;
+                pr.target = target;
+                pr.zone_gray = zone_gray;
+                pr.zone_after = zone_after;
+                pr.spreads.after_zone_pct = after_zone;
+                pr.spreads.after_pixel_pct = after_pixel;
+                pr.unreachable = unreachable;
+                comp.full = full;
+                comp.full_idx = full_idx;
+                comp.t = t;
+            }
+            Mode::Off => unreachable!(),
+        }
+        Ok(comp)
+    }
+
+    /// The compensation mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// The dithering setting.
+    pub fn dither(&self) -> Dither {
+        self.dither
+    }
+
+    /// Number of layers passed to [`apply`](Self::apply) whose lit pixels reach outside the
+    /// calibrated area.
+    pub fn layers_outside(&self) -> u64 {
+        self.layers_outside.load(Ordering::Relaxed)
+    }
+
+    /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
+    pub fn apply(&self, m: &mut Mask) {
+        assert_eq!(
+            (m.width as usize, m.height as usize),
+            (self.w, self.h),
+            "mask size differs from the field"
+        );
+        let w = self.w;
+        // Rows holding lit pixels.
+        let lit_row = |r: usize| m.data[r * w..(r + 1) * w].iter().any(|&v| v != 0);
+        let Some(r0) = (0..self.h).find(|&r| lit_row(r)) else {
+            return;
+        };
+        let r1 = (r0..self.h).rev().find(|&r| lit_row(r)).unwrap_or(r0) + 1;
+        if self.reaches_outside(m, r0, r1) {
+            self.layers_outside.fetch_add(1, Ordering::Relaxed);
+        }
+        match (self.mode, self.dither) {
+            (Mode::Zone, _) => self.apply_zone(m, r0, r1),
+            (Mode::Pixel, Dither::On) => self.apply_dither(m, r0, r1),
+            (Mode::Pixel, _) => self.apply_pixel(m, r0, r1),
+            (Mode::Off, _) => {}
+        }
+    }
+
+    fn reaches_outside(&self, m: &Mask, r0: usize, r1: usize) -> bool {
+        let w = self.w;
+        let [ir0, ir1] = self.inside_rows;
+        let [ic0, ic1] = self.inside_cols;
+        (r0..r1).any(|r| {
+            let row = &m.data[r * w..(r + 1) * w];
+            if r < ir0 || r >= ir1 {
+                row.iter().any(|&v| v != 0)
+            } else {
+                row[..ic0].iter().any(|&v| v != 0) || row[ic1..].iter().any(|&v| v != 0)
+            }
+        })
+    }
+
+    fn apply_zone(&self, m: &mut Mask, r0: usize, r1: usize) {
+        let w = self.w;
+        for r in r0..r1 {
+            let zr = self.zone_of_row[r] as usize * self.zcols;
+            let row = &mut m.data[r * w..(r + 1) * w];
+            // Walk the row zone segment by zone segment with that zone's table.
+            let mut c = 0;
+            while c < w {
+                let zc = self.zone_of_col[c];
+                let mut e = c + 1;
+                while e < w && self.zone_of_col[e] == zc {
+                    e += 1;
+                }
+                let z = zr + zc as usize;
+                let lut = &self.luts[z];
+                let (g0, g1, k) = self.mix[z];
+                if k > 0 {
+                    let bayer = &BAYER8[r % 8];
+                    for (cc, v) in (c..e).zip(&mut row[c..e]) {
+                        if *v == 255 {
+                            *v = if bayer[cc % 8] < k { g1 } else { g0 };
+                        } else if *v != 0 {
+                            *v = lut[*v as usize];
+                        }
+                    }
+                } else {
+                    for v in &mut row[c..e] {
+                        if *v != 0 {
+                            *v = lut[*v as usize];
+                        }
+                    }
+                }
+                c = e;
+            }
+        }
+    }
+
+    fn apply_pixel(&self, m: &mut Mask, r0: usize, r1: usize) {
+        let w = self.w;
+        let lv = &self.levels;
+        let span = r0 * w..r1 * w;
+        let data = &mut m.data[span.clone()];
+        let full = &self.full[span.clone()];
+        let fidx = &self.full_idx[span.clone()];
+        let t = &self.t[span];
+        for i in 0..data.len() {
+            let v = data[i];
+            if v == 255 {
+                data[i] = full[i];
+            } else if v != 0 {
+                let target = v as f64 / 255.0 * t[i] as f64;
+                data[i] = lv.gray[lv.nearest_from(fidx[i] as usize, target)];
+            }
+        }
+    }
+
+    fn apply_dither(&self, m: &mut Mask, r0: usize, r1: usize) {
+        let w = self.w;
+        let lv = &self.levels;
+        let s_max = lv.s_max();
+        let top = lv.s.len() - 1;
+        // Error (in units of E*) carried to the current and the next row; index c + 1.
+        let mut cur = vec![0f32; w + 2];
+        let mut next = vec![0f32; w + 2];
+        for r in r0..r1 {
+            let ltr = (r - r0) % 2 == 0;
+            let base = r * w;
+            for k in 0..w {
+                let c = if ltr { k } else { w - 1 - k };
+                let i = base + c;
+                let v = m.data[i];
+                if v == 0 {
+                    continue;
+                }
+                let ti = self.t[i] as f64;
+                let d = v as f64 / 255.0 + cur[c + 1] as f64;
+                let target = d * ti;
+                let idx = lv.nearest_from(self.full_idx[i] as usize, target);
+                m.data[i] = lv.gray[idx];
+                if idx == top && target > s_max {
+                    // Cannot reach the target here: do not push the deficit around.
+                    continue;
+                }
+                let e = (d - lv.s[idx] / ti).clamp(-0.5, 0.5) as f32;
+                // Forward neighbour on this row, three neighbours below (mirrored on
+                // right-to-left rows); only lit pixels (coverage > 0) take a share.
+                let (fwd, back): (isize, isize) = if ltr { (1, -1) } else { (-1, 1) };
+                let cc = c as isize;
+                let in_row = |x: isize| x >= 0 && (x as usize) < w;
+                if in_row(cc + fwd) && m.data[(base as isize + cc + fwd) as usize] != 0 {
+                    cur[(cc + fwd + 1) as usize] += e * (7.0 / 16.0);
+                }
+                if r + 1 < r1 {
+                    let nb = (base + w) as isize;
+                    for (dx, wgt) in [(back, 3.0f32), (0, 5.0), (fwd, 1.0)] {
+                        let x = cc + dx;
+                        if in_row(x) && m.data[(nb + x) as usize] != 0 {
+                            next[(x + 1) as usize] += e * (wgt / 16.0);
+                        }
+                    }
+                }
+            }
+            std::mem::swap(&mut cur, &mut next);
+            next.fill(0.0);
+        }
+    }
+
+    /// The full-coverage gray of every pixel (what a plate covering the field gets, without
+    /// dithering), in field orientation.
+    pub fn gray_map(&self) -> Mask {
+        let mut m = Mask {
+            width: self.w as u32,
+            height: self.h as u32,
+            data: vec![255; self.w * self.h],
+        };
+        match self.mode {
+            Mode::Zone => self.apply_zone(&mut m, 0, self.h),
+            _ => self.apply_pixel(&mut m, 0, self.h),
+        }
+        m
+    }
+
+    /// S of pixel value `g` on the levels used (0 for values outside the valid range other
+    /// than off).
+    pub fn s_of(&self, g: u8) -> f64 {
+        let lv = &self.levels;
+        let i = lv.gray.partition_point(|&x| x < g);
+        if i < lv.gray.len() && lv.gray[i] == g {
+            lv.s[i]
+        } else {
+            0.0
+        }
+    }
+}
