@@ -331,8 +331,16 @@ fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
             r.excluded_grays
         )
     };
+    let interp = if r.valid_gray[0] < r.measured_gray[0] {
+        format!(
+            ", measured {}..{} (below: interpolated to S(0) = 0)",
+            r.measured_gray[0], r.measured_gray[1]
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "valid gray {}..{}{excluded}",
+        "valid gray {}..{}{interp}{excluded}",
         r.valid_gray[0], r.valid_gray[1]
     );
     for (name, m) in [("zone", &r.zone), ("pixel", &r.pixel)] {

@@ -251,14 +251,7 @@ fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
     for (t, &nt) in norms.iter().enumerate() {
         a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
     }
-    let svd = a.svd(true, true);
-    let sv = &svd.singular_values;
-    let (smx, smn) = (sv.max(), sv.min());
-    let condition = if smn > 0.0 { smx / smn } else { f64::INFINITY };
-    if condition.is_nan() || condition > MAX_CONDITION {
-        return Err(condition);
-    }
-    let x = svd.solve(&b, 1e-14 * smx).expect("U and V were computed");
+    let (x, condition) = solve_scaled(&a, &b, true)?;
     let coef = (0..m).map(|t| x[t] / norms[t]).collect();
     let s = (0..nlev)
         .map(|j| {
@@ -275,6 +268,35 @@ fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
         s,
         condition,
     })
+}
+
+/// Least squares A·x ≈ b for a column-scaled A (columns of unit norm) through the normal
+/// equations (Cholesky; A is at most 28 columns wide). With `check`, the condition number
+/// of A (from the eigenvalues of AᵀA) is computed and must not exceed [`MAX_CONDITION`].
+/// Returns (x, condition number or 0 when not checked).
+fn solve_scaled(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    check: bool,
+) -> std::result::Result<(DVector<f64>, f64), f64> {
+    let ata = a.tr_mul(a);
+    let mut cond = 0.0;
+    if check {
+        let ev = ata.clone().symmetric_eigenvalues();
+        let (lo, hi) = (ev.min(), ev.max());
+        cond = if lo > 0.0 {
+            (hi / lo).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        if cond.is_nan() || cond > MAX_CONDITION {
+            return Err(cond);
+        }
+    }
+    match ata.cholesky() {
+        Some(ch) => Ok((ch.solve(&a.tr_mul(b)), cond)),
+        None => Err(f64::INFINITY),
+    }
 }
 
 /// Alternating least squares on relative residuals over `rows` (levels 0..nlev).
@@ -315,16 +337,11 @@ fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
         for (t, &nt) in norms.iter().enumerate() {
             a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
         }
-        let svd = a.clone().svd(true, true);
-        let sv = &svd.singular_values;
-        let (smx, smn) = (sv.max(), sv.min());
+        let x = solve_scaled(&a, &b, iter == 0)?;
         if iter == 0 {
-            condition = if smn > 0.0 { smx / smn } else { f64::INFINITY };
-            if condition.is_nan() || condition > MAX_CONDITION {
-                return Err(condition);
-            }
+            condition = x.1;
         }
-        let x = svd.solve(&b, 1e-14 * smx).expect("U and V were computed");
+        let x = x.0;
         for t in 0..m {
             coef[t] = x[t] / norms[t];
         }
@@ -350,7 +367,7 @@ fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
             .zip(&ps)
             .map(|(r, &p)| (1.0 - s[r.lev] * p / r.e).powi(2))
             .sum();
-        if (prev - obj).abs() <= 1e-12 * (1.0 + obj) {
+        if (prev - obj).abs() <= 1e-10 * (1.0 + obj) {
             break;
         }
         prev = obj;
@@ -435,6 +452,23 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
                 .collect::<Vec<_>>()
                 .join(", ")
         )));
+    }
+
+    // A cubic needs at least 4 distinct coordinates along each axis.
+    for axis in ["x", "y"] {
+        let vals: std::collections::BTreeSet<i64> = readings
+            .iter()
+            .map(|r| {
+                let t = if axis == "x" { r.x_mm } else { r.y_mm };
+                (t * 1e6).round() as i64
+            })
+            .collect();
+        if vals.len() < 4 {
+            return Err(bad(format!(
+                "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
+                vals.len()
+            )));
+        }
     }
 
     // Calibrated area: bounding box of the zone centres grown by half the zone pitch.
@@ -680,8 +714,8 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         source: format!(
             "dmdsl calibrate {name} ({} readings, {npos} zones, {} gray levels, degree-{degree} {} P)",
             readings.len(),
-            form_name(form),
-            glist.len()
+            glist.len(),
+            form_name(form)
         ),
         units: opts.units,
         zone_mm: Positive::new(opts.zone_mm)

@@ -14,7 +14,7 @@
 //!   irradiance) is diffused to the lit neighbours (Floyd–Steinberg, serpentine), row by
 //!   row within the layer, so the output does not depend on the thread count.
 
-use super::field::FieldModel;
+use super::field::{FieldModel, Form};
 use super::response::Levels;
 use super::{Calibration, Dither, Mode};
 use crate::bundle::Spreads;
@@ -160,11 +160,30 @@ fn spread(v: impl Iterator<Item = f64>) -> f64 {
 fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
     let (w, h) = (field.width_px as usize, field.height_px as usize);
     let p = field.pixel_mm;
+    let m = fm.extrapolate_mm.get();
+    let [x0, y0, x1, y1] = fm.area_mm;
+    let [px0, py0, px1, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
+    let inv = 1.0 / fm.length_unit_mm.get();
+    let sc = fm.scale.get();
+    let exp = fm.form == Form::Exponential;
     let mut out = vec![0f32; w * h];
     for (r, row) in out.chunks_exact_mut(w).enumerate() {
         let y = (h as f64 - r as f64 - 0.5) * p;
+        let yc = y.clamp(y0 - m, y1 + m);
+        // Inside the polynomial's rectangle: Horner in u with this row's coefficients.
+        let a =
+            (yc >= py0 && yc <= py1).then(|| fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv));
         for (c, o) in row.iter_mut().enumerate() {
-            *o = fm.eval((c as f64 + 0.5) * p, y) as f32;
+            let x = (c as f64 + 0.5) * p;
+            let xc = x.clamp(x0 - m, x1 + m);
+            *o = match &a {
+                Some(a) if xc >= px0 && xc <= px1 => {
+                    let u = (xc - fm.origin_mm[0]) * inv;
+                    let q = a.iter().rev().fold(0.0, |acc, k| acc * u + k);
+                    (sc * if exp { q.exp() } else { q }) as f32
+                }
+                _ => fm.eval(x, y) as f32,
+            };
         }
     }
     out
@@ -216,6 +235,11 @@ impl Compensator {
         let pixels_outside = (w * h - pixels_inside) as u64;
 
         let pp = pixel_p(fm, field);
+        debug_assert!({
+            let (c, r) = (w / 3, h / 3);
+            let direct = fm.eval((c as f64 + 0.5) * p, (h as f64 - r as f64 - 0.5) * p);
+            ((pp[r * w + c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
+        });
         let inside_iter = || (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * w + c));
         let mean = inside_iter().map(|i| pp[i] as f64).sum::<f64>() / pixels_inside as f64 * s_max;
 
@@ -630,5 +654,137 @@ impl Compensator {
         } else {
             0.0
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::field::Poly;
+    use crate::optics::{Interpolation, Response, Units};
+    use crate::units::{NonNegative, Positive};
+
+    /// A 40 × 30 mm field of 1 mm pixels; P = 1 + x/40 (x in mm), S(g) = (g/255)²
+    /// measured 50..255 and anchored at 0.
+    fn setup() -> (Calibration, Field) {
+        let pts: Vec<[f64; 2]> = std::iter::once([0.0, 0.0])
+            .chain(
+                (50..=255)
+                    .step_by(5)
+                    .map(|g| [g as f64, (g as f64 / 255.0).powi(2)]),
+            )
+            .collect();
+        let cal = Calibration {
+            source: "test".into(),
+            units: Units::Relative,
+            zone_mm: Positive::new(5.0).unwrap(),
+            field: FieldModel {
+                origin_mm: [0.0, 0.0],
+                length_unit_mm: Positive::new(40.0).unwrap(),
+                scale: Positive::new(1.0).unwrap(),
+                form: Form::Polynomial,
+                coefficients: Poly::from_terms(1, &[1.0, 1.0, 0.0]),
+                area_mm: [0.0, 0.0, 40.0, 30.0],
+                polynomial_area_mm: None,
+                extrapolate_mm: NonNegative::new(5.0).unwrap(),
+            },
+            response: Response::Table {
+                interpolation: Interpolation::Spline,
+                points: pts,
+            },
+            fit: None,
+        };
+        cal.validate().unwrap();
+        let field = Field {
+            width_px: 40,
+            height_px: 30,
+            pixel_mm: 1.0,
+        };
+        (cal, field)
+    }
+
+    fn s(g: u8) -> f64 {
+        (g as f64 / 255.0).powi(2)
+    }
+
+    #[test]
+    fn edge_pixel_gets_inverse_response_of_its_coverage_not_a_scaled_gray() {
+        let (cal, field) = setup();
+        let c = Compensator::new(&cal, &field, Mode::Zone, Dither::Off).unwrap();
+        let pr = &c.prediction;
+        // Zone at columns 20..25 (x 20..25 mm), rows 0..5; its mean P is 1 + 22.5/40.
+        let pz = 1.0 + 22.5 / 40.0;
+        let mut m = Mask::zeros(40, 30);
+        for r in 0..5 {
+            for col in 20..25 {
+                m.data[r * 40 + col] = if col == 24 { 128 } else { 255 };
+            }
+        }
+        c.apply(&mut m);
+        let full = m.data[20];
+        let edge = m.data[24];
+        // Full coverage: the nearest level to E*/P̄; the edge: nearest to (128/255)·E*/P̄.
+        let want = |target: f64| {
+            (0..=255u8)
+                .filter(|&g| g == 0 || g >= 50)
+                .min_by(|&a, &b| (s(a) - target).abs().total_cmp(&(s(b) - target).abs()))
+                .unwrap()
+        };
+        assert_eq!(full, want(pr.target / pz));
+        assert_eq!(edge, want(128.0 / 255.0 * pr.target / pz));
+        // With S = g², half the irradiance is about 0.71 × the gray, not 0.5 ×.
+        let scaled = (full as f64 * 128.0 / 255.0).round() as u8;
+        assert!(edge > scaled + 20, "edge {edge}, scaled gray {scaled}");
+        assert!((s(edge) / s(full) - 128.0 / 255.0).abs() < 0.02);
+        // Uncovered pixels stay off.
+        assert_eq!(m.data[19], 0);
+    }
+
+    #[test]
+    fn zone_and_pixel_modes_flatten_the_model() {
+        let (cal, field) = setup();
+        for (mode, dither, zone_max, pixel_max) in [
+            (Mode::Zone, Dither::Off, 1.5, 20.0),
+            (Mode::Zone, Dither::On, 0.2, 20.0),
+            (Mode::Pixel, Dither::Off, 0.5, 1.5),
+        ] {
+            let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+            let sp = c.prediction.spreads;
+            assert!(sp.before_zone_pct > 50.0, "{sp:?}");
+            assert!(sp.after_zone_pct <= zone_max, "{mode:?} {dither:?} {sp:?}");
+            assert!(
+                sp.after_pixel_pct <= pixel_max,
+                "{mode:?} {dither:?} {sp:?}"
+            );
+            // Target: the dimmest zone (or pixel) fully on, give or take the window.
+            let t = c.prediction.target;
+            assert!(t <= (1.0 + 2.5 / 40.0) * 1.02 && t >= 0.95, "{t}");
+        }
+    }
+
+    #[test]
+    fn pixel_dither_is_deterministic_and_keeps_the_mean() {
+        let (cal, field) = setup();
+        let c = Compensator::new(&cal, &field, Mode::Pixel, Dither::On).unwrap();
+        let mut a = Mask::zeros(40, 30);
+        a.data.iter_mut().enumerate().for_each(|(i, v)| {
+            *v = if i % 40 < 35 { 255 } else { 0 };
+        });
+        let mut b = a.clone();
+        c.apply(&mut a);
+        c.apply(&mut b);
+        assert_eq!(a, b);
+        // Mean delivered irradiance per lit pixel in units of E* stays close to 1.
+        let p = |col: usize| 1.0 + (col as f64 + 0.5) / 40.0;
+        let (mut sum, mut n) = (0.0, 0);
+        for (i, &g) in a.data.iter().enumerate() {
+            if i % 40 < 35 {
+                sum += s(g) * p(i % 40) / c.prediction.target;
+                n += 1;
+            } else {
+                assert_eq!(g, 0);
+            }
+        }
+        assert!((sum / n as f64 - 1.0).abs() < 0.003, "{}", sum / n as f64);
     }
 }

@@ -15,8 +15,8 @@ pub const MAX_DEGREE: usize = 6;
 /// Stored as a table of monomial names to coefficients: `c` is the constant, and a
 /// monomial u^a·v^b is written as `a` letters `x` followed by `b` letters `y` (`x` = u,
 /// `xy` = u·v, `xxy` = u²·v, `yyy` = v³). Missing monomials are zero.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "BTreeMap<String, f64>", into = "BTreeMap<String, f64>")]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(try_from = "BTreeMap<String, f64>")]
 pub struct Poly {
     /// Total degree (highest a + b with a nonzero entry slot).
     degree: usize,
@@ -162,12 +162,16 @@ impl TryFrom<BTreeMap<String, f64>> for Poly {
     }
 }
 
-impl From<Poly> for BTreeMap<String, f64> {
-    fn from(p: Poly) -> Self {
-        monomials(p.degree)
-            .into_iter()
-            .map(|(a, b)| (monomial_name(a, b), p.coef[a][b]))
-            .collect()
+impl Serialize for Poly {
+    /// A table of monomial names in degree order (c, x, y, xx, xy, yy, …).
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let m = monomials(self.degree);
+        let mut map = ser.serialize_map(Some(m.len()))?;
+        for (a, b) in m {
+            map.serialize_entry(&monomial_name(a, b), &self.coef[a][b])?;
+        }
+        map.end()
     }
 }
 

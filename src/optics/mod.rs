@@ -199,9 +199,29 @@ impl Calibration {
         Calibration::from_toml(&src, path)
     }
 
-    /// The calibration as TOML.
+    /// The calibration as TOML (response points one per line).
     pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).expect("calibration serializes")
+        let t = toml::to_string(self).expect("calibration serializes");
+        let mut out = String::with_capacity(t.len() + 256);
+        for line in t.lines() {
+            match line
+                .strip_prefix("points = [[")
+                .and_then(|l| l.strip_suffix("]]"))
+            {
+                Some(inner) => {
+                    out.push_str("points = [\n");
+                    for p in inner.split("], [") {
+                        out.push_str(&format!("    [{p}],\n"));
+                    }
+                    out.push_str("]\n");
+                }
+                None => {
+                    out.push_str(line);
+                    out.push('\n');
+                }
+            }
+        }
+        out
     }
 }
 

@@ -101,7 +101,8 @@ pub fn calibration_plots(
         .collect();
     let fitted: Vec<f64> = (0..nz).map(|i| pr.zone_p[i] * s_max).collect();
     // After zone compensation: each zone at its gray.
-    let gray_s: Vec<f64> = pr.zone_gray.iter().map(|&g| zone.s_of(g)).collect();
+    // Effective S of each zone (a mixing zone's mean of its two grays).
+    let gray_s: Vec<f64> = (0..nz).map(|i| pr.zone_after[i] / pr.zone_p[i]).collect();
     let pct = |v: f64| v / target * 100.0;
     let measured_after: Vec<f64> = (0..nz)
         .map(|i| pct(measured[i] / s_max * gray_s[i]))
@@ -120,7 +121,7 @@ pub fn calibration_plots(
         sibling(out, "measured"),
         heat(
             format!(
-                "Measured irradiance, mirrors fully on ({unit}); spread {:.1} %",
+                "Measured irradiance, mirrors fully on ({unit}), spread {:.1} %",
                 spread_pct(&measured)
             ),
             unit,
@@ -135,7 +136,7 @@ pub fn calibration_plots(
         sibling(out, "fitted"),
         heat(
             format!(
-                "Fitted P(x,y) zone means, fully on ({unit}); spread {:.1} %",
+                "Fitted P(x,y) zone means, fully on ({unit}), spread {:.1} %",
                 pr.spreads.before_zone_pct
             ),
             unit,
@@ -151,7 +152,7 @@ pub fn calibration_plots(
         sibling(out, "measured-compensated"),
         heat(
             format!(
-                "Measured x S(zone gray), % of target; spread {:.2} %",
+                "Measured x S(zone gray), % of target, spread {:.2} %",
                 spread_pct(&measured_after)
             ),
             "% of target",
@@ -166,7 +167,7 @@ pub fn calibration_plots(
         sibling(out, "fitted-compensated"),
         heat(
             format!(
-                "Fitted, zone compensation, % of target; spread {:.2} %",
+                "Fitted, zone compensation, % of target, spread {:.2} %",
                 spread_pct(&inside(&fitted_after))
             ),
             "% of target",
@@ -235,9 +236,24 @@ pub fn calibration_plots(
             points: excluded_pts,
         });
     }
+    let [mlo, mhi] = cal.fit.as_ref().map_or([glo, ghi], |f| f.measured_gray);
+    let mut bands = vec![Band {
+        x0: mlo as f64,
+        x1: mhi as f64,
+        color: [44, 160, 44],
+        label: "measured, monotone".into(),
+    }];
+    if glo < mlo {
+        bands.push(Band {
+            x0: glo as f64,
+            x1: mlo as f64,
+            color: [255, 187, 120],
+            label: "interpolated to S(0) = 0".into(),
+        });
+    }
     let chart = Chart {
         title: format!(
-            "Gray response S(g), valid {glo}..{ghi}; pixel mode spread {:.2} %",
+            "Gray response S(g), valid {glo}..{ghi}, pixel mode spread {:.2} %",
             pixel.prediction.spreads.after_pixel_pct
         ),
         x_label: "pixel value g (255 = fully on)".into(),
@@ -245,12 +261,7 @@ pub fn calibration_plots(
         width: 900,
         height: 600,
         series,
-        bands: vec![Band {
-            x0: glo as f64,
-            x1: ghi as f64,
-            color: [44, 160, 44],
-            label: "valid gray range".into(),
-        }],
+        bands,
     };
     files.push((sibling(out, "response"), chart.render_png()));
     files

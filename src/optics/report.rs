@@ -63,6 +63,9 @@ pub struct CalibrateReport {
     pub gray_levels: u64,
     /// Valid gray range [lo, hi].
     pub valid_gray: [u8; 2],
+    /// Measured, monotone gray range [lo, hi] (below it S is interpolated to S(0) = 0 when
+    /// `valid_gray` starts at 0).
+    pub measured_gray: [u8; 2],
     /// Measured levels outside the valid range.
     pub excluded_grays: Vec<u8>,
     /// Relative residual RMS, %.
@@ -99,6 +102,18 @@ fn mode_report(c: &Compensator) -> ModeReport {
 fn header(cal: &Calibration, input: &Path) -> String {
     let f = cal.fit.as_ref();
     let [lo, hi] = cal.response.valid_gray();
+    let [mlo, mhi] = f.map_or([lo, hi], |f| f.measured_gray);
+    let form = match cal.field.form {
+        super::field::Form::Polynomial => "poly(u, v)",
+        super::field::Form::Exponential => "exp(poly(u, v))",
+    };
+    let below = if lo < mlo {
+        format!(
+            "\n#      Below {mlo} (the lowest measured gray) S is interpolated down to S(0) = 0\n#      (mirror off): an assumption, not a measurement."
+        )
+    } else {
+        String::new()
+    };
     format!(
         "# dmdsl light calibration, fitted by `dmdsl calibrate {}`.
 # Use it with `dmdsl slice --calibration FILE`, or paste it into a profile as the
@@ -106,14 +121,14 @@ fn header(cal: &Calibration, input: &Path) -> String {
 # table names below with `projector.calibration.`).
 #
 # Model (seeds/000): irradiance E(x, y, g) = P(x, y) * S(g), units: {}.
-#  P = scale * cubic(u, v), u = (x_mm - origin_mm[0]) / length_unit_mm,
+#  P = scale * {form}, u = (x_mm - origin_mm[0]) / length_unit_mm,
 #      v = (y_mm - origin_mm[1]) / length_unit_mm; x, y in mm from the field's bottom-left
-#      corner. P is the irradiance with mirrors at the brightest valid gray ({hi}).
-#      It is fitted on area_mm (the measured zones), extrapolated extrapolate_mm beyond
-#      it and held constant further out.
-#  S = monotone cubic (PCHIP) through response.points = [pixel value, relative S], S = 1
-#      at {hi}; valid for pixel values {lo}..{hi} (S stops falling below {lo}); pixel
-#      value 0 (mirror off) gives no light.
+#      corner; coefficient xxy multiplies u^2 v. P is the irradiance with mirrors at the
+#      brightest measured gray ({mhi}). area_mm is the measured area; outside
+#      polynomial_area_mm (if given) the polynomial continues linearly; P is extrapolated
+#      extrapolate_mm beyond area_mm and held constant further out.
+#  S = relative response, S = 1 at {mhi}: cubic through response.points [pixel value, S]
+#      (interpolation = spline or pchip); measured and monotone on {mlo}..{mhi}.{below}
 # Fit: {} readings, residual RMS {:.2} %, max {:.2} % (line {}).
 ",
         input.display(),
@@ -193,6 +208,29 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
     let wrap = |m: String| Error::input(&opts.input, m);
     let zone = Compensator::new(cal, &opts.field, Mode::Zone, Dither::Auto).map_err(wrap)?;
     let pixel = Compensator::new(cal, &opts.field, Mode::Pixel, Dither::Auto).map_err(wrap)?;
+    let mut warnings = fit.warnings.clone();
+    let f = cal.fit.clone().expect("fit writes a summary");
+    let zp = &zone.prediction;
+    let lowest = (0..zp.zone_gray.len())
+        .filter(|&z| zp.zone_inside[z])
+        .map(|z| zp.zone_gray[z])
+        .min()
+        .unwrap_or(255);
+    if lowest < f.measured_gray[0] {
+        warnings.push(format!(
+            "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0; measure lower grays",
+            f.measured_gray[0]
+        ));
+    }
+    for (name, c) in [("zone", &zone), ("pixel", &pixel)] {
+        let p = &c.prediction;
+        if p.spreads.after_zone_pct > 2.0 || p.spreads.after_pixel_pct > 5.0 && name == "pixel" {
+            warnings.push(format!(
+                "{name} mode leaves a predicted spread of {:.2} % (zone means) / {:.2} % (pixels): the gray range cannot flatten this field",
+                p.spreads.after_zone_pct, p.spreads.after_pixel_pct
+            ));
+        }
+    }
 
     let mut files = vec![(
         out.clone(),
@@ -202,7 +240,6 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
         files.extend(super::plots::calibration_plots(out, &fit, &zone, &pixel));
     }
     write_all(&files)?;
-    let f = cal.fit.clone().expect("fit writes a summary");
     Ok(CalibrateReport {
         calibration: out.clone(),
         plots: files[1..].iter().map(|(p, _)| p.clone()).collect(),
@@ -221,6 +258,7 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
         zones_outside: zone.prediction.zones_outside,
         zone: mode_report(&zone),
         pixel: mode_report(&pixel),
-        warnings: fit.warnings.clone(),
+        measured_gray: f.measured_gray,
+        warnings,
     })
 }
