@@ -126,7 +126,10 @@ impl Sink for Checker<'_> {
                     i,
                     s.t0,
                     "mask",
-                    format!("light on at {:.3} s before layer {i}'s mask is on the DMD", s.t0),
+                    format!(
+                        "light on at {:.3} s before layer {i}'s mask is on the DMD",
+                        s.t0
+                    ),
                 );
             }
         }
@@ -262,5 +265,261 @@ impl Sink for Checker<'_> {
                 ),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::Step;
+    use crate::exec::sim::{simulate, FaultKind, FaultSpec};
+    use crate::exec::testutil::*;
+
+    fn check(m: &Manifest) -> Vec<Violation> {
+        check_with(m, &[])
+    }
+
+    fn check_with(m: &Manifest, faults: &[FaultSpec]) -> Vec<Violation> {
+        let mut c = Checker::new(m);
+        let o = simulate(m, faults, &mut [&mut c]);
+        c.finish(o.total_s, o.fault.is_none())
+    }
+
+    fn kinds(v: &[Violation]) -> Vec<(&'static str, Option<usize>)> {
+        v.iter().map(|v| (v.kind, v.layer)).collect()
+    }
+
+    fn clean() -> Manifest {
+        manifest(
+            profile(),
+            vec![
+                layer(
+                    0,
+                    0.5,
+                    0.5,
+                    Mode::Layered,
+                    16.0,
+                    recoat_steps(0.5, 10.0, 16.0),
+                    33.91,
+                ),
+                layer(
+                    1,
+                    1.0,
+                    0.5,
+                    Mode::Layered,
+                    8.0,
+                    recoat_steps(1.0, 10.0, 8.0),
+                    25.91,
+                ),
+            ],
+        )
+    }
+
+    #[test]
+    fn clean_jobs_have_no_violations() {
+        assert_eq!(check(&clean()), vec![]);
+        let sweep = |i: usize, t: f64| {
+            let z = 0.1 * (i + 1) as f64;
+            layer(
+                i,
+                z,
+                0.1,
+                Mode::Continuous,
+                2.0,
+                vec![Step::Sweep {
+                    to_mm: z,
+                    speed_mm_s: 0.05,
+                }],
+                t,
+            )
+        };
+        let m = manifest(
+            profile(),
+            vec![sweep(0, 2.07), sweep(1, 2.0), sweep(2, 2.05)],
+        );
+        assert_eq!(check(&m), vec![]);
+    }
+
+    #[test]
+    fn a_move_beyond_travel_is_a_violation() {
+        let mut m = clean();
+        m.layers[1].steps[0] = Step::Move {
+            to_mm: 130.0,
+            speed_mm_s: 2.0,
+            accel_mm_s2: 50.0,
+        };
+        let v = check(&m);
+        let travel: Vec<_> = v.iter().filter(|v| v.kind == "travel").collect();
+        // Out (0.5 → 130) and back (130 → 1.0): both moves touch 130 mm.
+        assert_eq!(travel.len(), 2, "{v:?}");
+        assert_eq!(travel[0].layer, Some(1));
+        assert!(travel[0]
+            .message
+            .contains("130.0000 mm leaves the stage travel [0, 120]"));
+        assert!((travel[0].time_s.unwrap() - 33.91).abs() < 1e-9);
+        // The longer moves also break the estimate.
+        assert!(v.iter().any(|v| v.kind == "estimate" && v.layer == Some(1)));
+        assert!(v.iter().any(|v| v.kind == "estimate" && v.layer.is_none()));
+    }
+
+    #[test]
+    fn commanding_more_speed_or_acceleration_than_the_stage_has_is_a_violation() {
+        let mut m = clean();
+        m.layers[0].steps[0] = Step::Move {
+            to_mm: 5.5,
+            speed_mm_s: 20.0,
+            accel_mm_s2: 50.0,
+        };
+        m.layers[1].steps[1] = Step::Move {
+            to_mm: 1.0,
+            speed_mm_s: 1.0,
+            accel_mm_s2: 500.0,
+        };
+        // Keep the estimates right so only the limits trip: 5.5 mm at 20 mm/s, 50 mm/s²
+        // is a triangle, 2·sqrt(5.5/50); 5 mm at 1 mm/s, 500 mm/s²: 0.004 + 4.998.
+        m.layers[0].time_s = 2.0 * (5.5f64 / 50.0).sqrt() + 5.02 + 26.1;
+        m.layers[1].time_s = 2.79 + 0.004 + 4.998 + 18.1;
+        m.totals.print_time_s = m.layers[0].time_s + m.layers[1].time_s;
+        let v = check(&m);
+        assert_eq!(
+            kinds(&v),
+            vec![("speed", Some(0)), ("accel", Some(1))],
+            "{v:?}"
+        );
+        assert!(v[0]
+            .message
+            .contains("20 mm/s exceeds the stage's max_speed_mm_s 10"));
+    }
+
+    #[test]
+    fn exposing_at_the_wrong_height_or_dose_is_a_violation() {
+        let mut m = clean();
+        // Layer 1 returns to 0.9 instead of 1.0 and exposes 7 s instead of 8.
+        m.layers[1].steps = recoat_steps(0.9, 10.0, 7.0);
+        m.layers[1].time_s = 2.79 + 5.02 + 10.0 + 7.1;
+        m.totals.print_time_s = 33.91 + m.layers[1].time_s;
+        let v = check(&m);
+        assert_eq!(
+            kinds(&v),
+            vec![("position", Some(1)), ("dose", Some(1))],
+            "{v:?}"
+        );
+        assert!(v[0].message.contains("stage at 0.9000 mm, its z_mm is 1"));
+        assert!(v[1]
+            .message
+            .contains("received 7.000000 s of light, its exposure_s is 8"));
+    }
+
+    #[test]
+    fn z_must_follow_from_the_thicknesses() {
+        let mut m = clean();
+        m.layers[1].thickness_mm = 0.4;
+        let v = check(&m);
+        assert_eq!(kinds(&v), vec![("position", Some(1))]);
+        assert!(v[0].message.contains("thicknesses put its top at 0.900000"));
+    }
+
+    #[test]
+    fn sweeping_in_a_layered_layer_is_light_during_a_move() {
+        let sweep = |i: usize, t: f64| {
+            let z = 0.1 * (i + 1) as f64;
+            layer(
+                i,
+                z,
+                0.1,
+                Mode::Layered,
+                2.0,
+                vec![Step::Sweep {
+                    to_mm: z,
+                    speed_mm_s: 0.05,
+                }],
+                t,
+            )
+        };
+        let m = manifest(profile(), vec![sweep(0, 2.07), sweep(1, 2.05)]);
+        let v = check(&m);
+        assert_eq!(
+            kinds(&v),
+            vec![
+                ("light-during-move", Some(0)),
+                ("light-during-move", Some(1))
+            ]
+        );
+    }
+
+    #[test]
+    fn a_sweep_must_end_at_the_layer() {
+        let m = manifest(
+            profile(),
+            vec![layer(
+                0,
+                0.1,
+                0.1,
+                Mode::Continuous,
+                2.0,
+                vec![Step::Sweep {
+                    to_mm: 0.2,
+                    speed_mm_s: 0.1,
+                }],
+                2.12,
+            )],
+        );
+        let v = check(&m);
+        assert_eq!(kinds(&v), vec![("position", Some(0))], "{v:?}");
+        assert!(v[0].message.contains("sweep ends at 0.2000 mm"));
+    }
+
+    #[test]
+    fn estimates_off_by_more_than_one_percent_are_reported() {
+        let mut m = clean();
+        m.layers[0].time_s = 33.91 * 1.009; // within 1 %
+        m.layers[1].time_s = 25.91 * 0.98; // 2 % short
+        m.totals.print_time_s = 59.82;
+        let v = check(&m);
+        assert_eq!(kinds(&v), vec![("estimate", Some(1))]);
+        assert!(v[0].message.contains("+2.04 %"), "{}", v[0].message);
+        m.totals.print_time_s = 59.82 * 1.02;
+        let v = check(&m);
+        assert_eq!(kinds(&v), vec![("estimate", Some(1)), ("estimate", None)]);
+    }
+
+    #[test]
+    fn quantization_is_not_an_estimate_error() {
+        // 0.0333 mm layers swept at 0.02 mm/s on 800 steps/mm: every sweep is 26 or 27
+        // steps instead of 26.64, 0.3 % to 1.4 % away from the unquantized time.
+        let layers = (0..6)
+            .map(|i| {
+                let z = 0.0333 * (i + 1) as f64;
+                let t = 0.0333 / 0.02
+                    + if i == 0 { 0.07 } else { 0.0 }
+                    + if i == 5 { 0.05 } else { 0.0 };
+                layer(
+                    i,
+                    z,
+                    0.0333,
+                    Mode::Continuous,
+                    0.0333 / 0.02,
+                    vec![Step::Sweep {
+                        to_mm: z,
+                        speed_mm_s: 0.02,
+                    }],
+                    t,
+                )
+            })
+            .collect();
+        let m = manifest(profile(), layers);
+        assert_eq!(check(&m), vec![]);
+    }
+
+    #[test]
+    fn an_aborted_layer_is_not_checked_for_dose_or_estimate() {
+        let v = check_with(
+            &clean(),
+            &[FaultSpec {
+                kind: FaultKind::Stall,
+                layer: 1,
+            }],
+        );
+        assert_eq!(v, vec![]);
     }
 }

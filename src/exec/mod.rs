@@ -22,6 +22,9 @@ pub mod sim;
 pub mod trace;
 pub mod verify;
 
+#[cfg(test)]
+mod testutil;
+
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};
 use report::{LayerTiming, PlotCollector, Report, Stats, Timings};
@@ -101,13 +104,10 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
     let manifest = Manifest::read(dir)?;
-    manifest
-        .machine
-        .validate()
-        .map_err(|msg| Error::Bundle {
-            path: dir.join(MANIFEST),
-            msg: format!("machine profile: {msg}"),
-        })?;
+    manifest.machine.validate().map_err(|msg| Error::Bundle {
+        path: dir.join(MANIFEST),
+        msg: format!("machine profile: {msg}"),
+    })?;
     let n = manifest.layers.len();
     for f in &opts.faults {
         if f.layer >= n {
@@ -137,7 +137,10 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         .as_deref()
         .map(|p| trace::TraceWriter::create(p, range.clone(), m))
         .transpose()?;
-    let mut plot = opts.plot.as_ref().map(|_| PlotCollector::new(range.clone()));
+    let mut plot = opts
+        .plot
+        .as_ref()
+        .map(|_| PlotCollector::new(range.clone()));
     let mut checker = check::Checker::new(&manifest);
     let mut stats = Stats::default();
     let outcome = {
@@ -265,4 +268,22 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layer_ranges() {
+        assert_eq!(parse_layer_range("2..5", 10).unwrap(), 2..=5);
+        assert_eq!(parse_layer_range("2..=5", 10).unwrap(), 2..=5);
+        assert_eq!(parse_layer_range("7..", 10).unwrap(), 7..=9);
+        assert_eq!(parse_layer_range("..3", 10).unwrap(), 0..=3);
+        assert_eq!(parse_layer_range("4", 10).unwrap(), 4..=4);
+        for bad in ["5..2", "0..10", "x..3", "", "10"] {
+            let e = parse_layer_range(bad, 10).unwrap_err().to_string();
+            assert!(e.starts_with("--layers"), "{bad}: {e}");
+        }
+    }
 }

@@ -182,7 +182,11 @@ impl PlotCollector {
                 x0: a / div,
                 x1: b / div,
                 color: [255, 190, 0],
-                label: if i == 0 { "light on".into() } else { String::new() },
+                label: if i == 0 {
+                    "light on".into()
+                } else {
+                    String::new()
+                },
             })
             .collect();
         Chart {

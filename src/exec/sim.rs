@@ -209,7 +209,13 @@ impl Segment {
                 if t >= self.t1 {
                     self.to_mm
                 } else {
-                    position_at(self.from_mm, target_mm, speed_mm_s, accel_mm_s2, t - self.t0)
+                    position_at(
+                        self.from_mm,
+                        target_mm,
+                        speed_mm_s,
+                        accel_mm_s2,
+                        t - self.t0,
+                    )
                 }
             }
             Motion::Constant { velocity_mm_s } => {
@@ -456,10 +462,12 @@ pub fn simulate(manifest: &Manifest, faults: &[FaultSpec], sinks: &mut [&mut dyn
         records: Vec::with_capacity(manifest.layers.len()),
     };
     sim.run();
-    let mut untriggered = Vec::new();
-    if sim.fault.is_none() {
-        untriggered = sim.faults.clone();
-    }
+    // Faults are only armed when their layer is reached; without a fault every layer was.
+    let untriggered = if sim.fault.is_none() {
+        faults.to_vec()
+    } else {
+        Vec::new()
+    };
     Outcome {
         layers: sim.records,
         total_s: sim.t,
@@ -520,7 +528,13 @@ impl Sim<'_, '_, '_> {
         }
     }
 
-    fn still(&self, kind: SegKind, step: Option<usize>, dur: f64, shutter: ShutterState) -> Segment {
+    fn still(
+        &self,
+        kind: SegKind,
+        step: Option<usize>,
+        dur: f64,
+        shutter: ShutterState,
+    ) -> Segment {
         Segment {
             kind,
             layer: self.rec.index,
@@ -557,7 +571,9 @@ impl Sim<'_, '_, '_> {
         self.send(&home);
         let layers = &self.manifest.layers;
         for (i, layer) in layers.iter().enumerate() {
-            let next_sweeps = layers.get(i + 1).is_some_and(|l| starts_with_sweep(&l.steps));
+            let next_sweeps = layers
+                .get(i + 1)
+                .is_some_and(|l| starts_with_sweep(&l.steps));
             if !self.layer(i, &layer.steps, next_sweeps) {
                 return;
             }
@@ -568,7 +584,11 @@ impl Sim<'_, '_, '_> {
     fn layer(&mut self, i: usize, steps: &[Step], next_sweeps: bool) -> bool {
         let preloaded = self.run_open && starts_with_sweep(steps);
         let start = self.t;
-        let ready = if preloaded { start } else { start + self.m.load_s };
+        let ready = if preloaded {
+            start
+        } else {
+            start + self.m.load_s
+        };
         self.rec = LayerRecord {
             index: i,
             start_s: start,
@@ -609,7 +629,12 @@ impl Sim<'_, '_, '_> {
         }
         for (k, step) in steps.iter().enumerate() {
             if self.run_open && !matches!(step, Step::Sweep { .. }) {
-                let c = self.still(SegKind::Close, Some(k), self.m.close_s, ShutterState::Closing);
+                let c = self.still(
+                    SegKind::Close,
+                    Some(k),
+                    self.m.close_s,
+                    ShutterState::Closing,
+                );
                 self.run_open = false;
                 if !self.emit(c) {
                     return false;
@@ -665,7 +690,12 @@ impl Sim<'_, '_, '_> {
     fn wait_for_mask(&mut self, k: usize) -> bool {
         let ready = self.load_fail.unwrap_or(self.rec.mask_ready_s);
         if ready > self.t {
-            let w = self.still(SegKind::LoadWait, Some(k), ready - self.t, ShutterState::Closed);
+            let w = self.still(
+                SegKind::LoadWait,
+                Some(k),
+                ready - self.t,
+                ShutterState::Closed,
+            );
             return self.emit(w);
         }
         true
@@ -836,8 +866,8 @@ impl Sim<'_, '_, '_> {
                 let target = seg.to_mm;
                 let was_open = started && seg.shutter != ShutterState::Closed;
                 if started {
-                    seg.t1 = tf;
                     seg.to_mm = self.m.quantize(seg.position_at(tf));
+                    seg.t1 = tf;
                     self.send(&seg);
                     if seg.light {
                         self.rec.light_s += seg.duration();
@@ -905,5 +935,388 @@ impl Sim<'_, '_, '_> {
             stage_mm: self.pos,
             message,
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::Mode;
+    use crate::exec::testutil::*;
+    use crate::units::NonNegative;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-9
+    }
+
+    /// Two top-down layers, 0.5 mm: (dip, return, wait 10, expose 16 / 8).
+    fn layered() -> crate::bundle::Manifest {
+        manifest(
+            profile(),
+            vec![
+                layer(
+                    0,
+                    0.5,
+                    0.5,
+                    Mode::Layered,
+                    16.0,
+                    recoat_steps(0.5, 10.0, 16.0),
+                    33.91,
+                ),
+                layer(
+                    1,
+                    1.0,
+                    0.5,
+                    Mode::Layered,
+                    8.0,
+                    recoat_steps(1.0, 10.0, 8.0),
+                    25.91,
+                ),
+            ],
+        )
+    }
+
+    fn sim(m: &crate::bundle::Manifest, faults: &[FaultSpec]) -> (Outcome, Collect) {
+        let mut c = Collect::default();
+        let o = simulate(m, faults, &mut [&mut c]);
+        (o, c)
+    }
+
+    #[test]
+    fn layered_times_follow_the_contract() {
+        let (o, c) = sim(&layered(), &[]);
+        // Layer 0: 5.5 mm at 2 mm/s, 50 mm/s²: 2·2/50 + (5.5 − 0.08)/2 = 2.79 s; back 5 mm at
+        // 1 mm/s: 0.04 + 4.98 = 5.02 s; wait 10; open 0.05 + 16 + close 0.05.
+        assert!(close(o.layers[0].time_s, 2.79 + 5.02 + 10.0 + 16.1));
+        assert!(close(o.layers[1].time_s, 2.79 + 5.02 + 10.0 + 8.1));
+        assert!(close(o.total_s, 59.82));
+        assert!(close(o.layers[0].light_s, 16.0) && close(o.layers[1].light_s, 8.0));
+        assert!(o.fault.is_none() && o.invalid_steps.is_empty());
+        // Segments tile time without gaps, light only in expose, never while moving.
+        for w in c.segs.windows(2) {
+            assert!(close(w[0].t1, w[1].t0), "{w:?}");
+        }
+        for s in &c.segs {
+            assert_eq!(s.light, s.kind == SegKind::Expose, "{s:?}");
+            if s.kind == SegKind::Expose {
+                assert_eq!(s.from_mm, [0.5, 1.0][s.layer]);
+            }
+        }
+        // The DMD load (0.02 s) runs during the first move: no load wait.
+        assert!(c.segs.iter().all(|s| s.kind != SegKind::LoadWait));
+        assert!(close(c.layers[1].mask_ready_s, 33.91 + 0.02));
+    }
+
+    #[test]
+    fn expose_waits_for_the_dmd_load() {
+        let mut p = profile();
+        p.dmd.load_s = NonNegative::new(0.5).unwrap();
+        p.stage.home_mm = 0.1;
+        let m = manifest(
+            p,
+            vec![
+                // At home already: waits the whole load.
+                layer(
+                    0,
+                    0.1,
+                    0.1,
+                    Mode::Layered,
+                    1.0,
+                    vec![Step::Expose { s: 1.0 }],
+                    1.6,
+                ),
+                // 0.1 mm at 1 mm/s, 50 mm/s²: 0.04 + 0.08 = 0.12 s, then waits to 0.5 s.
+                layer(
+                    1,
+                    0.2,
+                    0.1,
+                    Mode::Layered,
+                    1.0,
+                    vec![
+                        Step::Move {
+                            to_mm: 0.2,
+                            speed_mm_s: 1.0,
+                            accel_mm_s2: 50.0,
+                        },
+                        Step::Expose { s: 1.0 },
+                    ],
+                    1.6,
+                ),
+                // A 1 s wait hides the load.
+                layer(
+                    2,
+                    0.3,
+                    0.1,
+                    Mode::Layered,
+                    1.0,
+                    vec![
+                        Step::Wait { s: 1.0 },
+                        Step::Move {
+                            to_mm: 0.3,
+                            speed_mm_s: 1.0,
+                            accel_mm_s2: 50.0,
+                        },
+                        Step::Expose { s: 1.0 },
+                    ],
+                    2.22,
+                ),
+            ],
+        );
+        let (o, c) = sim(&m, &[]);
+        assert!(close(o.layers[0].time_s, 0.5 + 0.05 + 1.0 + 0.05));
+        assert!(close(o.layers[1].time_s, 0.5 + 0.05 + 1.0 + 0.05));
+        assert!(close(o.layers[2].time_s, 1.0 + 0.12 + 1.1));
+        let waits: Vec<f64> = c
+            .segs
+            .iter()
+            .filter(|s| s.kind == SegKind::LoadWait)
+            .map(|s| s.duration())
+            .collect();
+        assert_eq!(waits.len(), 2);
+        assert!(close(waits[0], 0.5) && close(waits[1], 0.5 - 0.12));
+    }
+
+    fn sweeps(mode: Mode) -> crate::bundle::Manifest {
+        let l = |i: usize, t: f64| {
+            let z = 0.1 * (i + 1) as f64;
+            layer(
+                i,
+                z,
+                0.1,
+                mode,
+                2.0,
+                vec![Step::Sweep {
+                    to_mm: z,
+                    speed_mm_s: 0.05,
+                }],
+                t,
+            )
+        };
+        manifest(profile(), vec![l(0, 2.07), l(1, 2.0), l(2, 2.05)])
+    }
+
+    #[test]
+    fn a_sweep_run_keeps_the_shutter_open_across_layers() {
+        let (o, c) = sim(&sweeps(Mode::Continuous), &[]);
+        // Layer 0 waits for its mask (0.02 s), opens (0.05 s), sweeps 0.1 mm at 0.05 mm/s.
+        assert!(close(o.layers[0].time_s, 0.02 + 0.05 + 2.0));
+        // Later masks are preloaded: no load time inside the run.
+        assert!(close(o.layers[1].time_s, 2.0));
+        assert!(close(c.layers[1].mask_ready_s, c.layers[1].start_s));
+        // The last layer closes the shutter.
+        assert!(close(o.layers[2].time_s, 2.0 + 0.05));
+        let opens = c.segs.iter().filter(|s| s.kind == SegKind::Open).count();
+        let closes = c.segs.iter().filter(|s| s.kind == SegKind::Close).count();
+        assert_eq!((opens, closes), (1, 1));
+        for r in &o.layers {
+            assert!(close(r.light_s, 2.0));
+            assert!(close(
+                r.last_sweep_end_mm.unwrap(),
+                0.1 * (r.index + 1) as f64
+            ));
+        }
+        let sw: Vec<_> = c.segs.iter().filter(|s| s.kind == SegKind::Sweep).collect();
+        assert!(sw.iter().all(|s| s.light && s.velocity_at(s.t0) == 0.05));
+    }
+
+    #[test]
+    fn positions_are_quantized_to_steps() {
+        let m = manifest(
+            profile(),
+            vec![layer(
+                0,
+                0.1234,
+                0.1234,
+                Mode::Layered,
+                1.0,
+                vec![
+                    Step::Move {
+                        to_mm: 0.1234,
+                        speed_mm_s: 1.0,
+                        accel_mm_s2: 50.0,
+                    },
+                    Step::Expose { s: 1.0 },
+                ],
+                1.2,
+            )],
+        );
+        let (o, c) = sim(&m, &[]);
+        // 0.1234 mm × 800 = 98.72 steps → 99 steps = 0.12375 mm.
+        let mv = c.segs.iter().find(|s| s.kind == SegKind::Move).unwrap();
+        assert_eq!(mv.to_mm, 0.12375);
+        assert!(close(mv.duration(), 0.04 + (0.12375 - 0.02)));
+        let q = (move_time(0.12375, 1.0, 50.0) - move_time(0.1234, 1.0, 50.0)).abs();
+        assert!(close(o.layers[0].quantization_s, q));
+    }
+
+    #[test]
+    fn invalid_steps_are_reported_and_skipped() {
+        let mut steps = recoat_steps(0.5, 1.0, 2.0);
+        steps.insert(
+            0,
+            Step::Move {
+                to_mm: 3.0,
+                speed_mm_s: 0.0,
+                accel_mm_s2: 50.0,
+            },
+        );
+        steps.push(Step::Wait { s: -1.0 });
+        let m = manifest(
+            profile(),
+            vec![layer(0, 0.5, 0.5, Mode::Layered, 2.0, steps, 10.91)],
+        );
+        let (o, _) = sim(&m, &[]);
+        assert_eq!(o.invalid_steps.len(), 2);
+        assert!(o.invalid_steps[0].message.contains("layer 0 step 0"));
+        assert!(o.invalid_steps[1].message.contains("step 5"));
+        assert!(close(o.total_s, 2.79 + 5.02 + 1.0 + 2.1));
+    }
+
+    fn last_light_off(c: &Collect) -> bool {
+        let last = c.segs.last().unwrap();
+        !last.light && last.velocity_at(last.t1) == 0.0
+    }
+
+    #[test]
+    fn stall_and_limit_stop_the_stage_halfway_through_the_first_move() {
+        for kind in [FaultKind::Stall, FaultKind::Limit] {
+            let (o, c) = sim(&layered(), &[FaultSpec { kind, layer: 1 }]);
+            let f = o.fault.unwrap();
+            assert_eq!((f.kind, f.layer), (kind.name(), 1));
+            // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
+            assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
+            let want = Machine::from_profile(&profile()).quantize(position_at(
+                0.5,
+                6.0,
+                2.0,
+                50.0,
+                2.79 / 2.0,
+            ));
+            assert!(close(f.stage_mm, want), "{} {want}", f.stage_mm);
+            assert!(close(o.total_s, f.time_s));
+            assert_eq!(o.layers.len(), 2);
+            assert!(!o.layers[1].completed && o.layers[0].completed);
+            assert!(last_light_off(&c));
+        }
+    }
+
+    #[test]
+    fn a_stall_during_a_sweep_closes_the_shutter() {
+        let (o, c) = sim(
+            &sweeps(Mode::Continuous),
+            &[FaultSpec {
+                kind: FaultKind::Stall,
+                layer: 1,
+            }],
+        );
+        let f = o.fault.unwrap();
+        assert!(close(f.time_s, 2.07 + 1.0));
+        assert!(close(f.stage_mm, 0.15));
+        let last = c.segs.last().unwrap();
+        assert_eq!(last.kind, SegKind::Close);
+        assert!(close(last.t0, f.time_s) && close(o.total_s, f.time_s + 0.05));
+        assert!(close(o.layers[1].light_s, 1.0));
+    }
+
+    #[test]
+    fn a_failed_mask_load_stops_the_stage_with_the_shutter_closed() {
+        let (o, c) = sim(
+            &layered(),
+            &[FaultSpec {
+                kind: FaultKind::MaskLoad,
+                layer: 1,
+            }],
+        );
+        let f = o.fault.unwrap();
+        assert_eq!((f.kind, f.layer), ("mask-load", 1));
+        assert!(close(f.time_s, 33.91 + 0.02));
+        // 0.02 s into a move accelerating at 50 mm/s²: 0.01 mm.
+        assert!(close(f.stage_mm, 0.51));
+        assert!(f.message.contains("masks/00001.png"));
+        assert!(c.segs.iter().filter(|s| s.layer == 1).all(|s| !s.light));
+        assert!(last_light_off(&c));
+    }
+
+    #[test]
+    fn a_stuck_shutter_blanks_the_dmd_after_the_close_latency() {
+        let (o, c) = sim(
+            &layered(),
+            &[FaultSpec {
+                kind: FaultKind::ShutterStuck,
+                layer: 0,
+            }],
+        );
+        let f = o.fault.unwrap();
+        assert_eq!((f.kind, f.layer), ("shutter-stuck", 0));
+        // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, detected 0.05 s later.
+        assert!(close(f.time_s, 33.91));
+        assert!(close(o.layers[0].light_s, 16.05));
+        let last = c.segs.last().unwrap();
+        assert_eq!(last.kind, SegKind::StuckOpen);
+        assert!(close(o.total_s, 33.91));
+    }
+
+    #[test]
+    fn untriggered_faults_are_listed() {
+        // No shutter close at or after layer 0 of a job without light.
+        let m = manifest(
+            profile(),
+            vec![layer(
+                0,
+                0.5,
+                0.5,
+                Mode::Layered,
+                0.0,
+                vec![Step::Wait { s: 1.0 }],
+                1.0,
+            )],
+        );
+        let spec = FaultSpec {
+            kind: FaultKind::ShutterStuck,
+            layer: 0,
+        };
+        let (o, _) = sim(&m, &[spec]);
+        assert!(o.fault.is_none());
+        assert_eq!(o.untriggered, vec![spec]);
+    }
+
+    #[test]
+    fn fault_specs_parse() {
+        let f: FaultSpec = "shutter-stuck@12".parse().unwrap();
+        assert_eq!(
+            f,
+            FaultSpec {
+                kind: FaultKind::ShutterStuck,
+                layer: 12
+            }
+        );
+        assert!("stall"
+            .parse::<FaultSpec>()
+            .unwrap_err()
+            .contains("KIND@LAYER"));
+        assert!("jam@1"
+            .parse::<FaultSpec>()
+            .unwrap_err()
+            .contains("unknown kind"));
+        assert!("limit@-1".parse::<FaultSpec>().is_err());
+    }
+
+    #[test]
+    fn velocity_profile_is_consistent_with_positions() {
+        let m = layered();
+        let (_, c) = sim(&m, &[]);
+        let mv = c.segs.iter().find(|s| s.kind == SegKind::Move).unwrap();
+        // Numerical derivative of the position matches the reported velocity.
+        let mut t = mv.t0 + 1e-3;
+        while t < mv.t1 - 1e-3 {
+            let d = (mv.position_at(t + 1e-6) - mv.position_at(t - 1e-6)) / 2e-6;
+            assert!((d - mv.velocity_at(t)).abs() < 1e-3, "{t} {d}");
+            t += 0.01;
+        }
+        let mut times = vec![];
+        mv.phase_times(&mut times);
+        assert_eq!(times.len(), 3);
+        assert!(close(times[1] - times[0], 0.04));
+        assert_eq!(mv.peak_speed(), 2.0);
     }
 }

@@ -74,12 +74,7 @@ impl TraceWriter {
         let (vel, shutter, light, event) = if end {
             (0.0, ShutterState::Closed, false, "end")
         } else {
-            (
-                seg.velocity_at(t),
-                seg.shutter,
-                seg.light,
-                seg.kind.name(),
-            )
+            (seg.velocity_at(t), seg.shutter, seg.light, seg.kind.name())
         };
         let mask: i64 = if t >= seg.mask_ready_s {
             seg.layer as i64
@@ -147,5 +142,102 @@ impl Sink for TraceWriter {
         }
         self.times = times;
         self.last = Some(*seg);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::Mode;
+    use crate::exec::sim::simulate;
+    use crate::exec::testutil::*;
+
+    #[test]
+    fn trace_rows_follow_the_timeline() {
+        let m = manifest(
+            profile(),
+            vec![
+                layer(
+                    0,
+                    0.5,
+                    0.5,
+                    Mode::Layered,
+                    16.0,
+                    recoat_steps(0.5, 10.0, 16.0),
+                    33.91,
+                ),
+                layer(
+                    1,
+                    1.0,
+                    0.5,
+                    Mode::Layered,
+                    8.0,
+                    recoat_steps(1.0, 10.0, 8.0),
+                    25.91,
+                ),
+            ],
+        );
+        let dir = std::env::temp_dir().join(format!("dmdsl-trace-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.csv");
+        let mach = Machine::from_profile(&m.machine);
+        let mut all = TraceWriter::create(&path, None, mach).unwrap();
+        let part_path = dir.join("l1.csv");
+        let mut part = TraceWriter::create(&part_path, Some(1..=1), mach).unwrap();
+        simulate(&m, &[], &mut [&mut all, &mut part]);
+        assert!(
+            !path.exists(),
+            "written in place of a temporary only at the end"
+        );
+        let rows = all.finish().unwrap();
+        part.finish().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], HEADER);
+        assert_eq!(lines.len() as u64, rows + 1);
+        let rows: Vec<Vec<&str>> = lines[1..].iter().map(|l| l.split(',').collect()).collect();
+        let t: Vec<f64> = rows.iter().map(|r| r[0].parse().unwrap()).collect();
+        assert!(t.windows(2).all(|w| w[0] <= w[1]));
+        // Home, 2 layers × (2 moves × 3 phases + mask ready + wait + open + expose + close), end.
+        assert_eq!(rows.len(), 1 + 2 * 11 + 1);
+        assert_eq!(rows[0][7], "home");
+        // The mask appears 0.02 s into the first move.
+        assert_eq!(
+            rows[2][..7],
+            ["0.020000", "0.010000", "1.000000", "closed", "0", "0", "0"]
+        );
+        let expose = rows.iter().find(|r| r[7] == "expose").unwrap();
+        assert_eq!(
+            expose[..6],
+            ["17.860000", "0.500000", "0.000000", "open", "1", "0"]
+        );
+        assert_eq!(rows.last().unwrap()[..1], ["59.820000"]);
+        assert_eq!(rows.last().unwrap()[7], "end");
+        // Light only when the shutter is open.
+        assert!(rows.iter().all(|r| (r[4] == "1") == (r[3] == "open")));
+        let part = std::fs::read_to_string(&part_path).unwrap();
+        assert!(part
+            .lines()
+            .skip(1)
+            .all(|l| l.split(',').nth(6) == Some("1")));
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            2,
+            "no temporaries left"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn an_unfinished_trace_leaves_nothing() {
+        let dir = std::env::temp_dir().join(format!("dmdsl-trace2-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let w = TraceWriter::create(&dir.join("t.csv"), None, Machine::from_profile(&profile()))
+            .unwrap();
+        drop(w);
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

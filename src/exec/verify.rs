@@ -23,7 +23,12 @@ pub struct Verified {
     pub problems: Vec<Violation>,
 }
 
-fn problem(layer: Option<usize>, kind: &'static str, file: Option<&str>, message: String) -> Violation {
+fn problem(
+    layer: Option<usize>,
+    kind: &'static str,
+    file: Option<&str>,
+    message: String,
+) -> Violation {
     Violation {
         layer,
         time_s: None,
@@ -58,11 +63,7 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verified {
                 Some(i),
                 "manifest",
                 Some(crate::bundle::MANIFEST),
-                format!(
-                    "{}: layer record {i} has index {}",
-                    job.display(),
-                    l.index
-                ),
+                format!("{}: layer record {i} has index {}", job.display(), l.index),
             ));
         }
         let mut seen = HashSet::new();
@@ -124,7 +125,9 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verified {
     }
     let per_file: Vec<(u64, Vec<Violation>)> = refs
         .par_iter()
-        .map_init(Vec::new, |buf, &(i, m)| check_mask(dir, manifest, i, m, buf))
+        .map_init(Vec::new, |buf, &(i, m)| {
+            check_mask(dir, manifest, i, m, buf)
+        })
         .collect();
     let mut bytes = 0;
     for (b, p) in per_file {
@@ -235,4 +238,109 @@ fn check_mask(
 
 fn short(hex: &str) -> &str {
     hex.get(..12).unwrap_or(hex)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::{Mode, Step};
+    use crate::exec::testutil::*;
+    use image::codecs::png::PngEncoder;
+    use image::{ExtendedColorType, ImageEncoder};
+
+    fn png(w: u32, h: u32, ct: ExtendedColorType) -> Vec<u8> {
+        let ch = if ct == ExtendedColorType::Rgb8 { 3 } else { 1 };
+        let px: Vec<u8> = (0..w * h * ch).map(|i| (i % 251) as u8).collect();
+        let mut out = Vec::new();
+        PngEncoder::new(&mut out)
+            .write_image(&px, w, h, ct)
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn every_mask_problem_is_found_and_named() {
+        let dir = std::env::temp_dir().join(format!("dmdsl-verify-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("masks")).unwrap();
+        let mut p = profile();
+        p.projector[0].width_px = 64;
+        p.projector[0].height_px = 48;
+        let good = png(64, 48, ExtendedColorType::L8);
+        let mut truncated = good.clone();
+        truncated.truncate(good.len() - 30);
+        let files: Vec<Option<Vec<u8>>> = vec![
+            Some(good.clone()),                         // 0: fine
+            Some(good.clone()),                         // 1: bytes flipped after hashing
+            None,                                       // 2: missing
+            Some(png(32, 48, ExtendedColorType::L8)),   // 3: wrong size
+            Some(png(64, 48, ExtendedColorType::Rgb8)), // 4: colour
+            Some(truncated),                            // 5: truncated (hash matches)
+        ];
+        let mut layers = Vec::new();
+        for (i, f) in files.iter().enumerate() {
+            let mut l = layer(
+                i,
+                0.1 * (i + 1) as f64,
+                0.1,
+                Mode::Layered,
+                1.0,
+                vec![Step::Expose { s: 1.0 }],
+                1.1,
+            );
+            let name = format!("masks/{i:05}.png");
+            if let Some(b) = f {
+                l.masks[0].sha256 = sha256_hex(b);
+                let mut b = b.clone();
+                if i == 1 {
+                    let n = b.len();
+                    for x in &mut b[n / 2..n / 2 + 8] {
+                        *x ^= 0xff;
+                    }
+                }
+                std::fs::write(dir.join(&name), b).unwrap();
+            }
+            layers.push(l);
+        }
+        // Layer 6 points outside the bundle; layer 7 has no mask.
+        let mut l6 = layer(6, 0.7, 0.1, Mode::Layered, 1.0, vec![], 0.0);
+        l6.masks[0].file = "../escape.png".into();
+        let mut l7 = layer(7, 0.8, 0.1, Mode::Layered, 1.0, vec![], 0.0);
+        l7.masks.clear();
+        layers.push(l6);
+        layers.push(l7);
+        let m = manifest(p, layers);
+        let v = verify(&dir, &m);
+        assert_eq!(v.masks, 6);
+        let got: Vec<(Option<usize>, &str)> =
+            v.problems.iter().map(|p| (p.layer, p.kind)).collect();
+        assert_eq!(
+            got,
+            vec![
+                (Some(1), "mask-checksum"),
+                (Some(1), "mask-decode"),
+                (Some(2), "mask-missing"),
+                (Some(3), "mask-format"),
+                (Some(4), "mask-format"),
+                (Some(5), "mask-decode"),
+                (Some(6), "manifest"),
+                (Some(7), "manifest"),
+            ],
+            "{:#?}",
+            v.problems
+        );
+        let msg = |i: usize| v.problems[i].message.clone();
+        assert!(
+            msg(0).contains("masks/00001.png: layer 1: SHA-256 mismatch"),
+            "{}",
+            msg(0)
+        );
+        assert!(msg(2).contains("masks/00002.png: layer 2: mask file is missing"));
+        assert!(msg(3).contains("PNG is 32x48, projector p0 is 64x48"));
+        assert!(msg(4).contains("expected 8-bit grayscale"));
+        assert!(msg(6).contains("not a relative path inside the bundle"));
+        assert!(msg(7).contains("masks for 0 of the machine's 1 projector"));
+        assert_eq!(v.problems[2].file.as_deref(), Some("masks/00002.png"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
