@@ -136,17 +136,17 @@ impl Sink for Checker<'_> {
         if moving || s.kind == SegKind::Home {
             let (lo, hi) = (self.m.travel_min_mm, self.m.travel_max_mm);
             let eps = 1e-9;
-            let out = [s.from_mm, s.to_mm]
-                .into_iter()
-                .find(|&p| p < lo - eps || p > hi + eps);
-            if let Some(p) = out {
+            let out = |p: f64| p < lo - eps || p > hi + eps;
+            if out(s.from_mm) || out(s.to_mm) {
                 self.push(
                     i,
                     s.t0,
                     "travel",
                     format!(
-                        "layer {i}: {} to {p:.4} mm leaves the stage travel [{lo}, {hi}] mm",
-                        s.kind.name()
+                        "layer {i}: {} from {:.4} to {:.4} mm leaves the stage travel [{lo}, {hi}] mm",
+                        s.kind.name(),
+                        s.from_mm,
+                        s.to_mm
                     ),
                 );
             }
@@ -355,7 +355,7 @@ mod tests {
         assert_eq!(travel[0].layer, Some(1));
         assert!(travel[0]
             .message
-            .contains("130.0000 mm leaves the stage travel [0, 120]"));
+            .contains("move from 0.5000 to 130.0000 mm leaves the stage travel [0, 120]"));
         assert!((travel[0].time_s.unwrap() - 33.91).abs() < 1e-9);
         // The longer moves also break the estimate.
         assert!(v.iter().any(|v| v.kind == "estimate" && v.layer == Some(1)));

@@ -250,7 +250,7 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} layers, {} masks verified",
+        "{}: {} layers, {} masks checked",
         r.bundle, r.layers, r.masks_verified
     );
     let _ = writeln!(
