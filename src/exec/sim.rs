@@ -570,11 +570,18 @@ impl Sim<'_, '_, '_> {
         };
         self.send(&home);
         let layers = &self.manifest.layers;
+        // next_sweeps[i]: the first step after layer i (skipping layers without steps) is
+        // a sweep, so a sweep run still going at the end of layer i continues.
+        let mut next_sweeps = vec![false; layers.len()];
+        let mut after = false;
+        for (i, l) in layers.iter().enumerate().rev() {
+            next_sweeps[i] = after;
+            if !l.steps.is_empty() {
+                after = starts_with_sweep(&l.steps);
+            }
+        }
         for (i, layer) in layers.iter().enumerate() {
-            let next_sweeps = layers
-                .get(i + 1)
-                .is_some_and(|l| starts_with_sweep(&l.steps));
-            if !self.layer(i, &layer.steps, next_sweeps) {
+            if !self.layer(i, &layer.steps, next_sweeps[i]) {
                 return;
             }
         }
@@ -1117,6 +1124,22 @@ mod tests {
         }
         let sw: Vec<_> = c.segs.iter().filter(|s| s.kind == SegKind::Sweep).collect();
         assert!(sw.iter().all(|s| s.light && s.velocity_at(s.t0) == 0.05));
+    }
+
+    #[test]
+    fn a_layer_without_steps_does_not_end_a_sweep_run() {
+        let mut m = sweeps(Mode::Continuous);
+        m.layers[1].steps.clear();
+        m.layers[2].steps = vec![Step::Sweep {
+            to_mm: 0.3,
+            speed_mm_s: 0.05,
+        }];
+        let (o, c) = sim(&m, &[]);
+        assert!(close(o.layers[0].time_s, 2.07));
+        assert_eq!(o.layers[1].time_s, 0.0);
+        assert!(close(o.layers[2].time_s, 4.0 + 0.05));
+        let opens = c.segs.iter().filter(|s| s.kind == SegKind::Open).count();
+        assert_eq!(opens, 1);
     }
 
     #[test]
