@@ -9,6 +9,7 @@
 
 pub mod bundle;
 pub mod error;
+pub mod exec;
 pub mod job;
 pub mod mesh;
 pub mod motion;

@@ -39,6 +39,39 @@ enum Cmd {
     /// Show or list machine profiles.
     #[command(subcommand)]
     Profile(ProfileCmd),
+    /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
+    /// shutter and DMD, and report the time and every violation.
+    #[command(after_help = RUN_EXIT_HELP)]
+    Run(RunArgs),
+}
+
+const RUN_EXIT_HELP: &str = "Exit codes:
+  0    the bundle verified and replayed without violations
+  1    violations, bad masks or an injected fault
+  2    unreadable bundle or usage error
+
+Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
+
+#[derive(Args)]
+struct RunArgs {
+    /// The job bundle (directory with job.json and masks/).
+    bundle: PathBuf,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
+    /// Write a PNG of stage position and light over time.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    #[arg(long, value_name = "A..B")]
+    layers: Option<String>,
+    /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
+    /// (repeatable).
+    #[arg(long, value_name = "KIND@LAYER")]
+    fault: Vec<String>,
 }
 
 #[derive(Args)]
@@ -97,6 +130,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
         Cmd::Slice(a) => slice(a, cli.quiet),
+        Cmd::Run(a) => run_bundle(a, cli.quiet),
         Cmd::Profile(ProfileCmd::List) => {
             for (name, src) in profile::BUILTIN {
                 let p = Profile::from_toml(src, name)?;
@@ -193,6 +227,27 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         return Ok(1);
     }
     Ok(0)
+}
+
+fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
+    let faults = a
+        .fault
+        .iter()
+        .map(|f| f.parse().map_err(dmdsl::Error::Usage))
+        .collect::<Result<Vec<_>, _>>()?;
+    let opts = dmdsl::exec::RunOptions {
+        faults,
+        trace: a.trace,
+        plot: a.plot,
+        layers: a.layers,
+    };
+    let report = dmdsl::exec::run(&a.bundle, &opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else if !quiet {
+        print!("{}", dmdsl::exec::report::render_human(&report));
+    }
+    Ok(if report.ok { 0 } else { 1 })
 }
 
 fn hms(s: f64) -> String {
