@@ -28,14 +28,23 @@ fn tiny_skia_mask(contours: &[Contour], aa: bool, pixel: f64, h_px: u32) -> Vec<
     }
     let mut m = tiny_skia::Mask::new(1024, h_px).unwrap();
     if let Some(path) = pb.finish() {
-        m.fill_path(&path, tiny_skia::FillRule::Winding, aa, tiny_skia::Transform::identity());
+        m.fill_path(
+            &path,
+            tiny_skia::FillRule::Winding,
+            aa,
+            tiny_skia::Transform::identity(),
+        );
     }
     m.data().to_vec()
 }
 
 fn main() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let mut models: Vec<PathBuf> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).map(PathBuf::from).collect();
+    let mut models: Vec<PathBuf> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .map(PathBuf::from)
+        .collect();
     if models.is_empty() {
         models.push(root.join("fixtures/bunny00.stl"));
     }
@@ -47,11 +56,22 @@ fn main() {
     for model in models {
         let mut mesh = dmdsl::mesh::load(&model).unwrap();
         let bbox = mesh.bbox();
-        let t = placement(&model, bbox, field.width_mm(), field.height_mm(), PlacementMode::Center).unwrap();
+        let t = placement(
+            &model,
+            bbox,
+            field.width_mm(),
+            field.height_mm(),
+            PlacementMode::Center,
+        )
+        .unwrap();
         mesh.translate(t);
         let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], 0.05);
         let sections = dmdsl::slice::slice(&mesh, 0.05, n).0;
-        let exact_area: f64 = sections.iter().flat_map(|s| &s.contours).map(signed_area).sum();
+        let exact_area: f64 = sections
+            .iter()
+            .flat_map(|s| &s.contours)
+            .map(signed_area)
+            .sum();
         let raster = Rasterizer::new(field);
         let mut scratch = Scratch::default();
         let name = model.file_name().unwrap().to_string_lossy().into_owned();
@@ -69,11 +89,22 @@ fn main() {
                 let ts = tiny_skia_mask(&s.contours, aa, field.pixel_mm, field.height_px);
                 stats[k].2 += t0.elapsed().as_secs_f64();
                 stats[k].0 += ts.iter().map(|&v| v as f64).sum::<f64>() / 255.0;
-                stats[k].1 += ts.iter().zip(&exact.data).filter(|(x, y)| (**x >= 128) != (**y >= 128)).count();
+                stats[k].1 += ts
+                    .iter()
+                    .zip(&exact.data)
+                    .filter(|(x, y)| (**x >= 128) != (**y >= 128))
+                    .count();
             }
             scratch.recycle(exact);
         }
-        for (k, label) in ["dmdsl exact coverage", "tiny-skia anti-aliased", "tiny-skia aliased"].iter().enumerate() {
+        for (k, label) in [
+            "dmdsl exact coverage",
+            "tiny-skia anti-aliased",
+            "tiny-skia aliased",
+        ]
+        .iter()
+        .enumerate()
+        {
             println!(
                 "| {name} | {label} | {:+.4} % | {:.4} | {:.3} |",
                 100.0 * (stats[k].0 * px2 / exact_area - 1.0),

@@ -3,7 +3,6 @@
 //! Exit codes: 0 success; 1 finished, but checks failed (e.g. `slice --strict` on a
 //! defective mesh); 2 usage or input error; 130 interrupted.
 
-use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
 use dmdsl::job::{self, PlacementMode, SliceOptions};
 use dmdsl::profile::{self, Profile};
@@ -117,12 +116,18 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            let code = e
-                .downcast_ref::<dmdsl::Error>()
-                .map(|d| d.exit_code())
-                .unwrap_or(2);
-            eprintln!("dmdsl: error: {e:#}");
-            ExitCode::from(code as u8)
+            match e.downcast_ref::<dmdsl::Error>() {
+                // The library's errors are complete one-line messages (their sources are
+                // already in the text), so print them without the cause chain.
+                Some(d) => {
+                    eprintln!("dmdsl: error: {d}");
+                    ExitCode::from(d.exit_code() as u8)
+                }
+                None => {
+                    eprintln!("dmdsl: error: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
         }
     }
 }
@@ -186,13 +191,7 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         progress: if show_progress { Some(&progress) } else { None },
         cancel: Some(&cancel),
     };
-    let summary = job::slice_to_bundle(&opts)
-        .with_context(|| format!("slice {} failed", a.input.display()))
-        .map_err(|e| match e.downcast::<dmdsl::Error>() {
-            // Keep the library's one-line message (it already names the file).
-            Ok(d) => anyhow::Error::new(d),
-            Err(e) => e,
-        })?;
+    let summary = job::slice_to_bundle(&opts)?;
     let defects = !summary.mesh.closed_manifold;
     let failed = a.strict && defects;
     if a.json {

@@ -513,6 +513,13 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
     }
     bad_input("random.stl", Some(&rnd), "not an STL");
     bad_input("missing.stl", None, "No such file");
+    let o = run_in(&tempdir("bad-missing2"), &["slice", "missing.stl"]);
+    assert_eq!(
+        stderr(&o).matches("No such file").count(),
+        1,
+        "{}",
+        stderr(&o)
+    );
     // A directory.
     let dir = tempdir("bad-dir");
     std::fs::create_dir(dir.join("adir.stl")).unwrap();
@@ -632,7 +639,7 @@ fn mirror_flags_flip_the_image() {
 fn ctrl_c_leaves_nothing_behind() {
     let dir = tempdir("ctrlc");
     let f = fixture("bunny00.stl");
-    let mut child = std::process::Command::new(bin())
+    let child = std::process::Command::new(bin())
         .args([
             "slice",
             f.to_str().unwrap(),
