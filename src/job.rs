@@ -145,15 +145,23 @@ pub fn placement(
     Ok(t)
 }
 
-/// Encodes a mask as an 8-bit grayscale PNG (fast deflate; deterministic).
+/// Encodes a mask as an 8-bit grayscale PNG ([`crate::png`]; deterministic).
 pub fn encode_png(m: &Mask) -> Vec<u8> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::ImageEncoder;
-    let mut out = Vec::with_capacity(16 * 1024);
-    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
-        .write_image(&m.data, m.width, m.height, image::ExtendedColorType::L8)
-        .expect("encoding to memory cannot fail");
-    out
+    crate::png::encode_gray8(m.width, m.height, &m.data)
+}
+
+/// Layers sliced at a time: memory depends on this, not on the number of layers.
+const WINDOW: usize = 32;
+/// Consecutive layers one worker processes in order.
+const BLOCK: usize = 4;
+
+/// One layer handed to a mask worker.
+struct LayerIn<'a> {
+    index: usize,
+    section: &'a Section,
+    /// The section of the layer below (None for layer 0), for analyses that compare layers.
+    #[allow(dead_code)]
+    below: Option<&'a Section>,
 }
 
 struct LayerOut {
@@ -204,17 +212,6 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let mut warnings = mesh.report.warnings();
     let t_load = t0.elapsed().as_secs_f64();
 
-    let t1 = Instant::now();
-    let (sections, stats) = slice::slice(&mesh, h, n);
-    if stats.repaired_layers > 0 {
-        warnings.push(format!(
-            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
-            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
-        ));
-    }
-    let t_slice = t1.elapsed().as_secs_f64();
-
-    let t2 = Instant::now();
     let out_path = opts.output.clone().unwrap_or_else(|| default_output(path));
     let writer = BundleWriter::create(&out_path)?;
     let tiled = profile.projector.len() > 1;
@@ -227,41 +224,66 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let done = AtomicUsize::new(0);
     let px_area = field.pixel_mm * field.pixel_mm;
     let binary = profile.slicing.binary;
-    let block = 4usize;
-    let blocks: Vec<Result<Vec<LayerOut>>> = (0..n.div_ceil(block))
-        .into_par_iter()
-        .map_init(Scratch::default, |scratch, b| {
-            let mut outs = Vec::with_capacity(block);
-            for i in b * block..((b + 1) * block).min(n) {
-                if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-                    return Err(Error::Interrupted);
-                }
-                outs.push(layer_masks(
-                    &writer,
-                    &profile,
-                    &raster,
-                    scratch,
-                    &sections[i],
-                    i,
-                    binary,
-                    tiled,
-                    px_area,
-                    optics.as_ref(),
-                )?);
-                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-                if let Some(p) = opts.progress {
-                    p(d, n);
-                }
-            }
-            Ok(outs)
-        })
-        .collect();
+    let mut slicer = slice::Slicer::new(&mesh, h, n);
     let mut outs = Vec::with_capacity(n);
-    for b in blocks {
-        outs.extend(b?);
+    let mut below: Option<Section> = None;
+    let (mut t_slice, mut t_masks) = (0.0, 0.0);
+    for start in (0..n).step_by(WINDOW) {
+        let ts = Instant::now();
+        let sections = slicer.window(start..start + WINDOW);
+        t_slice += ts.elapsed().as_secs_f64();
+        let tm = Instant::now();
+        let m = sections.len();
+        let blocks: Vec<Result<Vec<LayerOut>>> = (0..m.div_ceil(BLOCK))
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, b| {
+                let mut outs = Vec::with_capacity(BLOCK);
+                for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
+                    if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                        return Err(Error::Interrupted);
+                    }
+                    let layer = LayerIn {
+                        index: start + k,
+                        section: &sections[k],
+                        below: if k == 0 {
+                            below.as_ref()
+                        } else {
+                            Some(&sections[k - 1])
+                        },
+                    };
+                    outs.push(layer_masks(
+                        &writer,
+                        &profile,
+                        &raster,
+                        scratch,
+                        &layer,
+                        binary,
+                        tiled,
+                        px_area,
+                        optics.as_ref(),
+                    )?);
+                    let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                    if let Some(p) = opts.progress {
+                        p(d, n);
+                    }
+                }
+                Ok(outs)
+            })
+            .collect();
+        for b in blocks {
+            outs.extend(b?);
+        }
+        below = sections.into_iter().last();
+        t_masks += tm.elapsed().as_secs_f64();
     }
-    drop(sections);
-    let t_masks = t2.elapsed().as_secs_f64();
+    drop(below);
+    let stats = slicer.stats;
+    if stats.repaired_layers > 0 {
+        warnings.push(format!(
+            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
+            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
+        ));
+    }
 
     let t3 = Instant::now();
     let infos: Vec<LayerInfo> = outs
@@ -370,14 +392,14 @@ fn layer_masks(
     profile: &Profile,
     raster: &Rasterizer,
     scratch: &mut Scratch,
-    section: &Section,
-    i: usize,
+    layer: &LayerIn,
     binary: bool,
     tiled: bool,
     px_area: f64,
     optics: Option<&crate::optics::JobOptics>,
 ) -> Result<LayerOut> {
-    let mut field_mask = raster.coverage(&section.contours, scratch);
+    let i = layer.index;
+    let mut field_mask = raster.coverage(&layer.section.contours, scratch);
     let area_mm2 = field_mask.lit_pixels() * px_area;
     if binary {
         crate::raster::threshold(&mut field_mask);
@@ -402,5 +424,6 @@ fn layer_masks(
             projector: k as u32,
         });
     }
+    scratch.recycle(field_mask);
     Ok(LayerOut { area_mm2, masks })
 }

@@ -9,12 +9,14 @@
 
 pub mod bundle;
 pub mod error;
+pub mod exec;
 pub mod job;
 pub mod mesh;
 pub mod motion;
 pub mod optics;
 pub mod plan;
 pub mod plot;
+pub mod png;
 pub mod profile;
 pub mod raster;
 pub mod slice;

@@ -3,7 +3,6 @@
 //! Exit codes: 0 success; 1 finished, but checks failed (e.g. `slice --strict` on a
 //! defective mesh); 2 usage or input error; 130 interrupted.
 
-use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
 use dmdsl::job::{self, PlacementMode, SliceOptions};
 use dmdsl::profile::{self, Profile};
@@ -39,6 +38,10 @@ enum Cmd {
     /// Show or list machine profiles.
     #[command(subcommand)]
     Profile(ProfileCmd),
+    /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
+    /// shutter and DMD, and report the time and every violation.
+    #[command(after_help = RUN_EXIT_HELP)]
+    Run(RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
     #[command(after_help = EXIT_HELP)]
     Calibrate(CalibrateArgs),
@@ -98,6 +101,35 @@ enum CompensationArg {
     Off,
 }
 
+const RUN_EXIT_HELP: &str = "Exit codes:
+  0    the bundle verified and replayed without violations
+  1    violations, bad masks or an injected fault
+  2    unreadable bundle or usage error
+
+Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
+
+#[derive(Args)]
+struct RunArgs {
+    /// The job bundle (directory with job.json and masks/).
+    bundle: PathBuf,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
+    /// Write a PNG of stage position and light over time.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    #[arg(long, value_name = "A..B")]
+    layers: Option<String>,
+    /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
+    /// (repeatable).
+    #[arg(long, value_name = "KIND@LAYER")]
+    fault: Vec<String>,
+}
+
 #[derive(Args)]
 struct SliceArgs {
     /// The part: binary or ASCII STL, or OBJ.
@@ -155,12 +187,18 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            let code = e
-                .downcast_ref::<dmdsl::Error>()
-                .map(|d| d.exit_code())
-                .unwrap_or(2);
-            eprintln!("dmdsl: error: {e:#}");
-            ExitCode::from(code as u8)
+            match e.downcast_ref::<dmdsl::Error>() {
+                // The library's errors are complete one-line messages (their sources are
+                // already in the text), so print them without the cause chain.
+                Some(d) => {
+                    eprintln!("dmdsl: error: {d}");
+                    ExitCode::from(d.exit_code() as u8)
+                }
+                None => {
+                    eprintln!("dmdsl: error: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
         }
     }
 }
@@ -168,6 +206,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
         Cmd::Slice(a) => slice(a, cli.quiet),
+        Cmd::Run(a) => run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate(a, cli.quiet),
         Cmd::Profile(ProfileCmd::List) => {
             for (name, src) in profile::BUILTIN {
@@ -238,13 +277,7 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         progress: if show_progress { Some(&progress) } else { None },
         cancel: Some(&cancel),
     };
-    let summary = job::slice_to_bundle(&opts)
-        .with_context(|| format!("slice {} failed", a.input.display()))
-        .map_err(|e| match e.downcast::<dmdsl::Error>() {
-            // Keep the library's one-line message (it already names the file).
-            Ok(d) => anyhow::Error::new(d),
-            Err(e) => e,
-        })?;
+    let summary = job::slice_to_bundle(&opts)?;
     let defects = !summary.mesh.closed_manifold;
     let failed = a.strict && defects;
     if a.json {
@@ -358,6 +391,27 @@ fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         println!("plot: {}", p.display());
     }
     Ok(0)
+}
+
+fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
+    let faults = a
+        .fault
+        .iter()
+        .map(|f| f.parse().map_err(dmdsl::Error::Usage))
+        .collect::<Result<Vec<_>, _>>()?;
+    let opts = dmdsl::exec::RunOptions {
+        faults,
+        trace: a.trace,
+        plot: a.plot,
+        layers: a.layers,
+    };
+    let report = dmdsl::exec::run(&a.bundle, &opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else if !quiet {
+        print!("{}", dmdsl::exec::report::render_human(&report));
+    }
+    Ok(if report.ok { 0 } else { 1 })
 }
 
 fn hms(s: f64) -> String {

@@ -56,6 +56,27 @@ impl Mask {
 #[derive(Debug, Default)]
 pub struct Scratch {
     acc: Vec<f32>,
+    spare: Vec<Vec<u8>>,
+}
+
+impl Scratch {
+    /// Hands a mask's memory back for reuse by the next [`Rasterizer::coverage`] call
+    /// (saves a fresh, page-faulting allocation per layer).
+    pub fn recycle(&mut self, m: Mask) {
+        if self.spare.len() < 4 {
+            self.spare.push(m.data);
+        }
+    }
+
+    fn zeroed(&mut self, len: usize) -> Vec<u8> {
+        match self.spare.pop() {
+            Some(mut v) if v.len() == len => {
+                v.fill(0);
+                v
+            }
+            _ => vec![0; len],
+        }
+    }
 }
 
 /// Converts sections (in build-plane mm) to masks of a field.
@@ -71,7 +92,7 @@ impl Rasterizer {
     }
 
     #[inline]
-    fn to_px(&self, p: [f64; 2]) -> (f64, f64) {
+    fn px(&self, p: [f64; 2]) -> (f64, f64) {
         let s = 1.0 / self.field.pixel_mm;
         (p[0] * s, self.field.height_px as f64 - p[1] * s)
     }
@@ -81,7 +102,11 @@ impl Rasterizer {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
         let stride = w + 2;
-        let mut out = Mask::zeros(w as u32, h as u32);
+        let mut out = Mask {
+            width: w as u32,
+            height: h as u32,
+            data: scratch.zeroed(w * h),
+        };
         if contours.is_empty() {
             return out;
         }
@@ -93,8 +118,8 @@ impl Rasterizer {
         let (mut c0, mut c1) = (w, 0usize);
         for c in contours {
             for i in 0..c.len() {
-                let (x0, y0) = self.to_px(c[i]);
-                let (x1, y1) = self.to_px(c[(i + 1) % c.len()]);
+                let (x0, y0) = self.px(c[i]);
+                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
                 // Clamp into the field: the planner guarantees parts fit, this only guards.
                 let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
                 let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
@@ -107,17 +132,31 @@ impl Rasterizer {
         }
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
-        debug_assert!(c1 + 1 <= stride);
+        debug_assert!(c1 < stride);
         let mut max_winding = 0.0f32;
         for r in r0..r1 {
             let row = &mut acc[r * stride..(r + 1) * stride];
             let dst = &mut out.data[r * w..(r + 1) * w];
             let mut sum = 0.0f32;
-            for col in c0..c1.min(w) {
-                sum += row[col];
-                let v = sum.abs();
-                max_winding = max_winding.max(v);
-                dst[col] = (v.min(1.0) * 255.0 + 0.5) as u8;
+            let mut val = 0u8;
+            let end = c1.min(w);
+            let mut col = c0;
+            while col < end {
+                if row[col] != 0.0 {
+                    sum += row[col];
+                    let v = sum.abs();
+                    max_winding = max_winding.max(v);
+                    val = (v.min(1.0) * 255.0 + 0.5) as u8;
+                    dst[col] = val;
+                    col += 1;
+                } else {
+                    // Inside or outside the section: the value repeats until the next edge.
+                    let run = zero_run(&row[col..end]);
+                    if val != 0 {
+                        dst[col..col + run].fill(val);
+                    }
+                    col += run;
+                }
             }
             row[c0..(c1 + 1).min(stride)].fill(0.0);
         }
@@ -139,8 +178,8 @@ impl Rasterizer {
         let mut edges: Vec<(f64, f64, f64, f64, i32)> = Vec::new();
         for c in contours {
             for i in 0..c.len() {
-                let (x0, y0) = self.to_px(c[i]);
-                let (x1, y1) = self.to_px(c[(i + 1) % c.len()]);
+                let (x0, y0) = self.px(c[i]);
+                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
                 if y0 == y1 {
                     continue;
                 }
@@ -231,6 +270,19 @@ pub fn threshold(m: &mut Mask) {
     }
 }
 
+/// Number of leading cells equal to +0.0 (at least 1 when called on a zero cell).
+#[inline]
+fn zero_run(s: &[f32]) -> usize {
+    let mut i = 0;
+    while i + 8 <= s.len() && s[i..i + 8].iter().all(|&x| x.to_bits() == 0) {
+        i += 8;
+    }
+    while i < s.len() && s[i] == 0.0 {
+        i += 1;
+    }
+    i
+}
+
 /// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
 const SUBLINES: usize = 32;
 
@@ -315,8 +367,9 @@ fn line(acc: &mut [f32], stride: usize, h: usize, x0: f32, y0: f32, x1: f32, y1:
     }
 }
 
-/// Cuts projector `p`'s part out of a field mask and applies its mirror flags.
-pub fn projector_view(field_mask: &Mask, p: &Projector) -> Mask {
+/// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the
+/// field mask when the projector covers it exactly, unmirrored).
+pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::Cow<'a, Mask> {
     let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
     let (w, h) = (p.width_px as usize, p.height_px as usize);
     if ox == 0
@@ -326,7 +379,7 @@ pub fn projector_view(field_mask: &Mask, p: &Projector) -> Mask {
         && !p.mirror_x
         && !p.mirror_y
     {
-        return field_mask.clone();
+        return std::borrow::Cow::Borrowed(field_mask);
     }
     let fw = field_mask.width as usize;
     let mut out = Mask::zeros(w as u32, h as u32);
@@ -339,7 +392,7 @@ pub fn projector_view(field_mask: &Mask, p: &Projector) -> Mask {
             dst.reverse();
         }
     }
-    out
+    std::borrow::Cow::Owned(out)
 }
 
 #[cfg(test)]

@@ -21,8 +21,9 @@
 //! 2. Chains that do not close (holes in the surface) are repaired greedily: a chain's end
 //!    is joined to the nearest end of another open chain if that is within [`MAX_GAP_MM`]
 //!    and nearer than the chain's own start; otherwise the chain is closed with a straight
-//!    edge back to its own start. Chains of fewer than three points or no area are
-//!    dropped. Joined, closed and dropped chains are counted in [`SliceStats`] and
+//!    edge back to its own start, unless that edge is longer than [`MAX_GAP_MM`] and
+//!    crosses another contour of the layer (or the chain itself): such a chain is
+//!    dropped, as are chains of fewer than three points or no area. Joined, closed and dropped chains are counted in [`SliceStats`] and
 //!    reported as warnings.
 //! 3. The sections are filled with the nonzero winding rule, so overlapping and
 //!    touching shells union.
@@ -89,47 +90,123 @@ struct Seg {
     q: [f64; 2],
 }
 
-/// Cuts `mesh` with `n` layer planes of height `h`; returns one segment list per layer.
-fn cut(mesh: &Mesh, h: f64, n: usize) -> Vec<Vec<Seg>> {
-    let chunk = 8192;
-    let parts: Vec<Vec<(u32, Seg)>> = mesh
-        .triangles
-        .par_chunks(chunk)
-        .enumerate()
-        .map(|(ci, tris)| {
-            let mut out = Vec::new();
-            for (k, t) in tris.iter().enumerate() {
-                let ti = ci * chunk + k;
-                let v = [
-                    mesh.vertices[t[0] as usize],
-                    mesh.vertices[t[1] as usize],
-                    mesh.vertices[t[2] as usize],
+/// Streams a mesh's sections window by window, so memory depends on the window size,
+/// not on the number of layers.
+///
+/// Triangles are sorted by their lowest z once; [`Slicer::window`] (called with increasing
+/// layer ranges) keeps the triangles that can reach the window active, cuts them in
+/// parallel and chains each layer in parallel. The result does not depend on the window
+/// size or the thread count.
+pub struct Slicer<'m> {
+    mesh: &'m Mesh,
+    h: f64,
+    n: usize,
+    zmin: Vec<f64>,
+    zmax: Vec<f64>,
+    order: Vec<u32>,
+    next: usize,
+    active: Vec<u32>,
+    /// Repair counts over the windows sliced so far.
+    pub stats: SliceStats,
+}
+
+impl<'m> Slicer<'m> {
+    /// Prepares to slice `mesh` (already placed) into `n` layers of height `h`.
+    pub fn new(mesh: &'m Mesh, h: f64, n: usize) -> Self {
+        let (zmin, zmax): (Vec<f64>, Vec<f64>) = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let z = [
+                    mesh.vertices[t[0] as usize][2],
+                    mesh.vertices[t[1] as usize][2],
+                    mesh.vertices[t[2] as usize][2],
                 ];
-                let zmin = v[0][2].min(v[1][2]).min(v[2][2]);
-                let zmax = v[0][2].max(v[1][2]).max(v[2][2]);
-                // Planes with zmin <= Z < zmax; candidate range padded, then tested exactly.
-                let lo = ((zmin / h - 0.5).floor().max(0.0)) as usize;
-                let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
-                for i in lo..hi.min(n) {
-                    let z = plane_z(i, h);
-                    if !(zmin <= z && zmax > z) {
-                        continue;
-                    }
-                    if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
-                        out.push((i as u32, s));
-                    }
-                }
-            }
-            out
-        })
-        .collect();
-    let mut layers: Vec<Vec<Seg>> = vec![Vec::new(); n];
-    for part in parts {
-        for (i, s) in part {
-            layers[i as usize].push(s);
+                (z[0].min(z[1]).min(z[2]), z[0].max(z[1]).max(z[2]))
+            })
+            .unzip();
+        let mut order: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
+        order.sort_by(|&a, &b| {
+            zmin[a as usize]
+                .total_cmp(&zmin[b as usize])
+                .then(a.cmp(&b))
+        });
+        Slicer {
+            mesh,
+            h,
+            n,
+            zmin,
+            zmax,
+            order,
+            next: 0,
+            active: Vec::new(),
+            stats: SliceStats::default(),
         }
     }
-    layers
+
+    /// Sections of layers `range` (must follow the previous call's range).
+    pub fn window(&mut self, range: std::ops::Range<usize>) -> Vec<Section> {
+        let range = range.start..range.end.min(self.n);
+        if range.is_empty() {
+            return Vec::new();
+        }
+        let z_lo = plane_z(range.start, self.h);
+        let z_hi = plane_z(range.end - 1, self.h);
+        while self.next < self.order.len() && self.zmin[self.order[self.next] as usize] <= z_hi {
+            self.active.push(self.order[self.next]);
+            self.next += 1;
+        }
+        let zmax = &self.zmax;
+        self.active.retain(|&t| zmax[t as usize] > z_lo);
+
+        let (mesh, h) = (self.mesh, self.h);
+        let chunk = 4096;
+        let parts: Vec<Vec<(u32, Seg)>> = self
+            .active
+            .par_chunks(chunk)
+            .map(|tris| {
+                let mut out = Vec::new();
+                for &ti in tris {
+                    let ti = ti as usize;
+                    let t = &mesh.triangles[ti];
+                    let v = [
+                        mesh.vertices[t[0] as usize],
+                        mesh.vertices[t[1] as usize],
+                        mesh.vertices[t[2] as usize],
+                    ];
+                    let (zmin, zmax) = (self.zmin[ti], self.zmax[ti]);
+                    // Planes with zmin <= Z < zmax; candidate range padded, then tested exactly.
+                    let lo = ((zmin / h - 0.5).floor().max(0.0) as usize).max(range.start);
+                    let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
+                    for i in lo..hi.min(range.end) {
+                        let z = plane_z(i, h);
+                        if !(zmin <= z && zmax > z) {
+                            continue;
+                        }
+                        if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
+                            out.push(((i - range.start) as u32, s));
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        let mut segs: Vec<Vec<Seg>> = vec![Vec::new(); range.len()];
+        for part in parts {
+            for (i, s) in part {
+                segs[i as usize].push(s);
+            }
+        }
+        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
+        for s in &sections {
+            if s.joined_chains + s.dropped_chains > 0 {
+                self.stats.repaired_layers += 1;
+            }
+            self.stats.joined_chains += s.joined_chains;
+            self.stats.dropped_chains += s.dropped_chains;
+        }
+        sections
+    }
 }
 
 fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64) -> Option<Seg> {
@@ -306,11 +383,13 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
                 }
             }
             match best {
-                Some((_, j, _)) if j == i => {
+                Some((d2, j, _)) if j == i => {
+                    let crossing =
+                        d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
                     let mut pts = std::mem::take(&mut open[i]);
                     finish_loop(&mut pts, false);
                     alive[i] = false;
-                    if pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
+                    if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
                         section.contours.push(pts);
                         section.joined_chains += 1;
                     } else {
@@ -332,20 +411,45 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
     }
 }
 
-/// Slices `mesh` (already placed on the build plane) into `n` layers of height `h`.
-/// Layers are chained in parallel; the result is deterministic.
+/// True if the straight edge that would close open chain `i` (its end back to its start)
+/// properly crosses any other contour or chain of the layer, or chain `i` itself.
+fn closing_edge_crosses(open: &[Contour], alive: &[bool], i: usize, closed: &[Contour]) -> bool {
+    let a = *open[i].last().unwrap();
+    let b = open[i][0];
+    let crosses_poly = |c: &Contour, closed_loop: bool, skip_ends: bool| {
+        let n = c.len();
+        let m = if closed_loop { n } else { n.saturating_sub(1) };
+        (0..m).any(|k| {
+            if skip_ends && (k == 0 || k + 1 == m) {
+                return false;
+            }
+            segments_cross(a, b, c[k], c[(k + 1) % n])
+        })
+    };
+    closed.iter().any(|c| crosses_poly(c, true, false))
+        || open
+            .iter()
+            .enumerate()
+            .any(|(j, c)| j != i && alive[j] && crosses_poly(c, false, false))
+        || crosses_poly(&open[i], false, true)
+}
+
+/// Proper crossing of segments ab and cd (touching at an end point does not count).
+fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let orient = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| {
+        (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+    };
+    let (o1, o2) = (orient(a, b, c), orient(a, b, d));
+    let (o3, o4) = (orient(c, d, a), orient(c, d, b));
+    o1 * o2 < 0.0 && o3 * o4 < 0.0
+}
+
+/// Slices `mesh` (already placed on the build plane) into `n` layers of height `h` at
+/// once (tests and small jobs; the pipeline streams with [`Slicer`]).
 pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
-    let segs = cut(mesh, h, n);
-    let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
-    let mut st = SliceStats::default();
-    for s in &sections {
-        if s.joined_chains + s.dropped_chains > 0 {
-            st.repaired_layers += 1;
-        }
-        st.joined_chains += s.joined_chains;
-        st.dropped_chains += s.dropped_chains;
-    }
-    (sections, st)
+    let mut s = Slicer::new(mesh, h, n);
+    let sections = s.window(0..n);
+    (sections, s.stats)
 }
 
 /// Signed area of a contour (positive when counter-clockwise).
@@ -364,34 +468,7 @@ mod tests {
     use super::*;
     use crate::mesh::Mesh;
 
-    fn cube(s: f32, at: [f32; 3]) -> Vec<[[f32; 3]; 3]> {
-        let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
-        let v = [
-            p(0., 0., 0.),
-            p(1., 0., 0.),
-            p(1., 1., 0.),
-            p(0., 1., 0.),
-            p(0., 0., 1.),
-            p(1., 0., 1.),
-            p(1., 1., 1.),
-            p(0., 1., 1.),
-        ];
-        let f = [
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [1, 2, 6],
-            [1, 6, 5],
-            [2, 3, 7],
-            [2, 7, 6],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
-        f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
-    }
+    use crate::mesh::cube_soup as cube;
 
     #[test]
     fn layer_count_rule() {
@@ -442,6 +519,46 @@ mod tests {
                 "{:?}",
                 s.contours
             );
+        }
+    }
+
+    #[test]
+    fn open_chain_closing_across_another_contour_is_dropped() {
+        // A U-shaped open chain whose mouth (x = 0..10 at y = 0) is 10 mm wide.
+        let u: Contour = vec![[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]];
+        // Nothing in the way: closed into the square.
+        let mut s = Section::default();
+        join_open(vec![u.clone()], &mut s);
+        assert_eq!(
+            (s.contours.len(), s.joined_chains, s.dropped_chains),
+            (1, 1, 0)
+        );
+        // A closed contour straddling the mouth: closing would cut through it, so dropped.
+        let mut s = Section {
+            contours: vec![vec![[4.0, -1.0], [6.0, -1.0], [6.0, 1.0], [4.0, 1.0]]],
+            ..Section::default()
+        };
+        join_open(vec![u], &mut s);
+        assert_eq!(
+            (s.contours.len(), s.joined_chains, s.dropped_chains),
+            (1, 0, 1)
+        );
+    }
+
+    #[test]
+    fn windows_give_the_same_sections() {
+        let mut soup = cube(10.0, [0.0; 3]);
+        soup.extend(cube(3.0, [20.0, 0.0, 4.0]));
+        let m = Mesh::from_soup(&soup, "t");
+        let (all, _) = slice(&m, 0.25, 40);
+        let mut s = Slicer::new(&m, 0.25, 40);
+        let mut win = Vec::new();
+        for a in (0..40).step_by(7) {
+            win.extend(s.window(a..a + 7));
+        }
+        assert_eq!(all.len(), win.len());
+        for (x, y) in all.iter().zip(&win) {
+            assert_eq!(x.contours, y.contours);
         }
     }
 }

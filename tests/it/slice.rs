@@ -1,25 +1,687 @@
-//! `dmdsl slice` as a user runs it.
+//! `dmdsl slice` as a user runs it: real and project-made models in, bundles out.
 
 use crate::common::*;
+use serde_json::Value;
+use std::path::Path;
+
+const P: f64 = 65.0 / 1024.0;
+
+fn slice_ok(dir: &Path, args: &[&str]) -> Value {
+    // These tests check geometry (coverage masks); light compensation, on by default with
+    // the built-in profile, is tested in tests/it/calibrate.rs.
+    let mut args = args.to_vec();
+    if args.first() == Some(&"slice") {
+        args.extend(["--compensation", "off"]);
+    }
+    let args = &args[..];
+    let o = run_in(dir, args);
+    assert!(o.status.success(), "dmdsl {args:?} failed: {}", stderr(&o));
+    let out = args
+        .iter()
+        .position(|a| *a == "-o")
+        .map(|i| dir.join(args[i + 1]))
+        .expect("tests pass -o");
+    serde_json::from_slice(&std::fs::read(out.join("job.json")).unwrap()).unwrap()
+}
+
+fn mask(bundle: &Path, job: &Value, layer: usize) -> Vec<u8> {
+    let f = job["layers"][layer]["masks"][0]["file"].as_str().unwrap();
+    let (w, h, px) = read_gray(&bundle.join(f));
+    assert_eq!((w, h), (1024, 768));
+    px
+}
+
+/// Expected mask of pixel-aligned rectangles: (col0, col1, row_from_bottom0, row_from_bottom1).
+fn rect_mask(rects: &[(usize, usize, usize, usize)]) -> Vec<u8> {
+    let mut m = vec![0u8; 1024 * 768];
+    for &(c0, c1, b0, b1) in rects {
+        for b in b0..b1 {
+            let row = 767 - b;
+            m[row * 1024 + c0..row * 1024 + c1].fill(255);
+        }
+    }
+    m
+}
 
 #[test]
-fn slices_box_fixture_into_bundle() {
-    let dir = tempdir("box");
+fn cube_keep_position_golden_mask_exact() {
+    let dir = tempdir("cube");
+    let f = fixture("cube10.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "-o",
+            "c.dmdjob",
+        ],
+    );
+    assert_eq!(job["layers"].as_array().unwrap().len(), 200);
+    let want = rect_mask(&[(256, 416, 192, 352)]);
+    for layer in [0, 99, 199] {
+        assert!(
+            mask(&dir.join("c.dmdjob"), &job, layer) == want,
+            "layer {layer}"
+        );
+    }
+    let l0 = &job["layers"][0];
+    assert_eq!(l0["z_mm"], 0.05);
+    assert_eq!(l0["slice_z_mm"], 0.025);
+    assert_eq!(l0["mode"], "layered");
+    let area = l0["area_mm2"].as_f64().unwrap();
+    assert!((area - (160.0 * P).powi(2)).abs() < 1e-6, "{area}");
+    assert_eq!(job["source"]["placement"]["mode"], "keep");
+    assert_eq!(job["source"]["mesh"]["closed_manifold"], true);
+    assert_eq!(job["source"]["mesh"]["format"], "stl-binary");
+}
+
+#[test]
+fn cube_centered_by_default() {
+    let dir = tempdir("cube-center");
+    let f = fixture("cube10.stl");
+    let job = slice_ok(
+        &dir,
+        &["slice", f.to_str().unwrap(), "-q", "-o", "c.dmdjob"],
+    );
+    let m = mask(&dir.join("c.dmdjob"), &job, 0);
+    // 160 px wide part centred on 1024 x 768: columns 432..592, rows 304..464.
+    assert!(m == rect_mask(&[(432, 592, 304, 464)]));
+    assert_eq!(job["source"]["placement"]["mode"], "center");
+}
+
+#[test]
+fn cylinder_with_hole_ascii() {
+    let dir = tempdir("cyl");
+    let f = fixture("cylinder_hole.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "-o",
+            "c.dmdjob",
+        ],
+    );
+    assert_eq!(job["source"]["mesh"]["format"], "stl-ascii");
+    assert_eq!(job["layers"].as_array().unwrap().len(), 100);
+    let b = dir.join("c.dmdjob");
+    let m = mask(&b, &job, 50);
+    // Exact area of the 128-gon annulus.
+    let ngon = |r: f64| 0.5 * 128.0 * r * r * (std::f64::consts::TAU / 128.0).sin();
+    let exact = ngon(8.0) - ngon(3.0);
+    let lit: f64 = m.iter().map(|&v| v as f64 / 255.0).sum::<f64>() * P * P;
+    assert!((lit - exact).abs() / exact < 1e-3, "{lit} vs {exact}");
+    let area = job["layers"][50]["area_mm2"].as_f64().unwrap();
+    assert!((area - exact).abs() / exact < 1e-3);
+    // Pixels whose centre is clearly inside the ring are 255, clearly outside 0.
+    for row in 0..768 {
+        for col in 0..1024 {
+            let x = (col as f64 + 0.5) * P - 32.5;
+            let y = (767.0 - row as f64 + 0.5) * P - 24.375;
+            let r = (x * x + y * y).sqrt();
+            let v = m[row * 1024 + col];
+            if (3.1..7.9).contains(&r) {
+                assert_eq!(v, 255, "({col},{row}) r={r}");
+            } else if !(2.9..=8.1).contains(&r) {
+                assert_eq!(v, 0, "({col},{row}) r={r}");
+            }
+        }
+    }
+    // Golden: the whole layer, byte for byte (regenerate only after reviewing a change).
+    let golden = read_gray(&fixture("golden/cylinder_hole_layer50.png")).2;
+    assert!(
+        m == golden,
+        "layer 50 differs from fixtures/golden/cylinder_hole_layer50.png"
+    );
+}
+
+#[test]
+fn overlapping_and_touching_shells_union() {
+    let dir = tempdir("overlap");
+    let f = fixture("overlap_shells.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "-o",
+            "o.dmdjob",
+        ],
+    );
+    let want = rect_mask(&[
+        (100, 300, 100, 200),
+        (200, 400, 150, 300),
+        (400, 500, 150, 300),
+    ]);
+    let m = mask(&dir.join("o.dmdjob"), &job, 10);
+    let diff = m.iter().zip(&want).filter(|(a, b)| a != b).count();
+    assert_eq!(diff, 0);
+    // The touching boxes share a face's edges, so they form one (non-manifold) shell.
+    assert_eq!(job["source"]["mesh"]["shells"], 2);
+    assert!(job["source"]["mesh"]["nonmanifold_edges"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn vertices_on_planes_and_flat_faces() {
+    let dir = tempdir("vop");
+    let f = fixture("vertex_on_plane.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "--layer-height",
+            "0.25",
+            "-q",
+            "-o",
+            "v.dmdjob",
+        ],
+    );
+    let layers = job["layers"].as_array().unwrap();
+    assert_eq!(layers.len(), 8);
+    let r = 100.0 * P;
+    for (i, l) in layers.iter().enumerate() {
+        let z = 0.125 + 0.25 * i as f64;
+        // Octahedron: square of half-diagonal r·(1 − |z − 1.125|), area 2·s².
+        let s = r * (1.0 - (z - 1.125f64).abs());
+        let octa = 2.0 * s * s;
+        let boxa = (100.0 * P).powi(2); // bottom face on plane 0 counts; thin box's top doesn't
+        let area = l["area_mm2"].as_f64().unwrap();
+        let exact = octa + boxa;
+        assert!(
+            (area - exact).abs() < 1e-4 * exact,
+            "layer {i}: {area} vs {exact}"
+        );
+    }
+    // The equator layer (z = 1.125, vertices on the plane) is an exact diamond: check a
+    // pixel-centre row through it.
+    let m = mask(&dir.join("v.dmdjob"), &job, 4);
+    let row = 767 - 300;
+    let lit: Vec<usize> = (0..1024).filter(|&c| m[row * 1024 + c] >= 128).collect();
+    assert_eq!((lit[0], *lit.last().unwrap()), (200, 599));
+}
+
+#[test]
+fn island_above_a_gap() {
+    let dir = tempdir("island");
+    let f = fixture("island.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "-o",
+            "i.dmdjob",
+        ],
+    );
+    let b = dir.join("i.dmdjob");
+    assert_eq!(job["layers"].as_array().unwrap().len(), 100);
+    assert!(mask(&b, &job, 10) == rect_mask(&[(200, 300, 200, 300)]));
+    // The gap (z 2..3) has empty masks but still layers.
+    let gap = mask(&b, &job, 50);
+    assert!(gap.iter().all(|&v| v == 0));
+    assert_eq!(job["layers"][50]["area_mm2"], 0.0);
+    assert!(mask(&b, &job, 70) == rect_mask(&[(250, 450, 250, 350)]));
+}
+
+#[test]
+fn real_model_bunny_json_summary_and_warnings() {
+    let dir = tempdir("bunny");
+    let f = fixture("bunny00.stl");
     let o = run_in(
         &dir,
         &[
             "slice",
-            root().join("../shared/models/box.stl").to_str().unwrap(),
-            "-q",
+            f.to_str().unwrap(),
+            "--json",
+            "--layer-height",
+            "0.5",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
-    let b = dir.join("box.dmdjob");
-    let job: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(b.join("job.json")).unwrap()).unwrap();
-    assert_eq!(job["format"], "dmdsl-job");
-    assert_eq!(job["layers"].as_array().unwrap().len(), 500);
-    let (w, h, px) = read_gray(&b.join("masks/00000.png"));
-    assert_eq!((w, h), (1024, 768));
-    assert!(px.iter().any(|&v| v == 255));
+    let v: Value = serde_json::from_str(&stdout(&o)).expect("--json prints JSON on stdout");
+    assert_eq!(v["layers"], 78);
+    assert!(v["bundle"].as_str().unwrap().ends_with("bunny00.dmdjob"));
+    assert_eq!(v["mesh"]["triangles"], 75408);
+    assert_eq!(v["mesh"]["closed_manifold"], true);
+    assert!(v["timings"]["total_s"].as_f64().unwrap() > 0.0);
+    assert!(dir.join("bunny00.dmdjob/job.json").is_file());
+    // The manifest's masks exist and their hashes match.
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("bunny00.dmdjob/job.json")).unwrap())
+            .unwrap();
+    for l in job["layers"].as_array().unwrap() {
+        let m = &l["masks"][0];
+        let bytes =
+            std::fs::read(dir.join("bunny00.dmdjob").join(m["file"].as_str().unwrap())).unwrap();
+        assert_eq!(m["sha256"].as_str().unwrap(), sha256(&bytes));
+    }
+}
+
+fn sha256(b: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(b)
+        .iter()
+        .map(|x| format!("{x:02x}"))
+        .collect()
+}
+
+fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((
+                    p.strip_prefix(dir).unwrap().display().to_string(),
+                    std::fs::read(&p).unwrap(),
+                ));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn byte_identical_whatever_the_thread_count() {
+    let dir = tempdir("repro");
+    let f = fixture("bunny00.stl");
+    let mut bundles = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let out = format!("b{threads}.dmdjob");
+        let o = std::process::Command::new(bin())
+            .args([
+                "slice",
+                f.to_str().unwrap(),
+                "-q",
+                "--layer-height",
+                "1",
+                "-o",
+                &out,
+            ])
+            .env("RAYON_NUM_THREADS", threads)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        bundles.push(tree(&dir.join(out)));
+    }
+    assert!(bundles[0] == bundles[1] && bundles[1] == bundles[2]);
+}
+
+#[test]
+fn broken_mesh_warns_and_strict_fails() {
+    let dir = tempdir("broken");
+    // A cube with one facet missing and one flipped.
+    let mut t = box_tris([10.0, 10.0, 0.0], [20.0, 20.0, 5.0]);
+    t.remove(7);
+    let f = t[4];
+    t[4] = [f[0], f[2], f[1]];
+    write_stl(&dir.join("broken.stl"), &t);
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "broken.stl",
+            "-o",
+            "b.dmdjob",
+            "--layer-height",
+            "0.5",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("warning: mesh has 3 open edges"), "{e}");
+    assert!(e.contains("backwards edges"), "{e}");
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();
+    // Repaired sections are the full 10 x 10 mm square.
+    for l in job["layers"].as_array().unwrap() {
+        let a = l["area_mm2"].as_f64().unwrap();
+        assert!((a - 100.0).abs() < 0.05, "{a}");
+    }
+    assert!(!job["warnings"].as_array().unwrap().is_empty());
+    let o = run_in(
+        &dir,
+        &["slice", "broken.stl", "-o", "b.dmdjob", "--strict", "-q"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        dir.join("b.dmdjob/job.json").is_file(),
+        "--strict still writes the bundle"
+    );
+}
+
+#[test]
+fn obj_input() {
+    let dir = tempdir("obj");
+    let obj =
+        "v 10 10 0\nv 20 10 0\nv 20 20 0\nv 10 20 0\nv 10 10 5\nv 20 10 5\nv 20 20 5\nv 10 20 5\n\
+               f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+    std::fs::write(dir.join("cube.obj"), obj).unwrap();
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            "cube.obj",
+            "-q",
+            "-o",
+            "c.dmdjob",
+            "--layer-height",
+            "1",
+        ],
+    );
+    assert_eq!(job["source"]["mesh"]["format"], "obj");
+    assert_eq!(job["source"]["mesh"]["closed_manifold"], true);
+    assert_eq!(job["layers"].as_array().unwrap().len(), 5);
+    let a = job["layers"][2]["area_mm2"].as_f64().unwrap();
+    assert!((a - 100.0).abs() < 1e-2, "{a}");
+}
+
+#[test]
+fn replaces_only_bundles_atomically() {
+    let dir = tempdir("replace");
+    let f = fixture("cube10.stl");
+    let f = f.to_str().unwrap();
+    slice_ok(
+        &dir,
+        &["slice", f, "-q", "-o", "x.dmdjob", "--layer-height", "1"],
+    );
+    slice_ok(
+        &dir,
+        &["slice", f, "-q", "-o", "x.dmdjob", "--layer-height", "2"],
+    );
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("x.dmdjob/job.json")).unwrap()).unwrap();
+    assert_eq!(job["layers"].as_array().unwrap().len(), 5);
+    // Old masks are gone: the bundle was replaced whole.
+    assert!(!dir.join("x.dmdjob/masks/00009.png").exists());
+    // A directory that is not a bundle is never replaced.
+    std::fs::create_dir(dir.join("precious")).unwrap();
+    std::fs::write(dir.join("precious/notes.txt"), "keep me").unwrap();
+    let o = run_in(&dir, &["slice", f, "-q", "-o", "precious"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("precious: exists and is not a dmdsl bundle"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("precious/notes.txt")).unwrap(),
+        "keep me"
+    );
+    // No staging directories are left behind.
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.starts_with('.')), "{names:?}");
+}
+
+/// Runs `slice` on a bad input: exit code 2, one line on stderr naming the file and the
+/// problem, nothing written.
+fn bad_input(name: &str, bytes: Option<&[u8]>, expect: &str) {
+    let dir = tempdir(&format!("bad-{name}"));
+    if let Some(b) = bytes {
+        std::fs::write(dir.join(name), b).unwrap();
+    }
+    let o = run_in(&dir, &["slice", name, "-o", "out.dmdjob"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{name}: {e}");
+    assert_eq!(
+        e.trim_end().lines().count(),
+        1,
+        "{name}: one line expected: {e}"
+    );
+    assert!(e.contains(name), "{name}: error must name the file: {e}");
+    assert!(e.contains(expect), "{name}: expected '{expect}' in: {e}");
+    assert!(!e.contains("panicked"));
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    let expected_left = usize::from(bytes.is_some());
+    assert_eq!(
+        left.len(),
+        expected_left,
+        "{name}: nothing may be written: {left:?}"
+    );
+}
+
+#[test]
+fn bad_inputs_are_one_line_errors_with_exit_2() {
+    let tri = box_tris([1.0, 1.0, 0.0], [2.0, 2.0, 1.0]);
+    let mut good = Vec::new();
+    {
+        let d = tempdir("bad-src");
+        write_stl(&d.join("g.stl"), &tri);
+        good = std::fs::read(d.join("g.stl")).unwrap_or(good);
+    }
+    bad_input("empty.stl", Some(b""), "file is empty");
+    bad_input(
+        "trunc.stl",
+        Some(&good[..good.len() - 20]),
+        "declares 12 triangles",
+    );
+    let mut big = good.clone();
+    big[80..84].copy_from_slice(&5_000_000u32.to_le_bytes());
+    bad_input("count.stl", Some(&big), "declares 5000000 triangles");
+    let ascii = "solid a\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n";
+    bad_input("cut.stl", Some(ascii.as_bytes()), "ends inside a facet");
+    let mut nan = good.clone();
+    nan[84 + 12..84 + 16].copy_from_slice(&f32::NAN.to_le_bytes());
+    bad_input("nan.stl", Some(&nan), "non-finite");
+    let mut inf = good.clone();
+    inf[84 + 20..84 + 24].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    bad_input("inf.stl", Some(&inf), "non-finite");
+    let mut zero = vec![0u8; 84];
+    zero[..5].copy_from_slice(b"solix");
+    bad_input("zero.stl", Some(&zero), "contains no triangles");
+    let flat = box_tris([1.0, 1.0, 0.0], [2.0, 2.0, 0.0]);
+    let d = tempdir("bad-flat-src");
+    write_stl(&d.join("f.stl"), &flat);
+    bad_input(
+        "flat.stl",
+        Some(&std::fs::read(d.join("f.stl")).unwrap()),
+        "less than one layer",
+    );
+    let huge = box_tris([0.0, 0.0, 0.0], [70.0, 10.0, 1.0]);
+    write_stl(&d.join("h.stl"), &huge);
+    bad_input(
+        "huge.stl",
+        Some(&std::fs::read(d.join("h.stl")).unwrap()),
+        "part is 70.000 x 10.000 mm but the build field is 65.000 x 48.750 mm",
+    );
+    bad_input(
+        "bad.obj",
+        Some(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"),
+        "out of",
+    );
+    let mut rnd = Vec::with_capacity(4096);
+    let mut x: u64 = 0x9e3779b97f4a7c15;
+    for _ in 0..4096 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        rnd.push((x >> 24) as u8);
+    }
+    bad_input("random.stl", Some(&rnd), "not an STL");
+    bad_input("missing.stl", None, "No such file");
+    let o = run_in(&tempdir("bad-missing2"), &["slice", "missing.stl"]);
+    assert_eq!(
+        stderr(&o).matches("No such file").count(),
+        1,
+        "{}",
+        stderr(&o)
+    );
+    // A directory.
+    let dir = tempdir("bad-dir");
+    std::fs::create_dir(dir.join("adir.stl")).unwrap();
+    let o = run_in(&dir, &["slice", "adir.stl", "-o", "out.dmdjob"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("adir.stl: is a directory"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let dir = tempdir("usage");
+    let f = fixture("cube10.stl");
+    let f = f.to_str().unwrap();
+    for (args, expect) in [
+        (
+            vec!["slice", f, "--layer-height", "0"],
+            "--layer-height must be a number > 0",
+        ),
+        (
+            vec!["slice", f, "--layer-height", "nan"],
+            "--layer-height must be a number > 0",
+        ),
+        (
+            vec!["slice", f, "--profile", "nope"],
+            "profile nope: no built-in profile",
+        ),
+        (vec!["slice"], "required"),
+        (vec!["frobnicate"], "unrecognized subcommand"),
+    ] {
+        let o = run_in(&dir, &args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(expect), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn profile_show_round_trips_and_bad_profile_is_clear() {
+    let dir = tempdir("profile");
+    let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    assert!(o.status.success());
+    let text = stdout(&o);
+    assert!(text.contains("pixel_mm = 0.0634765625"));
+    std::fs::write(dir.join("my.toml"), &text).unwrap();
+    let f = fixture("cube10.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--profile",
+            "my.toml",
+            "-q",
+            "-o",
+            "a.dmdjob",
+            "--layer-height",
+            "2",
+        ],
+    );
+    assert_eq!(job["machine"]["name"], "xu2010-topdown");
+    std::fs::write(
+        dir.join("bad.toml"),
+        text.replace("mirror_x = false", "mirror_x = false\nmirorr_y = 1"),
+    )
+    .unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--profile",
+            "bad.toml",
+            "-o",
+            "b.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(
+        e.contains("bad.toml") && e.contains("unknown field `mirorr_y`"),
+        "{e}"
+    );
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    assert!(!dir.join("b.dmdjob").exists());
+}
+
+#[test]
+fn mirror_flags_flip_the_image() {
+    let dir = tempdir("mirror");
+    let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    let text = stdout(&o).replace("mirror_x = false", "mirror_x = true");
+    std::fs::write(dir.join("mx.toml"), text).unwrap();
+    let f = fixture("cube10.stl");
+    let job = slice_ok(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "--profile",
+            "mx.toml",
+            "-q",
+            "-o",
+            "m.dmdjob",
+            "--layer-height",
+            "5",
+        ],
+    );
+    let m = mask(&dir.join("m.dmdjob"), &job, 0);
+    assert!(m == rect_mask(&[(1024 - 416, 1024 - 256, 192, 352)]));
+}
+
+#[test]
+fn ctrl_c_leaves_nothing_behind() {
+    let dir = tempdir("ctrlc");
+    let f = fixture("bunny00.stl");
+    let child = std::process::Command::new(bin())
+        .args([
+            "slice",
+            f.to_str().unwrap(),
+            "--layer-height",
+            "0.002",
+            "-o",
+            "x.dmdjob",
+        ])
+        .current_dir(&dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the job is writing masks into its staging directory, then interrupt it.
+    let staging = || {
+        std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .any(|e| e.file_name().to_string_lossy().starts_with(".x.dmdjob.tmp"))
+    };
+    let t = std::time::Instant::now();
+    while !staging() {
+        assert!(t.elapsed().as_secs() < 60, "no staging directory appeared");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let st = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
+    assert!(stderr(&out).contains("interrupted; nothing was written"));
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }

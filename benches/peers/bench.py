@@ -1,0 +1,52 @@
+#!/usr/bin/env python3
+"""Whole-process wall time and peak memory of `dmdsl slice` vs PrusaSlicer's SLA export.
+
+Usage: bench.py DMDSL_BIN OUTDIR RUNS MODEL.stl [MODEL.stl ...]
+
+Runs are interleaved (for each run: each model: PrusaSlicer, then dmdsl) so machine noise
+hits both tools alike. Reports per model the median wall time and peak RSS of each tool,
+the speed ratio, and the geometric mean of the ratios. Needs prusa-slicer (apt).
+"""
+import json, math, os, statistics, subprocess, sys, time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def timed(cmd):
+    t = time.perf_counter()
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, ru = os.wait4(p.pid, 0)
+    dt = time.perf_counter() - t
+    if status != 0:
+        raise SystemExit(f"failed: {cmd}")
+    return dt, ru.ru_maxrss  # KiB on Linux
+
+
+def main():
+    dmdsl, out, runs = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    models = sys.argv[4:]
+    os.makedirs(out, exist_ok=True)
+    res = {m: {"prusa": [], "dmdsl": [], "prusa_kb": 0, "dmdsl_kb": 0} for m in models}
+    for _ in range(runs):
+        for m in models:
+            name = os.path.splitext(os.path.basename(m))[0]
+            dt, kb = timed(["prusa-slicer", "--load", os.path.join(HERE, "prusa_sla.ini"), "--export-sla",
+                            "--output", os.path.join(out, name + ".sl1"), m])
+            res[m]["prusa"].append(dt)
+            res[m]["prusa_kb"] = max(res[m]["prusa_kb"], kb)
+            dt, kb = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, name + ".dmdjob")])
+            res[m]["dmdsl"].append(dt)
+            res[m]["dmdsl_kb"] = max(res[m]["dmdsl_kb"], kb)
+    ratios = []
+    for m in models:
+        r = res[m]
+        p, d = statistics.median(r["prusa"]), statistics.median(r["dmdsl"])
+        ratios.append(p / d)
+        print(json.dumps({"model": os.path.basename(m), "prusa_s": round(p, 3), "dmdsl_s": round(d, 3),
+                          "speedup": round(p / d, 2), "prusa_peak_mib": round(r["prusa_kb"] / 1024, 1),
+                          "dmdsl_peak_mib": round(r["dmdsl_kb"] / 1024, 1)}))
+    print(json.dumps({"geomean_speedup": round(math.exp(sum(map(math.log, ratios)) / len(ratios)), 2)}))
+
+
+if __name__ == "__main__":
+    main()

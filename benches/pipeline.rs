@@ -1,0 +1,91 @@
+//! Stage-by-stage cost of the slicing pipeline on a real model (no test harness).
+//!
+//! `cargo bench --bench pipeline -- [MODEL.stl] [LAYER_HEIGHT]`
+//! (default: fixtures/bunny00.stl at 0.05 mm). Prints the median of 5 runs per stage,
+//! per layer, single-threaded, so the numbers compare across machines and commits.
+
+use dmdsl::job::{encode_png, placement, PlacementMode};
+use dmdsl::profile::Profile;
+use dmdsl::raster::{Rasterizer, Scratch};
+use std::path::PathBuf;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let model = args
+        .first()
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/bunny00.stl"));
+    let h: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.05);
+    let profile = Profile::default_profile();
+    let field = profile.field();
+
+    let t = Instant::now();
+    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
+    let load_s = t.elapsed().as_secs_f64();
+    let bbox = mesh.bbox();
+    let tr = placement(
+        &model,
+        bbox,
+        field.width_mm(),
+        field.height_mm(),
+        PlacementMode::Center,
+    )
+    .unwrap();
+    mesh.translate(tr);
+    let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], h);
+
+    let mut slice_t = Vec::new();
+    let mut sections = Vec::new();
+    for _ in 0..5 {
+        let t = Instant::now();
+        sections = dmdsl::slice::slice(&mesh, h, n).0;
+        slice_t.push(t.elapsed().as_secs_f64());
+    }
+    let raster = Rasterizer::new(field);
+    let mut scratch = Scratch::default();
+    let (mut cov_t, mut png_t, mut sha_t) = (Vec::new(), Vec::new(), Vec::new());
+    let mut png_bytes = 0usize;
+    for _ in 0..5 {
+        let (mut c, mut p, mut s) = (0.0, 0.0, 0.0);
+        png_bytes = 0;
+        for sec in &sections {
+            let t = Instant::now();
+            let m = raster.coverage(&sec.contours, &mut scratch);
+            c += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let png = encode_png(&m);
+            p += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            std::hint::black_box(dmdsl::bundle::sha256_hex(&png));
+            s += t.elapsed().as_secs_f64();
+            png_bytes += png.len();
+        }
+        cov_t.push(c);
+        png_t.push(p);
+        sha_t.push(s);
+    }
+    let per = |v: Vec<f64>| median(v) / n as f64 * 1e3;
+    println!(
+        "model {} ({} triangles), {n} layers of {h} mm",
+        model.display(),
+        mesh.triangles.len()
+    );
+    println!("load+weld+validate  {:8.2} ms total", load_s * 1e3);
+    println!("slice (all layers)  {:8.2} ms total", median(slice_t) * 1e3);
+    println!("coverage raster     {:8.3} ms/layer", per(cov_t));
+    println!(
+        "png encode          {:8.3} ms/layer ({} bytes/layer)",
+        per(png_t),
+        png_bytes / n
+    );
+    println!("sha256              {:8.3} ms/layer", per(sha_t));
+}

@@ -1,0 +1,369 @@
+//! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
+//! deflate block whose only back-references are runs (distance 1).
+//!
+//! Masks are mostly long runs of 0 and 255 with a thin band of anti-aliased edge values,
+//! so run-length coding gets most of the compression at a fraction of a general encoder's
+//! cost: runs are found eight bytes at a time and the zlib Adler-32 of a run is computed
+//! in closed form, so the work grows with the number of runs, not the number of pixels.
+//! The output is a standard PNG that any decoder reads (tests decode it with `image`).
+
+/// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
+pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
+    assert_eq!(data.len(), width as usize * height as usize, "mask size");
+    let idat = zlib_rows(width as usize, height as usize, data);
+    let mut out = Vec::with_capacity(idat.len() + 64);
+    out.extend_from_slice(b"\x89PNG\r\n\x1a\n");
+    let mut ihdr = Vec::with_capacity(13);
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 0, 0, 0, 0]); // bit depth 8, grayscale, deflate, filter 0, no interlace
+    chunk(&mut out, b"IHDR", &ihdr);
+    chunk(&mut out, b"IDAT", &idat);
+    chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], body: &[u8]) {
+    out.extend_from_slice(&(body.len() as u32).to_be_bytes());
+    let start = out.len();
+    out.extend_from_slice(kind);
+    out.extend_from_slice(body);
+    let crc = crc32(&out[start..]);
+    out.extend_from_slice(&crc.to_be_bytes());
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        let mut t = [0u32; 256];
+        for (n, e) in t.iter_mut().enumerate() {
+            let mut c = n as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+            *e = c;
+        }
+        t
+    });
+    let mut c = !0u32;
+    for &b in bytes {
+        c = t[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
+    }
+    !c
+}
+
+const MOD: u64 = 65521;
+
+/// Adler-32 state updated by runs of one byte value.
+struct Adler {
+    a: u64,
+    b: u64,
+    /// Bytes added since the last reduction modulo 65521.
+    pending: u32,
+}
+
+impl Adler {
+    fn run(&mut self, v: u8, k: u64) {
+        if k < 16 {
+            // Short runs (anti-aliased edges): plain sums, reduced every few thousand bytes.
+            for _ in 0..k {
+                self.a += v as u64;
+                self.b += self.a;
+            }
+            self.pending += k as u32;
+            if self.pending > 4096 {
+                self.a %= MOD;
+                self.b %= MOD;
+                self.pending = 0;
+            }
+            return;
+        }
+        self.a %= MOD;
+        self.b %= MOD;
+        self.pending = 0;
+        // After k bytes of value v: a' = a + k·v, b' = b + k·a + v·k(k+1)/2.
+        let v = v as u64;
+        let k_m = k % MOD;
+        let tri = if k % 2 == 0 {
+            (k / 2 % MOD) * ((k + 1) % MOD)
+        } else {
+            (k % MOD) * (k.div_ceil(2) % MOD)
+        } % MOD;
+        self.b = (self.b + k_m * self.a + v * tri) % MOD;
+        self.a = (self.a + k_m * v) % MOD;
+    }
+}
+
+struct Bits {
+    out: Vec<u8>,
+    acc: u64,
+    n: u32,
+}
+
+impl Bits {
+    #[inline]
+    fn put(&mut self, value: u32, bits: u32) {
+        self.acc |= (value as u64) << self.n;
+        self.n += bits;
+        while self.n >= 8 {
+            self.out.push(self.acc as u8);
+            self.acc >>= 8;
+            self.n -= 8;
+        }
+    }
+
+    /// Writes a Huffman code (given MSB-first) in deflate's bit order.
+    #[inline]
+    fn code(&mut self, code: u32, len: u32) {
+        self.put(code.reverse_bits() >> (32 - len), len);
+    }
+
+    #[inline]
+    fn literal(&mut self, b: u8) {
+        if b < 144 {
+            self.code(0x30 + b as u32, 8);
+        } else {
+            self.code(0x190 + (b as u32 - 144), 9);
+        }
+    }
+
+    /// A back-reference of `len` (3..=258) bytes at distance 1.
+    #[inline]
+    fn repeat(&mut self, len: usize) {
+        let (sym, extra_bits, extra) = length_code(len);
+        if sym < 280 {
+            self.code(sym - 256, 7);
+        } else {
+            self.code(0xC0 + (sym - 280), 8);
+        }
+        if extra_bits > 0 {
+            self.put(extra, extra_bits);
+        }
+        self.code(0, 5); // distance code 0 = distance 1
+    }
+}
+
+fn length_code(len: usize) -> (u32, u32, u32) {
+    const BASE: [u16; 29] = [
+        3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31, 35, 43, 51, 59, 67, 83, 99, 115,
+        131, 163, 195, 227, 258,
+    ];
+    const EXTRA: [u8; 29] = [
+        0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0,
+    ];
+    let i = BASE.partition_point(|&b| b as usize <= len) - 1;
+    (
+        257 + i as u32,
+        EXTRA[i] as u32,
+        (len - BASE[i] as usize) as u32,
+    )
+}
+
+/// Emits `k` copies of byte `v` (the literal is the first copy, then distance-1 repeats).
+fn emit_run(bits: &mut Bits, v: u8, mut k: usize) {
+    if k < 4 {
+        for _ in 0..k {
+            bits.literal(v);
+        }
+        return;
+    }
+    bits.literal(v);
+    k -= 1;
+    while k >= 3 {
+        let l = if k > 258 && k - 258 < 3 {
+            k - 3
+        } else {
+            k.min(258)
+        };
+        bits.repeat(l);
+        k -= l;
+    }
+    for _ in 0..k {
+        bits.literal(v);
+    }
+}
+
+/// Length of the run of byte `v` starting at `s[0]` (eight bytes at a time).
+#[inline]
+fn run_len(s: &[u8], v: u8) -> usize {
+    let pat = u64::from_ne_bytes([v; 8]);
+    let mut i = 0;
+    while i + 8 <= s.len() {
+        let w = u64::from_ne_bytes(s[i..i + 8].try_into().unwrap());
+        if w != pat {
+            break;
+        }
+        i += 8;
+    }
+    while i < s.len() && s[i] == v {
+        i += 1;
+    }
+    i
+}
+
+/// The zlib stream of the PNG scanlines (each row preceded by filter byte 0).
+fn zlib_rows(w: usize, h: usize, data: &[u8]) -> Vec<u8> {
+    let mut bits = Bits {
+        out: Vec::with_capacity(4096),
+        acc: 0,
+        n: 0,
+    };
+    bits.put(0x78, 8);
+    bits.put(0x01, 8);
+    bits.put(1, 1); // BFINAL
+    bits.put(1, 2); // BTYPE = 01, fixed Huffman
+    let mut adler = Adler {
+        a: 1,
+        b: 0,
+        pending: 0,
+    };
+    // The pending run spans row boundaries (filter bytes are 0, like empty pixels).
+    let (mut rv, mut rk) = (0u8, 0usize);
+    for r in 0..h {
+        let row = &data[r * w..(r + 1) * w];
+        // filter byte 0
+        if rk > 0 && rv == 0 {
+            rk += 1;
+        } else {
+            if rk > 0 {
+                emit_run(&mut bits, rv, rk);
+                adler.run(rv, rk as u64);
+            }
+            rv = 0;
+            rk = 1;
+        }
+        let mut i = 0;
+        while i < w {
+            let v = row[i];
+            let k = run_len(&row[i..], v);
+            if v == rv {
+                rk += k;
+            } else {
+                emit_run(&mut bits, rv, rk);
+                adler.run(rv, rk as u64);
+                rv = v;
+                rk = k;
+            }
+            i += k;
+        }
+    }
+    if rk > 0 {
+        emit_run(&mut bits, rv, rk);
+        adler.run(rv, rk as u64);
+    }
+    bits.code(0, 7); // end of block (symbol 256)
+    if bits.n > 0 {
+        bits.put(0, 8 - bits.n);
+    }
+    let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
+    bits.out.extend_from_slice(&ad.to_be_bytes());
+    bits.out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode(png: &[u8]) -> (u32, u32, Vec<u8>) {
+        let img = image::load_from_memory_with_format(png, image::ImageFormat::Png).unwrap();
+        let g = img.as_luma8().expect("8-bit gray").clone();
+        (g.width(), g.height(), g.into_raw())
+    }
+
+    fn xorshift(state: &mut u64) -> u64 {
+        *state ^= *state << 13;
+        *state ^= *state >> 7;
+        *state ^= *state << 17;
+        *state
+    }
+
+    #[test]
+    fn round_trips_through_a_standard_decoder() {
+        let mut seed = 0x1234_5678_9abc_def0u64;
+        for (w, h) in [
+            (1, 1),
+            (3, 2),
+            (7, 5),
+            (1024, 768),
+            (1000, 13),
+            (259, 3),
+            (517, 2),
+        ] {
+            for pattern in 0..5 {
+                let mut d = vec![0u8; w * h];
+                match pattern {
+                    0 => {}
+                    1 => d.fill(255),
+                    2 => d.iter_mut().for_each(|v| *v = xorshift(&mut seed) as u8),
+                    3 => {
+                        // blobs with anti-aliased edges
+                        for (i, v) in d.iter_mut().enumerate() {
+                            let (x, y) = ((i % w) as f64, (i / w) as f64);
+                            let r = ((x - w as f64 / 2.0).powi(2) + (y - h as f64 / 2.0).powi(2))
+                                .sqrt();
+                            let c = (w.min(h) as f64 / 3.0 - r + 0.5).clamp(0.0, 1.0);
+                            *v = (c * 255.0).round() as u8;
+                        }
+                    }
+                    _ => {
+                        // random runs of random lengths, crossing rows
+                        let mut i = 0;
+                        while i < d.len() {
+                            let k = (xorshift(&mut seed) % 600) as usize + 1;
+                            let v = [0u8, 255, 7, 128][(xorshift(&mut seed) % 4) as usize];
+                            for x in d.iter_mut().skip(i).take(k) {
+                                *x = v;
+                            }
+                            i += k;
+                        }
+                    }
+                }
+                let png = encode_gray8(w as u32, h as u32, &d);
+                let (dw, dh, back) = decode(&png);
+                assert_eq!((dw, dh), (w as u32, h as u32));
+                assert!(back == d, "{w}x{h} pattern {pattern}");
+            }
+        }
+    }
+
+    #[test]
+    fn adler_runs_match_bytewise() {
+        let data: Vec<u8> = (0..200_000u32)
+            .map(|i| {
+                if (i / 70_000) % 2 == 0 {
+                    255
+                } else {
+                    (i % 7) as u8
+                }
+            })
+            .collect();
+        let (mut a, mut b) = (1u64, 0u64);
+        for &x in &data {
+            a = (a + x as u64) % MOD;
+            b = (b + a) % MOD;
+        }
+        let mut ad = Adler {
+            a: 1,
+            b: 0,
+            pending: 0,
+        };
+        let mut i = 0;
+        while i < data.len() {
+            let k = run_len(&data[i..], data[i]);
+            ad.run(data[i], k as u64);
+            i += k;
+        }
+        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+    }
+
+    #[test]
+    fn empty_mask_is_tiny() {
+        let png = encode_gray8(1024, 768, &vec![0u8; 1024 * 768]);
+        // Deflate copies at most 258 bytes per 13-bit code: ~5 KB for 786 KB of zeros.
+        assert!(png.len() < 5200, "{}", png.len());
+    }
+}
