@@ -127,7 +127,7 @@ fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
         while have == n {
             let (lo, hi) = (pairs[j].0, pairs[i].0);
             let width = (hi - lo) / (hi + lo);
-            if best.map_or(true, |b| width < b.0 - 1e-15) {
+            if best.is_none_or(|b| width < b.0 - 1e-15) {
                 best = Some((width, 0.5 * (lo + hi)));
             }
             let k = pairs[j].1;
@@ -758,7 +758,7 @@ mod tests {
             );
             // Target: the dimmest zone (or pixel) fully on, give or take the window.
             let t = c.prediction.target;
-            assert!(t <= (1.0 + 2.5 / 40.0) * 1.02 && t >= 0.95, "{t}");
+            assert!((0.95..=(1.0 + 2.5 / 40.0) * 1.02).contains(&t), "{t}");
         }
     }
 

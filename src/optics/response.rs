@@ -308,7 +308,7 @@ impl Response {
         }
         for g in lo..=hi {
             let v = curve.eval(g as f64);
-            if s.last().map_or(true, |&l| v > l) {
+            if s.last().is_none_or(|&l| v > l) {
                 gray.push(g);
                 s.push(v);
             }
