@@ -35,8 +35,11 @@ pub struct Compensator {
     zone_of_col: Vec<u16>,
     zone_of_row: Vec<u16>,
     luts: Vec<[u8; 256]>,
-    /// Zone mode with dithering: (lower gray, upper gray, count of 64) per zone.
+    /// Zone mode: (lower gray, upper gray, count of 64) per zone; rows chosen by
+    /// [`upper_row`] show the upper gray at full coverage. k = 0: one gray.
     mix: Vec<(u8, u8, u8)>,
+    /// `luts` with entry 255 = the upper gray of the zone's mix.
+    luts_upper: Vec<[u8; 256]>,
     // Pixel mode.
     full: Vec<u8>,
     full_idx: Vec<u16>,
@@ -85,17 +88,14 @@ pub struct Prediction {
 /// this fraction mixes the two grays around the target.
 pub const MIX_TOLERANCE: f64 = 0.0075;
 
-/// 8×8 Bayer ordered-dither thresholds 0..63.
-const BAYER8: [[u8; 8]; 8] = [
-    [0, 32, 8, 40, 2, 34, 10, 42],
-    [48, 16, 56, 24, 50, 18, 58, 26],
-    [12, 44, 4, 36, 14, 46, 6, 38],
-    [60, 28, 52, 20, 62, 30, 54, 22],
-    [3, 35, 11, 43, 1, 33, 9, 41],
-    [51, 19, 59, 27, 49, 17, 57, 25],
-    [15, 47, 7, 39, 13, 45, 5, 37],
-    [63, 31, 55, 23, 61, 29, 53, 21],
-];
+/// Whether row `r` of a mixing zone shows the upper of its two grays, for a mix of `k`
+/// sixty-fourths: the 6-bit bit-reversal of r mod 64 (a 1-D ordered dither) is below
+/// `k`. Any 8 consecutive rows hold k/64 of them to within 1/8, any 64 exactly. Whole
+/// rows (not a checkerboard) keep the masks run-length friendly.
+#[inline]
+fn upper_row(r: usize, k: u8) -> bool {
+    (((r & 63) as u8).reverse_bits() >> 2) < k
+}
 
 /// The zone-mode target: among targets within 15 % of `emax` (the highest every inside
 /// zone can reach), the centre of the narrowest irradiance window that holds one
@@ -139,6 +139,43 @@ fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
         }
     }
     best.map_or(emax, |b| b.1)
+}
+
+thread_local! {
+    /// Edge pixels of the row being compensated (pixel mode): (index, gray).
+    static EDGES: std::cell::RefCell<Vec<(usize, u8)>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// First and last index of a nonzero byte in `row`, scanning eight bytes at a time.
+fn lit_span(row: &[u8]) -> Option<(usize, usize)> {
+    let n = row.len();
+    let n8 = n / 8 * 8;
+    let word = |i: usize| u64::from_ne_bytes(row[i..i + 8].try_into().expect("8 bytes"));
+    let mut a = 0;
+    while a < n8 && word(a) == 0 {
+        a += 8;
+    }
+    while a < n && row[a] == 0 {
+        a += 1;
+    }
+    if a == n {
+        return None;
+    }
+    // Exclusive end: the tail bytes, then whole words, then bytes (a lit byte at `a`
+    // stops every loop).
+    let mut b = n;
+    while b > n8 && row[b - 1] == 0 {
+        b -= 1;
+    }
+    if b == n8 {
+        while b >= 8 && word(b - 8) == 0 {
+            b -= 8;
+        }
+    }
+    while row[b - 1] == 0 {
+        b -= 1;
+    }
+    Some((a, b - 1))
 }
 
 fn spread(v: impl Iterator<Item = f64>) -> f64 {
@@ -303,6 +340,7 @@ impl Compensator {
             zone_of_row,
             luts: Vec::new(),
             mix: Vec::new(),
+            luts_upper: Vec::new(),
             full: Vec::new(),
             full_idx: Vec::new(),
             t: Vec::new(),
@@ -378,7 +416,8 @@ impl Compensator {
                     if mixing {
                         mixed += 1;
                         // Full coverage: mix the two levels around the target in the
-                        // fraction that puts the zone mean on it (ordered 8×8 pattern).
+                        // fraction that puts the zone mean on it (whole rows, see
+                        // `upper_row`).
                         let i = lv.s.partition_point(|&x| x <= tz).clamp(1, lv.s.len() - 1);
                         let (s0, s1) = (lv.s[i - 1], lv.s[i]);
                         let f = ((tz - s0) / (s1 - s0)).clamp(0.0, 1.0);
@@ -396,9 +435,21 @@ impl Compensator {
                     let (r, c) = (i / w, i % w);
                     let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
                     let (g0, g1, k) = mix[z];
-                    let g = if BAYER8[r % 8][c % 8] < k { g1 } else { g0 };
+                    let g = if upper_row(r, k) { g1 } else { g0 };
                     pp[i] as f64 * s_of(g)
                 }));
+                comp.luts_upper = luts
+                    .iter()
+                    .zip(&mix)
+                    .map(|(l, &(_, g1, _))| {
+                        let mut u = *l;
+                        u[255] = g1;
+                        u
+                    })
+                    .collect();
+                for (l, &(g0, _, _)) in luts.iter_mut().zip(&mix) {
+                    l[255] = g0;
+                }
                 comp.mix = mix;
                 comp.prediction.mixed_zones = mixed;
                 let pr = &mut comp.prediction;
@@ -484,6 +535,9 @@ impl Compensator {
     }
 
     /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
+    ///
+    /// Only the span from the first to the last lit pixel of each row is touched (found
+    /// eight bytes at a time).
     pub fn apply(&self, m: &mut Mask) {
         assert_eq!(
             (m.width as usize, m.height as usize),
@@ -491,91 +545,101 @@ impl Compensator {
             "mask size differs from the field"
         );
         let w = self.w;
-        // Rows holding lit pixels.
-        let lit_row = |r: usize| m.data[r * w..(r + 1) * w].iter().any(|&v| v != 0);
-        let Some(r0) = (0..self.h).find(|&r| lit_row(r)) else {
-            return;
-        };
-        let r1 = (r0..self.h).rev().find(|&r| lit_row(r)).unwrap_or(r0) + 1;
-        if self.reaches_outside(m, r0, r1) {
-            self.layers_outside.fetch_add(1, Ordering::Relaxed);
-        }
-        match (self.mode, self.dither) {
-            (Mode::Zone, _) => self.apply_zone(m, r0, r1),
-            (Mode::Pixel, Dither::On) => self.apply_dither(m, r0, r1),
-            (Mode::Pixel, _) => self.apply_pixel(m, r0, r1),
-            (Mode::Off, _) => {}
-        }
-    }
-
-    fn reaches_outside(&self, m: &Mask, r0: usize, r1: usize) -> bool {
-        let w = self.w;
         let [ir0, ir1] = self.inside_rows;
         let [ic0, ic1] = self.inside_cols;
-        (r0..r1).any(|r| {
+        let mut outside = false;
+        let mut first_lit = None;
+        let mut last_lit = 0;
+        for r in 0..self.h {
             let row = &m.data[r * w..(r + 1) * w];
-            if r < ir0 || r >= ir1 {
-                row.iter().any(|&v| v != 0)
-            } else {
-                row[..ic0].iter().any(|&v| v != 0) || row[ic1..].iter().any(|&v| v != 0)
+            let Some((a, b)) = lit_span(row) else {
+                continue;
+            };
+            first_lit.get_or_insert(r);
+            last_lit = r;
+            outside |= r < ir0 || r >= ir1 || a < ic0 || b >= ic1;
+            match (self.mode, self.dither) {
+                (Mode::Zone, _) => self.zone_row(m, r, a, b + 1),
+                (Mode::Pixel, Dither::On) => {}
+                (Mode::Pixel, _) => self.pixel_row(m, r, a, b + 1),
+                (Mode::Off, _) => {}
             }
-        })
-    }
-
-    fn apply_zone(&self, m: &mut Mask, r0: usize, r1: usize) {
-        let w = self.w;
-        for r in r0..r1 {
-            let zr = self.zone_of_row[r] as usize * self.zcols;
-            let row = &mut m.data[r * w..(r + 1) * w];
-            // Walk the row zone segment by zone segment with that zone's table.
-            let mut c = 0;
-            while c < w {
-                let zc = self.zone_of_col[c];
-                let mut e = c + 1;
-                while e < w && self.zone_of_col[e] == zc {
-                    e += 1;
-                }
-                let z = zr + zc as usize;
-                let lut = &self.luts[z];
-                let (g0, g1, k) = self.mix[z];
-                if k > 0 {
-                    let bayer = &BAYER8[r % 8];
-                    for (cc, v) in (c..e).zip(&mut row[c..e]) {
-                        if *v == 255 {
-                            *v = if bayer[cc % 8] < k { g1 } else { g0 };
-                        } else if *v != 0 {
-                            *v = lut[*v as usize];
-                        }
-                    }
-                } else {
-                    for v in &mut row[c..e] {
-                        if *v != 0 {
-                            *v = lut[*v as usize];
-                        }
-                    }
-                }
-                c = e;
-            }
+        }
+        if outside {
+            self.layers_outside.fetch_add(1, Ordering::Relaxed);
+        }
+        if let (Some(r0), Mode::Pixel, Dither::On) = (first_lit, self.mode, self.dither) {
+            self.apply_dither(m, r0, last_lit + 1);
         }
     }
 
-    fn apply_pixel(&self, m: &mut Mask, r0: usize, r1: usize) {
+    /// Zone mode, row `r`, columns [a, b): one table lookup per pixel (0 stays 0).
+    fn zone_row(&self, m: &mut Mask, r: usize, a: usize, b: usize) {
         let w = self.w;
+        let zr = self.zone_of_row[r] as usize * self.zcols;
+        let row = &mut m.data[r * w..(r + 1) * w];
+        let mut c = a;
+        while c < b {
+            let zc = self.zone_of_col[c];
+            let mut e = c + 1;
+            while e < b && self.zone_of_col[e] == zc {
+                e += 1;
+            }
+            let z = zr + zc as usize;
+            let lut = if upper_row(r, self.mix[z].2) {
+                &self.luts_upper[z]
+            } else {
+                &self.luts[z]
+            };
+            for v in &mut row[c..e] {
+                *v = lut[*v as usize];
+            }
+            c = e;
+        }
+    }
+
+    /// Pixel mode without dithering, row `r`, columns [a, b): edge pixels (0 < v < 255)
+    /// are looked up first, then full pixels take the precomputed gray in one branch-free
+    /// pass, then the edge grays are written.
+    fn pixel_row(&self, m: &mut Mask, r: usize, a: usize, b: usize) {
         let lv = &self.levels;
-        let span = r0 * w..r1 * w;
+        let span = r * self.w + a..r * self.w + b;
         let data = &mut m.data[span.clone()];
         let full = &self.full[span.clone()];
         let fidx = &self.full_idx[span.clone()];
         let t = &self.t[span];
-        for i in 0..data.len() {
-            let v = data[i];
-            if v == 255 {
-                data[i] = full[i];
-            } else if v != 0 {
+        EDGES.with(|e| {
+            let mut e = e.borrow_mut();
+            e.clear();
+            let mut edge = |i: usize, v: u8| {
                 let target = v as f64 / 255.0 * t[i] as f64;
-                data[i] = lv.gray[lv.nearest_from(fidx[i] as usize, target)];
+                e.push((i, lv.gray[lv.nearest_from(fidx[i] as usize, target)]));
+            };
+            // Eight bytes at a time: all-off and all-on words hold no edge pixel.
+            let mut i = 0;
+            while i + 8 <= data.len() {
+                let word = u64::from_ne_bytes(data[i..i + 8].try_into().expect("8 bytes"));
+                if word != 0 && word != u64::MAX {
+                    for (k, &v) in data[i..i + 8].iter().enumerate() {
+                        if v != 0 && v != 255 {
+                            edge(i + k, v);
+                        }
+                    }
+                }
+                i += 8;
             }
-        }
+            for (k, &v) in data[i..].iter().enumerate() {
+                if v != 0 && v != 255 {
+                    edge(i + k, v);
+                }
+            }
+            for (d, &f) in data.iter_mut().zip(full) {
+                *d = if *d == 255 { f } else { *d };
+            }
+            for &(i, g) in e.iter() {
+                data[i] = g;
+            }
+        });
     }
 
     fn apply_dither(&self, m: &mut Mask, r0: usize, r1: usize) {
@@ -630,16 +694,18 @@ impl Compensator {
     }
 
     /// The full-coverage gray of every pixel (what a plate covering the field gets, without
-    /// dithering), in field orientation.
+    /// error diffusion), in field orientation.
     pub fn gray_map(&self) -> Mask {
         let mut m = Mask {
             width: self.w as u32,
             height: self.h as u32,
             data: vec![255; self.w * self.h],
         };
-        match self.mode {
-            Mode::Zone => self.apply_zone(&mut m, 0, self.h),
-            _ => self.apply_pixel(&mut m, 0, self.h),
+        for r in 0..self.h {
+            match self.mode {
+                Mode::Zone => self.zone_row(&mut m, r, 0, self.w),
+                _ => self.pixel_row(&mut m, r, 0, self.w),
+            }
         }
         m
     }
@@ -759,6 +825,35 @@ mod tests {
             // Target: the dimmest zone (or pixel) fully on, give or take the window.
             let t = c.prediction.target;
             assert!((0.95..=(1.0 + 2.5 / 40.0) * 1.02).contains(&t), "{t}");
+        }
+    }
+
+    #[test]
+    fn lit_span_and_row_pattern() {
+        for n in [1usize, 7, 8, 9, 23, 64, 1024] {
+            assert_eq!(lit_span(&vec![0u8; n]), None);
+            for a in 0..n.min(20) {
+                for b in a..n.min(a + 19) {
+                    let mut row = vec![0u8; n];
+                    row[a] = 3;
+                    row[b] = 9;
+                    assert_eq!(lit_span(&row), Some((a, b)), "n {n} a {a} b {b}");
+                }
+            }
+        }
+        // k of every 64 consecutive rows show the upper gray, any 8 rows within 1/8.
+        for k in 0..=64u8 {
+            assert_eq!(
+                (0..64).filter(|&r| upper_row(r + 128, k)).count(),
+                k as usize
+            );
+            for s in 0..64 {
+                let c = (s..s + 8).filter(|&r| upper_row(r, k)).count() as f64;
+                assert!(
+                    (c / 8.0 - k as f64 / 64.0).abs() <= 0.125 + 1e-12,
+                    "k {k} s {s}"
+                );
+            }
         }
     }
 
