@@ -216,11 +216,22 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
             *o = match &a {
                 Some(a) if xc >= px0 && xc <= px1 => {
                     let u = (xc - fm.origin_mm[0]) * inv;
-                    let q = a.iter().rev().fold(0.0, |acc, k| acc * u + k);
-                    (sc * if exp { q.exp() } else { q }) as f32
+                    a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
                 }
-                _ => fm.eval(x, y) as f32,
+                _ => f32::NAN,
             };
+        }
+        // Separate passes: exp must not be evaluated (speculatively) for polynomials.
+        let scf = sc as f32;
+        if exp {
+            row.iter_mut().for_each(|o| *o = scf * o.exp());
+        } else {
+            row.iter_mut().for_each(|o| *o *= scf);
+        }
+        for (c, o) in row.iter_mut().enumerate() {
+            if o.is_nan() {
+                *o = fm.eval((c as f64 + 0.5) * p, y) as f32;
+            }
         }
     }
     out
@@ -369,10 +380,11 @@ impl Compensator {
             },
         };
         let lv = &comp.levels;
-        let s_of = |g: u8| -> f64 {
-            let i = lv.gray.partition_point(|&x| x < g);
-            lv.s[i]
-        };
+        let mut s_table = [0.0f64; 256];
+        for (&g, &sv) in lv.gray.iter().zip(&lv.s) {
+            s_table[g as usize] = sv;
+        }
+        let s_of = |g: u8| -> f64 { s_table[g as usize] };
         match mode {
             Mode::Zone => {
                 let pmin = (0..nz)
