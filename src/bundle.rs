@@ -61,6 +61,9 @@ pub struct Manifest {
     pub warnings: Vec<String>,
     /// One record per layer, bottom first.
     pub layers: Vec<Layer>,
+    /// Light compensation applied to the masks (absent when compensation is off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optics: Option<Optics>,
 }
 
 /// Who wrote the bundle.
@@ -120,6 +123,70 @@ pub struct Settings {
     /// Distortion correction applied to the masks: its table and fit report.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<crate::geometry::distortion::FitReport>,
+}
+
+/// Light compensation of a job (see docs/CALIBRATION.md). Irradiances are in `units`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Optics {
+    /// "zone" or "pixel".
+    pub mode: String,
+    /// Dithering: "auto", "on" or "off" (docs/CALIBRATION.md).
+    pub dither: String,
+    /// Zones that mix two grays to hit the target (zone mode).
+    pub mixed_zones: u64,
+    /// Index of the projector whose calibration was applied.
+    pub projector: u32,
+    /// The calibration's `source` text.
+    pub calibration: String,
+    /// Unit of the irradiances below: "relative" or "mW/cm2".
+    pub units: String,
+    /// Target irradiance E*: the highest irradiance every zone (zone mode) or pixel (pixel
+    /// mode) of the calibrated area can reach; full-coverage pixels aim at it.
+    pub target_irradiance: f64,
+    /// Mean irradiance of the calibrated area with every mirror at the brightest valid gray.
+    pub mean_irradiance: f64,
+    /// target / mean: the fraction of the projector's light a compensated job uses.
+    pub throughput: f64,
+    /// Calibrated area [x0, y0, x1, y1] in build-plane mm.
+    pub calibrated_area_mm: [f64; 4],
+    /// Pixel values the response is valid for [lo, hi]; 0 (mirror off) is always allowed.
+    pub valid_gray: [u8; 2],
+    /// Zone edge, mm (zones start at the field's bottom-left corner).
+    pub zone_mm: f64,
+    /// Full-coverage gray of each zone, row 0 = top of the image (zone mode; empty in pixel
+    /// mode). A mixing zone lists the gray it shows on most of its pixels.
+    pub zone_grays: Vec<Vec<u8>>,
+    /// Bundle file with the full-coverage gray of every pixel (8-bit PNG, mask orientation).
+    pub gray_map: String,
+    /// SHA-256 of `gray_map`.
+    pub gray_map_sha256: String,
+    /// Predicted spreads under the calibration model.
+    pub predicted: Spreads,
+    /// Zones whose centre lies outside the calibrated area (P extrapolated there).
+    pub zones_outside: u64,
+    /// Pixels of the field outside the calibrated area.
+    pub pixels_outside: u64,
+    /// Zones (zone mode) or pixels (pixel mode) that cannot reach the target even fully on.
+    pub unreachable: u64,
+    /// Layers whose section reaches outside the calibrated area.
+    pub layers_outside: u64,
+    /// How exposure times were derived.
+    pub exposure_rule: String,
+    /// Dose of a normal layer at the target irradiance, mJ/cm² (absolute calibrations only).
+    pub dose_mj_cm2: Option<f64>,
+}
+
+/// Spreads (max − min) / mean of irradiance over the calibrated area, %.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Spreads {
+    /// Zone means, uncompensated (every mirror at the brightest valid gray).
+    pub before_zone_pct: f64,
+    /// Pixels, uncompensated.
+    pub before_pixel_pct: f64,
+    /// Zone means, compensated.
+    pub after_zone_pct: f64,
+    /// Pixels, compensated.
+    pub after_pixel_pct: f64,
 }
 
 /// Totals over the job.

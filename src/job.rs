@@ -48,6 +48,8 @@ pub struct SliceOptions<'a> {
     pub binary: Option<bool>,
     /// Placement rule.
     pub placement: PlacementMode,
+    /// Light compensation (mode, dithering).
+    pub optics: crate::optics::OpticsOptions,
     /// Called with (layers done, layers total) as layers are written.
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
     /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
@@ -186,6 +188,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         profile.slicing.binary = b;
     }
     let h = profile.slicing.layer_height_mm.get();
+    let optics = crate::optics::prepare(&mut profile, &opts.optics, h)?;
     let field = profile.field();
     let path = opts.input.as_path();
     let correction = distortion::for_job(&opts.distortion, &mut profile)?;
@@ -276,6 +279,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         binary,
                         tiled,
                         px_area,
+                        optics.as_ref(),
                         (correction.as_ref(), path),
                         tiler.as_ref(),
                     )?);
@@ -350,6 +354,14 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             time_s: p.time_s,
         });
     }
+    let optics_record = match &optics {
+        Some(o) => {
+            let (record, w) = o.finish(&writer, &profile, encode_png)?;
+            warnings.extend(w);
+            Some(record)
+        }
+        None => None,
+    };
     let manifest = Manifest {
         format: bundle::FORMAT.into(),
         version: bundle::VERSION,
@@ -375,13 +387,16 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         settings: Settings {
             layer_height_mm: h,
             binary,
-            compensation: "off".into(),
+            compensation: optics_record
+                .as_ref()
+                .map_or("off".into(), |o| o.mode.clone()),
             distortion: distortion_report.clone(),
         },
         machine: profile.clone(),
         totals: totals.clone(),
         warnings: warnings.clone(),
         layers,
+        optics: optics_record,
     };
     if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
         return Err(Error::Interrupted);
@@ -415,6 +430,7 @@ fn layer_masks(
     binary: bool,
     tiled: bool,
     px_area: f64,
+    optics: Option<&crate::optics::JobOptics>,
     (correction, model): (Option<&Correction>, &Path),
     tiler: Option<&Tiler>,
 ) -> Result<LayerOut> {
@@ -433,6 +449,10 @@ fn layer_masks(
     let area_mm2 = field_mask.lit_pixels() * px_area * area_scale;
     if binary {
         crate::raster::threshold(&mut field_mask);
+    }
+    if let Some(o) = optics {
+        // Coverage → gray through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
+        o.apply(&mut field_mask);
     }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {

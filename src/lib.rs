@@ -9,10 +9,12 @@
 
 pub mod bundle;
 pub mod error;
+pub mod exec;
 pub mod geometry;
 pub mod job;
 pub mod mesh;
 pub mod motion;
+pub mod optics;
 pub mod plan;
 pub mod plot;
 pub mod png;

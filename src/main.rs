@@ -3,7 +3,6 @@
 //! Exit codes: 0 success; 1 finished, but checks failed (e.g. `slice --strict` on a
 //! defective mesh); 2 usage or input error; 130 interrupted.
 
-use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
 use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions};
@@ -40,6 +39,13 @@ enum Cmd {
     /// Show or list machine profiles.
     #[command(subcommand)]
     Profile(ProfileCmd),
+    /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
+    /// shutter and DMD, and report the time and every violation.
+    #[command(after_help = RUN_EXIT_HELP)]
+    Run(RunArgs),
+    /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
+    #[command(after_help = EXIT_HELP)]
+    Calibrate(CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
     #[command(after_help = EXIT_HELP)]
     Distortion(DistortionArgs),
@@ -58,6 +64,89 @@ struct DistortionArgs {
     /// Print the fit report as JSON on stdout.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Args)]
+struct CalibrateArgs {
+    /// Measurements: CSV with header x_mm,y_mm,gray,irradiance_mw_cm2 (zone centre from the
+    /// field's bottom-left corner, pixel value shown there (255 = fully on), irradiance).
+    input: PathBuf,
+    /// Calibration file to write (TOML); PNG plots are written next to it.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The irradiance column is in arbitrary units (exposure then comes from the profile).
+    #[arg(long)]
+    relative: bool,
+    /// Compensation zone edge, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    zone_mm: f64,
+    /// How far P is extrapolated beyond the measured area before it is held constant, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    extrapolate_mm: f64,
+    /// Degree of the polynomial P(x, y), 3..6 [default: 3 (the paper's cubic) unless
+    /// cross-validation on held-out zones shows a higher degree predicts better].
+    #[arg(long, value_name = "N")]
+    degree: Option<usize>,
+    /// Machine profile whose field the predictions are made for.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Do not write PNG plots.
+    #[arg(long)]
+    no_plots: bool,
+    /// Print a machine-readable report on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Dithering of compensated grays.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum DitherArg {
+    /// Zone mode mixes two grays only where one gray misses the target by > 0.75 %.
+    Auto,
+    /// Every zone mixes two grays; pixel mode diffuses the error.
+    On,
+    /// One gray per zone or pixel.
+    Off,
+}
+
+/// Light compensation mode.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CompensationArg {
+    /// One gray per zone (seeds/000).
+    Zone,
+    /// One gray per pixel from the smooth fit.
+    Pixel,
+    /// No compensation: pixel value = coverage.
+    Off,
+}
+
+const RUN_EXIT_HELP: &str = "Exit codes:
+  0    the bundle verified and replayed without violations
+  1    violations, bad masks or an injected fault
+  2    unreadable bundle or usage error
+
+Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
+
+#[derive(Args)]
+struct RunArgs {
+    /// The job bundle (directory with job.json and masks/).
+    bundle: PathBuf,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
+    /// Write a PNG of stage position and light over time.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    #[arg(long, value_name = "A..B")]
+    layers: Option<String>,
+    /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
+    /// (repeatable).
+    #[arg(long, value_name = "KIND@LAYER")]
+    fault: Vec<String>,
 }
 
 #[derive(Args)]
@@ -82,6 +171,20 @@ struct SliceArgs {
     /// Exit with code 1 if the mesh has defects (the bundle is still written).
     #[arg(long)]
     strict: bool,
+    /// Light calibration file from `dmdsl calibrate`, replacing the profile's (repeatable:
+    /// PROJECTOR=FILE for a named projector).
+    #[arg(long, value_name = "[PROJECTOR=]FILE")]
+    calibration: Vec<String>,
+    /// Light compensation [default: zone when the profile or --calibration has a
+    /// calibration, else off].
+    #[arg(long, value_enum)]
+    compensation: Option<CompensationArg>,
+    /// Dithering of compensated grays, to beat 8-bit gray steps. auto: a zone whose
+    /// nearest gray misses the target by > 0.75 % mixes the two grays around it (ordered
+    /// pattern), pixel mode does not dither; on: every zone mixes, pixel mode diffuses
+    /// the error (Floyd-Steinberg); off: one gray per zone/pixel.
+    #[arg(long, value_enum, default_value = "auto")]
+    dither: DitherArg,
     /// Print a machine-readable summary on stdout.
     #[arg(long)]
     json: bool,
@@ -107,12 +210,18 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            let code = e
-                .downcast_ref::<dmdsl::Error>()
-                .map(|d| d.exit_code())
-                .unwrap_or(2);
-            eprintln!("dmdsl: error: {e:#}");
-            ExitCode::from(code as u8)
+            match e.downcast_ref::<dmdsl::Error>() {
+                // The library's errors are complete one-line messages (their sources are
+                // already in the text), so print them without the cause chain.
+                Some(d) => {
+                    eprintln!("dmdsl: error: {d}");
+                    ExitCode::from(d.exit_code() as u8)
+                }
+                None => {
+                    eprintln!("dmdsl: error: {e:#}");
+                    ExitCode::from(2)
+                }
+            }
         }
     }
 }
@@ -121,6 +230,8 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
         Cmd::Slice(a) => slice(a, cli.quiet),
         Cmd::Distortion(a) => distortion(a, cli.quiet),
+        Cmd::Run(a) => run_bundle(a, cli.quiet),
+        Cmd::Calibrate(a) => calibrate(a, cli.quiet),
         Cmd::Profile(ProfileCmd::List) => {
             for (name, src) in profile::BUILTIN {
                 let p = Profile::from_toml(src, name)?;
@@ -139,7 +250,20 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
 }
 
 fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
-    let profile = Profile::resolve(&a.profile)?;
+    let mut profile = Profile::resolve(&a.profile)?;
+    dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    let optics = dmdsl::optics::OpticsOptions {
+        mode: a.compensation.map(|c| match c {
+            CompensationArg::Zone => dmdsl::optics::Mode::Zone,
+            CompensationArg::Pixel => dmdsl::optics::Mode::Pixel,
+            CompensationArg::Off => dmdsl::optics::Mode::Off,
+        }),
+        dither: match a.dither {
+            DitherArg::Auto => dmdsl::optics::Dither::Auto,
+            DitherArg::On => dmdsl::optics::Dither::On,
+            DitherArg::Off => dmdsl::optics::Dither::Off,
+        },
+    };
     let layer_height_mm = match a.layer_height {
         None => None,
         Some(v) => Some(Positive::new(v).ok_or_else(|| {
@@ -173,6 +297,7 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         } else {
             PlacementMode::Center
         },
+        optics,
         progress: if show_progress { Some(&progress) } else { None },
         cancel: Some(&cancel),
         distortion: match &a.distortion {
@@ -181,13 +306,7 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) => DistortionChoice::Table(p.clone()),
         },
     };
-    let summary = job::slice_to_bundle(&opts)
-        .with_context(|| format!("slice {} failed", a.input.display()))
-        .map_err(|e| match e.downcast::<dmdsl::Error>() {
-            // Keep the library's one-line message (it already names the file).
-            Ok(d) => anyhow::Error::new(d),
-            Err(e) => e,
-        })?;
+    let summary = job::slice_to_bundle(&opts)?;
     let defects = !summary.mesh.closed_manifold;
     let failed = a.strict && defects;
     if a.json {
@@ -251,6 +370,106 @@ fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
         );
     }
     Ok(0)
+}
+
+fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
+    use dmdsl::optics::report::{self, CalibrateOptions};
+    let field = Profile::resolve(&a.profile)?.field();
+    let r = report::calibrate(&CalibrateOptions {
+        input: a.input,
+        output: a.output,
+        units: if a.relative {
+            dmdsl::optics::Units::Relative
+        } else {
+            dmdsl::optics::Units::MwCm2
+        },
+        zone_mm: a.zone_mm,
+        extrapolate_mm: a.extrapolate_mm,
+        field,
+        degree: a.degree,
+        plots: !a.no_plots,
+    })?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(0);
+    }
+    if quiet {
+        return Ok(0);
+    }
+    for w in &r.warnings {
+        eprintln!("dmdsl: warning: {w}");
+    }
+    let u = if r.units == "relative" {
+        ""
+    } else {
+        " mW/cm²"
+    };
+    println!(
+        "{}: {} zones x {} gray levels ({} readings); residual RMS {:.2} %, max {:.2} % (line {})",
+        r.calibration.display(),
+        r.zones,
+        r.gray_levels,
+        r.readings,
+        r.residual_rms_pct,
+        r.residual_max_pct,
+        r.residual_max_line
+    );
+    let excluded = if r.excluded_grays.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; S stops falling below it, excluded levels {:?}",
+            r.excluded_grays
+        )
+    };
+    let interp = if r.valid_gray[0] < r.measured_gray[0] {
+        format!(
+            ", measured {}..{} (below: interpolated to S(0) = 0)",
+            r.measured_gray[0], r.measured_gray[1]
+        )
+    } else {
+        String::new()
+    };
+    println!(
+        "valid gray {}..{}{interp}{excluded}",
+        r.valid_gray[0], r.valid_gray[1]
+    );
+    for (name, m) in [("zone", &r.zone), ("pixel", &r.pixel)] {
+        println!(
+            "{name} mode: target {:.4}{u} = {:.1} % of the mean; spread zone means {:.1} % -> {:.2} %, pixels {:.1} % -> {:.2} %",
+            m.target_irradiance,
+            m.throughput * 100.0,
+            m.spreads.before_zone_pct,
+            m.spreads.after_zone_pct,
+            m.spreads.before_pixel_pct,
+            m.spreads.after_pixel_pct
+        );
+    }
+    for p in &r.plots {
+        println!("plot: {}", p.display());
+    }
+    Ok(0)
+}
+
+fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
+    let faults = a
+        .fault
+        .iter()
+        .map(|f| f.parse().map_err(dmdsl::Error::Usage))
+        .collect::<Result<Vec<_>, _>>()?;
+    let opts = dmdsl::exec::RunOptions {
+        faults,
+        trace: a.trace,
+        plot: a.plot,
+        layers: a.layers,
+    };
+    let report = dmdsl::exec::run(&a.bundle, &opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else if !quiet {
+        print!("{}", dmdsl::exec::report::render_human(&report));
+    }
+    Ok(if report.ok { 0 } else { 1 })
 }
 
 fn hms(s: f64) -> String {

@@ -88,6 +88,10 @@ pub struct Projector {
     pub mirror_x: bool,
     /// Mirror the image top-bottom (applied last).
     pub mirror_y: bool,
+    /// Light-uniformity calibration of this projector (`[projector.calibration]`; see
+    /// docs/CALIBRATION.md). Without one the projector's masks are not compensated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<crate::optics::Calibration>,
 }
 
 /// Slicing settings.
@@ -289,6 +293,10 @@ impl Profile {
             }
             if (p.pixel_mm.get() - px).abs() > 1e-12 {
                 return Err("all projectors must have the same pixel_mm".into());
+            }
+            if let Some(c) = &p.calibration {
+                c.validate()
+                    .map_err(|m| format!("projector {} calibration: {m}", p.name))?;
             }
         }
         let s = &self.stage;

@@ -468,34 +468,7 @@ mod tests {
     use super::*;
     use crate::mesh::Mesh;
 
-    fn cube(s: f32, at: [f32; 3]) -> Vec<[[f32; 3]; 3]> {
-        let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
-        let v = [
-            p(0., 0., 0.),
-            p(1., 0., 0.),
-            p(1., 1., 0.),
-            p(0., 1., 0.),
-            p(0., 0., 1.),
-            p(1., 0., 1.),
-            p(1., 1., 1.),
-            p(0., 1., 1.),
-        ];
-        let f = [
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [1, 2, 6],
-            [1, 6, 5],
-            [2, 3, 7],
-            [2, 7, 6],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
-        f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
-    }
+    use crate::mesh::cube_soup as cube;
 
     #[test]
     fn layer_count_rule() {

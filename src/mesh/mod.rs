@@ -332,42 +332,44 @@ impl Mesh {
     }
 }
 
+/// An outward-facing cube of edge `s` with its lowest corner at `at` (test helper).
+#[cfg(test)]
+pub(crate) fn cube_soup(s: f32, at: [f32; 3]) -> Soup {
+    let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
+    let v = [
+        p(0., 0., 0.),
+        p(1., 0., 0.),
+        p(1., 1., 0.),
+        p(0., 1., 0.),
+        p(0., 0., 1.),
+        p(1., 0., 1.),
+        p(1., 1., 1.),
+        p(0., 1., 1.),
+    ];
+    let f = [
+        [0, 2, 1],
+        [0, 3, 2],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ];
+    f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    pub(crate) fn cube_soup(s: f32) -> Soup {
-        let p = |x: f32, y: f32, z: f32| [x * s, y * s, z * s];
-        let v = [
-            p(0., 0., 0.),
-            p(1., 0., 0.),
-            p(1., 1., 0.),
-            p(0., 1., 0.),
-            p(0., 0., 1.),
-            p(1., 0., 1.),
-            p(1., 1., 1.),
-            p(0., 1., 1.),
-        ];
-        let f = [
-            [0, 2, 1],
-            [0, 3, 2],
-            [4, 5, 6],
-            [4, 6, 7],
-            [0, 1, 5],
-            [0, 5, 4],
-            [1, 2, 6],
-            [1, 6, 5],
-            [2, 3, 7],
-            [2, 7, 6],
-            [3, 0, 4],
-            [3, 4, 7],
-        ];
-        f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
-    }
-
     #[test]
     fn cube_is_clean() {
-        let m = Mesh::from_soup(&cube_soup(10.0), "test");
+        let m = Mesh::from_soup(&cube_soup(10.0, [0.0; 3]), "test");
         let r = &m.report;
         assert_eq!((r.triangles, r.vertices, r.edges, r.shells), (12, 8, 18, 1));
         assert!(r.closed_manifold, "{r:?}");
@@ -377,7 +379,7 @@ mod tests {
 
     #[test]
     fn defects_are_counted() {
-        let mut s = cube_soup(10.0);
+        let mut s = cube_soup(10.0, [0.0; 3]);
         s.pop(); // hole: 3 open edges
         let t = s[0];
         s[0] = [t[0], t[2], t[1]]; // flip one facet: 3 backwards edges (one is open now? no)

@@ -7,6 +7,13 @@ use std::path::Path;
 const P: f64 = 65.0 / 1024.0;
 
 fn slice_ok(dir: &Path, args: &[&str]) -> Value {
+    // These tests check geometry (coverage masks); light compensation, on by default with
+    // the built-in profile, is tested in tests/it/calibrate.rs.
+    let mut args = args.to_vec();
+    if args.first() == Some(&"slice") {
+        args.extend(["--compensation", "off"]);
+    }
+    let args = &args[..];
     let o = run_in(dir, args);
     assert!(o.status.success(), "dmdsl {args:?} failed: {}", stderr(&o));
     let out = args
@@ -513,6 +520,13 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
     }
     bad_input("random.stl", Some(&rnd), "not an STL");
     bad_input("missing.stl", None, "No such file");
+    let o = run_in(&tempdir("bad-missing2"), &["slice", "missing.stl"]);
+    assert_eq!(
+        stderr(&o).matches("No such file").count(),
+        1,
+        "{}",
+        stderr(&o)
+    );
     // A directory.
     let dir = tempdir("bad-dir");
     std::fs::create_dir(dir.join("adir.stl")).unwrap();

@@ -1,0 +1,318 @@
+//! What `dmdsl run` reports: the [`Report`] (serialized for `--json`), the statistics
+//! sink, the human summary and the `--plot` chart.
+
+use super::sim::{FaultEvent, Motion, SegKind, Segment, ShutterState, Sink};
+use super::Violation;
+use crate::plot::{Band, Chart, Series, Style};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::ops::RangeInclusive;
+
+/// Timing of one layer: simulated and estimated.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LayerTiming {
+    /// Layer index.
+    pub index: usize,
+    /// When the layer's steps start, s.
+    pub start_s: f64,
+    /// Simulated duration, s.
+    pub time_s: f64,
+    /// The manifest's estimate (`layers[].time_s`), s.
+    pub estimate_s: f64,
+    /// Light time received, s.
+    pub light_s: f64,
+    /// The manifest's `exposure_s`.
+    pub exposure_s: f64,
+}
+
+/// The result of `dmdsl run`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// The bundle, as given.
+    pub bundle: String,
+    /// Layers in the job.
+    pub layers: usize,
+    /// Layers simulated to the end (fewer than `layers` after a fault).
+    pub layers_completed: usize,
+    /// Mask files verified.
+    pub masks_verified: usize,
+    /// Simulated duration of the job (to the abort after a fault), s.
+    pub total_s: f64,
+    /// The manifest's estimate, `totals.print_time_s`, s.
+    pub estimate_s: f64,
+    /// (total_s − estimate_s) / estimate_s, percent.
+    pub estimate_diff_pct: f64,
+    /// Sum of the layers' `exposure_s`, s.
+    pub exposure_s: f64,
+    /// Time light reached the resin, s.
+    pub light_on_s: f64,
+    /// Time the shutter was not closed (opening, open, closing), s.
+    pub shutter_open_s: f64,
+    /// Time in `wait` steps, s.
+    pub wait_s: f64,
+    /// Time waiting for the DMD to load a mask, s.
+    pub load_wait_s: f64,
+    /// Distance the stage moved, mm.
+    pub stage_travel_mm: f64,
+    /// Stage position range visited, mm: [min, max].
+    pub stage_range_mm: [f64; 2],
+    /// Highest stage speed reached, mm/s.
+    pub peak_speed_mm_s: f64,
+    /// The fault that ended the run, if one was injected and triggered.
+    pub fault: Option<FaultEvent>,
+    /// Injected faults that never triggered, as `KIND@LAYER`.
+    pub untriggered_faults: Vec<String>,
+    /// Everything wrong, verification problems first, then in time order.
+    pub violations: Vec<Violation>,
+    /// Number of violations per kind.
+    pub violation_counts: BTreeMap<&'static str, usize>,
+    /// Per-layer timing.
+    pub per_layer: Vec<LayerTiming>,
+    /// Wall-clock seconds spent: read, verify, simulate.
+    pub timings: Timings,
+    /// True when the bundle verified, replayed without violations and no fault triggered.
+    pub ok: bool,
+}
+
+/// Wall-clock time of the run's phases, s.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
+pub struct Timings {
+    /// Reading and parsing job.json.
+    pub read_s: f64,
+    /// Hashing and decoding the masks.
+    pub verify_s: f64,
+    /// Simulation, checks, trace.
+    pub simulate_s: f64,
+}
+
+/// Statistics gathered from the timeline.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stats {
+    /// See [`Report::light_on_s`].
+    pub light_on_s: f64,
+    /// See [`Report::shutter_open_s`].
+    pub shutter_open_s: f64,
+    /// See [`Report::wait_s`].
+    pub wait_s: f64,
+    /// See [`Report::load_wait_s`].
+    pub load_wait_s: f64,
+    /// See [`Report::stage_travel_mm`].
+    pub travel_mm: f64,
+    /// See [`Report::stage_range_mm`].
+    pub range_mm: [f64; 2],
+    /// See [`Report::peak_speed_mm_s`].
+    pub peak_speed_mm_s: f64,
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Stats {
+            light_on_s: 0.0,
+            shutter_open_s: 0.0,
+            wait_s: 0.0,
+            load_wait_s: 0.0,
+            travel_mm: 0.0,
+            range_mm: [f64::INFINITY, f64::NEG_INFINITY],
+            peak_speed_mm_s: 0.0,
+        }
+    }
+}
+
+impl Sink for Stats {
+    fn segment(&mut self, s: &Segment) {
+        let d = s.duration();
+        if s.light {
+            self.light_on_s += d;
+        }
+        if s.shutter != ShutterState::Closed {
+            self.shutter_open_s += d;
+        }
+        match s.kind {
+            SegKind::Wait => self.wait_s += d,
+            SegKind::LoadWait => self.load_wait_s += d,
+            _ => {}
+        }
+        self.travel_mm += (s.to_mm - s.from_mm).abs();
+        for p in [s.from_mm, s.to_mm] {
+            self.range_mm = [self.range_mm[0].min(p), self.range_mm[1].max(p)];
+        }
+        self.peak_speed_mm_s = self.peak_speed_mm_s.max(s.peak_speed());
+    }
+}
+
+/// Collects what `--plot` draws: stage position over time and the light-on intervals,
+/// for a range of layers.
+#[derive(Debug, Clone, Default)]
+pub struct PlotCollector {
+    layers: Option<RangeInclusive<usize>>,
+    points: Vec<(f64, f64)>,
+    light: Vec<(f64, f64)>,
+    times: Vec<f64>,
+}
+
+impl PlotCollector {
+    /// Collects the segments of `layers` (all if `None`).
+    pub fn new(layers: Option<RangeInclusive<usize>>) -> Self {
+        PlotCollector {
+            layers,
+            ..Default::default()
+        }
+    }
+
+    /// Renders the chart as PNG bytes.
+    pub fn render(&self, title: &str) -> Vec<u8> {
+        let span = match (self.points.first(), self.points.last()) {
+            (Some(a), Some(b)) => b.0 - a.0,
+            _ => 0.0,
+        };
+        let (unit, div) = if span > 3.0 * 3600.0 {
+            ("h", 3600.0)
+        } else if span > 600.0 {
+            ("min", 60.0)
+        } else {
+            ("s", 1.0)
+        };
+        let points = self.points.iter().map(|&(t, z)| (t / div, z)).collect();
+        let bands = self
+            .light
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, b))| Band {
+                x0: a / div,
+                x1: b / div,
+                color: [255, 190, 0],
+                label: if i == 0 {
+                    "light on".into()
+                } else {
+                    String::new()
+                },
+            })
+            .collect();
+        Chart {
+            title: title.to_string(),
+            x_label: format!("time ({unit})"),
+            y_label: "stage (mm)".into(),
+            width: 1400,
+            height: 600,
+            series: vec![Series {
+                label: "stage position".into(),
+                color: [30, 90, 200],
+                style: Style::Line,
+                points,
+            }],
+            bands,
+        }
+        .render_png()
+    }
+}
+
+impl Sink for PlotCollector {
+    fn segment(&mut self, s: &Segment) {
+        if let Some(r) = &self.layers {
+            if !r.contains(&s.layer) {
+                return;
+            }
+        }
+        self.times.clear();
+        s.phase_times(&mut self.times);
+        if let Motion::Trapezoid { .. } = s.motion {
+            // Samples inside the move so its accelerating phases look curved.
+            for j in 1..8 {
+                self.times.push(s.t0 + s.duration() * j as f64 / 8.0);
+            }
+            self.times.sort_by(f64::total_cmp);
+        }
+        for &t in &self.times {
+            self.points.push((t, s.position_at(t)));
+        }
+        self.points.push((s.t1, s.to_mm));
+        if s.light && s.t1 > s.t0 {
+            match self.light.last_mut() {
+                Some(last) if s.t0 - last.1 < 1e-9 => last.1 = s.t1,
+                _ => self.light.push((s.t0, s.t1)),
+            }
+        }
+    }
+}
+
+/// "1h02m03s".
+pub fn hms(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
+}
+
+/// Most violations listed in the human summary.
+pub const LIST_MAX: usize = 20;
+
+/// The human summary printed by `dmdsl run`.
+pub fn render_human(r: &Report) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "{}: {} layers, {} masks checked",
+        r.bundle, r.layers, r.masks_verified
+    );
+    let _ = writeln!(
+        o,
+        "simulated {} ({:.2} s); manifest estimate {:.2} s ({:+.2} %)",
+        hms(r.total_s),
+        r.total_s,
+        r.estimate_s,
+        r.estimate_diff_pct
+    );
+    let _ = writeln!(
+        o,
+        "light on {:.2} s (exposures {:.2} s), shutter open {:.2} s, waits {:.2} s, DMD load waits {:.2} s",
+        r.light_on_s, r.exposure_s, r.shutter_open_s, r.wait_s, r.load_wait_s
+    );
+    let _ = writeln!(
+        o,
+        "stage travel {:.1} mm within [{:.3}, {:.3}] mm, peak speed {:.3} mm/s",
+        r.stage_travel_mm, r.stage_range_mm[0], r.stage_range_mm[1], r.peak_speed_mm_s
+    );
+    if let Some(f) = &r.fault {
+        let _ = writeln!(
+            o,
+            "FAULT {} in layer {} at {:.3} s ({}), stage at {:.4} mm: {}",
+            f.kind,
+            f.layer,
+            f.time_s,
+            hms(f.time_s),
+            f.stage_mm,
+            f.message
+        );
+    }
+    for u in &r.untriggered_faults {
+        let _ = writeln!(o, "note: fault {u} never triggered");
+    }
+    if r.violations.is_empty() {
+        let _ = writeln!(o, "violations: none");
+    } else {
+        let counts: Vec<String> = r
+            .violation_counts
+            .iter()
+            .map(|(k, n)| format!("{k} {n}"))
+            .collect();
+        let _ = writeln!(
+            o,
+            "violations: {} ({})",
+            r.violations.len(),
+            counts.join(", ")
+        );
+        for v in r.violations.iter().take(LIST_MAX) {
+            let layer = v.layer.map_or("job".to_string(), |l| format!("layer {l}"));
+            let time = v.time_s.map_or(String::new(), |t| format!(" at {t:.3} s"));
+            let _ = writeln!(o, "  {layer}{time}: {}: {}", v.kind, v.message);
+        }
+        if r.violations.len() > LIST_MAX {
+            let _ = writeln!(
+                o,
+                "  ... and {} more (--json lists all)",
+                r.violations.len() - LIST_MAX
+            );
+        }
+    }
+    let _ = writeln!(o, "{}", if r.ok { "OK" } else { "FAILED" });
+    o
+}

@@ -1,0 +1,114 @@
+//! Hand-written manifests and a collecting sink for the executor's unit tests.
+
+use super::sim::{LayerRecord, Segment, Sink};
+use crate::bundle::*;
+use crate::profile::Profile;
+
+/// The default profile (open/close 0.05 s, load 0.02 s, 10 mm/s, 50 mm/s², 800 steps/mm,
+/// travel 0..120, home 0).
+pub fn profile() -> Profile {
+    Profile::default_profile()
+}
+
+/// A layer record with no mask files.
+pub fn layer(
+    index: usize,
+    z_mm: f64,
+    thickness_mm: f64,
+    mode: Mode,
+    exposure_s: f64,
+    steps: Vec<Step>,
+    time_s: f64,
+) -> Layer {
+    Layer {
+        index: index as u64,
+        z_mm,
+        slice_z_mm: z_mm - thickness_mm / 2.0,
+        thickness_mm,
+        mode,
+        exposure_s,
+        area_mm2: 1.0,
+        masks: vec![MaskRef {
+            file: format!("masks/{index:05}.png"),
+            sha256: String::new(),
+            projector: 0,
+        }],
+        steps,
+        time_s,
+    }
+}
+
+/// A manifest around `layers`; totals from the layers.
+pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
+    let h = layers.first().map_or(0.1, |l| l.thickness_mm);
+    Manifest {
+        format: FORMAT.into(),
+        version: VERSION,
+        generator: Generator::current(),
+        source: Source {
+            file: "test.stl".into(),
+            sha256: String::new(),
+            triangles: 12,
+            bbox_mm: [[0.0; 3], [1.0; 3]],
+            placement: Placement {
+                mode: "keep".into(),
+                translate_mm: [0.0; 3],
+            },
+            mesh: Default::default(),
+        },
+        settings: Settings {
+            layer_height_mm: h,
+            binary: false,
+            compensation: "off".into(),
+            distortion: None,
+        },
+        machine,
+        totals: Totals {
+            layers: layers.len() as u64,
+            height_mm: layers.last().map_or(0.0, |l| l.z_mm),
+            print_time_s: layers.iter().map(|l| l.time_s).sum(),
+            exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
+            resin_volume_ml: 0.0,
+        },
+        warnings: vec![],
+        layers,
+        optics: None,
+    }
+}
+
+/// Records everything it is fed.
+#[derive(Debug, Default)]
+pub struct Collect {
+    /// Segments in order.
+    pub segs: Vec<Segment>,
+    /// Layer records in order.
+    pub layers: Vec<LayerRecord>,
+}
+
+impl Sink for Collect {
+    fn segment(&mut self, seg: &Segment) {
+        self.segs.push(*seg);
+    }
+    fn layer_end(&mut self, rec: &LayerRecord) {
+        self.layers.push(rec.clone());
+    }
+}
+
+/// Moves of the default top-down recoat for a layer at `z` (dip 5 mm at 2 mm/s, return
+/// at 1 mm/s, 50 mm/s²), a wait and an exposure.
+pub fn recoat_steps(z: f64, wait_s: f64, expose_s: f64) -> Vec<Step> {
+    vec![
+        Step::Move {
+            to_mm: z + 5.0,
+            speed_mm_s: 2.0,
+            accel_mm_s2: 50.0,
+        },
+        Step::Move {
+            to_mm: z,
+            speed_mm_s: 1.0,
+            accel_mm_s2: 50.0,
+        },
+        Step::Wait { s: wait_s },
+        Step::Expose { s: expose_s },
+    ]
+}

@@ -1,0 +1,822 @@
+//! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements.
+//!
+//! Input: a CSV table with the header `x_mm,y_mm,gray,irradiance_mw_cm2` (any column order;
+//! `#` comment lines and blank lines ignored): a zone centre in build-plane mm (origin at
+//! the field's bottom-left corner), the pixel value shown there (255 = fully on) and the
+//! measured irradiance. Any grid of zones, any set of gray levels, repeated readings.
+//!
+//! Method (docs/CALIBRATION.md): the model is bilinear in the cubic's 10 coefficients and
+//! one free value s_j per measured gray level, so it is fitted by alternating least
+//! squares on relative residuals (radiometer noise is proportional to the reading):
+//! with s fixed the coefficients solve a 10-unknown linear least-squares problem (SVD of
+//! the column-scaled design matrix, whose condition number is checked); with P fixed each
+//! s_j has a closed form. The valid gray range is the run of levels, from the brightest
+//! down, over which s keeps falling; P is then refitted on those levels only, s is
+//! normalised to 1 at the brightest level (so P is the full-on irradiance) and S(g) is the
+//! monotone cubic (PCHIP) through the (g_j, s_j).
+
+use super::field::{FieldModel, Form, Poly, MAX_DEGREE};
+use super::response::{Interpolation, Response};
+use super::{Calibration, FitSummary, Units};
+use crate::error::{Error, Result};
+use crate::units::{NonNegative, Positive};
+use nalgebra::{DMatrix, DVector};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The CSV header columns, in the canonical order.
+pub const COLUMNS: [&str; 4] = ["x_mm", "y_mm", "gray", "irradiance_mw_cm2"];
+
+/// Largest accepted condition number of the column-scaled design matrix of P.
+pub const MAX_CONDITION: f64 = 1e6;
+
+/// One measurement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Line in the file (1-based).
+    pub line: u64,
+    /// Zone centre x, mm.
+    pub x_mm: f64,
+    /// Zone centre y, mm.
+    pub y_mm: f64,
+    /// Pixel value shown.
+    pub gray: u8,
+    /// Measured irradiance (> 0).
+    pub irradiance: f64,
+}
+
+/// Parses a measurement table. Errors name `path` and the line.
+pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Reading>> {
+    let err = |line: usize, msg: String| Error::input(path, format!("line {line}: {msg}"));
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let Some((hl, header)) = lines.next() else {
+        return Err(Error::input(
+            path,
+            format!("empty file; expected the header {}", COLUMNS.join(",")),
+        ));
+    };
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let mut col = [usize::MAX; 4];
+    for (i, n) in names.iter().enumerate() {
+        match COLUMNS.iter().position(|c| c == n) {
+            Some(k) if col[k] != usize::MAX => {
+                return Err(err(hl, format!("column {n:?} appears twice")));
+            }
+            Some(k) => col[k] = i,
+            None => {
+                return Err(err(
+                    hl,
+                    format!(
+                        "unknown column {n:?} (expected the header {})",
+                        COLUMNS.join(",")
+                    ),
+                ))
+            }
+        }
+    }
+    if let Some(k) = col.iter().position(|&c| c == usize::MAX) {
+        return Err(err(
+            hl,
+            format!(
+                "missing column {:?} (expected the header {})",
+                COLUMNS[k],
+                COLUMNS.join(",")
+            ),
+        ));
+    }
+    let mut out = Vec::new();
+    for (ln, l) in lines {
+        let f: Vec<&str> = l.split(',').map(str::trim).collect();
+        if f.len() != names.len() {
+            return Err(err(
+                ln,
+                format!("expected {} columns, found {}", names.len(), f.len()),
+            ));
+        }
+        let num = |k: usize| -> Result<f64> {
+            let s = f[col[k]];
+            match s.parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                _ => Err(err(ln, format!("{} {s:?} is not a number", COLUMNS[k]))),
+            }
+        };
+        let (x, y, g, e) = (num(0)?, num(1)?, num(2)?, num(3)?);
+        if !(0.0..=255.0).contains(&g) || g.fract() != 0.0 {
+            return Err(err(
+                ln,
+                format!("gray {g} must be an integer pixel value 0..255"),
+            ));
+        }
+        if e <= 0.0 {
+            return Err(err(ln, format!("irradiance_mw_cm2 must be > 0, got {e}")));
+        }
+        out.push(Reading {
+            line: ln as u64,
+            x_mm: x,
+            y_mm: y,
+            gray: g as u8,
+            irradiance: e,
+        });
+    }
+    if out.is_empty() {
+        return Err(Error::input(path, "no measurements after the header"));
+    }
+    Ok(out)
+}
+
+/// Reads and parses a measurement file.
+pub fn read_csv(path: &Path) -> Result<Vec<Reading>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_csv(&text, path)
+}
+
+/// Fit options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitOptions {
+    /// Units of the irradiance column as stored in the calibration.
+    pub units: Units,
+    /// Compensation zone edge, mm.
+    pub zone_mm: f64,
+    /// How far P is extrapolated beyond the calibrated area, mm.
+    pub extrapolate_mm: f64,
+    /// Field size (width, height), mm: the calibrated area is clipped to it.
+    pub field_mm: (f64, f64),
+    /// Degree of P; `None`: chosen by cross-validation from 3 (the paper's cubic) up to
+    /// [`MAX_DEGREE`].
+    pub degree: Option<usize>,
+}
+
+/// One measured zone position.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZoneFit {
+    /// Zone centre, mm.
+    pub x_mm: f64,
+    /// Zone centre, mm.
+    pub y_mm: f64,
+    /// P of this zone alone from its readings (given the fitted S): the "measured" full-on
+    /// irradiance.
+    pub measured_p: f64,
+    /// P of the fitted polynomial at the centre.
+    pub fitted_p: f64,
+}
+
+/// One measured gray level.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LevelFit {
+    /// Pixel value.
+    pub gray: u8,
+    /// Fitted relative response s (1 at the brightest valid level).
+    pub s: f64,
+    /// Inside the valid range.
+    pub valid: bool,
+    /// Each reading of this level divided by the fitted P at its zone (for plots).
+    pub points: Vec<f64>,
+}
+
+/// The result of [`fit`].
+#[derive(Debug, Clone)]
+pub struct FitResult {
+    /// The fitted calibration.
+    pub calibration: Calibration,
+    /// Per zone position.
+    pub zones: Vec<ZoneFit>,
+    /// Per gray level, ascending.
+    pub levels: Vec<LevelFit>,
+    /// Condition number of the scaled design matrix.
+    pub condition: f64,
+    /// Warnings (poor model fit, …).
+    pub warnings: Vec<String>,
+}
+
+/// A reading prepared for the fit: basis row, level index, position index.
+struct Row {
+    phi: Vec<f64>,
+    e: f64,
+    lev: usize,
+    pos: usize,
+}
+
+struct Als {
+    form: Form,
+    coef: Vec<f64>,
+    s: Vec<f64>,
+    condition: f64,
+}
+
+impl Als {
+    fn p(&self, phi: &[f64]) -> f64 {
+        let q: f64 = phi.iter().zip(&self.coef).map(|(a, b)| a * b).sum();
+        match self.form {
+            Form::Polynomial => q,
+            Form::Exponential => q.exp(),
+        }
+    }
+}
+
+/// Fits `form` to `rows`: alternating least squares for a polynomial P, one linear least-
+/// squares solve in log space for an exponential P.
+fn fit_form(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+    match form {
+        Form::Polynomial => als(rows, nlev),
+        Form::Exponential => logfit(rows, nlev),
+    }
+}
+
+/// ln E = poly(u, v) + ln s_j with ln s of the brightest level fixed at 0: linear least
+/// squares (log residuals ≈ relative residuals).
+fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+    let n = rows.len();
+    let m = rows.first().map_or(0, |r| r.phi.len());
+    let cols = m + nlev - 1;
+    let mut a = DMatrix::<f64>::zeros(n, cols);
+    let mut b = DVector::<f64>::zeros(n);
+    for (k, r) in rows.iter().enumerate() {
+        for t in 0..m {
+            a[(k, t)] = r.phi[t];
+        }
+        if r.lev + 1 < nlev {
+            a[(k, m + r.lev)] = 1.0;
+        }
+        b[k] = r.e.ln();
+    }
+    let norms: Vec<f64> = (0..cols).map(|t| a.column(t).norm()).collect();
+    if norms.contains(&0.0) {
+        return Err(f64::INFINITY);
+    }
+    for (t, &nt) in norms.iter().enumerate() {
+        a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
+    }
+    let (x, condition) = solve_scaled(&a, &b, true)?;
+    let coef = (0..m).map(|t| x[t] / norms[t]).collect();
+    let s = (0..nlev)
+        .map(|j| {
+            if j + 1 < nlev {
+                (x[m + j] / norms[m + j]).exp()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    Ok(Als {
+        form: Form::Exponential,
+        coef,
+        s,
+        condition,
+    })
+}
+
+/// Least squares A·x ≈ b for a column-scaled A (columns of unit norm) through the normal
+/// equations (Cholesky; A is at most 28 columns wide). With `check`, the condition number
+/// of A (from the eigenvalues of AᵀA) is computed and must not exceed [`MAX_CONDITION`].
+/// Returns (x, condition number or 0 when not checked).
+fn solve_scaled(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    check: bool,
+) -> std::result::Result<(DVector<f64>, f64), f64> {
+    let ata = a.tr_mul(a);
+    let mut cond = 0.0;
+    if check {
+        let ev = ata.clone().symmetric_eigenvalues();
+        let (lo, hi) = (ev.min(), ev.max());
+        cond = if lo > 0.0 {
+            (hi / lo).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        if cond.is_nan() || cond > MAX_CONDITION {
+            return Err(cond);
+        }
+    }
+    match ata.cholesky() {
+        Some(ch) => Ok((ch.solve(&a.tr_mul(b)), cond)),
+        None => Err(f64::INFINITY),
+    }
+}
+
+/// Alternating least squares on relative residuals over `rows` (levels 0..nlev).
+/// Err(condition number) if the scaled design matrix of P is ill-conditioned.
+fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+    let n = rows.len();
+    let m = rows.first().map_or(0, |r| r.phi.len());
+    // Initial s: geometric mean irradiance per level.
+    let mut s = vec![0.0; nlev];
+    let mut cnt = vec![0usize; nlev];
+    for r in rows {
+        s[r.lev] += r.e.ln();
+        cnt[r.lev] += 1;
+    }
+    for j in 0..nlev {
+        s[j] = if cnt[j] > 0 {
+            (s[j] / cnt[j] as f64).exp()
+        } else {
+            0.0
+        };
+    }
+    let smax = s.iter().cloned().fold(0.0, f64::max);
+    s.iter_mut().for_each(|v| *v /= smax);
+    let mut coef = vec![0.0; m];
+    let mut prev = f64::INFINITY;
+    let mut condition = 0.0;
+    let mut a = DMatrix::<f64>::zeros(n, m);
+    let b = DVector::<f64>::from_element(n, 1.0);
+    for iter in 0..200 {
+        // P-step: minimise Σ (1 − s_j φ·c / E)² over c.
+        for (k, r) in rows.iter().enumerate() {
+            let f = s[r.lev] / r.e;
+            for t in 0..m {
+                a[(k, t)] = f * r.phi[t];
+            }
+        }
+        let norms: Vec<f64> = (0..m).map(|t| a.column(t).norm().max(1e-300)).collect();
+        for (t, &nt) in norms.iter().enumerate() {
+            a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
+        }
+        let x = solve_scaled(&a, &b, iter == 0)?;
+        if iter == 0 {
+            condition = x.1;
+        }
+        let x = x.0;
+        for t in 0..m {
+            coef[t] = x[t] / norms[t];
+        }
+        // s-step: s_j = Σ r / Σ r², r = P / E.
+        let mut num = vec![0.0; nlev];
+        let mut den = vec![0.0; nlev];
+        let ps: Vec<f64> = rows
+            .iter()
+            .map(|r| r.phi.iter().zip(&coef).map(|(a, b)| a * b).sum::<f64>())
+            .collect();
+        for (r, &p) in rows.iter().zip(&ps) {
+            let q = p / r.e;
+            num[r.lev] += q;
+            den[r.lev] += q * q;
+        }
+        for j in 0..nlev {
+            if den[j] > 0.0 {
+                s[j] = num[j] / den[j];
+            }
+        }
+        let obj: f64 = rows
+            .iter()
+            .zip(&ps)
+            .map(|(r, &p)| (1.0 - s[r.lev] * p / r.e).powi(2))
+            .sum();
+        if (prev - obj).abs() <= 1e-10 * (1.0 + obj) {
+            break;
+        }
+        prev = obj;
+    }
+    Ok(Als {
+        form: Form::Polynomial,
+        coef,
+        s,
+        condition,
+    })
+}
+
+/// Cross-validated RMS relative error (%) of degree-`d` fits: zone positions are split
+/// into `k` interleaved folds; each fold is predicted from a fit to the others.
+fn cv_rms(form: Form, rows_d: &[Row], nlev: usize, k: usize) -> Option<f64> {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for fold in 0..k {
+        let train: Vec<&Row> = rows_d.iter().filter(|r| r.pos % k != fold).collect();
+        let test: Vec<&Row> = rows_d.iter().filter(|r| r.pos % k == fold).collect();
+        if test.is_empty() {
+            continue;
+        }
+        let mut seen = vec![false; nlev];
+        train.iter().for_each(|r| seen[r.lev] = true);
+        let fit = fit_form(form, &train, nlev).ok()?;
+        for r in test.iter().filter(|r| seen[r.lev]) {
+            let e = fit.p(&r.phi) * fit.s[r.lev] / r.e - 1.0;
+            ss += e * e;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| (ss / n as f64).sqrt() * 100.0)
+}
+
+fn form_name(f: Form) -> &'static str {
+    match f {
+        Form::Polynomial => "polynomial",
+        Form::Exponential => "exponential",
+    }
+}
+
+/// Fits a calibration to `readings` (from `path`, named in errors).
+pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitResult> {
+    let bad = |m: String| Error::input(path, m);
+    // Distinct positions (in sorted order: that order makes the CV folds) and levels.
+    let key = |r: &Reading| ((r.x_mm * 1e6).round() as i64, (r.y_mm * 1e6).round() as i64);
+    let mut pos: BTreeMap<(i64, i64), usize> = BTreeMap::new();
+    for r in readings {
+        pos.insert(key(r), 0);
+    }
+    for (i, v) in pos.values_mut().enumerate() {
+        *v = i;
+    }
+    let npos = pos.len();
+    let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
+    let min_terms = Poly::terms(3);
+    if npos < min_terms {
+        return Err(bad(format!(
+            "only {npos} distinct zone positions; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
+        )));
+    }
+    if let Some(d) = opts.degree {
+        if !(3..=MAX_DEGREE).contains(&d) {
+            return Err(Error::Usage(format!(
+                "degree {d}: P's degree must be 3..={MAX_DEGREE}"
+            )));
+        }
+        if npos < Poly::terms(d) {
+            return Err(bad(format!(
+                "only {npos} distinct zone positions; a degree-{d} P(x, y) has {} terms",
+                Poly::terms(d)
+            )));
+        }
+    }
+    if grays.len() < 3 {
+        return Err(bad(format!(
+            "only {} distinct gray levels ({}); S(g) needs at least 3",
+            grays.len(),
+            grays
+                .iter()
+                .map(|g| g.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+
+    // A cubic needs at least 4 distinct coordinates along each axis.
+    for axis in ["x", "y"] {
+        let vals: std::collections::BTreeSet<i64> = readings
+            .iter()
+            .map(|r| {
+                let t = if axis == "x" { r.x_mm } else { r.y_mm };
+                (t * 1e6).round() as i64
+            })
+            .collect();
+        if vals.len() < 4 {
+            return Err(bad(format!(
+                "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
+                vals.len()
+            )));
+        }
+    }
+
+    // Calibrated area: bounding box of the zone centres grown by half the zone pitch.
+    let pitch = |vals: Vec<f64>| -> f64 {
+        let mut v = vals;
+        v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        v.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+        let mut gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
+        if gaps.is_empty() {
+            return 0.0;
+        }
+        gaps.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        gaps[gaps.len() / 2]
+    };
+    let xs: Vec<f64> = readings.iter().map(|r| r.x_mm).collect();
+    let ys: Vec<f64> = readings.iter().map(|r| r.y_mm).collect();
+    let (px, py) = (pitch(xs.clone()), pitch(ys.clone()));
+    let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
+    let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    let (fw, fh) = opts.field_mm;
+    let area = [
+        (min(&xs) - px / 2.0).max(0.0),
+        (min(&ys) - py / 2.0).max(0.0),
+        (max(&xs) + px / 2.0).min(fw),
+        (max(&ys) + py / 2.0).min(fh),
+    ];
+    if area[0] >= area[2] || area[1] >= area[3] {
+        return Err(bad(format!(
+            "the zone centres span x {:.3}..{:.3}, y {:.3}..{:.3} mm: no area inside the {fw} x {fh} mm field",
+            min(&xs),
+            max(&xs),
+            min(&ys),
+            max(&ys)
+        )));
+    }
+    let origin = [(area[0] + area[2]) / 2.0, (area[1] + area[3]) / 2.0];
+    let unit = ((area[2] - area[0]).max(area[3] - area[1]) / 2.0).max(1e-3);
+    let uv = |r: &Reading| ((r.x_mm - origin[0]) / unit, (r.y_mm - origin[1]) / unit);
+
+    let glist: Vec<u8> = grays.iter().copied().collect();
+    let gidx = |g: u8| glist.binary_search(&g).expect("known gray");
+    let rows_of = |d: usize, lo: usize| -> Vec<Row> {
+        readings
+            .iter()
+            .filter(|r| gidx(r.gray) >= lo)
+            .map(|r| {
+                let (u, v) = uv(r);
+                Row {
+                    phi: Poly::basis(d, u, v),
+                    e: r.irradiance,
+                    lev: gidx(r.gray) - lo,
+                    pos: pos[&key(r)],
+                }
+            })
+            .collect()
+    };
+    let ill = |cond: f64| {
+        bad(format!(
+            "ill-conditioned fit (condition number {cond:.2e}): the {npos} zone positions do not determine a cubic P(x, y); measure zones spread over the field in both x and y"
+        ))
+    };
+
+    // First pass (cubic, all levels): the valid range is the run of levels from the
+    // brightest down over which s keeps falling.
+    let rows3 = rows_of(3, 0);
+    let first = als(&rows3.iter().collect::<Vec<_>>(), glist.len()).map_err(ill)?;
+    let top = glist.len() - 1;
+    let mut lo = top;
+    while lo > 0 && first.s[lo - 1] < first.s[lo] {
+        lo -= 1;
+    }
+    let valid_n = top + 1 - lo;
+    if first.s[top] <= 0.0 || valid_n < 3 {
+        let shown: Vec<String> = glist
+            .iter()
+            .zip(&first.s)
+            .rev()
+            .take(4)
+            .map(|(g, s)| format!("S({g}) = {:.4}", s / first.s[top].max(1e-300)))
+            .collect();
+        return Err(bad(format!(
+            "no monotone S fits the data: the response must fall from the brightest gray ({}) over at least 3 measured levels, but {} (255 = mirror fully on; is the gray column inverted?)",
+            glist[top],
+            shown.join(", ")
+        )));
+    }
+    let excluded: Vec<u8> = glist[..lo].to_vec();
+    let used_pos: std::collections::BTreeSet<usize> =
+        rows_of(0, lo).iter().map(|r| r.pos).collect();
+    if used_pos.len() < min_terms {
+        return Err(bad(format!(
+            "only {} distinct zone positions were measured at the valid gray levels {}..{}; the cubic P(x, y) needs at least {min_terms}",
+            used_pos.len(),
+            glist[lo],
+            glist[top]
+        )));
+    }
+
+    // Model: forced degree (polynomial form), or among the polynomial (degrees 3..) and
+    // exponential (degrees 2..) candidates the one with the fewest terms whose
+    // cross-validated error is within 2 % of the best (the cubic first on ties).
+    let k = used_pos.len().min(10);
+    let mut cv: Vec<(u64, f64)> = Vec::new();
+    let mut cv_exp: Vec<(u64, f64)> = Vec::new();
+    let (form, degree) = match opts.degree {
+        Some(d) => (Form::Polynomial, d),
+        None => {
+            let mut cands: Vec<(usize, u8, Form, usize, f64)> = Vec::new();
+            for d in 2..=MAX_DEGREE {
+                if 2 * Poly::terms(d) > used_pos.len() {
+                    break;
+                }
+                let rows_d = rows_of(d, lo);
+                if d >= 3 {
+                    if let Some(e) = cv_rms(Form::Polynomial, &rows_d, valid_n, k) {
+                        cv.push((d as u64, e));
+                        cands.push((Poly::terms(d), 0, Form::Polynomial, d, e));
+                    }
+                }
+                if let Some(e) = cv_rms(Form::Exponential, &rows_d, valid_n, k) {
+                    cv_exp.push((d as u64, e));
+                    cands.push((Poly::terms(d), 1, Form::Exponential, d, e));
+                }
+            }
+            cands.sort_by_key(|c| (c.0, c.1));
+            let best = cands.iter().map(|c| c.4).fold(f64::INFINITY, f64::min);
+            cands
+                .iter()
+                .find(|c| c.4 <= best * 1.02)
+                .map_or((Form::Polynomial, 3), |c| (c.2, c.3))
+        }
+    };
+
+    // Final fit on the valid levels.
+    let rows = rows_of(degree, lo);
+    let second = fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n).map_err(ill)?;
+    let s_top = second.s[valid_n - 1];
+    let mut coef: Vec<f64> = second.coef.clone();
+    match form {
+        Form::Polynomial => coef.iter_mut().for_each(|c| *c *= s_top),
+        Form::Exponential => coef[0] += s_top.ln(),
+    }
+    let s: Vec<f64> = second.s.iter().map(|v| v / s_top).collect();
+    if s.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(bad(
+            "no monotone S fits the data: the refitted response is not increasing over the valid gray levels"
+                .to_string(),
+        ));
+    }
+    let poly = Poly::from_terms(degree, &coef);
+    let pval = |q: f64| match form {
+        Form::Polynomial => q,
+        Form::Exponential => q.exp(),
+    };
+    let p_at = |r: &Reading| -> f64 {
+        let (u, v) = uv(r);
+        pval(poly.eval(u, v))
+    };
+
+    // Residuals over the valid levels.
+    let used: Vec<&Reading> = readings.iter().filter(|r| r.gray >= glist[lo]).collect();
+    let (mut ss, mut worst, mut worst_line) = (0.0, 0.0f64, 0u64);
+    for r in &used {
+        let rel = p_at(r) * s[gidx(r.gray) - lo] / r.irradiance - 1.0;
+        ss += rel * rel;
+        if rel.abs() > worst.abs() {
+            worst = rel;
+            worst_line = r.line;
+        }
+    }
+    let rms = (ss / used.len() as f64).sqrt() * 100.0;
+    let mut warnings = Vec::new();
+    if rms > 3.0 {
+        warnings.push(format!(
+            "residual RMS {rms:.2} %: the model P(x, y)·S(g) with a degree-{degree} {} P does not describe these measurements well",
+            form_name(form)
+        ));
+    }
+
+    // Per zone: measured P from its own readings, fitted P at the centre.
+    let mut zacc: BTreeMap<(i64, i64), (f64, f64, f64, f64)> = BTreeMap::new();
+    for r in &used {
+        let q = s[gidx(r.gray) - lo] / r.irradiance;
+        let e = zacc.entry(key(r)).or_insert((r.x_mm, r.y_mm, 0.0, 0.0));
+        e.2 += q;
+        e.3 += q * q;
+    }
+    let zones: Vec<ZoneFit> = zacc
+        .values()
+        .map(|&(x, y, a, b)| ZoneFit {
+            x_mm: x,
+            y_mm: y,
+            measured_p: a / b,
+            fitted_p: pval(poly.eval((x - origin[0]) / unit, (y - origin[1]) / unit)),
+        })
+        .collect();
+    let levels: Vec<LevelFit> = glist
+        .iter()
+        .enumerate()
+        .map(|(j, &g)| LevelFit {
+            gray: g,
+            s: if j >= lo {
+                s[j - lo]
+            } else {
+                first.s[j] / first.s[top]
+            },
+            valid: j >= lo,
+            points: readings
+                .iter()
+                .filter(|r| r.gray == g)
+                .map(|r| r.irradiance / p_at(r))
+                .collect(),
+        })
+        .collect();
+
+    // S: the measured levels; when S falls all the way down the measured levels, it is
+    // also interpolated to pixel value 0 (mirror off, no light).
+    let mut points: Vec<[f64; 2]> = Vec::with_capacity(valid_n + 1);
+    if lo == 0 && glist[0] > 0 {
+        points.push([0.0, 0.0]);
+    }
+    points.extend(glist[lo..].iter().zip(&s).map(|(&g, &v)| [g as f64, v]));
+
+    // Spline through the levels when it is increasing on every gray, else PCHIP.
+    let spline = Response::Table {
+        interpolation: Interpolation::Spline,
+        points: points.clone(),
+    };
+    let response = if spline.validate().is_ok() {
+        spline
+    } else {
+        Response::Table {
+            interpolation: Interpolation::Pchip,
+            points,
+        }
+    };
+
+    let name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let calibration = Calibration {
+        source: format!(
+            "dmdsl calibrate {name} ({} readings, {npos} zones, {} gray levels, degree-{degree} {} P)",
+            readings.len(),
+            glist.len(),
+            form_name(form)
+        ),
+        units: opts.units,
+        zone_mm: Positive::new(opts.zone_mm)
+            .ok_or_else(|| Error::Usage(format!("zone size must be > 0, got {}", opts.zone_mm)))?,
+        field: FieldModel {
+            origin_mm: origin,
+            length_unit_mm: Positive::new(unit).expect("unit > 0"),
+            scale: Positive::new(1.0).expect("1 > 0"),
+            form,
+            coefficients: poly,
+            area_mm: area,
+            // Degree ≤ 3 extrapolates reliably (seeds/000 uses its cubic on the whole grid);
+            // higher degrees continue linearly beyond the measured zone centres.
+            polynomial_area_mm: (degree > 3).then(|| [min(&xs), min(&ys), max(&xs), max(&ys)]),
+            extrapolate_mm: NonNegative::new(opts.extrapolate_mm).ok_or_else(|| {
+                Error::Usage(format!(
+                    "extrapolation distance must be >= 0, got {}",
+                    opts.extrapolate_mm
+                ))
+            })?,
+        },
+        response,
+        fit: Some(FitSummary {
+            measurements: name,
+            form,
+            degree: degree as u64,
+            cv_rms_pct: cv,
+            cv_exp_rms_pct: cv_exp,
+            measured_gray: [glist[lo], glist[top]],
+            readings: used.len() as u64,
+            zones: npos as u64,
+            gray_levels: glist.len() as u64,
+            excluded_grays: excluded,
+            residual_rms_pct: rms,
+            residual_max_pct: worst * 100.0,
+            residual_max_line: worst_line,
+        }),
+    };
+    calibration.validate().map_err(|m| {
+        bad(format!(
+            "the fitted model is unusable ({m}); the measurements do not describe a smooth field"
+        ))
+    })?;
+    Ok(FitResult {
+        calibration,
+        zones,
+        levels,
+        condition: second.condition,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> &'static Path {
+        Path::new("m.csv")
+    }
+
+    #[test]
+    fn csv_errors_name_file_and_line() {
+        let e = |t: &str| parse_csv(t, p()).unwrap_err().to_string();
+        assert_eq!(
+            e("x_mm,y_mm,gray\n1,2,3\n"),
+            "m.csv: line 1: missing column \"irradiance_mw_cm2\" (expected the header x_mm,y_mm,gray,irradiance_mw_cm2)"
+        );
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2,z\n").contains("line 1: unknown column \"z\""));
+        assert_eq!(
+            e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,3\n# c\n1,2,255\n"),
+            "m.csv: line 4: expected 4 columns, found 3"
+        );
+        assert_eq!(
+            e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,3,4\n"),
+            "m.csv: line 2: expected 4 columns, found 5"
+        );
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,abc,255,3\n")
+            .contains("line 2: y_mm \"abc\" is not a number"));
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,0\n")
+            .contains("line 2: irradiance_mw_cm2 must be > 0, got 0"));
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,-1\n").contains("must be > 0"));
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255.5,1\n")
+            .contains("line 2: gray 255.5 must be an integer"));
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,NaN,1\n").contains("is not a number"));
+        assert!(e("").contains("empty file"));
+        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n").contains("no measurements"));
+        // Column order is free; CRLF and comments are fine.
+        let r = parse_csv(
+            "# m\r\ngray,irradiance_mw_cm2,x_mm,y_mm\r\n200,1.5,3,4\r\n",
+            p(),
+        )
+        .unwrap();
+        assert_eq!(
+            r,
+            vec![Reading {
+                line: 3,
+                x_mm: 3.0,
+                y_mm: 4.0,
+                gray: 200,
+                irradiance: 1.5
+            }]
+        );
+    }
+}

@@ -1,0 +1,139 @@
+//! Layer exposure from the flattened irradiance.
+//!
+//! * Absolute calibration (mW/cm²): the working curve (Jacobs) gives the time that cures
+//!   the layer plus the overcure at the target irradiance E*:
+//!   t = (Ec / E*)·exp((Δz + overcure) / Dp). It replaces the profile's `exposure.layer_s`;
+//!   `bottom_s` keeps its ratio to `layer_s` (the bottom-layer factor), and the transition
+//!   layers ramp between them as before ([`crate::profile::Exposure::layer_exposure_s`]).
+//! * Relative calibration (the published seeds/000 fit): irradiance is known only up to a
+//!   factor, so the profile's fixed exposure is taken as the exposure at E*; the profile is
+//!   left unchanged and no dose can be stated.
+//!
+//! The planner keeps calling [`crate::profile::Exposure::layer_exposure_s`] on the resolved
+//! profile: [`resolve`] is applied to the job's copy of the profile before planning.
+
+use super::Units;
+use crate::profile::{Profile, Resin};
+use crate::units::Positive;
+
+/// How a job's exposure was derived.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resolved {
+    /// One-line description for the manifest.
+    pub rule: String,
+    /// Dose of a normal layer at E*, mJ/cm² (absolute calibrations).
+    pub dose_mj_cm2: Option<f64>,
+    /// Plausibility warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Working-curve exposure, s: time at irradiance `e_mw_cm2` to cure `thickness_mm` plus the
+/// resin's overcure.
+pub fn working_curve_s(resin: &Resin, e_mw_cm2: f64, thickness_mm: f64) -> f64 {
+    resin.ec_mj_cm2.get() / e_mw_cm2
+        * ((thickness_mm + resin.overcure_mm.get()) / resin.dp_mm.get()).exp()
+}
+
+/// Cure depth (mm) of dose `dose_mj_cm2` in `resin` (0 below the critical energy).
+pub fn cure_depth_mm(resin: &Resin, dose_mj_cm2: f64) -> f64 {
+    (resin.dp_mm.get() * (dose_mj_cm2 / resin.ec_mj_cm2.get()).ln()).max(0.0)
+}
+
+/// Resolves the job's exposure for a calibration in `units` with target irradiance
+/// `target` and layer thickness `thickness_mm`, updating `profile.exposure` for absolute
+/// calibrations (see the module docs).
+pub fn resolve(profile: &mut Profile, units: Units, target: f64, thickness_mm: f64) -> Resolved {
+    let resin = profile.resin.clone();
+    let e = &mut profile.exposure;
+    match units {
+        Units::Relative => Resolved {
+            rule: format!(
+                "relative calibration: the profile's exposure ({} s per layer) is the exposure at E*; dose unknown",
+                e.layer_s
+            ),
+            dose_mj_cm2: None,
+            warnings: Vec::new(),
+        },
+        Units::MwCm2 => {
+            let t = working_curve_s(&resin, target, thickness_mm);
+            let ratio = e.bottom_s.get() / e.layer_s.get();
+            let dose = target * t;
+            let mut warnings = Vec::new();
+            let depth = (thickness_mm + resin.overcure_mm.get()) / resin.dp_mm.get();
+            if depth > 100f64.ln() {
+                warnings.push(format!(
+                    "layer {thickness_mm} mm + overcure {} mm is {depth:.1} Dp deep: the working curve asks {dose:.0} mJ/cm² (> 100 Ec), implausible for resin {:?}",
+                    resin.overcure_mm, resin.name
+                ));
+            }
+            if t > 600.0 {
+                warnings.push(format!(
+                    "at E* = {target:.4} mW/cm² resin {:?} (Ec {} mJ/cm²) needs {t:.0} s per layer: implausible; check the calibration's units (µW vs mW) and the resin",
+                    resin.name, resin.ec_mj_cm2
+                ));
+            } else if t < 0.2 {
+                warnings.push(format!(
+                    "at E* = {target:.4} mW/cm² resin {:?} needs only {t:.3} s per layer, shorter than shutter timing allows to control; check the calibration's units",
+                    resin.name
+                ));
+            }
+            match (Positive::new(t), Positive::new(t * ratio)) {
+                (Some(l), Some(b)) => {
+                    e.layer_s = l;
+                    e.bottom_s = b;
+                }
+                _ => warnings.push(format!(
+                    "working-curve exposure {t} s is not a positive number; kept the profile's {} s",
+                    e.layer_s
+                )),
+            }
+            Resolved {
+                rule: format!(
+                    "working curve: t = (Ec/E*)·exp((Δz + overcure)/Dp) = ({}/{target:.6})·exp(({thickness_mm} + {})/{}) = {:.3} s; bottom layers × {ratio:.3}",
+                    resin.ec_mj_cm2, resin.overcure_mm, resin.dp_mm, e.layer_s
+                ),
+                dose_mj_cm2: Some(dose),
+                warnings,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn working_curve_cures_layer_plus_overcure() {
+        let r = Profile::default_profile().resin;
+        let t = working_curve_s(&r, 5.0, 0.05);
+        let depth = cure_depth_mm(&r, 5.0 * t);
+        assert!((depth - (0.05 + r.overcure_mm.get())).abs() < 1e-12);
+        // Doubling irradiance halves the time.
+        assert!((working_curve_s(&r, 10.0, 0.05) * 2.0 - t).abs() < 1e-12);
+    }
+
+    #[test]
+    fn absolute_sets_exposure_relative_keeps_it() {
+        let mut p = Profile::default_profile();
+        let before = p.exposure.clone();
+        let r = resolve(&mut p, Units::Relative, 123.0, 0.05);
+        assert_eq!(p.exposure, before);
+        assert!(r.dose_mj_cm2.is_none());
+        let r = resolve(&mut p, Units::MwCm2, 5.0, 0.05);
+        let t = working_curve_s(&p.resin, 5.0, 0.05);
+        assert!((p.exposure.layer_s.get() - t).abs() < 1e-12);
+        let ratio = before.bottom_s.get() / before.layer_s.get();
+        assert!((p.exposure.bottom_s.get() - t * ratio).abs() < 1e-9);
+        assert!((r.dose_mj_cm2.unwrap() - 5.0 * t).abs() < 1e-9);
+        assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+        // The published irradiance read as mW/cm² (really µW/cm²) is implausible.
+        let mut p = Profile::default_profile();
+        let r = resolve(&mut p, Units::MwCm2, 0.0028, 0.05);
+        assert!(
+            r.warnings.iter().any(|w| w.contains("implausible")),
+            "{:?}",
+            r.warnings
+        );
+    }
+}

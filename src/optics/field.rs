@@ -1,0 +1,336 @@
+//! The field factor P(x, y): irradiance across the build plane at the brightest valid gray
+//! (up to the factor S), a bivariate polynomial. seeds/000 uses a cubic (10 terms);
+//! `dmdsl calibrate` fits degree 3 unless cross-validation shows that a higher degree
+//! (up to [`MAX_DEGREE`]) predicts held-out zones better.
+
+use crate::units::{NonNegative, Positive};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Highest polynomial degree of P.
+pub const MAX_DEGREE: usize = 6;
+
+/// A bivariate polynomial in u, v of total degree ≤ [`MAX_DEGREE`].
+///
+/// Stored as a table of monomial names to coefficients: `c` is the constant, and a
+/// monomial u^a·v^b is written as `a` letters `x` followed by `b` letters `y` (`x` = u,
+/// `xy` = u·v, `xxy` = u²·v, `yyy` = v³). Missing monomials are zero.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(try_from = "BTreeMap<String, f64>")]
+pub struct Poly {
+    /// Total degree (highest a + b with a nonzero entry slot).
+    degree: usize,
+    /// coef[a][b] for u^a v^b, a + b ≤ degree.
+    coef: Vec<Vec<f64>>,
+}
+
+/// The monomials (a, b) of total degree ≤ `degree`, by degree then descending a.
+pub fn monomials(degree: usize) -> Vec<(usize, usize)> {
+    let mut m = Vec::new();
+    for t in 0..=degree {
+        for a in (0..=t).rev() {
+            m.push((a, t - a));
+        }
+    }
+    m
+}
+
+/// Name of monomial u^a v^b in the file format.
+pub fn monomial_name(a: usize, b: usize) -> String {
+    if a + b == 0 {
+        "c".into()
+    } else {
+        "x".repeat(a) + &"y".repeat(b)
+    }
+}
+
+impl Poly {
+    /// The zero polynomial of `degree`.
+    pub fn zeros(degree: usize) -> Poly {
+        Poly {
+            degree,
+            coef: (0..=degree).map(|a| vec![0.0; degree + 1 - a]).collect(),
+        }
+    }
+
+    /// From coefficients in [`monomials`] order.
+    pub fn from_terms(degree: usize, values: &[f64]) -> Poly {
+        let mut p = Poly::zeros(degree);
+        for (&(a, b), &v) in monomials(degree).iter().zip(values) {
+            p.coef[a][b] = v;
+        }
+        p
+    }
+
+    /// Total degree.
+    pub fn degree(&self) -> usize {
+        self.degree
+    }
+
+    /// Number of terms of a polynomial of `degree`.
+    pub fn terms(degree: usize) -> usize {
+        (degree + 1) * (degree + 2) / 2
+    }
+
+    /// The basis functions at (u, v), in [`monomials`] order.
+    pub fn basis(degree: usize, u: f64, v: f64) -> Vec<f64> {
+        let mut pu = vec![1.0; degree + 1];
+        let mut pv = vec![1.0; degree + 1];
+        for k in 1..=degree {
+            pu[k] = pu[k - 1] * u;
+            pv[k] = pv[k - 1] * v;
+        }
+        monomials(degree)
+            .into_iter()
+            .map(|(a, b)| pu[a] * pv[b])
+            .collect()
+    }
+
+    /// Coefficients of the polynomial in u for fixed v: out[a] = Σ_b coef[a][b]·v^b.
+    #[inline]
+    pub fn in_u(&self, v: f64) -> Vec<f64> {
+        self.coef
+            .iter()
+            .map(|cb| cb.iter().rev().fold(0.0, |acc, c| acc * v + c))
+            .collect()
+    }
+
+    /// Value at (u, v).
+    pub fn eval(&self, u: f64, v: f64) -> f64 {
+        self.in_u(v).iter().rev().fold(0.0, |acc, c| acc * u + c)
+    }
+
+    /// Value and gradient (∂/∂u, ∂/∂v) at (u, v).
+    pub fn eval_grad(&self, u: f64, v: f64) -> (f64, f64, f64) {
+        let (mut f, mut fu, mut fv) = (0.0, 0.0, 0.0);
+        let (mut ua, mut ua1) = (1.0, 0.0); // u^a and a·u^(a−1)
+        for (a, cb) in self.coef.iter().enumerate() {
+            // q(v) = Σ_b c_b v^b and q'(v).
+            let (mut q, mut qv, mut vb, mut vb1) = (0.0, 0.0, 1.0, 0.0);
+            for (b, &c) in cb.iter().enumerate() {
+                q += c * vb;
+                qv += c * vb1;
+                vb1 = (b + 1) as f64 * vb;
+                vb *= v;
+            }
+            f += q * ua;
+            fu += q * ua1;
+            fv += qv * ua;
+            ua1 = (a + 1) as f64 * ua;
+            ua *= u;
+        }
+        (f, fu, fv)
+    }
+
+    /// True if every coefficient is finite.
+    pub fn is_finite(&self) -> bool {
+        self.coef.iter().flatten().all(|c| c.is_finite())
+    }
+}
+
+impl TryFrom<BTreeMap<String, f64>> for Poly {
+    type Error = String;
+    fn try_from(m: BTreeMap<String, f64>) -> Result<Self, String> {
+        let mut terms = Vec::new();
+        for (k, &v) in &m {
+            let (a, b) = if k == "c" {
+                (0, 0)
+            } else {
+                let a = k.chars().take_while(|&c| c == 'x').count();
+                let b = k.len() - a;
+                if k.is_empty() || !k[a..].chars().all(|c| c == 'y') {
+                    return Err(format!(
+                        "coefficient name {k:?}: use c, or x's then y's (x = u, xxy = u^2 v)"
+                    ));
+                }
+                (a, b)
+            };
+            if a + b > MAX_DEGREE {
+                return Err(format!(
+                    "coefficient {k:?}: degree {} above {MAX_DEGREE}",
+                    a + b
+                ));
+            }
+            terms.push((a, b, v));
+        }
+        let degree = terms.iter().map(|t| t.0 + t.1).max().unwrap_or(0);
+        let mut p = Poly::zeros(degree);
+        for (a, b, v) in terms {
+            p.coef[a][b] = v;
+        }
+        Ok(p)
+    }
+}
+
+impl Serialize for Poly {
+    /// A table of monomial names in degree order (c, x, y, xx, xy, yy, …).
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let m = monomials(self.degree);
+        let mut map = ser.serialize_map(Some(m.len()))?;
+        for (a, b) in m {
+            map.serialize_entry(&monomial_name(a, b), &self.coef[a][b])?;
+        }
+        map.end()
+    }
+}
+
+/// How the polynomial gives P.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Form {
+    /// P = scale · poly(u, v) (seeds/000).
+    #[default]
+    Polynomial,
+    /// P = scale · exp(poly(u, v)): for fields that fall off multiplicatively (vignetting,
+    /// Gaussian beams), fitted in log space.
+    Exponential,
+}
+
+/// The field factor P(x, y) of a calibration.
+///
+/// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), see [`Form`]) with u = (x_mm − origin_mm[0]) / length_unit_mm and
+/// v = (y_mm − origin_mm[1]) / length_unit_mm; (x_mm, y_mm) are build-plane coordinates from
+/// the field's bottom-left corner (BRIEF §3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldModel {
+    /// Build-plane point where u = v = 0, mm.
+    pub origin_mm: [f64; 2],
+    /// Length that is one unit of u and v, mm (10 = centimetres, the seeds/000 reading).
+    pub length_unit_mm: Positive,
+    /// Factor applied to the polynomial (1e-8 in seeds/000).
+    pub scale: Positive,
+    /// Polynomial (default) or exponential of a polynomial.
+    #[serde(default)]
+    pub form: Form,
+    /// The polynomial's coefficients (see [`Poly`] for the names).
+    pub coefficients: Poly,
+    /// The calibrated area [x0, y0, x1, y1], mm: the union of the measured zones.
+    pub area_mm: [f64; 4],
+    /// Rectangle [x0, y0, x1, y1] (mm) where P is the polynomial itself: the span of the
+    /// measured zone centres. Outside it P continues linearly (first-order Taylor
+    /// expansion at the nearest point of the rectangle), because a polynomial fitted to
+    /// points is unreliable beyond them. Default: `area_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub polynomial_area_mm: Option<[f64; 4]>,
+    /// Beyond the calibrated area P is extrapolated this far (mm) and held constant
+    /// further out (P at the nearest point of the enlarged area).
+    pub extrapolate_mm: NonNegative,
+}
+
+impl FieldModel {
+    /// P at build-plane point (x, y) mm: the polynomial inside `polynomial_area_mm`, its
+    /// linear continuation outside it up to `extrapolate_mm` beyond `area_mm`, constant
+    /// further out (for the exponential form the exponent is continued). A polynomial
+    /// continuation is kept at or above 10 % of P at the rectangle's edge.
+    pub fn eval(&self, x: f64, y: f64) -> f64 {
+        let m = self.extrapolate_mm.get();
+        let [x0, y0, x1, y1] = self.area_mm;
+        let xc = x.clamp(x0 - m, x1 + m);
+        let yc = y.clamp(y0 - m, y1 + m);
+        let [px0, py0, px1, py1] = self.polynomial_area_mm.unwrap_or(self.area_mm);
+        let xp = xc.clamp(px0, px1);
+        let yp = yc.clamp(py0, py1);
+        let s = 1.0 / self.length_unit_mm.get();
+        let (u, v) = ((xp - self.origin_mm[0]) * s, (yp - self.origin_mm[1]) * s);
+        let sc = self.scale.get();
+        let q = if xp == xc && yp == yc {
+            self.coefficients.eval(u, v)
+        } else {
+            let (f, fu, fv) = self.coefficients.eval_grad(u, v);
+            let lin = f + (fu * (xc - xp) + fv * (yc - yp)) * s;
+            match self.form {
+                Form::Polynomial => lin.max(0.1 * f),
+                Form::Exponential => lin,
+            }
+        };
+        match self.form {
+            Form::Polynomial => sc * q,
+            Form::Exponential => sc * q.exp(),
+        }
+    }
+
+    /// True if (x, y) lies in the calibrated area.
+    #[inline]
+    pub fn inside(&self, x: f64, y: f64) -> bool {
+        let [x0, y0, x1, y1] = self.area_mm;
+        x >= x0 && x <= x1 && y >= y0 && y <= y1
+    }
+
+    /// Checks finiteness, the area, and that P is positive over the calibrated area
+    /// (sampled on a 0.5 mm grid).
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let [x0, y0, x1, y1] = self.area_mm;
+        if !self.area_mm.iter().all(|v| v.is_finite()) || x0 >= x1 || y0 >= y1 {
+            return Err("field.area_mm must be [x0, y0, x1, y1] with x0 < x1, y0 < y1".into());
+        }
+        if let Some([a0, b0, a1, b1]) = self.polynomial_area_mm {
+            if ![a0, b0, a1, b1].iter().all(|v| v.is_finite()) || a0 > a1 || b0 > b1 {
+                return Err(
+                    "field.polynomial_area_mm must be [x0, y0, x1, y1] with x0 <= x1, y0 <= y1"
+                        .into(),
+                );
+            }
+        }
+        if !self.origin_mm.iter().all(|v| v.is_finite()) || !self.coefficients.is_finite() {
+            return Err("field: origin_mm and coefficients must be finite numbers".into());
+        }
+        let nx = ((x1 - x0) / 0.5).ceil() as usize;
+        let ny = ((y1 - y0) / 0.5).ceil() as usize;
+        if nx * ny > 4_000_000 {
+            return Err("field.area_mm is implausibly large".into());
+        }
+        for i in 0..=nx {
+            for j in 0..=ny {
+                let x = (x0 + i as f64 * 0.5).min(x1);
+                let y = (y0 + j as f64 * 0.5).min(y1);
+                let p = self.eval(x, y);
+                if !(p.is_finite() && p > 0.0) {
+                    return Err(format!(
+                        "field: P({x:.1} mm, {y:.1} mm) = {p:.4e} is not positive inside the calibrated area"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_published_cubic_evaluates() {
+        let src = "c = 161.8\nx = -0.3\ny = -63.6\nxx = 11.5\nxy = -2.8\nyy = 12.5\nxxx = -1.1\nxxy = 0.05\nxyy = 0.8\nyyy = -0.8\n";
+        let p: Poly = toml::from_str(src).unwrap();
+        assert_eq!(p.degree(), 3);
+        let (x, y) = (2.0, 3.0);
+        let want = -1.1 * x * x * x - 0.8 * y * y * y
+            + 0.8 * x * y * y
+            + 0.05 * x * x * y
+            + 11.5 * x * x
+            + 12.5 * y * y
+            - 2.8 * x * y
+            - 0.3 * x
+            - 63.6 * y
+            + 161.8;
+        assert!((p.eval(x, y) - want).abs() < 1e-9);
+        let back: Poly = toml::from_str(&toml::to_string(&p).unwrap()).unwrap();
+        assert_eq!(back, p);
+        // Basis order matches from_terms.
+        let vals: Vec<f64> = (0..Poly::terms(4)).map(|i| i as f64 * 0.1 - 0.3).collect();
+        let q = Poly::from_terms(4, &vals);
+        let b = Poly::basis(4, 0.7, -0.4);
+        let dot: f64 = b.iter().zip(&vals).map(|(a, c)| a * c).sum();
+        assert!((q.eval(0.7, -0.4) - dot).abs() < 1e-12);
+        let (f, fu, fv) = q.eval_grad(0.7, -0.4);
+        let h = 1e-6;
+        assert!((f - q.eval(0.7, -0.4)).abs() < 1e-12);
+        assert!((fu - (q.eval(0.7 + h, -0.4) - q.eval(0.7 - h, -0.4)) / (2.0 * h)).abs() < 1e-6);
+        assert!((fv - (q.eval(0.7, -0.4 + h) - q.eval(0.7, -0.4 - h)) / (2.0 * h)).abs() < 1e-6);
+        assert!(toml::from_str::<Poly>("yx = 1.0").is_err());
+        assert!(toml::from_str::<Poly>("xxxxxxx = 1.0").is_err());
+    }
+}

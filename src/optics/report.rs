@@ -1,0 +1,264 @@
+//! The `dmdsl calibrate` command: fit, predict, write the calibration file and its plots.
+
+use super::calib::{self, FitOptions, FitResult};
+use super::{Calibration, Compensator, Dither, Mode, Units};
+use crate::bundle::Spreads;
+use crate::error::{Error, Result};
+use crate::profile::Field;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Options of [`calibrate`].
+#[derive(Debug, Clone)]
+pub struct CalibrateOptions {
+    /// Measurement CSV.
+    pub input: PathBuf,
+    /// Calibration TOML to write; plots go next to it.
+    pub output: PathBuf,
+    /// Units of the irradiance column.
+    pub units: Units,
+    /// Compensation zone edge, mm.
+    pub zone_mm: f64,
+    /// Extrapolation distance beyond the calibrated area, mm.
+    pub extrapolate_mm: f64,
+    /// Field the predictions are made for.
+    pub field: Field,
+    /// Degree of P (`None`: chosen by cross-validation).
+    pub degree: Option<usize>,
+    /// Write PNG plots.
+    pub plots: bool,
+}
+
+/// What one compensation mode achieves under the fitted model.
+#[derive(Debug, Clone, Serialize)]
+pub struct ModeReport {
+    /// Target irradiance E*.
+    pub target_irradiance: f64,
+    /// Mean irradiance of the calibrated area fully on.
+    pub mean_irradiance: f64,
+    /// E* / mean.
+    pub throughput: f64,
+    /// Predicted spreads, %.
+    pub spreads: Spreads,
+    /// Zones (zone mode) or pixels (pixel mode) that cannot reach E*.
+    pub unreachable: u64,
+}
+
+/// Result of `dmdsl calibrate`.
+#[derive(Debug, Clone, Serialize)]
+pub struct CalibrateReport {
+    /// The calibration file written.
+    pub calibration: PathBuf,
+    /// PNG plots written.
+    pub plots: Vec<PathBuf>,
+    /// Irradiance units.
+    pub units: String,
+    /// Readings in the file.
+    pub readings: u64,
+    /// Readings used (valid gray range).
+    pub readings_used: u64,
+    /// Distinct zone positions.
+    pub zones: u64,
+    /// Distinct gray levels.
+    pub gray_levels: u64,
+    /// Valid gray range [lo, hi].
+    pub valid_gray: [u8; 2],
+    /// Measured, monotone gray range [lo, hi] (below it S is interpolated to S(0) = 0 when
+    /// `valid_gray` starts at 0).
+    pub measured_gray: [u8; 2],
+    /// Measured levels outside the valid range.
+    pub excluded_grays: Vec<u8>,
+    /// Relative residual RMS, %.
+    pub residual_rms_pct: f64,
+    /// Largest relative residual, %.
+    pub residual_max_pct: f64,
+    /// Its line in the measurement file.
+    pub residual_max_line: u64,
+    /// Condition number of the scaled design matrix of P.
+    pub condition: f64,
+    /// Calibrated area [x0, y0, x1, y1], mm.
+    pub calibrated_area_mm: [f64; 4],
+    /// Zones of the field outside the calibrated area.
+    pub zones_outside: u64,
+    /// Zone-mode prediction.
+    pub zone: ModeReport,
+    /// Pixel-mode prediction.
+    pub pixel: ModeReport,
+    /// Warnings.
+    pub warnings: Vec<String>,
+}
+
+fn mode_report(c: &Compensator) -> ModeReport {
+    let p = &c.prediction;
+    ModeReport {
+        target_irradiance: p.target,
+        mean_irradiance: p.mean,
+        throughput: p.target / p.mean,
+        spreads: p.spreads,
+        unreachable: p.unreachable,
+    }
+}
+
+fn header(cal: &Calibration, input: &Path) -> String {
+    let f = cal.fit.as_ref();
+    let [lo, hi] = cal.response.valid_gray();
+    let [mlo, mhi] = f.map_or([lo, hi], |f| f.measured_gray);
+    let form = match cal.field.form {
+        super::field::Form::Polynomial => "poly(u, v)",
+        super::field::Form::Exponential => "exp(poly(u, v))",
+    };
+    let below = if lo < mlo {
+        format!(
+            "\n#      Below {mlo} (the lowest measured gray) S is interpolated down to S(0) = 0\n#      (mirror off): an assumption, not a measurement."
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "# dmdsl light calibration, fitted by `dmdsl calibrate {}`.
+# Use it with `dmdsl slice --calibration FILE`, or paste it into a profile as the
+# [projector.calibration] section of the projector it was measured on (prefix the
+# table names below with `projector.calibration.`).
+#
+# Model (seeds/000): irradiance E(x, y, g) = P(x, y) * S(g), units: {}.
+#  P = scale * {form}, u = (x_mm - origin_mm[0]) / length_unit_mm,
+#      v = (y_mm - origin_mm[1]) / length_unit_mm; x, y in mm from the field's bottom-left
+#      corner; coefficient xxy multiplies u^2 v. P is the irradiance with mirrors at the
+#      brightest measured gray ({mhi}). area_mm is the measured area; outside
+#      polynomial_area_mm (if given) the polynomial continues linearly; P is extrapolated
+#      extrapolate_mm beyond area_mm and held constant further out.
+#  S = relative response, S = 1 at {mhi}: cubic through response.points [pixel value, S]
+#      (interpolation = spline or pchip); measured and monotone on {mlo}..{mhi}.{below}
+# Fit: {} readings, residual RMS {:.2} %, max {:.2} % (line {}).
+",
+        input.display(),
+        cal.units.as_str(),
+        f.map_or(0, |f| f.readings),
+        f.map_or(0.0, |f| f.residual_rms_pct),
+        f.map_or(0.0, |f| f.residual_max_pct),
+        f.map_or(0, |f| f.residual_max_line),
+    )
+}
+
+/// Writes `files` (path, bytes) all-or-nothing: each goes to a temporary sibling first and
+/// is renamed into place only when every file was written.
+fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
+    let tmp: Vec<PathBuf> = files
+        .iter()
+        .map(|(p, _)| {
+            let name = p
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            p.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+        })
+        .collect();
+    let cleanup = |upto: usize| {
+        for t in &tmp[..upto] {
+            let _ = std::fs::remove_file(t);
+        }
+    };
+    for (i, ((_, bytes), t)) in files.iter().zip(&tmp).enumerate() {
+        if let Err(e) = std::fs::write(t, bytes) {
+            cleanup(i + 1);
+            return Err(Error::io(t, e));
+        }
+    }
+    for (i, ((p, _), t)) in files.iter().zip(&tmp).enumerate() {
+        if let Err(e) = std::fs::rename(t, p) {
+            for t2 in &tmp[i..] {
+                let _ = std::fs::remove_file(t2);
+            }
+            return Err(Error::io(p, e));
+        }
+    }
+    Ok(())
+}
+
+/// Runs the fit and writes the calibration (and plots). See the module docs.
+pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
+    let out = &opts.output;
+    if out.is_dir() {
+        return Err(Error::input(
+            out,
+            "is a directory; give the calibration file to write",
+        ));
+    }
+    if let Some(parent) = out.parent() {
+        if !parent.as_os_str().is_empty() && !parent.is_dir() {
+            return Err(Error::input(
+                out,
+                format!("directory {} does not exist", parent.display()),
+            ));
+        }
+    }
+    let readings = calib::read_csv(&opts.input)?;
+    let fit: FitResult = calib::fit(
+        &readings,
+        &opts.input,
+        &FitOptions {
+            units: opts.units,
+            zone_mm: opts.zone_mm,
+            extrapolate_mm: opts.extrapolate_mm,
+            field_mm: (opts.field.width_mm(), opts.field.height_mm()),
+            degree: opts.degree,
+        },
+    )?;
+    let cal = &fit.calibration;
+    let wrap = |m: String| Error::input(&opts.input, m);
+    let zone = Compensator::new(cal, &opts.field, Mode::Zone, Dither::Auto).map_err(wrap)?;
+    let pixel = Compensator::new(cal, &opts.field, Mode::Pixel, Dither::Auto).map_err(wrap)?;
+    let mut warnings = fit.warnings.clone();
+    let f = cal.fit.clone().expect("fit writes a summary");
+    let zp = &zone.prediction;
+    let lowest = (0..zp.zone_gray.len())
+        .filter(|&z| zp.zone_inside[z])
+        .map(|z| zp.zone_gray[z])
+        .min()
+        .unwrap_or(255);
+    if lowest < f.measured_gray[0] {
+        warnings.push(format!(
+            "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0; measure lower grays",
+            f.measured_gray[0]
+        ));
+    }
+    for (name, c) in [("zone", &zone), ("pixel", &pixel)] {
+        let p = &c.prediction;
+        if p.spreads.after_zone_pct > 2.0 || p.spreads.after_pixel_pct > 5.0 && name == "pixel" {
+            warnings.push(format!(
+                "{name} mode leaves a predicted spread of {:.2} % (zone means) / {:.2} % (pixels): the gray range cannot flatten this field",
+                p.spreads.after_zone_pct, p.spreads.after_pixel_pct
+            ));
+        }
+    }
+
+    let mut files = vec![(
+        out.clone(),
+        format!("{}\n{}", header(cal, &opts.input), cal.to_toml()).into_bytes(),
+    )];
+    if opts.plots {
+        files.extend(super::plots::calibration_plots(out, &fit, &zone, &pixel));
+    }
+    write_all(&files)?;
+    Ok(CalibrateReport {
+        calibration: out.clone(),
+        plots: files[1..].iter().map(|(p, _)| p.clone()).collect(),
+        units: cal.units.as_str().into(),
+        readings: readings.len() as u64,
+        readings_used: f.readings,
+        zones: f.zones,
+        gray_levels: f.gray_levels,
+        valid_gray: cal.response.valid_gray(),
+        excluded_grays: f.excluded_grays,
+        residual_rms_pct: f.residual_rms_pct,
+        residual_max_pct: f.residual_max_pct,
+        residual_max_line: f.residual_max_line,
+        condition: fit.condition,
+        calibrated_area_mm: cal.field.area_mm,
+        zones_outside: zone.prediction.zones_outside,
+        zone: mode_report(&zone),
+        pixel: mode_report(&pixel),
+        measured_gray: f.measured_gray,
+        warnings,
+    })
+}

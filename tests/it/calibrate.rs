@@ -1,0 +1,587 @@
+//! `dmdsl calibrate` and `slice --calibration/--compensation`, judged physically: synthetic
+//! measurement sets from known P(x, y) and S(g) with 1.5 % noise are fitted, a plate
+//! covering the field is sliced with the fitted calibration, the written mask PNGs are
+//! decoded and the TRUE irradiance P·S of every pixel is evaluated.
+
+use crate::common::*;
+use std::path::{Path, PathBuf};
+
+const PX: f64 = 0.0634765625;
+const W: usize = 1024;
+const H: usize = 768;
+
+/// splitmix64 + Box–Muller: a tiny fixed-seed normal generator.
+struct Rng(u64);
+impl Rng {
+    fn u(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn normal(&mut self) -> f64 {
+        let (a, b) = (self.u().max(1e-300), self.u());
+        (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+    }
+}
+
+type Field2 = fn(f64, f64) -> f64;
+type Resp = fn(f64) -> f64;
+
+/// A smooth cubic field, 1.5 : 1 (mW/cm²).
+fn p_cubic(x: f64, y: f64) -> f64 {
+    1.0 + 0.02 * x - 0.01 * y - 0.0004 * x * x + 0.0002 * x * y + 0.0003 * y * y + 2e-6 * x * x * x
+        - 3e-6 * y * y * y
+}
+/// A Gaussian beam off centre with a tilt, 3.7 : 1 (not a polynomial).
+fn p_gauss(x: f64, y: f64) -> f64 {
+    2.0 * (-((x - 40.0).powi(2) + (y - 20.0).powi(2)) / (2.0 * 30.0f64.powi(2))).exp()
+        * (1.0 + 0.004 * y)
+}
+/// seeds/000's published P (x, y in cm), 5.6 : 1.
+fn p_published(x: f64, y: f64) -> f64 {
+    let (x, y) = (x / 10.0, y / 10.0);
+    -1.1 * x * x * x - 0.8 * y * y * y
+        + 0.8 * x * y * y
+        + 0.05 * x * x * y
+        + 11.5 * x * x
+        + 12.5 * y * y
+        - 2.8 * x * y
+        - 0.3 * x
+        - 63.6 * y
+        + 161.8
+}
+/// seeds/000's published S with z = 255 − pixel value (steps of 2–3 % near its operating
+/// point), for pixel values 121..255.
+fn s_published(g: f64) -> f64 {
+    let z = 255.0 - g;
+    -1e-6 * z * z * z + 5.78e-4 * z * z - 0.101 * z + 5.72
+}
+fn s_gamma(g: f64) -> f64 {
+    (g / 255.0).powf(2.2)
+}
+
+const GRAYS: [u32; 7] = [255, 235, 215, 195, 175, 155, 135];
+
+/// Measurements at the 13 × 9 zone centres (5 mm zones from the bottom-left corner).
+fn write_measurements(path: &Path, p: Field2, s: Resp, noise: f64, seed: u64) {
+    let mut rng = Rng(seed);
+    let mut csv = String::from("x_mm,y_mm,gray,irradiance_mw_cm2\n");
+    for g in GRAYS {
+        for i in 0..13 {
+            for j in 0..9 {
+                let (x, y) = (2.5 + 5.0 * i as f64, 2.5 + 5.0 * j as f64);
+                let e = p(x, y) * s(g as f64) * (1.0 + noise * rng.normal());
+                csv.push_str(&format!("{x},{y},{g},{e:.6e}\n"));
+            }
+        }
+    }
+    std::fs::write(path, csv).unwrap();
+}
+
+/// A 0.2 mm plate covering the whole 65 × 48.75 mm field (4 layers of 0.05 mm: 2 bottom
+/// layers, 2 normal ones).
+fn plate(dir: &Path) -> PathBuf {
+    let p = dir.join("plate.stl");
+    write_stl(&p, &box_tris([0.0, 0.0, 0.0], [65.0, 48.75, 0.2]));
+    p
+}
+
+fn ok(o: &std::process::Output) {
+    assert!(o.status.success(), "{}", stderr(o));
+}
+
+/// True irradiance of every pixel of a mask: (x, y, E).
+fn true_irradiance(mask: &[u8], p: Field2, s: Resp) -> Vec<(f64, f64, f64)> {
+    (0..W * H)
+        .map(|i| {
+            let (r, c) = (i / W, i % W);
+            let (x, y) = ((c as f64 + 0.5) * PX, (H as f64 - r as f64 - 0.5) * PX);
+            let g = mask[i];
+            let e = if g == 0 { 0.0 } else { p(x, y) * s(g as f64) };
+            (x, y, e)
+        })
+        .collect()
+}
+
+fn spread(v: &[f64]) -> f64 {
+    let lo = v.iter().cloned().fold(f64::INFINITY, f64::min);
+    let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    (hi - lo) / (v.iter().sum::<f64>() / v.len() as f64) * 100.0
+}
+
+/// Zone means of 5 mm zones inside the calibrated 65 × 45 mm area, and all pixels there.
+fn zone_and_pixel_spreads(e: &[(f64, f64, f64)]) -> (f64, f64) {
+    let mut sum = [[0.0f64; 13]; 9];
+    let mut n = [[0usize; 13]; 9];
+    let mut inside = Vec::new();
+    for &(x, y, v) in e {
+        if y <= 45.0 {
+            let (zc, zr) = ((x / 5.0) as usize, (y / 5.0) as usize);
+            sum[zr][zc] += v;
+            n[zr][zc] += 1;
+            inside.push(v);
+        }
+    }
+    let means: Vec<f64> = (0..9)
+        .flat_map(|r| (0..13).map(move |c| (r, c)))
+        .map(|(r, c)| sum[r][c] / n[r][c] as f64)
+        .collect();
+    (spread(&means), spread(&inside))
+}
+
+fn calibrate(dir: &Path, p: Field2, s: Resp, seed: u64) -> (PathBuf, serde_json::Value) {
+    let m = dir.join("m.csv");
+    write_measurements(&m, p, s, 0.015, seed);
+    let o = run_in(
+        dir,
+        &[
+            "calibrate",
+            "m.csv",
+            "-o",
+            "cal.toml",
+            "--json",
+            "--no-plots",
+        ],
+    );
+    ok(&o);
+    (
+        dir.join("cal.toml"),
+        serde_json::from_slice(&o.stdout).unwrap(),
+    )
+}
+
+fn slice_plate(dir: &Path, extra: &[&str]) -> (Vec<u8>, serde_json::Value) {
+    let plate = plate(dir);
+    let mut args = vec![
+        "slice",
+        plate.to_str().unwrap(),
+        "-o",
+        "p.dmdjob",
+        "--keep-position",
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    let o = run_in(dir, &args);
+    ok(&o);
+    let b = dir.join("p.dmdjob");
+    let (w, h, px) = read_gray(&b.join("masks/00000.png"));
+    assert_eq!((w as usize, h as usize), (W, H));
+    let job = serde_json::from_slice(&std::fs::read(b.join("job.json")).unwrap()).unwrap();
+    (px, job)
+}
+
+#[test]
+fn fit_recovers_known_p_and_s_and_writes_plots() {
+    let dir = tempdir("cal-recover");
+    write_measurements(&dir.join("m.csv"), p_cubic, s_published, 0.015, 7);
+    let o = run_in(&dir, &["calibrate", "m.csv", "-o", "cal.toml", "--json"]);
+    ok(&o);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // Residuals are the noise, nothing more.
+    let rms = r["residual_rms_pct"].as_f64().unwrap();
+    assert!((1.2..1.8).contains(&rms), "{rms}");
+    assert_eq!(r["zones"], 117);
+    assert_eq!(r["gray_levels"], 7);
+    assert_eq!(r["measured_gray"], serde_json::json!([135, 255]));
+    for p in r["plots"].as_array().unwrap() {
+        let bytes = std::fs::read(dir.join(p.as_str().unwrap())).unwrap();
+        assert!(bytes.starts_with(b"\x89PNG"), "{p}");
+    }
+    assert_eq!(r["plots"].as_array().unwrap().len(), 6);
+    let cal = dmdsl::optics::Calibration::read(&dir.join("cal.toml")).unwrap();
+    let f = cal.fit.as_ref().unwrap();
+    assert_eq!(
+        f.degree, 3,
+        "a cubic field is fitted with the paper's cubic"
+    );
+    // P is the irradiance at gray 255 (S normalised there): within 1 % everywhere inside.
+    let s255 = s_published(255.0);
+    for i in 0..=26 {
+        for j in 0..=18 {
+            let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
+            let want = p_cubic(x, y) * s255;
+            let got = cal.field.eval(x, y);
+            assert!(
+                (got / want - 1.0).abs() < 0.01,
+                "P({x}, {y}) = {got} vs {want}"
+            );
+        }
+    }
+    // S relative to gray 255: within 1 % on the measured range.
+    let c = cal.response.curve();
+    for g in 135..=255 {
+        let want = s_published(g as f64) / s255;
+        let got = c.eval(g as f64);
+        assert!((got / want - 1.0).abs() < 0.01, "S({g}) = {got} vs {want}");
+    }
+    // The file is usable as written (it round-trips through the loader above) and a
+    // second run replaces it atomically.
+    ok(&run_in(
+        &dir,
+        &["calibrate", "m.csv", "-o", "cal.toml", "-q", "--no-plots"],
+    ));
+}
+
+#[test]
+fn zone_mode_flattens_true_zone_means() {
+    for (k, (p, s)) in [
+        (p_cubic as Field2, s_published as Resp),
+        (p_gauss, s_gamma),
+        (p_published, s_published),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let dir = tempdir(&format!("cal-zone-{k}"));
+        let (cal, _) = calibrate(&dir, p, s, 100 + k as u64);
+        let (mask, job) = slice_plate(&dir, &["--calibration", cal.to_str().unwrap()]);
+        assert_eq!(job["settings"]["compensation"], "zone");
+        let e = true_irradiance(&mask, p, s);
+        let (zone, _) = zone_and_pixel_spreads(&e);
+        assert!(zone <= 2.5, "case {k}: zone-mean spread {zone:.2} %");
+        // Uncompensated, the same plate is far from flat.
+        let (mask0, _) = slice_plate(&dir, &["--compensation", "off"]);
+        let (zone0, _) = zone_and_pixel_spreads(&true_irradiance(&mask0, p, s));
+        assert!(zone0 > 30.0, "case {k}: {zone0}");
+    }
+}
+
+#[test]
+fn pixel_mode_flattens_true_pixels() {
+    for (k, (p, s)) in [
+        (p_cubic as Field2, s_gamma as Resp),
+        (p_gauss, s_published),
+        (p_published, s_published),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let dir = tempdir(&format!("cal-pixel-{k}"));
+        let (cal, _) = calibrate(&dir, p, s, 200 + k as u64);
+        let (mask, job) = slice_plate(
+            &dir,
+            &[
+                "--calibration",
+                cal.to_str().unwrap(),
+                "--compensation",
+                "pixel",
+            ],
+        );
+        assert_eq!(job["optics"]["mode"], "pixel");
+        let e = true_irradiance(&mask, p, s);
+        let (_, pixel) = zone_and_pixel_spreads(&e);
+        // 3 %, or 5 % where one gray step moves irradiance by more than 2 %.
+        let coarse = mask
+            .iter()
+            .filter(|&&g| g > 0 && g < 255)
+            .any(|&g| s(g as f64 + 1.0) / s(g as f64) - 1.0 > 0.02);
+        let limit = if coarse { 5.0 } else { 3.0 };
+        assert!(
+            pixel <= limit,
+            "case {k}: per-pixel spread {pixel:.2} % > {limit}"
+        );
+    }
+}
+
+#[test]
+fn builtin_published_fit_flattens_the_published_model() {
+    let dir = tempdir("cal-builtin");
+    let (mask, job) = slice_plate(&dir, &[]);
+    let o = &job["optics"];
+    assert_eq!(o["mode"], "zone");
+    assert_eq!(o["units"], "relative");
+    assert_eq!(o["valid_gray"], serde_json::json!([121, 255]));
+    assert_eq!(o["zone_grays"].as_array().unwrap().len(), 10);
+    assert_eq!(o["zone_grays"][0].as_array().unwrap().len(), 13);
+    assert!(o["exposure_rule"].as_str().unwrap().contains("relative"));
+    assert!(o["dose_mj_cm2"].is_null());
+    // The fixed profile exposure is kept (exposure at E*).
+    assert_eq!(job["layers"][3]["exposure_s"], 8.0);
+    // The gray map is in the bundle with its checksum.
+    let map = std::fs::read(dir.join("p.dmdjob").join(o["gray_map"].as_str().unwrap())).unwrap();
+    let sha = {
+        use sha2::Digest;
+        let d = sha2::Sha256::digest(&map);
+        d.iter().map(|b| format!("{b:02x}")).collect::<String>()
+    };
+    assert_eq!(o["gray_map_sha256"], sha);
+    // Physically: zone means of P·S under the published model within 4.5 %.
+    let e = true_irradiance(&mask, p_published, s_published);
+    let (zone, _) = zone_and_pixel_spreads(&e);
+    assert!(zone <= 4.5, "{zone}");
+    assert!(o["predicted"]["after_zone_pct"].as_f64().unwrap() <= 4.5);
+    // One gray step of the published S is 2–3 % here, so some zones mix two grays.
+    let pred_before = o["predicted"]["before_zone_pct"].as_f64().unwrap();
+    assert!(pred_before > 100.0, "{pred_before}");
+}
+
+#[test]
+fn edge_pixels_get_the_inverse_response_of_their_coverage() {
+    // A box whose left edge cuts pixel column 400 in half; built-in published fit.
+    let dir = tempdir("cal-edge");
+    let stl = dir.join("b.stl");
+    let x0 = 400.5 * PX;
+    write_stl(
+        &stl,
+        &box_tris([x0 as f32, 10.0, 0.0], [(x0 + 10.0) as f32, 20.0, 0.1]),
+    );
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "b.stl",
+            "-o",
+            "b.dmdjob",
+            "--keep-position",
+            "-q",
+            "--dither",
+            "off",
+        ],
+    );
+    ok(&o);
+    let (_, _, px) = read_gray(&dir.join("b.dmdjob/masks/00000.png"));
+    let job: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();
+    let target = job["optics"]["target_irradiance"].as_f64().unwrap() * 1e8;
+    // Row in the middle of the box (y = 15 mm); pixel 400 is half covered (value 128).
+    let r = H - 1 - (15.0 / PX) as usize;
+    let (edge, full) = (px[r * W + 400], px[r * W + 403]);
+    // Zone mean of P over the zone's pixels, as the compensator computes it.
+    let (zc, zr) = (((400.5 * PX) / 5.0) as usize, 3usize);
+    assert_eq!(zc, ((403.5 * PX) / 5.0) as usize);
+    let (mut sum, mut n) = (0.0, 0);
+    for rr in 0..H {
+        for c in 0..W {
+            let (x, y) = ((c as f64 + 0.5) * PX, (H as f64 - rr as f64 - 0.5) * PX);
+            if (x / 5.0) as usize == zc && (y / 5.0) as usize == zr {
+                sum += p_published(x, y);
+                n += 1;
+            }
+        }
+    }
+    let pz = sum / n as f64;
+    let nearest = |t: f64| {
+        std::iter::once(0u8)
+            .chain(121..=255)
+            .min_by(|&a, &b| {
+                let sa = if a == 0 { 0.0 } else { s_published(a as f64) };
+                let sb = if b == 0 { 0.0 } else { s_published(b as f64) };
+                (sa - t).abs().total_cmp(&(sb - t).abs())
+            })
+            .unwrap()
+    };
+    assert_eq!(full, nearest(target / pz));
+    assert_eq!(edge, nearest(128.0 / 255.0 * target / pz));
+    // Not coverage × gray: half the irradiance is a much brighter gray than half the gray.
+    assert!(
+        edge as f64 > 0.5 * full as f64 + 30.0,
+        "edge {edge}, full {full}"
+    );
+}
+
+#[test]
+fn absolute_calibration_sets_exposure_from_the_working_curve() {
+    let dir = tempdir("cal-exposure");
+    let (cal, _) = calibrate(&dir, p_cubic, s_gamma, 300);
+    let (_, job) = slice_plate(&dir, &["--calibration", cal.to_str().unwrap()]);
+    let o = &job["optics"];
+    assert_eq!(o["units"], "mW/cm2");
+    let e = o["target_irradiance"].as_f64().unwrap();
+    let r = &job["machine"]["resin"];
+    let (ec, dp, oc) = (
+        r["ec_mj_cm2"].as_f64().unwrap(),
+        r["dp_mm"].as_f64().unwrap(),
+        r["overcure_mm"].as_f64().unwrap(),
+    );
+    let t = ec / e * ((0.05 + oc) / dp).exp();
+    let got = job["layers"][2]["exposure_s"].as_f64().unwrap();
+    assert!((got - t).abs() < 1e-9 * t, "{got} vs {t}");
+    // Bottom layers keep the profile's 2 : 1 ratio; the dose is E*·t.
+    assert!((job["layers"][0]["exposure_s"].as_f64().unwrap() - 2.0 * t).abs() < 1e-9 * t);
+    assert!((o["dose_mj_cm2"].as_f64().unwrap() - e * t).abs() < 1e-9 * e * t);
+    // The plate reaches the top 3.75 mm strip outside the measured area: that is reported;
+    // the dose is plausible.
+    let w = job["warnings"].to_string();
+    assert!(w.contains("outside the calibrated area"), "{w}");
+    assert!(!w.contains("implausible"), "{w}");
+}
+
+#[test]
+fn implausible_dose_warns() {
+    // The published irradiances (µW/cm²) given as mW/cm²: 1000× too little light.
+    let dir = tempdir("cal-dose");
+    let m = dir.join("m.csv");
+    write_measurements(&m, |x, y| p_published(x, y) * 5e-5, s_published, 0.01, 5);
+    ok(&run_in(
+        &dir,
+        &["calibrate", "m.csv", "-o", "c.toml", "-q", "--no-plots"],
+    ));
+    let stl = dir.join("b.stl");
+    write_stl(&stl, &box_tris([0.0, 0.0, 0.0], [5.0, 5.0, 0.1]));
+    let o = run_in(&dir, &["slice", "b.stl", "--calibration", "c.toml"]);
+    ok(&o);
+    assert!(stderr(&o).contains("implausible"), "{}", stderr(&o));
+}
+
+#[test]
+fn dithered_output_does_not_depend_on_thread_count() {
+    let dir = tempdir("cal-threads");
+    let stl = dir.join("b.stl");
+    write_stl(&stl, &box_tris([0.0, 0.0, 0.0], [30.0, 20.0, 0.5]));
+    let mut sums = Vec::new();
+    for threads in ["1", "2"] {
+        for (mode, dither) in [("pixel", "on"), ("zone", "on")] {
+            let out = format!("t{threads}{mode}.dmdjob");
+            let o = std::process::Command::new(bin())
+                .args([
+                    "slice",
+                    "b.stl",
+                    "-o",
+                    &out,
+                    "-q",
+                    "--compensation",
+                    mode,
+                    "--dither",
+                    dither,
+                ])
+                .env("RAYON_NUM_THREADS", threads)
+                .current_dir(&dir)
+                .output()
+                .unwrap();
+            ok(&o);
+            sums.push(std::fs::read(dir.join(&out).join("job.json")).unwrap());
+        }
+    }
+    assert_eq!(sums[0], sums[2]);
+    assert_eq!(sums[1], sums[3]);
+}
+
+fn expect_error(dir: &Path, csv: &str, want: &str) {
+    std::fs::write(dir.join("bad.csv"), csv).unwrap();
+    let o = run_in(dir, &["calibrate", "bad.csv", "-o", "c.toml"]);
+    assert_eq!(o.status.code(), Some(2), "{want}: {}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(
+        e.contains("bad.csv") && e.contains(want),
+        "want {want:?} in {e}"
+    );
+    assert!(!dir.join("c.toml").exists());
+}
+
+#[test]
+fn bad_measurements_are_one_line_errors_with_exit_2() {
+    let dir = tempdir("cal-bad");
+    let h = "x_mm,y_mm,gray,irradiance_mw_cm2\n";
+    expect_error(
+        &dir,
+        "x_mm,y_mm,gray\n1,2,3\n",
+        "line 1: missing column \"irradiance_mw_cm2\"",
+    );
+    expect_error(
+        &dir,
+        &format!("{h}1,2,255,1.0,7\n"),
+        "line 2: expected 4 columns, found 5",
+    );
+    expect_error(
+        &dir,
+        &format!("{h}1,2,255,abc\n"),
+        "line 2: irradiance_mw_cm2 \"abc\" is not a number",
+    );
+    expect_error(
+        &dir,
+        &format!("{h}1,2,255,1\n1,3,255,0\n"),
+        "line 3: irradiance_mw_cm2 must be > 0",
+    );
+    expect_error(&dir, &format!("{h}1,2,255,-2\n"), "must be > 0");
+    // Too few zones: 9 positions for a 10-term cubic.
+    let mut few = h.to_string();
+    for i in 0..9 {
+        for g in [255, 200, 150] {
+            few.push_str(&format!(
+                "{},{},{g},{}\n",
+                5 * i,
+                3 * (i % 3),
+                1.0 + g as f64 / 255.0
+            ));
+        }
+    }
+    expect_error(&dir, &few, "only 9 distinct zone positions");
+    // Too few gray levels.
+    let mut two = h.to_string();
+    for i in 0..13 {
+        for j in 0..9 {
+            for g in [255, 200] {
+                two.push_str(&format!(
+                    "{},{},{g},{}\n",
+                    2.5 + 5.0 * i as f64,
+                    2.5 + 5.0 * j as f64,
+                    g as f64 / 255.0
+                ));
+            }
+        }
+    }
+    expect_error(&dir, &two, "only 2 distinct gray levels");
+    // All zones on one line: y never varies, the cubic is undetermined.
+    let mut line = h.to_string();
+    for i in 0..13 {
+        for g in [255, 200, 150] {
+            line.push_str(&format!(
+                "{},10,{g},{}\n",
+                2.5 + 5.0 * i as f64,
+                (1.0 + 0.01 * i as f64) * g as f64 / 255.0
+            ));
+        }
+    }
+    expect_error(&dir, &line, "ill-conditioned fit");
+    // Inverted gray column (S rises as the pixel value falls): no monotone S.
+    let mut inv = h.to_string();
+    for i in 0..13 {
+        for j in 0..9 {
+            for g in [255, 200, 150, 100] {
+                let (x, y) = (2.5 + 5.0 * i as f64, 2.5 + 5.0 * j as f64);
+                inv.push_str(&format!(
+                    "{x},{y},{g},{}\n",
+                    p_cubic(x, y) * (2.0 - g as f64 / 255.0)
+                ));
+            }
+        }
+    }
+    expect_error(&dir, &inv, "no monotone S fits the data");
+    // Missing file.
+    let o = run_in(&dir, &["calibrate", "nope.csv", "-o", "c.toml"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("nope.csv"));
+}
+
+#[test]
+fn compensation_flags_are_checked() {
+    let dir = tempdir("cal-flags");
+    let stl = dir.join("b.stl");
+    write_stl(&stl, &box_tris([0.0, 0.0, 0.0], [5.0, 5.0, 0.1]));
+    // --dither on without compensation.
+    let o = run_in(
+        &dir,
+        &["slice", "b.stl", "--compensation", "off", "--dither", "on"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--dither on needs compensation"));
+    // A calibration file that is not one.
+    std::fs::write(dir.join("c.toml"), "units = \"relative\"\n").unwrap();
+    let o = run_in(&dir, &["slice", "b.stl", "--calibration", "c.toml"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("c.toml"), "{}", stderr(&o));
+    // Off: plain coverage, no optics record.
+    let o = run_in(&dir, &["slice", "b.stl", "-q", "--compensation", "off"]);
+    ok(&o);
+    let job: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();
+    assert_eq!(job["settings"]["compensation"], "off");
+    assert!(job.get("optics").is_none());
+    // A 5 mm square is about 78.8 px on a side: interior pixels are plain 255.
+    let (_, _, px) = read_gray(&dir.join("b.dmdjob/masks/00000.png"));
+    let full = px.iter().filter(|&&v| v == 255).count();
+    assert!((77 * 77..=79 * 79).contains(&full), "{full}");
+}
