@@ -257,6 +257,7 @@ fn synthetic(path: &Path, n: usize) -> Manifest {
         warnings: vec![],
         layers,
         optics: None,
+        projector_optics: Vec::new(),
     };
     w.finish(&manifest).unwrap();
     manifest

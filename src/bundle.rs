@@ -64,6 +64,10 @@ pub struct Manifest {
     /// Light compensation applied to the masks (absent when compensation is off).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optics: Option<Optics>,
+    /// Tiled jobs (several projectors): the light compensation of each projector, with one
+    /// common target irradiance (absent when off; `optics` is then absent too).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub projector_optics: Vec<Optics>,
 }
 
 /// Who wrote the bundle.

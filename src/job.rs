@@ -10,7 +10,6 @@ use crate::bundle::{
     self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
 };
 use crate::error::{Error, Result};
-use crate::geometry::blend::Response;
 use crate::geometry::distortion::{self, Correction, DistortionChoice, FitReport};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh, MeshReport};
@@ -188,7 +187,13 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         profile.slicing.binary = b;
     }
     let h = profile.slicing.layer_height_mm.get();
-    let optics = crate::optics::prepare(&mut profile, &opts.optics, h)?;
+    let tiled = profile.projector.len() > 1;
+    // Several projectors: tiling (geometry::tile) does their blending and compensation.
+    let (optics, tiler) = if tiled {
+        (None, Some(Tiler::for_job(&mut profile, &opts.optics, h)?))
+    } else {
+        (crate::optics::prepare(&mut profile, &opts.optics, h)?, None)
+    };
     let field = profile.field();
     let path = opts.input.as_path();
     let correction = distortion::for_job(&opts.distortion, &mut profile)?;
@@ -223,23 +228,12 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
 
     let out_path = opts.output.clone().unwrap_or_else(|| default_output(path));
     let writer = BundleWriter::create(&out_path)?;
-    let tiled = profile.projector.len() > 1;
     if tiled {
         for k in 0..profile.projector.len() {
             writer.create_dir(&format!("masks/p{k}"))?;
         }
     }
     let raster = Rasterizer::new(field);
-    // Tiling (geometry::tile): blend tables per projector, built once.
-    let tiler = tiled.then(|| {
-        let n = profile.projector.len();
-        Tiler::new(
-            &profile.projector,
-            &profile.blend.unwrap_or_default(),
-            &vec![Response::linear(); n],
-            &vec![None; n],
-        )
-    });
     let done = AtomicUsize::new(0);
     let px_area = field.pixel_mm * field.pixel_mm;
     let binary = profile.slicing.binary;
@@ -362,6 +356,14 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
         None => None,
     };
+    let projector_optics = match &tiler {
+        Some(t) => {
+            let (records, w) = t.finish(&writer, &profile, encode_png)?;
+            warnings.extend(w);
+            records
+        }
+        None => Vec::new(),
+    };
     let manifest = Manifest {
         format: bundle::FORMAT.into(),
         version: bundle::VERSION,
@@ -387,9 +389,12 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         settings: Settings {
             layer_height_mm: h,
             binary,
-            compensation: optics_record
-                .as_ref()
-                .map_or("off".into(), |o| o.mode.clone()),
+            compensation: match &tiler {
+                Some(t) => t.compensation().as_str().into(),
+                None => optics_record
+                    .as_ref()
+                    .map_or("off".into(), |o| o.mode.clone()),
+            },
             distortion: distortion_report.clone(),
         },
         machine: profile.clone(),
@@ -397,6 +402,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         warnings: warnings.clone(),
         layers,
         optics: optics_record,
+        projector_optics,
     };
     if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
         return Err(Error::Interrupted);

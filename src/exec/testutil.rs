@@ -73,6 +73,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
         warnings: vec![],
         layers,
         optics: None,
+        projector_optics: Vec::new(),
     }
 }
 

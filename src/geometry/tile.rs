@@ -7,9 +7,19 @@
 //! shift and one table look-up: `gray = lut[(coverage · F + 2¹⁵) >> 16]` with
 //! `F = round(f · 16 · 2¹⁶)`, since the LUT has 255 · 16 steps (coverage 255 × share 1 →
 //! the last entry). Black pixels are skipped. Mirror flags are applied last.
+//!
+//! With light compensation (zone or pixel, [`crate::optics`]) every projector of a tiled
+//! profile needs its own `[projector.calibration]`. Each gets a
+//! [`Compensator`](crate::optics::Compensator) over its own pixels and calibration, all with
+//! one common target irradiance E* (the lowest of the targets the projectors would choose
+//! alone), so the field is flat across the seam. A layer's projector view is then
+//! `coverage × share` (rounded to 8 bits), compensated: each projector delivers its share of
+//! E* through its own P(x, y)·S(g).
 
 use super::blend::{self, BlendCurve, Rect, Response, LUT_STEPS};
-use crate::profile::Projector;
+use crate::error::{Error, Result};
+use crate::optics::{Compensator, Dither, JobOptics, Mode, OpticsOptions};
+use crate::profile::{Field, Profile, Projector};
 use crate::raster::Mask;
 
 /// Fixed-point factor of a full share (f = 1).
@@ -30,9 +40,11 @@ struct Tile {
 }
 
 /// Splits field coverage masks into blended, response-corrected projector masks.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Tiler {
     tiles: Vec<Tile>,
+    /// Per-projector compensation (empty when compensation is off).
+    optics: Vec<JobOptics>,
 }
 
 impl Tiler {
@@ -85,7 +97,153 @@ impl Tiler {
                 }
             })
             .collect();
-        Tiler { tiles }
+        Tiler {
+            tiles,
+            optics: Vec::new(),
+        }
+    }
+
+    /// The tiling stage of a job on a profile with several projectors: blend curve from
+    /// `[blend]`, each projector's response from its calibration (linear without one), and
+    /// per-projector compensation when `opts` (or a calibration, by default zone) asks for
+    /// it. Resolves the exposure in `profile` like [`crate::optics::prepare`].
+    pub fn for_job(
+        profile: &mut Profile,
+        opts: &OpticsOptions,
+        thickness_mm: f64,
+    ) -> Result<Tiler> {
+        let ps = &profile.projector;
+        let n = ps.len();
+        let perr = |msg: String| Error::Profile {
+            origin: profile.name.clone(),
+            msg,
+        };
+        for (i, p) in ps.iter().enumerate() {
+            if ps[..i].iter().any(|q| q.name == p.name) {
+                return Err(perr(format!("two projectors are named {:?}", p.name)));
+            }
+        }
+        let mut responses = Vec::with_capacity(n);
+        for p in ps {
+            responses.push(match &p.calibration {
+                None => Response::linear(),
+                Some(c) => {
+                    let lv = c.response.levels();
+                    let pairs: Vec<(u8, f64)> = lv.gray.iter().copied().zip(lv.s).collect();
+                    Response::from_levels(&pairs).ok_or_else(|| {
+                        perr(format!(
+                            "projector {} calibration: the response has no usable gray levels",
+                            p.name
+                        ))
+                    })?
+                }
+            });
+        }
+        let curve = profile.blend.unwrap_or_default();
+        let mut tiler = Tiler::new(ps, &curve, &responses, &vec![None; n]);
+        let calibrated = ps.iter().filter(|p| p.calibration.is_some()).count();
+        let mode = opts.mode.unwrap_or(if calibrated > 0 {
+            Mode::Zone
+        } else {
+            Mode::Off
+        });
+        if opts.dither == Dither::On && mode == Mode::Off {
+            return Err(Error::Usage(
+                "--dither on needs compensation (zone or pixel)".to_string(),
+            ));
+        }
+        if mode == Mode::Off {
+            return Ok(tiler);
+        }
+        let mut cals = Vec::with_capacity(n);
+        for p in ps {
+            let Some(c) = &p.calibration else {
+                return Err(Error::Usage(format!(
+                    "--compensation {}: projector {} of tiled profile {:?} has no light calibration; every projector needs one (give --calibration {}=FILE) or use --compensation off",
+                    mode.as_str(),
+                    p.name,
+                    profile.name,
+                    p.name
+                )));
+            };
+            if c.units != ps[0].calibration.as_ref().map_or(c.units, |c0| c0.units) {
+                return Err(perr(
+                    "the projectors' calibrations are in different units (relative and mW/cm2)"
+                        .into(),
+                ));
+            }
+            cals.push(c.clone());
+        }
+        let local = |p: &Projector| Field {
+            width_px: p.width_px,
+            height_px: p.height_px,
+            pixel_mm: p.pixel_mm.get(),
+        };
+        let wrap =
+            |p: &Projector, m: String| perr(format!("projector {} calibration: {m}", p.name));
+        // One target for all: the lowest each projector would pick alone.
+        let mut target = f64::INFINITY;
+        for (p, c) in ps.iter().zip(&cals) {
+            let alone =
+                Compensator::new(c, &local(p), mode, opts.dither).map_err(|m| wrap(p, m))?;
+            target = target.min(alone.prediction.target);
+        }
+        let mut comps = Vec::with_capacity(n);
+        for (p, c) in ps.iter().zip(&cals) {
+            comps.push(
+                Compensator::with_target(c, &local(p), mode, opts.dither, Some(target))
+                    .map_err(|m| wrap(p, m))?,
+            );
+        }
+        let units = cals[0].units;
+        let exposure = crate::optics::exposure::resolve(profile, units, target, thickness_mm);
+        tiler.optics = comps
+            .into_iter()
+            .zip(cals)
+            .enumerate()
+            .map(|(k, (compensator, calibration))| JobOptics {
+                compensator,
+                projector: k,
+                calibration,
+                exposure: exposure.clone(),
+            })
+            .collect();
+        Ok(tiler)
+    }
+
+    /// The compensation mode applied ("off" when none).
+    pub fn compensation(&self) -> Mode {
+        self.optics
+            .first()
+            .map_or(Mode::Off, |o| o.compensator.mode())
+    }
+
+    /// After all layers: each projector's gray map into the bundle, the per-projector
+    /// manifest records and the job's warnings.
+    pub fn finish(
+        &self,
+        writer: &crate::bundle::BundleWriter,
+        profile: &Profile,
+        png: impl Fn(&Mask) -> Vec<u8>,
+    ) -> Result<(Vec<crate::bundle::Optics>, Vec<String>)> {
+        // The gray maps are projector-sized: view them without the field offsets.
+        let mut local = profile.clone();
+        for p in &mut local.projector {
+            p.offset_px = [0, 0];
+        }
+        let mut records = Vec::with_capacity(self.optics.len());
+        let mut warnings = Vec::new();
+        for (k, o) in self.optics.iter().enumerate() {
+            let (r, w) = o.finish(writer, &local, &png)?;
+            records.push(r);
+            for w in w {
+                // The exposure warnings are the same for every projector.
+                if k == 0 || !o.exposure.warnings.contains(&w) {
+                    warnings.push(format!("projector {}: {w}", profile.projector[k].name));
+                }
+            }
+        }
+        Ok((records, warnings))
     }
 
     /// Number of projectors.
@@ -100,6 +258,9 @@ impl Tiler {
 
     /// Projector `k`'s gray mask of a field coverage mask.
     pub fn render(&self, k: usize, field: &Mask) -> Mask {
+        if let Some(o) = self.optics.get(k) {
+            return self.render_compensated(k, o, field);
+        }
         let t = &self.tiles[k];
         let (w, h) = (
             (t.rect.x1 - t.rect.x0) as usize,
@@ -141,6 +302,39 @@ impl Tiler {
             if t.mirror_x {
                 dst.reverse();
             }
+        }
+        out
+    }
+
+    /// Compensated path: crop, scale by the share (8-bit), compensate, mirror.
+    fn render_compensated(&self, k: usize, o: &JobOptics, field: &Mask) -> Mask {
+        let t = &self.tiles[k];
+        let (w, h) = (
+            (t.rect.x1 - t.rect.x0) as usize,
+            (t.rect.y1 - t.rect.y0) as usize,
+        );
+        let fw = field.width as usize;
+        let mut out = Mask::zeros(w as u32, h as u32);
+        for r in 0..h {
+            let row0 = (t.rect.y0 as usize + r) * fw + t.rect.x0 as usize;
+            let dst = &mut out.data[r * w..(r + 1) * w];
+            dst.copy_from_slice(&field.data[row0..row0 + w]);
+            if let Some(f) = &t.factor {
+                let (a, b) = (t.spans[r].0 as usize, t.spans[r].1 as usize);
+                for (d, &f) in dst[a..b].iter_mut().zip(&f[r * w + a..r * w + b]) {
+                    *d = ((*d as u32 * f + (FULL >> 1)) / FULL) as u8;
+                }
+            }
+        }
+        o.apply(&mut out);
+        if t.mirror_y {
+            for r in 0..h / 2 {
+                let (top, bottom) = out.data.split_at_mut((h - 1 - r) * w);
+                top[r * w..(r + 1) * w].swap_with_slice(&mut bottom[..w]);
+            }
+        }
+        if t.mirror_x {
+            out.data.chunks_exact_mut(w).for_each(|row| row.reverse());
         }
         out
     }

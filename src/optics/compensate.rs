@@ -248,6 +248,19 @@ impl Compensator {
         mode: Mode,
         dither: Dither,
     ) -> std::result::Result<Compensator, String> {
+        Self::with_target(cal, field, mode, dither, None)
+    }
+
+    /// As [`new`](Self::new), but with the target irradiance E* given (`Some`) instead of
+    /// chosen from this calibration: projectors tiling one field share one E*
+    /// ([`crate::geometry::tile`]).
+    pub fn with_target(
+        cal: &Calibration,
+        field: &Field,
+        mode: Mode,
+        dither: Dither,
+        forced_target: Option<f64>,
+    ) -> std::result::Result<Compensator, String> {
         assert!(mode != Mode::Off, "no compensator for mode off");
         let (w, h) = (field.width_px as usize, field.height_px as usize);
         let p = field.pixel_mm;
@@ -397,10 +410,10 @@ impl Compensator {
                     ));
                 }
                 let emax = pmin * s_max;
-                let target = if dither == Dither::On {
-                    emax
-                } else {
-                    best_window(lv, &zone_p, &zone_inside, emax)
+                let target = match forced_target {
+                    Some(t) => t,
+                    None if dither == Dither::On => emax,
+                    None => best_window(lv, &zone_p, &zone_inside, emax),
                 };
                 let mut mixed = 0u64;
                 let mut unreachable = 0;
@@ -477,7 +490,7 @@ impl Compensator {
                 let pmin = inside_iter()
                     .map(|i| pp[i] as f64)
                     .fold(f64::INFINITY, f64::min);
-                let target = pmin * s_max;
+                let target = forced_target.unwrap_or(pmin * s_max);
                 let mut unreachable = 0;
                 let mut full = vec![0u8; w * h];
                 let mut full_idx = vec![0u16; w * h];

@@ -196,6 +196,8 @@ fn squares_land_within_0_05_mm_through_held_out_distortions() {
                 "slice",
                 "sq.stl",
                 "--keep-position",
+                "--compensation",
+                "off",
                 "--distortion",
                 &table,
                 "-q",
@@ -220,7 +222,16 @@ fn squares_land_within_0_05_mm_through_held_out_distortions() {
         let raw = format!("r{n}.dmdjob");
         let job = slice(
             &dir,
-            &["slice", "sq.stl", "--keep-position", "-q", "-o", &raw],
+            &[
+                "slice",
+                "sq.stl",
+                "--keep-position",
+                "--compensation",
+                "off",
+                "-q",
+                "-o",
+                &raw,
+            ],
         );
         let errs = landing_errors(&layer0(&dir, &raw, &job), lens, &cs);
         let max = errs.iter().cloned().fold(0.0, f64::max);
@@ -563,6 +574,200 @@ fn distortion_command_reports_fit_reach_and_plots() {
     assert_eq!(o.status.code(), Some(2));
     assert!(
         stderr(&o).contains("profiles with 2 projectors cannot use one"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// A `[projector.calibration]` block: field P = scale·(1 + gx·u + gy·v) over the projector's
+/// own 65 × 48.75 mm (u, v in cm), response a table through (pixel value, S) points.
+fn calibration_block(gx: f64, gy: f64, points: &str) -> String {
+    format!(
+        "[projector.calibration]
+source = \"test\"
+units = \"relative\"
+zone_mm = 5.0
+[projector.calibration.field]
+origin_mm = [0.0, 0.0]
+length_unit_mm = 10.0
+scale = 1.0
+coefficients = {{ c = 1.0, x = {gx}, y = {gy} }}
+area_mm = [0.0, 0.0, 65.0, 48.75]
+extrapolate_mm = 0.0
+[projector.calibration.response]
+kind = \"table\"
+interpolation = \"pchip\"
+points = [{points}]
+"
+    )
+}
+
+/// A gamma-like (≈ 2.2) response.
+const GAMMA: &str = "[0.0, 0.0], [64.0, 0.048], [128.0, 0.22], [192.0, 0.535], [255.0, 1.0]";
+
+/// `tiled-2x1` with a calibration block after each projector.
+fn calibrated_tiled(dir: &Path, name: &str, blocks: [String; 2]) -> dmdsl::profile::Profile {
+    let src = stdout(&run_in(dir, &["profile", "show", "tiled-2x1"]));
+    let mut parts: Vec<String> = src.split("\n[[projector]]\n").map(String::from).collect();
+    assert_eq!(parts.len(), 3);
+    // parts[1] is p0's keys; parts[2] p1's keys and everything after: insert the block
+    // right after each projector's keys (before the next table header).
+    let cut = parts[2].find("\n[").unwrap() + 1;
+    parts[2].insert_str(cut, &blocks[1]);
+    parts[1].push_str(&blocks[0]);
+    let text = parts.join("\n[[projector]]\n");
+    std::fs::write(dir.join(name), &text).unwrap();
+    dmdsl::profile::Profile::resolve(dir.join(name).to_str().unwrap()).unwrap()
+}
+
+#[test]
+fn tiled_blend_goes_through_a_nonlinear_response() {
+    let dir = tempdir("geom-gamma");
+    let blk = calibration_block(0.0, 0.0, GAMMA);
+    let prof = calibrated_tiled(&dir, "g.toml", [blk.clone(), blk]);
+    let s = prof.projector[0]
+        .calibration
+        .as_ref()
+        .unwrap()
+        .response
+        .curve();
+    write_stl(
+        &dir.join("plate.stl"),
+        &box_tris([50.0, 10.0, 0.0], [80.0, 30.0, 0.12]),
+    );
+    let job = slice(
+        &dir,
+        &[
+            "slice",
+            "plate.stl",
+            "--keep-position",
+            "--profile",
+            "g.toml",
+            "--compensation",
+            "off",
+            "-q",
+            "-o",
+            "g.dmdjob",
+        ],
+    );
+    assert_eq!(job["settings"]["compensation"], "off");
+    let m = &job["layers"][0]["masks"];
+    let a = read_gray(&dir.join("g.dmdjob").join(m[0]["file"].as_str().unwrap())).2;
+    let b = read_gray(&dir.join("g.dmdjob").join(m[1]["file"].as_str().unwrap())).2;
+    let (mut worst, mut gray_sum_max) = (0.0f64, 0);
+    for r in PLATE_ROWS {
+        for c in 992..1024 {
+            let (va, vb) = at(&a, &b, r, c);
+            let e = s.eval(va as f64) + s.eval(vb as f64);
+            worst = worst.max((e - 1.0).abs());
+            gray_sum_max = gray_sum_max.max(va + vb);
+        }
+        assert_eq!(at(&a, &b, r, 900), (255, 0));
+        assert_eq!(at(&a, &b, r, 1100), (0, 255));
+    }
+    // The shares sum to one in irradiance (within the 8-bit steps of the response) ...
+    assert!(worst < 0.02, "irradiance sum off by {worst}");
+    // ... which takes gray sums far above 255 ...
+    assert!(gray_sum_max > 330, "{gray_sum_max}");
+    // ... while halving the gray (seeds/003 scheme B) would give under half the dose.
+    let half = 2.0 * s.eval(128.0);
+    assert!(half < 0.5, "{half}");
+}
+
+#[test]
+fn tiled_compensation_per_projector_flattens_across_the_seam() {
+    let dir = tempdir("geom-comp");
+    // Two projectors with different fields and responses.
+    let prof = calibrated_tiled(
+        &dir,
+        "c.toml",
+        [
+            calibration_block(0.03, -0.02, GAMMA),
+            calibration_block(-0.04, 0.03, "[0.0, 0.0], [255.0, 1.3]"),
+        ],
+    );
+    let cals: Vec<_> = prof
+        .projector
+        .iter()
+        .map(|p| p.calibration.clone().unwrap())
+        .collect();
+    write_stl(
+        &dir.join("plate.stl"),
+        &box_tris([50.0, 10.0, 0.0], [80.0, 30.0, 0.12]),
+    );
+    for (mode, tol) in [("pixel", 0.012), ("zone", 0.03)] {
+        let out = format!("{mode}.dmdjob");
+        let job = slice(
+            &dir,
+            &[
+                "slice",
+                "plate.stl",
+                "--keep-position",
+                "--profile",
+                "c.toml",
+                "--compensation",
+                mode,
+                "--dither",
+                "off",
+                "-q",
+                "-o",
+                &out,
+            ],
+        );
+        assert_eq!(job["settings"]["compensation"], mode);
+        let po = job["projector_optics"].as_array().unwrap();
+        assert_eq!(po.len(), 2);
+        let target = po[0]["target_irradiance"].as_f64().unwrap();
+        assert_eq!(po[1]["target_irradiance"].as_f64().unwrap(), target);
+        for (k, o) in po.iter().enumerate() {
+            assert_eq!(o["projector"], k);
+            let f = o["gray_map"].as_str().unwrap();
+            assert_eq!(f, format!("optics/p{k}-gray-map.png"));
+            assert_eq!(read_gray(&dir.join(&out).join(f)).0, 1024);
+        }
+        let m = &job["layers"][0]["masks"];
+        let a = read_gray(&dir.join(&out).join(m[0]["file"].as_str().unwrap())).2;
+        let b = read_gray(&dir.join(&out).join(m[1]["file"].as_str().unwrap())).2;
+        // Predicted irradiance P_k(x, y)·S_k(g_k), summed over the projectors, in units of
+        // the common target: flat over the plate, seam included.
+        let curves: Vec<_> = cals.iter().map(|c| c.response.curve()).collect();
+        let mut worst = 0.0f64;
+        for r in PLATE_ROWS.step_by(7) {
+            let y = H - (r as f64 + 0.5) * P;
+            for c in PLATE_COLS {
+                let (va, vb) = at(&a, &b, r, c);
+                let mut e = 0.0;
+                if c < 1024 {
+                    let x = (c as f64 + 0.5) * P;
+                    e += cals[0].field.eval(x, y) * curves[0].eval(va as f64);
+                }
+                if c >= 992 {
+                    let x = (c as f64 - 992.0 + 0.5) * P;
+                    e += cals[1].field.eval(x, y) * curves[1].eval(vb as f64);
+                }
+                worst = worst.max((e / target - 1.0).abs());
+            }
+        }
+        eprintln!("{mode}: largest deviation from the common target {worst:.4}");
+        assert!(worst < tol, "{mode}: off by {worst}");
+    }
+    // Compensation needs every projector calibrated.
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "plate.stl",
+            "--profile",
+            "tiled-2x1",
+            "--compensation",
+            "zone",
+            "-o",
+            "x.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("projector p0 of tiled profile \"tiled-2x1\" has no light calibration"),
         "{}",
         stderr(&o)
     );
