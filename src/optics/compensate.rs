@@ -288,7 +288,10 @@ impl Compensator {
             let direct = fm.eval((c as f64 + 0.5) * p, (h as f64 - r as f64 - 0.5) * p);
             ((pp[r * w + c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
         });
-        let inside_iter = || (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * w + c));
+        // Pixels of the calibrated area, row by row (a plain nested loop: this runs over
+        // most of the field several times per job).
+        let inside_rows_iter = || (r0..=r1).map(move |r| r * w + c0..r * w + c1 + 1);
+        let inside_iter = || inside_rows_iter().flatten();
         let mean = inside_iter().map(|i| pp[i] as f64).sum::<f64>() / pixels_inside as f64 * s_max;
 
         // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
@@ -446,12 +449,19 @@ impl Compensator {
                     .map(|&(g0, g1, k)| if k >= 32 { g1 } else { g0 })
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
-                let after_pixel = spread(inside_iter().map(|i| {
-                    let (r, c) = (i / w, i % w);
-                    let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
-                    let (g0, g1, k) = mix[z];
-                    let g = if upper_row(r, k) { g1 } else { g0 };
-                    pp[i] as f64 * s_of(g)
+                // Per-pixel prediction: each row of a zone shows one gray.
+                let zone_of_col = &comp.zone_of_col;
+                let zone_of_row = &comp.zone_of_row;
+                let pp = &pp;
+                let after_pixel = spread((r0..=r1).flat_map(|r| {
+                    let zr = zone_of_row[r] as usize * zcols;
+                    let row_s: Vec<f64> = (0..zcols)
+                        .map(|zc| {
+                            let (g0, g1, k) = mix[zr + zc];
+                            s_of(if upper_row(r, k) { g1 } else { g0 })
+                        })
+                        .collect();
+                    (c0..=c1).map(move |c| pp[r * w + c] as f64 * row_s[zone_of_col[c] as usize])
                 }));
                 comp.luts_upper = luts
                     .iter()
