@@ -99,14 +99,14 @@ fn upper_row(r: usize, k: u8) -> bool {
     (((r & 63) as u8).reverse_bits() >> 2) < k
 }
 
-/// The zone-mode target: among targets within 15 % of `emax` (the highest every inside
-/// zone can reach), the centre of the narrowest irradiance window that holds one
+/// The zone-mode target: among targets within 3 % of `emax` (the highest every inside
+/// zone can reach; about one gray step), the centre of the narrowest irradiance window that holds one
 /// achievable full-coverage value P̄·S(level) of every inside zone. One gray per zone
 /// cannot do better than that window's width; nearest rounding to `emax` alone can be
 /// up to one gray step worse. Falls back to `emax`.
 fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     let zones: Vec<usize> = (0..zone_p.len()).filter(|&z| inside[z]).collect();
-    let (lo_b, hi_b) = (emax * 0.85, emax * 1.15);
+    let (lo_b, hi_b) = (emax * 0.97, emax * 1.03);
     let mut pairs: Vec<(f64, usize)> = Vec::new();
     for (k, &z) in zones.iter().enumerate() {
         for &s in &lv.s {
