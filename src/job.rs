@@ -458,7 +458,7 @@ fn layer_masks(
     }
     if let Some(o) = optics {
         // Coverage → gray through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
-        o.apply(&mut field_mask);
+        o.apply(&mut field_mask, scratch.lit_box());
     }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {

@@ -57,9 +57,16 @@ impl Mask {
 pub struct Scratch {
     acc: Vec<f32>,
     spare: Vec<Vec<u8>>,
+    lit: [usize; 4],
 }
 
 impl Scratch {
+    /// [r0, r1, c0, c1]: the last [`Rasterizer::coverage`] mask is zero outside rows r0..r1
+    /// and columns c0..c1 (lets later passes skip the empty part of the field).
+    pub fn lit_box(&self) -> [usize; 4] {
+        self.lit
+    }
+
     /// Hands a mask's memory back for reuse by the next [`Rasterizer::coverage`] call
     /// (saves a fresh, page-faulting allocation per layer).
     pub fn recycle(&mut self, m: Mask) {
@@ -107,6 +114,7 @@ impl Rasterizer {
             height: h as u32,
             data: scratch.zeroed(w * h),
         };
+        scratch.lit = [0; 4];
         if contours.is_empty() {
             return out;
         }
@@ -133,6 +141,7 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
+        scratch.lit = [r0, r1, c0, c1.min(w)];
         let mut max_winding = 0.0f32;
         for r in r0..r1 {
             let row = &mut acc[r * stride..(r + 1) * stride];

@@ -290,29 +290,7 @@ mod tests {
     }
 
     fn clean() -> Manifest {
-        manifest(
-            profile(),
-            vec![
-                layer(
-                    0,
-                    0.5,
-                    0.5,
-                    Mode::Layered,
-                    16.0,
-                    recoat_steps(0.5, 10.0, 16.0),
-                    33.91,
-                ),
-                layer(
-                    1,
-                    1.0,
-                    0.5,
-                    Mode::Layered,
-                    8.0,
-                    recoat_steps(1.0, 10.0, 8.0),
-                    25.91,
-                ),
-            ],
-        )
+        two_layer_topdown()
     }
 
     #[test]

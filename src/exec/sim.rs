@@ -958,29 +958,7 @@ mod tests {
 
     /// Two top-down layers, 0.5 mm: (dip, return, wait 10, expose 16 / 8).
     fn layered() -> crate::bundle::Manifest {
-        manifest(
-            profile(),
-            vec![
-                layer(
-                    0,
-                    0.5,
-                    0.5,
-                    Mode::Layered,
-                    16.0,
-                    recoat_steps(0.5, 10.0, 16.0),
-                    33.91,
-                ),
-                layer(
-                    1,
-                    1.0,
-                    0.5,
-                    Mode::Layered,
-                    8.0,
-                    recoat_steps(1.0, 10.0, 8.0),
-                    25.91,
-                ),
-            ],
-        )
+        two_layer_topdown()
     }
 
     fn sim(m: &crate::bundle::Manifest, faults: &[FaultSpec]) -> (Outcome, Collect) {

@@ -113,3 +113,30 @@ pub fn recoat_steps(z: f64, wait_s: f64, expose_s: f64) -> Vec<Step> {
         Step::Expose { s: expose_s },
     ]
 }
+
+/// Two top-down layers of 0.5 mm: dip, return, wait 10 s, expose 16 s then 8 s.
+pub fn two_layer_topdown() -> Manifest {
+    manifest(
+        profile(),
+        vec![
+            layer(
+                0,
+                0.5,
+                0.5,
+                Mode::Layered,
+                16.0,
+                recoat_steps(0.5, 10.0, 16.0),
+                33.91,
+            ),
+            layer(
+                1,
+                1.0,
+                0.5,
+                Mode::Layered,
+                8.0,
+                recoat_steps(1.0, 10.0, 8.0),
+                25.91,
+            ),
+        ],
+    )
+}

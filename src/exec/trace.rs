@@ -148,35 +148,12 @@ impl Sink for TraceWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bundle::Mode;
     use crate::exec::sim::simulate;
     use crate::exec::testutil::*;
 
     #[test]
     fn trace_rows_follow_the_timeline() {
-        let m = manifest(
-            profile(),
-            vec![
-                layer(
-                    0,
-                    0.5,
-                    0.5,
-                    Mode::Layered,
-                    16.0,
-                    recoat_steps(0.5, 10.0, 16.0),
-                    33.91,
-                ),
-                layer(
-                    1,
-                    1.0,
-                    0.5,
-                    Mode::Layered,
-                    8.0,
-                    recoat_steps(1.0, 10.0, 8.0),
-                    25.91,
-                ),
-            ],
-        );
+        let m = two_layer_topdown();
         let dir = std::env::temp_dir().join(format!("dmdsl-trace-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();

@@ -569,7 +569,8 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
 
     // Model: forced degree (polynomial form), or among the polynomial (degrees 3..) and
     // exponential (degrees 2..) candidates the one with the fewest terms whose
-    // cross-validated error is within 2 % of the best (the cubic first on ties).
+    // cross-validated error is within one standard error of the best (the polynomial
+    // first on ties).
     let k = used_pos.len().min(10);
     let mut cv: Vec<(u64, f64)> = Vec::new();
     let mut cv_exp: Vec<(u64, f64)> = Vec::new();
@@ -594,10 +595,13 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
                 }
             }
             cands.sort_by_key(|c| (c.0, c.1));
+            // One-standard-error rule: an RMS over n held-out readings is uncertain by
+            // about 1/sqrt(2n) of itself; prefer the simplest model within that of the best.
             let best = cands.iter().map(|c| c.4).fold(f64::INFINITY, f64::min);
+            let tol = (0.5 / rows_of(0, lo).len() as f64).sqrt().max(0.02);
             cands
                 .iter()
-                .find(|c| c.4 <= best * 1.02)
+                .find(|c| c.4 <= best * (1.0 + tol))
                 .map_or((Form::Polynomial, 3), |c| (c.2, c.3))
         }
     };

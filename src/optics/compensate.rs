@@ -33,6 +33,8 @@ pub struct Compensator {
     // Zone mode.
     zcols: usize,
     zone_of_col: Vec<u16>,
+    /// Exclusive end column of each zone column.
+    zone_col_end: Vec<usize>,
     zone_of_row: Vec<u16>,
     luts: Vec<[u8; 256]>,
     /// Zone mode: (lower gray, upper gray, count of 64) per zone; rows chosen by
@@ -97,14 +99,14 @@ fn upper_row(r: usize, k: u8) -> bool {
     (((r & 63) as u8).reverse_bits() >> 2) < k
 }
 
-/// The zone-mode target: among targets within 15 % of `emax` (the highest every inside
-/// zone can reach), the centre of the narrowest irradiance window that holds one
+/// The zone-mode target: among targets within 3 % of `emax` (the highest every inside
+/// zone can reach; about one gray step), the centre of the narrowest irradiance window that holds one
 /// achievable full-coverage value P̄·S(level) of every inside zone. One gray per zone
 /// cannot do better than that window's width; nearest rounding to `emax` alone can be
 /// up to one gray step worse. Falls back to `emax`.
 fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     let zones: Vec<usize> = (0..zone_p.len()).filter(|&z| inside[z]).collect();
-    let (lo_b, hi_b) = (emax * 0.85, emax * 1.15);
+    let (lo_b, hi_b) = (emax * 0.97, emax * 1.03);
     let mut pairs: Vec<(f64, usize)> = Vec::new();
     for (k, &z) in zones.iter().enumerate() {
         for &s in &lv.s {
@@ -146,36 +148,34 @@ thread_local! {
     static EDGES: std::cell::RefCell<Vec<(usize, u8)>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// First and last index of a nonzero byte in `row`, scanning eight bytes at a time.
+/// First and last index of a nonzero byte in `row`, testing 32 bytes at a time (an OR
+/// reduction the compiler vectorizes).
 fn lit_span(row: &[u8]) -> Option<(usize, usize)> {
+    const K: usize = 32;
+    let any = |c: &[u8]| c.iter().fold(0u8, |acc, &v| acc | v) != 0;
     let n = row.len();
-    let n8 = n / 8 * 8;
-    let word = |i: usize| u64::from_ne_bytes(row[i..i + 8].try_into().expect("8 bytes"));
-    let mut a = 0;
-    while a < n8 && word(a) == 0 {
-        a += 8;
-    }
-    while a < n && row[a] == 0 {
-        a += 1;
-    }
-    if a == n {
-        return None;
-    }
-    // Exclusive end: the tail bytes, then whole words, then bytes (a lit byte at `a`
-    // stops every loop).
-    let mut b = n;
-    while b > n8 && row[b - 1] == 0 {
-        b -= 1;
-    }
-    if b == n8 {
-        while b >= 8 && word(b - 8) == 0 {
-            b -= 8;
+    let nk = n / K;
+    let a = match (0..nk).find(|&i| any(&row[i * K..(i + 1) * K])) {
+        Some(i) => i * K,
+        None => nk * K,
+    };
+    let a = a + row[a..].iter().position(|&v| v != 0)?;
+    let tail = &row[nk * K..];
+    let b = match tail.iter().rposition(|&v| v != 0) {
+        Some(t) => nk * K + t,
+        None => {
+            let i = (0..nk)
+                .rev()
+                .find(|&i| any(&row[i * K..(i + 1) * K]))
+                .expect("a lit byte exists");
+            i * K
+                + row[i * K..(i + 1) * K]
+                    .iter()
+                    .rposition(|&v| v != 0)
+                    .expect("lit")
         }
-    }
-    while row[b - 1] == 0 {
-        b -= 1;
-    }
-    Some((a, b - 1))
+    };
+    Some((a, b))
 }
 
 fn spread(v: impl Iterator<Item = f64>) -> f64 {
@@ -301,7 +301,10 @@ impl Compensator {
             let direct = fm.eval((c as f64 + 0.5) * p, (h as f64 - r as f64 - 0.5) * p);
             ((pp[r * w + c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
         });
-        let inside_iter = || (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * w + c));
+        // Pixels of the calibrated area, row by row (a plain nested loop: this runs over
+        // most of the field several times per job).
+        let inside_rows_iter = || (r0..=r1).map(move |r| r * w + c0..r * w + c1 + 1);
+        let inside_iter = || inside_rows_iter().flatten();
         let mean = inside_iter().map(|i| pp[i] as f64).sum::<f64>() / pixels_inside as f64 * s_max;
 
         // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
@@ -360,6 +363,9 @@ impl Compensator {
             h,
             levels,
             zcols,
+            zone_col_end: (0..zcols)
+                .map(|zc| zone_of_col.partition_point(|&z| (z as usize) <= zc))
+                .collect(),
             zone_of_col,
             zone_of_row,
             luts: Vec::new(),
@@ -456,12 +462,19 @@ impl Compensator {
                     .map(|&(g0, g1, k)| if k >= 32 { g1 } else { g0 })
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
-                let after_pixel = spread(inside_iter().map(|i| {
-                    let (r, c) = (i / w, i % w);
-                    let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
-                    let (g0, g1, k) = mix[z];
-                    let g = if upper_row(r, k) { g1 } else { g0 };
-                    pp[i] as f64 * s_of(g)
+                // Per-pixel prediction: each row of a zone shows one gray.
+                let zone_of_col = &comp.zone_of_col;
+                let zone_of_row = &comp.zone_of_row;
+                let pp = &pp;
+                let after_pixel = spread((r0..=r1).flat_map(|r| {
+                    let zr = zone_of_row[r] as usize * zcols;
+                    let row_s: Vec<f64> = (0..zcols)
+                        .map(|zc| {
+                            let (g0, g1, k) = mix[zr + zc];
+                            s_of(if upper_row(r, k) { g1 } else { g0 })
+                        })
+                        .collect();
+                    (c0..=c1).map(move |c| pp[r * w + c] as f64 * row_s[zone_of_col[c] as usize])
                 }));
                 comp.luts_upper = luts
                     .iter()
@@ -564,22 +577,31 @@ impl Compensator {
     /// Only the span from the first to the last lit pixel of each row is touched (found
     /// eight bytes at a time).
     pub fn apply(&self, m: &mut Mask) {
+        self.apply_in(m, [0, self.h, 0, self.w]);
+    }
+
+    /// [`apply`](Self::apply) for a mask known to be zero outside rows r0..r1 and columns
+    /// c0..c1 (`lit_box` = [r0, r1, c0, c1], e.g. [`crate::raster::Scratch::lit_box`]).
+    pub fn apply_in(&self, m: &mut Mask, lit_box: [usize; 4]) {
         assert_eq!(
             (m.width as usize, m.height as usize),
             (self.w, self.h),
             "mask size differs from the field"
         );
         let w = self.w;
+        let [br0, br1, bc0, bc1] = lit_box;
+        let (br1, bc1) = (br1.min(self.h), bc1.min(w));
         let [ir0, ir1] = self.inside_rows;
         let [ic0, ic1] = self.inside_cols;
         let mut outside = false;
         let mut first_lit = None;
         let mut last_lit = 0;
-        for r in 0..self.h {
-            let row = &m.data[r * w..(r + 1) * w];
+        for r in br0..br1 {
+            let row = &m.data[r * w + bc0.min(bc1)..r * w + bc1];
             let Some((a, b)) = lit_span(row) else {
                 continue;
             };
+            let (a, b) = (a + bc0, b + bc0);
             first_lit.get_or_insert(r);
             last_lit = r;
             outside |= r < ir0 || r >= ir1 || a < ic0 || b >= ic1;
@@ -598,7 +620,7 @@ impl Compensator {
         }
     }
 
-    /// Zone mode, row `r`, columns [a, b): one table lookup per pixel (0 stays 0).
+    /// Zone mode, row `r`, columns [a, b): a table lookup per edge pixel (0 stays 0).
     fn zone_row(&self, m: &mut Mask, r: usize, a: usize, b: usize) {
         let w = self.w;
         let zr = self.zone_of_row[r] as usize * self.zcols;
@@ -606,19 +628,28 @@ impl Compensator {
         let mut c = a;
         while c < b {
             let zc = self.zone_of_col[c];
-            let mut e = c + 1;
-            while e < b && self.zone_of_col[e] == zc {
-                e += 1;
-            }
+            let e = self.zone_col_end[zc as usize].min(b);
             let z = zr + zc as usize;
             let lut = if upper_row(r, self.mix[z].2) {
                 &self.luts_upper[z]
             } else {
                 &self.luts[z]
             };
-            for v in &mut row[c..e] {
-                *v = lut[*v as usize];
+            // Eight pixels at a time: all-off words stay, all-on words take the full gray,
+            // others go through the table pixel by pixel.
+            let full = lut[255];
+            let mut i = c;
+            while i + 8 <= e {
+                let chunk = &mut row[i..i + 8];
+                let word = u64::from_ne_bytes((&*chunk).try_into().expect("8 bytes"));
+                if word == u64::MAX {
+                    chunk.copy_from_slice(&[full; 8]);
+                } else if word != 0 {
+                    chunk.iter_mut().for_each(|v| *v = lut[*v as usize]);
+                }
+                i += 8;
             }
+            row[i..e].iter_mut().for_each(|v| *v = lut[*v as usize]);
             c = e;
         }
     }
