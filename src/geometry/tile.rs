@@ -326,7 +326,7 @@ impl Tiler {
                 }
             }
         }
-        o.apply(&mut out);
+        o.compensator.apply(&mut out);
         if t.mirror_y {
             for r in 0..h / 2 {
                 let (top, bottom) = out.data.split_at_mut((h - 1 - r) * w);
