@@ -11,7 +11,7 @@ use crate::bundle::{
 };
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh, MeshReport};
-use crate::plan::{self, LayerInfo};
+use crate::plan::{self, LayerAnalysis, LayerInfo};
 use crate::profile::Profile;
 use crate::raster::{projector_view, Mask, Rasterizer, Scratch};
 use crate::slice::{self, Section};
@@ -60,6 +60,9 @@ pub struct Timings {
     pub slice_s: f64,
     /// Rasterizing, encoding, hashing and writing masks.
     pub masks_s: f64,
+    /// Layer analysis (max fill distance, islands), summed over the worker threads (CPU
+    /// time, part of `masks_s`'s wall time).
+    pub analysis_cpu_s: f64,
     /// Planning and writing the manifest.
     pub finish_s: f64,
     /// Everything.
@@ -156,6 +159,8 @@ pub fn encode_png(m: &Mask) -> Vec<u8> {
 
 struct LayerOut {
     area_mm2: f64,
+    analysis: LayerAnalysis,
+    analysis_s: f64,
     masks: Vec<MaskRef>,
 }
 
@@ -229,6 +234,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         .into_par_iter()
         .map_init(Scratch::default, |scratch, b| {
             let mut outs = Vec::with_capacity(block);
+            let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
             for i in b * block..((b + 1) * block).min(n) {
                 if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                     return Err(Error::Interrupted);
@@ -239,6 +245,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                     &raster,
                     scratch,
                     &sections[i],
+                    i.checked_sub(1).map(|j| &sections[j]),
+                    &mut analyser,
                     i,
                     binary,
                     tiled,
@@ -260,6 +268,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let t_masks = t2.elapsed().as_secs_f64();
 
     let t3 = Instant::now();
+    let analysis_cpu_s = outs.iter().map(|o| o.analysis_s).sum();
     let infos: Vec<LayerInfo> = outs
         .iter()
         .enumerate()
@@ -268,9 +277,16 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             z_mm: (i + 1) as f64 * h,
             thickness_mm: h,
             area_mm2: o.area_mm2,
+            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
+            islands: o.analysis.islands,
         })
         .collect();
-    let plans = plan::plan(&profile, &infos);
+    let plan = plan::plan(&profile, &infos).map_err(|msg| Error::Job {
+        path: path.into(),
+        msg,
+    })?;
+    warnings.extend(plan.warnings.iter().cloned());
+    let hybrid = profile.process == crate::profile::Process::Hybrid;
     let mut layers = Vec::with_capacity(n);
     let mut totals = Totals {
         layers: n as u64,
@@ -278,8 +294,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         print_time_s: 0.0,
         exposure_s: 0.0,
         resin_volume_ml: 0.0,
+        continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
+        all_layered_time_s: plan.all_layered_time_s,
     };
-    for ((info, o), p) in infos.iter().zip(outs).zip(plans) {
+    for ((info, o), p) in infos.iter().zip(outs).zip(plan.layers) {
         totals.print_time_s += p.time_s;
         totals.exposure_s += p.exposure_s;
         totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
@@ -291,6 +309,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             mode: p.mode,
             exposure_s: p.exposure_s,
             area_mm2: o.area_mm2,
+            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
+            islands: o.analysis.islands,
+            bbox_mm: o.analysis.bbox_mm,
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
@@ -343,6 +364,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             load_s: t_load,
             slice_s: t_slice,
             masks_s: t_masks,
+            analysis_cpu_s,
             finish_s: t_finish,
             total_s: t0.elapsed().as_secs_f64(),
         },
@@ -356,6 +378,8 @@ fn layer_masks(
     raster: &Rasterizer,
     scratch: &mut Scratch,
     section: &Section,
+    below: Option<&Section>,
+    analyser: &mut plan::analysis::Analyser,
     i: usize,
     binary: bool,
     tiled: bool,
@@ -384,5 +408,13 @@ fn layer_masks(
             projector: k as u32,
         });
     }
-    Ok(LayerOut { area_mm2, masks })
+    let ta = Instant::now();
+    let analysis = analyser.analyse(i, &section.contours, below.map(|b| b.contours.as_slice()));
+    let analysis_s = ta.elapsed().as_secs_f64();
+    Ok(LayerOut {
+        area_mm2,
+        analysis,
+        analysis_s,
+        masks,
+    })
 }

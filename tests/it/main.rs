@@ -2,4 +2,5 @@
 //! files it writes. Each module covers one command.
 
 mod common;
+mod plan;
 mod slice;
