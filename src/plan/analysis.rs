@@ -1,29 +1,37 @@
 //! Per-layer analysis: the largest fill distance (seeds/001's DisMax-Min), unsupported
 //! islands and the bounding box, computed from the exact section contours (mm), not from
-//! the pixels.
+//! the pixels (a pixel is 0.063 mm; the fill distance must be right to ±0.02 mm).
 //!
 //! * **Max fill distance** = the radius of the largest circle inside the section = the
 //!   largest, over all points inside, of the distance to the nearest boundary point. It is
 //!   found with a best-first subdivision of the section's bounding box ("pole of
-//!   inaccessibility"): every cell is scored by the exact signed distance of its centre to
-//!   the contour edges (a bounding-volume hierarchy over the edges for the distance, a
-//!   band index for the nonzero-winding inside test), and a cell of half-size `h` cannot
-//!   hold a point deeper than `d + h·√2`, so cells that cannot beat the best centre by
-//!   more than [`PRECISION_MM`] are dropped. The result is a true inscribed radius
-//!   (a lower bound) and within [`PRECISION_MM`] of the exact value.
+//!   inaccessibility", see [`max_fill_distance_with`]): every cell is scored by the exact
+//!   signed distance of its centre to the contour edges (a bounding-volume hierarchy over
+//!   the edges for the distance, a band index for the nonzero-winding inside test), and
+//!   cells whose upper bound cannot beat the best centre by more than [`PRECISION_MM`] are
+//!   dropped. The result is a true inscribed radius, never more than the exact value and
+//!   never less by more than [`PRECISION_MM`]; a final local polish usually brings it
+//!   much closer (in the unit tests: within 0.001 mm on squares, rectangles, regular
+//!   polygons and an L-shape).
 //! * **Islands** = connected regions of the layer that do not overlap the layer below
 //!   (they would print onto nothing). Both layers are scanned exactly at the centres of
 //!   the pixel rows (nonzero winding), regions are the connected runs across rows, and a
 //!   region is supported when one of its runs overlaps a run of the layer below. Layer 0
-//!   rests on the platform: it has no islands.
+//!   rests on the platform: it has no islands. Features thinner than a pixel row can be
+//!   missed.
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
+//!
+//! Overlapping shells (sections filled by the nonzero rule) are not merged first: an edge
+//! of one shell lying inside another still counts as boundary, so the max fill distance of
+//! such a section is a lower bound.
 
 use crate::slice::Contour;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-/// Accuracy of [`max_fill_distance`], mm (the issue asks for ±0.02 mm).
-pub const PRECISION_MM: f64 = 0.005;
+/// Guaranteed accuracy of [`max_fill_distance`], mm (the issue asks for ±0.02 mm): the
+/// result lies in `[exact − PRECISION_MM, exact]`.
+pub const PRECISION_MM: f64 = 0.02;
 
 /// What the planner learns from one layer's section.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -129,6 +137,13 @@ const LEAF: usize = 4;
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
     segs: Vec<Seg>,
+    /// For each edge (same order as `segs`): index of its start point in `verts` and of
+    /// its contour in `contours`.
+    seg_at: Vec<(u32, u32)>,
+    /// All contour points, contour after contour.
+    verts: Vec<[f64; 2]>,
+    /// `(first point, number of points)` of each contour in `verts`.
+    contours: Vec<(u32, u32)>,
     nodes: Vec<Node>,
     band_y0: f64,
     band_inv: f64,
@@ -156,12 +171,12 @@ fn box_d2(p: [f64; 2], n: &Node) -> f64 {
     dx * dx + dy * dy
 }
 
-fn build(nodes: &mut Vec<Node>, segs: &mut [Seg], offset: usize, ni: usize) {
+fn build(nodes: &mut Vec<Node>, segs: &mut [(Seg, (u32, u32))], offset: usize, ni: usize) {
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
     let mut clo = [f64::INFINITY; 2];
     let mut chi = [f64::NEG_INFINITY; 2];
-    for s in segs.iter() {
+    for (s, _) in segs.iter() {
         for k in 0..2 {
             lo[k] = lo[k].min(s[k]).min(s[k + 2]);
             hi[k] = hi[k].max(s[k]).max(s[k + 2]);
@@ -183,7 +198,7 @@ fn build(nodes: &mut Vec<Node>, segs: &mut [Seg], offset: usize, ni: usize) {
         1
     };
     let mid = segs.len() / 2;
-    segs.select_nth_unstable_by(mid, |a, b| {
+    segs.select_nth_unstable_by(mid, |(a, _), (b, _)| {
         (a[axis] + a[axis + 2]).total_cmp(&(b[axis] + b[axis + 2]))
     });
     let l = nodes.len();
@@ -199,21 +214,28 @@ fn build(nodes: &mut Vec<Node>, segs: &mut [Seg], offset: usize, ni: usize) {
 impl Edges {
     /// Indexes the edges of closed `contours` (zero-length edges are skipped).
     pub fn new(contours: &[Contour]) -> Edges {
-        let mut segs: Vec<Seg> = Vec::with_capacity(contours.iter().map(|c| c.len()).sum());
-        for c in contours {
+        let total: usize = contours.iter().map(|c| c.len()).sum();
+        let mut tagged: Vec<(Seg, (u32, u32))> = Vec::with_capacity(total);
+        let mut verts = Vec::with_capacity(total);
+        let mut ranges = Vec::with_capacity(contours.len());
+        for (ci, c) in contours.iter().enumerate() {
+            let first = verts.len();
+            verts.extend_from_slice(c);
+            ranges.push((first as u32, c.len() as u32));
             for i in 0..c.len() {
                 let a = c[i];
                 let b = c[(i + 1) % c.len()];
                 if a != b {
-                    segs.push([a[0], a[1], b[0], b[1]]);
+                    tagged.push(([a[0], a[1], b[0], b[1]], ((first + i) as u32, ci as u32)));
                 }
             }
         }
-        let mut nodes = Vec::with_capacity(2 * segs.len() / LEAF + 2);
-        if !segs.is_empty() {
+        let mut nodes = Vec::with_capacity(2 * tagged.len() / LEAF + 2);
+        if !tagged.is_empty() {
             nodes.push(Node::default());
-            build(&mut nodes, &mut segs, 0, 0);
+            build(&mut nodes, &mut tagged, 0, 0);
         }
+        let (segs, seg_at): (Vec<Seg>, Vec<(u32, u32)>) = tagged.into_iter().unzip();
         // Horizontal bands for the inside test, about 4 edges deep each.
         let (y0, y1) = match nodes.first() {
             Some(n) => (n.lo[1], n.hi[1]),
@@ -243,6 +265,9 @@ impl Edges {
         }
         Edges {
             segs,
+            seg_at,
+            verts,
+            contours: ranges,
             nodes,
             band_y0: y0,
             band_inv,
@@ -305,6 +330,99 @@ impl Edges {
             }
         }
         (best.sqrt(), arg)
+    }
+
+    /// The boundary point nearest to `p` among those on the far side of `p` from `q`
+    /// (in the half-plane `(x − p)·(q − p) ≤ 0`), if any.
+    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2]) -> Option<([f64; 2], u32)> {
+        let u = [q[0] - p[0], q[1] - p[1]];
+        let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
+        let mut best = f64::INFINITY;
+        let mut arg = None;
+        let mut stack: [u32; 64] = [0; 64];
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let n = &self.nodes[stack[sp] as usize];
+            if box_d2(p, n) >= best {
+                continue;
+            }
+            // Boxes wholly on q's side hold nothing behind p.
+            let lo_side = side(n.lo[0], n.lo[1])
+                .min(side(n.hi[0], n.lo[1]))
+                .min(side(n.lo[0], n.hi[1]))
+                .min(side(n.hi[0], n.hi[1]));
+            if lo_side > 0.0 {
+                continue;
+            }
+            if n.count > 0 {
+                let f = n.first as usize;
+                for (k, sg) in self.segs[f..f + n.count as usize].iter().enumerate() {
+                    let (ga, gb) = (side(sg[0], sg[1]), side(sg[2], sg[3]));
+                    if ga > 0.0 && gb > 0.0 {
+                        continue;
+                    }
+                    // Part of the segment behind p: t in [t0, t1].
+                    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+                    if ga > 0.0 {
+                        t0 = ga / (ga - gb);
+                    } else if gb > 0.0 {
+                        t1 = ga / (ga - gb);
+                    }
+                    let (dx, dy) = (sg[2] - sg[0], sg[3] - sg[1]);
+                    let l2 = dx * dx + dy * dy;
+                    let t = if l2 > 0.0 {
+                        (((p[0] - sg[0]) * dx + (p[1] - sg[1]) * dy) / l2).clamp(t0, t1)
+                    } else {
+                        0.0
+                    };
+                    let x = [sg[0] + t * dx, sg[1] + t * dy];
+                    let dd = d2(x, p);
+                    if dd < best {
+                        best = dd;
+                        arg = Some((x, (f + k) as u32));
+                    }
+                }
+            } else {
+                let (l, r) = (n.first, n.first + 1);
+                let dl = box_d2(p, &self.nodes[l as usize]);
+                let dr = box_d2(p, &self.nodes[r as usize]);
+                let (far, near) = if dl <= dr { (r, l) } else { (l, r) };
+                if sp + 2 > stack.len() {
+                    return None;
+                }
+                stack[sp] = far;
+                stack[sp + 1] = near;
+                sp += 2;
+            }
+        }
+        arg
+    }
+
+    /// Boundary points about `h` away from `q` (a point of edge `i`) along its contour,
+    /// one each way: the first contour points at least `h` from `q` (at most 64 points
+    /// walked).
+    fn along(&self, i: u32, q: [f64; 2], h: f64) -> [[f64; 2]; 2] {
+        let (v, c) = self.seg_at[i as usize];
+        let (first, len) = self.contours[c as usize];
+        let h2 = h * h;
+        let at = |k: u32| self.verts[(first + k % len) as usize];
+        let k0 = v - first;
+        let mut fwd = at(k0 + 1);
+        for s in 1..len.min(64) {
+            fwd = at(k0 + s);
+            if d2(fwd, q) >= h2 {
+                break;
+            }
+        }
+        let mut back = at(k0);
+        for s in 0..len.min(64) {
+            back = at(k0 + len - s);
+            if d2(back, q) >= h2 {
+                break;
+            }
+        }
+        [fwd, back]
     }
 
     /// The point of edge `i` nearest to `p`.
@@ -371,12 +489,8 @@ impl Edges {
 // ---------------------------------------------------------------------------------------
 // Largest inscribed circle.
 
-/// Boundary points a cell remembers (its own nearest one and its ancestors').
-const KEEP: usize = 4;
-
 /// A square cell of the subdivision: centre `c`, half-size `h`, `max` an upper bound of the
-/// signed distance inside it (the parent's bound until the cell is evaluated), `pts`
-/// boundary points found by the cell's ancestors.
+/// signed distance inside it (the parent's bound until the cell is evaluated).
 #[derive(Debug, Clone, Copy)]
 struct Cell {
     c: [f64; 2],
@@ -384,8 +498,6 @@ struct Cell {
     max: f64,
     /// The parent's nearest edge (a good first guess for this cell's).
     hint: u32,
-    pts: [[f64; 2]; KEEP],
-    npts: u8,
 }
 
 impl PartialEq for Cell {
@@ -415,12 +527,21 @@ fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// at a box corner, where a bisector crosses the box's edges, or at a circumcentre.
 fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
     let (x0, x1, y0, y1) = (c[0] - h, c[0] + h, c[1] - h, c[1] + h);
-    let g = |x: [f64; 2]| q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min);
-    let mut best = g([x0, y0])
-        .max(g([x1, y0]))
-        .max(g([x0, y1]))
-        .max(g([x1, y1]));
-    let inb = |x: [f64; 2]| x[0] >= x0 && x[0] <= x1 && x[1] >= y0 && x[1] <= y1;
+    // min_j |x − q_j|², or anything ≤ `floor` once it is known not to beat it.
+    let g = |x: [f64; 2], floor: f64| {
+        let mut m = f64::INFINITY;
+        for &p in q {
+            m = m.min(d2(x, p));
+            if m <= floor {
+                break;
+            }
+        }
+        m
+    };
+    let mut best = 0.0f64;
+    for x in [[x0, y0], [x1, y0], [x0, y1], [x1, y1]] {
+        best = best.max(g(x, best));
+    }
     for i in 0..q.len() {
         for j in i + 1..q.len() {
             // Bisector of q_i q_j: n·x = k.
@@ -430,7 +551,7 @@ fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
                 for x in [x0, x1] {
                     let y = (k - n[0] * x) / n[1];
                     if y >= y0 && y <= y1 {
-                        best = best.max(g([x, y]));
+                        best = best.max(g([x, y], best));
                     }
                 }
             }
@@ -438,7 +559,7 @@ fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
                 for y in [y0, y1] {
                     let x = (k - n[1] * y) / n[0];
                     if x >= x0 && x <= x1 {
-                        best = best.max(g([x, y]));
+                        best = best.max(g([x, y], best));
                     }
                 }
             }
@@ -453,8 +574,8 @@ fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
                         (a2 * (b[1] - cc[1]) + b2 * (cc[1] - a[1]) + c2 * (a[1] - b[1])) / den,
                         (a2 * (cc[0] - b[0]) + b2 * (a[0] - cc[0]) + c2 * (b[0] - a[0])) / den,
                     ];
-                    if inb(u) {
-                        best = best.max(g(u));
+                    if u[0] >= x0 && u[0] <= x1 && u[1] >= y0 && u[1] <= y1 {
+                        best = best.max(g(u, best));
                     }
                 }
             }
@@ -475,11 +596,19 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 ///
 /// Best-first search over square cells ordered by an upper bound of the signed distance
 /// inside them. A cell is evaluated (its centre's exact signed distance `d` and nearest
-/// boundary point) only when it is popped. Its bound is the smaller of `d + h·√2`
-/// (distance is 1-Lipschitz) and [`points_bound`] over the boundary points it and its
-/// ancestors found — the second is what keeps ridges (two nearly parallel walls) cheap;
-/// children inherit it until they are popped in turn, so cells left in the queue at the end
-/// cost nothing.
+/// boundary point `q`) only when it is popped; its children inherit its bound until they
+/// are popped in turn, so cells left in the queue at the end cost nothing. The bound of a
+/// cell of half-size `h` is the smaller of
+/// * `d + h·√2` (the distance is 1-Lipschitz), and
+/// * [`points_bound`] over a few boundary points: `q`, the nearest boundary point behind
+///   the centre (`p2`, the other wall of a ridge), and on the contours of `q` and `p2` the
+///   points about `h` away on either side. No point of the cell is farther than that from
+///   the boundary. This is what keeps long ridges (walls of constant thickness, rings)
+///   from being subdivided down to the precision.
+///
+/// The best centre found is finally polished by a local pattern search on the exact
+/// distance (it only ever moves to a deeper point), so typical results are much closer
+/// than the guaranteed precision.
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     let Some(root) = e.nodes.first() else {
         return (0.0, [0.0, 0.0]);
@@ -505,14 +634,13 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 h: half,
                 max: f64::INFINITY,
                 hint: u32::MAX,
-                pts: [[0.0; 2]; KEEP],
-                npts: 0,
             });
         }
     }
     let mut best_d = f64::NEG_INFINITY;
     let mut best_c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
-    while let Some(mut c) = heap.pop() {
+    let mut best_near = u32::MAX;
+    while let Some(c) = heap.pop() {
         if c.max - best_d <= precision {
             // The heap is ordered by the bound: no remaining cell can do better.
             break;
@@ -522,19 +650,25 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         if d > best_d {
             best_d = d;
             best_c = c.c;
+            best_near = near;
         }
-        // Remember this cell's nearest boundary point (most recent first).
-        let q = e.closest_point(near, c.c);
-        let n = c.npts as usize;
-        c.pts.copy_within(0..n.min(KEEP - 1), 1);
-        c.pts[0] = q;
-        c.npts = (n + 1).min(KEEP) as u8;
-        let lip = d + c.h * std::f64::consts::SQRT_2;
-        let max = if d > 0.0 {
-            lip.min(points_bound(c.c, c.h, &c.pts[..c.npts as usize]))
-        } else {
-            lip
-        };
+        let mut max = d + c.h * std::f64::consts::SQRT_2;
+        if d > 0.0 && max - best_d > precision {
+            let q = e.closest_point(near, c.c);
+            let mut pts = [[0.0; 2]; 6];
+            let mut n = 0;
+            let mut add = |p: [f64; 2]| {
+                pts[n] = p;
+                n += 1;
+            };
+            add(q);
+            e.along(near, q, c.h).into_iter().for_each(&mut add);
+            if let Some((q2, i2)) = e.nearest_behind(c.c, q) {
+                add(q2);
+                e.along(i2, q2, c.h).into_iter().for_each(&mut add);
+            }
+            max = max.min(points_bound(c.c, c.h, &pts[..n]));
+        }
         if max - best_d <= precision {
             continue;
         }
@@ -545,12 +679,67 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 h: qh,
                 max,
                 hint: near,
-                pts: c.pts,
-                npts: c.npts,
             });
         }
     }
-    (best_d.max(0.0), best_c)
+    if best_d <= 0.0 {
+        return (0.0, best_c);
+    }
+    polish(e, best_c, best_d, best_near, precision)
+}
+
+/// Local pattern search from `c` (depth `d`, nearest edge `near`): tries steps in 8
+/// directions, keeps going in a direction while it gains (doubling the step), halves the
+/// step when no direction gains, from `precision` down to `precision / 16`; moves only
+/// to deeper points, so the result stays a true inscribed radius.
+fn polish(
+    e: &Edges,
+    mut c: [f64; 2],
+    mut d: f64,
+    mut near: u32,
+    precision: f64,
+) -> (f64, [f64; 2]) {
+    const S: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    const DIRS: [[f64; 2]; 8] = [
+        [1.0, 0.0],
+        [S, S],
+        [0.0, 1.0],
+        [-S, S],
+        [-1.0, 0.0],
+        [-S, -S],
+        [0.0, -1.0],
+        [S, -S],
+    ];
+    let mut step = precision;
+    let mut k0 = 0;
+    let mut evals = 0;
+    while step > precision / 16.0 && evals < 64 {
+        let mut moved = false;
+        for k in (0..8).map(|i| (k0 + i) % 8) {
+            let u = DIRS[k];
+            let mut s = step;
+            loop {
+                let p = [c[0] + s * u[0], c[1] + s * u[1]];
+                let (dp, np) = e.nearest(p, near);
+                evals += 1;
+                if dp > d && e.inside(p) {
+                    (c, d, near) = (p, dp, np);
+                    moved = true;
+                    s *= 2.0;
+                } else {
+                    break;
+                }
+            }
+            if moved {
+                k0 = k;
+                break;
+            }
+        }
+        if !moved {
+            step /= 2.0;
+        }
+    }
+    (d, c)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -730,10 +919,10 @@ mod tests {
 
     #[test]
     fn square_and_rectangle() {
-        assert!((mfd(&[rect(10.0, 10.0, 20.0, 20.0)]) - 5.0).abs() <= 0.005);
-        assert!((mfd(&[rect(3.0, 4.0, 8.0, 9.0)]) - 2.5).abs() <= 0.005);
-        assert!((mfd(&[rect(0.0, 0.0, 20.0, 10.0)]) - 5.0).abs() <= 0.005);
-        assert!((mfd(&[rect(0.0, 0.0, 60.0, 0.5)]) - 0.25).abs() <= 0.005);
+        assert!((mfd(&[rect(10.0, 10.0, 20.0, 20.0)]) - 5.0).abs() <= 0.001);
+        assert!((mfd(&[rect(3.0, 4.0, 8.0, 9.0)]) - 2.5).abs() <= 0.001);
+        assert!((mfd(&[rect(0.0, 0.0, 20.0, 10.0)]) - 5.0).abs() <= 0.001);
+        assert!((mfd(&[rect(0.0, 0.0, 60.0, 0.5)]) - 0.25).abs() <= 0.001);
         // Never more than the exact value: it is a real inscribed circle.
         assert!(mfd(&[rect(0.0, 0.0, 20.0, 10.0)]) <= 5.0 + 1e-12);
     }
@@ -744,7 +933,7 @@ mod tests {
         let n = 96;
         let exact = 7.5 * (std::f64::consts::PI / n as f64).cos();
         let v = mfd(&[ngon(30.0, 20.0, 7.5, n, true)]);
-        assert!((v - exact).abs() <= 0.005, "{v} vs {exact}");
+        assert!((v - exact).abs() <= 0.001, "{v} vs {exact}");
         // Ring: outer r 10, inner r 8 (hole clockwise). The wall is 2 mm: radius 1 mm up to
         // the polygon's chord error.
         let ring = [
@@ -752,7 +941,7 @@ mod tests {
             ngon(0.0, 0.0, 8.0, 256, false),
         ];
         let v = mfd(&ring);
-        assert!((v - 1.0).abs() <= 0.005, "{v}");
+        assert!((v - 1.0).abs() <= 0.001, "{v}");
         // L-shape: the circle touches x = 0, y = 0 and the reflex corner (10, 10):
         // r = 10·(2 − √2).
         let l = vec![
@@ -765,7 +954,7 @@ mod tests {
         ];
         let exact = 10.0 * (2.0 - std::f64::consts::SQRT_2);
         let (v, c) = max_fill_distance(&[l]);
-        assert!((v - exact).abs() <= 0.005, "{v} vs {exact}");
+        assert!((v - exact).abs() <= 0.001, "{v} vs {exact}");
         assert!(
             (c[0] - exact).abs() < 0.05 && (c[1] - exact).abs() < 0.05,
             "{c:?}"
@@ -828,9 +1017,11 @@ mod tests {
                     }
                 }
             }
-            // The fine grid is within 0.0015 mm of the optimum, the search within
-            // PRECISION_MM, and neither can exceed it.
-            assert!((v - brute).abs() <= PRECISION_MM + 0.0015, "{v} vs {brute}");
+            // The fine grid is within 0.0015 mm of the optimum and cannot exceed it; the
+            // search is a true inscribed radius, guaranteed within PRECISION_MM and, after
+            // the polish, much closer.
+            assert!(v <= brute + 0.0015, "{v} vs {brute}");
+            assert!(v >= brute - 0.005, "{v} vs {brute}");
         }
     }
 
