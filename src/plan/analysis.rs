@@ -132,7 +132,7 @@ struct Node {
     count: u32,
 }
 
-const LEAF: usize = 4;
+const LEAF: usize = 8;
 
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
@@ -171,51 +171,70 @@ fn box_d2(p: [f64; 2], n: &Node) -> f64 {
     dx * dx + dy * dy
 }
 
-fn build(nodes: &mut Vec<Node>, segs: &mut [(Seg, (u32, u32))], offset: usize, ni: usize) {
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
-    let mut clo = [f64::INFINITY; 2];
-    let mut chi = [f64::NEG_INFINITY; 2];
-    for (s, _) in segs.iter() {
-        for k in 0..2 {
-            lo[k] = lo[k].min(s[k]).min(s[k + 2]);
-            hi[k] = hi[k].max(s[k]).max(s[k + 2]);
-            let c = 0.5 * (s[k] + s[k + 2]);
-            clo[k] = clo[k].min(c);
-            chi[k] = chi[k].max(c);
+fn union(a: &Node, b: &Node) -> ([f64; 2], [f64; 2]) {
+    (
+        [a.lo[0].min(b.lo[0]), a.lo[1].min(b.lo[1])],
+        [a.hi[0].max(b.hi[0]), a.hi[1].max(b.hi[1])],
+    )
+}
+
+/// Builds the hierarchy bottom-up in contour order: leaves are runs of up to [`LEAF`]
+/// consecutive edges of one contour (a short piece of curve, so a tight box), and each
+/// level pairs neighbours of the level below. Linear time; the root is the last node.
+fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
+    let mut nodes: Vec<Node> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
+    let mut start = 0;
+    for &end in contour_ends {
+        let mut i = start;
+        while i < end {
+            let j = (i + LEAF).min(end);
+            let mut n = Node {
+                lo: [f64::INFINITY; 2],
+                hi: [f64::NEG_INFINITY; 2],
+                first: i as u32,
+                count: (j - i) as u32,
+            };
+            for s in &segs[i..j] {
+                n.lo = [n.lo[0].min(s[0]).min(s[2]), n.lo[1].min(s[1]).min(s[3])];
+                n.hi = [n.hi[0].max(s[0]).max(s[2]), n.hi[1].max(s[1]).max(s[3])];
+            }
+            nodes.push(n);
+            i = j;
         }
+        start = end;
     }
-    nodes[ni].lo = lo;
-    nodes[ni].hi = hi;
-    if segs.len() <= LEAF {
-        nodes[ni].first = offset as u32;
-        nodes[ni].count = segs.len() as u32;
-        return;
+    let (mut lo, mut hi) = (0, nodes.len());
+    while hi - lo > 1 {
+        let mut k = lo;
+        while k < hi {
+            if k + 1 < hi {
+                let (a, b) = (nodes[k], nodes[k + 1]);
+                let (l, h) = union(&a, &b);
+                nodes.push(Node {
+                    lo: l,
+                    hi: h,
+                    first: k as u32,
+                    count: 0,
+                });
+            } else {
+                // An odd node out moves up unchanged.
+                let a = nodes[k];
+                nodes.push(a);
+            }
+            k += 2;
+        }
+        (lo, hi) = (hi, nodes.len());
     }
-    let axis = if chi[0] - clo[0] >= chi[1] - clo[1] {
-        0
-    } else {
-        1
-    };
-    let mid = segs.len() / 2;
-    segs.select_nth_unstable_by(mid, |(a, _), (b, _)| {
-        (a[axis] + a[axis + 2]).total_cmp(&(b[axis] + b[axis + 2]))
-    });
-    let l = nodes.len();
-    nodes.push(Node::default());
-    nodes.push(Node::default());
-    nodes[ni].first = l as u32;
-    nodes[ni].count = 0;
-    let (left, right) = segs.split_at_mut(mid);
-    build(nodes, left, offset, l);
-    build(nodes, right, offset + mid, l + 1);
+    nodes
 }
 
 impl Edges {
     /// Indexes the edges of closed `contours` (zero-length edges are skipped).
     pub fn new(contours: &[Contour]) -> Edges {
         let total: usize = contours.iter().map(|c| c.len()).sum();
-        let mut tagged: Vec<(Seg, (u32, u32))> = Vec::with_capacity(total);
+        let mut segs: Vec<Seg> = Vec::with_capacity(total);
+        let mut seg_at: Vec<(u32, u32)> = Vec::with_capacity(total);
+        let mut ends = Vec::with_capacity(contours.len());
         let mut verts = Vec::with_capacity(total);
         let mut ranges = Vec::with_capacity(contours.len());
         for (ci, c) in contours.iter().enumerate() {
@@ -226,18 +245,19 @@ impl Edges {
                 let a = c[i];
                 let b = c[(i + 1) % c.len()];
                 if a != b {
-                    tagged.push(([a[0], a[1], b[0], b[1]], ((first + i) as u32, ci as u32)));
+                    segs.push([a[0], a[1], b[0], b[1]]);
+                    seg_at.push(((first + i) as u32, ci as u32));
                 }
             }
+            ends.push(segs.len());
         }
-        let mut nodes = Vec::with_capacity(2 * tagged.len() / LEAF + 2);
-        if !tagged.is_empty() {
-            nodes.push(Node::default());
-            build(&mut nodes, &mut tagged, 0, 0);
-        }
-        let (segs, seg_at): (Vec<Seg>, Vec<(u32, u32)>) = tagged.into_iter().unzip();
+        let nodes = if segs.is_empty() {
+            Vec::new()
+        } else {
+            build(&segs, &ends)
+        };
         // Horizontal bands for the inside test, about 4 edges deep each.
-        let (y0, y1) = match nodes.first() {
+        let (y0, y1) = match nodes.last() {
             Some(n) => (n.lo[1], n.hi[1]),
             None => (0.0, 1.0),
         };
@@ -297,6 +317,7 @@ impl Edges {
             None => (f64::INFINITY, u32::MAX),
         };
         let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
@@ -335,11 +356,15 @@ impl Edges {
     /// The boundary point nearest to `p` among those on the far side of `p` from `q`
     /// (in the half-plane `(x − p)·(q − p) ≤ 0`), if any.
     fn nearest_behind(&self, p: [f64; 2], q: [f64; 2]) -> Option<([f64; 2], u32)> {
+        if self.nodes.is_empty() {
+            return None;
+        }
         let u = [q[0] - p[0], q[1] - p[1]];
         let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
         let mut best = f64::INFINITY;
         let mut arg = None;
         let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
         let mut sp = 1usize;
         while sp > 0 {
             sp -= 1;
@@ -451,7 +476,7 @@ impl Edges {
 
     /// Nonzero-winding inside test.
     pub fn inside(&self, p: [f64; 2]) -> bool {
-        let Some(root) = self.nodes.first() else {
+        let Some(root) = self.nodes.last() else {
             return false;
         };
         if p[1] < root.lo[1] || p[1] > root.hi[1] || p[0] < root.lo[0] || p[0] > root.hi[0] {
@@ -610,7 +635,7 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// distance (it only ever moves to a deeper point), so typical results are much closer
 /// than the guaranteed precision.
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
-    let Some(root) = e.nodes.first() else {
+    let Some(root) = e.nodes.last() else {
         return (0.0, [0.0, 0.0]);
     };
     let (lo, hi) = (root.lo, root.hi);
@@ -648,9 +673,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         let (d, near) = e.nearest(c.c, c.hint);
         let d = if e.inside(c.c) { d } else { -d };
         if d > best_d {
-            best_d = d;
-            best_c = c.c;
-            best_near = near;
+            (best_c, best_d, best_near) = (c.c, d, near);
         }
         let mut max = d + c.h * std::f64::consts::SQRT_2;
         if d > 0.0 && max - best_d > precision {
@@ -663,11 +686,26 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             };
             add(q);
             e.along(near, q, c.h).into_iter().for_each(&mut add);
-            if let Some((q2, i2)) = e.nearest_behind(c.c, q) {
+            let behind = e.nearest_behind(c.c, q);
+            if let Some((q2, i2)) = behind {
                 add(q2);
                 e.along(i2, q2, c.h).into_iter().for_each(&mut add);
             }
             max = max.min(points_bound(c.c, c.h, &pts[..n]));
+            // Ridge probe: half-way between the two walls along the line through q and
+            // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
+            // the best value close to a ridge's height so ridge cells can be pruned.
+            if let Some((q2, _)) = behind {
+                let t = 0.5 * (d2(q2, c.c).sqrt() - d);
+                if max - best_d > precision && t > 0.25 * precision {
+                    let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
+                    let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
+                    let (dp, np) = e.nearest(p, near);
+                    if dp > best_d && e.inside(p) {
+                        (best_c, best_d, best_near) = (p, dp, np);
+                    }
+                }
+            }
         }
         if max - best_d <= precision {
             continue;
@@ -685,7 +723,14 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     if best_d <= 0.0 {
         return (0.0, best_c);
     }
-    polish(e, best_c, best_d, best_near, precision)
+    let (c, d, _) = polish(
+        e,
+        (best_c, best_d, best_near),
+        precision,
+        precision / 16.0,
+        64,
+    );
+    (d, c)
 }
 
 /// Local pattern search from `c` (depth `d`, nearest edge `near`): tries steps in 8
@@ -694,11 +739,11 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
 /// to deeper points, so the result stays a true inscribed radius.
 fn polish(
     e: &Edges,
-    mut c: [f64; 2],
-    mut d: f64,
-    mut near: u32,
-    precision: f64,
-) -> (f64, [f64; 2]) {
+    (mut c, mut d, mut near): ([f64; 2], f64, u32),
+    first_step: f64,
+    last_step: f64,
+    max_evals: usize,
+) -> ([f64; 2], f64, u32) {
     const S: f64 = std::f64::consts::FRAC_1_SQRT_2;
     const DIRS: [[f64; 2]; 8] = [
         [1.0, 0.0],
@@ -710,10 +755,10 @@ fn polish(
         [0.0, -1.0],
         [S, -S],
     ];
-    let mut step = precision;
+    let mut step = first_step;
     let mut k0 = 0;
     let mut evals = 0;
-    while step > precision / 16.0 && evals < 64 {
+    while step >= last_step && evals < max_evals {
         let mut moved = false;
         for k in (0..8).map(|i| (k0 + i) % 8) {
             let u = DIRS[k];
@@ -739,7 +784,7 @@ fn polish(
             step /= 2.0;
         }
     }
-    (d, c)
+    (c, d, near)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -764,44 +809,73 @@ impl Runs {
 }
 
 fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
-    let mut xs: Vec<(i64, f64, i32)> = Vec::new();
+    // An edge crosses rows k0..k1 (exclusive), k0 = ⌈lo/row − ½⌉, k1 = ⌈hi/row − ½⌉: the
+    // rows with lo <= y_k < hi up to rounding. Two edges meeting at a vertex compute its
+    // row from the same y, so the vertex counts exactly once.
+    let inv_row = 1.0 / row_mm;
+    let row_of = |y: f64| (y * inv_row - 0.5).ceil() as i64;
+    let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
+    for p in contours.iter().flatten() {
+        let k = row_of(p[1]);
+        kmin = kmin.min(k);
+        kmax = kmax.max(k);
+    }
+    if kmin >= kmax {
+        return Vec::new();
+    }
+    let nrows = (kmax - kmin) as usize;
+    // Counting sort of the crossings by row, then by x within each (short) row.
+    let mut start = vec![0u32; nrows + 1];
     for c in contours {
         for i in 0..c.len() {
-            let a = c[i];
-            let b = c[(i + 1) % c.len()];
-            if a[1] == b[1] {
-                continue;
-            }
-            let (lo, hi, dir) = if a[1] < b[1] { (a, b, 1) } else { (b, a, -1) };
-            // Rows with lo.y <= y_k < hi.y (half-open, so shared vertices count once).
-            let k0 = (lo[1] / row_mm - 0.5).ceil() as i64 - 1;
-            let k1 = (hi[1] / row_mm - 0.5).ceil() as i64 + 1;
-            let inv = (hi[0] - lo[0]) / (hi[1] - lo[1]);
-            for k in k0..=k1 {
-                let y = (k as f64 + 0.5) * row_mm;
-                if lo[1] <= y && y < hi[1] {
-                    xs.push((k, lo[0] + (y - lo[1]) * inv, dir));
-                }
+            let (a, b) = (row_of(c[i][1]), row_of(c[(i + 1) % c.len()][1]));
+            let (k0, k1) = if a <= b { (a, b) } else { (b, a) };
+            for k in k0..k1 {
+                start[(k - kmin) as usize + 1] += 1;
             }
         }
     }
-    xs.sort_unstable_by(|p, q| p.0.cmp(&q.0).then(p.1.total_cmp(&q.1)));
+    for r in 0..nrows {
+        start[r + 1] += start[r];
+    }
+    let mut fill = start.clone();
+    let mut xs = vec![(0.0f64, 0i32); start[nrows] as usize];
+    for c in contours {
+        for i in 0..c.len() {
+            let (p, q) = (c[i], c[(i + 1) % c.len()]);
+            let (a, b) = (row_of(p[1]), row_of(q[1]));
+            if a == b {
+                continue;
+            }
+            let (lo, hi, dir, k0, k1) = if a < b {
+                (p, q, 1, a, b)
+            } else {
+                (q, p, -1, b, a)
+            };
+            let slope = (hi[0] - lo[0]) / (hi[1] - lo[1]);
+            for k in k0..k1 {
+                let y = (k as f64 + 0.5) * row_mm;
+                let r = (k - kmin) as usize;
+                xs[fill[r] as usize] = (lo[0] + (y - lo[1]) * slope, dir);
+                fill[r] += 1;
+            }
+        }
+    }
     let mut out = Vec::new();
-    let mut i = 0;
-    while i < xs.len() {
-        let k = xs[i].0;
+    for r in 0..nrows {
+        let row = &mut xs[start[r] as usize..start[r + 1] as usize];
+        row.sort_unstable_by(|p, q| p.0.total_cmp(&q.0));
+        let k = kmin + r as i64;
         let mut w = 0;
-        let mut start = 0.0;
-        while i < xs.len() && xs[i].0 == k {
-            let (_, x, d) = xs[i];
+        let mut x0 = 0.0;
+        for &(x, d) in row.iter() {
             let was = w != 0;
             w += d;
             if !was && w != 0 {
-                start = x;
-            } else if was && w == 0 && x > start {
-                out.push((k, start, x));
+                x0 = x;
+            } else if was && w == 0 && x > x0 {
+                out.push((k, x0, x));
             }
-            i += 1;
         }
     }
     out
