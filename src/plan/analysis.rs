@@ -51,8 +51,9 @@ pub fn analyse(cur: &[Contour], prev: Option<&[Contour]>, row_mm: f64) -> LayerA
     Analyser::new(row_mm).analyse(usize::MAX, cur, prev)
 }
 
-/// Analyses consecutive layers, reusing the scan of the layer below when the previous
-/// call analysed it (a worker handling a block of consecutive layers keeps one).
+/// Analyses consecutive layers, reusing the row scan (for the islands) of the previous
+/// call when it analysed the layer below. A worker handling a block of consecutive layers
+/// keeps one. Results never depend on the reuse.
 #[derive(Debug)]
 pub struct Analyser {
     row_mm: f64,
@@ -66,39 +67,33 @@ impl Analyser {
     }
 
     /// Analyses layer `index` (contours `cur`) over the layer below (`prev`: the contours
-    /// of layer `index − 1`, `None` for layer 0). The result does not depend on which
-    /// layers were analysed before.
+    /// of layer `index − 1`, `None` for layer 0).
     pub fn analyse(
         &mut self,
         index: usize,
         cur: &[Contour],
         prev: Option<&[Contour]>,
     ) -> LayerAnalysis {
-        LayerAnalysis {
-            max_fill_distance_mm: max_fill_distance(cur).0,
-            islands: self.islands_only(index, cur, prev),
-            bbox_mm: bbox(cur),
-        }
-    }
-
-    /// The islands part of [`analyse`](Self::analyse) alone.
-    pub fn islands_only(&mut self, index: usize, cur: &[Contour], prev: Option<&[Contour]>) -> u32 {
-        let rc = Runs::new(cur, self.row_mm);
+        let below = self
+            .last
+            .take()
+            .filter(|(i, _)| index != usize::MAX && i.wrapping_add(1) == index);
+        let runs = Runs::new(cur, self.row_mm);
         let islands = match prev {
             None => 0,
-            Some(p) => {
-                let cached = match &self.last {
-                    Some((i, r)) if index != usize::MAX && i.wrapping_add(1) == index => Some(r),
-                    _ => None,
-                };
-                match cached {
-                    Some(rp) => count_islands(&rc, rp),
-                    None => count_islands(&rc, &Runs::new(p, self.row_mm)),
-                }
-            }
+            Some(p) => match &below {
+                Some((_, r)) => count_islands(&runs, r),
+                None => count_islands(&runs, &Runs::new(p, self.row_mm)),
+            },
         };
-        self.last = (index != usize::MAX).then_some((index, rc));
-        islands
+        if index != usize::MAX {
+            self.last = Some((index, runs));
+        }
+        LayerAnalysis {
+            max_fill_distance_mm: max_fill_distance(cur).0,
+            islands,
+            bbox_mm: bbox(cur),
+        }
     }
 }
 

@@ -399,3 +399,35 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
         .unwrap()
         .contains("1 unsupported islands on 1 layers (first at layer 5)")));
 }
+
+#[test]
+fn part_taller_than_the_stage_travel_is_a_one_line_error() {
+    let dir = tempdir("plan-travel");
+    let src = crate::common::stdout(&run_in(&dir, &["profile", "show", "hybrid-bottomup"]));
+    let short = src.replace("travel_max_mm = 150.0", "travel_max_mm = 5.0");
+    assert_ne!(short, src);
+    std::fs::write(dir.join("short.toml"), short).unwrap();
+    write_stl(
+        &dir.join("tall.stl"),
+        &box_tris([0.0, 0.0, 0.0], [5.0, 5.0, 10.0]),
+    );
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "tall.stl",
+            "-p",
+            "short.toml",
+            "--layer-height",
+            "1",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+    assert!(
+        e.contains("tall.stl") && e.contains("layer 5") && e.contains("stage travel"),
+        "{e}"
+    );
+    assert!(!dir.join("tall.dmdjob").exists());
+}
