@@ -3,5 +3,6 @@
 
 mod calibrate;
 mod common;
+mod plan;
 mod run;
 mod slice;
