@@ -223,6 +223,9 @@ fn synthetic(path: &Path, n: usize) -> Manifest {
             }],
             steps,
             time_s,
+            max_fill_distance_mm: 0.0,
+            islands: 0,
+            bbox_mm: None,
         });
     }
     let manifest = Manifest {
@@ -252,6 +255,8 @@ fn synthetic(path: &Path, n: usize) -> Manifest {
             print_time_s: layers.iter().map(|l| l.time_s).sum(),
             exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
             resin_volume_ml: 0.0,
+            continuous_layers: None,
+            all_layered_time_s: None,
         },
         machine: profile,
         warnings: vec![],

@@ -206,6 +206,13 @@ pub struct Totals {
     pub exposure_s: f64,
     /// Cured resin volume, ml (sum of area × thickness).
     pub resin_volume_ml: f64,
+    /// Hybrid process: layers printed continuously.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub continuous_layers: Option<u64>,
+    /// Hybrid process: estimated print time had every slice been printed layered, s (the
+    /// saving of the hybrid plan is `all_layered_time_s − print_time_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub all_layered_time_s: Option<f64>,
 }
 
 /// How a layer is printed.
@@ -236,6 +243,17 @@ pub struct Layer {
     pub exposure_s: f64,
     /// Area of the section, mm² (from anti-aliased coverage).
     pub area_mm2: f64,
+    /// Largest distance from a point of the section to its boundary (seeds/001's
+    /// DisMax-Min: the radius of the largest inscribed circle), mm.
+    #[serde(default)]
+    pub max_fill_distance_mm: f64,
+    /// Connected regions of the section that do not rest on the layer below.
+    #[serde(default)]
+    pub islands: u32,
+    /// Bounding box of the section in build-plane mm, `[[x_min, y_min], [x_max, y_max]]`;
+    /// `null` for an empty section.
+    #[serde(default)]
+    pub bbox_mm: Option<[[f64; 2]; 2]>,
     /// Mask image(s) of the layer, one per projector.
     pub masks: Vec<MaskRef>,
     /// Ordered machine steps that take the stage from where the previous layer left it to

@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::geometry::distortion::{self, Correction, DistortionChoice, FitReport};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh, MeshReport};
-use crate::plan::{self, LayerInfo};
+use crate::plan::{self, LayerAnalysis, LayerInfo};
 use crate::profile::Profile;
 use crate::raster::{projector_view, Mask, Rasterizer, Scratch};
 use crate::slice::{self, Section};
@@ -66,6 +66,9 @@ pub struct Timings {
     pub slice_s: f64,
     /// Rasterizing, encoding, hashing and writing masks.
     pub masks_s: f64,
+    /// Layer analysis (max fill distance, islands), summed over the worker threads (CPU
+    /// time, part of `masks_s`'s wall time).
+    pub analysis_cpu_s: f64,
     /// Planning and writing the manifest.
     pub finish_s: f64,
     /// Everything.
@@ -167,12 +170,13 @@ struct LayerIn<'a> {
     index: usize,
     section: &'a Section,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
-    #[allow(dead_code)]
     below: Option<&'a Section>,
 }
 
 struct LayerOut {
     area_mm2: f64,
+    analysis: LayerAnalysis,
+    analysis_s: f64,
     masks: Vec<MaskRef>,
 }
 
@@ -251,6 +255,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             .into_par_iter()
             .map_init(Scratch::default, |scratch, b| {
                 let mut outs = Vec::with_capacity(BLOCK);
+                let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
                 for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
                     if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
                         return Err(Error::Interrupted);
@@ -269,6 +274,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         &profile,
                         &raster,
                         scratch,
+                        &mut analyser,
                         &layer,
                         binary,
                         tiled,
@@ -312,6 +318,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     }
 
     let t3 = Instant::now();
+    let analysis_cpu_s = outs.iter().map(|o| o.analysis_s).sum();
     let infos: Vec<LayerInfo> = outs
         .iter()
         .enumerate()
@@ -320,9 +327,16 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             z_mm: (i + 1) as f64 * h,
             thickness_mm: h,
             area_mm2: o.area_mm2,
+            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
+            islands: o.analysis.islands,
         })
         .collect();
-    let plans = plan::plan(&profile, &infos);
+    let plan = plan::plan(&profile, &infos).map_err(|msg| Error::Job {
+        path: path.into(),
+        msg,
+    })?;
+    warnings.extend(plan.warnings.iter().cloned());
+    let hybrid = profile.process == crate::profile::Process::Hybrid;
     let mut layers = Vec::with_capacity(n);
     let mut totals = Totals {
         layers: n as u64,
@@ -330,8 +344,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         print_time_s: 0.0,
         exposure_s: 0.0,
         resin_volume_ml: 0.0,
+        continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
+        all_layered_time_s: plan.all_layered_time_s,
     };
-    for ((info, o), p) in infos.iter().zip(outs).zip(plans) {
+    for ((info, o), p) in infos.iter().zip(outs).zip(plan.layers) {
         totals.print_time_s += p.time_s;
         totals.exposure_s += p.exposure_s;
         totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
@@ -343,6 +359,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             mode: p.mode,
             exposure_s: p.exposure_s,
             area_mm2: o.area_mm2,
+            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
+            islands: o.analysis.islands,
+            bbox_mm: o.analysis.bbox_mm,
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
@@ -419,6 +438,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             load_s: t_load,
             slice_s: t_slice,
             masks_s: t_masks,
+            analysis_cpu_s,
             finish_s: t_finish,
             total_s: t0.elapsed().as_secs_f64(),
         },
@@ -432,6 +452,7 @@ fn layer_masks(
     profile: &Profile,
     raster: &Rasterizer,
     scratch: &mut Scratch,
+    analyser: &mut plan::analysis::Analyser,
     layer: &LayerIn,
     binary: bool,
     tiled: bool,
@@ -480,5 +501,17 @@ fn layer_masks(
         });
     }
     scratch.recycle(field_mask);
-    Ok(LayerOut { area_mm2, masks })
+    let ta = Instant::now();
+    let analysis = analyser.analyse(
+        i,
+        &layer.section.contours,
+        layer.below.map(|b| b.contours.as_slice()),
+    );
+    let analysis_s = ta.elapsed().as_secs_f64();
+    Ok(LayerOut {
+        area_mm2,
+        analysis,
+        analysis_s,
+        masks,
+    })
 }

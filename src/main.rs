@@ -337,6 +337,17 @@ fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             summary.totals.resin_volume_ml,
             summary.timings.total_s
         );
+        if let (Some(all), Some(c)) = (
+            summary.totals.all_layered_time_s,
+            summary.totals.continuous_layers,
+        ) {
+            println!(
+                "hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
+                summary.layers,
+                hms(all),
+                100.0 * (1.0 - summary.totals.print_time_s / all)
+            );
+        }
     }
     if failed {
         if !quiet {

@@ -17,6 +17,11 @@ pub const BUILTIN: &[(&str, &str)] = &[
         "xu2010-topdown",
         include_str!("../profiles/xu2010-topdown.toml"),
     ),
+    (
+        "hybrid-bottomup",
+        include_str!("../profiles/hybrid-bottomup.toml"),
+    ),
+    ("bottom-up", include_str!("../profiles/bottom-up.toml")),
     ("tiled-2x1", include_str!("../profiles/tiled-2x1.toml")),
 ];
 
@@ -62,6 +67,12 @@ pub struct Profile {
     /// Top-down recoat settings (required when `process = "top-down"`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recoat: Option<Recoat>,
+    /// Bottom-up peel settings (required when `process = "bottom-up"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peel: Option<Peel>,
+    /// Hybrid continuous/layered settings (required when `process = "hybrid"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hybrid: Option<Hybrid>,
     /// Lens distortion correction table (docs/GEOMETRY.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<crate::geometry::distortion::DistortionConfig>,
@@ -186,19 +197,8 @@ pub struct Resin {
     pub viscosity_pa_s: Positive,
 }
 
-/// Top-down recoat (natural leveling).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Recoat {
-    /// How much deeper than the next layer the stage dips, mm.
-    pub dip_mm: NonNegative,
-    /// Speed of the dip, mm/s.
-    pub dip_speed_mm_s: Positive,
-    /// Speed of the return to the next layer, mm/s.
-    pub return_speed_mm_s: Positive,
-    /// Leveling wait before exposure, s.
-    pub wait_s: NonNegative,
-}
+/// The process sections live with the planner that uses them.
+pub use crate::plan::config::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 /// Size of the whole build field.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -309,16 +309,13 @@ impl Profile {
         if s.home_mm < s.travel_min_mm || s.home_mm > s.travel_max_mm {
             return Err("stage.home_mm must lie inside the stage travel".into());
         }
-        if self.process == Process::TopDown && self.recoat.is_none() {
-            return Err("process \"top-down\" needs a [recoat] section".into());
-        }
         if let Some(d) = &self.distortion {
             d.validate()?;
         }
         if let Some(b) = &self.blend {
             b.validate()?;
         }
-        Ok(())
+        crate::plan::config::validate(self)
     }
 
     /// The build field covered by the union of the projectors.

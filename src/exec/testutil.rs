@@ -35,6 +35,9 @@ pub fn layer(
         }],
         steps,
         time_s,
+        max_fill_distance_mm: 0.0,
+        islands: 0,
+        bbox_mm: None,
     }
 }
 
@@ -69,6 +72,8 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             print_time_s: layers.iter().map(|l| l.time_s).sum(),
             exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
             resin_volume_ml: 0.0,
+            continuous_layers: None,
+            all_layered_time_s: None,
         },
         warnings: vec![],
         layers,

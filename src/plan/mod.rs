@@ -1,4 +1,23 @@
 //! Process planning: per-layer analysis, exposure and the machine steps of each layer.
+//!
+//! Stages (see `docs/PLANNING.md`):
+//! 1. [`analysis`] (run per layer inside the slicing workers): max fill distance
+//!    (seeds/001's DisMax-Min, the largest inscribed circle of the exact contours),
+//!    unsupported islands, bounding box.
+//! 2. [`plan`]: per process ([`config`] holds the profile sections) the mode, exposure and
+//!    step list of each layer ([`steps`]), then the time estimate under the bundle's timing
+//!    contract ([`timing`]). For the hybrid process it also plans the same job all layered,
+//!    for the time comparison seeds/001 reports.
+//!
+//! The planner is pure: the same layers and profile give the same plan, bit for bit.
+
+pub mod analysis;
+pub mod config;
+mod steps;
+pub mod timing;
+
+pub use analysis::LayerAnalysis;
+pub use config::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 use crate::bundle::{Mode, Step};
 use crate::motion::move_time;
@@ -15,6 +34,10 @@ pub struct LayerInfo {
     pub thickness_mm: f64,
     /// Section area, mm².
     pub area_mm2: f64,
+    /// Largest distance from a point of the section to its boundary, mm.
+    pub max_fill_distance_mm: f64,
+    /// Regions not resting on the layer below.
+    pub islands: u32,
 }
 
 /// The plan of one layer.
@@ -22,15 +45,42 @@ pub struct LayerInfo {
 pub struct LayerPlan {
     /// Printing mode.
     pub mode: Mode,
-    /// Exposure, s.
+    /// Exposure (dose time), s: the `expose` time, or thickness/speed for a sweep.
     pub exposure_s: f64,
     /// Steps in order.
     pub steps: Vec<Step>,
-    /// Estimated duration of the steps, s.
+    /// Estimated duration of the steps under the timing contract, s.
     pub time_s: f64,
 }
 
-/// Estimated duration of a step list starting at stage position `from_mm`.
+/// The plan of a job.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// One plan per layer.
+    pub layers: Vec<LayerPlan>,
+    /// Sum of the layer times, s.
+    pub print_time_s: f64,
+    /// Hybrid process: the time the same job would take with every slice layered, s.
+    pub all_layered_time_s: Option<f64>,
+    /// Layers printed continuously.
+    pub continuous_layers: usize,
+    /// Notes for the manifest's warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Counters the step builders fill; turned into warnings.
+#[derive(Debug, Default)]
+pub(crate) struct Notes {
+    travel_clamped: usize,
+    wait_capped: usize,
+    wait_model_max_s: f64,
+    beyond_table: usize,
+    beyond_table_max_mm: f64,
+}
+
+/// Estimated duration of a step list starting at stage position `from_mm`: moves, waits,
+/// sweeps and light-on times only (no shutter, DMD load or run rules; see
+/// [`timing::Timing::layer_times`] for the full estimate).
 pub fn steps_time(steps: &[Step], from_mm: f64) -> f64 {
     let mut pos = from_mm;
     let mut t = 0.0;
@@ -54,57 +104,112 @@ pub fn steps_time(steps: &[Step], from_mm: f64) -> f64 {
     t
 }
 
-/// Plans every layer: fixed exposure from the profile and, for top-down machines, a plain
-/// natural-leveling recoat (dip deeper, return, wait, expose).
-pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Vec<LayerPlan> {
-    let st = &profile.stage;
-    let accel = st.max_accel_mm_s2.get();
-    let vmax = st.max_speed_mm_s.get();
-    let mut pos = st.home_mm;
-    let mut out = Vec::with_capacity(layers.len());
-    for l in layers {
-        let exposure_s = profile.exposure.layer_exposure_s(l.index);
-        let mut steps = Vec::new();
-        match profile.process {
-            Process::TopDown => {
-                let r = profile
-                    .recoat
-                    .as_ref()
-                    .expect("validated: top-down has [recoat]");
-                let dip = r.dip_mm.get();
-                if dip > 0.0 {
-                    steps.push(Step::Move {
-                        to_mm: (l.z_mm + dip).min(st.travel_max_mm),
-                        speed_mm_s: r.dip_speed_mm_s.get().min(vmax),
-                        accel_mm_s2: accel,
-                    });
-                }
-                steps.push(Step::Move {
-                    to_mm: l.z_mm,
-                    speed_mm_s: r.return_speed_mm_s.get().min(vmax),
-                    accel_mm_s2: accel,
-                });
-                if r.wait_s.get() > 0.0 {
-                    steps.push(Step::Wait { s: r.wait_s.get() });
-                }
-            }
-            Process::BottomUp | Process::Hybrid => {
-                steps.push(Step::Move {
-                    to_mm: l.z_mm,
-                    speed_mm_s: vmax,
-                    accel_mm_s2: accel,
-                });
-            }
+fn build(
+    profile: &Profile,
+    layers: &[LayerInfo],
+    force_layered: bool,
+    notes: &mut Notes,
+) -> Vec<LayerPlan> {
+    let lim = steps::Limits::of(profile);
+    let mut plans = match profile.process {
+        Process::TopDown => {
+            let r = profile
+                .recoat
+                .as_ref()
+                .expect("validated: top-down has [recoat]");
+            steps::top_down(profile, r, &lim, layers, notes)
         }
-        steps.push(Step::Expose { s: exposure_s });
-        let time_s = steps_time(&steps, pos);
-        pos = l.z_mm;
-        out.push(LayerPlan {
-            mode: Mode::Layered,
-            exposure_s,
-            steps,
-            time_s,
-        });
+        Process::BottomUp => {
+            let k = profile
+                .peel
+                .as_ref()
+                .expect("validated: bottom-up has [peel]");
+            steps::bottom_up(profile, k, &lim, layers, notes)
+        }
+        Process::Hybrid => {
+            let h = profile
+                .hybrid
+                .as_ref()
+                .expect("validated: hybrid has [hybrid]");
+            steps::hybrid(profile, h, &lim, layers, force_layered, notes)
+        }
+    };
+    let lists: Vec<&[Step]> = plans.iter().map(|p| p.steps.as_slice()).collect();
+    let times = timing::Timing::of(profile).layer_times(&lists);
+    for (p, t) in plans.iter_mut().zip(times) {
+        p.time_s = t;
     }
-    out
+    plans
 }
+
+/// Plans every layer for the profile's process. Fails (with a one-line reason) when a
+/// layer's exposure position lies outside the stage travel.
+pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
+    let st = &profile.stage;
+    if let Some(l) = layers
+        .iter()
+        .find(|l| l.z_mm > st.travel_max_mm || l.z_mm < st.travel_min_mm)
+    {
+        return Err(format!(
+            "layer {} is exposed at stage position {:.3} mm, outside the stage travel {}..{} mm (part too tall for this machine)",
+            l.index, l.z_mm, st.travel_min_mm, st.travel_max_mm
+        ));
+    }
+    let mut notes = Notes::default();
+    let layers_plan = build(profile, layers, false, &mut notes);
+    let all_layered_time_s = (profile.process == Process::Hybrid).then(|| {
+        let mut scratch = Notes::default();
+        build(profile, layers, true, &mut scratch)
+            .iter()
+            .map(|p| p.time_s)
+            .sum()
+    });
+    let n = layers.len();
+    let mut warnings = Vec::new();
+    if notes.wait_capped > 0 {
+        warnings.push(format!(
+            "leveling wait capped at recoat.wait_max_s = {} s on {} of {n} layers (the leveling model asks up to {:.0} s): natural leveling of thin films over wide flat tops is slow; consider thicker layers or a larger cap",
+            profile.recoat.as_ref().map_or(0.0, |r| r.wait_max_s.get()),
+            notes.wait_capped,
+            notes.wait_model_max_s
+        ));
+    }
+    if notes.travel_clamped > 0 {
+        warnings.push(format!(
+            "{} lifts or dips were shortened to end at stage.travel_max_mm = {} mm",
+            notes.travel_clamped, st.travel_max_mm
+        ));
+    }
+    if notes.beyond_table > 0 {
+        let h = profile.hybrid.as_ref().expect("hybrid");
+        warnings.push(format!(
+            "{} slices have a max fill distance beyond the lift table (up to {:.2} mm > {} mm): they use the last row's lift, {} mm",
+            notes.beyond_table,
+            notes.beyond_table_max_mm,
+            h.olh.last().map_or(0.0, |r| r.up_to_mm.get()),
+            h.olh.last().map_or(0.0, |r| r.lift_mm.get())
+        ));
+    }
+    let with_islands: Vec<&LayerInfo> = layers.iter().filter(|l| l.islands > 0).collect();
+    if let Some(first) = with_islands.first() {
+        warnings.push(format!(
+            "{} unsupported islands on {} layers (first at layer {}): regions that do not rest on the layer below need supports",
+            with_islands.iter().map(|l| l.islands as u64).sum::<u64>(),
+            with_islands.len(),
+            first.index
+        ));
+    }
+    Ok(Plan {
+        print_time_s: layers_plan.iter().map(|p| p.time_s).sum(),
+        continuous_layers: layers_plan
+            .iter()
+            .filter(|p| p.mode == Mode::Continuous)
+            .count(),
+        layers: layers_plan,
+        all_layered_time_s,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -4,5 +4,6 @@
 mod calibrate;
 mod common;
 mod geometry;
+mod plan;
 mod run;
 mod slice;

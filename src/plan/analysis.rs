@@ -1,0 +1,1169 @@
+//! Per-layer analysis: the largest fill distance (seeds/001's DisMax-Min), unsupported
+//! islands and the bounding box, computed from the exact section contours (mm), not from
+//! the pixels (a pixel is 0.063 mm; the fill distance must be right to ±0.02 mm).
+//!
+//! * **Max fill distance** = the radius of the largest circle inside the section = the
+//!   largest, over all points inside, of the distance to the nearest boundary point. It is
+//!   found with a best-first subdivision of the section's bounding box ("pole of
+//!   inaccessibility", see [`max_fill_distance_with`]): every cell is scored by the exact
+//!   signed distance of its centre to the contour edges (a bounding-volume hierarchy over
+//!   the edges for the distance, a band index for the nonzero-winding inside test), and
+//!   cells whose upper bound cannot beat the best centre by more than [`PRECISION_MM`] are
+//!   dropped. The result is a true inscribed radius, never more than the exact value and
+//!   never less by more than [`PRECISION_MM`]; a final local polish usually brings it
+//!   much closer (in the unit tests: within 0.001 mm on squares, rectangles, regular
+//!   polygons and an L-shape).
+//! * **Islands** = connected regions of the layer that do not overlap the layer below
+//!   (they would print onto nothing). Both layers are scanned exactly at the centres of
+//!   the pixel rows (nonzero winding), regions are the connected runs across rows, and a
+//!   region is supported when one of its runs overlaps a run of the layer below. Layer 0
+//!   rests on the platform: it has no islands. Features thinner than a pixel row can be
+//!   missed.
+//! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
+//!
+//! Overlapping shells (sections filled by the nonzero rule) are not merged first: an edge
+//! of one shell lying inside another still counts as boundary, so the max fill distance of
+//! such a section is a lower bound.
+
+use crate::slice::Contour;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// Guaranteed accuracy of [`max_fill_distance`], mm (the issue asks for ±0.02 mm): the
+/// result lies in `[exact − PRECISION_MM, exact]`.
+pub const PRECISION_MM: f64 = 0.02;
+
+/// What the planner learns from one layer's section.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LayerAnalysis {
+    /// Largest distance from a point of the section to its boundary, mm.
+    pub max_fill_distance_mm: f64,
+    /// Regions of the section that do not rest on the layer below.
+    pub islands: u32,
+    /// Bounding box of the section, mm; `None` for an empty section.
+    pub bbox_mm: Option<[[f64; 2]; 2]>,
+}
+
+/// Analyses one layer: `cur` its contours, `prev` the contours of the layer below (`None`
+/// for layer 0, which rests on the platform), `row_mm` the pixel pitch of the scan rows
+/// used for islands.
+pub fn analyse(cur: &[Contour], prev: Option<&[Contour]>, row_mm: f64) -> LayerAnalysis {
+    Analyser::new(row_mm).analyse(usize::MAX, cur, prev)
+}
+
+/// Analyses consecutive layers, reusing the row scan (for the islands) of the previous
+/// call when it analysed the layer below. A worker handling a block of consecutive layers
+/// keeps one. Results never depend on the reuse.
+#[derive(Debug)]
+pub struct Analyser {
+    row_mm: f64,
+    last: Option<(usize, Runs)>,
+}
+
+impl Analyser {
+    /// An analyser scanning islands at rows of pitch `row_mm`.
+    pub fn new(row_mm: f64) -> Analyser {
+        Analyser { row_mm, last: None }
+    }
+
+    /// Analyses layer `index` (contours `cur`) over the layer below (`prev`: the contours
+    /// of layer `index − 1`, `None` for layer 0).
+    pub fn analyse(
+        &mut self,
+        index: usize,
+        cur: &[Contour],
+        prev: Option<&[Contour]>,
+    ) -> LayerAnalysis {
+        let below = self
+            .last
+            .take()
+            .filter(|(i, _)| index != usize::MAX && i.wrapping_add(1) == index);
+        let runs = Runs::new(cur, self.row_mm);
+        let islands = match prev {
+            None => 0,
+            Some(p) => match &below {
+                Some((_, r)) => count_islands(&runs, r),
+                None => count_islands(&runs, &Runs::new(p, self.row_mm)),
+            },
+        };
+        if index != usize::MAX {
+            self.last = Some((index, runs));
+        }
+        LayerAnalysis {
+            max_fill_distance_mm: max_fill_distance(cur).0,
+            islands,
+            bbox_mm: bbox(cur),
+        }
+    }
+}
+
+/// Bounding box of all contour points, or `None` if there are none.
+pub fn bbox(contours: &[Contour]) -> Option<[[f64; 2]; 2]> {
+    let mut it = contours.iter().flatten();
+    let first = *it.next()?;
+    let mut b = [first, first];
+    for p in it {
+        b[0][0] = b[0][0].min(p[0]);
+        b[0][1] = b[0][1].min(p[1]);
+        b[1][0] = b[1][0].max(p[0]);
+        b[1][1] = b[1][1].max(p[1]);
+    }
+    Some(b)
+}
+
+// ---------------------------------------------------------------------------------------
+// Edge geometry: nearest-edge distance (BVH) and nonzero-winding inside test (bands).
+
+/// A directed edge `[ax, ay, bx, by]`.
+type Seg = [f64; 4];
+
+#[derive(Debug, Clone, Copy, Default)]
+struct Node {
+    lo: [f64; 2],
+    hi: [f64; 2],
+    /// Leaf: first edge; inner node: index of the left child (the right one follows).
+    first: u32,
+    /// Number of edges of a leaf; 0 for an inner node.
+    count: u32,
+}
+
+const LEAF: usize = 8;
+
+/// The edges of a section with the indexes the distance queries need.
+pub struct Edges {
+    segs: Vec<Seg>,
+    /// For each edge (same order as `segs`): index of its start point in `verts` and of
+    /// its contour in `contours`.
+    seg_at: Vec<(u32, u32)>,
+    /// All contour points, contour after contour.
+    verts: Vec<[f64; 2]>,
+    /// `(first point, number of points)` of each contour in `verts`.
+    contours: Vec<(u32, u32)>,
+    nodes: Vec<Node>,
+    band_y0: f64,
+    band_inv: f64,
+    band_start: Vec<u32>,
+    band_items: Vec<u32>,
+}
+
+fn seg_d2(p: [f64; 2], s: &Seg) -> f64 {
+    let (ax, ay, bx, by) = (s[0], s[1], s[2], s[3]);
+    let (dx, dy) = (bx - ax, by - ay);
+    let (px, py) = (p[0] - ax, p[1] - ay);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 {
+        ((px * dx + py * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (ex, ey) = (px - t * dx, py - t * dy);
+    ex * ex + ey * ey
+}
+
+fn box_d2(p: [f64; 2], n: &Node) -> f64 {
+    let dx = (n.lo[0] - p[0]).max(0.0).max(p[0] - n.hi[0]);
+    let dy = (n.lo[1] - p[1]).max(0.0).max(p[1] - n.hi[1]);
+    dx * dx + dy * dy
+}
+
+fn union(a: &Node, b: &Node) -> ([f64; 2], [f64; 2]) {
+    (
+        [a.lo[0].min(b.lo[0]), a.lo[1].min(b.lo[1])],
+        [a.hi[0].max(b.hi[0]), a.hi[1].max(b.hi[1])],
+    )
+}
+
+/// Builds the hierarchy bottom-up in contour order: leaves are runs of up to [`LEAF`]
+/// consecutive edges of one contour (a short piece of curve, so a tight box), and each
+/// level pairs neighbours of the level below. Linear time; the root is the last node.
+fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
+    let mut nodes: Vec<Node> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
+    let mut start = 0;
+    for &end in contour_ends {
+        let mut i = start;
+        while i < end {
+            let j = (i + LEAF).min(end);
+            let mut n = Node {
+                lo: [f64::INFINITY; 2],
+                hi: [f64::NEG_INFINITY; 2],
+                first: i as u32,
+                count: (j - i) as u32,
+            };
+            for s in &segs[i..j] {
+                n.lo = [n.lo[0].min(s[0]).min(s[2]), n.lo[1].min(s[1]).min(s[3])];
+                n.hi = [n.hi[0].max(s[0]).max(s[2]), n.hi[1].max(s[1]).max(s[3])];
+            }
+            nodes.push(n);
+            i = j;
+        }
+        start = end;
+    }
+    let (mut lo, mut hi) = (0, nodes.len());
+    while hi - lo > 1 {
+        let mut k = lo;
+        while k < hi {
+            if k + 1 < hi {
+                let (a, b) = (nodes[k], nodes[k + 1]);
+                let (l, h) = union(&a, &b);
+                nodes.push(Node {
+                    lo: l,
+                    hi: h,
+                    first: k as u32,
+                    count: 0,
+                });
+            } else {
+                // An odd node out moves up unchanged.
+                let a = nodes[k];
+                nodes.push(a);
+            }
+            k += 2;
+        }
+        (lo, hi) = (hi, nodes.len());
+    }
+    nodes
+}
+
+impl Edges {
+    /// Indexes the edges of closed `contours` (zero-length edges are skipped).
+    pub fn new(contours: &[Contour]) -> Edges {
+        let total: usize = contours.iter().map(|c| c.len()).sum();
+        let mut segs: Vec<Seg> = Vec::with_capacity(total);
+        let mut seg_at: Vec<(u32, u32)> = Vec::with_capacity(total);
+        let mut ends = Vec::with_capacity(contours.len());
+        let mut verts = Vec::with_capacity(total);
+        let mut ranges = Vec::with_capacity(contours.len());
+        for (ci, c) in contours.iter().enumerate() {
+            let first = verts.len();
+            verts.extend_from_slice(c);
+            ranges.push((first as u32, c.len() as u32));
+            for i in 0..c.len() {
+                let a = c[i];
+                let b = c[(i + 1) % c.len()];
+                if a != b {
+                    segs.push([a[0], a[1], b[0], b[1]]);
+                    seg_at.push(((first + i) as u32, ci as u32));
+                }
+            }
+            ends.push(segs.len());
+        }
+        let nodes = if segs.is_empty() {
+            Vec::new()
+        } else {
+            build(&segs, &ends)
+        };
+        // Horizontal bands for the inside test, about 4 edges deep each.
+        let (y0, y1) = match nodes.last() {
+            Some(n) => (n.lo[1], n.hi[1]),
+            None => (0.0, 1.0),
+        };
+        let nb = (segs.len() / 4).clamp(1, 4096);
+        let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
+        let band_of = |y: f64| ((((y - y0) * band_inv) as usize).min(nb - 1)) as u32;
+        let mut count = vec![0u32; nb + 1];
+        for s in &segs {
+            let (a, b) = (band_of(s[1].min(s[3])), band_of(s[1].max(s[3])));
+            for k in a..=b {
+                count[k as usize + 1] += 1;
+            }
+        }
+        for k in 0..nb {
+            count[k + 1] += count[k];
+        }
+        let mut fill = count.clone();
+        let mut items = vec![0u32; count[nb] as usize];
+        for (i, s) in segs.iter().enumerate() {
+            let (a, b) = (band_of(s[1].min(s[3])), band_of(s[1].max(s[3])));
+            for k in a..=b {
+                items[fill[k as usize] as usize] = i as u32;
+                fill[k as usize] += 1;
+            }
+        }
+        Edges {
+            segs,
+            seg_at,
+            verts,
+            contours: ranges,
+            nodes,
+            band_y0: y0,
+            band_inv,
+            band_start: count,
+            band_items: items,
+        }
+    }
+
+    /// True when there are no edges.
+    pub fn is_empty(&self) -> bool {
+        self.segs.is_empty()
+    }
+
+    /// Distance from `p` to the nearest edge.
+    pub fn distance(&self, p: [f64; 2]) -> f64 {
+        self.nearest(p, u32::MAX).0
+    }
+
+    /// Distance from `p` to the nearest edge and that edge's index; `hint`, an edge likely
+    /// to be near (or `u32::MAX`), bounds the search from the start.
+    fn nearest(&self, p: [f64; 2], hint: u32) -> (f64, u32) {
+        if self.nodes.is_empty() {
+            return (f64::INFINITY, u32::MAX);
+        }
+        let (mut best, mut arg) = match self.segs.get(hint as usize) {
+            Some(s) => (seg_d2(p, s), hint),
+            None => (f64::INFINITY, u32::MAX),
+        };
+        let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let n = &self.nodes[stack[sp] as usize];
+            if box_d2(p, n) >= best {
+                continue;
+            }
+            if n.count > 0 {
+                let f = n.first as usize;
+                for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
+                    let d = seg_d2(p, s);
+                    if d < best {
+                        best = d;
+                        arg = (f + k) as u32;
+                    }
+                }
+            } else {
+                let (l, r) = (n.first, n.first + 1);
+                let dl = box_d2(p, &self.nodes[l as usize]);
+                let dr = box_d2(p, &self.nodes[r as usize]);
+                // Visit the nearer child first: push it last.
+                let (far, near) = if dl <= dr { (r, l) } else { (l, r) };
+                if sp + 2 <= stack.len() {
+                    stack[sp] = far;
+                    stack[sp + 1] = near;
+                    sp += 2;
+                } else {
+                    // Deeper than any balanced tree of < 2^60 edges; keep it correct anyway.
+                    return self.nearest_brute(p);
+                }
+            }
+        }
+        (best.sqrt(), arg)
+    }
+
+    /// The boundary point nearest to `p` among those on the far side of `p` from `q`
+    /// (in the half-plane `(x − p)·(q − p) ≤ 0`), if any.
+    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2]) -> Option<([f64; 2], u32)> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let u = [q[0] - p[0], q[1] - p[1]];
+        let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
+        let mut best = f64::INFINITY;
+        let mut arg = None;
+        let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let n = &self.nodes[stack[sp] as usize];
+            if box_d2(p, n) >= best {
+                continue;
+            }
+            // Boxes wholly on q's side hold nothing behind p.
+            let lo_side = side(n.lo[0], n.lo[1])
+                .min(side(n.hi[0], n.lo[1]))
+                .min(side(n.lo[0], n.hi[1]))
+                .min(side(n.hi[0], n.hi[1]));
+            if lo_side > 0.0 {
+                continue;
+            }
+            if n.count > 0 {
+                let f = n.first as usize;
+                for (k, sg) in self.segs[f..f + n.count as usize].iter().enumerate() {
+                    let (ga, gb) = (side(sg[0], sg[1]), side(sg[2], sg[3]));
+                    if ga > 0.0 && gb > 0.0 {
+                        continue;
+                    }
+                    // Part of the segment behind p: t in [t0, t1].
+                    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+                    if ga > 0.0 {
+                        t0 = ga / (ga - gb);
+                    } else if gb > 0.0 {
+                        t1 = ga / (ga - gb);
+                    }
+                    let (dx, dy) = (sg[2] - sg[0], sg[3] - sg[1]);
+                    let l2 = dx * dx + dy * dy;
+                    let t = if l2 > 0.0 {
+                        (((p[0] - sg[0]) * dx + (p[1] - sg[1]) * dy) / l2).clamp(t0, t1)
+                    } else {
+                        0.0
+                    };
+                    let x = [sg[0] + t * dx, sg[1] + t * dy];
+                    let dd = d2(x, p);
+                    if dd < best {
+                        best = dd;
+                        arg = Some((x, (f + k) as u32));
+                    }
+                }
+            } else {
+                let (l, r) = (n.first, n.first + 1);
+                let dl = box_d2(p, &self.nodes[l as usize]);
+                let dr = box_d2(p, &self.nodes[r as usize]);
+                let (far, near) = if dl <= dr { (r, l) } else { (l, r) };
+                if sp + 2 > stack.len() {
+                    return None;
+                }
+                stack[sp] = far;
+                stack[sp + 1] = near;
+                sp += 2;
+            }
+        }
+        arg
+    }
+
+    /// Boundary points about `h` away from `q` (a point of edge `i`) along its contour,
+    /// one each way: the first contour points at least `h` from `q` (at most 64 points
+    /// walked).
+    fn along(&self, i: u32, q: [f64; 2], h: f64) -> [[f64; 2]; 2] {
+        let (v, c) = self.seg_at[i as usize];
+        let (first, len) = self.contours[c as usize];
+        let h2 = h * h;
+        let at = |k: u32| self.verts[(first + k % len) as usize];
+        let k0 = v - first;
+        let mut fwd = at(k0 + 1);
+        for s in 1..len.min(64) {
+            fwd = at(k0 + s);
+            if d2(fwd, q) >= h2 {
+                break;
+            }
+        }
+        let mut back = at(k0);
+        for s in 0..len.min(64) {
+            back = at(k0 + len - s);
+            if d2(back, q) >= h2 {
+                break;
+            }
+        }
+        [fwd, back]
+    }
+
+    /// The point of edge `i` nearest to `p`.
+    fn closest_point(&self, i: u32, p: [f64; 2]) -> [f64; 2] {
+        let s = &self.segs[i as usize];
+        let (dx, dy) = (s[2] - s[0], s[3] - s[1]);
+        let l2 = dx * dx + dy * dy;
+        let t = if l2 > 0.0 {
+            (((p[0] - s[0]) * dx + (p[1] - s[1]) * dy) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        [s[0] + t * dx, s[1] + t * dy]
+    }
+
+    fn nearest_brute(&self, p: [f64; 2]) -> (f64, u32) {
+        let mut best = (f64::INFINITY, u32::MAX);
+        for (i, s) in self.segs.iter().enumerate() {
+            let d = seg_d2(p, s);
+            if d < best.0 {
+                best = (d, i as u32);
+            }
+        }
+        (best.0.sqrt(), best.1)
+    }
+
+    /// Nonzero-winding inside test.
+    pub fn inside(&self, p: [f64; 2]) -> bool {
+        let Some(root) = self.nodes.last() else {
+            return false;
+        };
+        if p[1] < root.lo[1] || p[1] > root.hi[1] || p[0] < root.lo[0] || p[0] > root.hi[0] {
+            return false;
+        }
+        let nb = self.band_start.len() - 1;
+        let k = (((p[1] - self.band_y0) * self.band_inv) as usize).min(nb - 1);
+        let mut w = 0i32;
+        for &i in &self.band_items[self.band_start[k] as usize..self.band_start[k + 1] as usize] {
+            let s = &self.segs[i as usize];
+            let (ay, by) = (s[1], s[3]);
+            let up = ay <= p[1] && p[1] < by;
+            let down = by <= p[1] && p[1] < ay;
+            if up || down {
+                let x = s[0] + (p[1] - ay) * (s[2] - s[0]) / (by - ay);
+                if x > p[0] {
+                    w += if up { 1 } else { -1 };
+                }
+            }
+        }
+        w != 0
+    }
+
+    /// Signed distance: positive inside, negative outside.
+    pub fn signed_distance(&self, p: [f64; 2]) -> f64 {
+        let d = self.distance(p);
+        if self.inside(p) {
+            d
+        } else {
+            -d
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Largest inscribed circle.
+
+/// A square cell of the subdivision: centre `c`, half-size `h`, `max` an upper bound of the
+/// signed distance inside it (the parent's bound until the cell is evaluated).
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    c: [f64; 2],
+    h: f64,
+    max: f64,
+    /// The parent's nearest edge (a good first guess for this cell's).
+    hint: u32,
+}
+
+impl PartialEq for Cell {
+    fn eq(&self, o: &Self) -> bool {
+        self.max == o.max
+    }
+}
+impl Eq for Cell {}
+impl PartialOrd for Cell {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Cell {
+    fn cmp(&self, o: &Self) -> Ordering {
+        self.max.total_cmp(&o.max)
+    }
+}
+
+fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
+}
+
+/// Largest value over the square `[c ± h]` of `min_j |x − q_j|`: the distance from a point
+/// to its nearest boundary point can be no larger, so this bounds the signed distance in
+/// the cell. The function is convex on each Voronoi cell of the points, so its maximum is
+/// at a box corner, where a bisector crosses the box's edges, or at a circumcentre.
+fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
+    let (x0, x1, y0, y1) = (c[0] - h, c[0] + h, c[1] - h, c[1] + h);
+    // min_j |x − q_j|², or anything ≤ `floor` once it is known not to beat it.
+    let g = |x: [f64; 2], floor: f64| {
+        let mut m = f64::INFINITY;
+        for &p in q {
+            m = m.min(d2(x, p));
+            if m <= floor {
+                break;
+            }
+        }
+        m
+    };
+    let mut best = 0.0f64;
+    for x in [[x0, y0], [x1, y0], [x0, y1], [x1, y1]] {
+        best = best.max(g(x, best));
+    }
+    for i in 0..q.len() {
+        for j in i + 1..q.len() {
+            // Bisector of q_i q_j: n·x = k.
+            let n = [q[j][0] - q[i][0], q[j][1] - q[i][1]];
+            let k = 0.5 * (d2(q[j], [0.0, 0.0]) - d2(q[i], [0.0, 0.0]));
+            if n[1] != 0.0 {
+                for x in [x0, x1] {
+                    let y = (k - n[0] * x) / n[1];
+                    if y >= y0 && y <= y1 {
+                        best = best.max(g([x, y], best));
+                    }
+                }
+            }
+            if n[0] != 0.0 {
+                for y in [y0, y1] {
+                    let x = (k - n[1] * y) / n[0];
+                    if x >= x0 && x <= x1 {
+                        best = best.max(g([x, y], best));
+                    }
+                }
+            }
+            for m in j + 1..q.len() {
+                // Circumcentre of q_i q_j q_m.
+                let (a, b, cc) = (q[i], q[j], q[m]);
+                let den =
+                    2.0 * (a[0] * (b[1] - cc[1]) + b[0] * (cc[1] - a[1]) + cc[0] * (a[1] - b[1]));
+                if den != 0.0 {
+                    let (a2, b2, c2) = (d2(a, [0.0; 2]), d2(b, [0.0; 2]), d2(cc, [0.0; 2]));
+                    let u = [
+                        (a2 * (b[1] - cc[1]) + b2 * (cc[1] - a[1]) + c2 * (a[1] - b[1])) / den,
+                        (a2 * (cc[0] - b[0]) + b2 * (a[0] - cc[0]) + c2 * (b[0] - a[0])) / den,
+                    ];
+                    if u[0] >= x0 && u[0] <= x1 && u[1] >= y0 && u[1] <= y1 {
+                        best = best.max(g(u, best));
+                    }
+                }
+            }
+        }
+    }
+    best.sqrt()
+}
+
+/// Largest inscribed circle of the section (nonzero winding): `(radius, centre)`, mm.
+/// The radius is a true inscribed radius and within [`PRECISION_MM`] of the largest one.
+/// An empty section gives `(0, [0, 0])`.
+pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
+    let e = Edges::new(contours);
+    max_fill_distance_with(&e, PRECISION_MM)
+}
+
+/// [`max_fill_distance`] on indexed edges with a chosen precision, mm.
+///
+/// Best-first search over square cells ordered by an upper bound of the signed distance
+/// inside them. A cell is evaluated (its centre's exact signed distance `d` and nearest
+/// boundary point `q`) only when it is popped; its children inherit its bound until they
+/// are popped in turn, so cells left in the queue at the end cost nothing. The bound of a
+/// cell of half-size `h` is the smaller of
+/// * `d + h·√2` (the distance is 1-Lipschitz), and
+/// * [`points_bound`] over a few boundary points: `q`, the nearest boundary point behind
+///   the centre (`p2`, the other wall of a ridge), and on the contours of `q` and `p2` the
+///   points about `h` away on either side. No point of the cell is farther than that from
+///   the boundary. This is what keeps long ridges (walls of constant thickness, rings)
+///   from being subdivided down to the precision.
+///
+/// The best centre found is finally polished by a local pattern search on the exact
+/// distance (it only ever moves to a deeper point), so typical results are much closer
+/// than the guaranteed precision.
+pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
+    let Some(root) = e.nodes.last() else {
+        return (0.0, [0.0, 0.0]);
+    };
+    let (lo, hi) = (root.lo, root.hi);
+    let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
+    let size = w.min(h);
+    if size.is_nan() || size <= 0.0 {
+        return (0.0, [0.0, 0.0]);
+    }
+    let half = size / 2.0;
+    let mut heap = BinaryHeap::new();
+    let nx = (w / size).ceil() as usize;
+    let ny = (h / size).ceil() as usize;
+    for i in 0..nx {
+        for j in 0..ny {
+            let c = [
+                lo[0] + (i as f64 + 0.5) * size,
+                lo[1] + (j as f64 + 0.5) * size,
+            ];
+            heap.push(Cell {
+                c,
+                h: half,
+                max: f64::INFINITY,
+                hint: u32::MAX,
+            });
+        }
+    }
+    let mut best_d = f64::NEG_INFINITY;
+    let mut best_c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let mut best_near = u32::MAX;
+    while let Some(c) = heap.pop() {
+        if c.max - best_d <= precision {
+            // The heap is ordered by the bound: no remaining cell can do better.
+            break;
+        }
+        let (d, near) = e.nearest(c.c, c.hint);
+        let d = if e.inside(c.c) { d } else { -d };
+        if d > best_d {
+            (best_c, best_d, best_near) = (c.c, d, near);
+        }
+        let mut max = d + c.h * std::f64::consts::SQRT_2;
+        if d > 0.0 && max - best_d > precision {
+            let q = e.closest_point(near, c.c);
+            let mut pts = [[0.0; 2]; 6];
+            let mut n = 0;
+            let mut add = |p: [f64; 2]| {
+                pts[n] = p;
+                n += 1;
+            };
+            add(q);
+            e.along(near, q, c.h).into_iter().for_each(&mut add);
+            let behind = e.nearest_behind(c.c, q);
+            if let Some((q2, i2)) = behind {
+                add(q2);
+                e.along(i2, q2, c.h).into_iter().for_each(&mut add);
+            }
+            max = max.min(points_bound(c.c, c.h, &pts[..n]));
+            // Ridge probe: half-way between the two walls along the line through q and
+            // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
+            // the best value close to a ridge's height so ridge cells can be pruned.
+            if let Some((q2, _)) = behind {
+                let t = 0.5 * (d2(q2, c.c).sqrt() - d);
+                if max - best_d > precision && t > 0.25 * precision {
+                    let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
+                    let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
+                    let (dp, np) = e.nearest(p, near);
+                    if dp > best_d && e.inside(p) {
+                        (best_c, best_d, best_near) = (p, dp, np);
+                    }
+                }
+            }
+        }
+        if max - best_d <= precision {
+            continue;
+        }
+        let qh = c.h / 2.0;
+        for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            heap.push(Cell {
+                c: [c.c[0] + sx * qh, c.c[1] + sy * qh],
+                h: qh,
+                max,
+                hint: near,
+            });
+        }
+    }
+    if best_d <= 0.0 {
+        return (0.0, best_c);
+    }
+    let (c, d, _) = polish(
+        e,
+        (best_c, best_d, best_near),
+        precision,
+        precision / 16.0,
+        64,
+    );
+    (d, c)
+}
+
+/// Local pattern search from `c` (depth `d`, nearest edge `near`): tries steps in 8
+/// directions, keeps going in a direction while it gains (doubling the step), halves the
+/// step when no direction gains, from `precision` down to `precision / 16`; moves only
+/// to deeper points, so the result stays a true inscribed radius.
+fn polish(
+    e: &Edges,
+    (mut c, mut d, mut near): ([f64; 2], f64, u32),
+    first_step: f64,
+    last_step: f64,
+    max_evals: usize,
+) -> ([f64; 2], f64, u32) {
+    const S: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    const DIRS: [[f64; 2]; 8] = [
+        [1.0, 0.0],
+        [S, S],
+        [0.0, 1.0],
+        [-S, S],
+        [-1.0, 0.0],
+        [-S, -S],
+        [0.0, -1.0],
+        [S, -S],
+    ];
+    let mut step = first_step;
+    let mut k0 = 0;
+    let mut evals = 0;
+    while step >= last_step && evals < max_evals {
+        let mut moved = false;
+        for k in (0..8).map(|i| (k0 + i) % 8) {
+            let u = DIRS[k];
+            let mut s = step;
+            loop {
+                let p = [c[0] + s * u[0], c[1] + s * u[1]];
+                let (dp, np) = e.nearest(p, near);
+                evals += 1;
+                if dp > d && e.inside(p) {
+                    (c, d, near) = (p, dp, np);
+                    moved = true;
+                    s *= 2.0;
+                } else {
+                    break;
+                }
+            }
+            if moved {
+                k0 = k;
+                break;
+            }
+        }
+        if !moved {
+            step /= 2.0;
+        }
+    }
+    (c, d, near)
+}
+
+// ---------------------------------------------------------------------------------------
+// Islands.
+
+/// The inside runs of a section along the pixel-row centres `y = (k + 0.5)·row_mm`.
+#[derive(Debug, Clone, Default)]
+pub struct Runs {
+    /// `(k, x_start, x_end)` sorted by row then x.
+    runs: Vec<(i64, f64, f64)>,
+    /// `(k, first, end)` index range of each row's runs.
+    rows: Vec<(i64, usize, usize)>,
+}
+
+impl Runs {
+    /// Scans `contours` (nonzero winding) at the rows of pitch `row_mm`.
+    pub fn new(contours: &[Contour], row_mm: f64) -> Runs {
+        let runs = runs(contours, row_mm);
+        let rows = rows(&runs);
+        Runs { runs, rows }
+    }
+}
+
+fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
+    // An edge crosses rows k0..k1 (exclusive), k0 = ⌈lo/row − ½⌉, k1 = ⌈hi/row − ½⌉: the
+    // rows with lo <= y_k < hi up to rounding. Two edges meeting at a vertex compute its
+    // row from the same y, so the vertex counts exactly once.
+    let inv_row = 1.0 / row_mm;
+    let row_of = |y: f64| (y * inv_row - 0.5).ceil() as i64;
+    let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
+    for p in contours.iter().flatten() {
+        let k = row_of(p[1]);
+        kmin = kmin.min(k);
+        kmax = kmax.max(k);
+    }
+    if kmin >= kmax {
+        return Vec::new();
+    }
+    let nrows = (kmax - kmin) as usize;
+    // Counting sort of the crossings by row, then by x within each (short) row.
+    let mut start = vec![0u32; nrows + 1];
+    for c in contours {
+        for i in 0..c.len() {
+            let (a, b) = (row_of(c[i][1]), row_of(c[(i + 1) % c.len()][1]));
+            let (k0, k1) = if a <= b { (a, b) } else { (b, a) };
+            for k in k0..k1 {
+                start[(k - kmin) as usize + 1] += 1;
+            }
+        }
+    }
+    for r in 0..nrows {
+        start[r + 1] += start[r];
+    }
+    let mut fill = start.clone();
+    let mut xs = vec![(0.0f64, 0i32); start[nrows] as usize];
+    for c in contours {
+        for i in 0..c.len() {
+            let (p, q) = (c[i], c[(i + 1) % c.len()]);
+            let (a, b) = (row_of(p[1]), row_of(q[1]));
+            if a == b {
+                continue;
+            }
+            let (lo, hi, dir, k0, k1) = if a < b {
+                (p, q, 1, a, b)
+            } else {
+                (q, p, -1, b, a)
+            };
+            let slope = (hi[0] - lo[0]) / (hi[1] - lo[1]);
+            for k in k0..k1 {
+                let y = (k as f64 + 0.5) * row_mm;
+                let r = (k - kmin) as usize;
+                xs[fill[r] as usize] = (lo[0] + (y - lo[1]) * slope, dir);
+                fill[r] += 1;
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for r in 0..nrows {
+        let row = &mut xs[start[r] as usize..start[r + 1] as usize];
+        row.sort_unstable_by(|p, q| p.0.total_cmp(&q.0));
+        let k = kmin + r as i64;
+        let mut w = 0;
+        let mut x0 = 0.0;
+        for &(x, d) in row.iter() {
+            let was = w != 0;
+            w += d;
+            if !was && w != 0 {
+                x0 = x;
+            } else if was && w == 0 && x > x0 {
+                out.push((k, x0, x));
+            }
+        }
+    }
+    out
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+/// Index ranges of each row's runs: `(k, start, end)`.
+fn rows(r: &[(i64, f64, f64)]) -> Vec<(i64, usize, usize)> {
+    let mut out: Vec<(i64, usize, usize)> = Vec::new();
+    for (i, run) in r.iter().enumerate() {
+        match out.last_mut() {
+            Some(last) if last.0 == run.0 => last.2 = i + 1,
+            _ => out.push((run.0, i, i + 1)),
+        }
+    }
+    out
+}
+
+/// Number of connected regions of `cur` that overlap no part of `prev` (scanned at the
+/// centres of pixel rows of pitch `row_mm`).
+pub fn islands(cur: &[Contour], prev: &[Contour], row_mm: f64) -> u32 {
+    count_islands(&Runs::new(cur, row_mm), &Runs::new(prev, row_mm))
+}
+
+fn count_islands(cur: &Runs, prev: &Runs) -> u32 {
+    let (rc, rows_c) = (&cur.runs, &cur.rows);
+    let (rp, rows_p) = (&prev.runs, &prev.rows);
+    if rc.is_empty() {
+        return 0;
+    }
+    let mut parent: Vec<u32> = (0..rc.len() as u32).collect();
+    // Union runs of adjacent rows that overlap in x.
+    for w in rows_c.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if b.0 != a.0 + 1 {
+            continue;
+        }
+        let (mut i, mut j) = (a.1, b.1);
+        while i < a.2 && j < b.2 {
+            if rc[i].1 < rc[j].2 && rc[j].1 < rc[i].2 {
+                let (x, y) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
+                parent[x as usize] = y;
+            }
+            if rc[i].2 < rc[j].2 {
+                i += 1;
+            } else {
+                j += 1;
+            }
+        }
+    }
+    // A region is supported when one of its runs overlaps a run of the layer below.
+    let mut supported = vec![false; rc.len()];
+    let mut pi = 0;
+    for &(k, s, e) in rows_c {
+        while pi < rows_p.len() && rows_p[pi].0 < k {
+            pi += 1;
+        }
+        if pi == rows_p.len() || rows_p[pi].0 != k {
+            continue;
+        }
+        let (_, ps, pe) = rows_p[pi];
+        let (mut i, mut j) = (s, ps);
+        while i < e && j < pe {
+            if rc[i].1 < rp[j].2 && rp[j].1 < rc[i].2 {
+                let r = find(&mut parent, i as u32);
+                supported[r as usize] = true;
+            }
+            if rc[i].2 < rp[j].2 {
+                i += 1;
+            } else {
+                j += 1;
+            }
+        }
+    }
+    let mut n = 0;
+    for i in 0..rc.len() as u32 {
+        if find(&mut parent, i) == i && !supported[i as usize] {
+            n += 1;
+        }
+    }
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
+        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
+        let mut c: Contour = (0..n)
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / n as f64;
+                [cx + r * a.cos(), cy + r * a.sin()]
+            })
+            .collect();
+        if !ccw {
+            c.reverse();
+        }
+        c
+    }
+
+    fn mfd(c: &[Contour]) -> f64 {
+        max_fill_distance(c).0
+    }
+
+    #[test]
+    fn square_and_rectangle() {
+        assert!((mfd(&[rect(10.0, 10.0, 20.0, 20.0)]) - 5.0).abs() <= 0.001);
+        assert!((mfd(&[rect(3.0, 4.0, 8.0, 9.0)]) - 2.5).abs() <= 0.001);
+        assert!((mfd(&[rect(0.0, 0.0, 20.0, 10.0)]) - 5.0).abs() <= 0.001);
+        assert!((mfd(&[rect(0.0, 0.0, 60.0, 0.5)]) - 0.25).abs() <= 0.001);
+        // Never more than the exact value: it is a real inscribed circle.
+        assert!(mfd(&[rect(0.0, 0.0, 20.0, 10.0)]) <= 5.0 + 1e-12);
+    }
+
+    #[test]
+    fn circle_ring_and_l_shape() {
+        // A regular n-gon of circumradius r has inradius r·cos(π/n).
+        let n = 96;
+        let exact = 7.5 * (std::f64::consts::PI / n as f64).cos();
+        let v = mfd(&[ngon(30.0, 20.0, 7.5, n, true)]);
+        assert!((v - exact).abs() <= 0.001, "{v} vs {exact}");
+        // Ring: outer r 10, inner r 8 (hole clockwise). The wall is 2 mm: radius 1 mm up to
+        // the polygon's chord error.
+        let ring = [
+            ngon(0.0, 0.0, 10.0, 256, true),
+            ngon(0.0, 0.0, 8.0, 256, false),
+        ];
+        let v = mfd(&ring);
+        assert!((v - 1.0).abs() <= 0.001, "{v}");
+        // L-shape: the circle touches x = 0, y = 0 and the reflex corner (10, 10):
+        // r = 10·(2 − √2).
+        let l = vec![
+            [0.0, 0.0],
+            [20.0, 0.0],
+            [20.0, 10.0],
+            [10.0, 10.0],
+            [10.0, 20.0],
+            [0.0, 20.0],
+        ];
+        let exact = 10.0 * (2.0 - std::f64::consts::SQRT_2);
+        let (v, c) = max_fill_distance(&[l]);
+        assert!((v - exact).abs() <= 0.001, "{v} vs {exact}");
+        assert!(
+            (c[0] - exact).abs() < 0.05 && (c[1] - exact).abs() < 0.05,
+            "{c:?}"
+        );
+    }
+
+    #[test]
+    fn two_parts_and_empty() {
+        let two = [rect(0.0, 0.0, 4.0, 4.0), rect(10.0, 0.0, 22.0, 30.0)];
+        assert!((mfd(&two) - 6.0).abs() <= 0.005);
+        assert_eq!(mfd(&[]), 0.0);
+        // A hole in the middle of a square: the best circle sits between hole and rim.
+        let holed = [rect(0.0, 0.0, 20.0, 20.0), {
+            let mut h = rect(8.0, 8.0, 12.0, 12.0);
+            h.reverse();
+            h
+        }];
+        // Corner circle touching two sides and the hole corner (8, 8): centre (t, t) with
+        // √2·(8 − t) = t → t = 8√2/(1+√2).
+        let t = 8.0 * std::f64::consts::SQRT_2 / (1.0 + std::f64::consts::SQRT_2);
+        assert!((mfd(&holed) - t).abs() <= 0.005, "{} vs {t}", mfd(&holed));
+    }
+
+    #[test]
+    fn matches_brute_force_on_random_polygons() {
+        // Star-shaped random polygons; reference: a fine grid plus the exact distance.
+        let mut s = 0x9e3779b97f4a7c15u64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..6 {
+            let n = 5 + (rnd() * 20.0) as usize;
+            let c: Contour = (0..n)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * i as f64 / n as f64;
+                    let r = 3.0 + 7.0 * rnd();
+                    [r * a.cos(), r * a.sin()]
+                })
+                .collect();
+            let e = Edges::new(std::slice::from_ref(&c));
+            let (v, _) = max_fill_distance_with(&e, PRECISION_MM);
+            // Coarse grid, then a fine grid around the five best coarse points.
+            let mut coarse: Vec<(f64, [f64; 2])> = Vec::new();
+            for i in 0..=400 {
+                for j in 0..=400 {
+                    let p = [-10.0 + 0.05 * i as f64, -10.0 + 0.05 * j as f64];
+                    coarse.push((e.signed_distance(p), p));
+                }
+            }
+            coarse.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let mut brute: f64 = 0.0;
+            for &(_, p) in coarse.iter().take(5) {
+                for i in -30..=30 {
+                    for j in -30..=30 {
+                        let q = [p[0] + 0.002 * i as f64, p[1] + 0.002 * j as f64];
+                        brute = brute.max(e.signed_distance(q));
+                    }
+                }
+            }
+            // The fine grid is within 0.0015 mm of the optimum and cannot exceed it; the
+            // search is a true inscribed radius, guaranteed within PRECISION_MM and, after
+            // the polish, much closer.
+            assert!(v <= brute + 0.0015, "{v} vs {brute}");
+            assert!(v >= brute - 0.005, "{v} vs {brute}");
+        }
+    }
+
+    #[test]
+    fn inside_and_distance() {
+        let sq = [rect(0.0, 0.0, 10.0, 10.0), {
+            let mut h = rect(4.0, 4.0, 6.0, 6.0);
+            h.reverse();
+            h
+        }];
+        let e = Edges::new(&sq);
+        assert!(e.inside([1.0, 1.0]));
+        assert!(!e.inside([5.0, 5.0]));
+        assert!(!e.inside([11.0, 5.0]));
+        assert!((e.signed_distance([1.0, 2.0]) - 1.0).abs() < 1e-12);
+        assert!((e.signed_distance([5.0, 5.0]) + 1.0).abs() < 1e-12);
+        assert!((e.signed_distance([13.0, 14.0]) + 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn islands_count_unsupported_regions() {
+        let p = 0.0634765625;
+        let base = [rect(0.0, 0.0, 10.0, 10.0)];
+        // Same region: supported.
+        assert_eq!(islands(&base, &base, p), 0);
+        // Two new regions, one overlapping the base and one beside it.
+        let two = [rect(5.0, 5.0, 8.0, 8.0), rect(20.0, 0.0, 25.0, 5.0)];
+        assert_eq!(islands(&two, &base, p), 1);
+        // Nothing below at all.
+        assert_eq!(islands(&two, &[], p), 2);
+        // A ring counts once, and rests on a base touching only part of it.
+        let ring = [
+            ngon(40.0, 30.0, 10.0, 64, true),
+            ngon(40.0, 30.0, 8.0, 64, false),
+        ];
+        assert_eq!(islands(&ring, &[], p), 1);
+        assert_eq!(islands(&ring, &[rect(48.0, 28.0, 52.0, 32.0)], p), 0);
+        // A base inside the ring's hole does not support it.
+        assert_eq!(islands(&ring, &[rect(38.0, 28.0, 42.0, 32.0)], p), 1);
+        assert_eq!(islands(&[], &base, p), 0);
+    }
+
+    #[test]
+    fn analyser_reuses_the_layer_below_without_changing_results() {
+        let p = 0.0634765625;
+        let layers = [
+            vec![rect(0.0, 0.0, 10.0, 10.0)],
+            vec![rect(5.0, 5.0, 8.0, 8.0), rect(20.0, 0.0, 25.0, 5.0)],
+            vec![rect(20.0, 0.0, 25.0, 5.0), rect(30.0, 0.0, 31.0, 1.0)],
+        ];
+        let mut a = Analyser::new(p);
+        let seq: Vec<u32> = (0..3)
+            .map(|i| {
+                a.analyse(
+                    i,
+                    &layers[i],
+                    i.checked_sub(1).map(|j| layers[j].as_slice()),
+                )
+                .islands
+            })
+            .collect();
+        assert_eq!(seq, vec![0, 1, 1]);
+        // Out of order (a fresh scan of the layer below) gives the same.
+        assert_eq!(analyse(&layers[2], Some(&layers[1]), p).islands, 1);
+        assert_eq!(a.analyse(1, &layers[1], Some(&layers[0])).islands, 1);
+    }
+
+    #[test]
+    fn analyse_fills_all_fields() {
+        let a = analyse(&[rect(1.0, 2.0, 11.0, 12.0)], None, 0.0634765625);
+        assert!((a.max_fill_distance_mm - 5.0).abs() <= 0.005);
+        assert_eq!(a.islands, 0);
+        assert_eq!(a.bbox_mm, Some([[1.0, 2.0], [11.0, 12.0]]));
+        assert_eq!(analyse(&[], None, 0.1).bbox_mm, None);
+    }
+}

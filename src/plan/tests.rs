@@ -1,0 +1,275 @@
+//! Unit tests of the planner on synthetic layers.
+
+use super::*;
+use crate::profile::Profile;
+
+fn info(i: usize, h: f64, area: f64, fill: f64) -> LayerInfo {
+    LayerInfo {
+        index: i,
+        z_mm: (i + 1) as f64 * h,
+        thickness_mm: h,
+        area_mm2: area,
+        max_fill_distance_mm: fill,
+        islands: 0,
+    }
+}
+
+fn top(steps: &[Step]) -> f64 {
+    steps
+        .iter()
+        .filter_map(|s| match *s {
+            Step::Move { to_mm, .. } | Step::Sweep { to_mm, .. } => Some(to_mm),
+            _ => None,
+        })
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Lift height of a layer: highest `to_mm` minus its exposure position.
+fn lift(p: &LayerPlan, l: &LayerInfo) -> f64 {
+    top(&p.steps) - l.z_mm
+}
+
+#[test]
+fn top_down_dips_returns_waits_exposes() {
+    let p = Profile::default_profile();
+    let r = p.recoat.clone().unwrap();
+    let h = 0.05;
+    let layers: Vec<LayerInfo> = (0..4).map(|i| info(i, h, 50.0, 0.5 + i as f64)).collect();
+    let plan = plan(&p, &layers).unwrap();
+    for (l, lp) in layers.iter().zip(&plan.layers) {
+        assert_eq!(lp.mode, Mode::Layered);
+        let want_wait = r.wait_for(l.max_fill_distance_mm, h, 0.5).0;
+        match lp.steps.as_slice() {
+            [Step::Move { to_mm: d, .. }, Step::Move { to_mm: z, .. }, Step::Wait { s }, Step::Expose { s: e }] =>
+            {
+                assert!((d - l.z_mm - r.dip_mm.get()).abs() < 1e-12);
+                assert_eq!(*z, l.z_mm);
+                assert_eq!(*s, want_wait);
+                assert_eq!(*e, p.exposure.layer_exposure_s(l.index));
+            }
+            other => panic!("unexpected steps {other:?}"),
+        }
+    }
+    // The wait grows with the flat extent, between the minimum and the cap.
+    let waits: Vec<f64> = plan
+        .layers
+        .iter()
+        .map(|lp| match lp.steps[2] {
+            Step::Wait { s } => s,
+            _ => unreachable!(),
+        })
+        .collect();
+    assert_eq!(waits[0], r.wait_s.get());
+    assert!(waits.windows(2).all(|w| w[1] >= w[0]));
+    assert_eq!(waits[3], r.wait_max_s.get());
+    assert!(plan
+        .warnings
+        .iter()
+        .any(|w| w.contains("leveling wait capped")));
+    assert_eq!(plan.all_layered_time_s, None);
+    let sum: f64 = plan.layers.iter().map(|l| l.time_s).sum();
+    assert!((plan.print_time_s - sum).abs() < 1e-9);
+}
+
+#[test]
+fn bottom_up_two_stage_lift_scales_with_area() {
+    let p = Profile::resolve("bottom-up").unwrap();
+    let k = p.peel.clone().unwrap();
+    let h = 0.05;
+    let b = p.exposure.bottom_layers as usize;
+    let areas = [300.0, 300.0, 300.0, 300.0, 100.0, 100.0, 800.0, 800.0, 10.0];
+    let layers: Vec<LayerInfo> = areas
+        .iter()
+        .enumerate()
+        .map(|(i, &a)| info(i, h, a, 3.0))
+        .collect();
+    let plan = plan(&p, &layers).unwrap();
+    assert!(matches!(plan.layers[0].steps[0], Step::Move { to_mm, .. } if to_mm == h));
+    for i in 1..layers.len() {
+        let (want_lift, want_v) = k.lift_for(areas[i - 1], i - 1 < b);
+        let lp = &plan.layers[i];
+        assert!(
+            (lift(lp, &layers[i]) - want_lift).abs() < 1e-12,
+            "layer {i}"
+        );
+        // wait after cure, slow stage, fast stage, retract, wait, expose
+        match lp.steps.as_slice() {
+            [Step::Wait { .. }, Step::Move {
+                to_mm: s,
+                speed_mm_s: v,
+                ..
+            }, Step::Move { speed_mm_s: f, .. }, Step::Move { to_mm: z, .. }, Step::Wait { .. }, Step::Expose { s: e }] =>
+            {
+                assert!((s - layers[i - 1].z_mm - k.slow_lift_mm.get()).abs() < 1e-12);
+                assert_eq!(*v, want_v);
+                assert_eq!(*f, k.fast_speed_mm_s.get());
+                assert_eq!(*z, layers[i].z_mm);
+                assert_eq!(*e, p.exposure.layer_exposure_s(i));
+            }
+            other => panic!("layer {i}: {other:?}"),
+        }
+    }
+    // Larger peeled area: higher lift, slower first stage.
+    let v = |i: usize| match plan.layers[i].steps[1] {
+        Step::Move { speed_mm_s, .. } => speed_mm_s,
+        _ => unreachable!(),
+    };
+    assert!(lift(&plan.layers[7], &layers[7]) > lift(&plan.layers[5], &layers[5]));
+    assert!(v(7) < v(5));
+}
+
+#[test]
+fn hybrid_modes_lifts_and_sweeps() {
+    let p = Profile::resolve("hybrid-bottomup").unwrap();
+    let hy = p.hybrid.clone().unwrap();
+    let h = 0.1;
+    let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
+    // Bottom/transition layers, then: continuous ×3, 5.0 (2 mm), 2.52 (continuous: within
+    // tolerance), 7.5 (4 mm), 7.53 (8 mm), 1.0 ×2 (continuous), 31 (beyond table: 8 mm).
+    let mut fills = vec![7.5; first_free];
+    fills.extend([1.0, 2.0, 2.5, 5.0, 2.52, 7.5, 7.53, 1.0, 1.0, 31.0]);
+    let layers: Vec<LayerInfo> = fills
+        .iter()
+        .enumerate()
+        .map(|(i, &f)| info(i, h, 100.0, f))
+        .collect();
+    let plan = plan(&p, &layers).unwrap();
+    let modes: Vec<Mode> = plan.layers.iter().map(|l| l.mode).collect();
+    use Mode::{Continuous as C, Layered as L};
+    let mut want = vec![L; first_free];
+    want.extend([C, C, C, L, C, L, L, C, C, L]);
+    assert_eq!(modes, want);
+    assert_eq!(plan.continuous_layers, 6);
+    for (i, (l, lp)) in layers.iter().zip(&plan.layers).enumerate() {
+        match lp.mode {
+            Mode::Continuous => {
+                let last = *lp.steps.last().unwrap();
+                assert_eq!(
+                    last,
+                    Step::Sweep {
+                        to_mm: l.z_mm,
+                        speed_mm_s: 0.06
+                    }
+                );
+                assert!((lp.exposure_s - h / 0.06).abs() < 1e-12);
+                // Inside a run a continuous slice is a single sweep; after a layered slice
+                // an explicit settle wait comes first.
+                if plan.layers[i - 1].mode == Mode::Continuous {
+                    assert_eq!(lp.steps.len(), 1, "layer {i}");
+                } else {
+                    assert!(matches!(lp.steps[0], Step::Wait { s } if s == hy.switch_wait_s.get()));
+                }
+            }
+            Mode::Layered if i > 0 => {
+                let want_lift = if i - 1 < p.exposure.bottom_layers as usize {
+                    hy.bottom_lift_mm
+                        .get()
+                        .max(hy.olh_for(l.max_fill_distance_mm).0)
+                } else {
+                    hy.olh_for(l.max_fill_distance_mm).0
+                };
+                assert!((lift(lp, l) - want_lift).abs() < 1e-9, "layer {i}");
+                assert!(matches!(lp.steps.last(), Some(Step::Expose { .. })));
+            }
+            Mode::Layered => {}
+        }
+    }
+    let lifts: Vec<f64> = (first_free..layers.len())
+        .filter(|&i| plan.layers[i].mode == Mode::Layered)
+        .map(|i| (lift(&plan.layers[i], &layers[i]) * 1e6).round() / 1e6)
+        .collect();
+    assert_eq!(lifts, vec![2.0, 4.0, 8.0, 8.0]);
+    assert!(plan
+        .warnings
+        .iter()
+        .any(|w| w.contains("beyond the lift table")));
+    // The all-layered comparison plan is slower.
+    let all = plan.all_layered_time_s.unwrap();
+    assert!(all > plan.print_time_s, "{all} vs {}", plan.print_time_s);
+}
+
+#[test]
+fn out_of_travel_is_an_error_and_long_lifts_are_clamped() {
+    let mut p = Profile::resolve("hybrid-bottomup").unwrap();
+    p.stage.travel_max_mm = 1.5;
+    let layers: Vec<LayerInfo> = (0..10).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
+    let plan = plan(&p, &layers).unwrap();
+    assert!(plan.layers.iter().all(|l| top(&l.steps) <= 1.5));
+    assert!(plan.warnings.iter().any(|w| w.contains("shortened")));
+    let layers: Vec<LayerInfo> = (0..20).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
+    let e = super::plan(&p, &layers).unwrap_err();
+    assert!(
+        e.contains("layer 15") && e.contains("outside the stage travel"),
+        "{e}"
+    );
+}
+
+/// An independent replay of the timing contract: one flat event list, absolute clock.
+fn replay(p: &Profile, plans: &[LayerPlan]) -> f64 {
+    let flat: Vec<(usize, Step)> = plans
+        .iter()
+        .enumerate()
+        .flat_map(|(i, l)| l.steps.iter().map(move |s| (i, *s)))
+        .collect();
+    let (open, close, load) = (
+        p.shutter.open_s.get(),
+        p.shutter.close_s.get(),
+        p.dmd.load_s.get(),
+    );
+    let mut clock = 0.0;
+    let mut pos = p.stage.home_mm;
+    let mut layer_start = 0.0;
+    let mut cur = usize::MAX;
+    let mut shutter_open = false;
+    for (k, &(i, s)) in flat.iter().enumerate() {
+        if i != cur {
+            cur = i;
+            layer_start = clock;
+        }
+        let ready = layer_start + load;
+        match s {
+            Step::Move {
+                to_mm,
+                speed_mm_s,
+                accel_mm_s2,
+            } => {
+                assert!(!shutter_open);
+                clock += move_time(to_mm - pos, speed_mm_s, accel_mm_s2);
+                pos = to_mm;
+            }
+            Step::Wait { s } => clock += s,
+            Step::Expose { s } => clock = clock.max(ready) + open + s + close,
+            Step::Sweep { to_mm, speed_mm_s } => {
+                if !shutter_open {
+                    clock = clock.max(ready) + open;
+                    shutter_open = true;
+                }
+                clock += (to_mm - pos).abs() / speed_mm_s;
+                pos = to_mm;
+                if !matches!(flat.get(k + 1), Some((_, Step::Sweep { .. }))) {
+                    clock += close;
+                    shutter_open = false;
+                }
+            }
+        }
+    }
+    clock
+}
+
+#[test]
+fn estimate_matches_an_independent_replay() {
+    for name in crate::profile::builtin_names() {
+        let p = Profile::resolve(name).unwrap();
+        let h = p.slicing.layer_height_mm.get();
+        let layers: Vec<LayerInfo> = (0..40)
+            .map(|i| info(i, h, 20.0 * (i % 7) as f64, [1.0, 3.0, 6.0, 9.0][i / 10]))
+            .collect();
+        let plan = plan(&p, &layers).unwrap();
+        let r = replay(&p, &plan.layers);
+        assert!(
+            (plan.print_time_s - r).abs() < 1e-9 * r,
+            "{name}: {} vs {r}",
+            plan.print_time_s
+        );
+    }
+}
