@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// Where the part goes on the build plane.
@@ -165,6 +166,47 @@ const WINDOW: usize = 32;
 /// Consecutive layers one worker processes in order.
 const BLOCK: usize = 4;
 
+/// A [`Scratch`] borrowed from a pool and returned to it when dropped.
+struct Pooled<'p> {
+    pool: &'p Mutex<Vec<Scratch>>,
+    scratch: Option<Scratch>,
+}
+
+impl<'p> Pooled<'p> {
+    fn take(pool: &'p Mutex<Vec<Scratch>>) -> Self {
+        let scratch = pool
+            .lock()
+            .ok()
+            .and_then(|mut v| v.pop())
+            .unwrap_or_default();
+        Pooled {
+            pool,
+            scratch: Some(scratch),
+        }
+    }
+}
+
+impl std::ops::Deref for Pooled<'_> {
+    type Target = Scratch;
+    fn deref(&self) -> &Scratch {
+        self.scratch.as_ref().expect("present until drop")
+    }
+}
+
+impl std::ops::DerefMut for Pooled<'_> {
+    fn deref_mut(&mut self) -> &mut Scratch {
+        self.scratch.as_mut().expect("present until drop")
+    }
+}
+
+impl Drop for Pooled<'_> {
+    fn drop(&mut self) {
+        if let (Some(s), Ok(mut v)) = (self.scratch.take(), self.pool.lock()) {
+            v.push(s);
+        }
+    }
+}
+
 /// One layer handed to a mask worker.
 struct LayerIn<'a> {
     index: usize,
@@ -245,6 +287,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let mut outs = Vec::with_capacity(n);
     let mut below: Option<Section> = None;
     let (mut t_slice, mut t_masks) = (0.0, 0.0);
+    let scratch_pool = Mutex::new(Vec::new());
     for start in (0..n).step_by(WINDOW) {
         let ts = Instant::now();
         let sections = slicer.window(start..start + WINDOW);
@@ -253,7 +296,11 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         let m = sections.len();
         let blocks: Vec<Result<Vec<LayerOut>>> = (0..m.div_ceil(BLOCK))
             .into_par_iter()
-            .map_init(Scratch::default, |scratch, b| {
+            .map(|b| {
+                // Scratch buffers (megabytes) outlive blocks and windows: fresh ones would
+                // page-fault on every block.
+                let mut scratch = Pooled::take(&scratch_pool);
+                let scratch = &mut *scratch;
                 let mut outs = Vec::with_capacity(BLOCK);
                 let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
                 for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
