@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """Whole-process wall time and peak memory of `dmdsl slice` vs PrusaSlicer's SLA export.
 
-Usage: bench.py DMDSL_BIN OUTDIR RUNS MODEL.stl [MODEL.stl ...]
+Usage: bench.py [--replace] DMDSL_BIN OUTDIR RUNS MODEL.stl [MODEL.stl ...]
 
 Runs are interleaved (for each run: each model: PrusaSlicer, then dmdsl) so machine noise
-hits both tools alike. Every run writes a new output path and the previous outputs are
-deleted before the run, untimed: a run then measures slicing into a fresh path, as a user
-does, not the deletion of the previous run's 800 mask files (on ext4, creating files right
-after deleting many costs dmdsl up to 0.5 s of kernel time; PrusaSlicer writes one file). Reports per model the median wall time and peak RSS of each tool,
+hits both tools alike. Every run writes a new output path and nothing is deleted until the
+end: a run measures slicing a part into a fresh path, as a user does. (On this machine's
+journal-less ext4, creating files within ~30 s of deleting many makes the kernel skip every
+recently deleted inode: replacing a bundle right after deleting another costs dmdsl up to
+0.5 s of kernel time, while PrusaSlicer writes one file. The `--replace` flag measures that
+case: each run overwrites the previous run's output.) Reports per model the median wall time and peak RSS of each tool,
 the speed ratio, and the geometric mean of the ratios. Needs prusa-slicer (apt).
 """
 import json, math, os, statistics, subprocess, sys, time
@@ -26,20 +28,22 @@ def timed(cmd):
 
 
 def main():
-    dmdsl, out, runs = sys.argv[1], sys.argv[2], int(sys.argv[3])
-    models = sys.argv[4:]
+    replace = "--replace" in sys.argv
+    args = [a for a in sys.argv[1:] if a != "--replace"]
+    dmdsl, out, runs = args[0], args[1], int(args[2])
+    models = args[3:]
+    subprocess.run(["rm", "-rf", out], check=True)
     os.makedirs(out, exist_ok=True)
     res = {m: {"prusa": [], "dmdsl": [], "prusa_kb": 0, "dmdsl_kb": 0} for m in models}
     for r in range(runs):
         for m in models:
             name = os.path.splitext(os.path.basename(m))[0]
-            subprocess.run(["rm", "-rf", out], check=True)
-            os.makedirs(out)
+            tag = "" if replace else f"-{r}"
             dt, kb = timed(["prusa-slicer", "--load", os.path.join(HERE, "prusa_sla.ini"), "--export-sla",
-                            "--output", os.path.join(out, f"{name}-{r}.sl1"), m])
+                            "--output", os.path.join(out, f"{name}{tag}.sl1"), m])
             res[m]["prusa"].append(dt)
             res[m]["prusa_kb"] = max(res[m]["prusa_kb"], kb)
-            dt, kb = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}-{r}.dmdjob")])
+            dt, kb = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}{tag}.dmdjob")])
             res[m]["dmdsl"].append(dt)
             res[m]["dmdsl_kb"] = max(res[m]["dmdsl_kb"], kb)
     ratios = []
@@ -50,6 +54,7 @@ def main():
         print(json.dumps({"model": os.path.basename(m), "prusa_s": round(p, 3), "dmdsl_s": round(d, 3),
                           "speedup": round(p / d, 2), "prusa_peak_mib": round(r["prusa_kb"] / 1024, 1),
                           "dmdsl_peak_mib": round(r["dmdsl_kb"] / 1024, 1)}))
+    subprocess.run(["rm", "-rf", out], check=True)
     print(json.dumps({"geomean_speedup": round(math.exp(sum(map(math.log, ratios)) / len(ratios)), 2)}))
 
 
