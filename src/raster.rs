@@ -48,7 +48,23 @@ impl Mask {
 
     /// Sum of values / 255: the lit area in pixels.
     pub fn lit_pixels(&self) -> f64 {
-        self.data.iter().map(|&v| v as u64).sum::<u64>() as f64 / 255.0
+        self.lit_pixels_in([0, self.height as usize, 0, self.width as usize])
+    }
+
+    /// Like [`lit_pixels`](Self::lit_pixels) when the mask is known to be zero outside
+    /// `lit_box` = [r0, r1, c0, c1] (e.g. [`Scratch::lit_box`]): visits only that box.
+    pub fn lit_pixels_in(&self, lit_box: [usize; 4]) -> f64 {
+        let [r0, r1, c0, c1] = lit_box;
+        let w = self.width as usize;
+        let mut sum = 0u64;
+        for r in r0..r1 {
+            // u32 partial sums per row vectorize well; a row cannot overflow them.
+            sum += self.data[r * w + c0..r * w + c1]
+                .iter()
+                .map(|&v| v as u32)
+                .sum::<u32>() as u64;
+        }
+        sum as f64 / 255.0
     }
 }
 
@@ -56,7 +72,8 @@ impl Mask {
 #[derive(Debug, Default)]
 pub struct Scratch {
     acc: Vec<f32>,
-    spare: Vec<Vec<u8>>,
+    /// Recycled mask buffers with the box outside which each is known to be zero.
+    spare: Vec<(Vec<u8>, [usize; 4])>,
     lit: [usize; 4],
 }
 
@@ -67,21 +84,33 @@ impl Scratch {
         self.lit
     }
 
-    /// Hands a mask's memory back for reuse by the next [`Rasterizer::coverage`] call
-    /// (saves a fresh, page-faulting allocation per layer).
+    /// Hands the mask returned by the latest [`Rasterizer::coverage`] call back for reuse
+    /// (saves a fresh, page-faulting allocation per layer). The mask may have been changed,
+    /// but only inside [`lit_box`](Self::lit_box): only that box is cleared for reuse.
     pub fn recycle(&mut self, m: Mask) {
+        let [r0, r1, c0, c1] = self.lit;
+        debug_assert!(
+            m.data.chunks(m.width as usize).enumerate().all(|(r, row)| {
+                row.iter()
+                    .enumerate()
+                    .all(|(c, &v)| v == 0 || ((r0..r1).contains(&r) && (c0..c1).contains(&c)))
+            }),
+            "recycled mask is lit outside its lit box"
+        );
         if self.spare.len() < 4 {
-            self.spare.push(m.data);
+            self.spare.push((m.data, self.lit));
         }
     }
 
-    fn zeroed(&mut self, len: usize) -> Vec<u8> {
+    fn zeroed(&mut self, w: usize, h: usize) -> Vec<u8> {
         match self.spare.pop() {
-            Some(mut v) if v.len() == len => {
-                v.fill(0);
+            Some((mut v, [r0, r1, c0, c1])) if v.len() == w * h => {
+                for r in r0..r1 {
+                    v[r * w + c0..r * w + c1].fill(0);
+                }
                 v
             }
-            _ => vec![0; len],
+            _ => vec![0; w * h],
         }
     }
 }
@@ -112,7 +141,7 @@ impl Rasterizer {
         let mut out = Mask {
             width: w as u32,
             height: h as u32,
-            data: scratch.zeroed(w * h),
+            data: scratch.zeroed(w, h),
         };
         scratch.lit = [0; 4];
         if contours.is_empty() {
