@@ -534,7 +534,13 @@ fn layer_masks(
             Some(t) => std::borrow::Cow::Owned(t.render(k, &field_mask)),
             None => projector_view(&field_mask, p),
         };
-        let png = encode_png(&view);
+        let png = match &view {
+            // The field mask itself: zero outside the rasterizer's lit box.
+            std::borrow::Cow::Borrowed(m) => {
+                crate::png::encode_gray8_in(m.width, m.height, &m.data, scratch.lit_box())
+            }
+            std::borrow::Cow::Owned(m) => encode_png(m),
+        };
         let file = if tiled {
             format!("masks/p{k}/{i:05}.png")
         } else {

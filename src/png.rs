@@ -9,8 +9,14 @@
 
 /// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
 pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
+    encode_gray8_in(width, height, data, [0, height as usize, 0, width as usize])
+}
+
+/// Like [`encode_gray8`] for a mask known to be zero outside `lit_box` = [r0, r1, c0, c1]:
+/// only the box is scanned. The bytes are the same as `encode_gray8`'s.
+pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
     assert_eq!(data.len(), width as usize * height as usize, "mask size");
-    let idat = zlib_rows(width as usize, height as usize, data);
+    let idat = zlib_rows(width as usize, height as usize, data, lit_box);
     let mut out = Vec::with_capacity(idat.len() + 64);
     out.extend_from_slice(b"\x89PNG\r\n\x1a\n");
     let mut ihdr = Vec::with_capacity(13);
@@ -206,7 +212,9 @@ fn run_len(s: &[u8], v: u8) -> usize {
 }
 
 /// The zlib stream of the PNG scanlines (each row preceded by filter byte 0).
-fn zlib_rows(w: usize, h: usize, data: &[u8]) -> Vec<u8> {
+fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
+    let [r0, r1, c0, c1] = lit_box;
+    let (c0, c1) = (c0.min(w), c1.min(w).max(c0.min(w)));
     let mut bits = Bits {
         out: Vec::with_capacity(4096),
         acc: 0,
@@ -236,20 +244,34 @@ fn zlib_rows(w: usize, h: usize, data: &[u8]) -> Vec<u8> {
             rv = 0;
             rk = 1;
         }
-        let mut i = 0;
-        while i < w {
-            let v = row[i];
-            let k = run_len(&row[i..], v);
+        if !(r0..r1).contains(&r) {
+            rk += w; // an empty row continues the zero run
+            continue;
+        }
+        // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
+        // whole row had been scanned, so the stream does not depend on the box.
+        let mut push = |v: u8, k: usize, bits: &mut Bits, adler: &mut Adler| {
+            if k == 0 {
+                return;
+            }
             if v == rv {
                 rk += k;
             } else {
-                emit_run(&mut bits, rv, rk);
+                emit_run(bits, rv, rk);
                 adler.run(rv, rk as u64);
                 rv = v;
                 rk = k;
             }
+        };
+        push(0, c0, &mut bits, &mut adler);
+        let mut i = c0;
+        while i < c1 {
+            let v = row[i];
+            let k = run_len(&row[i..c1], v);
+            push(v, k, &mut bits, &mut adler);
             i += k;
         }
+        push(0, w - c1, &mut bits, &mut adler);
     }
     if rk > 0 {
         emit_run(&mut bits, rv, rk);
@@ -327,6 +349,26 @@ mod tests {
                 assert_eq!((dw, dh), (w as u32, h as u32));
                 assert!(back == d, "{w}x{h} pattern {pattern}");
             }
+        }
+    }
+
+    #[test]
+    fn boxed_encoding_is_byte_identical() {
+        let (w, h) = (300usize, 200usize);
+        let mut d = vec![0u8; w * h];
+        for r in 50..120 {
+            for c in 40..260 {
+                d[r * w + c] = if (r + c) % 17 == 0 { 99 } else { 255 };
+            }
+        }
+        let full = encode_gray8(w as u32, h as u32, &d);
+        for b in [
+            [50, 120, 40, 260],
+            [0, 200, 0, 300],
+            [49, 121, 39, 261],
+            [50, 120, 0, 300],
+        ] {
+            assert_eq!(encode_gray8_in(w as u32, h as u32, &d, b), full, "{b:?}");
         }
     }
 
