@@ -20,7 +20,6 @@ pub use analysis::LayerAnalysis;
 pub use config::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 use crate::bundle::{Mode, Step};
-use crate::motion::move_time;
 use crate::profile::{Process, Profile};
 
 /// What the planner needs to know about one layer.
@@ -76,32 +75,6 @@ pub(crate) struct Notes {
     wait_model_max_s: f64,
     beyond_table: usize,
     beyond_table_max_mm: f64,
-}
-
-/// Estimated duration of a step list starting at stage position `from_mm`: moves, waits,
-/// sweeps and light-on times only (no shutter, DMD load or run rules; see
-/// [`timing::Timing::layer_times`] for the full estimate).
-pub fn steps_time(steps: &[Step], from_mm: f64) -> f64 {
-    let mut pos = from_mm;
-    let mut t = 0.0;
-    for s in steps {
-        match *s {
-            Step::Move {
-                to_mm,
-                speed_mm_s,
-                accel_mm_s2,
-            } => {
-                t += move_time(to_mm - pos, speed_mm_s, accel_mm_s2);
-                pos = to_mm;
-            }
-            Step::Wait { s } | Step::Expose { s } => t += s,
-            Step::Sweep { to_mm, speed_mm_s } => {
-                t += (to_mm - pos).abs() / speed_mm_s;
-                pos = to_mm;
-            }
-        }
-    }
-    t
 }
 
 fn build(
