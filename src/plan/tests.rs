@@ -1,6 +1,7 @@
 //! Unit tests of the planner on synthetic layers.
 
 use super::*;
+use crate::motion::move_time;
 use crate::profile::Profile;
 
 fn info(i: usize, h: f64, area: f64, fill: f64) -> LayerInfo {
