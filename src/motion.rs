@@ -5,6 +5,11 @@
 /// Time to travel `dist` mm starting and ending at rest, with cruise speed `v` mm/s and
 /// acceleration/deceleration `a` mm/s² (a triangular profile when `dist` is too short to
 /// reach `v`).
+///
+/// ```
+/// // 10 mm at 2 mm/s with 4 mm/s²: 0.5 s to accelerate, 0.5 s to stop, 9 mm cruising.
+/// assert!((dmdsl::motion::move_time(10.0, 2.0, 4.0) - 5.5).abs() < 1e-12);
+/// ```
 pub fn move_time(dist: f64, v: f64, a: f64) -> f64 {
     let d = dist.abs();
     if d == 0.0 {

@@ -7,6 +7,13 @@ use std::fmt;
 ///
 /// Deserializing a zero, negative, NaN or infinite value fails with a clear message,
 /// so a profile can never carry a layer height of 0 or a NaN speed.
+///
+/// ```
+/// use dmdsl::units::Positive;
+/// assert_eq!(Positive::new(0.05).map(Positive::get), Some(0.05));
+/// assert!(Positive::new(0.0).is_none());
+/// assert!(Positive::new(f64::NAN).is_none());
+/// ```
 #[derive(Clone, Copy, PartialEq, PartialOrd, Serialize, Deserialize)]
 #[serde(try_from = "f64", into = "f64")]
 pub struct Positive(f64);
