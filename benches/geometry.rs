@@ -10,7 +10,7 @@
 use dmdsl::geometry::blend::Response;
 use dmdsl::geometry::distortion::{Correction, Table};
 use dmdsl::geometry::tile::Tiler;
-use dmdsl::job::{placement, PlacementMode};
+use dmdsl::job::{place_mesh, PlacementMode};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use std::path::PathBuf;
@@ -39,17 +39,7 @@ fn main() {
     let profile = Profile::default_profile();
     let field = profile.field();
     let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
-    let bbox = mesh.bbox();
-    let tr = placement(
-        &model,
-        bbox,
-        field.width_mm(),
-        field.height_mm(),
-        PlacementMode::Center,
-    )
-    .unwrap();
-    mesh.translate(tr);
-    let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], h);
+    let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, h).unwrap();
     let sections = dmdsl::slice::slice(&mesh, h, n).0;
 
     let t = Instant::now();
@@ -119,15 +109,7 @@ fn main() {
     let tiled = Profile::resolve("tiled-2x1").unwrap();
     let tfield = tiled.field();
     let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
-    let tr = placement(
-        &model,
-        bbox,
-        tfield.width_mm(),
-        tfield.height_mm(),
-        PlacementMode::Center,
-    )
-    .unwrap();
-    mesh.translate(tr);
+    place_mesh(&model, &mut mesh, &tfield, PlacementMode::Center, h).unwrap();
     let tsections = dmdsl::slice::slice(&mesh, h, n).0;
     let t = Instant::now();
     let tiler = Tiler::new(

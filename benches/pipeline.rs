@@ -4,7 +4,7 @@
 //! (default: fixtures/bunny00.stl at 0.05 mm). Prints the median of 5 runs per stage,
 //! per layer, single-threaded, so the numbers compare across machines and commits.
 
-use dmdsl::job::{encode_png, placement, PlacementMode};
+use dmdsl::job::{encode_png, place_mesh, PlacementMode};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use std::path::PathBuf;
@@ -31,17 +31,7 @@ fn main() {
     let t = Instant::now();
     let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
     let load_s = t.elapsed().as_secs_f64();
-    let bbox = mesh.bbox();
-    let tr = placement(
-        &model,
-        bbox,
-        field.width_mm(),
-        field.height_mm(),
-        PlacementMode::Center,
-    )
-    .unwrap();
-    mesh.translate(tr);
-    let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], h);
+    let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, h).unwrap();
 
     let mut slice_t = Vec::new();
     let mut sections = Vec::new();

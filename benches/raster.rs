@@ -6,7 +6,7 @@
 //! against the polygons' exact area, how many pixels each puts on the other side of the
 //! 50 % level than the exact coverage does, and the time per layer.
 
-use dmdsl::job::{placement, PlacementMode};
+use dmdsl::job::{place_mesh, PlacementMode};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use dmdsl::slice::{signed_area, Contour};
@@ -55,17 +55,7 @@ fn main() {
     println!("|---|---|---:|---:|---:|");
     for model in models {
         let mut mesh = dmdsl::mesh::load(&model).unwrap();
-        let bbox = mesh.bbox();
-        let t = placement(
-            &model,
-            bbox,
-            field.width_mm(),
-            field.height_mm(),
-            PlacementMode::Center,
-        )
-        .unwrap();
-        mesh.translate(t);
-        let n = dmdsl::slice::layer_count(bbox[1][2] - bbox[0][2], 0.05);
+        let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, 0.05).unwrap();
         let sections = dmdsl::slice::slice(&mesh, 0.05, n).0;
         let exact_area: f64 = sections
             .iter()

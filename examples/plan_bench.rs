@@ -42,17 +42,14 @@ fn main() {
         .unwrap_or(5);
     let field = p.field();
     let mut mesh = dmdsl::mesh::load(&path).expect("model loads");
-    let bb = mesh.bbox();
-    let t = dmdsl::job::placement(
+    let (_, n) = dmdsl::job::place_mesh(
         &path,
-        bb,
-        field.width_mm(),
-        field.height_mm(),
+        &mut mesh,
+        &field,
         dmdsl::job::PlacementMode::Center,
+        h,
     )
     .expect("model fits");
-    mesh.translate(t);
-    let n = dmdsl::slice::layer_count(bb[1][2] + t[2], h);
     let (t_slice, (sections, _)) = best_of(reps, || dmdsl::slice::slice(&mesh, h, n));
     let r = Rasterizer::new(field);
     let mut sc = Scratch::default();

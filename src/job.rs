@@ -156,6 +156,33 @@ pub fn placement(
     Ok(t)
 }
 
+/// Places a loaded mesh on `field` by `mode` (translating it) and returns the translation
+/// and the number of layers of height `h`; a part that does not fit or is thinner than one
+/// layer is an error naming `path`. `slice_to_bundle`, the benchmarks and tools that drive
+/// the stages themselves share this.
+pub fn place_mesh(
+    path: &Path,
+    mesh: &mut Mesh,
+    field: &crate::profile::Field,
+    mode: PlacementMode,
+    h: f64,
+) -> Result<([f64; 3], usize)> {
+    let bbox = mesh.bbox();
+    let t = placement(path, bbox, field.width_mm(), field.height_mm(), mode)?;
+    mesh.translate(t);
+    let n = slice::layer_count(bbox[1][2] + t[2], h);
+    if n == 0 {
+        return Err(Error::Job {
+            path: path.into(),
+            msg: format!(
+                "part is {:.4} mm tall, less than one layer ({h} mm): nothing to print",
+                bbox[1][2] - bbox[0][2]
+            ),
+        });
+    }
+    Ok((t, n))
+}
+
 /// Encodes a mask as an 8-bit grayscale PNG ([`crate::png`]; deterministic).
 pub fn encode_png(m: &Mask) -> Vec<u8> {
     crate::png::encode_gray8(m.width, m.height, &m.data)
@@ -256,19 +283,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     drop(bytes);
     let bbox = mesh.bbox();
     let mode = opts.placement;
-    let t = placement(path, bbox, field.width_mm(), field.height_mm(), mode)?;
-    mesh.translate(t);
-    let z_top = bbox[1][2] + t[2];
-    let n = slice::layer_count(z_top, h);
-    if n == 0 {
-        return Err(Error::Job {
-            path: path.into(),
-            msg: format!(
-                "part is {:.4} mm tall, less than one layer ({h} mm): nothing to print",
-                bbox[1][2] - bbox[0][2]
-            ),
-        });
-    }
+    let (t, n) = place_mesh(path, &mut mesh, &field, mode, h)?;
     let mut warnings = mesh.report.warnings();
     let t_load = t0.elapsed().as_secs_f64();
 

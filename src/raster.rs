@@ -520,6 +520,16 @@ mod tests {
         assert!((barea - exact).abs() / exact < 2e-3, "{barea} vs {exact}");
     }
 
+    /// Largest per-pixel difference between two masks.
+    fn max_diff(a: &Mask, b: &Mask) -> u8 {
+        a.data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap()
+    }
+
     #[test]
     fn overlapping_shells_union() {
         let r = Rasterizer::new(field());
@@ -531,26 +541,14 @@ mod tests {
         assert!((area - 150.0).abs() < 0.05, "{area}");
         // Same picture as the union drawn as one rectangle, to 1/32 of a level step.
         let u = r.coverage(&[rect(10.0, 10.0, 25.0, 20.0)], &mut s);
-        let worst = m
-            .data
-            .iter()
-            .zip(&u.data)
-            .map(|(x, y)| x.abs_diff(*y))
-            .max()
-            .unwrap();
+        let worst = max_diff(&m, &u);
         assert!(worst <= 8, "{worst}");
         // Touching shells (shared edge at x = 15) need no fallback and are exact too.
         let t = r.coverage(
             &[rect(10.0, 10.0, 15.0, 20.0), rect(15.0, 10.0, 25.0, 20.0)],
             &mut s,
         );
-        let worst = t
-            .data
-            .iter()
-            .zip(&u.data)
-            .map(|(x, y)| x.abs_diff(*y))
-            .max()
-            .unwrap();
+        let worst = max_diff(&t, &u);
         assert!(worst <= 1, "{worst}");
     }
 

@@ -24,6 +24,21 @@ fn slice_ok(dir: &Path, args: &[&str]) -> Value {
     serde_json::from_slice(&std::fs::read(out.join("job.json")).unwrap()).unwrap()
 }
 
+/// Slices fixture `name` with `--keep-position` (plus `extra`) into `dir/out`.
+fn slice_kept(dir: &Path, name: &str, out: &str, extra: &[&str]) -> Value {
+    let f = fixture(name);
+    let mut args = vec![
+        "slice",
+        f.to_str().unwrap(),
+        "--keep-position",
+        "-q",
+        "-o",
+        out,
+    ];
+    args.extend_from_slice(extra);
+    slice_ok(dir, &args)
+}
+
 fn mask(bundle: &Path, job: &Value, layer: usize) -> Vec<u8> {
     let f = job["layers"][layer]["masks"][0]["file"].as_str().unwrap();
     let (w, h, px) = read_gray(&bundle.join(f));
@@ -46,18 +61,7 @@ fn rect_mask(rects: &[(usize, usize, usize, usize)]) -> Vec<u8> {
 #[test]
 fn cube_keep_position_golden_mask_exact() {
     let dir = tempdir("cube");
-    let f = fixture("cube10.stl");
-    let job = slice_ok(
-        &dir,
-        &[
-            "slice",
-            f.to_str().unwrap(),
-            "--keep-position",
-            "-q",
-            "-o",
-            "c.dmdjob",
-        ],
-    );
+    let job = slice_kept(&dir, "cube10.stl", "c.dmdjob", &[]);
     assert_eq!(job["layers"].as_array().unwrap().len(), 200);
     let want = rect_mask(&[(256, 416, 192, 352)]);
     for layer in [0, 99, 199] {
@@ -94,18 +98,7 @@ fn cube_centered_by_default() {
 #[test]
 fn cylinder_with_hole_ascii() {
     let dir = tempdir("cyl");
-    let f = fixture("cylinder_hole.stl");
-    let job = slice_ok(
-        &dir,
-        &[
-            "slice",
-            f.to_str().unwrap(),
-            "--keep-position",
-            "-q",
-            "-o",
-            "c.dmdjob",
-        ],
-    );
+    let job = slice_kept(&dir, "cylinder_hole.stl", "c.dmdjob", &[]);
     assert_eq!(job["source"]["mesh"]["format"], "stl-ascii");
     assert_eq!(job["layers"].as_array().unwrap().len(), 100);
     let b = dir.join("c.dmdjob");
@@ -142,18 +135,7 @@ fn cylinder_with_hole_ascii() {
 #[test]
 fn overlapping_and_touching_shells_union() {
     let dir = tempdir("overlap");
-    let f = fixture("overlap_shells.stl");
-    let job = slice_ok(
-        &dir,
-        &[
-            "slice",
-            f.to_str().unwrap(),
-            "--keep-position",
-            "-q",
-            "-o",
-            "o.dmdjob",
-        ],
-    );
+    let job = slice_kept(&dir, "overlap_shells.stl", "o.dmdjob", &[]);
     let want = rect_mask(&[
         (100, 300, 100, 200),
         (200, 400, 150, 300),
@@ -170,19 +152,11 @@ fn overlapping_and_touching_shells_union() {
 #[test]
 fn vertices_on_planes_and_flat_faces() {
     let dir = tempdir("vop");
-    let f = fixture("vertex_on_plane.stl");
-    let job = slice_ok(
+    let job = slice_kept(
         &dir,
-        &[
-            "slice",
-            f.to_str().unwrap(),
-            "--keep-position",
-            "--layer-height",
-            "0.25",
-            "-q",
-            "-o",
-            "v.dmdjob",
-        ],
+        "vertex_on_plane.stl",
+        "v.dmdjob",
+        &["--layer-height", "0.25"],
     );
     let layers = job["layers"].as_array().unwrap();
     assert_eq!(layers.len(), 8);
@@ -211,18 +185,7 @@ fn vertices_on_planes_and_flat_faces() {
 #[test]
 fn island_above_a_gap() {
     let dir = tempdir("island");
-    let f = fixture("island.stl");
-    let job = slice_ok(
-        &dir,
-        &[
-            "slice",
-            f.to_str().unwrap(),
-            "--keep-position",
-            "-q",
-            "-o",
-            "i.dmdjob",
-        ],
-    );
+    let job = slice_kept(&dir, "island.stl", "i.dmdjob", &[]);
     let b = dir.join("i.dmdjob");
     assert_eq!(job["layers"].as_array().unwrap().len(), 100);
     assert!(mask(&b, &job, 10) == rect_mask(&[(200, 300, 200, 300)]));
