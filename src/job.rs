@@ -63,9 +63,10 @@ pub struct SliceOptions<'a> {
 pub struct Timings {
     /// Reading, welding and validating the mesh.
     pub load_s: f64,
-    /// Cutting and chaining contours.
+    /// Cutting and chaining contours (after the first window this overlaps `masks_s`).
     pub slice_s: f64,
-    /// Rasterizing, encoding, hashing and writing masks.
+    /// Rasterizing, encoding, hashing and writing masks (with the slicing of the next
+    /// window running alongside).
     pub masks_s: f64,
     /// Layer analysis (max fill distance, islands), summed over the worker threads (CPU
     /// time, part of `masks_s`'s wall time).
@@ -278,8 +279,11 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             Error::io(path, e)
         }
     })?;
-    let sha = bundle::sha256_hex(&bytes);
-    let mut mesh: Mesh = mesh::load_bytes(path, &bytes)?;
+    let (sha, mesh) = rayon::join(
+        || bundle::sha256_hex(&bytes),
+        || mesh::load_bytes(path, &bytes),
+    );
+    let mut mesh: Mesh = mesh?;
     drop(bytes);
     let bbox = mesh.bbox();
     let mode = opts.placement;
@@ -303,60 +307,74 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let mut below: Option<Section> = None;
     let (mut t_slice, mut t_masks) = (0.0, 0.0);
     let scratch_pool = Mutex::new(Vec::new());
+    // While the workers turn one window's sections into masks, the next window is sliced
+    // (rayon::join): the slicer's serial parts overlap the mask work.
+    let ts = Instant::now();
+    let mut sections = slicer.window(0..WINDOW);
+    t_slice += ts.elapsed().as_secs_f64();
     for start in (0..n).step_by(WINDOW) {
-        let ts = Instant::now();
-        let sections = slicer.window(start..start + WINDOW);
-        t_slice += ts.elapsed().as_secs_f64();
         let tm = Instant::now();
         let m = sections.len();
-        let blocks: Vec<Result<Vec<LayerOut>>> = (0..m.div_ceil(BLOCK))
-            .into_par_iter()
-            .map(|b| {
-                // Scratch buffers (megabytes) outlive blocks and windows: fresh ones would
-                // page-fault on every block.
-                let mut scratch = Pooled::take(&scratch_pool);
-                let scratch = &mut *scratch;
-                let mut outs = Vec::with_capacity(BLOCK);
-                let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
-                for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
-                    if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
-                        return Err(Error::Interrupted);
-                    }
-                    let layer = LayerIn {
-                        index: start + k,
-                        section: &sections[k],
-                        below: if k == 0 {
-                            below.as_ref()
-                        } else {
-                            Some(&sections[k - 1])
-                        },
-                    };
-                    outs.push(layer_masks(
-                        &writer,
-                        &profile,
-                        &raster,
-                        scratch,
-                        &mut analyser,
-                        &layer,
-                        binary,
-                        tiled,
-                        px_area,
-                        optics.as_ref(),
-                        (correction.as_ref(), path),
-                        tiler.as_ref(),
-                    )?);
-                    let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-                    if let Some(p) = opts.progress {
-                        p(d, n);
-                    }
-                }
-                Ok(outs)
-            })
-            .collect();
+        let next_start = start + WINDOW;
+        let (next, blocks) = rayon::join(
+            || {
+                let ts = Instant::now();
+                let next = slicer.window(next_start..next_start + WINDOW);
+                (next, ts.elapsed().as_secs_f64())
+            },
+            || -> Vec<Result<Vec<LayerOut>>> {
+                (0..m.div_ceil(BLOCK))
+                    .into_par_iter()
+                    .map(|b| {
+                        // Scratch buffers (megabytes) outlive blocks and windows: fresh ones
+                        // would page-fault on every block.
+                        let mut scratch = Pooled::take(&scratch_pool);
+                        let scratch = &mut *scratch;
+                        let mut outs = Vec::with_capacity(BLOCK);
+                        let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
+                        for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
+                            if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                                return Err(Error::Interrupted);
+                            }
+                            let layer = LayerIn {
+                                index: start + k,
+                                section: &sections[k],
+                                below: if k == 0 {
+                                    below.as_ref()
+                                } else {
+                                    Some(&sections[k - 1])
+                                },
+                            };
+                            outs.push(layer_masks(
+                                &writer,
+                                &profile,
+                                &raster,
+                                scratch,
+                                &mut analyser,
+                                &layer,
+                                binary,
+                                tiled,
+                                px_area,
+                                optics.as_ref(),
+                                (correction.as_ref(), path),
+                                tiler.as_ref(),
+                            )?);
+                            let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                            if let Some(p) = opts.progress {
+                                p(d, n);
+                            }
+                        }
+                        Ok(outs)
+                    })
+                    .collect()
+            },
+        );
         for b in blocks {
             outs.extend(b?);
         }
         below = sections.into_iter().last();
+        sections = next.0;
+        t_slice += next.1;
         t_masks += tm.elapsed().as_secs_f64();
     }
     drop(below);

@@ -205,7 +205,27 @@ enum ProfileCmd {
     List,
 }
 
+/// Restores the default SIGPIPE action, which Rust's runtime sets to "ignore": then
+/// `dmdsl ... --json | head` ends quietly when the reader goes away, as other command-line
+/// tools do, instead of panicking on a failed print. Output is only printed after a bundle
+/// is complete, so this never leaves anything half-written.
+#[cfg(unix)]
+fn default_sigpipe() {
+    unsafe extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: called once at start-up, before any other thread exists; SIG_DFL is a valid
+    // disposition for SIGPIPE.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    #[cfg(unix)]
+    default_sigpipe();
     let cli = Cli::parse();
     match run(cli) {
         Ok(code) => ExitCode::from(code),

@@ -115,7 +115,7 @@ impl<'m> Slicer<'m> {
     pub fn new(mesh: &'m Mesh, h: f64, n: usize) -> Self {
         let (zmin, zmax): (Vec<f64>, Vec<f64>) = mesh
             .triangles
-            .iter()
+            .par_iter()
             .map(|t| {
                 let z = [
                     mesh.vertices[t[0] as usize][2],
@@ -126,7 +126,8 @@ impl<'m> Slicer<'m> {
             })
             .unzip();
         let mut order: Vec<u32> = (0..mesh.triangles.len() as u32).collect();
-        order.sort_by(|&a, &b| {
+        // A total order (ties by index): the same result at any thread count.
+        order.par_sort_unstable_by(|&a, &b| {
             zmin[a as usize]
                 .total_cmp(&zmin[b as usize])
                 .then(a.cmp(&b))

@@ -159,67 +159,176 @@ impl Hasher for FxHasher {
 }
 type FxMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
 
+/// A corner position as bit patterns (+0.0 folds -0.0 into 0.0 so both weld together),
+/// hashed as two words.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct CornerKey(u64, u32);
+
+impl CornerKey {
+    fn of(c: &[f32; 3]) -> CornerKey {
+        let b = |v: f32| (v + 0.0).to_bits();
+        CornerKey(b(c[0]) as u64 | (b(c[1]) as u64) << 32, b(c[2]))
+    }
+
+    /// The hash that picks a corner's shard (independent of the map's own hashing).
+    fn shard_hash(self) -> u64 {
+        (self.0 ^ (self.1 as u64).rotate_left(17)).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+    }
+}
+
+impl std::hash::Hash for CornerKey {
+    fn hash<H: Hasher>(&self, h: &mut H) {
+        h.write_u64(self.0);
+        h.write_u32(self.1);
+    }
+}
+
+/// Welds the soup's corners: returns the distinct positions (in order of first
+/// appearance) and each corner's vertex id (3 per triangle, file order).
+///
+/// The corners are split into shards by hash and each shard finds, in parallel, the first
+/// corner with each of its positions; a sequential pass then numbers the first corners.
+/// The result is the same for any number of shards.
+fn weld(soup: &[[[f32; 3]; 3]]) -> (Vec<[f64; 3]>, Vec<u32>) {
+    use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
+    let corners: &[[f32; 3]] = soup.as_flattened();
+    let nc = corners.len();
+    let shards = rayon::current_num_threads().clamp(1, 16);
+    // first[c]: index of the first corner at c's position (<= c).
+    let first: Vec<AtomicU32> = (0..nc).map(|_| AtomicU32::new(0)).collect();
+    let work = |s: usize| {
+        let mut map: FxMap<CornerKey, u32> = FxMap::default();
+        map.reserve(nc / (5 * shards) + 16);
+        for (c, p) in corners.iter().enumerate() {
+            let key = CornerKey::of(p);
+            if shards > 1 && (key.shard_hash() >> 32) as usize % shards != s {
+                continue;
+            }
+            let f = *map.entry(key).or_insert(c as u32);
+            first[c].store(f, Relaxed);
+        }
+    };
+    if shards == 1 {
+        work(0);
+    } else {
+        use rayon::prelude::*;
+        (0..shards).into_par_iter().for_each(work);
+    }
+    let mut ids = vec![0u32; nc];
+    let mut vertices = Vec::with_capacity(nc / 5 + 16);
+    for c in 0..nc {
+        let f = first[c].load(Relaxed) as usize;
+        ids[c] = if f == c {
+            let p = corners[c];
+            vertices.push([p[0] as f64, p[1] as f64, p[2] as f64]);
+            vertices.len() as u32 - 1
+        } else {
+            ids[f]
+        };
+    }
+    (vertices, ids)
+}
+
+/// Per-triangle edge ids and per-edge counts, see [`edge_table`].
+struct EdgeTable {
+    tri_edges: Vec<[u32; 3]>,
+    /// Triangles using each edge.
+    faces: Vec<u32>,
+    /// Of those, how many traverse it from its lower to its higher vertex id.
+    fwd: Vec<u32>,
+    /// The first triangle using each edge.
+    first_face: Vec<u32>,
+}
+
+/// Buckets bigger than this (a vertex that is the lower end of many edges, like the
+/// centre of a large fan) are looked up in a hash map instead of scanned.
+const BUCKET_SCAN: u32 = 32;
+
+/// Numbers the edges (unordered vertex pairs) in order of first appearance. Each edge is
+/// kept in the bucket of its lower vertex (buckets sized by a counting pass), so a lookup
+/// scans a few neighbours of one vertex instead of probing a large hash table.
+fn edge_table(triangles: &[[u32; 3]], nv: usize) -> EdgeTable {
+    let mut start = vec![0u32; nv + 1];
+    for t in triangles {
+        for k in 0..3 {
+            start[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
+        }
+    }
+    for i in 0..nv {
+        start[i + 1] += start[i];
+    }
+    let mut fill: Vec<u32> = start[..nv].to_vec();
+    // (hi, edge id) per slot.
+    let mut slots = vec![(0u32, 0u32); start[nv] as usize];
+    let mut big: FxMap<u64, u32> = FxMap::default();
+    let cap = triangles.len() * 3 / 2 + 16;
+    let mut table = EdgeTable {
+        tri_edges: Vec::with_capacity(triangles.len()),
+        faces: Vec::with_capacity(cap),
+        fwd: Vec::with_capacity(cap),
+        first_face: Vec::with_capacity(cap),
+    };
+    for (ti, t) in triangles.iter().enumerate() {
+        let mut te = [0u32; 3];
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            let next = table.faces.len() as u32;
+            let (s, f) = (start[lo as usize], fill[lo as usize]);
+            let id = if start[lo as usize + 1] - s > BUCKET_SCAN {
+                *big.entry((lo as u64) << 32 | hi as u64).or_insert(next)
+            } else {
+                match slots[s as usize..f as usize].iter().find(|e| e.0 == hi) {
+                    Some(e) => e.1,
+                    None => {
+                        slots[f as usize] = (hi, next);
+                        fill[lo as usize] += 1;
+                        next
+                    }
+                }
+            };
+            if id == next {
+                table.faces.push(0);
+                table.fwd.push(0);
+                table.first_face.push(ti as u32);
+            }
+            table.faces[id as usize] += 1;
+            if a < b {
+                table.fwd[id as usize] += 1;
+            }
+            te[k] = id;
+        }
+        table.tri_edges.push(te);
+    }
+    table
+}
+
 impl Mesh {
     /// Welds a triangle soup (corners with bit-identical coordinates become one vertex),
     /// drops triangles with a repeated vertex, builds the edge table and the report.
+    ///
+    /// Vertex and edge ids are numbered in order of first appearance (file order), so the
+    /// result does not depend on how the work is split between threads.
     pub(crate) fn from_soup(soup: &[[[f32; 3]; 3]], format: &str) -> Mesh {
-        let mut vmap: FxMap<[u32; 3], u32> = FxMap::default();
-        vmap.reserve(soup.len() / 2 + 16);
-        let mut vertices: Vec<[f64; 3]> = Vec::with_capacity(soup.len() / 2 + 16);
+        let (vertices, corner_ids) = weld(soup);
         let mut triangles = Vec::with_capacity(soup.len());
         let mut degenerate = 0u64;
-        for t in soup {
-            let mut ids = [0u32; 3];
-            for (k, c) in t.iter().enumerate() {
-                // +0.0 folds -0.0 into 0.0 so both weld together.
-                let key = [
-                    (c[0] + 0.0).to_bits(),
-                    (c[1] + 0.0).to_bits(),
-                    (c[2] + 0.0).to_bits(),
-                ];
-                let next = vertices.len() as u32;
-                let id = *vmap.entry(key).or_insert_with(|| {
-                    vertices.push([c[0] as f64, c[1] as f64, c[2] as f64]);
-                    next
-                });
-                ids[k] = id;
-            }
+        for ids in corner_ids.chunks_exact(3) {
             if ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2] {
                 degenerate += 1;
                 continue;
             }
-            triangles.push(ids);
+            triangles.push([ids[0], ids[1], ids[2]]);
         }
-        drop(vmap);
+        drop(corner_ids);
 
-        // Edge table: key (lo, hi) -> edge id; per edge: faces and orientation balance.
-        let mut emap: FxMap<u64, u32> = FxMap::default();
-        emap.reserve(triangles.len() * 3 / 2 + 16);
-        let mut tri_edges = Vec::with_capacity(triangles.len());
-        let mut faces: Vec<u32> = Vec::with_capacity(triangles.len() * 3 / 2 + 16);
-        let mut fwd: Vec<u32> = Vec::with_capacity(triangles.len() * 3 / 2 + 16);
-        let mut first_face: Vec<u32> = Vec::with_capacity(triangles.len() * 3 / 2 + 16);
-        for (ti, t) in triangles.iter().enumerate() {
-            let mut te = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                let key = (lo as u64) << 32 | hi as u64;
-                let next = faces.len() as u32;
-                let id = *emap.entry(key).or_insert_with(|| {
-                    faces.push(0);
-                    fwd.push(0);
-                    first_face.push(ti as u32);
-                    next
-                });
-                faces[id as usize] += 1;
-                if a < b {
-                    fwd[id as usize] += 1;
-                }
-                te[k] = id;
-            }
-            tri_edges.push(te);
-        }
+        // Edge table: (lo, hi) -> edge id; per edge: faces and orientation balance.
+        let EdgeTable {
+            tri_edges,
+            faces,
+            fwd,
+            first_face,
+        } = edge_table(&triangles, vertices.len());
         let edge_count = faces.len();
         let mut open = 0;
         let mut nonmanifold = 0;
@@ -375,6 +484,91 @@ mod tests {
         assert!(r.closed_manifold, "{r:?}");
         assert!((r.volume_mm3 - 1000.0).abs() < 1e-9);
         assert!(r.warnings().is_empty());
+    }
+
+    type Welded = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[u32; 3]>);
+
+    /// The old single-threaded hash-map weld and edge numbering, as the reference.
+    fn reference(soup: &[[[f32; 3]; 3]]) -> Welded {
+        let mut vmap: HashMap<[u32; 3], u32> = HashMap::new();
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        for t in soup {
+            let ids = t.map(|c| {
+                let key = c.map(|v| (v + 0.0).to_bits());
+                let next = vmap.len() as u32;
+                *vmap.entry(key).or_insert_with(|| {
+                    vertices.push(c.map(|v| v as f64));
+                    next
+                })
+            });
+            if ids[0] != ids[1] && ids[1] != ids[2] && ids[0] != ids[2] {
+                triangles.push(ids);
+            }
+        }
+        let mut emap: HashMap<(u32, u32), u32> = HashMap::new();
+        let tri_edges = triangles
+            .iter()
+            .map(|t| {
+                [0, 1, 2].map(|k| {
+                    let (a, b) = (t[k], t[(k + 1) % 3]);
+                    let next = emap.len() as u32;
+                    *emap.entry((a.min(b), a.max(b))).or_insert(next)
+                })
+            })
+            .collect();
+        (vertices, triangles, tri_edges)
+    }
+
+    #[test]
+    fn weld_and_edges_match_the_reference_at_any_thread_count() {
+        // Fixed-seed soups on a small lattice (so corners repeat, in both -0.0 and 0.0),
+        // with some big fans (buckets past BUCKET_SCAN) and degenerate triangles.
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = |m: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % m
+        };
+        for case in 0..6 {
+            let lattice = [3, 6, 12, 40, 6, 3][case];
+            let mut soup: Soup = Vec::new();
+            for _ in 0..2000 {
+                let mut t = [[0.0f32; 3]; 3];
+                for c in &mut t {
+                    for v in c.iter_mut() {
+                        let q = rnd(lattice) as f32 - (lattice / 2) as f32;
+                        *v = if q == 0.0 && rnd(2) == 0 {
+                            -0.0
+                        } else {
+                            q * 0.5
+                        };
+                    }
+                }
+                soup.push(t);
+            }
+            if case >= 4 {
+                // a fan of 200 triangles around the origin
+                for i in 0..200 {
+                    let a = i as f32 * 0.0314;
+                    let b = (i + 1) as f32 * 0.0314;
+                    soup.push([[0.0; 3], [a.cos(), a.sin(), 0.0], [b.cos(), b.sin(), 0.0]]);
+                }
+            }
+            let (v, t, e) = reference(&soup);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let m = pool.install(|| Mesh::from_soup(&soup, "test"));
+                assert_eq!(m.vertices, v, "case {case}, {threads} threads");
+                assert_eq!(m.triangles, t, "case {case}, {threads} threads");
+                assert_eq!(m.tri_edges, e, "case {case}, {threads} threads");
+                let edges = e.iter().flatten().max().map_or(0, |&x| x as usize + 1);
+                assert_eq!(m.edge_count, edges);
+            }
+        }
     }
 
     #[test]
