@@ -72,6 +72,9 @@ impl Mask {
 #[derive(Debug, Default)]
 pub struct Scratch {
     acc: Vec<f32>,
+    /// Per accumulation row, one bit per [`BLOCK`] cells that `line` wrote to: the scan
+    /// visits only those blocks and skips the (zero) cells between them.
+    touched: Vec<u64>,
     /// Recycled mask buffers with the box outside which each is known to be zero.
     spare: Vec<(Vec<u8>, [usize; 4])>,
     lit: [usize; 4],
@@ -147,10 +150,17 @@ impl Rasterizer {
         if contours.is_empty() {
             return out;
         }
+        let words = stride.div_ceil(BLOCK).div_ceil(64);
         if scratch.acc.len() != stride * h {
             scratch.acc = vec![0.0; stride * h];
+            scratch.touched = vec![0; words * h];
         }
-        let acc = &mut scratch.acc;
+        let acc = &mut Accum {
+            cells: &mut scratch.acc,
+            touched: &mut scratch.touched,
+            stride,
+            words,
+        };
         let (mut r0, mut r1) = (h, 0usize);
         let (mut c0, mut c1) = (w, 0usize);
         for c in contours {
@@ -160,7 +170,7 @@ impl Rasterizer {
                 // Clamp into the field: the planner guarantees parts fit, this only guards.
                 let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
                 let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
-                line(acc, stride, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
+                line(acc, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
                 r0 = r0.min(y0.min(y1).floor() as usize);
                 r1 = r1.max(y0.max(y1).ceil() as usize);
                 c0 = c0.min(x0.min(x1).floor() as usize);
@@ -172,31 +182,47 @@ impl Rasterizer {
         debug_assert!(c1 < stride);
         scratch.lit = [r0, r1, c0, c1.min(w)];
         let mut max_winding = 0.0f32;
+        let end = c1.min(w);
         for r in r0..r1 {
-            let row = &mut acc[r * stride..(r + 1) * stride];
+            let row = &mut acc.cells[r * stride..(r + 1) * stride];
+            let marks = &mut acc.touched[r * words..(r + 1) * words];
             let dst = &mut out.data[r * w..(r + 1) * w];
             let mut sum = 0.0f32;
             let mut val = 0u8;
-            let end = c1.min(w);
             let mut col = c0;
-            while col < end {
-                if row[col] != 0.0 {
-                    sum += row[col];
-                    let v = sum.abs();
-                    max_winding = max_winding.max(v);
-                    val = (v.min(1.0) * 255.0 + 0.5) as u8;
-                    dst[col] = val;
-                    col += 1;
-                } else {
-                    // Inside or outside the section: the value repeats until the next edge.
-                    let run = zero_run(&row[col..end]);
+            for (wi, m) in marks.iter_mut().enumerate() {
+                let mut bits = std::mem::take(m);
+                while bits != 0 {
+                    let b = wi * 64 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                    // Between marked blocks every cell is zero: the value repeats.
+                    let from = bs.max(col).min(end);
                     if val != 0 {
-                        dst[col..col + run].fill(val);
+                        dst[col..from].fill(val);
                     }
-                    col += run;
+                    let to = be.min(end).max(from);
+                    for c in from..to {
+                        let a = row[c];
+                        if a != 0.0 {
+                            sum += a;
+                            // Cleared as it is read: the buffer is all zeros after the scan.
+                            row[c] = 0.0;
+                            let v = sum.abs();
+                            max_winding = max_winding.max(v);
+                            val = (v.min(1.0) * 255.0 + 0.5) as u8;
+                        }
+                        dst[c] = val;
+                    }
+                    // Cells right of the field (edges carry area one column past their
+                    // rightmost pixel): not part of the mask, just cleared.
+                    row[to.max(bs)..be].fill(0.0);
+                    col = to;
                 }
             }
-            row[c0..(c1 + 1).min(stride)].fill(0.0);
+            if val != 0 && col < end {
+                dst[col..end].fill(val);
+            }
         }
         if max_winding > 1.001 {
             // Overlapping shells: the accumulated winding integral over-counts pixels where
@@ -308,17 +334,27 @@ pub fn threshold(m: &mut Mask) {
     }
 }
 
-/// Number of leading cells equal to +0.0 (at least 1 when called on a zero cell).
-#[inline]
-fn zero_run(s: &[f32]) -> usize {
-    let mut i = 0;
-    while i + 8 <= s.len() && s[i..i + 8].iter().all(|&x| x.to_bits() == 0) {
-        i += 8;
+/// Accumulation cells per bit of [`Scratch::touched`].
+const BLOCK: usize = 32;
+
+/// The signed-area accumulation buffer of one field and its touched-block bitmap.
+struct Accum<'a> {
+    cells: &'a mut [f32],
+    touched: &'a mut [u64],
+    stride: usize,
+    /// Bitmap words per row.
+    words: usize,
+}
+
+impl Accum<'_> {
+    /// Marks cells `lo..=hi` of row `r` as written.
+    #[inline]
+    fn mark(&mut self, r: usize, lo: usize, hi: usize) {
+        let row = &mut self.touched[r * self.words..(r + 1) * self.words];
+        for b in lo / BLOCK..=hi / BLOCK {
+            row[b / 64] |= 1 << (b % 64);
+        }
     }
-    while i < s.len() && s[i] == 0.0 {
-        i += 1;
-    }
-    i
 }
 
 /// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
@@ -347,7 +383,8 @@ fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
 /// Adds the signed-area contribution of the line (x0,y0)→(x1,y1) (pixel units, y down)
 /// to the accumulation buffer: after a prefix sum along each row, every cell holds the
 /// winding-weighted area of its pixel inside the polygon.
-fn line(acc: &mut [f32], stride: usize, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
+fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
+    let stride = accum.stride;
     if y0 == y1 {
         return;
     }
@@ -375,6 +412,8 @@ fn line(acc: &mut [f32], stride: usize, h: usize, x0: f32, y0: f32, x1: f32, y1:
         let li = lf as usize;
         let rc = rx.ceil();
         let ri = rc as usize;
+        accum.mark(r, li, ri.max(li + 1));
+        let acc = &mut *accum.cells;
         if ri <= li + 1 {
             // The line stays inside one pixel column on this row.
             let mid = 0.5 * (x + xn) - lf;
