@@ -524,6 +524,66 @@ mod tests {
         assert_eq!(m2.get(0, 767), 255);
     }
 
+    /// Shoelace area of a polygon, mm².
+    fn area(c: &Contour) -> f64 {
+        (0..c.len())
+            .map(|i| {
+                let (a, b) = (c[i], c[(i + 1) % c.len()]);
+                a[0] * b[1] - b[0] * a[1]
+            })
+            .sum::<f64>()
+            / 2.0
+    }
+
+    #[test]
+    fn random_polygons_reused_scratch_matches_fresh_and_area() {
+        // Fixed-seed random star polygons, some crossing the field's edges (clamped), drawn
+        // one after another with one scratch: every mask must equal the one drawn with a
+        // fresh scratch (the accumulation buffer and its block marks are left clean), and
+        // polygons inside the field must cover their exact area.
+        let f = field();
+        let (fw, fh) = (1024.0 * f.pixel_mm, 768.0 * f.pixel_mm);
+        let r = Rasterizer::new(f);
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut reused = Scratch::default();
+        for case in 0..40 {
+            let (cx, cy) = (rnd() * fw, rnd() * fh);
+            let n = 3 + (rnd() * 60.0) as usize;
+            let rmax = 0.2 + rnd() * if case % 4 == 0 { 40.0 } else { 8.0 };
+            let star: Contour = (0..n)
+                .map(|i| {
+                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                    let rad = rmax * (0.3 + 0.7 * rnd());
+                    [cx + rad * a.cos(), cy + rad * a.sin()]
+                })
+                .collect();
+            let shapes = [star.clone()];
+            let a = r.coverage(&shapes, &mut reused);
+            let b = r.coverage(&shapes, &mut Scratch::default());
+            assert!(
+                a.data == b.data,
+                "case {case}: reused scratch changed the mask"
+            );
+            let inside = star
+                .iter()
+                .all(|p| (0.0..fw).contains(&p[0]) && (0.0..fh).contains(&p[1]));
+            if inside {
+                let got = a.lit_pixels() * f.pixel_mm * f.pixel_mm;
+                let want = area(&star);
+                // 8-bit rounding: at most half a step per edge pixel.
+                let tol = 1e-3 * want + 0.5 / 255.0 * f.pixel_mm * rmax * 30.0;
+                assert!((got - want).abs() <= tol, "case {case}: {got} vs {want}");
+            }
+            reused.recycle(a);
+        }
+    }
+
     #[test]
     fn half_pixel_edges_give_half_coverage() {
         let p = 0.0634765625;
