@@ -39,27 +39,8 @@ fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], body: &[u8]) {
 }
 
 fn crc32(bytes: &[u8]) -> u32 {
-    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
-    let t = TABLE.get_or_init(|| {
-        let mut t = [0u32; 256];
-        for (n, e) in t.iter_mut().enumerate() {
-            let mut c = n as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-            }
-            *e = c;
-        }
-        t
-    });
-    let mut c = !0u32;
-    for &b in bytes {
-        c = t[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
-    }
-    !c
+    // crc32fast picks a carry-less-multiply (PCLMULQDQ) kernel when the CPU has one.
+    crc32fast::hash(bytes)
 }
 
 const MOD: u64 = 65521;
@@ -108,49 +89,83 @@ struct Bits {
     out: Vec<u8>,
     acc: u64,
     n: u32,
+    codes: &'static Codes,
 }
 
 impl Bits {
+    /// Appends the low `bits` bits of `value` (at most 32) in deflate's LSB-first order.
     #[inline]
     fn put(&mut self, value: u32, bits: u32) {
         self.acc |= (value as u64) << self.n;
         self.n += bits;
-        while self.n >= 8 {
-            self.out.push(self.acc as u8);
-            self.acc >>= 8;
-            self.n -= 8;
+        if self.n >= 32 {
+            self.out.extend_from_slice(&(self.acc as u32).to_le_bytes());
+            self.acc >>= 32;
+            self.n -= 32;
         }
     }
 
-    /// Writes a Huffman code (given MSB-first) in deflate's bit order.
-    #[inline]
-    fn code(&mut self, code: u32, len: u32) {
-        self.put(code.reverse_bits() >> (32 - len), len);
+    /// Writes the pending whole bytes and the last partial byte (zero-padded).
+    fn finish(mut self) -> Vec<u8> {
+        while self.n > 0 {
+            self.out.push(self.acc as u8);
+            self.acc >>= 8;
+            self.n = self.n.saturating_sub(8);
+        }
+        self.out
     }
 
     #[inline]
     fn literal(&mut self, b: u8) {
-        if b < 144 {
-            self.code(0x30 + b as u32, 8);
-        } else {
-            self.code(0x190 + (b as u32 - 144), 9);
-        }
+        let (code, len) = self.codes.literal[b as usize];
+        self.put(code as u32, len as u32);
     }
 
     /// A back-reference of `len` (3..=258) bytes at distance 1.
     #[inline]
     fn repeat(&mut self, len: usize) {
-        let (sym, extra_bits, extra) = length_code(len);
-        if sym < 280 {
-            self.code(sym - 256, 7);
-        } else {
-            self.code(0xC0 + (sym - 280), 8);
-        }
-        if extra_bits > 0 {
-            self.put(extra, extra_bits);
-        }
-        self.code(0, 5); // distance code 0 = distance 1
+        let (code, bits) = self.codes.repeat[len];
+        self.put(code, bits as u32);
     }
+}
+
+/// Fixed-Huffman codes, already bit-reversed into deflate's order.
+struct Codes {
+    /// Literal byte -> (code, length).
+    literal: [(u16, u8); 256],
+    /// Match length 3..=258 at distance 1 -> (length code + extra bits + distance code,
+    /// total bits).
+    repeat: [(u32, u8); 259],
+}
+
+fn codes() -> &'static Codes {
+    static CODES: std::sync::OnceLock<Codes> = std::sync::OnceLock::new();
+    CODES.get_or_init(|| {
+        let rev = |code: u32, len: u32| code.reverse_bits() >> (32 - len);
+        let mut c = Codes {
+            literal: [(0, 0); 256],
+            repeat: [(0, 0); 259],
+        };
+        for b in 0..256u32 {
+            c.literal[b as usize] = if b < 144 {
+                (rev(0x30 + b, 8) as u16, 8)
+            } else {
+                (rev(0x190 + (b - 144), 9) as u16, 9)
+            };
+        }
+        for len in 3..=258 {
+            let (sym, extra_bits, extra) = length_code(len);
+            let (code, n) = if sym < 280 {
+                (rev(sym - 256, 7), 7)
+            } else {
+                (rev(0xC0 + (sym - 280), 8), 8)
+            };
+            // then the extra bits, then distance code 0 (distance 1): five zero bits
+            let v = code | extra << n;
+            c.repeat[len] = (v, (n + extra_bits + 5) as u8);
+        }
+        c
+    })
 }
 
 fn length_code(len: usize) -> (u32, u32, u32) {
@@ -193,15 +208,37 @@ fn emit_run(bits: &mut Bits, v: u8, mut k: usize) {
     }
 }
 
-/// Length of the run of byte `v` starting at `s[0]` (eight bytes at a time).
+/// Length of the run of byte `v` starting at `s[0]`: compares 32 bytes per step and finds
+/// the first different byte from the lowest set bit of the XOR.
 #[inline]
 fn run_len(s: &[u8], v: u8) -> usize {
     let pat = u64::from_ne_bytes([v; 8]);
-    let mut i = 0;
+    let word = |i: usize| u64::from_le_bytes(s[i..i + 8].try_into().expect("8 bytes")) ^ pat;
+    let first_diff = |x: u64| (x.trailing_zeros() / 8) as usize;
+    // Most runs in a mask are short (anti-aliased edges): look at one word first.
+    if s.len() < 8 {
+        return s.iter().take_while(|&&b| b == v).count();
+    }
+    let x = word(0);
+    if x != 0 {
+        return first_diff(x);
+    }
+    let mut i = 8;
+    while i + 32 <= s.len() {
+        let x = [word(i), word(i + 8), word(i + 16), word(i + 24)];
+        if x[0] | x[1] | x[2] | x[3] != 0 {
+            for (k, &x) in x.iter().enumerate() {
+                if x != 0 {
+                    return i + 8 * k + first_diff(x);
+                }
+            }
+        }
+        i += 32;
+    }
     while i + 8 <= s.len() {
-        let w = u64::from_ne_bytes(s[i..i + 8].try_into().unwrap());
-        if w != pat {
-            break;
+        let x = word(i);
+        if x != 0 {
+            return i + first_diff(x);
         }
         i += 8;
     }
@@ -219,6 +256,7 @@ fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
         out: Vec::with_capacity(4096),
         acc: 0,
         n: 0,
+        codes: codes(),
     };
     bits.put(0x78, 8);
     bits.put(0x01, 8);
@@ -277,13 +315,11 @@ fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
         emit_run(&mut bits, rv, rk);
         adler.run(rv, rk as u64);
     }
-    bits.code(0, 7); // end of block (symbol 256)
-    if bits.n > 0 {
-        bits.put(0, 8 - bits.n);
-    }
+    bits.put(0, 7); // end of block (symbol 256: seven zero bits)
+    let mut out = bits.finish();
     let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
-    bits.out.extend_from_slice(&ad.to_be_bytes());
-    bits.out
+    out.extend_from_slice(&ad.to_be_bytes());
+    out
 }
 
 #[cfg(test)]
