@@ -1,10 +1,11 @@
 //! The slicing pipeline: load → place → slice → (per layer, in parallel) raster → encode →
 //! hash → write; then plan and write the manifest, atomically.
 //!
-//! Layers are processed in blocks of consecutive layers on rayon's pool; a worker keeps
-//! only its current mask (and the previous one), so memory does not grow with the
-//! number of layers. Every output byte depends only on the input and the settings, never
-//! on the thread count or timing.
+//! One thread slices windows of 32 layers and hands each window to rayon's pool in blocks
+//! of 4 consecutive layers as soon as it is cut (no barrier between windows); at most 96
+//! layers wait for a worker, and a worker keeps only its current mask, so memory does not
+//! grow with the number of layers. Every output byte depends only on the input and the
+//! settings, never on the thread count or timing.
 
 use crate::bundle::{
     self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
@@ -18,11 +19,10 @@ use crate::profile::Profile;
 use crate::raster::{projector_view, Mask, Rasterizer, Scratch};
 use crate::slice::{self, Section};
 use crate::units::Positive;
-use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 /// Where the part goes on the build plane.
@@ -63,10 +63,11 @@ pub struct SliceOptions<'a> {
 pub struct Timings {
     /// Reading, welding and validating the mesh.
     pub load_s: f64,
-    /// Cutting and chaining contours (after the first window this overlaps `masks_s`).
+    /// Cutting and chaining contours (time spent by the slicing thread; part of `masks_s`'s
+    /// wall time, overlapping the mask work).
     pub slice_s: f64,
-    /// Rasterizing, encoding, hashing and writing masks (with the slicing of the next
-    /// window running alongside).
+    /// Slicing, rasterizing, encoding, hashing and writing masks, and the layer analysis
+    /// (wall time of the parallel stage).
     pub masks_s: f64,
     /// Layer analysis (max fill distance, islands), summed over the worker threads (CPU
     /// time, part of `masks_s`'s wall time).
@@ -193,6 +194,8 @@ pub fn encode_png(m: &Mask) -> Vec<u8> {
 const WINDOW: usize = 32;
 /// Consecutive layers one worker processes in order.
 const BLOCK: usize = 4;
+/// Layers sliced but not yet made into masks, at most (bounds memory).
+const MAX_AHEAD: usize = 3 * WINDOW;
 
 /// A [`Scratch`] borrowed from a pool and returned to it when dropped.
 struct Pooled<'p> {
@@ -303,81 +306,116 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let px_area = field.pixel_mm * field.pixel_mm;
     let binary = profile.slicing.binary;
     let mut slicer = slice::Slicer::new(&mesh, h, n);
-    let mut outs = Vec::with_capacity(n);
-    let mut below: Option<Section> = None;
-    let (mut t_slice, mut t_masks) = (0.0, 0.0);
     let scratch_pool = Mutex::new(Vec::new());
-    // While the workers turn one window's sections into masks, the next window is sliced
-    // (rayon::join): the slicer's serial parts overlap the mask work.
-    let ts = Instant::now();
-    let mut sections = slicer.window(0..WINDOW);
-    t_slice += ts.elapsed().as_secs_f64();
-    for start in (0..n).step_by(WINDOW) {
-        let tm = Instant::now();
-        let m = sections.len();
-        let next_start = start + WINDOW;
-        let (next, blocks) = rayon::join(
-            || {
-                let ts = Instant::now();
-                let next = slicer.window(next_start..next_start + WINDOW);
-                (next, ts.elapsed().as_secs_f64())
-            },
-            || -> Vec<Result<Vec<LayerOut>>> {
-                (0..m.div_ceil(BLOCK))
-                    .into_par_iter()
-                    .map(|b| {
-                        // Scratch buffers (megabytes) outlive blocks and windows: fresh ones
-                        // would page-fault on every block.
-                        let mut scratch = Pooled::take(&scratch_pool);
+    // One slot per layer, filled by whichever worker makes it.
+    let slots: Vec<OnceLock<LayerOut>> = (0..n).map(|_| OnceLock::new()).collect();
+    let failure: Mutex<Option<Error>> = Mutex::new(None);
+    let stop = AtomicBool::new(false);
+    let in_flight = AtomicUsize::new(0);
+    let cancelled = || opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+    let mut t_slice = 0.0;
+    let tm = Instant::now();
+    // The slicer runs on one worker, window after window, and hands each window's layers
+    // to the pool in blocks as soon as they are cut: no barrier between windows, so the
+    // slicing and every block overlap. At most MAX_AHEAD layers wait (memory stays
+    // bounded); while it waits, the slicing thread makes masks itself.
+    rayon::scope(|scope| {
+        let (slots, failure, stop, in_flight) = (&slots, &failure, &stop, &in_flight);
+        let (scratch_pool, done, raster, profile) = (&scratch_pool, &done, &raster, &profile);
+        let (writer, optics, tiler, correction) = (
+            &writer,
+            optics.as_ref(),
+            tiler.as_ref(),
+            correction.as_ref(),
+        );
+        let mut prev: Option<Arc<Vec<Section>>> = None;
+        for start in (0..n).step_by(WINDOW) {
+            while in_flight.load(Ordering::Acquire) > MAX_AHEAD && !stop.load(Ordering::Relaxed) {
+                if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                    std::thread::sleep(std::time::Duration::from_micros(50));
+                }
+            }
+            if stop.load(Ordering::Relaxed) || cancelled() {
+                break;
+            }
+            let ts = Instant::now();
+            let sections = Arc::new(slicer.window(start..start + WINDOW));
+            t_slice += ts.elapsed().as_secs_f64();
+            let m = sections.len();
+            for b in 0..m.div_ceil(BLOCK) {
+                let (sections, prev) = (Arc::clone(&sections), prev.clone());
+                let ks = b * BLOCK..((b + 1) * BLOCK).min(m);
+                in_flight.fetch_add(ks.len(), Ordering::AcqRel);
+                scope.spawn(move |_| {
+                    let count = ks.len();
+                    let run = || -> Result<()> {
+                        // Scratch buffers (megabytes) outlive blocks: fresh ones would
+                        // page-fault on every block.
+                        let mut scratch = Pooled::take(scratch_pool);
                         let scratch = &mut *scratch;
-                        let mut outs = Vec::with_capacity(BLOCK);
                         let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
-                        for k in b * BLOCK..((b + 1) * BLOCK).min(m) {
-                            if opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                        for k in ks {
+                            if stop.load(Ordering::Relaxed) || cancelled() {
                                 return Err(Error::Interrupted);
                             }
                             let layer = LayerIn {
                                 index: start + k,
                                 section: &sections[k],
                                 below: if k == 0 {
-                                    below.as_ref()
+                                    prev.as_ref().and_then(|p| p.last())
                                 } else {
                                     Some(&sections[k - 1])
                                 },
                             };
-                            outs.push(layer_masks(
-                                &writer,
-                                &profile,
-                                &raster,
+                            let out = layer_masks(
+                                writer,
+                                profile,
+                                raster,
                                 scratch,
                                 &mut analyser,
                                 &layer,
                                 binary,
                                 tiled,
                                 px_area,
-                                optics.as_ref(),
-                                (correction.as_ref(), path),
-                                tiler.as_ref(),
-                            )?);
+                                optics,
+                                (correction, path),
+                                tiler,
+                            )?;
+                            let _ = slots[start + k].set(out);
                             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                             if let Some(p) = opts.progress {
                                 p(d, n);
                             }
                         }
-                        Ok(outs)
-                    })
-                    .collect()
-            },
-        );
-        for b in blocks {
-            outs.extend(b?);
+                        Ok(())
+                    };
+                    if let Err(e) = run() {
+                        stop.store(true, Ordering::Relaxed);
+                        let mut f = failure.lock().unwrap_or_else(|p| p.into_inner());
+                        // Keep the first real error (others may just be the stop it caused).
+                        if f.as_ref()
+                            .is_none_or(|old| matches!(old, Error::Interrupted))
+                        {
+                            *f = Some(e);
+                        }
+                    }
+                    in_flight.fetch_sub(count, Ordering::AcqRel);
+                });
+            }
+            prev = Some(sections);
         }
-        below = sections.into_iter().last();
-        sections = next.0;
-        t_slice += next.1;
-        t_masks += tm.elapsed().as_secs_f64();
+    });
+    let t_masks = tm.elapsed().as_secs_f64();
+    if let Some(e) = failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        return Err(e);
     }
-    drop(below);
+    if cancelled() {
+        return Err(Error::Interrupted);
+    }
+    let outs: Vec<LayerOut> = slots
+        .into_iter()
+        .map(|s| s.into_inner().expect("every layer is made"))
+        .collect();
     let stats = slicer.stats;
     if stats.repaired_layers > 0 {
         warnings.push(format!(
