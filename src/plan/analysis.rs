@@ -189,9 +189,23 @@ fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
                 first: i as u32,
                 count: (j - i) as u32,
             };
+            // Each edge starts where the previous one ended: the start points and the last
+            // end point are all the points (plain comparisons: no NaN handling needed).
             for s in &segs[i..j] {
-                n.lo = [n.lo[0].min(s[0]).min(s[2]), n.lo[1].min(s[1]).min(s[3])];
-                n.hi = [n.hi[0].max(s[0]).max(s[2]), n.hi[1].max(s[1]).max(s[3])];
+                for (x, y) in [(s[0], s[1]), (s[2], s[3])] {
+                    if x < n.lo[0] {
+                        n.lo[0] = x;
+                    }
+                    if x > n.hi[0] {
+                        n.hi[0] = x;
+                    }
+                    if y < n.lo[1] {
+                        n.lo[1] = y;
+                    }
+                    if y > n.hi[1] {
+                        n.hi[1] = y;
+                    }
+                }
             }
             nodes.push(n);
             i = j;
@@ -260,8 +274,18 @@ impl Edges {
         let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
         let band_of = |y: f64| ((((y - y0) * band_inv) as usize).min(nb - 1)) as u32;
         let mut count = vec![0u32; nb + 1];
-        for s in &segs {
-            let (a, b) = (band_of(s[1].min(s[3])), band_of(s[1].max(s[3])));
+        let spans: Vec<(u32, u32)> = segs
+            .iter()
+            .map(|s| {
+                let (a, b) = if s[1] <= s[3] {
+                    (s[1], s[3])
+                } else {
+                    (s[3], s[1])
+                };
+                (band_of(a), band_of(b))
+            })
+            .collect();
+        for &(a, b) in &spans {
             for k in a..=b {
                 count[k as usize + 1] += 1;
             }
@@ -271,8 +295,7 @@ impl Edges {
         }
         let mut fill = count.clone();
         let mut items = vec![0u32; count[nb] as usize];
-        for (i, s) in segs.iter().enumerate() {
-            let (a, b) = (band_of(s[1].min(s[3])), band_of(s[1].max(s[3])));
+        for (i, &(a, b)) in spans.iter().enumerate() {
             for k in a..=b {
                 items[fill[k as usize] as usize] = i as u32;
                 fill[k as usize] += 1;
@@ -510,7 +533,7 @@ impl Edges {
 // Largest inscribed circle.
 
 /// A square cell of the subdivision: centre `c`, half-size `h`, `max` an upper bound of the
-/// signed distance inside it (the parent's bound until the cell is evaluated).
+/// signed distance inside it (set from the parent when the cell is queued).
 #[derive(Debug, Clone, Copy)]
 struct Cell {
     c: [f64; 2],
@@ -518,6 +541,11 @@ struct Cell {
     max: f64,
     /// The parent's nearest edge (a good first guess for this cell's).
     hint: u32,
+    /// The parent's far-wall edge (`u32::MAX`: none).
+    hint2: u32,
+    /// Index of the parent's boundary points in the search's point arena (`u32::MAX`:
+    /// none), tried again when the cell is popped.
+    pts: u32,
 }
 
 impl PartialEq for Cell {
@@ -541,67 +569,82 @@ fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
     (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)
 }
 
-/// Largest value over the square `[c ± h]` of `min_j |x − q_j|`: the distance from a point
-/// to its nearest boundary point can be no larger, so this bounds the signed distance in
-/// the cell. The function is convex on each Voronoi cell of the points, so its maximum is
-/// at a box corner, where a bisector crosses the box's edges, or at a circumcentre.
-fn points_bound(c: [f64; 2], h: f64, q: &[[f64; 2]]) -> f64 {
-    let (x0, x1, y0, y1) = (c[0] - h, c[0] + h, c[1] - h, c[1] + h);
-    // min_j |x − q_j|², or anything ≤ `floor` once it is known not to beat it.
-    let g = |x: [f64; 2], floor: f64| {
-        let mut m = f64::INFINITY;
-        for &p in q {
-            m = m.min(d2(x, p));
-            if m <= floor {
-                break;
-            }
+/// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
+/// of `q` (at most 8 points). When it is not, no point of the square is farther than
+/// `sqrt(t2)` from the boundary the points lie on: the square is covered by discs of
+/// radius `sqrt(t2)` around boundary points.
+///
+/// `x ↦ min_j |x − q_j|²` is convex on each Voronoi cell of the points, so its maximum over
+/// the square is at a corner, where a bisector of two points crosses an edge of the square,
+/// or at a circumcentre of three points inside it: the test checks those candidates and
+/// stops at the first one that is far from every point.
+fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
+    let mut p = [[0.0f64; 2]; 8];
+    let mut r2 = [0.0f64; 8];
+    let mut n = 0;
+    for qj in q {
+        let v = [qj[0] - c[0], qj[1] - c[1]];
+        let (ax, ay) = (v[0].abs(), v[1].abs());
+        // A point whose disc holds the whole square covers it alone; one whose disc
+        // misses the square covers none of it and can be left out.
+        if (ax + h).powi(2) + (ay + h).powi(2) <= t2 {
+            return false;
         }
-        m
-    };
-    let mut best = 0.0f64;
-    for x in [[x0, y0], [x1, y0], [x0, y1], [x1, y1]] {
-        best = best.max(g(x, best));
+        if (ax - h).max(0.0).powi(2) + (ay - h).max(0.0).powi(2) > t2 {
+            continue;
+        }
+        p[n] = v;
+        r2[n] = v[0] * v[0] + v[1] * v[1];
+        n += 1;
     }
-    for i in 0..q.len() {
-        for j in i + 1..q.len() {
-            // Bisector of q_i q_j: n·x = k.
-            let n = [q[j][0] - q[i][0], q[j][1] - q[i][1]];
-            let k = 0.5 * (d2(q[j], [0.0, 0.0]) - d2(q[i], [0.0, 0.0]));
-            if n[1] != 0.0 {
-                for x in [x0, x1] {
-                    let y = (k - n[0] * x) / n[1];
-                    if y >= y0 && y <= y1 {
-                        best = best.max(g([x, y], best));
+    if n == 0 {
+        return true;
+    }
+    let p = &p[..n];
+    // True when x is farther than t from all points.
+    let far = |x: [f64; 2]| p.iter().all(|pj| d2(x, *pj) > t2);
+    if far([-h, -h]) || far([h, -h]) || far([-h, h]) || far([h, h]) {
+        return true;
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            let nv = [p[j][0] - p[i][0], p[j][1] - p[i][1]];
+            let k = 0.5 * (r2[j] - r2[i]);
+            if nv[1] != 0.0 {
+                for x in [-h, h] {
+                    let y = (k - nv[0] * x) / nv[1];
+                    if y.abs() <= h && far([x, y]) {
+                        return true;
                     }
                 }
             }
-            if n[0] != 0.0 {
-                for y in [y0, y1] {
-                    let x = (k - n[1] * y) / n[0];
-                    if x >= x0 && x <= x1 {
-                        best = best.max(g([x, y], best));
+            if nv[0] != 0.0 {
+                for y in [-h, h] {
+                    let x = (k - nv[1] * y) / nv[0];
+                    if x.abs() <= h && far([x, y]) {
+                        return true;
                     }
                 }
             }
-            for m in j + 1..q.len() {
-                // Circumcentre of q_i q_j q_m.
-                let (a, b, cc) = (q[i], q[j], q[m]);
+            for m in j + 1..n {
+                let (a, b, cc) = (p[i], p[j], p[m]);
                 let den =
                     2.0 * (a[0] * (b[1] - cc[1]) + b[0] * (cc[1] - a[1]) + cc[0] * (a[1] - b[1]));
                 if den != 0.0 {
-                    let (a2, b2, c2) = (d2(a, [0.0; 2]), d2(b, [0.0; 2]), d2(cc, [0.0; 2]));
                     let u = [
-                        (a2 * (b[1] - cc[1]) + b2 * (cc[1] - a[1]) + c2 * (a[1] - b[1])) / den,
-                        (a2 * (cc[0] - b[0]) + b2 * (a[0] - cc[0]) + c2 * (b[0] - a[0])) / den,
+                        (r2[i] * (b[1] - cc[1]) + r2[j] * (cc[1] - a[1]) + r2[m] * (a[1] - b[1]))
+                            / den,
+                        (r2[i] * (cc[0] - b[0]) + r2[j] * (a[0] - cc[0]) + r2[m] * (b[0] - a[0]))
+                            / den,
                     ];
-                    if u[0] >= x0 && u[0] <= x1 && u[1] >= y0 && u[1] <= y1 {
-                        best = best.max(g(u, best));
+                    if u[0].abs() <= h && u[1].abs() <= h && far(u) {
+                        return true;
                     }
                 }
             }
         }
     }
-    best.sqrt()
+    false
 }
 
 /// Largest inscribed circle of the section (nonzero winding): `(radius, centre)`, mm.
@@ -615,20 +658,34 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// [`max_fill_distance`] on indexed edges with a chosen precision, mm.
 ///
 /// Best-first search over square cells ordered by an upper bound of the signed distance
-/// inside them. A cell is evaluated (its centre's exact signed distance `d` and nearest
-/// boundary point `q`) only when it is popped; its children inherit its bound until they
-/// are popped in turn, so cells left in the queue at the end cost nothing. The bound of a
-/// cell of half-size `h` is the smaller of
-/// * `d + h·√2` (the distance is 1-Lipschitz), and
-/// * [`points_bound`] over a few boundary points: `q`, the nearest boundary point behind
-///   the centre (`p2`, the other wall of a ridge), and on the contours of `q` and `p2` the
-///   points about `h` away on either side. No point of the cell is farther than that from
-///   the boundary. This is what keeps long ridges (walls of constant thickness, rings)
-///   from being subdivided down to the precision.
+/// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
+/// dropped as soon as it is shown to hold no point deeper than `T`. Popping a cell of
+/// half-size `h`:
+/// 1. its parent's boundary points (below) still cover it at radius `T` (`T` may have grown
+///    since it was pushed): dropped without a search;
+/// 2. its distance to the parent's nearest and far-wall edges `+ h·√2 ≤ T` (each edge is
+///    boundary, so that distance bounds the depth from above): dropped without a search;
+/// 3. the centre's exact signed distance `d` and nearest edge (bounding-volume hierarchy,
+///    seeded with the parent's nearest edge; band-indexed nonzero-winding inside test);
+///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
+/// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
+///    boundary point behind the centre (the other wall of a ridge) and, on the contours of
+///    both, the points about `h` away on either side. If discs of radius `T` around them
+///    cover the cell ([`points_exceed`]) it is dropped. This is what keeps long ridges
+///    (walls of constant thickness, rings) from being subdivided down to the precision.
+///    Otherwise a ridge probe (half-way between the two walls) may raise the best;
+/// 5. the four children are tested against the same points at once, and only those not
+///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
+///    `q` or the far-wall point, if smaller) as their key.
 ///
+/// The search ends when the largest key left is within `precision` of the best depth.
 /// The best centre found is finally polished by a local pattern search on the exact
-/// distance (it only ever moves to a deeper point), so typical results are much closer
-/// than the guaranteed precision.
+/// distance (it only ever moves to a deeper point; trial points closer than the current
+/// depth to a recently nearest edge are rejected without a search), so typical results
+/// are much closer than the guaranteed precision.
+///
+/// Everything depends only on the section's edges (no state carried between layers), so
+/// the result does not depend on threads or block boundaries.
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     let Some(root) = e.nodes.last() else {
         return (0.0, [0.0, 0.0]);
@@ -654,27 +711,57 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 h: half,
                 max: f64::INFINITY,
                 hint: u32::MAX,
+                hint2: u32::MAX,
+                pts: u32::MAX,
             });
         }
     }
     let mut best_d = f64::NEG_INFINITY;
     let mut best_c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
     let mut best_near = u32::MAX;
+    let mut arena: Vec<([[f64; 2]; 6], u8)> = Vec::new();
+    let far_corner = |c: [f64; 2], h: f64, q: [f64; 2]| {
+        let (dx, dy) = ((c[0] - q[0]).abs() + h, (c[1] - q[1]).abs() + h);
+        (dx * dx + dy * dy).sqrt()
+    };
     while let Some(c) = heap.pop() {
         if c.max - best_d <= precision {
             // The heap is ordered by the bound: no remaining cell can do better.
             break;
+        }
+        let t = best_d + precision;
+        if c.pts != u32::MAX && t > 0.0 {
+            let (p, n) = &arena[c.pts as usize];
+            if !points_exceed(c.c, c.h, &p[..*n as usize], t * t) {
+                continue;
+            }
+        }
+        // The parent's edges bound the distance from above: many cells are dropped
+        // without a search.
+        let reach = c.h * std::f64::consts::SQRT_2;
+        if c.hint != u32::MAX {
+            let mut u = seg_d2(c.c, &e.segs[c.hint as usize]);
+            if let Some(s2) = e.segs.get(c.hint2 as usize) {
+                u = u.min(seg_d2(c.c, s2));
+            }
+            if u.sqrt() + reach - best_d <= precision {
+                continue;
+            }
         }
         let (d, near) = e.nearest(c.c, c.hint);
         let d = if e.inside(c.c) { d } else { -d };
         if d > best_d {
             (best_c, best_d, best_near) = (c.c, d, near);
         }
-        let mut max = d + c.h * std::f64::consts::SQRT_2;
-        if d > 0.0 && max - best_d > precision {
+        let lip = d + reach;
+        if lip - best_d <= precision {
+            continue;
+        }
+        let mut pts = [[0.0; 2]; 6];
+        let mut n = 0;
+        let mut far_edge = u32::MAX;
+        if d > 0.0 {
             let q = e.closest_point(near, c.c);
-            let mut pts = [[0.0; 2]; 6];
-            let mut n = 0;
             let mut add = |p: [f64; 2]| {
                 pts[n] = p;
                 n += 1;
@@ -685,14 +772,18 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             if let Some((q2, i2)) = behind {
                 add(q2);
                 e.along(i2, q2, c.h).into_iter().for_each(&mut add);
+                far_edge = i2;
             }
-            max = max.min(points_bound(c.c, c.h, &pts[..n]));
+            let t = best_d + precision;
+            if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                continue;
+            }
             // Ridge probe: half-way between the two walls along the line through q and
             // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
             // the best value close to a ridge's height so ridge cells can be pruned.
             if let Some((q2, _)) = behind {
                 let t = 0.5 * (d2(q2, c.c).sqrt() - d);
-                if max - best_d > precision && t > 0.25 * precision {
+                if t > 0.25 * precision {
                     let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
                     let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
                     let (dp, np) = e.nearest(p, near);
@@ -702,16 +793,36 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 }
             }
         }
-        if max - best_d <= precision {
-            continue;
-        }
         let qh = c.h / 2.0;
+        let idx = if n > 0 {
+            arena.push((pts, n as u8));
+            (arena.len() - 1) as u32
+        } else {
+            u32::MAX
+        };
+        let t = best_d + precision;
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            let cc = [c.c[0] + sx * qh, c.c[1] + sy * qh];
+            let mut cmax = lip;
+            if n > 0 {
+                if !points_exceed(cc, qh, &pts[..n], t * t) {
+                    continue;
+                }
+                cmax = cmax.min(far_corner(cc, qh, pts[0]));
+                if n > 3 {
+                    cmax = cmax.min(far_corner(cc, qh, pts[3]));
+                }
+            }
+            if cmax - best_d <= precision {
+                continue;
+            }
             heap.push(Cell {
-                c: [c.c[0] + sx * qh, c.c[1] + sy * qh],
+                c: cc,
                 h: qh,
-                max,
+                max: cmax,
                 hint: near,
+                hint2: far_edge,
+                pts: idx,
             });
         }
     }
@@ -753,6 +864,10 @@ fn polish(
     let mut step = first_step;
     let mut k0 = 0;
     let mut evals = 0;
+    // Edges recently nearest: a point closer to one of them than `d` cannot be deeper,
+    // so most trial points are rejected without a search.
+    let mut recent = [near; 4];
+    let mut slot = 0;
     while step >= last_step && evals < max_evals {
         let mut moved = false;
         for k in (0..8).map(|i| (k0 + i) % 8) {
@@ -760,8 +875,16 @@ fn polish(
             let mut s = step;
             loop {
                 let p = [c[0] + s * u[0], c[1] + s * u[1]];
-                let (dp, np) = e.nearest(p, near);
                 evals += 1;
+                let dd = d * d;
+                if recent.iter().any(|&i| seg_d2(p, &e.segs[i as usize]) <= dd) {
+                    break;
+                }
+                let (dp, np) = e.nearest(p, near);
+                if !recent.contains(&np) {
+                    recent[slot] = np;
+                    slot = (slot + 1) % 4;
+                }
                 if dp > d && e.inside(p) {
                     (c, d, near) = (p, dp, np);
                     moved = true;
@@ -803,15 +926,29 @@ impl Runs {
     }
 }
 
+/// `⌈x⌉` as an integer (exact; the library `ceil` is a software call on baseline x86-64).
+fn ceil_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) < x {
+        t.saturating_add(1)
+    } else {
+        t
+    }
+}
+
 fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
     // An edge crosses rows k0..k1 (exclusive), k0 = ⌈lo/row − ½⌉, k1 = ⌈hi/row − ½⌉: the
     // rows with lo <= y_k < hi up to rounding. Two edges meeting at a vertex compute its
     // row from the same y, so the vertex counts exactly once.
     let inv_row = 1.0 / row_mm;
-    let row_of = |y: f64| (y * inv_row - 0.5).ceil() as i64;
+    // The row of every vertex, contour after contour, computed once.
+    let vrow: Vec<i64> = contours
+        .iter()
+        .flatten()
+        .map(|p| ceil_i64(p[1] * inv_row - 0.5))
+        .collect();
     let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
-    for p in contours.iter().flatten() {
-        let k = row_of(p[1]);
+    for &k in &vrow {
         kmin = kmin.min(k);
         kmax = kmax.max(k);
     }
@@ -821,27 +958,33 @@ fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
     let nrows = (kmax - kmin) as usize;
     // Counting sort of the crossings by row, then by x within each (short) row.
     let mut start = vec![0u32; nrows + 1];
+    let mut first = 0;
     for c in contours {
+        let rows = &vrow[first..first + c.len()];
         for i in 0..c.len() {
-            let (a, b) = (row_of(c[i][1]), row_of(c[(i + 1) % c.len()][1]));
+            let (a, b) = (rows[i], rows[if i + 1 == c.len() { 0 } else { i + 1 }]);
             let (k0, k1) = if a <= b { (a, b) } else { (b, a) };
             for k in k0..k1 {
                 start[(k - kmin) as usize + 1] += 1;
             }
         }
+        first += c.len();
     }
     for r in 0..nrows {
         start[r + 1] += start[r];
     }
     let mut fill = start.clone();
     let mut xs = vec![(0.0f64, 0i32); start[nrows] as usize];
+    let mut first = 0;
     for c in contours {
+        let rows = &vrow[first..first + c.len()];
         for i in 0..c.len() {
-            let (p, q) = (c[i], c[(i + 1) % c.len()]);
-            let (a, b) = (row_of(p[1]), row_of(q[1]));
+            let j = if i + 1 == c.len() { 0 } else { i + 1 };
+            let (a, b) = (rows[i], rows[j]);
             if a == b {
                 continue;
             }
+            let (p, q) = (c[i], c[j]);
             let (lo, hi, dir, k0, k1) = if a < b {
                 (p, q, 1, a, b)
             } else {
@@ -855,6 +998,7 @@ fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
                 fill[r] += 1;
             }
         }
+        first += c.len();
     }
     let mut out = Vec::new();
     for r in 0..nrows {
@@ -1091,6 +1235,121 @@ mod tests {
             // the polish, much closer.
             assert!(v <= brute + 0.0015, "{v} vs {brute}");
             assert!(v >= brute - 0.005, "{v} vs {brute}");
+        }
+    }
+
+    fn xorshift(mut s: u64) -> impl FnMut() -> f64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    #[test]
+    fn points_exceed_matches_a_grid() {
+        // Random point sets and squares: the decision must agree with the largest
+        // min-distance found on a fine grid of the square, away from the threshold.
+        let mut rnd = xorshift(0x2545f4914f6cdd1d);
+        let mut decided = [0, 0];
+        for _ in 0..300 {
+            let n = 1 + (rnd() * 6.0) as usize;
+            let q: Vec<[f64; 2]> = (0..n)
+                .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
+                .collect();
+            let c = [rnd() - 0.5, rnd() - 0.5];
+            let h = 0.1 + rnd();
+            let steps = 60;
+            let step = 2.0 * h / steps as f64;
+            let mut grid_max: f64 = 0.0;
+            for i in 0..=steps {
+                for j in 0..=steps {
+                    let x = [c[0] - h + step * i as f64, c[1] - h + step * j as f64];
+                    let m = q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min);
+                    grid_max = grid_max.max(m.sqrt());
+                }
+            }
+            // The true maximum is in [grid_max, grid_max + step].
+            let t = grid_max * (0.5 + rnd());
+            if (t - grid_max).abs() < 2.0 * step {
+                continue;
+            }
+            let exceed = points_exceed(c, h, &q, t * t);
+            assert_eq!(exceed, grid_max > t, "{q:?} {c:?} {h} {t} {grid_max}");
+            decided[exceed as usize] += 1;
+        }
+        assert!(decided[0] > 50 && decided[1] > 50, "{decided:?}");
+    }
+
+    #[test]
+    fn matches_brute_force_on_random_polygons_with_holes() {
+        // A random star with a random star-shaped hole (and a second part), the kind of
+        // section where the far wall and the contour neighbours come from other contours.
+        let mut rnd = xorshift(0x853c49e6748fea9b);
+        let star = |rnd: &mut dyn FnMut() -> f64, c: [f64; 2], r0: f64, r1: f64, ccw: bool| {
+            let n = 8 + (rnd() * 40.0) as usize;
+            let mut v: Contour = (0..n)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * i as f64 / n as f64;
+                    let r = r0 + (r1 - r0) * rnd();
+                    [c[0] + r * a.cos(), c[1] + r * a.sin()]
+                })
+                .collect();
+            if !ccw {
+                v.reverse();
+            }
+            v
+        };
+        for _ in 0..4 {
+            let contours = vec![
+                star(&mut rnd, [0.0, 0.0], 7.0, 10.0, true),
+                star(&mut rnd, [0.5, -0.5], 2.0, 5.0, false),
+                star(&mut rnd, [14.0, 0.0], 1.0, 3.0, true),
+            ];
+            let e = Edges::new(&contours);
+            let (v, centre) = max_fill_distance_with(&e, PRECISION_MM);
+            // A true inscribed circle.
+            assert!(e.inside(centre) && e.distance(centre) >= v - 1e-12);
+            let mut coarse: Vec<(f64, [f64; 2])> = Vec::new();
+            for i in 0..=180 {
+                for j in 0..=140 {
+                    let p = [-11.0 + 0.15 * i as f64, -11.0 + 0.15 * j as f64];
+                    coarse.push((e.signed_distance(p), p));
+                }
+            }
+            coarse.sort_by(|a, b| b.0.total_cmp(&a.0));
+            let mut brute: f64 = 0.0;
+            for &(_, p) in coarse.iter().take(8) {
+                for i in -40..=40 {
+                    for j in -40..=40 {
+                        let q = [p[0] + 0.003 * i as f64, p[1] + 0.003 * j as f64];
+                        brute = brute.max(e.signed_distance(q));
+                    }
+                }
+            }
+            // The fine grid is within 0.003 mm of the optimum near the coarse maxima.
+            assert!(v <= brute + 0.003, "{v} vs {brute}");
+            assert!(v >= brute - PRECISION_MM, "{v} vs {brute}");
+        }
+    }
+
+    #[test]
+    fn ceil_i64_is_ceil() {
+        for x in [
+            -3.0,
+            -2.5,
+            -0.5,
+            -1e-300,
+            0.0,
+            1e-300,
+            0.5,
+            1.0,
+            2.0000000000000004,
+            7.99,
+            1e15,
+        ] {
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
         }
     }
 
