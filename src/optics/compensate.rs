@@ -33,17 +33,15 @@ pub struct Compensator {
     // Zone mode.
     zcols: usize,
     zone_of_col: Vec<u16>,
-    /// Exclusive end column of each zone column.
-    zone_col_end: Vec<usize>,
     zone_of_row: Vec<u16>,
-    luts: Vec<[u8; 256]>,
-    /// Zone mode: (lower gray, upper gray, count of 64) per zone; rows chosen by
-    /// [`upper_row`] show the upper gray at full coverage. k = 0: one gray.
-    mix: Vec<(u8, u8, u8)>,
-    /// `luts` with entry 255 = the upper gray of the zone's mix.
-    luts_upper: Vec<[u8; 256]>,
-    // Pixel mode.
+    /// Coverage → gray tables: per zone, the lower-gray table then (for zones that mix two
+    /// grays, see [`upper_row`]) the upper-gray table, which differs only in entry 255.
+    tables: Vec<[u8; 256]>,
+    /// Index into `tables` of each zone column for each image row ([r · zcols + zc]).
+    row_tables: Vec<u32>,
+    /// The full-coverage gray of every pixel (both modes; the gray map).
     full: Vec<u8>,
+    // Pixel mode: level index of `full` and E*/P per pixel.
     full_idx: Vec<u16>,
     t: Vec<f32>,
     // Calibrated area in pixels: rows [r0, r1), cols [c0, c1).
@@ -143,39 +141,47 @@ fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     best.map_or(emax, |b| b.1)
 }
 
-thread_local! {
-    /// Edge pixels of the row being compensated (pixel mode): (index, gray).
-    static EDGES: std::cell::RefCell<Vec<(usize, u8)>> = const { std::cell::RefCell::new(Vec::new()) };
-}
-
-/// First and last index of a nonzero byte in `row`, testing 32 bytes at a time (an OR
-/// reduction the compiler vectorizes).
-fn lit_span(row: &[u8]) -> Option<(usize, usize)> {
-    const K: usize = 32;
-    let any = |c: &[u8]| c.iter().fold(0u8, |acc, &v| acc | v) != 0;
-    let n = row.len();
-    let nk = n / K;
-    let a = match (0..nk).find(|&i| any(&row[i * K..(i + 1) * K])) {
-        Some(i) => i * K,
-        None => nk * K,
-    };
-    let a = a + row[a..].iter().position(|&v| v != 0)?;
-    let tail = &row[nk * K..];
-    let b = match tail.iter().rposition(|&v| v != 0) {
-        Some(t) => nk * K + t,
-        None => {
-            let i = (0..nk)
-                .rev()
-                .find(|&i| any(&row[i * K..(i + 1) * K]))
-                .expect("a lit byte exists");
-            i * K
-                + row[i * K..(i + 1) * K]
-                    .iter()
-                    .rposition(|&v| v != 0)
-                    .expect("lit")
+/// Maps coverage values `data` to grays in place: 0 stays 0, 255 takes `full` (the
+/// full-coverage gray of the same pixel), others `edge(index, value)`. Eight bytes at a
+/// time: runs of all-off words are skipped and runs of all-on words copied from `full` in
+/// tight loops, so the work is a few instructions per eight pixels away from part edges.
+#[inline]
+fn map_row(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
+    let n = data.len().min(full.len());
+    let (data, full) = (&mut data[..n], &full[..n]);
+    let rd = |d: &[u8], i: usize| u64::from_ne_bytes(d[i..i + 8].try_into().expect("8 bytes"));
+    let px = |d: &mut u8, f: u8, i: usize| {
+        *d = match *d {
+            0 => 0,
+            255 => f,
+            v => edge(i, v),
         }
     };
-    Some((a, b))
+    let mut i = 0;
+    while i + 8 <= n {
+        let w = rd(data, i);
+        if w == 0 {
+            i += 8;
+            while i + 8 <= n && rd(data, i) == 0 {
+                i += 8;
+            }
+        } else if w == u64::MAX {
+            data[i..i + 8].copy_from_slice(&full[i..i + 8]);
+            i += 8;
+            while i + 8 <= n && rd(data, i) == u64::MAX {
+                data[i..i + 8].copy_from_slice(&full[i..i + 8]);
+                i += 8;
+            }
+        } else {
+            for k in i..i + 8 {
+                px(&mut data[k], full[k], k);
+            }
+            i += 8;
+        }
+    }
+    for k in i..n {
+        px(&mut data[k], full[k], k);
+    }
 }
 
 fn spread(v: impl Iterator<Item = f64>) -> f64 {
@@ -193,7 +199,8 @@ fn spread(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// P at every pixel centre of the field (row-major, top row first), following the
-/// extrapolation rule.
+/// extrapolation rule: inside the polynomial's rectangle Horner in u with the row's
+/// coefficients, elsewhere [`FieldModel::eval_row`] (the same values as `eval`).
 fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
     let (w, h) = (field.width_px as usize, field.height_px as usize);
     let p = field.pixel_mm;
@@ -201,36 +208,48 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
     let [x0, y0, x1, y1] = fm.area_mm;
     let [px0, py0, px1, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
     let inv = 1.0 / fm.length_unit_mm.get();
-    let sc = fm.scale.get();
+    let scf = fm.scale.get() as f32;
     let exp = fm.form == Form::Exponential;
+    let xs: Vec<f64> = (0..w).map(|c| (c as f64 + 0.5) * p).collect();
+    // Columns whose clamped x lies in the polynomial's rectangle: one contiguous run.
+    let us: Vec<Option<f64>> = xs
+        .iter()
+        .map(|&x| {
+            let xc = x.clamp(x0 - m, x1 + m);
+            (xc >= px0 && xc <= px1).then(|| (xc - fm.origin_mm[0]) * inv)
+        })
+        .collect();
     let mut out = vec![0f32; w * h];
+    let mut cache = super::field::RowCache::default();
+    let mut exact = vec![0f64; w];
     for (r, row) in out.chunks_exact_mut(w).enumerate() {
         let y = (h as f64 - r as f64 - 0.5) * p;
         let yc = y.clamp(y0 - m, y1 + m);
-        // Inside the polynomial's rectangle: Horner in u with this row's coefficients.
-        let a =
-            (yc >= py0 && yc <= py1).then(|| fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv));
-        for (c, o) in row.iter_mut().enumerate() {
-            let x = (c as f64 + 0.5) * p;
-            let xc = x.clamp(x0 - m, x1 + m);
-            *o = match &a {
-                Some(a) if xc >= px0 && xc <= px1 => {
-                    let u = (xc - fm.origin_mm[0]) * inv;
-                    a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
+        let mut rest = false;
+        if yc >= py0 && yc <= py1 {
+            let a = fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv);
+            for (o, u) in row.iter_mut().zip(&us) {
+                match u {
+                    Some(u) => *o = a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32,
+                    None => rest = true,
                 }
-                _ => f32::NAN,
-            };
-        }
-        // Separate passes: exp must not be evaluated (speculatively) for polynomials.
-        let scf = sc as f32;
-        if exp {
-            row.iter_mut().for_each(|o| *o = scf * o.exp());
+            }
+            // Separate passes: exp must not be evaluated (speculatively) for polynomials.
+            if exp {
+                row.iter_mut().for_each(|o| *o = scf * o.exp());
+            } else {
+                row.iter_mut().for_each(|o| *o *= scf);
+            }
         } else {
-            row.iter_mut().for_each(|o| *o *= scf);
+            rest = true;
         }
-        for (c, o) in row.iter_mut().enumerate() {
-            if o.is_nan() {
-                *o = fm.eval((c as f64 + 0.5) * p, y) as f32;
+        if rest {
+            fm.eval_row(y, &xs, &mut cache, &mut exact);
+            let inside_row = yc >= py0 && yc <= py1;
+            for ((o, u), &e) in row.iter_mut().zip(&us).zip(&exact) {
+                if !inside_row || u.is_none() {
+                    *o = e as f32;
+                }
             }
         }
     }
@@ -363,14 +382,10 @@ impl Compensator {
             h,
             levels,
             zcols,
-            zone_col_end: (0..zcols)
-                .map(|zc| zone_of_col.partition_point(|&z| (z as usize) <= zc))
-                .collect(),
             zone_of_col,
             zone_of_row,
-            luts: Vec::new(),
-            mix: Vec::new(),
-            luts_upper: Vec::new(),
+            tables: Vec::new(),
+            row_tables: Vec::new(),
             full: Vec::new(),
             full_idx: Vec::new(),
             t: Vec::new(),
@@ -476,19 +491,50 @@ impl Compensator {
                         .collect();
                     (c0..=c1).map(move |c| pp[r * w + c] as f64 * row_s[zone_of_col[c] as usize])
                 }));
-                comp.luts_upper = luts
-                    .iter()
-                    .zip(&mix)
-                    .map(|(l, &(_, g1, _))| {
-                        let mut u = *l;
-                        u[255] = g1;
-                        u
-                    })
-                    .collect();
+                // Tables: the lower-gray table of every zone, plus an upper-gray one for
+                // mixing zones; each row of a zone uses one of them (`upper_row`).
+                let mut tables = Vec::with_capacity(nz + mixed as usize);
+                let mut upper_idx = vec![u32::MAX; nz];
                 for (l, &(g0, _, _)) in luts.iter_mut().zip(&mix) {
                     l[255] = g0;
+                    tables.push(*l);
                 }
-                comp.mix = mix;
+                for z in 0..nz {
+                    let (_, g1, k) = mix[z];
+                    if k > 0 {
+                        let mut u = luts[z];
+                        u[255] = g1;
+                        upper_idx[z] = tables.len() as u32;
+                        tables.push(u);
+                    }
+                }
+                let zone_of_row = &comp.zone_of_row;
+                let row_tables: Vec<u32> = (0..h)
+                    .flat_map(|r| {
+                        let zr = zone_of_row[r] as usize * zcols;
+                        let mix = &mix;
+                        let upper_idx = &upper_idx;
+                        (0..zcols).map(move |zc| {
+                            let z = zr + zc;
+                            if upper_row(r, mix[z].2) {
+                                upper_idx[z]
+                            } else {
+                                z as u32
+                            }
+                        })
+                    })
+                    .collect();
+                // The full-coverage gray of every pixel.
+                let mut full = vec![0u8; w * h];
+                for (r, row) in full.chunks_exact_mut(w).enumerate() {
+                    let tabs = &row_tables[r * zcols..(r + 1) * zcols];
+                    for (o, &zc) in row.iter_mut().zip(&comp.zone_of_col) {
+                        *o = tables[tabs[zc as usize] as usize][255];
+                    }
+                }
+                comp.full = full;
+                comp.tables = tables;
+                comp.row_tables = row_tables;
                 comp.prediction.mixed_zones = mixed;
                 let pr = &mut comp.prediction;
                 pr.target = target;
@@ -497,7 +543,6 @@ impl Compensator {
                 pr.spreads.after_zone_pct = after_zone;
                 pr.spreads.after_pixel_pct = after_pixel;
                 pr.unreachable = unreachable;
-                comp.luts = luts;
             }
             Mode::Pixel => {
                 let pmin = inside_iter()
@@ -573,15 +618,18 @@ impl Compensator {
     }
 
     /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
-    ///
-    /// Only the span from the first to the last lit pixel of each row is touched (found
-    /// eight bytes at a time).
     pub fn apply(&self, m: &mut Mask) {
         self.apply_in(m, [0, self.h, 0, self.w]);
     }
 
     /// [`apply`](Self::apply) for a mask known to be zero outside rows r0..r1 and columns
     /// c0..c1 (`lit_box` = [r0, r1, c0, c1], e.g. [`crate::raster::Scratch::lit_box`]).
+    ///
+    /// One pass over the box, row by row and zone segment by zone segment, eight pixels
+    /// at a time: all-off words are skipped, all-on words take the precomputed full gray
+    /// (zone mode: the zone's gray for this row; pixel mode: the per-pixel gray map), other
+    /// words go pixel by pixel (zone mode: a 256-entry table per zone and row parity;
+    /// pixel mode: a search from the full-coverage level).
     pub fn apply_in(&self, m: &mut Mask, lit_box: [usize; 4]) {
         assert_eq!(
             (m.width as usize, m.height as usize),
@@ -591,110 +639,74 @@ impl Compensator {
         let w = self.w;
         let [br0, br1, bc0, bc1] = lit_box;
         let (br1, bc1) = (br1.min(self.h), bc1.min(w));
-        let [ir0, ir1] = self.inside_rows;
-        let [ic0, ic1] = self.inside_cols;
-        let mut outside = false;
-        let mut first_lit = None;
-        let mut last_lit = 0;
-        for r in br0..br1 {
-            let row = &m.data[r * w + bc0.min(bc1)..r * w + bc1];
-            let Some((a, b)) = lit_span(row) else {
-                continue;
-            };
-            let (a, b) = (a + bc0, b + bc0);
-            first_lit.get_or_insert(r);
-            last_lit = r;
-            outside |= r < ir0 || r >= ir1 || a < ic0 || b >= ic1;
-            match (self.mode, self.dither) {
-                (Mode::Zone, _) => self.zone_row(m, r, a, b + 1),
-                (Mode::Pixel, Dither::On) => {}
-                (Mode::Pixel, _) => self.pixel_row(m, r, a, b + 1),
-                (Mode::Off, _) => {}
-            }
+        if br0 >= br1 || bc0 >= bc1 {
+            return;
         }
-        if outside {
+        if self.lit_outside(m, [br0, br1, bc0, bc1]) {
             self.layers_outside.fetch_add(1, Ordering::Relaxed);
         }
-        if let (Some(r0), Mode::Pixel, Dither::On) = (first_lit, self.mode, self.dither) {
-            self.apply_dither(m, r0, last_lit + 1);
+        match (self.mode, self.dither) {
+            (Mode::Zone, _) => {
+                for r in br0..br1 {
+                    self.zone_row(&mut m.data[r * w..(r + 1) * w], r, bc0, bc1);
+                }
+            }
+            (Mode::Pixel, Dither::On) => {
+                let lit = |r: &usize| m.data[r * w + bc0..r * w + bc1].iter().any(|&v| v != 0);
+                let first = (br0..br1).find(lit);
+                let last = (br0..br1).rev().find(lit);
+                if let (Some(r0), Some(r1)) = (first, last) {
+                    self.apply_dither(m, r0, r1 + 1);
+                }
+            }
+            (Mode::Pixel, _) => {
+                for r in br0..br1 {
+                    self.pixel_row(&mut m.data[r * w..(r + 1) * w], r, bc0, bc1);
+                }
+            }
+            (Mode::Off, _) => {}
         }
     }
 
-    /// Zone mode, row `r`, columns [a, b): a table lookup per edge pixel (0 stays 0).
-    fn zone_row(&self, m: &mut Mask, r: usize, a: usize, b: usize) {
+    /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
+    /// part of the box outside it is scanned; usually there is none).
+    fn lit_outside(&self, m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> bool {
         let w = self.w;
-        let zr = self.zone_of_row[r] as usize * self.zcols;
-        let row = &mut m.data[r * w..(r + 1) * w];
-        let mut c = a;
-        while c < b {
-            let zc = self.zone_of_col[c];
-            let e = self.zone_col_end[zc as usize].min(b);
-            let z = zr + zc as usize;
-            let lut = if upper_row(r, self.mix[z].2) {
-                &self.luts_upper[z]
+        let [ir0, ir1] = self.inside_rows;
+        let [ic0, ic1] = self.inside_cols;
+        let any = |r: usize, a: usize, b: usize| {
+            a < b && m.data[r * w + a..r * w + b].iter().any(|&v| v != 0)
+        };
+        (r0..r1).any(|r| {
+            if r < ir0 || r >= ir1 {
+                any(r, c0, c1)
             } else {
-                &self.luts[z]
-            };
-            // Eight pixels at a time: all-off words stay, all-on words take the full gray,
-            // others go through the table pixel by pixel.
-            let full = lut[255];
-            let mut i = c;
-            while i + 8 <= e {
-                let chunk = &mut row[i..i + 8];
-                let word = u64::from_ne_bytes((&*chunk).try_into().expect("8 bytes"));
-                if word == u64::MAX {
-                    chunk.copy_from_slice(&[full; 8]);
-                } else if word != 0 {
-                    chunk.iter_mut().for_each(|v| *v = lut[*v as usize]);
-                }
-                i += 8;
+                any(r, c0, c1.min(ic0)) || any(r, c0.max(ic1), c1)
             }
-            row[i..e].iter_mut().for_each(|v| *v = lut[*v as usize]);
-            c = e;
-        }
+        })
     }
 
-    /// Pixel mode without dithering, row `r`, columns [a, b): edge pixels (0 < v < 255)
-    /// are looked up first, then full pixels take the precomputed gray in one branch-free
-    /// pass, then the edge grays are written.
-    fn pixel_row(&self, m: &mut Mask, r: usize, a: usize, b: usize) {
+    /// Zone mode, columns [a, b) of row `r` (`row` is the whole row): full pixels take
+    /// the zone's gray for this row, edge pixels go through the zone's table.
+    fn zone_row(&self, row: &mut [u8], r: usize, a: usize, b: usize) {
+        let tabs = &self.row_tables[r * self.zcols..(r + 1) * self.zcols];
+        let cols = &self.zone_of_col[a..b];
+        let full = &self.full[r * self.w + a..r * self.w + b];
+        map_row(&mut row[a..b], full, |k, v| {
+            self.tables[tabs[cols[k] as usize] as usize][v as usize]
+        });
+    }
+
+    /// Pixel mode without dithering, columns [a, b) of row `r`: full pixels take the
+    /// precomputed gray, edge pixels (0 < v < 255) are searched from it.
+    fn pixel_row(&self, row: &mut [u8], r: usize, a: usize, b: usize) {
         let lv = &self.levels;
-        let span = r * self.w + a..r * self.w + b;
-        let data = &mut m.data[span.clone()];
-        let full = &self.full[span.clone()];
-        let fidx = &self.full_idx[span.clone()];
-        let t = &self.t[span];
-        EDGES.with(|e| {
-            let mut e = e.borrow_mut();
-            e.clear();
-            let mut edge = |i: usize, v: u8| {
-                let target = v as f64 / 255.0 * t[i] as f64;
-                e.push((i, lv.gray[lv.nearest_from(fidx[i] as usize, target)]));
-            };
-            // Eight bytes at a time: all-off and all-on words hold no edge pixel.
-            let mut i = 0;
-            while i + 8 <= data.len() {
-                let word = u64::from_ne_bytes(data[i..i + 8].try_into().expect("8 bytes"));
-                if word != 0 && word != u64::MAX {
-                    for (k, &v) in data[i..i + 8].iter().enumerate() {
-                        if v != 0 && v != 255 {
-                            edge(i + k, v);
-                        }
-                    }
-                }
-                i += 8;
-            }
-            for (k, &v) in data[i..].iter().enumerate() {
-                if v != 0 && v != 255 {
-                    edge(i + k, v);
-                }
-            }
-            for (d, &f) in data.iter_mut().zip(full) {
-                *d = if *d == 255 { f } else { *d };
-            }
-            for &(i, g) in e.iter() {
-                data[i] = g;
-            }
+        let base = r * self.w;
+        let fidx = &self.full_idx[base + a..base + b];
+        let t = &self.t[base + a..base + b];
+        map_row(&mut row[a..b], &self.full[base + a..base + b], |k, v| {
+            let target = v as f64 / 255.0 * t[k] as f64;
+            lv.gray[lv.nearest_from(fidx[k] as usize, target)]
         });
     }
 
@@ -752,18 +764,11 @@ impl Compensator {
     /// The full-coverage gray of every pixel (what a plate covering the field gets, without
     /// error diffusion), in field orientation.
     pub fn gray_map(&self) -> Mask {
-        let mut m = Mask {
+        Mask {
             width: self.w as u32,
             height: self.h as u32,
-            data: vec![255; self.w * self.h],
-        };
-        for r in 0..self.h {
-            match self.mode {
-                Mode::Zone => self.zone_row(&mut m, r, 0, self.w),
-                _ => self.pixel_row(&mut m, r, 0, self.w),
-            }
+            data: self.full.clone(),
         }
-        m
     }
 
     /// S of pixel value `g` on the levels used (0 for values outside the valid range other
@@ -885,18 +890,7 @@ mod tests {
     }
 
     #[test]
-    fn lit_span_and_row_pattern() {
-        for n in [1usize, 7, 8, 9, 23, 64, 1024] {
-            assert_eq!(lit_span(&vec![0u8; n]), None);
-            for a in 0..n.min(20) {
-                for b in a..n.min(a + 19) {
-                    let mut row = vec![0u8; n];
-                    row[a] = 3;
-                    row[b] = 9;
-                    assert_eq!(lit_span(&row), Some((a, b)), "n {n} a {a} b {b}");
-                }
-            }
-        }
+    fn row_pattern() {
         // k of every 64 consecutive rows show the upper gray, any 8 rows within 1/8.
         for k in 0..=64u8 {
             assert_eq!(

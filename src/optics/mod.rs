@@ -23,6 +23,8 @@ pub mod field;
 pub mod plots;
 pub mod report;
 pub mod response;
+#[cfg(test)]
+mod sweep;
 
 pub use compensate::Compensator;
 pub use field::{FieldModel, Poly};
