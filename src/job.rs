@@ -265,29 +265,39 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     }
     let h = profile.slicing.layer_height_mm.get();
     let tiled = profile.projector.len() > 1;
-    // Several projectors: tiling (geometry::tile) does their blending and compensation.
-    let (optics, tiler) = if tiled {
-        (None, Some(Tiler::for_job(&mut profile, &opts.optics, h)?))
-    } else {
-        (crate::optics::prepare(&mut profile, &opts.optics, h)?, None)
-    };
-    let field = profile.field();
     let path = opts.input.as_path();
-    let correction = distortion::for_job(&opts.distortion, &mut profile)?;
-
-    let bytes = std::fs::read(path).map_err(|e| {
-        if path.is_dir() {
-            Error::input(path, "is a directory, not a mesh file")
-        } else {
-            Error::io(path, e)
-        }
-    })?;
-    let (sha, mesh) = rayon::join(
-        || bundle::sha256_hex(&bytes),
-        || mesh::load_bytes(path, &bytes),
+    // The machine's per-job set-up (light compensation tables, distortion fit) and reading
+    // the model are independent: they run side by side. Set-up errors are reported first.
+    let (setup, loaded) = rayon::join(
+        || -> Result<_> {
+            // Several projectors: tiling (geometry::tile) does their blending and
+            // compensation.
+            let (optics, tiler) = if tiled {
+                (None, Some(Tiler::for_job(&mut profile, &opts.optics, h)?))
+            } else {
+                (crate::optics::prepare(&mut profile, &opts.optics, h)?, None)
+            };
+            let correction = distortion::for_job(&opts.distortion, &mut profile)?;
+            Ok((optics, tiler, correction))
+        },
+        || -> Result<(String, Mesh)> {
+            let bytes = std::fs::read(path).map_err(|e| {
+                if path.is_dir() {
+                    Error::input(path, "is a directory, not a mesh file")
+                } else {
+                    Error::io(path, e)
+                }
+            })?;
+            let (sha, mesh) = rayon::join(
+                || bundle::sha256_hex(&bytes),
+                || mesh::load_bytes(path, &bytes),
+            );
+            Ok((sha, mesh?))
+        },
     );
-    let mut mesh: Mesh = mesh?;
-    drop(bytes);
+    let (optics, tiler, correction) = setup?;
+    let (sha, mut mesh) = loaded?;
+    let field = profile.field();
     let bbox = mesh.bbox();
     let mode = opts.placement;
     let (t, n) = place_mesh(path, &mut mesh, &field, mode, h)?;
