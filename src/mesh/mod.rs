@@ -128,13 +128,16 @@ pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Mesh> {
     if soup.is_empty() {
         return Err(Error::input(path, "contains no triangles"));
     }
-    for (i, t) in soup.iter().enumerate() {
-        if t.iter().flatten().any(|c| !c.is_finite()) {
-            return Err(Error::input(
-                path,
-                format!("triangle {i} has a non-finite (NaN or infinite) coordinate"),
-            ));
-        }
+    use rayon::prelude::*;
+    if let Some(i) = soup
+        .par_iter()
+        .with_min_len(4096)
+        .position_first(|t| t.iter().flatten().any(|c| !c.is_finite()))
+    {
+        return Err(Error::input(
+            path,
+            format!("triangle {i} has a non-finite (NaN or infinite) coordinate"),
+        ));
     }
     Ok(Mesh::from_soup(&soup, format))
 }

@@ -61,16 +61,19 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
 }
 
 fn parse_binary(b: &[u8], n: usize) -> Soup {
-    let mut soup = Vec::with_capacity(n);
-    for rec in b[84..84 + 50 * n].chunks_exact(50) {
-        let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
-        let v = |k: usize| {
-            let o = 12 + 12 * k;
-            [f(o), f(o + 4), f(o + 8)]
-        };
-        soup.push([v(0), v(1), v(2)]);
-    }
-    soup
+    use rayon::prelude::*;
+    b[84..84 + 50 * n]
+        .par_chunks_exact(50)
+        .with_min_len(4096)
+        .map(|rec| {
+            let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
+            let v = |k: usize| {
+                let o = 12 + 12 * k;
+                [f(o), f(o + 4), f(o + 8)]
+            };
+            [v(0), v(1), v(2)]
+        })
+        .collect()
 }
 
 struct Tokens<'a> {
