@@ -6,7 +6,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 
 /// Slices a 10 × 10 × 2 mm box at 0.5 mm layers (4 layers) into `<dir>/box.dmdjob`.
-fn sliced(name: &str) -> (PathBuf, PathBuf) {
+fn sliced(name: &str) -> (TempDir, PathBuf) {
     let dir = tempdir(&format!("run-{name}"));
     write_stl(&dir.join("box.stl"), &box_tris([0.0; 3], [10.0, 10.0, 2.0]));
     let o = run_in(&dir, &["slice", "box.stl", "--layer-height", "0.5", "-q"]);
