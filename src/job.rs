@@ -601,7 +601,7 @@ fn layer_masks(
         None => (None, 1.0),
     };
     let mut field_mask = raster.coverage(warped.as_deref().unwrap_or(section), scratch);
-    let area_mm2 = field_mask.lit_pixels_in(scratch.lit_box()) * px_area * area_scale;
+    let area_mm2 = scratch.lit_pixels(&field_mask) * px_area * area_scale;
     if binary {
         crate::raster::threshold(&mut field_mask);
     }

@@ -72,6 +72,9 @@ impl Mask {
 #[derive(Debug, Default)]
 pub struct Scratch {
     acc: Vec<f32>,
+    /// Sum of the last [`Rasterizer::coverage`] mask's values, counted by the scan (`None`
+    /// when the nonzero fallback drew the mask).
+    lit_sum: Option<u64>,
     /// Per accumulation row, one bit per [`BLOCK`] cells that `line` wrote to: the scan
     /// visits only those blocks and skips the (zero) cells between them.
     touched: Vec<u64>,
@@ -85,6 +88,16 @@ impl Scratch {
     /// and columns c0..c1 (lets later passes skip the empty part of the field).
     pub fn lit_box(&self) -> [usize; 4] {
         self.lit
+    }
+
+    /// The lit area of the last [`Rasterizer::coverage`] mask in pixels (sum of values /
+    /// 255), as [`Mask::lit_pixels`] gives it, without another pass over the mask. Only
+    /// valid for that mask as it was returned (before thresholding or compensation).
+    pub fn lit_pixels(&self, m: &Mask) -> f64 {
+        match self.lit_sum {
+            Some(sum) => sum as f64 / 255.0,
+            None => m.lit_pixels_in(self.lit),
+        }
     }
 
     /// Hands the mask returned by the latest [`Rasterizer::coverage`] call back for reuse
@@ -147,6 +160,7 @@ impl Rasterizer {
             data: scratch.zeroed(w, h),
         };
         scratch.lit = [0; 4];
+        scratch.lit_sum = Some(0);
         if contours.is_empty() {
             return out;
         }
@@ -183,6 +197,7 @@ impl Rasterizer {
         scratch.lit = [r0, r1, c0, c1.min(w)];
         let mut max_winding = 0.0f32;
         let end = c1.min(w);
+        let mut lit_sum = 0u64;
         for r in r0..r1 {
             let row = &mut acc.cells[r * stride..(r + 1) * stride];
             let marks = &mut acc.touched[r * words..(r + 1) * words];
@@ -200,6 +215,7 @@ impl Rasterizer {
                     let from = bs.max(col).min(end);
                     if val != 0 {
                         dst[col..from].fill(val);
+                        lit_sum += val as u64 * (from - col) as u64;
                     }
                     let to = be.min(end).max(from);
                     for c in from..to {
@@ -213,6 +229,7 @@ impl Rasterizer {
                             val = (v.min(1.0) * 255.0 + 0.5) as u8;
                         }
                         dst[c] = val;
+                        lit_sum += val as u64;
                     }
                     // Cells right of the field (edges carry area one column past their
                     // rightmost pixel): not part of the mask, just cleared.
@@ -222,12 +239,15 @@ impl Rasterizer {
             }
             if val != 0 && col < end {
                 dst[col..end].fill(val);
+                lit_sum += val as u64 * (end - col) as u64;
             }
         }
+        scratch.lit_sum = Some(lit_sum);
         if max_winding > 1.001 {
             // Overlapping shells: the accumulated winding integral over-counts pixels where
             // two boundaries meet; redo the layer with the exact nonzero rule.
             self.coverage_nonzero(contours, &mut out);
+            scratch.lit_sum = None;
         }
         out
     }
@@ -569,6 +589,11 @@ mod tests {
             assert!(
                 a.data == b.data,
                 "case {case}: reused scratch changed the mask"
+            );
+            assert_eq!(
+                reused.lit_pixels(&a),
+                a.lit_pixels(),
+                "case {case}: lit sum"
             );
             let inside = star
                 .iter()
