@@ -93,8 +93,11 @@ fn main() {
         .iter()
         .map(|s| s.contours.iter().map(|c| c.len()).sum::<usize>())
         .sum();
+    let same = (1..sections.len())
+        .filter(|&i| sections[i].contours == sections[i - 1].contours)
+        .count();
     println!(
-        "{}: {n} layers of {h} mm, {:.0} edges/layer; best of {reps}, one thread:",
+        "{}: {n} layers of {h} mm, {:.0} edges/layer, {same} identical to the layer below; best of {reps}, one thread:",
         path.display(),
         edges as f64 / n.max(1) as f64
     );

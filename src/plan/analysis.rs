@@ -58,12 +58,22 @@ pub fn analyse(cur: &[Contour], prev: Option<&[Contour]>, row_mm: f64) -> LayerA
 pub struct Analyser {
     row_mm: f64,
     last: Option<(usize, Runs)>,
+    /// Buffers reused from layer to layer (results never depend on them).
+    scratch: ScanScratch,
+    cur: Runs,
+    below: Runs,
 }
 
 impl Analyser {
     /// An analyser scanning islands at rows of pitch `row_mm`.
     pub fn new(row_mm: f64) -> Analyser {
-        Analyser { row_mm, last: None }
+        Analyser {
+            row_mm,
+            last: None,
+            scratch: ScanScratch::default(),
+            cur: Runs::default(),
+            below: Runs::default(),
+        }
     }
 
     /// Analyses layer `index` (contours `cur`) over the layer below (`prev`: the contours
@@ -74,20 +84,33 @@ impl Analyser {
         cur: &[Contour],
         prev: Option<&[Contour]>,
     ) -> LayerAnalysis {
-        let below = self
-            .last
-            .take()
-            .filter(|(i, _)| index != usize::MAX && i.wrapping_add(1) == index);
-        let runs = Runs::new(cur, self.row_mm);
+        let last = self.last.take();
+        let reuse =
+            matches!(&last, Some((i, _)) if index != usize::MAX && i.wrapping_add(1) == index);
+        match last {
+            // The scan of the layer below, kept from the previous call.
+            Some((_, r)) if reuse => self.below = r,
+            // Its buffers, for the next scan.
+            Some((_, r)) => self.cur = r,
+            None => {}
+        }
+        let mut runs = std::mem::take(&mut self.cur);
+        runs.scan(cur, self.row_mm, &mut self.scratch);
         let islands = match prev {
             None => 0,
-            Some(p) => match &below {
-                Some((_, r)) => count_islands(&runs, r),
-                None => count_islands(&runs, &Runs::new(p, self.row_mm)),
-            },
+            Some(p) => {
+                if !reuse {
+                    self.below.scan(p, self.row_mm, &mut self.scratch);
+                }
+                count_islands(&runs, &self.below)
+            }
         };
+        // The scan of the layer below is no longer needed: its buffers serve the next one.
+        std::mem::swap(&mut self.cur, &mut self.below);
         if index != usize::MAX {
             self.last = Some((index, runs));
+        } else {
+            self.below = runs;
         }
         LayerAnalysis {
             max_fill_distance_mm: max_fill_distance(cur).0,
@@ -128,6 +151,9 @@ struct Node {
 }
 
 const LEAF: usize = 8;
+
+/// Spacing of the cover points along the walls, in cell half-sizes.
+const ALONG: f64 = 0.67;
 
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
@@ -252,7 +278,7 @@ impl Edges {
             ranges.push((first as u32, c.len() as u32));
             for i in 0..c.len() {
                 let a = c[i];
-                let b = c[(i + 1) % c.len()];
+                let b = c[if i + 1 == c.len() { 0 } else { i + 1 }];
                 if a != b {
                     segs.push([a[0], a[1], b[0], b[1]]);
                     seg_at.push(((first + i) as u32, ci as u32));
@@ -327,13 +353,18 @@ impl Edges {
     /// Distance from `p` to the nearest edge and that edge's index; `hint`, an edge likely
     /// to be near (or `u32::MAX`), bounds the search from the start.
     fn nearest(&self, p: [f64; 2], hint: u32) -> (f64, u32) {
-        if self.nodes.is_empty() {
-            return (f64::INFINITY, u32::MAX);
-        }
-        let (mut best, mut arg) = match self.segs.get(hint as usize) {
+        let start = match self.segs.get(hint as usize) {
             Some(s) => (seg_d2(p, s), hint),
             None => (f64::INFINITY, u32::MAX),
         };
+        self.nearest_from(p, start)
+    }
+
+    /// [`Edges::nearest`] started from a known edge `(squared distance to p, index)`.
+    fn nearest_from(&self, p: [f64; 2], (mut best, mut arg): (f64, u32)) -> (f64, u32) {
+        if self.nodes.is_empty() {
+            return (f64::INFINITY, u32::MAX);
+        }
         let mut stack: [u32; 64] = [0; 64];
         stack[0] = (self.nodes.len() - 1) as u32;
         let mut sp = 1usize;
@@ -372,14 +403,14 @@ impl Edges {
     }
 
     /// The boundary point nearest to `p` among those on the far side of `p` from `q`
-    /// (in the half-plane `(x − p)·(q − p) ≤ 0`), if any.
-    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2]) -> Option<([f64; 2], u32)> {
+    /// (in the half-plane `(x − p)·(q − p) ≤ 0`) and closer than `limit`, if any.
+    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2], limit: f64) -> Option<([f64; 2], u32)> {
         if self.nodes.is_empty() {
             return None;
         }
         let u = [q[0] - p[0], q[1] - p[1]];
         let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
-        let mut best = f64::INFINITY;
+        let mut best = limit * limit;
         let mut arg = None;
         let mut stack: [u32; 64] = [0; 64];
         stack[0] = (self.nodes.len() - 1) as u32;
@@ -391,10 +422,10 @@ impl Edges {
                 continue;
             }
             // Boxes wholly on q's side hold nothing behind p.
-            let lo_side = side(n.lo[0], n.lo[1])
-                .min(side(n.hi[0], n.lo[1]))
-                .min(side(n.lo[0], n.hi[1]))
-                .min(side(n.hi[0], n.hi[1]));
+            // (Its lowest corner: centre minus half-extents; rounding can only drop a
+            // point exactly on the line, which is a choice of cover point, not a bound.)
+            let lo_side = side(0.5 * (n.lo[0] + n.hi[0]), 0.5 * (n.lo[1] + n.hi[1]))
+                - 0.5 * ((n.hi[0] - n.lo[0]) * u[0].abs() + (n.hi[1] - n.lo[1]) * u[1].abs());
             if lo_side > 0.0 {
                 continue;
             }
@@ -449,7 +480,8 @@ impl Edges {
         let (v, c) = self.seg_at[i as usize];
         let (first, len) = self.contours[c as usize];
         let h2 = h * h;
-        let at = |k: u32| self.verts[(first + k % len) as usize];
+        // k < 2·len below.
+        let at = |k: u32| self.verts[(first + if k >= len { k - len } else { k }) as usize];
         let k0 = v - first;
         let mut fwd = at(k0 + 1);
         for s in 1..len.min(64) {
@@ -739,16 +771,20 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         // The parent's edges bound the distance from above: many cells are dropped
         // without a search.
         let reach = c.h * std::f64::consts::SQRT_2;
+        let mut start = (f64::INFINITY, u32::MAX);
         if c.hint != u32::MAX {
-            let mut u = seg_d2(c.c, &e.segs[c.hint as usize]);
+            start = (seg_d2(c.c, &e.segs[c.hint as usize]), c.hint);
             if let Some(s2) = e.segs.get(c.hint2 as usize) {
-                u = u.min(seg_d2(c.c, s2));
+                let u2 = seg_d2(c.c, s2);
+                if u2 < start.0 {
+                    start = (u2, c.hint2);
+                }
             }
-            if u.sqrt() + reach - best_d <= precision {
+            if start.0.sqrt() + reach - best_d <= precision {
                 continue;
             }
         }
-        let (d, near) = e.nearest(c.c, c.hint);
+        let (d, near) = e.nearest_from(c.c, start);
         let d = if e.inside(c.c) { d } else { -d };
         if d > best_d {
             (best_c, best_d, best_near) = (c.c, d, near);
@@ -767,11 +803,14 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 n += 1;
             };
             add(q);
-            e.along(near, q, c.h).into_iter().for_each(&mut add);
-            let behind = e.nearest_behind(c.c, q);
+            e.along(near, q, ALONG * c.h).into_iter().for_each(&mut add);
+            // Wall points farther than this can neither cover the cell at radius `T`
+            // nor bound a child's depth below `lip`.
+            let limit = best_d + precision + 1.5 * reach;
+            let behind = e.nearest_behind(c.c, q, limit);
             if let Some((q2, i2)) = behind {
                 add(q2);
-                e.along(i2, q2, c.h).into_iter().for_each(&mut add);
+                e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
                 far_edge = i2;
             }
             let t = best_d + precision;
@@ -781,14 +820,22 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             // Ridge probe: half-way between the two walls along the line through q and
             // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
             // the best value close to a ridge's height so ridge cells can be pruned.
-            if let Some((q2, _)) = behind {
+            if let Some((q2, i2)) = behind {
                 let t = 0.5 * (d2(q2, c.c).sqrt() - d);
                 if t > 0.25 * precision {
                     let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
                     let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
-                    let (dp, np) = e.nearest(p, near);
-                    if dp > best_d && e.inside(p) {
-                        (best_c, best_d, best_near) = (p, dp, np);
+                    // Both walls bound the probe's depth: search only if it can gain.
+                    let mut start = (seg_d2(p, &e.segs[near as usize]), near);
+                    let u2 = seg_d2(p, &e.segs[i2 as usize]);
+                    if u2 < start.0 {
+                        start = (u2, i2);
+                    }
+                    if best_d < 0.0 || start.0 > best_d * best_d {
+                        let (dp, np) = e.nearest_from(p, start);
+                        if dp > best_d && e.inside(p) {
+                            (best_c, best_d, best_near) = (p, dp, np);
+                        }
                     }
                 }
             }
@@ -920,10 +967,25 @@ pub struct Runs {
 impl Runs {
     /// Scans `contours` (nonzero winding) at the rows of pitch `row_mm`.
     pub fn new(contours: &[Contour], row_mm: f64) -> Runs {
-        let runs = runs(contours, row_mm);
-        let rows = rows(&runs);
-        Runs { runs, rows }
+        let mut r = Runs::default();
+        r.scan(contours, row_mm, &mut ScanScratch::default());
+        r
     }
+
+    /// [`Runs::new`] into `self`, reusing its buffers and `sc`'s.
+    fn scan(&mut self, contours: &[Contour], row_mm: f64, sc: &mut ScanScratch) {
+        runs(contours, row_mm, sc, &mut self.runs);
+        rows(&self.runs, &mut self.rows);
+    }
+}
+
+/// Buffers of the row scan, kept between layers.
+#[derive(Debug, Default)]
+struct ScanScratch {
+    vrow: Vec<i64>,
+    start: Vec<u32>,
+    fill: Vec<u32>,
+    xs: Vec<(f64, i32)>,
 }
 
 /// `⌈x⌉` as an integer (exact; the library `ceil` is a software call on baseline x86-64).
@@ -936,45 +998,73 @@ fn ceil_i64(x: f64) -> i64 {
     }
 }
 
-fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
+/// Sorts a (short) row of crossings by x: insertion sort (the order of equal keys does
+/// not matter: the winding sums between distinct x are the same).
+fn sort_row(row: &mut [(f64, i32)]) {
+    for i in 1..row.len() {
+        let v = row[i];
+        let mut j = i;
+        while j > 0 && row[j - 1].0.total_cmp(&v.0).is_gt() {
+            row[j] = row[j - 1];
+            j -= 1;
+        }
+        row[j] = v;
+    }
+}
+
+fn runs(contours: &[Contour], row_mm: f64, sc: &mut ScanScratch, out: &mut Vec<(i64, f64, f64)>) {
+    out.clear();
     // An edge crosses rows k0..k1 (exclusive), k0 = ⌈lo/row − ½⌉, k1 = ⌈hi/row − ½⌉: the
     // rows with lo <= y_k < hi up to rounding. Two edges meeting at a vertex compute its
     // row from the same y, so the vertex counts exactly once.
     let inv_row = 1.0 / row_mm;
     // The row of every vertex, contour after contour, computed once.
-    let vrow: Vec<i64> = contours
-        .iter()
-        .flatten()
-        .map(|p| ceil_i64(p[1] * inv_row - 0.5))
-        .collect();
+    let vrow = &mut sc.vrow;
+    vrow.clear();
+    vrow.extend(
+        contours
+            .iter()
+            .flatten()
+            .map(|p| ceil_i64(p[1] * inv_row - 0.5)),
+    );
     let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
-    for &k in &vrow {
+    for &k in vrow.iter() {
         kmin = kmin.min(k);
         kmax = kmax.max(k);
     }
     if kmin >= kmax {
-        return Vec::new();
+        return;
     }
     let nrows = (kmax - kmin) as usize;
     // Counting sort of the crossings by row, then by x within each (short) row.
-    let mut start = vec![0u32; nrows + 1];
+    let start = &mut sc.start;
+    start.clear();
+    start.resize(nrows + 1, 0);
     let mut first = 0;
     for c in contours {
         let rows = &vrow[first..first + c.len()];
-        for i in 0..c.len() {
-            let (a, b) = (rows[i], rows[if i + 1 == c.len() { 0 } else { i + 1 }]);
+        first += c.len();
+        let Some(&last) = rows.last() else {
+            continue;
+        };
+        let mut a = last;
+        for &b in rows {
             let (k0, k1) = if a <= b { (a, b) } else { (b, a) };
             for k in k0..k1 {
                 start[(k - kmin) as usize + 1] += 1;
             }
+            a = b;
         }
-        first += c.len();
     }
     for r in 0..nrows {
         start[r + 1] += start[r];
     }
-    let mut fill = start.clone();
-    let mut xs = vec![(0.0f64, 0i32); start[nrows] as usize];
+    let fill = &mut sc.fill;
+    fill.clear();
+    fill.extend_from_slice(start);
+    let xs = &mut sc.xs;
+    xs.clear();
+    xs.resize(start[nrows] as usize, (0.0, 0));
     let mut first = 0;
     for c in contours {
         let rows = &vrow[first..first + c.len()];
@@ -1000,10 +1090,12 @@ fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
         }
         first += c.len();
     }
-    let mut out = Vec::new();
     for r in 0..nrows {
         let row = &mut xs[start[r] as usize..start[r + 1] as usize];
-        row.sort_unstable_by(|p, q| p.0.total_cmp(&q.0));
+        if row.is_empty() {
+            continue;
+        }
+        sort_row(row);
         let k = kmin + r as i64;
         let mut w = 0;
         let mut x0 = 0.0;
@@ -1017,7 +1109,6 @@ fn runs(contours: &[Contour], row_mm: f64) -> Vec<(i64, f64, f64)> {
             }
         }
     }
-    out
 }
 
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
@@ -1029,15 +1120,14 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
 }
 
 /// Index ranges of each row's runs: `(k, start, end)`.
-fn rows(r: &[(i64, f64, f64)]) -> Vec<(i64, usize, usize)> {
-    let mut out: Vec<(i64, usize, usize)> = Vec::new();
+fn rows(r: &[(i64, f64, f64)], out: &mut Vec<(i64, usize, usize)>) {
+    out.clear();
     for (i, run) in r.iter().enumerate() {
         match out.last_mut() {
             Some(last) if last.0 == run.0 => last.2 = i + 1,
             _ => out.push((run.0, i, i + 1)),
         }
     }
-    out
 }
 
 /// Number of connected regions of `cur` that overlap no part of `prev` (scanned at the
@@ -1424,5 +1514,60 @@ mod tests {
         assert_eq!(a.islands, 0);
         assert_eq!(a.bbox_mm, Some([[1.0, 2.0], [11.0, 12.0]]));
         assert_eq!(analyse(&[], None, 0.1).bbox_mm, None);
+    }
+
+    #[test]
+    fn analyser_buffers_never_change_results() {
+        // Random layers of scattered squares (some overlapping: several runs per row),
+        // analysed in and out of order by one analyser (every reuse and recycling path),
+        // must give what fresh scans give.
+        let p = 0.25;
+        let mut rnd = xorshift(0x5eed_1a7e_u64);
+        let layers: Vec<Vec<Contour>> = (0..12)
+            .map(|_| {
+                let n = 1 + (rnd() * 6.0) as usize;
+                (0..n)
+                    .map(|_| {
+                        let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 6.0);
+                        rect(x, y, x + w, y + 0.2 + rnd() * 6.0)
+                    })
+                    .collect()
+            })
+            .collect();
+        let fresh = |i: usize| {
+            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
+            analyse(&layers[i], below, p)
+        };
+        let mut a = Analyser::new(p);
+        let order: [usize; 16] = [0, 1, 2, 3, 5, 6, 4, 5, 11, 10, 11, 7, 8, 9, 1, 2];
+        let mut islands = 0;
+        for &i in &order {
+            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
+            let got = a.analyse(i, &layers[i], below);
+            assert_eq!(got, fresh(i), "layer {i}");
+            islands += got.islands;
+        }
+        // The layers do have islands (the test exercises the supported/unsupported logic).
+        assert!(islands > 0);
+    }
+
+    #[test]
+    fn sort_row_sorts_by_x() {
+        let mut rnd = xorshift(7);
+        for n in 0..40 {
+            let mut row: Vec<(f64, i32)> = (0..n)
+                .map(|k| ((rnd() * 8.0).floor(), if k % 2 == 0 { 1 } else { -1 }))
+                .collect();
+            let mut want: Vec<f64> = row.iter().map(|r| r.0).collect();
+            want.sort_by(f64::total_cmp);
+            let mut dirs: Vec<i32> = row.iter().map(|r| r.1).collect();
+            sort_row(&mut row);
+            assert_eq!(row.iter().map(|r| r.0).collect::<Vec<_>>(), want);
+            // A permutation: the directions are all still there.
+            let mut got: Vec<i32> = row.iter().map(|r| r.1).collect();
+            got.sort();
+            dirs.sort();
+            assert_eq!(got, dirs);
+        }
     }
 }
