@@ -197,6 +197,15 @@ const BLOCK: usize = 4;
 /// Layers sliced but not yet made into masks, at most (bounds memory).
 const MAX_AHEAD: usize = 3 * WINDOW;
 
+/// Subtracts a block's layer count from the layers in flight when the block ends.
+struct Leaving<'a>(&'a AtomicUsize, usize);
+
+impl Drop for Leaving<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(self.1, Ordering::AcqRel);
+    }
+}
+
 /// A [`Scratch`] borrowed from a pool and returned to it when dropped.
 struct Pooled<'p> {
     pool: &'p Mutex<Vec<Scratch>>,
@@ -357,7 +366,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                 let ks = b * BLOCK..((b + 1) * BLOCK).min(m);
                 in_flight.fetch_add(ks.len(), Ordering::AcqRel);
                 scope.spawn(move |_| {
-                    let count = ks.len();
+                    // Counts the block's layers off even if it panics (the panic reaches
+                    // the caller when the scope ends; the slicing thread must not wait).
+                    let _leaving = Leaving(in_flight, ks.len());
                     let run = || -> Result<()> {
                         // Scratch buffers (megabytes) outlive blocks: fresh ones would
                         // page-fault on every block.
@@ -409,7 +420,6 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                             *f = Some(e);
                         }
                     }
-                    in_flight.fetch_sub(count, Ordering::AcqRel);
                 });
             }
             prev = Some(sections);
