@@ -2,7 +2,7 @@
 //! stereolithography.
 //!
 //! The library follows the data (see `docs/ARCHITECTURE.md`):
-//! [`mesh`] (load, weld, validate) → [`slice`] (contours per layer) → [`raster`]
+//! [`mesh`] (load, weld, validate) → [`slice`](mod@slice) (contours per layer) → [`raster`]
 //! (8-bit masks) → [`plan`] (exposure and stage steps) → [`bundle`] (the job bundle,
 //! written atomically), orchestrated by [`job`]. The executor reads only the bundle.
 #![warn(missing_docs)]

@@ -167,7 +167,7 @@ pub struct Table {
     pub origin: PathBuf,
     /// "line" for files, "point" for inline profile points.
     pub unit: &'static str,
-    /// Short source name for the manifest (file name, or "profile <name>").
+    /// Short source name for the manifest (file name, or "profile `<name>`").
     pub source: String,
     /// SHA-256 of the file bytes (or of the inline points as CSV text).
     pub sha256: String,

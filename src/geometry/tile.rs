@@ -10,7 +10,7 @@
 //!
 //! With light compensation (zone or pixel, [`crate::optics`]) every projector of a tiled
 //! profile needs its own `[projector.calibration]`. Each gets a
-//! [`Compensator`](crate::optics::Compensator) over its own pixels and calibration, all with
+//! [`Compensator`] over its own pixels and calibration, all with
 //! one common target irradiance E* (the lowest of the targets the projectors would choose
 //! alone), so the field is flat across the seam. A layer's projector view is then
 //! `coverage × share` (rounded to 8 bits), compensated: each projector delivers its share of

@@ -86,7 +86,7 @@ impl Poly {
             .collect()
     }
 
-    /// Coefficients of the polynomial in u for fixed v: out[a] = Σ_b coef[a][b]·v^b.
+    /// Coefficients of the polynomial in u for fixed v: `out[a] = Σ_b coef[a][b]·v^b`.
     #[inline]
     pub fn in_u(&self, v: f64) -> Vec<f64> {
         self.coef
@@ -196,8 +196,8 @@ pub enum Form {
 
 /// The field factor P(x, y) of a calibration.
 ///
-/// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), see [`Form`]) with u = (x_mm − origin_mm[0]) / length_unit_mm and
-/// v = (y_mm − origin_mm[1]) / length_unit_mm; (x_mm, y_mm) are build-plane coordinates from
+/// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), see [`Form`]) with u = (x_mm − `origin_mm[0]`) / length_unit_mm and
+/// v = (y_mm − `origin_mm[1]`) / length_unit_mm; (x_mm, y_mm) are build-plane coordinates from
 /// the field's bottom-left corner (BRIEF §3).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -258,7 +258,7 @@ impl FieldModel {
         }
     }
 
-    /// [`eval`](Self::eval) at (xs[i], y) for every i into `out`, bit for bit, but
+    /// [`eval`](Self::eval) at (`xs[i]`, y) for every i into `out`, bit for bit, but
     /// evaluating the polynomial's value and gradient at a clamped point only once per
     /// distinct point: the columns left and right of `polynomial_area_mm` share one per
     /// row, and rows above or below it share one per column (`cache`, reused across calls).

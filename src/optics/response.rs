@@ -43,7 +43,7 @@ pub enum Interpolation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Response {
-    /// S = Σ coefficients[k]·v^k, v the pixel value or the attenuation.
+    /// S = Σ `coefficients[k]`·v^k, v the pixel value or the attenuation.
     Polynomial {
         /// The polynomial's variable.
         variable: GrayVariable,

@@ -703,7 +703,7 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
 ///    boundary point behind the centre (the other wall of a ridge) and, on the contours of
 ///    both, the points about `h` away on either side. If discs of radius `T` around them
-///    cover the cell ([`points_exceed`]) it is dropped. This is what keeps long ridges
+///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
 ///    Otherwise a ridge probe (half-way between the two walls) may raise the best;
 /// 5. the four children are tested against the same points at once, and only those not

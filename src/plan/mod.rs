@@ -5,7 +5,7 @@
 //!    (seeds/001's DisMax-Min, the largest inscribed circle of the exact contours),
 //!    unsupported islands, bounding box.
 //! 2. [`plan`]: per process ([`config`] holds the profile sections) the mode, exposure and
-//!    step list of each layer ([`steps`]), then the time estimate under the bundle's timing
+//!    step list of each layer (`steps`), then the time estimate under the bundle's timing
 //!    contract ([`timing`]). For the hybrid process it also plans the same job all layered,
 //!    for the time comparison seeds/001 reports.
 //!
