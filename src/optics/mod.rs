@@ -25,6 +25,8 @@ pub mod report;
 pub mod response;
 #[cfg(test)]
 mod sweep;
+#[cfg(test)]
+mod synthetic;
 
 pub use compensate::Compensator;
 pub use field::{FieldModel, Poly};

@@ -6,90 +6,24 @@
 //! prints the full table (docs/CALIBRATION.md).
 
 use super::calib::{fit, FitOptions, Reading};
+use super::synthetic::*;
 use super::{Calibration, Dither, Mode, Units};
 use crate::optics::Compensator;
 use crate::profile::Field;
 use std::path::Path;
 
-/// splitmix64 + Box–Muller.
-struct Rng(pub u64);
-impl Rng {
-    fn u(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        let (a, b) = (self.u().max(1e-300), self.u());
-        (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-    }
-}
-
-type Field2 = fn(f64, f64) -> f64;
-type Resp = fn(f64) -> f64;
-
-/// A smooth cubic field, 1.5 : 1.
-fn p_cubic(x: f64, y: f64) -> f64 {
-    1.0 + 0.02 * x - 0.01 * y - 0.0004 * x * x + 0.0002 * x * y + 0.0003 * y * y + 2e-6 * x * x * x
-        - 3e-6 * y * y * y
-}
-/// A Gaussian beam off centre with a tilt, 3.7 : 1.
-fn p_gauss(x: f64, y: f64) -> f64 {
-    2.0 * (-((x - 40.0).powi(2) + (y - 20.0).powi(2)) / (2.0 * 30.0f64.powi(2))).exp()
-        * (1.0 + 0.004 * y)
-}
-/// seeds/000's published P (x, y in cm), 5.6 : 1.
-fn p_published(x: f64, y: f64) -> f64 {
-    let (x, y) = (x / 10.0, y / 10.0);
-    -1.1 * x * x * x - 0.8 * y * y * y
-        + 0.8 * x * y * y
-        + 0.05 * x * x * y
-        + 11.5 * x * x
-        + 12.5 * y * y
-        - 2.8 * x * y
-        - 0.3 * x
-        - 63.6 * y
-        + 161.8
-}
-/// A vignette (1 + r²/50²)⁻² about the field centre, 2.7 : 1 (not a polynomial, nor the
-/// exponential of one).
-fn p_vignette(x: f64, y: f64) -> f64 {
-    let r2 = (x - 32.5).powi(2) + (y - 24.375).powi(2);
-    (1.0 + r2 / 2500.0).powi(-2)
-}
-/// seeds/000's S with z = 255 − pixel value (steps of 2–3 % near its operating point).
-fn s_published(g: f64) -> f64 {
-    let z = 255.0 - g;
-    -1e-6 * z * z * z + 5.78e-4 * z * z - 0.101 * z + 5.72
-}
-/// A gamma-2.2 response (steps of 0.9–1.9 % over the grays used).
-fn s_gamma(g: f64) -> f64 {
-    (g / 255.0).powf(2.2)
-}
-
-const GRAYS: [u32; 7] = [255, 235, 215, 195, 175, 155, 135];
-
 fn readings(p: Field2, s: Resp, noise: f64, seed: u64) -> Vec<Reading> {
-    let mut rng = Rng(seed);
-    let mut out = Vec::new();
-    for g in GRAYS {
-        for i in 0..13 {
-            for j in 0..9 {
-                let (x, y) = (2.5 + 5.0 * i as f64, 2.5 + 5.0 * j as f64);
-                let e = p(x, y) * s(g as f64) * (1.0 + noise * rng.normal());
-                out.push(Reading {
-                    line: out.len() as u64 + 2,
-                    x_mm: x,
-                    y_mm: y,
-                    gray: g as u8,
-                    irradiance: e,
-                });
-            }
-        }
-    }
-    out
+    centre_readings(p, s, noise, seed)
+        .into_iter()
+        .enumerate()
+        .map(|(k, (x_mm, y_mm, g, irradiance))| Reading {
+            line: k as u64 + 2,
+            x_mm,
+            y_mm,
+            gray: g as u8,
+            irradiance,
+        })
+        .collect()
 }
 
 fn field(step: usize) -> Field {
@@ -110,12 +44,6 @@ fn calibrate(p: Field2, s: Resp, seed: u64, f: &Field) -> Calibration {
         degree: None,
     };
     fit(&r, Path::new("m.csv"), &opts).unwrap().calibration
-}
-
-fn spread(v: &[f64]) -> f64 {
-    let lo = v.iter().cloned().fold(f64::INFINITY, f64::min);
-    let hi = v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    (hi - lo) / (v.iter().sum::<f64>() / v.len() as f64) * 100.0
 }
 
 /// (zone-mean spread, per-pixel spread) of the true irradiance of the plate mask over the
