@@ -1281,16 +1281,42 @@ mod tests {
         assert!((mfd(&holed) - t).abs() <= 0.005, "{} vs {t}", mfd(&holed));
     }
 
+    /// Brute-force deepest signed distance: a coarse grid of `(ni + 1) × (nj + 1)` points
+    /// from `origin` with step `coarse`, then a fine grid of step `fine` and half-width
+    /// `half` steps around each of the `best` deepest coarse points.
+    fn brute_max(
+        e: &Edges,
+        origin: [f64; 2],
+        coarse: f64,
+        (ni, nj): (usize, usize),
+        best: usize,
+        fine: f64,
+        half: i32,
+    ) -> f64 {
+        let mut pts: Vec<(f64, [f64; 2])> = Vec::new();
+        for i in 0..=ni {
+            for j in 0..=nj {
+                let p = [origin[0] + coarse * i as f64, origin[1] + coarse * j as f64];
+                pts.push((e.signed_distance(p), p));
+            }
+        }
+        pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut brute: f64 = 0.0;
+        for &(_, p) in pts.iter().take(best) {
+            for i in -half..=half {
+                for j in -half..=half {
+                    let q = [p[0] + fine * i as f64, p[1] + fine * j as f64];
+                    brute = brute.max(e.signed_distance(q));
+                }
+            }
+        }
+        brute
+    }
+
     #[test]
     fn matches_brute_force_on_random_polygons() {
         // Star-shaped random polygons; reference: a fine grid plus the exact distance.
-        let mut s = 0x9e3779b97f4a7c15u64;
-        let mut rnd = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = xorshift(0x9e3779b97f4a7c15);
         for _ in 0..6 {
             let n = 5 + (rnd() * 20.0) as usize;
             let c: Contour = (0..n)
@@ -1302,24 +1328,7 @@ mod tests {
                 .collect();
             let e = Edges::new(std::slice::from_ref(&c));
             let (v, _) = max_fill_distance_with(&e, PRECISION_MM);
-            // Coarse grid, then a fine grid around the five best coarse points.
-            let mut coarse: Vec<(f64, [f64; 2])> = Vec::new();
-            for i in 0..=400 {
-                for j in 0..=400 {
-                    let p = [-10.0 + 0.05 * i as f64, -10.0 + 0.05 * j as f64];
-                    coarse.push((e.signed_distance(p), p));
-                }
-            }
-            coarse.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let mut brute: f64 = 0.0;
-            for &(_, p) in coarse.iter().take(5) {
-                for i in -30..=30 {
-                    for j in -30..=30 {
-                        let q = [p[0] + 0.002 * i as f64, p[1] + 0.002 * j as f64];
-                        brute = brute.max(e.signed_distance(q));
-                    }
-                }
-            }
+            let brute = brute_max(&e, [-10.0, -10.0], 0.05, (400, 400), 5, 0.002, 30);
             // The fine grid is within 0.0015 mm of the optimum and cannot exceed it; the
             // search is a true inscribed radius, guaranteed within PRECISION_MM and, after
             // the polish, much closer.
@@ -1401,23 +1410,7 @@ mod tests {
             let (v, centre) = max_fill_distance_with(&e, PRECISION_MM);
             // A true inscribed circle.
             assert!(e.inside(centre) && e.distance(centre) >= v - 1e-12);
-            let mut coarse: Vec<(f64, [f64; 2])> = Vec::new();
-            for i in 0..=180 {
-                for j in 0..=140 {
-                    let p = [-11.0 + 0.15 * i as f64, -11.0 + 0.15 * j as f64];
-                    coarse.push((e.signed_distance(p), p));
-                }
-            }
-            coarse.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let mut brute: f64 = 0.0;
-            for &(_, p) in coarse.iter().take(8) {
-                for i in -40..=40 {
-                    for j in -40..=40 {
-                        let q = [p[0] + 0.003 * i as f64, p[1] + 0.003 * j as f64];
-                        brute = brute.max(e.signed_distance(q));
-                    }
-                }
-            }
+            let brute = brute_max(&e, [-11.0, -11.0], 0.15, (180, 140), 8, 0.003, 40);
             // The fine grid is within 0.003 mm of the optimum near the coarse maxima.
             assert!(v <= brute + 0.003, "{v} vs {brute}");
             assert!(v >= brute - PRECISION_MM, "{v} vs {brute}");
