@@ -648,3 +648,37 @@ fn ctrl_c_leaves_nothing_behind() {
         .collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+#[test]
+fn closed_stdout_ends_quietly() {
+    // `dmdsl slice … --json | head -c 1`: the reader is gone before the summary is printed.
+    // The process must not panic; it ends by SIGPIPE like other command-line tools (or,
+    // should the print win the race, with success), and the bundle is complete either way.
+    let dir = tempdir("sigpipe");
+    let mut child = std::process::Command::new(bin())
+        .args([
+            "slice",
+            &fixture("cube10.stl").to_string_lossy(),
+            "--json",
+            "-o",
+        ])
+        .arg(dir.join("c.dmdjob"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run dmdsl");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        assert!(
+            out.status.success() || out.status.signal() == Some(13),
+            "{:?}: {err}",
+            out.status
+        );
+    }
+    assert!(dir.join("c.dmdjob/job.json").is_file());
+}
