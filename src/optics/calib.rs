@@ -30,6 +30,12 @@ pub const COLUMNS: [&str; 4] = ["x_mm", "y_mm", "gray", "irradiance_mw_cm2"];
 /// Largest accepted condition number of the column-scaled design matrix of P.
 pub const MAX_CONDITION: f64 = 1e6;
 
+/// Highest degree of the inverse-square candidates (P = 1/poly²): the quadratic is the
+/// cos⁴ law of vignetting. A cubic was measured to be chosen on fields it does not
+/// describe (fewer terms than exp(quartic), similar cross-validated error) and then to
+/// extrapolate worse into the outer half-zone band, so only the quadratic is offered.
+const MAX_INVERSE_SQUARE_DEGREE: usize = 2;
+
 /// One measurement.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
@@ -211,18 +217,15 @@ struct Als {
 impl Als {
     fn p(&self, phi: &[f64]) -> f64 {
         let q: f64 = phi.iter().zip(&self.coef).map(|(a, b)| a * b).sum();
-        match self.form {
-            Form::Polynomial => q,
-            Form::Exponential => q.exp(),
-        }
+        self.form.apply(1.0, q)
     }
 }
 
-/// Fits `form` to `rows`: alternating least squares for a polynomial P, one linear least-
-/// squares solve in log space for an exponential P.
+/// Fits `form` to `rows`: alternating least squares for a polynomial or inverse-square P,
+/// one linear least-squares solve in log space for an exponential P.
 fn fit_form(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
     match form {
-        Form::Polynomial => als(rows, nlev),
+        Form::Polynomial | Form::InverseSquare => als(form, rows, nlev),
         Form::Exponential => logfit(rows, nlev),
     }
 }
@@ -299,9 +302,10 @@ fn solve_scaled(
     }
 }
 
-/// Alternating least squares on relative residuals over `rows` (levels 0..nlev).
+/// Alternating least squares on relative residuals over `rows` (levels 0..nlev), for P =
+/// poly (`form` polynomial) or P = 1/poly² (inverse square).
 /// Err(condition number) if the scaled design matrix of P is ill-conditioned.
-fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
     let n = rows.len();
     let m = rows.first().map_or(0, |r| r.phi.len());
     // Initial s: geometric mean irradiance per level.
@@ -326,9 +330,14 @@ fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
     let mut a = DMatrix::<f64>::zeros(n, m);
     let b = DVector::<f64>::from_element(n, 1.0);
     for iter in 0..200 {
-        // P-step: minimise Σ (1 − s_j φ·c / E)² over c.
+        // P-step: minimise Σ (1 − s_j φ·c / E)² over c. Inverse square: E = s_j / q² with
+        // q = φ·c, so q should be q* = √(s_j / E); a relative error ε of q is one of −2ε in
+        // E, so minimise Σ (1 − φ·c / q*)² (the linearised relative residual, halved).
         for (k, r) in rows.iter().enumerate() {
-            let f = s[r.lev] / r.e;
+            let f = match form {
+                Form::InverseSquare => (r.e / s[r.lev]).sqrt(),
+                _ => s[r.lev] / r.e,
+            };
             for t in 0..m {
                 a[(k, t)] = f * r.phi[t];
             }
@@ -350,7 +359,12 @@ fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
         let mut den = vec![0.0; nlev];
         let ps: Vec<f64> = rows
             .iter()
-            .map(|r| r.phi.iter().zip(&coef).map(|(a, b)| a * b).sum::<f64>())
+            .map(|r| {
+                form.apply(
+                    1.0,
+                    r.phi.iter().zip(&coef).map(|(a, b)| a * b).sum::<f64>(),
+                )
+            })
             .collect();
         for (r, &p) in rows.iter().zip(&ps) {
             let q = p / r.e;
@@ -373,7 +387,7 @@ fn als(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
         prev = obj;
     }
     Ok(Als {
-        form: Form::Polynomial,
+        form,
         coef,
         s,
         condition,
@@ -406,6 +420,7 @@ fn form_name(f: Form) -> &'static str {
     match f {
         Form::Polynomial => "polynomial",
         Form::Exponential => "exponential",
+        Form::InverseSquare => "inverse-square",
     }
 }
 
@@ -534,7 +549,12 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     // First pass (cubic, all levels): the valid range is the run of levels from the
     // brightest down over which s keeps falling.
     let rows3 = rows_of(3, 0);
-    let first = als(&rows3.iter().collect::<Vec<_>>(), glist.len()).map_err(ill)?;
+    let first = als(
+        Form::Polynomial,
+        &rows3.iter().collect::<Vec<_>>(),
+        glist.len(),
+    )
+    .map_err(ill)?;
     let top = glist.len() - 1;
     let mut lo = top;
     while lo > 0 && first.s[lo - 1] < first.s[lo] {
@@ -574,6 +594,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     let k = used_pos.len().min(10);
     let mut cv: Vec<(u64, f64)> = Vec::new();
     let mut cv_exp: Vec<(u64, f64)> = Vec::new();
+    let mut cv_inv: Vec<(u64, f64)> = Vec::new();
     let (form, degree) = match opts.degree {
         Some(d) => (Form::Polynomial, d),
         None => {
@@ -592,6 +613,12 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
                 if let Some(e) = cv_rms(Form::Exponential, &rows_d, valid_n, k) {
                     cv_exp.push((d as u64, e));
                     cands.push((Poly::terms(d), 1, Form::Exponential, d, e));
+                }
+                if d <= MAX_INVERSE_SQUARE_DEGREE {
+                    if let Some(e) = cv_rms(Form::InverseSquare, &rows_d, valid_n, k) {
+                        cv_inv.push((d as u64, e));
+                        cands.push((Poly::terms(d), 2, Form::InverseSquare, d, e));
+                    }
                 }
             }
             cands.sort_by_key(|c| (c.0, c.1));
@@ -614,6 +641,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     match form {
         Form::Polynomial => coef.iter_mut().for_each(|c| *c *= s_top),
         Form::Exponential => coef[0] += s_top.ln(),
+        Form::InverseSquare => coef.iter_mut().for_each(|c| *c /= s_top.sqrt()),
     }
     let s: Vec<f64> = second.s.iter().map(|v| v / s_top).collect();
     if s.windows(2).any(|w| w[1] <= w[0]) {
@@ -623,10 +651,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         ));
     }
     let poly = Poly::from_terms(degree, &coef);
-    let pval = |q: f64| match form {
-        Form::Polynomial => q,
-        Form::Exponential => q.exp(),
-    };
+    let pval = |q: f64| form.apply(1.0, q);
     let p_at = |r: &Reading| -> f64 {
         let (u, v) = uv(r);
         pval(poly.eval(u, v))
@@ -748,6 +773,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
             degree: degree as u64,
             cv_rms_pct: cv,
             cv_exp_rms_pct: cv_exp,
+            cv_inv_rms_pct: cv_inv,
             measured_gray: [glist[lo], glist[top]],
             readings: used.len() as u64,
             zones: npos as u64,

@@ -209,7 +209,7 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
     let [px0, py0, px1, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
     let inv = 1.0 / fm.length_unit_mm.get();
     let scf = fm.scale.get() as f32;
-    let exp = fm.form == Form::Exponential;
+    let form = fm.form;
     let xs: Vec<f64> = (0..w).map(|c| (c as f64 + 0.5) * p).collect();
     // Columns whose clamped x lies in the polynomial's rectangle: one contiguous run.
     let us: Vec<Option<f64>> = xs
@@ -235,10 +235,10 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
                 }
             }
             // Separate passes: exp must not be evaluated (speculatively) for polynomials.
-            if exp {
-                row.iter_mut().for_each(|o| *o = scf * o.exp());
-            } else {
-                row.iter_mut().for_each(|o| *o *= scf);
+            match form {
+                Form::Exponential => row.iter_mut().for_each(|o| *o = scf * o.exp()),
+                Form::InverseSquare => row.iter_mut().for_each(|o| *o = scf / (*o * *o)),
+                Form::Polynomial => row.iter_mut().for_each(|o| *o *= scf),
             }
         } else {
             rest = true;

@@ -192,11 +192,28 @@ pub enum Form {
     /// P = scale · exp(poly(u, v)): for fields that fall off multiplicatively (vignetting,
     /// Gaussian beams), fitted in log space.
     Exponential,
+    /// P = scale / poly(u, v)²: the cos⁴ law of natural vignetting, cos⁴θ =
+    /// (1 + r²/f²)⁻², is this form with a quadratic poly (about any centre).
+    #[serde(rename = "inverse-square")]
+    InverseSquare,
+}
+
+impl Form {
+    /// P from the scale and the polynomial's value `q`.
+    #[inline]
+    pub fn apply(self, scale: f64, q: f64) -> f64 {
+        match self {
+            Form::Polynomial => scale * q,
+            Form::Exponential => scale * q.exp(),
+            Form::InverseSquare => scale / (q * q),
+        }
+    }
 }
 
 /// The field factor P(x, y) of a calibration.
 ///
-/// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), see [`Form`]) with u = (x_mm − `origin_mm[0]`) / length_unit_mm and
+/// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), scale / poly(u, v)²,
+/// see [`Form`]) with u = (x_mm − `origin_mm[0]`) / length_unit_mm and
 /// v = (y_mm − `origin_mm[1]`) / length_unit_mm; (x_mm, y_mm) are build-plane coordinates from
 /// the field's bottom-left corner (BRIEF §3).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -208,7 +225,7 @@ pub struct FieldModel {
     pub length_unit_mm: Positive,
     /// Factor applied to the polynomial (1e-8 in seeds/000).
     pub scale: Positive,
-    /// Polynomial (default) or exponential of a polynomial.
+    /// Polynomial (default), exponential of a polynomial, or inverse square of one.
     #[serde(default)]
     pub form: Form,
     /// The polynomial's coefficients (see [`Poly`] for the names).
@@ -229,8 +246,9 @@ pub struct FieldModel {
 impl FieldModel {
     /// P at build-plane point (x, y) mm: the polynomial inside `polynomial_area_mm`, its
     /// linear continuation outside it up to `extrapolate_mm` beyond `area_mm`, constant
-    /// further out (for the exponential form the exponent is continued). A polynomial
-    /// continuation is kept at or above 10 % of P at the rectangle's edge.
+    /// further out (for the exponential form the exponent is continued, for the inverse
+    /// square the polynomial). A polynomial continuation is kept at or above 10 % of P at
+    /// the rectangle's edge, an inverse-square one at or below 4 × P there.
     pub fn eval(&self, x: f64, y: f64) -> f64 {
         let m = self.extrapolate_mm.get();
         let [x0, y0, x1, y1] = self.area_mm;
@@ -250,12 +268,10 @@ impl FieldModel {
             match self.form {
                 Form::Polynomial => lin.max(0.1 * f),
                 Form::Exponential => lin,
+                Form::InverseSquare => lin.max(0.5 * f),
             }
         };
-        match self.form {
-            Form::Polynomial => sc * q,
-            Form::Exponential => sc * q.exp(),
-        }
+        self.form.apply(sc, q)
     }
 
     /// [`eval`](Self::eval) at (`xs[i]`, y) for every i into `out`, bit for bit, but
@@ -297,12 +313,10 @@ impl FieldModel {
                 match self.form {
                     Form::Polynomial => lin.max(0.1 * f),
                     Form::Exponential => lin,
+                    Form::InverseSquare => lin.max(0.5 * f),
                 }
             };
-            *o = match self.form {
-                Form::Polynomial => sc * q,
-                Form::Exponential => sc * q.exp(),
-            };
+            *o = self.form.apply(sc, q);
         }
     }
 
@@ -387,7 +401,7 @@ mod tests {
         assert!((fv - (q.eval(0.7, -0.4 + h) - q.eval(0.7, -0.4 - h)) / (2.0 * h)).abs() < 1e-6);
         assert!(toml::from_str::<Poly>("yx = 1.0").is_err());
         // eval_row is eval, bit for bit, inside and outside the polynomial's rectangle.
-        for form in [Form::Polynomial, Form::Exponential] {
+        for form in [Form::Polynomial, Form::Exponential, Form::InverseSquare] {
             let fm = FieldModel {
                 origin_mm: [30.0, 20.0],
                 length_unit_mm: Positive::new(30.0).unwrap(),

@@ -95,6 +95,9 @@ pub struct FitSummary {
     pub cv_rms_pct: Vec<(u64, f64)>,
     /// The same for the exponential candidates.
     pub cv_exp_rms_pct: Vec<(u64, f64)>,
+    /// The same for the inverse-square candidates (absent in files from before them).
+    #[serde(default)]
+    pub cv_inv_rms_pct: Vec<(u64, f64)>,
     /// Measured gray levels [lowest, highest] of the valid range. When every measured
     /// level is in it, S is also interpolated between the lowest and pixel value 0
     /// (mirror off, S = 0).

@@ -106,6 +106,7 @@ fn header(cal: &Calibration, input: &Path) -> String {
     let form = match cal.field.form {
         super::field::Form::Polynomial => "poly(u, v)",
         super::field::Form::Exponential => "exp(poly(u, v))",
+        super::field::Form::InverseSquare => "1 / poly(u, v)²",
     };
     let below = if lo < mlo {
         format!(

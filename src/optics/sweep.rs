@@ -97,21 +97,20 @@ fn pixel_limit(mask: &[u8], s: Resp) -> f64 {
 
 /// Held-out sets (one fixed seed each, none used to tune the method): every zone-mode
 /// zone-mean spread within 2.5 % and every pixel-mode per-pixel spread within the issue's
-/// limit, except the vignette with a gamma response in pixel mode (see docs/CALIBRATION.md,
-/// "How well it works": fit noise at the corners plus one 1.4 % gray step), held to 3.5 %.
+/// limit (3 %, or 5 % where one gray step moves irradiance by more than 2 %).
 /// Quarter-resolution field (0.254 mm pixels) to keep the debug build fast.
 #[test]
 fn held_out_sets_are_flattened_within_the_issue_limits() {
     let f = field(4);
     // Four of the eight field × response pairs (a fit takes ~5 s in a debug build); the
     // ignored `sweep_report` runs all eight with three seeds each.
-    let cases: [(Field2, Resp, f64); 4] = [
-        (p_cubic, s_published, 3.0),
-        (p_gauss, s_gamma, 3.0),
-        (p_published, s_gamma, 3.0),
-        (p_vignette, s_gamma, 3.5),
+    let cases: [(Field2, Resp); 4] = [
+        (p_cubic, s_published),
+        (p_gauss, s_gamma),
+        (p_published, s_gamma),
+        (p_vignette, s_gamma),
     ];
-    for (k, (p, s, gamma_vignette_limit)) in cases.into_iter().enumerate() {
+    for (k, (p, s)) in cases.into_iter().enumerate() {
         let cal = calibrate(p, s, 5000 + k as u64, &f);
         let cz = Compensator::new(&cal, &f, Mode::Zone, Dither::Auto).unwrap();
         let (zone, _) = judge(&plate(&cz, &f), &f, p, s);
@@ -119,7 +118,7 @@ fn held_out_sets_are_flattened_within_the_issue_limits() {
         let cp = Compensator::new(&cal, &f, Mode::Pixel, Dither::Off).unwrap();
         let mask = plate(&cp, &f);
         let (_, pixel) = judge(&mask, &f, p, s);
-        let limit = pixel_limit(&mask, s).max(gamma_vignette_limit);
+        let limit = pixel_limit(&mask, s);
         assert!(
             pixel <= limit,
             "set {k}: per-pixel spread {pixel:.2} % > {limit} %"
@@ -133,11 +132,12 @@ fn held_out_sets_are_flattened_within_the_issue_limits() {
 #[test]
 #[ignore]
 fn sweep_report() {
-    let fields: [(&str, Field2); 4] = [
+    let fields: [(&str, Field2); 5] = [
         ("cubic", p_cubic),
         ("gauss", p_gauss),
         ("published", p_published),
         ("vignette", p_vignette),
+        ("lens", p_lens),
     ];
     let resps: [(&str, Resp); 2] = [("published", s_published), ("gamma", s_gamma)];
     let step: usize = std::env::var("SWEEP_STEP")

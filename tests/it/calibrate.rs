@@ -161,6 +161,37 @@ fn fit_recovers_known_p_and_s_and_writes_plots() {
 }
 
 #[test]
+fn vignetting_is_fitted_with_the_cos4_form() {
+    // (1 + r²/50²)⁻² is the cos⁴ law: 1/poly² with a quadratic poly fits it exactly, where
+    // a polynomial or exp(polynomial) leaves a bias at the corners.
+    let dir = tempdir("cal-cos4");
+    write_measurements(&dir.join("m.csv"), p_vignette, s_gamma, 0.015, 11);
+    ok(&run_in(
+        &dir,
+        &["calibrate", "m.csv", "-o", "cal.toml", "-q", "--no-plots"],
+    ));
+    let text = std::fs::read_to_string(dir.join("cal.toml")).unwrap();
+    assert!(text.contains("1 / poly(u, v)²"), "{text}");
+    let cal = dmdsl::optics::Calibration::read(&dir.join("cal.toml")).unwrap();
+    let f = cal.fit.as_ref().unwrap();
+    assert_eq!(f.form, dmdsl::optics::field::Form::InverseSquare);
+    assert_eq!(f.degree, 2);
+    assert_eq!(f.cv_inv_rms_pct.len(), 1, "{:?}", f.cv_inv_rms_pct);
+    let s255 = s_gamma(255.0);
+    for i in 0..=26 {
+        for j in 0..=18 {
+            let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
+            let want = p_vignette(x, y) * s255;
+            let got = cal.field.eval(x, y);
+            assert!(
+                (got / want - 1.0).abs() < 0.01,
+                "P({x}, {y}) = {got} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
 fn zone_mode_flattens_true_zone_means() {
     for (k, (p, s)) in [
         (p_cubic as Field2, s_published as Resp),
