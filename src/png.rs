@@ -54,15 +54,21 @@ struct Adler {
 }
 
 impl Adler {
+    /// Bytes between reductions modulo 65521: with a, b reduced below 2¹⁶ and at most
+    /// `REDUCE + BIG` bytes since, a < 2³² and b < 2⁵⁵, so nothing overflows.
+    const REDUCE: u32 = 1 << 22;
+    /// Runs at least this long use the modular formula (k² would overflow for huge k).
+    const BIG: u64 = 1 << 20;
+
     fn run(&mut self, v: u8, k: u64) {
-        if k < 16 {
-            // Short runs (anti-aliased edges): plain sums, reduced every few thousand bytes.
-            for _ in 0..k {
-                self.a += v as u64;
-                self.b += self.a;
-            }
+        let v = v as u64;
+        if k < Self::BIG {
+            // After k bytes of value v: a' = a + k·v, b' = b + k·a + v·k(k+1)/2, in plain
+            // integers, reduced every few million bytes.
+            self.b += k * self.a + v * (k * (k + 1) / 2);
+            self.a += k * v;
             self.pending += k as u32;
-            if self.pending > 4096 {
+            if self.pending >= Self::REDUCE {
                 self.a %= MOD;
                 self.b %= MOD;
                 self.pending = 0;
@@ -72,8 +78,6 @@ impl Adler {
         self.a %= MOD;
         self.b %= MOD;
         self.pending = 0;
-        // After k bytes of value v: a' = a + k·v, b' = b + k·a + v·k(k+1)/2.
-        let v = v as u64;
         let k_m = k % MOD;
         let tri = if k % 2 == 0 {
             (k / 2 % MOD) * ((k + 1) % MOD)
@@ -113,12 +117,6 @@ impl Bits {
             self.n = self.n.saturating_sub(8);
         }
         self.out
-    }
-
-    #[inline]
-    fn literal(&mut self, b: u8) {
-        let (code, len) = self.codes.literal[b as usize];
-        self.put(code as u32, len as u32);
     }
 
     /// A back-reference of `len` (3..=258) bytes at distance 1.
@@ -185,27 +183,31 @@ fn length_code(len: usize) -> (u32, u32, u32) {
 }
 
 /// Emits `k` copies of byte `v` (the literal is the first copy, then distance-1 repeats).
-fn emit_run(bits: &mut Bits, v: u8, mut k: usize) {
+#[inline]
+fn emit_run(bits: &mut Bits, v: u8, k: usize) {
+    let (lit, lit_len) = bits.codes.literal[v as usize];
+    let (lit, lit_len) = (lit as u32, lit_len as u32);
     if k < 4 {
         for _ in 0..k {
-            bits.literal(v);
+            bits.put(lit, lit_len);
         }
         return;
     }
-    bits.literal(v);
-    k -= 1;
-    while k >= 3 {
-        let l = if k > 258 && k - 258 < 3 {
-            k - 3
-        } else {
-            k.min(258)
-        };
+    let mut k = k - 1;
+    if k <= 258 {
+        // One write: the literal (≤ 9 bits) then the repeat (≤ 18 bits).
+        let (rep, rep_len) = bits.codes.repeat[k];
+        bits.put(lit | rep << lit_len, lit_len + rep_len as u32);
+        return;
+    }
+    bits.put(lit, lit_len);
+    while k > 258 {
+        // Never leave 1 or 2 bytes: a repeat is at least 3 long.
+        let l = if k - 258 < 3 { k - 3 } else { 258 };
         bits.repeat(l);
         k -= l;
     }
-    for _ in 0..k {
-        bits.literal(v);
-    }
+    bits.repeat(k);
 }
 
 /// Length of the run of byte `v` starting at `s[0]`: compares 32 bytes per step and finds
@@ -434,6 +436,32 @@ mod tests {
             let k = run_len(&data[i..], data[i]);
             ad.run(data[i], k as u64);
             i += k;
+        }
+        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+        // Random runs, short and long, some past the plain-integer limit, over more bytes
+        // than one reduction period.
+        let mut state = 0x2545_F491_4F6C_DD1D;
+        let (mut a, mut b) = (1u64, 0u64);
+        let mut ad = Adler {
+            a: 1,
+            b: 0,
+            pending: 0,
+        };
+        let mut total = 0u64;
+        while total < 12_000_000 {
+            let r = xorshift(&mut state);
+            let v = (r >> 8) as u8;
+            let k = match r % 8 {
+                0 => (r >> 20) % 3_000_000,
+                1..=3 => (r >> 20) % 2000,
+                _ => (r >> 20) % 16,
+            };
+            ad.run(v, k);
+            total += k;
+            for _ in 0..k {
+                a = (a + v as u64) % MOD;
+                b = (b + a) % MOD;
+            }
         }
         assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
     }
