@@ -350,6 +350,8 @@ impl FieldModel {
         if nx * ny > 4_000_000 {
             return Err("field.area_mm is implausibly large".into());
         }
+        let unit = self.length_unit_mm.get();
+        let mut sign = 0.0;
         for i in 0..=nx {
             for j in 0..=ny {
                 let x = (x0 + i as f64 * 0.5).min(x1);
@@ -359,6 +361,20 @@ impl FieldModel {
                     return Err(format!(
                         "field: P({x:.1} mm, {y:.1} mm) = {p:.4e} is not positive inside the calibrated area"
                     ));
+                }
+                if self.form == Form::InverseSquare {
+                    // P = scale / q²: q crossing zero would make P infinite between samples.
+                    let q = self.coefficients.eval(
+                        (x - self.origin_mm[0]) / unit,
+                        (y - self.origin_mm[1]) / unit,
+                    );
+                    if sign == 0.0 {
+                        sign = q.signum();
+                    } else if q.signum() != sign {
+                        return Err(format!(
+                            "field: the inverse-square polynomial changes sign near ({x:.1} mm, {y:.1} mm) inside the calibrated area (P would be infinite there)"
+                        ));
+                    }
                 }
             }
         }
@@ -424,5 +440,35 @@ mod tests {
             }
         }
         assert!(toml::from_str::<Poly>("xxxxxxx = 1.0").is_err());
+    }
+
+    #[test]
+    fn inverse_square_form_is_the_cos4_law_and_must_not_cross_zero() {
+        // cos⁴θ = (1 + r²/f²)⁻² = 1 / (1 + u² + v²)² with u, v in units of f.
+        let mut fm = FieldModel {
+            origin_mm: [30.0, 20.0],
+            length_unit_mm: Positive::new(50.0).unwrap(),
+            scale: Positive::new(2.0).unwrap(),
+            form: Form::InverseSquare,
+            coefficients: Poly::from_terms(2, &[1.0, 0.0, 0.0, 1.0, 0.0, 1.0]),
+            area_mm: [0.0, 0.0, 60.0, 40.0],
+            polynomial_area_mm: None,
+            extrapolate_mm: NonNegative::new(5.0).unwrap(),
+        };
+        for (x, y) in [(30.0, 20.0), (0.0, 0.0), (55.0, 12.0)] {
+            let r2: f64 = (x - 30.0f64).powi(2) + (y - 20.0f64).powi(2);
+            let want = 2.0 * (1.0 + r2 / 2500.0).powi(-2);
+            assert!((fm.eval(x, y) / want - 1.0).abs() < 1e-12, "{x} {y}");
+        }
+        assert!(fm.validate().is_ok());
+        let toml_text = toml::to_string(&fm).unwrap();
+        assert!(
+            toml_text.contains("form = \"inverse-square\""),
+            "{toml_text}"
+        );
+        // q = 0.205 − u changes sign at x = 40.25 mm, between samples: refused.
+        fm.coefficients = Poly::from_terms(2, &[0.205, -1.0, 0.0, 0.0, 0.0, 0.0]);
+        let e = fm.validate().unwrap_err();
+        assert!(e.contains("changes sign"), "{e}");
     }
 }
