@@ -157,14 +157,12 @@ const ALONG: f64 = 0.67;
 
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
+    /// Edge `v` goes from contour point `v` to point `next[v]` (the points of all contours
+    /// one contour after the other, repeated consecutive points left out).
     segs: Vec<Seg>,
-    /// For each edge (same order as `segs`): index of its start point in `verts` and of
-    /// its contour in `contours`.
-    seg_at: Vec<(u32, u32)>,
-    /// All contour points, contour after contour.
-    verts: Vec<[f64; 2]>,
-    /// `(first point, number of points)` of each contour in `verts`.
-    contours: Vec<(u32, u32)>,
+    /// The next and the previous point (and edge) of the same contour.
+    next: Vec<u32>,
+    prev: Vec<u32>,
     nodes: Vec<Node>,
     band_y0: f64,
     band_inv: f64,
@@ -268,21 +266,33 @@ impl Edges {
     pub fn new(contours: &[Contour]) -> Edges {
         let total: usize = contours.iter().map(|c| c.len()).sum();
         let mut segs: Vec<Seg> = Vec::with_capacity(total);
-        let mut seg_at: Vec<(u32, u32)> = Vec::with_capacity(total);
         let mut ends = Vec::with_capacity(contours.len());
-        let mut verts = Vec::with_capacity(total);
-        let mut ranges = Vec::with_capacity(contours.len());
-        for (ci, c) in contours.iter().enumerate() {
+        let mut verts: Vec<[f64; 2]> = Vec::with_capacity(total);
+        let mut next: Vec<u32> = Vec::with_capacity(total);
+        let mut prev: Vec<u32> = Vec::with_capacity(total);
+        for c in contours {
             let first = verts.len();
-            verts.extend_from_slice(c);
-            ranges.push((first as u32, c.len() as u32));
-            for i in 0..c.len() {
-                let a = c[i];
-                let b = c[if i + 1 == c.len() { 0 } else { i + 1 }];
-                if a != b {
-                    segs.push([a[0], a[1], b[0], b[1]]);
-                    seg_at.push(((first + i) as u32, ci as u32));
+            for &p in c {
+                if verts.len() == first || *verts.last().unwrap_or(&p) != p {
+                    verts.push(p);
                 }
+            }
+            while verts.len() > first + 1 && verts[verts.len() - 1] == verts[first] {
+                verts.pop();
+            }
+            let n = verts.len() - first;
+            if n < 2 {
+                verts.truncate(first);
+                ends.push(segs.len());
+                continue;
+            }
+            for k in 0..n {
+                let v = first + k;
+                let w = if k + 1 == n { first } else { v + 1 };
+                let (a, b) = (verts[v], verts[w]);
+                segs.push([a[0], a[1], b[0], b[1]]);
+                next.push(w as u32);
+                prev.push(if k == 0 { first + n - 1 } else { v - 1 } as u32);
             }
             ends.push(segs.len());
         }
@@ -329,9 +339,8 @@ impl Edges {
         }
         Edges {
             segs,
-            seg_at,
-            verts,
-            contours: ranges,
+            next,
+            prev,
             nodes,
             band_y0: y0,
             band_inv,
@@ -477,27 +486,66 @@ impl Edges {
     /// one each way: the first contour points at least `h` from `q` (at most 64 points
     /// walked).
     fn along(&self, i: u32, q: [f64; 2], h: f64) -> [[f64; 2]; 2] {
-        let (v, c) = self.seg_at[i as usize];
-        let (first, len) = self.contours[c as usize];
         let h2 = h * h;
-        // k < 2·len below.
-        let at = |k: u32| self.verts[(first + if k >= len { k - len } else { k }) as usize];
-        let k0 = v - first;
-        let mut fwd = at(k0 + 1);
-        for s in 1..len.min(64) {
-            fwd = at(k0 + s);
+        let mut k = self.next[i as usize];
+        let mut fwd = self.vert(k);
+        for _ in 1..63 {
             if d2(fwd, q) >= h2 {
                 break;
             }
+            k = self.next[k as usize];
+            fwd = self.vert(k);
         }
-        let mut back = at(k0);
-        for s in 0..len.min(64) {
-            back = at(k0 + len - s);
+        let mut k = i;
+        let mut back = self.vert(k);
+        for _ in 1..64 {
             if d2(back, q) >= h2 {
                 break;
             }
+            k = self.prev[k as usize];
+            back = self.vert(k);
         }
         [fwd, back]
+    }
+
+    /// From edge `v`, along its contour while the points get nearer to `p` (a local
+    /// minimum of the distance to the contour points, at most 64 steps), then the nearer
+    /// of the two edges at that point: `(squared distance, edge)`. A cheap guess of the
+    /// nearest edge of this wall; any edge gives a valid bound.
+    fn descend(&self, mut v: u32, p: [f64; 2]) -> (f64, u32) {
+        let mut d = d2(self.vert(v), p);
+        for dir in [&self.next, &self.prev] {
+            let mut moved = false;
+            for _ in 0..64 {
+                let w = dir[v as usize];
+                let dw = d2(self.vert(w), p);
+                if dw < d {
+                    (d, v) = (dw, w);
+                    moved = true;
+                } else {
+                    break;
+                }
+            }
+            if moved {
+                break;
+            }
+        }
+        let w = self.prev[v as usize];
+        let (a, b) = (
+            seg_d2(p, &self.segs[v as usize]),
+            seg_d2(p, &self.segs[w as usize]),
+        );
+        if b < a {
+            (b, w)
+        } else {
+            (a, v)
+        }
+    }
+
+    /// Start point of edge `v`.
+    fn vert(&self, v: u32) -> [f64; 2] {
+        let s = &self.segs[v as usize];
+        [s[0], s[1]]
     }
 
     /// The point of edge `i` nearest to `p`.
@@ -578,6 +626,9 @@ struct Cell {
     /// Index of the parent's boundary points in the search's point arena (`u32::MAX`:
     /// none), tried again when the cell is popped.
     pts: u32,
+    /// The best depth when the cell was queued: its parent's points did not cover it
+    /// then, nor will they while the best has not grown.
+    best: f64,
 }
 
 impl PartialEq for Cell {
@@ -745,6 +796,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint: u32::MAX,
                 hint2: u32::MAX,
                 pts: u32::MAX,
+                best: f64::NEG_INFINITY,
             });
         }
     }
@@ -762,7 +814,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             break;
         }
         let t = best_d + precision;
-        if c.pts != u32::MAX && t > 0.0 {
+        if c.pts != u32::MAX && t > 0.0 && best_d > c.best {
             let (p, n) = &arena[c.pts as usize];
             if !points_exceed(c.c, c.h, &p[..*n as usize], t * t) {
                 continue;
@@ -773,15 +825,33 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         let reach = c.h * std::f64::consts::SQRT_2;
         let mut start = (f64::INFINITY, u32::MAX);
         if c.hint != u32::MAX {
-            start = (seg_d2(c.c, &e.segs[c.hint as usize]), c.hint);
-            if let Some(s2) = e.segs.get(c.hint2 as usize) {
-                let u2 = seg_d2(c.c, s2);
-                if u2 < start.0 {
-                    start = (u2, c.hint2);
+            // The walls of the parent, followed along their contours to the points nearest
+            // to this centre.
+            let w1 = e.descend(c.hint, c.c);
+            start = w1;
+            let w2 = (c.hint2 != u32::MAX).then(|| e.descend(c.hint2, c.c));
+            if let Some(w2) = w2 {
+                if w2.0 < start.0 {
+                    start = w2;
                 }
             }
-            if start.0.sqrt() + reach - best_d <= precision {
+            let u = start.0.sqrt();
+            if u + reach - best_d <= precision {
                 continue;
+            }
+            // The centre cannot beat the best: try to drop the cell with these walls alone.
+            if u <= best_d && t > 0.0 && w2.is_some() {
+                let mut pts = [[0.0; 2]; 6];
+                let mut n = 0;
+                for (_, i) in std::iter::once(w1).chain(w2) {
+                    let q = e.closest_point(i, c.c);
+                    let [a, b] = e.along(i, q, ALONG * c.h);
+                    pts[n..n + 3].copy_from_slice(&[q, a, b]);
+                    n += 3;
+                }
+                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                    continue;
+                }
             }
         }
         let (d, near) = e.nearest_from(c.c, start);
@@ -870,6 +940,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint: near,
                 hint2: far_edge,
                 pts: idx,
+                best: best_d,
             });
         }
     }
@@ -1415,6 +1486,26 @@ mod tests {
             assert!(v <= brute + 0.003, "{v} vs {brute}");
             assert!(v >= brute - PRECISION_MM, "{v} vs {brute}");
         }
+    }
+
+    #[test]
+    fn repeated_points_are_left_out() {
+        // Repeated consecutive points (and a closing point equal to the first) add no
+        // edges: same edges, same result; a contour of one distinct point has none.
+        let clean = rect(0.0, 0.0, 20.0, 10.0);
+        let mut rep = vec![clean[0], clean[0], clean[1], clean[2], clean[2], clean[3]];
+        rep.push(clean[0]);
+        let (a, b) = (
+            Edges::new(std::slice::from_ref(&clean)),
+            Edges::new(&[rep, vec![[5.0, 5.0]; 3]]),
+        );
+        assert_eq!(a.segs, b.segs);
+        assert_eq!((&a.next, &a.prev), (&b.next, &b.prev));
+        assert_eq!(a.next, vec![1, 2, 3, 0]);
+        assert_eq!(
+            max_fill_distance_with(&a, PRECISION_MM),
+            max_fill_distance_with(&b, PRECISION_MM)
+        );
     }
 
     #[test]
