@@ -413,7 +413,15 @@ impl Edges {
 
     /// The boundary point nearest to `p` among those on the far side of `p` from `q`
     /// (in the half-plane `(x − p)·(q − p) ≤ 0`) and closer than `limit`, if any.
-    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2], limit: f64) -> Option<([f64; 2], u32)> {
+    /// `seed`, an edge likely to hold such a point (or `u32::MAX`), bounds the search
+    /// from the start.
+    fn nearest_behind(
+        &self,
+        p: [f64; 2],
+        q: [f64; 2],
+        limit: f64,
+        seed: u32,
+    ) -> Option<([f64; 2], u32)> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -421,6 +429,14 @@ impl Edges {
         let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
         let mut best = limit * limit;
         let mut arg = None;
+        if seed != u32::MAX {
+            // Its point nearest to p, if that is behind p (else the seed does not count).
+            let x = self.closest_point(seed, p);
+            let dd = d2(x, p);
+            if side(x[0], x[1]) <= 0.0 && dd < best {
+                (best, arg) = (dd, Some((x, seed)));
+            }
+        }
         let mut stack: [u32; 64] = [0; 64];
         stack[0] = (self.nodes.len() - 1) as u32;
         let mut sp = 1usize;
@@ -824,12 +840,14 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         // without a search.
         let reach = c.h * std::f64::consts::SQRT_2;
         let mut start = (f64::INFINITY, u32::MAX);
+        let mut seed2 = u32::MAX;
         if c.hint != u32::MAX {
             // The walls of the parent, followed along their contours to the points nearest
             // to this centre.
             let w1 = e.descend(c.hint, c.c);
             start = w1;
             let w2 = (c.hint2 != u32::MAX).then(|| e.descend(c.hint2, c.c));
+            seed2 = w2.map_or(u32::MAX, |w| w.1);
             if let Some(w2) = w2 {
                 if w2.0 < start.0 {
                     start = w2;
@@ -877,7 +895,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             // Wall points farther than this can neither cover the cell at radius `T`
             // nor bound a child's depth below `lip`.
             let limit = best_d + precision + 1.5 * reach;
-            let behind = e.nearest_behind(c.c, q, limit);
+            let behind = e.nearest_behind(c.c, q, limit, seed2);
             if let Some((q2, i2)) = behind {
                 add(q2);
                 e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
