@@ -267,32 +267,37 @@ impl Edges {
         let total: usize = contours.iter().map(|c| c.len()).sum();
         let mut segs: Vec<Seg> = Vec::with_capacity(total);
         let mut ends = Vec::with_capacity(contours.len());
-        let mut verts: Vec<[f64; 2]> = Vec::with_capacity(total);
         let mut next: Vec<u32> = Vec::with_capacity(total);
         let mut prev: Vec<u32> = Vec::with_capacity(total);
         for c in contours {
-            let first = verts.len();
+            // The start points first (repeated ones left out), then the end points.
+            let first = segs.len();
+            let mut last = [f64::NAN; 2];
             for &p in c {
-                if verts.len() == first || *verts.last().unwrap_or(&p) != p {
-                    verts.push(p);
+                if p != last {
+                    segs.push([p[0], p[1], 0.0, 0.0]);
+                    last = p;
                 }
             }
-            while verts.len() > first + 1 && verts[verts.len() - 1] == verts[first] {
-                verts.pop();
+            while segs.len() > first + 1 && segs[segs.len() - 1][..2] == segs[first][..2] {
+                segs.pop();
             }
-            let n = verts.len() - first;
+            let n = segs.len() - first;
             if n < 2 {
-                verts.truncate(first);
+                segs.truncate(first);
                 ends.push(segs.len());
                 continue;
             }
-            for k in 0..n {
-                let v = first + k;
-                let w = if k + 1 == n { first } else { v + 1 };
-                let (a, b) = (verts[v], verts[w]);
-                segs.push([a[0], a[1], b[0], b[1]]);
-                next.push(w as u32);
-                prev.push(if k == 0 { first + n - 1 } else { v - 1 } as u32);
+            let end = first + n;
+            next.extend((first as u32 + 1)..end as u32);
+            next.push(first as u32);
+            prev.push(end as u32 - 1);
+            prev.extend(first as u32..end as u32 - 1);
+            for v in first..end {
+                let w = if v + 1 == end { first } else { v + 1 };
+                let (x, y) = (segs[w][0], segs[w][1]);
+                segs[v][2] = x;
+                segs[v][3] = y;
             }
             ends.push(segs.len());
         }
@@ -760,16 +765,23 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
 /// dropped as soon as it is shown to hold no point deeper than `T`. Popping a cell of
 /// half-size `h`:
-/// 1. its parent's boundary points (below) still cover it at radius `T` (`T` may have grown
-///    since it was pushed): dropped without a search;
-/// 2. its distance to the parent's nearest and far-wall edges `+ h·√2 ≤ T` (each edge is
-///    boundary, so that distance bounds the depth from above): dropped without a search;
+/// 1. its parent's boundary points (below) still cover it at radius `T` (only tried when
+///    `T` has grown since it was queued: they did not cover it then): dropped without a
+///    search;
+/// 2. the parent's nearest and far-wall edges, each followed along its contour to the
+///    points nearest this centre (`Edges::descend`, a local minimum): their distance `u`
+///    bounds the centre's depth from above (they are boundary), so `u + h·√2 ≤ T` drops
+///    the cell without a search. If `u ≤` the best depth the centre cannot improve the
+///    best, so its exact distance is not needed to drop the cell: the cover test of step 4
+///    with these two walls' points drops it without a search when it can;
 /// 3. the centre's exact signed distance `d` and nearest edge (bounding-volume hierarchy,
-///    seeded with the parent's nearest edge; band-indexed nonzero-winding inside test);
+///    seeded with the nearer of the walls of step 2; band-indexed nonzero-winding inside
+///    test);
 ///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
 /// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
-///    boundary point behind the centre (the other wall of a ridge) and, on the contours of
-///    both, the points about `h` away on either side. If discs of radius `T` around them
+///    boundary point behind the centre (the other wall of a ridge; its search starts from
+///    the far wall of step 2) and, on the contours of both, the points about `⅔·h` away on
+///    either side. If discs of radius `T` around them
 ///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
 ///    Otherwise a ridge probe (half-way between the two walls) may raise the best;
