@@ -152,6 +152,10 @@ struct Node {
 
 const LEAF: usize = 8;
 
+/// Most generations of cells split with walls followed from their parent's without a
+/// search (the walls may miss a nearer third wall; measured 1–4, 3 is cheapest).
+const FOLLOWED_MAX: u8 = 3;
+
 /// Spacing of the cover points along the walls, in cell half-sizes.
 const ALONG: f64 = 0.67;
 
@@ -650,6 +654,9 @@ struct Cell {
     /// The best depth when the cell was queued: its parent's points did not cover it
     /// then, nor will they while the best has not grown.
     best: f64,
+    /// For how many generations the walls (`hint`, `hint2`) have been followed along the
+    /// contours without a search (0: found by the parent's searches).
+    followed: u8,
 }
 
 impl PartialEq for Cell {
@@ -825,6 +832,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint2: u32::MAX,
                 pts: u32::MAX,
                 best: f64::NEG_INFINITY,
+                followed: 0,
             });
         }
     }
@@ -853,6 +861,9 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         let reach = c.h * std::f64::consts::SQRT_2;
         let mut start = (f64::INFINITY, u32::MAX);
         let mut seed2 = u32::MAX;
+        // The inside test of the centre, once made.
+        let mut ins = None;
+        let mut local = None;
         if c.hint != u32::MAX {
             // The walls of the parent, followed along their contours to the points nearest
             // to this centre.
@@ -869,8 +880,15 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             if u + reach - best_d <= precision {
                 continue;
             }
+            // A centre outside the section has a negative depth, so no point of the cell
+            // is deeper than `h·√2`; nor can the walls' points cover such a cell.
+            let inside = e.inside(c.c);
+            if !inside && reach <= t {
+                continue;
+            }
+            ins = Some(inside);
             // The centre cannot beat the best: try to drop the cell with these walls alone.
-            if u <= best_d && t > 0.0 && w2.is_some() {
+            if inside && u <= best_d && t > 0.0 && w2.is_some() {
                 let mut pts = [[0.0; 2]; 6];
                 let mut n = 0;
                 for (_, i) in std::iter::once(w1).chain(w2) {
@@ -882,64 +900,78 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 if !points_exceed(c.c, c.h, &pts[..n], t * t) {
                     continue;
                 }
+                // Not covered: split it with these walls (no search: the centre cannot
+                // beat the best), unless they have been followed for too long.
+                if c.followed < FOLLOWED_MAX {
+                    local = Some((pts, n, u + reach, w1.1, w2.map_or(u32::MAX, |w| w.1)));
+                }
             }
         }
-        let (d, near) = e.nearest_from(c.c, start);
-        let d = if e.inside(c.c) { d } else { -d };
-        if d > best_d {
-            (best_c, best_d, best_near) = (c.c, d, near);
-        }
-        let lip = d + reach;
-        if lip - best_d <= precision {
-            continue;
-        }
-        let mut pts = [[0.0; 2]; 6];
-        let mut n = 0;
-        let mut far_edge = u32::MAX;
-        if d > 0.0 {
-            let q = e.closest_point(near, c.c);
-            let mut add = |p: [f64; 2]| {
-                pts[n] = p;
-                n += 1;
+        let (pts, n, lip, near, far_edge) = if let Some(l) = local {
+            l
+        } else {
+            let (d, near) = e.nearest_from(c.c, start);
+            let d = if ins.unwrap_or_else(|| e.inside(c.c)) {
+                d
+            } else {
+                -d
             };
-            add(q);
-            e.along(near, q, ALONG * c.h).into_iter().for_each(&mut add);
-            // Wall points farther than this can neither cover the cell at radius `T`
-            // nor bound a child's depth below `lip`.
-            let limit = best_d + precision + 1.5 * reach;
-            let behind = e.nearest_behind(c.c, q, limit, seed2);
-            if let Some((q2, i2)) = behind {
-                add(q2);
-                e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
-                far_edge = i2;
+            if d > best_d {
+                (best_c, best_d, best_near) = (c.c, d, near);
             }
-            let t = best_d + precision;
-            if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+            let lip = d + reach;
+            if lip - best_d <= precision {
                 continue;
             }
-            // Ridge probe: half-way between the two walls along the line through q and
-            // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
-            // the best value close to a ridge's height so ridge cells can be pruned.
-            if let Some((q2, i2)) = behind {
-                let t = 0.5 * (d2(q2, c.c).sqrt() - d);
-                if t > 0.25 * precision {
-                    let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
-                    let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
-                    // Both walls bound the probe's depth: search only if it can gain.
-                    let mut start = (seg_d2(p, &e.segs[near as usize]), near);
-                    let u2 = seg_d2(p, &e.segs[i2 as usize]);
-                    if u2 < start.0 {
-                        start = (u2, i2);
-                    }
-                    if best_d < 0.0 || start.0 > best_d * best_d {
-                        let (dp, np) = e.nearest_from(p, start);
-                        if dp > best_d && e.inside(p) {
-                            (best_c, best_d, best_near) = (p, dp, np);
+            let mut pts = [[0.0; 2]; 6];
+            let mut n = 0;
+            let mut far_edge = u32::MAX;
+            if d > 0.0 {
+                let q = e.closest_point(near, c.c);
+                let mut add = |p: [f64; 2]| {
+                    pts[n] = p;
+                    n += 1;
+                };
+                add(q);
+                e.along(near, q, ALONG * c.h).into_iter().for_each(&mut add);
+                // Wall points farther than this can neither cover the cell at radius `T`
+                // nor bound a child's depth below `lip`.
+                let limit = best_d + precision + 1.5 * reach;
+                let behind = e.nearest_behind(c.c, q, limit, seed2);
+                if let Some((q2, i2)) = behind {
+                    add(q2);
+                    e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
+                    far_edge = i2;
+                }
+                let t = best_d + precision;
+                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                    continue;
+                }
+                // Ridge probe: half-way between the two walls along the line through q and
+                // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
+                // the best value close to a ridge's height so ridge cells can be pruned.
+                if let Some((q2, i2)) = behind {
+                    let t = 0.5 * (d2(q2, c.c).sqrt() - d);
+                    if t > 0.25 * precision {
+                        let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
+                        let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
+                        // Both walls bound the probe's depth: search only if it can gain.
+                        let mut start = (seg_d2(p, &e.segs[near as usize]), near);
+                        let u2 = seg_d2(p, &e.segs[i2 as usize]);
+                        if u2 < start.0 {
+                            start = (u2, i2);
+                        }
+                        if best_d < 0.0 || start.0 > best_d * best_d {
+                            let (dp, np) = e.nearest_from(p, start);
+                            if dp > best_d && e.inside(p) {
+                                (best_c, best_d, best_near) = (p, dp, np);
+                            }
                         }
                     }
                 }
             }
-        }
+            (pts, n, lip, near, far_edge)
+        };
         let qh = c.h / 2.0;
         let idx = if n > 0 {
             arena.push((pts, n as u8));
@@ -971,6 +1003,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint2: far_edge,
                 pts: idx,
                 best: best_d,
+                followed: if local.is_none() { 0 } else { c.followed + 1 },
             });
         }
     }
