@@ -1270,7 +1270,33 @@ pub fn islands(cur: &[Contour], prev: &[Contour], row_mm: f64) -> u32 {
     count_islands(&Runs::new(cur, row_mm), &Runs::new(prev, row_mm))
 }
 
+/// Whether every run of `cur` overlaps a run of `prev` in the same row: then every region
+/// is supported (the usual case), without joining runs into regions.
+fn all_runs_supported(cur: &Runs, prev: &Runs) -> bool {
+    let (rc, rp) = (&cur.runs, &prev.runs);
+    // Both sorted by row then x, and a row's runs are disjoint: one merge-walk.
+    let mut j = 0;
+    for r in rc {
+        // Skip the runs below that end before this one starts (in this row or earlier).
+        while j < rp.len() && (rp[j].0 < r.0 || (rp[j].0 == r.0 && rp[j].2 <= r.1)) {
+            j += 1;
+        }
+        if j == rp.len() || rp[j].0 != r.0 || rp[j].1 >= r.2 {
+            return false;
+        }
+    }
+    true
+}
+
 fn count_islands(cur: &Runs, prev: &Runs) -> u32 {
+    if cur.runs.is_empty() || all_runs_supported(cur, prev) {
+        return 0;
+    }
+    join_and_count(cur, prev)
+}
+
+/// [`count_islands`] by joining the runs into regions (union-find).
+fn join_and_count(cur: &Runs, prev: &Runs) -> u32 {
     let (rc, rows_c) = (&cur.runs, &cur.rows);
     let (rp, rows_p) = (&prev.runs, &prev.rows);
     if rc.is_empty() {
@@ -1696,6 +1722,45 @@ mod tests {
         }
         // The layers do have islands (the test exercises the supported/unsupported logic).
         assert!(islands > 0);
+    }
+
+    #[test]
+    fn supported_runs_shortcut_agrees_with_joining() {
+        // Random layers of scattered squares and rings over random layers below: when
+        // every run rests on a run below, joining finds no island either, and the count
+        // with the shortcut is the count without it.
+        let p = 0.25;
+        let mut rnd = xorshift(0x1d5_0a7e_u64);
+        let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
+            let n = 1 + (rnd() * 5.0) as usize;
+            let mut v: Vec<Contour> = (0..n)
+                .map(|_| {
+                    let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 8.0);
+                    rect(x, y, x + w, y + 0.2 + rnd() * 8.0)
+                })
+                .collect();
+            if rnd() < 0.5 {
+                let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
+                v.push(ngon(cx, cy, r, 48, true));
+                v.push(ngon(cx, cy, r * 0.6, 48, false));
+            }
+            v
+        };
+        let (mut shortcut, mut islands) = (0, 0);
+        for _ in 0..200 {
+            let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
+            // Sometimes the layer below is the same or larger, so all runs rest on it.
+            let below = if rnd() < 0.3 { cur.clone() } else { below };
+            let (rc, rp) = (Runs::new(&cur, p), Runs::new(&below, p));
+            let joined = join_and_count(&rc, &rp);
+            if all_runs_supported(&rc, &rp) {
+                assert_eq!(joined, 0);
+                shortcut += 1;
+            }
+            assert_eq!(count_islands(&rc, &rp), joined);
+            islands += joined;
+        }
+        assert!(shortcut > 40 && islands > 40, "{shortcut} {islands}");
     }
 
     #[test]
