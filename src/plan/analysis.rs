@@ -16,7 +16,9 @@
 //! * **Islands** = connected regions of the layer that do not overlap the layer below
 //!   (they would print onto nothing). Both layers are scanned exactly at the centres of
 //!   the pixel rows (nonzero winding), regions are the connected runs across rows, and a
-//!   region is supported when one of its runs overlaps a run of the layer below. Layer 0
+//!   region is supported when one of its runs overlaps a run of the layer below (when
+//!   every run overlaps one, the usual case, no region is unsupported and the runs are
+//!   not joined into regions at all). Layer 0
 //!   rests on the platform: it has no islands. Features thinner than a pixel row can be
 //!   missed.
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
