@@ -781,8 +781,12 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 ///    points nearest this centre (`Edges::descend`, a local minimum): their distance `u`
 ///    bounds the centre's depth from above (they are boundary), so `u + h·√2 ≤ T` drops
 ///    the cell without a search. If `u ≤` the best depth the centre cannot improve the
-///    best, so its exact distance is not needed to drop the cell: the cover test of step 4
-///    with these two walls' points drops it without a search when it can;
+///    best, so its exact distance is not needed: the cover test of step 4 with these two
+///    walls' points drops it without a search when it can, and otherwise it is split as in
+///    step 5 with these walls (key `u + h·√2`), also without a search, for at most
+///    3 generations in a row (followed walls can miss a nearer third wall).
+///    A centre outside the section (inside test) has a negative depth, so the cell is
+///    dropped when `h·√2 ≤ T`;
 /// 3. the centre's exact signed distance `d` and nearest edge (bounding-volume hierarchy,
 ///    seeded with the nearer of the walls of step 2; band-indexed nonzero-winding inside
 ///    test);
