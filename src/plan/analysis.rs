@@ -320,19 +320,20 @@ impl Edges {
         let nb = (segs.len() / 4).clamp(1, 4096);
         let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
         let band_of = |y: f64| ((((y - y0) * band_inv) as usize).min(nb - 1)) as u32;
+        // The band of each contour point (the start of each edge), once; edge `v` spans
+        // the bands of its two points.
+        let vband: Vec<u32> = segs.iter().map(|s| band_of(s[1])).collect();
+        let span = |v: usize| {
+            let (a, b) = (vband[v], vband[next[v] as usize]);
+            if a <= b {
+                (a, b)
+            } else {
+                (b, a)
+            }
+        };
         let mut count = vec![0u32; nb + 1];
-        let spans: Vec<(u32, u32)> = segs
-            .iter()
-            .map(|s| {
-                let (a, b) = if s[1] <= s[3] {
-                    (s[1], s[3])
-                } else {
-                    (s[3], s[1])
-                };
-                (band_of(a), band_of(b))
-            })
-            .collect();
-        for &(a, b) in &spans {
+        for v in 0..segs.len() {
+            let (a, b) = span(v);
             for k in a..=b {
                 count[k as usize + 1] += 1;
             }
@@ -342,9 +343,10 @@ impl Edges {
         }
         let mut fill = count.clone();
         let mut items = vec![0u32; count[nb] as usize];
-        for (i, &(a, b)) in spans.iter().enumerate() {
+        for v in 0..segs.len() {
+            let (a, b) = span(v);
             for k in a..=b {
-                items[fill[k as usize] as usize] = i as u32;
+                items[fill[k as usize] as usize] = v as u32;
                 fill[k as usize] += 1;
             }
         }
