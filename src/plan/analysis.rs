@@ -16,7 +16,9 @@
 //! * **Islands** = connected regions of the layer that do not overlap the layer below
 //!   (they would print onto nothing). Both layers are scanned exactly at the centres of
 //!   the pixel rows (nonzero winding), regions are the connected runs across rows, and a
-//!   region is supported when one of its runs overlaps a run of the layer below. Layer 0
+//!   region is supported when one of its runs overlaps a run of the layer below (when
+//!   every run overlaps one, the usual case, no region is unsupported and the runs are
+//!   not joined into regions at all). Layer 0
 //!   rests on the platform: it has no islands. Features thinner than a pixel row can be
 //!   missed.
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
@@ -152,19 +154,21 @@ struct Node {
 
 const LEAF: usize = 8;
 
+/// Most generations of cells split with walls followed from their parent's without a
+/// search (the walls may miss a nearer third wall; measured 1–4, 3 is cheapest).
+const FOLLOWED_MAX: u8 = 3;
+
 /// Spacing of the cover points along the walls, in cell half-sizes.
 const ALONG: f64 = 0.67;
 
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
+    /// Edge `v` goes from contour point `v` to point `next[v]` (the points of all contours
+    /// one contour after the other, repeated consecutive points left out).
     segs: Vec<Seg>,
-    /// For each edge (same order as `segs`): index of its start point in `verts` and of
-    /// its contour in `contours`.
-    seg_at: Vec<(u32, u32)>,
-    /// All contour points, contour after contour.
-    verts: Vec<[f64; 2]>,
-    /// `(first point, number of points)` of each contour in `verts`.
-    contours: Vec<(u32, u32)>,
+    /// The next and the previous point (and edge) of the same contour.
+    next: Vec<u32>,
+    prev: Vec<u32>,
     nodes: Vec<Node>,
     band_y0: f64,
     band_inv: f64,
@@ -268,21 +272,38 @@ impl Edges {
     pub fn new(contours: &[Contour]) -> Edges {
         let total: usize = contours.iter().map(|c| c.len()).sum();
         let mut segs: Vec<Seg> = Vec::with_capacity(total);
-        let mut seg_at: Vec<(u32, u32)> = Vec::with_capacity(total);
         let mut ends = Vec::with_capacity(contours.len());
-        let mut verts = Vec::with_capacity(total);
-        let mut ranges = Vec::with_capacity(contours.len());
-        for (ci, c) in contours.iter().enumerate() {
-            let first = verts.len();
-            verts.extend_from_slice(c);
-            ranges.push((first as u32, c.len() as u32));
-            for i in 0..c.len() {
-                let a = c[i];
-                let b = c[if i + 1 == c.len() { 0 } else { i + 1 }];
-                if a != b {
-                    segs.push([a[0], a[1], b[0], b[1]]);
-                    seg_at.push(((first + i) as u32, ci as u32));
+        let mut next: Vec<u32> = Vec::with_capacity(total);
+        let mut prev: Vec<u32> = Vec::with_capacity(total);
+        for c in contours {
+            // The start points first (repeated ones left out), then the end points.
+            let first = segs.len();
+            let mut last = [f64::NAN; 2];
+            for &p in c {
+                if p != last {
+                    segs.push([p[0], p[1], 0.0, 0.0]);
+                    last = p;
                 }
+            }
+            while segs.len() > first + 1 && segs[segs.len() - 1][..2] == segs[first][..2] {
+                segs.pop();
+            }
+            let n = segs.len() - first;
+            if n < 2 {
+                segs.truncate(first);
+                ends.push(segs.len());
+                continue;
+            }
+            let end = first + n;
+            next.extend((first as u32 + 1)..end as u32);
+            next.push(first as u32);
+            prev.push(end as u32 - 1);
+            prev.extend(first as u32..end as u32 - 1);
+            for v in first..end {
+                let w = if v + 1 == end { first } else { v + 1 };
+                let (x, y) = (segs[w][0], segs[w][1]);
+                segs[v][2] = x;
+                segs[v][3] = y;
             }
             ends.push(segs.len());
         }
@@ -299,19 +320,20 @@ impl Edges {
         let nb = (segs.len() / 4).clamp(1, 4096);
         let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
         let band_of = |y: f64| ((((y - y0) * band_inv) as usize).min(nb - 1)) as u32;
+        // The band of each contour point (the start of each edge), once; edge `v` spans
+        // the bands of its two points.
+        let vband: Vec<u32> = segs.iter().map(|s| band_of(s[1])).collect();
+        let span = |v: usize| {
+            let (a, b) = (vband[v], vband[next[v] as usize]);
+            if a <= b {
+                (a, b)
+            } else {
+                (b, a)
+            }
+        };
         let mut count = vec![0u32; nb + 1];
-        let spans: Vec<(u32, u32)> = segs
-            .iter()
-            .map(|s| {
-                let (a, b) = if s[1] <= s[3] {
-                    (s[1], s[3])
-                } else {
-                    (s[3], s[1])
-                };
-                (band_of(a), band_of(b))
-            })
-            .collect();
-        for &(a, b) in &spans {
+        for v in 0..segs.len() {
+            let (a, b) = span(v);
             for k in a..=b {
                 count[k as usize + 1] += 1;
             }
@@ -321,17 +343,17 @@ impl Edges {
         }
         let mut fill = count.clone();
         let mut items = vec![0u32; count[nb] as usize];
-        for (i, &(a, b)) in spans.iter().enumerate() {
+        for v in 0..segs.len() {
+            let (a, b) = span(v);
             for k in a..=b {
-                items[fill[k as usize] as usize] = i as u32;
+                items[fill[k as usize] as usize] = v as u32;
                 fill[k as usize] += 1;
             }
         }
         Edges {
             segs,
-            seg_at,
-            verts,
-            contours: ranges,
+            next,
+            prev,
             nodes,
             band_y0: y0,
             band_inv,
@@ -404,7 +426,15 @@ impl Edges {
 
     /// The boundary point nearest to `p` among those on the far side of `p` from `q`
     /// (in the half-plane `(x − p)·(q − p) ≤ 0`) and closer than `limit`, if any.
-    fn nearest_behind(&self, p: [f64; 2], q: [f64; 2], limit: f64) -> Option<([f64; 2], u32)> {
+    /// `seed`, an edge likely to hold such a point (or `u32::MAX`), bounds the search
+    /// from the start.
+    fn nearest_behind(
+        &self,
+        p: [f64; 2],
+        q: [f64; 2],
+        limit: f64,
+        seed: u32,
+    ) -> Option<([f64; 2], u32)> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -412,6 +442,14 @@ impl Edges {
         let side = |x: f64, y: f64| (x - p[0]) * u[0] + (y - p[1]) * u[1];
         let mut best = limit * limit;
         let mut arg = None;
+        if seed != u32::MAX {
+            // Its point nearest to p, if that is behind p (else the seed does not count).
+            let x = self.closest_point(seed, p);
+            let dd = d2(x, p);
+            if side(x[0], x[1]) <= 0.0 && dd < best {
+                (best, arg) = (dd, Some((x, seed)));
+            }
+        }
         let mut stack: [u32; 64] = [0; 64];
         stack[0] = (self.nodes.len() - 1) as u32;
         let mut sp = 1usize;
@@ -477,27 +515,66 @@ impl Edges {
     /// one each way: the first contour points at least `h` from `q` (at most 64 points
     /// walked).
     fn along(&self, i: u32, q: [f64; 2], h: f64) -> [[f64; 2]; 2] {
-        let (v, c) = self.seg_at[i as usize];
-        let (first, len) = self.contours[c as usize];
         let h2 = h * h;
-        // k < 2·len below.
-        let at = |k: u32| self.verts[(first + if k >= len { k - len } else { k }) as usize];
-        let k0 = v - first;
-        let mut fwd = at(k0 + 1);
-        for s in 1..len.min(64) {
-            fwd = at(k0 + s);
+        let mut k = self.next[i as usize];
+        let mut fwd = self.vert(k);
+        for _ in 1..63 {
             if d2(fwd, q) >= h2 {
                 break;
             }
+            k = self.next[k as usize];
+            fwd = self.vert(k);
         }
-        let mut back = at(k0);
-        for s in 0..len.min(64) {
-            back = at(k0 + len - s);
+        let mut k = i;
+        let mut back = self.vert(k);
+        for _ in 1..64 {
             if d2(back, q) >= h2 {
                 break;
             }
+            k = self.prev[k as usize];
+            back = self.vert(k);
         }
         [fwd, back]
+    }
+
+    /// From edge `v`, along its contour while the points get nearer to `p` (a local
+    /// minimum of the distance to the contour points, at most 64 steps), then the nearer
+    /// of the two edges at that point: `(squared distance, edge)`. A cheap guess of the
+    /// nearest edge of this wall; any edge gives a valid bound.
+    fn descend(&self, mut v: u32, p: [f64; 2]) -> (f64, u32) {
+        let mut d = d2(self.vert(v), p);
+        for dir in [&self.next, &self.prev] {
+            let mut moved = false;
+            for _ in 0..64 {
+                let w = dir[v as usize];
+                let dw = d2(self.vert(w), p);
+                if dw < d {
+                    (d, v) = (dw, w);
+                    moved = true;
+                } else {
+                    break;
+                }
+            }
+            if moved {
+                break;
+            }
+        }
+        let w = self.prev[v as usize];
+        let (a, b) = (
+            seg_d2(p, &self.segs[v as usize]),
+            seg_d2(p, &self.segs[w as usize]),
+        );
+        if b < a {
+            (b, w)
+        } else {
+            (a, v)
+        }
+    }
+
+    /// Start point of edge `v`.
+    fn vert(&self, v: u32) -> [f64; 2] {
+        let s = &self.segs[v as usize];
+        [s[0], s[1]]
     }
 
     /// The point of edge `i` nearest to `p`.
@@ -578,6 +655,12 @@ struct Cell {
     /// Index of the parent's boundary points in the search's point arena (`u32::MAX`:
     /// none), tried again when the cell is popped.
     pts: u32,
+    /// The best depth when the cell was queued: its parent's points did not cover it
+    /// then, nor will they while the best has not grown.
+    best: f64,
+    /// For how many generations the walls (`hint`, `hint2`) have been followed along the
+    /// contours without a search (0: found by the parent's searches).
+    followed: u8,
 }
 
 impl PartialEq for Cell {
@@ -693,16 +776,27 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
 /// dropped as soon as it is shown to hold no point deeper than `T`. Popping a cell of
 /// half-size `h`:
-/// 1. its parent's boundary points (below) still cover it at radius `T` (`T` may have grown
-///    since it was pushed): dropped without a search;
-/// 2. its distance to the parent's nearest and far-wall edges `+ h·√2 ≤ T` (each edge is
-///    boundary, so that distance bounds the depth from above): dropped without a search;
+/// 1. its parent's boundary points (below) still cover it at radius `T` (only tried when
+///    `T` has grown since it was queued: they did not cover it then): dropped without a
+///    search;
+/// 2. the parent's nearest and far-wall edges, each followed along its contour to the
+///    points nearest this centre (`Edges::descend`, a local minimum): their distance `u`
+///    bounds the centre's depth from above (they are boundary), so `u + h·√2 ≤ T` drops
+///    the cell without a search. If `u ≤` the best depth the centre cannot improve the
+///    best, so its exact distance is not needed: the cover test of step 4 with these two
+///    walls' points drops it without a search when it can, and otherwise it is split as in
+///    step 5 with these walls (key `u + h·√2`), also without a search, for at most
+///    3 generations in a row (followed walls can miss a nearer third wall).
+///    A centre outside the section (inside test) has a negative depth, so the cell is
+///    dropped when `h·√2 ≤ T`;
 /// 3. the centre's exact signed distance `d` and nearest edge (bounding-volume hierarchy,
-///    seeded with the parent's nearest edge; band-indexed nonzero-winding inside test);
+///    seeded with the nearer of the walls of step 2; band-indexed nonzero-winding inside
+///    test);
 ///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
 /// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
-///    boundary point behind the centre (the other wall of a ridge) and, on the contours of
-///    both, the points about `h` away on either side. If discs of radius `T` around them
+///    boundary point behind the centre (the other wall of a ridge; its search starts from
+///    the far wall of step 2) and, on the contours of both, the points about `⅔·h` away on
+///    either side. If discs of radius `T` around them
 ///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
 ///    Otherwise a ridge probe (half-way between the two walls) may raise the best;
@@ -745,6 +839,8 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint: u32::MAX,
                 hint2: u32::MAX,
                 pts: u32::MAX,
+                best: f64::NEG_INFINITY,
+                followed: 0,
             });
         }
     }
@@ -762,7 +858,7 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
             break;
         }
         let t = best_d + precision;
-        if c.pts != u32::MAX && t > 0.0 {
+        if c.pts != u32::MAX && t > 0.0 && best_d > c.best {
             let (p, n) = &arena[c.pts as usize];
             if !points_exceed(c.c, c.h, &p[..*n as usize], t * t) {
                 continue;
@@ -772,74 +868,118 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         // without a search.
         let reach = c.h * std::f64::consts::SQRT_2;
         let mut start = (f64::INFINITY, u32::MAX);
+        let mut seed2 = u32::MAX;
+        // The inside test of the centre, once made.
+        let mut ins = None;
+        let mut local = None;
         if c.hint != u32::MAX {
-            start = (seg_d2(c.c, &e.segs[c.hint as usize]), c.hint);
-            if let Some(s2) = e.segs.get(c.hint2 as usize) {
-                let u2 = seg_d2(c.c, s2);
-                if u2 < start.0 {
-                    start = (u2, c.hint2);
+            // The walls of the parent, followed along their contours to the points nearest
+            // to this centre.
+            let w1 = e.descend(c.hint, c.c);
+            start = w1;
+            let w2 = (c.hint2 != u32::MAX).then(|| e.descend(c.hint2, c.c));
+            seed2 = w2.map_or(u32::MAX, |w| w.1);
+            if let Some(w2) = w2 {
+                if w2.0 < start.0 {
+                    start = w2;
                 }
             }
-            if start.0.sqrt() + reach - best_d <= precision {
+            let u = start.0.sqrt();
+            if u + reach - best_d <= precision {
                 continue;
             }
+            // A centre outside the section has a negative depth, so no point of the cell
+            // is deeper than `h·√2`; nor can the walls' points cover such a cell.
+            let inside = e.inside(c.c);
+            if !inside && reach <= t {
+                continue;
+            }
+            ins = Some(inside);
+            // The centre cannot beat the best: try to drop the cell with these walls alone.
+            if inside && u <= best_d && t > 0.0 && w2.is_some() {
+                let mut pts = [[0.0; 2]; 6];
+                let mut n = 0;
+                for (_, i) in std::iter::once(w1).chain(w2) {
+                    let q = e.closest_point(i, c.c);
+                    let [a, b] = e.along(i, q, ALONG * c.h);
+                    pts[n..n + 3].copy_from_slice(&[q, a, b]);
+                    n += 3;
+                }
+                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                    continue;
+                }
+                // Not covered: split it with these walls (no search: the centre cannot
+                // beat the best), unless they have been followed for too long.
+                if c.followed < FOLLOWED_MAX {
+                    local = Some((pts, n, u + reach, w1.1, w2.map_or(u32::MAX, |w| w.1)));
+                }
+            }
         }
-        let (d, near) = e.nearest_from(c.c, start);
-        let d = if e.inside(c.c) { d } else { -d };
-        if d > best_d {
-            (best_c, best_d, best_near) = (c.c, d, near);
-        }
-        let lip = d + reach;
-        if lip - best_d <= precision {
-            continue;
-        }
-        let mut pts = [[0.0; 2]; 6];
-        let mut n = 0;
-        let mut far_edge = u32::MAX;
-        if d > 0.0 {
-            let q = e.closest_point(near, c.c);
-            let mut add = |p: [f64; 2]| {
-                pts[n] = p;
-                n += 1;
+        let (pts, n, lip, near, far_edge) = if let Some(l) = local {
+            l
+        } else {
+            let (d, near) = e.nearest_from(c.c, start);
+            let d = if ins.unwrap_or_else(|| e.inside(c.c)) {
+                d
+            } else {
+                -d
             };
-            add(q);
-            e.along(near, q, ALONG * c.h).into_iter().for_each(&mut add);
-            // Wall points farther than this can neither cover the cell at radius `T`
-            // nor bound a child's depth below `lip`.
-            let limit = best_d + precision + 1.5 * reach;
-            let behind = e.nearest_behind(c.c, q, limit);
-            if let Some((q2, i2)) = behind {
-                add(q2);
-                e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
-                far_edge = i2;
+            if d > best_d {
+                (best_c, best_d, best_near) = (c.c, d, near);
             }
-            let t = best_d + precision;
-            if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+            let lip = d + reach;
+            if lip - best_d <= precision {
                 continue;
             }
-            // Ridge probe: half-way between the two walls along the line through q and
-            // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
-            // the best value close to a ridge's height so ridge cells can be pruned.
-            if let Some((q2, i2)) = behind {
-                let t = 0.5 * (d2(q2, c.c).sqrt() - d);
-                if t > 0.25 * precision {
-                    let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
-                    let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
-                    // Both walls bound the probe's depth: search only if it can gain.
-                    let mut start = (seg_d2(p, &e.segs[near as usize]), near);
-                    let u2 = seg_d2(p, &e.segs[i2 as usize]);
-                    if u2 < start.0 {
-                        start = (u2, i2);
-                    }
-                    if best_d < 0.0 || start.0 > best_d * best_d {
-                        let (dp, np) = e.nearest_from(p, start);
-                        if dp > best_d && e.inside(p) {
-                            (best_c, best_d, best_near) = (p, dp, np);
+            let mut pts = [[0.0; 2]; 6];
+            let mut n = 0;
+            let mut far_edge = u32::MAX;
+            if d > 0.0 {
+                let q = e.closest_point(near, c.c);
+                let mut add = |p: [f64; 2]| {
+                    pts[n] = p;
+                    n += 1;
+                };
+                add(q);
+                e.along(near, q, ALONG * c.h).into_iter().for_each(&mut add);
+                // Wall points farther than this can neither cover the cell at radius `T`
+                // nor bound a child's depth below `lip`.
+                let limit = best_d + precision + 1.5 * reach;
+                let behind = e.nearest_behind(c.c, q, limit, seed2);
+                if let Some((q2, i2)) = behind {
+                    add(q2);
+                    e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
+                    far_edge = i2;
+                }
+                let t = best_d + precision;
+                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                    continue;
+                }
+                // Ridge probe: half-way between the two walls along the line through q and
+                // the centre is (for parallel walls exactly) the deepest point nearby; it keeps
+                // the best value close to a ridge's height so ridge cells can be pruned.
+                if let Some((q2, i2)) = behind {
+                    let t = 0.5 * (d2(q2, c.c).sqrt() - d);
+                    if t > 0.25 * precision {
+                        let u = [(c.c[0] - q[0]) / d, (c.c[1] - q[1]) / d];
+                        let p = [c.c[0] + t * u[0], c.c[1] + t * u[1]];
+                        // Both walls bound the probe's depth: search only if it can gain.
+                        let mut start = (seg_d2(p, &e.segs[near as usize]), near);
+                        let u2 = seg_d2(p, &e.segs[i2 as usize]);
+                        if u2 < start.0 {
+                            start = (u2, i2);
+                        }
+                        if best_d < 0.0 || start.0 > best_d * best_d {
+                            let (dp, np) = e.nearest_from(p, start);
+                            if dp > best_d && e.inside(p) {
+                                (best_c, best_d, best_near) = (p, dp, np);
+                            }
                         }
                     }
                 }
             }
-        }
+            (pts, n, lip, near, far_edge)
+        };
         let qh = c.h / 2.0;
         let idx = if n > 0 {
             arena.push((pts, n as u8));
@@ -870,6 +1010,8 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
                 hint: near,
                 hint2: far_edge,
                 pts: idx,
+                best: best_d,
+                followed: if local.is_none() { 0 } else { c.followed + 1 },
             });
         }
     }
@@ -1136,7 +1278,33 @@ pub fn islands(cur: &[Contour], prev: &[Contour], row_mm: f64) -> u32 {
     count_islands(&Runs::new(cur, row_mm), &Runs::new(prev, row_mm))
 }
 
+/// Whether every run of `cur` overlaps a run of `prev` in the same row: then every region
+/// is supported (the usual case), without joining runs into regions.
+fn all_runs_supported(cur: &Runs, prev: &Runs) -> bool {
+    let (rc, rp) = (&cur.runs, &prev.runs);
+    // Both sorted by row then x, and a row's runs are disjoint: one merge-walk.
+    let mut j = 0;
+    for r in rc {
+        // Skip the runs below that end before this one starts (in this row or earlier).
+        while j < rp.len() && (rp[j].0 < r.0 || (rp[j].0 == r.0 && rp[j].2 <= r.1)) {
+            j += 1;
+        }
+        if j == rp.len() || rp[j].0 != r.0 || rp[j].1 >= r.2 {
+            return false;
+        }
+    }
+    true
+}
+
 fn count_islands(cur: &Runs, prev: &Runs) -> u32 {
+    if cur.runs.is_empty() || all_runs_supported(cur, prev) {
+        return 0;
+    }
+    join_and_count(cur, prev)
+}
+
+/// [`count_islands`] by joining the runs into regions (union-find).
+fn join_and_count(cur: &Runs, prev: &Runs) -> u32 {
     let (rc, rows_c) = (&cur.runs, &cur.rows);
     let (rp, rows_p) = (&prev.runs, &prev.rows);
     if rc.is_empty() {
@@ -1418,6 +1586,26 @@ mod tests {
     }
 
     #[test]
+    fn repeated_points_are_left_out() {
+        // Repeated consecutive points (and a closing point equal to the first) add no
+        // edges: same edges, same result; a contour of one distinct point has none.
+        let clean = rect(0.0, 0.0, 20.0, 10.0);
+        let mut rep = vec![clean[0], clean[0], clean[1], clean[2], clean[2], clean[3]];
+        rep.push(clean[0]);
+        let (a, b) = (
+            Edges::new(std::slice::from_ref(&clean)),
+            Edges::new(&[rep, vec![[5.0, 5.0]; 3]]),
+        );
+        assert_eq!(a.segs, b.segs);
+        assert_eq!((&a.next, &a.prev), (&b.next, &b.prev));
+        assert_eq!(a.next, vec![1, 2, 3, 0]);
+        assert_eq!(
+            max_fill_distance_with(&a, PRECISION_MM),
+            max_fill_distance_with(&b, PRECISION_MM)
+        );
+    }
+
+    #[test]
     fn ceil_i64_is_ceil() {
         for x in [
             -3.0,
@@ -1542,6 +1730,45 @@ mod tests {
         }
         // The layers do have islands (the test exercises the supported/unsupported logic).
         assert!(islands > 0);
+    }
+
+    #[test]
+    fn supported_runs_shortcut_agrees_with_joining() {
+        // Random layers of scattered squares and rings over random layers below: when
+        // every run rests on a run below, joining finds no island either, and the count
+        // with the shortcut is the count without it.
+        let p = 0.25;
+        let mut rnd = xorshift(0x1d5_0a7e_u64);
+        let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
+            let n = 1 + (rnd() * 5.0) as usize;
+            let mut v: Vec<Contour> = (0..n)
+                .map(|_| {
+                    let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 8.0);
+                    rect(x, y, x + w, y + 0.2 + rnd() * 8.0)
+                })
+                .collect();
+            if rnd() < 0.5 {
+                let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
+                v.push(ngon(cx, cy, r, 48, true));
+                v.push(ngon(cx, cy, r * 0.6, 48, false));
+            }
+            v
+        };
+        let (mut shortcut, mut islands) = (0, 0);
+        for _ in 0..200 {
+            let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
+            // Sometimes the layer below is the same or larger, so all runs rest on it.
+            let below = if rnd() < 0.3 { cur.clone() } else { below };
+            let (rc, rp) = (Runs::new(&cur, p), Runs::new(&below, p));
+            let joined = join_and_count(&rc, &rp);
+            if all_runs_supported(&rc, &rp) {
+                assert_eq!(joined, 0);
+                shortcut += 1;
+            }
+            assert_eq!(count_islands(&rc, &rp), joined);
+            islands += joined;
+        }
+        assert!(shortcut > 40 && islands > 40, "{shortcut} {islands}");
     }
 
     #[test]
