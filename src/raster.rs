@@ -162,6 +162,7 @@ impl Rasterizer {
     /// shells overlap (nonzero fallback): then the finished (thresholded) coverage mask goes
     /// through [`CoverageMap::apply`]. Either way the bytes are the same. The lit area
     /// ([`Scratch::lit_pixels`]) is always that of the coverage, before threshold and map.
+    #[inline(never)]
     pub fn render<M: CoverageMap>(
         &self,
         contours: &[Contour],
@@ -222,10 +223,10 @@ impl Rasterizer {
             end: c1.min(w),
         };
         let (lit_sum, max_winding) = match (fused, binary) {
-            (Some(m), false) => scan::<_, false>(acc, &mut out.data, w, span, Mapped(m)),
-            (Some(m), true) => scan::<_, true>(acc, &mut out.data, w, span, Mapped(m)),
-            (None, false) => scan::<_, false>(acc, &mut out.data, w, span, Plain),
-            (None, true) => scan::<_, true>(acc, &mut out.data, w, span, Plain),
+            (Some(m), false) => scan_runs::<_, false>(acc, &mut out.data, w, span, Mapped(m)),
+            (Some(m), true) => scan_runs::<_, true>(acc, &mut out.data, w, span, Mapped(m)),
+            (None, false) => scan_cells::<false>(acc, &mut out.data, w, span),
+            (None, true) => scan_cells::<true>(acc, &mut out.data, w, span),
         };
         scratch.lit_sum = Some(lit_sum);
         let mut mapped = fused.is_some();
@@ -403,32 +404,15 @@ impl CoverageMap for NoMap {
     }
 }
 
-/// How [`scan`] writes (thresholded) coverage values into a mask row.
+/// How [`scan_runs`] writes runs of equal (thresholded) coverage into a mask row.
 trait Emit {
     /// Per-row state.
     type Row<'a>: Copy
     where
         Self: 'a;
     fn row(&self, r: usize) -> Self::Row<'_>;
-    /// Maps `dst[a..b]`, which holds (thresholded) coverage values, in place.
-    fn block(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize);
     /// Writes columns a..b of `dst` (zero there) for (thresholded) coverage `v` ≠ 0.
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
-}
-
-/// Values as they are (coverage).
-struct Plain;
-
-impl Emit for Plain {
-    type Row<'a> = ();
-    #[inline(always)]
-    fn row(&self, _: usize) {}
-    #[inline(always)]
-    fn block(_: (), _: &mut [u8], _: usize, _: usize) {}
-    #[inline(always)]
-    fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
-        dst[a..b].fill(v);
-    }
 }
 
 /// Values through a [`CoverageMap`].
@@ -444,16 +428,17 @@ impl<M: CoverageMap> Emit for Mapped<'_, M> {
         (self.0, self.0.full_row(r), r)
     }
     #[inline(always)]
-    fn block((m, full, r): (&M, &[u8], usize), dst: &mut [u8], a: usize, b: usize) {
-        map_words(&mut dst[a..b], &full[a..b], |c, v| m.edge(r, a + c, v));
-    }
-    #[inline(always)]
     fn fill((m, full, r): (&M, &[u8], usize), dst: &mut [u8], a: usize, b: usize, v: u8) {
+        let (d, f) = (&mut dst[a..b], &full[a..b]);
         if v == 255 {
-            dst[a..b].copy_from_slice(&full[a..b]);
+            if d.len() <= 8 {
+                d.iter_mut().zip(f).for_each(|(x, &g)| *x = g);
+            } else {
+                d.copy_from_slice(f);
+            }
         } else {
-            for (c, d) in dst[a..b].iter_mut().enumerate() {
-                *d = m.edge(r, a + c, v);
+            for (c, x) in d.iter_mut().enumerate() {
+                *x = m.edge(r, a + c, v);
             }
         }
     }
@@ -501,7 +486,7 @@ pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
     }
 }
 
-/// The rows and columns [`scan`] visits: rows r0..r1, columns c0..end.
+/// The rows and columns the scans visit: rows r0..r1, columns c0..end.
 #[derive(Clone, Copy)]
 struct ScanSpan {
     r0: usize,
@@ -510,13 +495,81 @@ struct ScanSpan {
     end: usize,
 }
 
-/// The prefix-sum scan of the accumulation buffer: writes the mask (coverage, thresholded
-/// when `BIN`, through `emit`), clears the buffer and its block marks as it reads them, and
-/// returns the sum of the coverage values (before threshold and map) and the largest
-/// winding seen. Only the touched blocks are visited: between them every cell is zero
-/// and the value repeats.
+/// The prefix-sum scan of the accumulation buffer for masks without a map: writes the
+/// coverage (thresholded when `BIN`), clears the buffer and its block marks as it reads
+/// them, and returns the sum of the coverage values (before threshold) and the largest
+/// winding seen. Only the touched blocks are visited: between them every cell is zero and
+/// the value repeats. Each cell of a touched block is written as it is read.
+fn scan_cells<const BIN: bool>(
+    acc: &mut Accum,
+    data: &mut [u8],
+    w: usize,
+    ScanSpan { r0, r1, c0, end }: ScanSpan,
+) -> (u64, f32) {
+    let (stride, words) = (acc.stride, acc.words);
+    let th = |v: u8| match (BIN, v >= 128) {
+        (false, _) => v,
+        (true, true) => 255,
+        (true, false) => 0,
+    };
+    let mut max_winding = 0.0f32;
+    let mut lit_sum = 0u64;
+    for r in r0..r1 {
+        let row = &mut acc.cells[r * stride..(r + 1) * stride];
+        let marks = &mut acc.touched[r * words..(r + 1) * words];
+        let dst = &mut data[r * w..(r + 1) * w];
+        let mut sum = 0.0f32;
+        let mut val = 0u8;
+        // `val` thresholded (BIN).
+        let mut tv = 0u8;
+        let mut col = c0;
+        for (wi, m) in marks.iter_mut().enumerate() {
+            let mut bits = std::mem::take(m);
+            while bits != 0 {
+                let b = wi * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                // Between marked blocks every cell is zero: the value repeats.
+                let from = bs.max(col).min(end);
+                if val != 0 {
+                    dst[col..from].fill(tv);
+                    lit_sum += val as u64 * (from - col) as u64;
+                }
+                let to = be.min(end).max(from);
+                for c in from..to {
+                    let a = row[c];
+                    if a != 0.0 {
+                        sum += a;
+                        // Cleared as it is read: the buffer is all zeros after the scan.
+                        row[c] = 0.0;
+                        let v = sum.abs();
+                        max_winding = max_winding.max(v);
+                        val = (v.min(1.0) * 255.0 + 0.5) as u8;
+                        tv = th(val);
+                    }
+                    dst[c] = tv;
+                    lit_sum += val as u64;
+                }
+                // Cells right of the field (edges carry area one column past their
+                // rightmost pixel): not part of the mask, just cleared.
+                row[to.max(bs)..be].fill(0.0);
+                col = to;
+            }
+        }
+        if val != 0 && col < end {
+            dst[col..end].fill(tv);
+            lit_sum += val as u64 * (end - col) as u64;
+        }
+    }
+    (lit_sum, max_winding)
+}
+
+/// [`scan_cells`] for masks through a map (`emit`): the same values, read the same way,
+/// but written run by run. The value changes only at nonzero cells: the scan follows runs
+/// of equal coverage and writes each run once, when it ends (zero runs are left as they
+/// are), so a run of full coverage is one copy from the map's full-coverage row.
 #[inline(always)]
-fn scan<E: Emit, const BIN: bool>(
+fn scan_runs<E: Emit, const BIN: bool>(
     acc: &mut Accum,
     data: &mut [u8],
     w: usize,
@@ -537,51 +590,48 @@ fn scan<E: Emit, const BIN: bool>(
         let dst = &mut data[r * w..(r + 1) * w];
         let er = emit.row(r);
         let mut sum = 0.0f32;
+        // The current run: columns start.. of coverage `val`.
         let mut val = 0u8;
-        // `val` thresholded (BIN); what `emit` maps.
-        let mut tv = 0u8;
-        let mut col = c0;
+        let mut start = c0;
+        let mut run_end = |a: usize, b: usize, v: u8| {
+            if v != 0 {
+                lit_sum += v as u64 * (b - a) as u64;
+                let t = th(v);
+                if t != 0 {
+                    E::fill(er, dst, a, b, t);
+                }
+            }
+        };
         for (wi, m) in marks.iter_mut().enumerate() {
             let mut bits = std::mem::take(m);
             while bits != 0 {
                 let b = wi * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
                 let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
-                // Between marked blocks every cell is zero: the value repeats.
-                let from = bs.max(col).min(end);
-                if val != 0 {
-                    if tv != 0 {
-                        E::fill(er, dst, col, from, tv);
-                    }
-                    lit_sum += val as u64 * (from - col) as u64;
-                }
+                let from = bs.max(c0).min(end);
                 let to = be.min(end).max(from);
-                for c in from..to {
-                    let a = row[c];
+                for (c, cell) in (from..to).zip(&mut row[from..to]) {
+                    let a = *cell;
                     if a != 0.0 {
                         sum += a;
                         // Cleared as it is read: the buffer is all zeros after the scan.
-                        row[c] = 0.0;
+                        *cell = 0.0;
                         let v = sum.abs();
                         max_winding = max_winding.max(v);
-                        val = (v.min(1.0) * 255.0 + 0.5) as u8;
-                        tv = th(val);
+                        let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
+                        if nv != val {
+                            run_end(start, c, val);
+                            (start, val) = (c, nv);
+                        }
                     }
-                    dst[c] = tv;
-                    lit_sum += val as u64;
                 }
-                E::block(er, dst, from, to);
                 // Cells right of the field (edges carry area one column past their
                 // rightmost pixel): not part of the mask, just cleared.
                 row[to.max(bs)..be].fill(0.0);
-                col = to;
             }
         }
-        if val != 0 && col < end {
-            if tv != 0 {
-                E::fill(er, dst, col, end, tv);
-            }
-            lit_sum += val as u64 * (end - col) as u64;
+        if start < end {
+            run_end(start, end, val);
         }
     }
     (lit_sum, max_winding)

@@ -853,12 +853,12 @@ impl crate::raster::CoverageMap for Compensator {
         !(self.mode == Mode::Pixel && self.dither == Dither::On) && self.box_inside(lit_box)
     }
 
-    #[inline]
+    #[inline(always)]
     fn full_row(&self, r: usize) -> &[u8] {
         &self.full[r * self.w..(r + 1) * self.w]
     }
 
-    #[inline]
+    #[inline(always)]
     fn edge(&self, r: usize, c: usize, v: u8) -> u8 {
         if self.mode == Mode::Zone {
             let t = self.row_tables[r * self.zcols + self.zone_of_col[c] as usize];
