@@ -610,12 +610,14 @@ fn scan_runs<E: Emit, const BIN: bool>(
                 let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
                 let from = bs.max(c0).min(end);
                 let to = be.min(end).max(from);
-                for (c, cell) in (from..to).zip(&mut row[from..to]) {
-                    let a = *cell;
+                // Indexed (not zipped): measurably fewer instructions in this hot loop.
+                #[allow(clippy::needless_range_loop)]
+                for c in from..to {
+                    let a = row[c];
                     if a != 0.0 {
                         sum += a;
                         // Cleared as it is read: the buffer is all zeros after the scan.
-                        *cell = 0.0;
+                        row[c] = 0.0;
                         let v = sum.abs();
                         max_winding = max_winding.max(v);
                         let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
