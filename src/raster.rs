@@ -222,9 +222,23 @@ impl Rasterizer {
             c0,
             end: c1.min(w),
         };
+        let mut outside = false;
         let (lit_sum, max_winding) = match (fused, binary) {
-            (Some(m), false) => scan_runs::<_, false>(acc, &mut out.data, w, span, Mapped(m)),
-            (Some(m), true) => scan_runs::<_, true>(acc, &mut out.data, w, span, Mapped(m)),
+            (Some(m), binary) => {
+                // Whether the scan must look for lit pixels outside the map's area.
+                let [ar0, ar1, ac0, ac1] = m.area();
+                let check = r0 < ar0 || r1 > ar1 || c0 < ac0 || c1.min(w) > ac1;
+                let data = &mut out.data;
+                let o = &mut outside;
+                match (binary, check) {
+                    (false, false) => {
+                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o)
+                    }
+                    (false, true) => scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o),
+                    (true, false) => scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o),
+                    (true, true) => scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o),
+                }
+            }
             (None, false) => scan_cells::<false>(acc, &mut out.data, w, span),
             (None, true) => scan_cells::<true>(acc, &mut out.data, w, span),
         };
@@ -240,8 +254,10 @@ impl Rasterizer {
             }
             mapped = false;
         }
-        if let (Some(m), false) = (map, mapped) {
-            m.apply(&mut out, lit);
+        match (map, mapped) {
+            (Some(m), false) => m.apply(&mut out, lit),
+            (Some(m), true) if outside => m.lit_outside(),
+            _ => {}
         }
         out
     }
@@ -378,6 +394,12 @@ pub trait CoverageMap {
     /// `lit_box` = [r0, r1, c0, c1]; if not, [`apply`](Self::apply) maps the finished mask
     /// (e.g. when the map must look at the coverage of other pixels first).
     fn fusable(&self, lit_box: [usize; 4]) -> bool;
+    /// The map's area [r0, r1, c0, c1] (rows r0..r1, columns c0..c1): the scan reports
+    /// through [`lit_outside`](Self::lit_outside) a layer it mapped that has a lit pixel
+    /// (coverage, thresholded when binary, above zero) outside it.
+    fn area(&self) -> [usize; 4];
+    /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area).
+    fn lit_outside(&self);
     /// Row `r` of the full-coverage map: what coverage 255 becomes in each column.
     fn full_row(&self, r: usize) -> &[u8];
     /// What coverage `v` (1..=254) becomes at row `r`, column `c`.
@@ -391,6 +413,12 @@ enum NoMap {}
 
 impl CoverageMap for NoMap {
     fn fusable(&self, _: [usize; 4]) -> bool {
+        match *self {}
+    }
+    fn area(&self) -> [usize; 4] {
+        match *self {}
+    }
+    fn lit_outside(&self) {
         match *self {}
     }
     fn full_row(&self, _: usize) -> &[u8] {
@@ -411,6 +439,8 @@ trait Emit {
     where
         Self: 'a;
     fn row(&self, r: usize) -> Self::Row<'_>;
+    /// Rows r0..r1 and columns c0..c1 outside which lit pixels are reported.
+    fn area(&self) -> [usize; 4];
     /// Writes columns a..b of `dst` (zero there) for (thresholded) coverage `v` ≠ 0.
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
 }
@@ -426,6 +456,9 @@ impl<M: CoverageMap> Emit for Mapped<'_, M> {
     #[inline(always)]
     fn row(&self, r: usize) -> (&M, &[u8], usize) {
         (self.0, self.0.full_row(r), r)
+    }
+    fn area(&self) -> [usize; 4] {
+        self.0.area()
     }
     #[inline(always)]
     fn fill((m, full, r): (&M, &[u8], usize), dst: &mut [u8], a: usize, b: usize, v: u8) {
@@ -568,40 +601,33 @@ fn scan_cells<const BIN: bool>(
 /// but written run by run. The value changes only at nonzero cells: the scan follows runs
 /// of equal coverage and writes each run once, when it ends (zero runs are left as they
 /// are), so a run of full coverage is one copy from the map's full-coverage row.
-#[inline(always)]
-fn scan_runs<E: Emit, const BIN: bool>(
+#[inline(never)]
+fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,
     data: &mut [u8],
     w: usize,
     ScanSpan { r0, r1, c0, end }: ScanSpan,
     emit: E,
+    outside: &mut bool,
 ) -> (u64, f32) {
+    let [ar0, ar1, ac0, ac1] = emit.area();
     let (stride, words) = (acc.stride, acc.words);
-    let th = |v: u8| match (BIN, v >= 128) {
-        (false, _) => v,
-        (true, true) => 255,
-        (true, false) => 0,
-    };
     let mut max_winding = 0.0f32;
     let mut lit_sum = 0u64;
     for r in r0..r1 {
         let row = &mut acc.cells[r * stride..(r + 1) * stride];
         let marks = &mut acc.touched[r * words..(r + 1) * words];
-        let dst = &mut data[r * w..(r + 1) * w];
-        let er = emit.row(r);
+        let mut sink = Runs::<E, BIN, CHECK> {
+            er: emit.row(r),
+            dst: &mut data[r * w..(r + 1) * w],
+            lit_sum: 0,
+            lo: usize::MAX,
+            hi: 0,
+        };
         let mut sum = 0.0f32;
         // The current run: columns start.. of coverage `val`.
         let mut val = 0u8;
         let mut start = c0;
-        let mut run_end = |a: usize, b: usize, v: u8| {
-            if v != 0 {
-                lit_sum += v as u64 * (b - a) as u64;
-                let t = th(v);
-                if t != 0 {
-                    E::fill(er, dst, a, b, t);
-                }
-            }
-        };
         for (wi, m) in marks.iter_mut().enumerate() {
             let mut bits = std::mem::take(m);
             while bits != 0 {
@@ -622,7 +648,7 @@ fn scan_runs<E: Emit, const BIN: bool>(
                         max_winding = max_winding.max(v);
                         let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
                         if nv != val {
-                            run_end(start, c, val);
+                            sink.end(start, c, val);
                             (start, val) = (c, nv);
                         }
                     }
@@ -633,10 +659,48 @@ fn scan_runs<E: Emit, const BIN: bool>(
             }
         }
         if start < end {
-            run_end(start, end, val);
+            sink.end(start, end, val);
+        }
+        lit_sum += sink.lit_sum;
+        if CHECK && sink.lo < sink.hi {
+            *outside |= r < ar0 || r >= ar1 || sink.lo < ac0 || sink.hi > ac1;
         }
     }
     (lit_sum, max_winding)
+}
+
+/// Where [`scan_runs`] puts the runs of one row.
+struct Runs<'a, E: Emit + 'a, const BIN: bool, const CHECK: bool> {
+    er: E::Row<'a>,
+    dst: &'a mut [u8],
+    /// Sum of the coverage values of the row.
+    lit_sum: u64,
+    /// Columns lo..hi hold the row's lit pixels (thresholded coverage above zero); kept
+    /// when `CHECK` (the lit box is not inside the map's area).
+    lo: usize,
+    hi: usize,
+}
+
+impl<E: Emit, const BIN: bool, const CHECK: bool> Runs<'_, E, BIN, CHECK> {
+    /// Columns a..b have coverage `v`.
+    #[inline(always)]
+    fn end(&mut self, a: usize, b: usize, v: u8) {
+        if v != 0 {
+            self.lit_sum += v as u64 * (b - a) as u64;
+            let t = match (BIN, v >= 128) {
+                (false, _) => v,
+                (true, true) => 255,
+                (true, false) => 0,
+            };
+            if t != 0 {
+                E::fill(self.er, self.dst, a, b, t);
+                if CHECK {
+                    self.lo = self.lo.min(a);
+                    self.hi = self.hi.max(b);
+                }
+            }
+        }
+    }
 }
 
 /// Accumulation cells per bit of [`Scratch::touched`].

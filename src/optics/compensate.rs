@@ -717,13 +717,6 @@ impl Compensator {
         }
     }
 
-    /// Whether the box [r0, r1, c0, c1] lies inside the calibrated area.
-    fn box_inside(&self, [r0, r1, c0, c1]: [usize; 4]) -> bool {
-        let [ir0, ir1] = self.inside_rows;
-        let [ic0, ic1] = self.inside_cols;
-        r0 >= r1 || c0 >= c1 || (r0 >= ir0 && r1 <= ir1 && c0 >= ic0 && c1 <= ic1)
-    }
-
     /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
     /// part of the box outside it is scanned; usually there is none).
     fn lit_outside(&self, m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> bool {
@@ -843,14 +836,23 @@ impl Compensator {
 /// The rasterizer applies the compensation while it writes a layer's mask
 /// ([`crate::raster::Rasterizer::render`]), with the same values as
 /// [`Compensator::apply_in`]: full coverage takes the gray map, other coverage the zone's
-/// table (zone mode) or a search from the pixel's full-coverage level (pixel mode). Not
-/// fused (the rasterizer calls [`apply_in`](Compensator::apply_in) on the finished
-/// coverage): error diffusion (pixel mode, `--dither on`), which reads the neighbours'
-/// coverage, and layers whose lit box reaches outside the calibrated area, which
-/// [`Compensator::layers_outside`] counts on the coverage.
+/// table (zone mode) or a search from the pixel's full-coverage level (pixel mode); the
+/// scan reports layers lit outside the calibrated area (on the coverage, as
+/// [`apply_in`](Compensator::apply_in) counts them). Not fused (the rasterizer calls
+/// [`apply_in`](Compensator::apply_in) on the finished coverage): error diffusion (pixel
+/// mode, `--dither on`), which reads the neighbours' coverage.
 impl crate::raster::CoverageMap for Compensator {
-    fn fusable(&self, lit_box: [usize; 4]) -> bool {
-        !(self.mode == Mode::Pixel && self.dither == Dither::On) && self.box_inside(lit_box)
+    fn fusable(&self, _: [usize; 4]) -> bool {
+        !(self.mode == Mode::Pixel && self.dither == Dither::On)
+    }
+
+    fn area(&self) -> [usize; 4] {
+        let ([r0, r1], [c0, c1]) = (self.inside_rows, self.inside_cols);
+        [r0, r1, c0, c1]
+    }
+
+    fn lit_outside(&self) {
+        self.layers_outside.fetch_add(1, Ordering::Relaxed);
     }
 
     #[inline(always)]
