@@ -3,8 +3,10 @@
 //! Everything that depends only on the calibration and the field is computed once per job
 //! in [`Compensator::new`]: P at every pixel centre, the target E*, and either one
 //! 256-entry lookup table per zone (zone mode) or the full-coverage gray, its level index
-//! and E*/P per pixel (pixel mode). [`Compensator::apply`] then rewrites a layer's coverage
-//! mask in place, touching only lit pixels:
+//! and E*/P per pixel (pixel mode). The rasterizer then applies it while it writes each
+//! layer's mask (the compensator is its [`crate::raster::CoverageMap`], see
+//! [`crate::raster::Rasterizer::render`]), or [`Compensator::apply`] rewrites a finished
+//! coverage mask in place, touching only lit pixels; both give the same bytes:
 //!
 //! * coverage c = v/255 of a pixel asks for irradiance c·E*; the pixel gets the 8-bit level
 //!   whose S·P is nearest to it (so an anti-aliased edge pixel gets S⁻¹(c·E*/P), never
