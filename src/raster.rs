@@ -204,10 +204,15 @@ impl Rasterizer {
                 let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
                 let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
                 line(acc, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
-                r0 = r0.min(y0.min(y1).floor() as usize);
-                r1 = r1.max(y0.max(y1).ceil() as usize);
-                c0 = c0.min(x0.min(x1).floor() as usize);
-                c1 = c1.max(x0.max(x1).ceil() as usize + 1);
+                // Clamped, so non-negative: `as usize` truncates = floors.
+                let ceil = |v: f64| {
+                    let t = v as usize;
+                    t + ((t as f64) < v) as usize
+                };
+                r0 = r0.min(y0.min(y1) as usize);
+                r1 = r1.max(ceil(y0.max(y1)));
+                c0 = c0.min(x0.min(x1) as usize);
+                c1 = c1.max(ceil(x0.max(x1)) + 1);
             }
         }
         let r1 = r1.min(h);
@@ -749,6 +754,25 @@ fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
     }
 }
 
+/// `v.floor()` for `0 ≤ v < 2²⁴` (or −0.0, giving +0.0): truncation is the floor there, and
+/// it is one instruction where `f32::floor` is a libm call (the baseline x86-64 target has
+/// no rounding instruction).
+#[inline(always)]
+fn floor_nn(v: f32) -> f32 {
+    (v as u32) as f32
+}
+
+/// `v.ceil()` for `0 ≤ v < 2²⁴` (or −0.0, giving +0.0), see [`floor_nn`].
+#[inline(always)]
+fn ceil_nn(v: f32) -> f32 {
+    let t = (v as u32) as f32;
+    if t < v {
+        t + 1.0
+    } else {
+        t
+    }
+}
+
 /// Adds the signed-area contribution of the line (x0,y0)→(x1,y1) (pixel units, y down)
 /// to the accumulation buffer: after a prefix sum along each row, every cell holds the
 /// winding-weighted area of its pixel inside the polygon.
@@ -765,8 +789,8 @@ fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
     };
     let dxdy = (xb - xa) / (yb - ya);
     let mut x = xa;
-    let r_start = ya.floor().max(0.0) as usize;
-    let r_end = (yb.ceil() as usize).min(h);
+    let r_start = floor_nn(ya) as usize;
+    let r_end = (ceil_nn(yb) as usize).min(h);
     for r in r_start..r_end {
         let top = (r as f32).max(ya);
         let bot = ((r + 1) as f32).min(yb);
@@ -778,9 +802,9 @@ fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
         let d = dy * dir;
         let base = r * stride;
         let (lx, rx) = if x < xn { (x, xn) } else { (xn, x) };
-        let lf = lx.floor();
+        let lf = floor_nn(lx);
         let li = lf as usize;
-        let rc = rx.ceil();
+        let rc = ceil_nn(rx);
         let ri = rc as usize;
         accum.mark(r, li, ri.max(li + 1));
         let acc = &mut *accum.cells;
@@ -845,6 +869,33 @@ pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_and_ceil_of_non_negative_floats() {
+        let mut vals = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            1.0,
+            1.5,
+            767.99994,
+            768.0,
+            1023.5,
+            16_777_215.0,
+        ];
+        let mut s = 0x9E37_79B9u32;
+        for _ in 0..10_000 {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            vals.push(f32::from_bits(s).abs().min(16_000_000.0));
+            vals.push((s % 2_000_000) as f32 / 1024.0);
+        }
+        for v in vals.into_iter().filter(|v| v.is_finite()) {
+            assert_eq!(floor_nn(v), v.floor() + 0.0, "{v}");
+            assert_eq!(ceil_nn(v), v.ceil() + 0.0, "{v}");
+        }
+    }
 
     fn field() -> Field {
         Field {
