@@ -342,12 +342,6 @@ pub fn prepare(
 }
 
 impl JobOptics {
-    /// Compensates one layer's field mask in place; `lit_box` = [r0, r1, c0, c1] bounds its
-    /// nonzero pixels ([`crate::raster::Scratch::lit_box`]).
-    pub fn apply(&self, mask: &mut crate::raster::Mask, lit_box: [usize; 4]) {
-        self.compensator.apply_in(mask, lit_box);
-    }
-
     /// After all layers: writes the gray map into the bundle and returns the manifest
     /// record and the warnings for the job.
     pub fn finish(
