@@ -323,33 +323,35 @@ impl Edges {
         // The band of each contour point (the start of each edge), once; edge `v` spans
         // the bands of its two points.
         let vband: Vec<u32> = segs.iter().map(|s| band_of(s[1])).collect();
-        let span = |v: usize| {
-            let (a, b) = (vband[v], vband[next[v] as usize]);
-            if a <= b {
-                (a, b)
-            } else {
-                (b, a)
-            }
-        };
-        let mut count = vec![0u32; nb + 1];
-        for v in 0..segs.len() {
-            let (a, b) = span(v);
-            for k in a..=b {
-                count[k as usize + 1] += 1;
+        // Edges per band: a difference array (+1 at an edge's first band, −1 after its
+        // last), then each band's first slot (exclusive prefix sums).
+        let mut start = vec![0u32; nb + 1];
+        for (&a, &w) in vband.iter().zip(&next) {
+            let b = vband[w as usize];
+            let (a, b) = if a <= b { (a, b) } else { (b, a) };
+            start[a as usize] = start[a as usize].wrapping_add(1);
+            start[b as usize + 1] = start[b as usize + 1].wrapping_sub(1);
+        }
+        let (mut active, mut total) = (0u32, 0u32);
+        for s in start[..nb].iter_mut() {
+            active = active.wrapping_add(*s);
+            *s = total;
+            total += active;
+        }
+        start[nb] = total;
+        // Each edge into the bands it spans, in edge order; `start[k]` moves to the end of
+        // band k (the start of band k + 1), so a shift by one gives the bands' starts.
+        let mut items = vec![0u32; total as usize];
+        for (v, (&a, &w)) in vband.iter().zip(&next).enumerate() {
+            let b = vband[w as usize];
+            let (a, b) = if a <= b { (a, b) } else { (b, a) };
+            for s in &mut start[a as usize..=b as usize] {
+                items[*s as usize] = v as u32;
+                *s += 1;
             }
         }
-        for k in 0..nb {
-            count[k + 1] += count[k];
-        }
-        let mut fill = count.clone();
-        let mut items = vec![0u32; count[nb] as usize];
-        for v in 0..segs.len() {
-            let (a, b) = span(v);
-            for k in a..=b {
-                items[fill[k as usize] as usize] = v as u32;
-                fill[k as usize] += 1;
-            }
-        }
+        start.copy_within(0..nb, 1);
+        start[0] = 0;
         Edges {
             segs,
             next,
@@ -357,7 +359,7 @@ impl Edges {
             nodes,
             band_y0: y0,
             band_inv,
-            band_start: count,
+            band_start: start,
             band_items: items,
         }
     }
@@ -1788,6 +1790,48 @@ mod tests {
             got.sort();
             dirs.sort();
             assert_eq!(got, dirs);
+        }
+    }
+
+    #[test]
+    fn band_index_matches_the_reference_construction() {
+        // The band index (difference array, prefix sums, one fill pass) against the direct
+        // construction it replaced: every band's edges, in edge order.
+        let mut rnd = xorshift(0xba5d_0001_u64);
+        for case in 0..60 {
+            let mut contours: Vec<Contour> = Vec::new();
+            for _ in 0..1 + case % 4 {
+                let (cx, cy) = (rnd() * 20.0, rnd() * 20.0);
+                let n = 3 + (rnd() * 60.0) as usize;
+                contours.push(
+                    (0..n)
+                        .map(|i| {
+                            let a = std::f64::consts::TAU * i as f64 / n as f64;
+                            let r = 0.1 + 6.0 * rnd();
+                            [cx + r * a.cos(), cy + r * a.sin()]
+                        })
+                        .collect(),
+                );
+            }
+            if case % 5 == 0 {
+                contours.push(rect(0.0, 0.0, 30.0, 0.5));
+            }
+            let e = Edges::new(&contours);
+            let root = e.nodes.last().unwrap();
+            let nb = e.band_start.len() - 1;
+            let band_of = |y: f64| ((((y - root.lo[1]) * e.band_inv) as usize).min(nb - 1)) as u32;
+            let mut want: Vec<Vec<u32>> = vec![Vec::new(); nb];
+            for (v, s) in e.segs.iter().enumerate() {
+                let (a, b) = (band_of(s[1]), band_of(s[3]));
+                for k in a.min(b)..=a.max(b) {
+                    want[k as usize].push(v as u32);
+                }
+            }
+            for (k, w) in want.iter().enumerate() {
+                let got = &e.band_items[e.band_start[k] as usize..e.band_start[k + 1] as usize];
+                assert_eq!(got, w.as_slice(), "case {case} band {k}");
+            }
+            assert_eq!(e.band_start[nb] as usize, e.band_items.len());
         }
     }
 }
