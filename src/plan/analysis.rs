@@ -64,6 +64,7 @@ pub struct Analyser {
     scratch: ScanScratch,
     cur: Runs,
     below: Runs,
+    search: SearchScratch,
 }
 
 impl Analyser {
@@ -75,6 +76,7 @@ impl Analyser {
             scratch: ScanScratch::default(),
             cur: Runs::default(),
             below: Runs::default(),
+            search: SearchScratch::default(),
         }
     }
 
@@ -115,7 +117,7 @@ impl Analyser {
             self.below = runs;
         }
         LayerAnalysis {
-            max_fill_distance_mm: max_fill_distance(cur).0,
+            max_fill_distance_mm: search(&Edges::new(cur), PRECISION_MM, &mut self.search).0,
             islands,
             bbox_mm: bbox(cur),
         }
@@ -851,6 +853,26 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 /// Everything depends only on the section's edges (no state carried between layers), so
 /// the result does not depend on threads or block boundaries.
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
+    search(e, precision, &mut SearchScratch::default())
+}
+
+/// Buffers of the max fill distance search, kept from layer to layer by an [`Analyser`]
+/// (results never depend on them).
+#[derive(Default)]
+struct SearchScratch {
+    queue: Queue,
+    /// Boundary points of split cells, for their children.
+    arena: Vec<([[f64; 2]; 6], u8)>,
+}
+
+impl std::fmt::Debug for SearchScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SearchScratch")
+    }
+}
+
+/// [`max_fill_distance_with`] with buffers `sc`.
+fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) {
     let Some(root) = e.nodes.last() else {
         return (0.0, [0.0, 0.0]);
     };
@@ -861,7 +883,9 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
         return (0.0, [0.0, 0.0]);
     }
     let half = size / 2.0;
-    let mut heap = Queue::default();
+    let heap = &mut sc.queue;
+    heap.heap.clear();
+    heap.cells.clear();
     let nx = (w / size).ceil() as usize;
     let ny = (h / size).ceil() as usize;
     for i in 0..nx {
@@ -885,7 +909,8 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     let mut best_d = f64::NEG_INFINITY;
     let mut best_c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
     let mut best_near = u32::MAX;
-    let mut arena: Vec<([[f64; 2]; 6], u8)> = Vec::new();
+    let arena = &mut sc.arena;
+    arena.clear();
     let far_corner = |c: [f64; 2], h: f64, q: [f64; 2]| {
         let (dx, dy) = ((c[0] - q[0]).abs() + h, (c[1] - q[1]).abs() + h);
         (dx * dx + dy * dy).sqrt()
