@@ -610,15 +610,11 @@ fn layer_masks(
         }
         None => (None, 1.0),
     };
-    let mut field_mask = raster.coverage(warped.as_deref().unwrap_or(section), scratch);
+    // Coverage (thresholded when binary), compensated while it is drawn: coverage → gray
+    // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
+    let comp = optics.map(|o| &o.compensator);
+    let field_mask = raster.render(warped.as_deref().unwrap_or(section), scratch, binary, comp);
     let area_mm2 = scratch.lit_pixels(&field_mask) * px_area * area_scale;
-    if binary {
-        crate::raster::threshold(&mut field_mask);
-    }
-    if let Some(o) = optics {
-        // Coverage → gray through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
-        o.apply(&mut field_mask, scratch.lit_box());
-    }
     let mut masks = Vec::with_capacity(profile.projector.len());
     for (k, p) in profile.projector.iter().enumerate() {
         let view = match tiler {

@@ -91,8 +91,8 @@ impl Scratch {
     }
 
     /// The lit area of the last [`Rasterizer::coverage`] mask in pixels (sum of values /
-    /// 255), as [`Mask::lit_pixels`] gives it, without another pass over the mask. Only
-    /// valid for that mask as it was returned (before thresholding or compensation).
+    /// 255), as [`Mask::lit_pixels`] gives it, without another pass over the mask. For
+    /// [`Rasterizer::render`], the lit area of the coverage (before threshold and map).
     pub fn lit_pixels(&self, m: &Mask) -> f64 {
         match self.lit_sum {
             Some(sum) => sum as f64 / 255.0,
@@ -151,6 +151,25 @@ impl Rasterizer {
 
     /// Anti-aliased coverage mask of the section (exact area fractions).
     pub fn coverage(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
+        self.render::<NoMap>(contours, scratch, false, None)
+    }
+
+    /// The mask of a layer as it is written: coverage, thresholded at 50 % when `binary`
+    /// (as [`threshold`] does), then mapped through `map` (light compensation) when given.
+    ///
+    /// The map is applied by the scan itself, where it writes each value (one pass over the
+    /// lit box instead of two), unless [`CoverageMap::fusable`] declines the layer or its
+    /// shells overlap (nonzero fallback): then the finished (thresholded) coverage mask goes
+    /// through [`CoverageMap::apply`]. Either way the bytes are the same. The lit area
+    /// ([`Scratch::lit_pixels`]) is always that of the coverage, before threshold and map.
+    #[inline(never)]
+    pub fn render<M: CoverageMap>(
+        &self,
+        contours: &[Contour],
+        scratch: &mut Scratch,
+        binary: bool,
+        map: Option<&M>,
+    ) -> Mask {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
         let stride = w + 2;
@@ -194,60 +213,51 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
-        scratch.lit = [r0, r1, c0, c1.min(w)];
-        let mut max_winding = 0.0f32;
-        let end = c1.min(w);
-        let mut lit_sum = 0u64;
-        for r in r0..r1 {
-            let row = &mut acc.cells[r * stride..(r + 1) * stride];
-            let marks = &mut acc.touched[r * words..(r + 1) * words];
-            let dst = &mut out.data[r * w..(r + 1) * w];
-            let mut sum = 0.0f32;
-            let mut val = 0u8;
-            let mut col = c0;
-            for (wi, m) in marks.iter_mut().enumerate() {
-                let mut bits = std::mem::take(m);
-                while bits != 0 {
-                    let b = wi * 64 + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
-                    // Between marked blocks every cell is zero: the value repeats.
-                    let from = bs.max(col).min(end);
-                    if val != 0 {
-                        dst[col..from].fill(val);
-                        lit_sum += val as u64 * (from - col) as u64;
+        let lit = [r0, r1, c0, c1.min(w)];
+        scratch.lit = lit;
+        let fused = map.filter(|m| m.fusable(lit));
+        let span = ScanSpan {
+            r0,
+            r1,
+            c0,
+            end: c1.min(w),
+        };
+        let mut outside = false;
+        let (lit_sum, max_winding) = match (fused, binary) {
+            (Some(m), binary) => {
+                // Whether the scan must look for lit pixels outside the map's area.
+                let [ar0, ar1, ac0, ac1] = m.area();
+                let check = r0 < ar0 || r1 > ar1 || c0 < ac0 || c1.min(w) > ac1;
+                let data = &mut out.data;
+                let o = &mut outside;
+                match (binary, check) {
+                    (false, false) => {
+                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o)
                     }
-                    let to = be.min(end).max(from);
-                    for c in from..to {
-                        let a = row[c];
-                        if a != 0.0 {
-                            sum += a;
-                            // Cleared as it is read: the buffer is all zeros after the scan.
-                            row[c] = 0.0;
-                            let v = sum.abs();
-                            max_winding = max_winding.max(v);
-                            val = (v.min(1.0) * 255.0 + 0.5) as u8;
-                        }
-                        dst[c] = val;
-                        lit_sum += val as u64;
-                    }
-                    // Cells right of the field (edges carry area one column past their
-                    // rightmost pixel): not part of the mask, just cleared.
-                    row[to.max(bs)..be].fill(0.0);
-                    col = to;
+                    (false, true) => scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o),
+                    (true, false) => scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o),
+                    (true, true) => scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o),
                 }
             }
-            if val != 0 && col < end {
-                dst[col..end].fill(val);
-                lit_sum += val as u64 * (end - col) as u64;
-            }
-        }
+            (None, false) => scan_cells::<false>(acc, &mut out.data, w, span),
+            (None, true) => scan_cells::<true>(acc, &mut out.data, w, span),
+        };
         scratch.lit_sum = Some(lit_sum);
+        let mut mapped = fused.is_some();
         if max_winding > 1.001 {
             // Overlapping shells: the accumulated winding integral over-counts pixels where
             // two boundaries meet; redo the layer with the exact nonzero rule.
             self.coverage_nonzero(contours, &mut out);
-            scratch.lit_sum = None;
+            scratch.lit_sum = Some(box_sum(&out, lit));
+            if binary {
+                threshold_in(&mut out, lit);
+            }
+            mapped = false;
+        }
+        match (map, mapped) {
+            (Some(m), false) => m.apply(&mut out, lit),
+            (Some(m), true) if outside => m.lit_outside(),
+            _ => {}
         }
         out
     }
@@ -341,9 +351,7 @@ impl Rasterizer {
     /// Binary mask: 255 where the anti-aliased coverage is at least 50 % (value ≥ 128),
     /// else 0.
     pub fn binary(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
-        let mut m = self.coverage(contours, scratch);
-        threshold(&mut m);
-        m
+        self.render::<NoMap>(contours, scratch, true, None)
     }
 }
 
@@ -351,6 +359,347 @@ impl Rasterizer {
 pub fn threshold(m: &mut Mask) {
     for v in &mut m.data {
         *v = if *v >= 128 { 255 } else { 0 };
+    }
+}
+
+/// Thresholds the box [r0, r1, c0, c1] of a mask at 50 % in place (the mask is zero
+/// outside it).
+fn threshold_in(m: &mut Mask, [r0, r1, c0, c1]: [usize; 4]) {
+    let w = m.width as usize;
+    for r in r0..r1 {
+        for v in &mut m.data[r * w + c0..r * w + c1] {
+            *v = if *v >= 128 { 255 } else { 0 };
+        }
+    }
+}
+
+/// Sum of a mask's values inside the box [r0, r1, c0, c1].
+fn box_sum(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> u64 {
+    let w = m.width as usize;
+    (r0..r1)
+        .map(|r| {
+            m.data[r * w + c0..r * w + c1]
+                .iter()
+                .map(|&v| v as u32)
+                .sum::<u32>() as u64
+        })
+        .sum()
+}
+
+/// A per-pixel map from coverage to mask values that the rasterizer's scan can apply as it
+/// writes the mask ([`Rasterizer::render`]): light compensation
+/// ([`crate::optics::Compensator`]). Coverage 0 always stays 0.
+pub trait CoverageMap {
+    /// Whether the scan may apply the map to a layer whose lit pixels all lie in
+    /// `lit_box` = [r0, r1, c0, c1]; if not, [`apply`](Self::apply) maps the finished mask
+    /// (e.g. when the map must look at the coverage of other pixels first).
+    fn fusable(&self, lit_box: [usize; 4]) -> bool;
+    /// The map's area [r0, r1, c0, c1] (rows r0..r1, columns c0..c1): the scan reports
+    /// through [`lit_outside`](Self::lit_outside) a layer it mapped that has a lit pixel
+    /// (coverage, thresholded when binary, above zero) outside it.
+    fn area(&self) -> [usize; 4];
+    /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area).
+    fn lit_outside(&self);
+    /// Row `r` of the full-coverage map: what coverage 255 becomes in each column.
+    fn full_row(&self, r: usize) -> &[u8];
+    /// What coverage `v` (1..=254) becomes at row `r`, column `c`.
+    fn edge(&self, r: usize, c: usize, v: u8) -> u8;
+    /// Maps a finished coverage mask in place; it is zero outside `lit_box`.
+    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]);
+}
+
+/// No map (the [`Rasterizer::coverage`] and [`Rasterizer::binary`] masks).
+enum NoMap {}
+
+impl CoverageMap for NoMap {
+    fn fusable(&self, _: [usize; 4]) -> bool {
+        match *self {}
+    }
+    fn area(&self) -> [usize; 4] {
+        match *self {}
+    }
+    fn lit_outside(&self) {
+        match *self {}
+    }
+    fn full_row(&self, _: usize) -> &[u8] {
+        match *self {}
+    }
+    fn edge(&self, _: usize, _: usize, _: u8) -> u8 {
+        match *self {}
+    }
+    fn apply(&self, _: &mut Mask, _: [usize; 4]) {
+        match *self {}
+    }
+}
+
+/// How [`scan_runs`] writes runs of equal (thresholded) coverage into a mask row.
+trait Emit {
+    /// Per-row state.
+    type Row<'a>: Copy
+    where
+        Self: 'a;
+    fn row(&self, r: usize) -> Self::Row<'_>;
+    /// Rows r0..r1 and columns c0..c1 outside which lit pixels are reported.
+    fn area(&self) -> [usize; 4];
+    /// Writes columns a..b of `dst` (zero there) for (thresholded) coverage `v` ≠ 0.
+    fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
+}
+
+/// Values through a [`CoverageMap`].
+struct Mapped<'m, M>(&'m M);
+
+impl<M: CoverageMap> Emit for Mapped<'_, M> {
+    type Row<'a>
+        = (&'a M, &'a [u8], usize)
+    where
+        Self: 'a;
+    #[inline(always)]
+    fn row(&self, r: usize) -> (&M, &[u8], usize) {
+        (self.0, self.0.full_row(r), r)
+    }
+    fn area(&self) -> [usize; 4] {
+        self.0.area()
+    }
+    #[inline(always)]
+    fn fill((m, full, r): (&M, &[u8], usize), dst: &mut [u8], a: usize, b: usize, v: u8) {
+        let (d, f) = (&mut dst[a..b], &full[a..b]);
+        if v == 255 {
+            if d.len() <= 8 {
+                d.iter_mut().zip(f).for_each(|(x, &g)| *x = g);
+            } else {
+                d.copy_from_slice(f);
+            }
+        } else {
+            for (c, x) in d.iter_mut().enumerate() {
+                *x = m.edge(r, a + c, v);
+            }
+        }
+    }
+}
+
+/// Maps coverage values `data` in place: 0 stays 0, 255 takes `full` (same index), others
+/// `edge(index, value)`. Eight bytes at a time: all-off words are skipped, all-on words
+/// copied from `full`, so the work is a few instructions per eight pixels away from edges.
+#[inline(always)]
+pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
+    let n = data.len().min(full.len());
+    let (data, full) = (&mut data[..n], &full[..n]);
+    let rd = |d: &[u8], i: usize| u64::from_ne_bytes(d[i..i + 8].try_into().expect("8 bytes"));
+    let px = |d: &mut u8, f: u8, i: usize| {
+        *d = match *d {
+            0 => 0,
+            255 => f,
+            v => edge(i, v),
+        }
+    };
+    let mut i = 0;
+    while i + 8 <= n {
+        let w = rd(data, i);
+        if w == 0 {
+            i += 8;
+            while i + 8 <= n && rd(data, i) == 0 {
+                i += 8;
+            }
+        } else if w == u64::MAX {
+            data[i..i + 8].copy_from_slice(&full[i..i + 8]);
+            i += 8;
+            while i + 8 <= n && rd(data, i) == u64::MAX {
+                data[i..i + 8].copy_from_slice(&full[i..i + 8]);
+                i += 8;
+            }
+        } else {
+            for k in i..i + 8 {
+                px(&mut data[k], full[k], k);
+            }
+            i += 8;
+        }
+    }
+    for k in i..n {
+        px(&mut data[k], full[k], k);
+    }
+}
+
+/// The rows and columns the scans visit: rows r0..r1, columns c0..end.
+#[derive(Clone, Copy)]
+struct ScanSpan {
+    r0: usize,
+    r1: usize,
+    c0: usize,
+    end: usize,
+}
+
+/// The prefix-sum scan of the accumulation buffer for masks without a map: writes the
+/// coverage (thresholded when `BIN`), clears the buffer and its block marks as it reads
+/// them, and returns the sum of the coverage values (before threshold) and the largest
+/// winding seen. Only the touched blocks are visited: between them every cell is zero and
+/// the value repeats. Each cell of a touched block is written as it is read.
+fn scan_cells<const BIN: bool>(
+    acc: &mut Accum,
+    data: &mut [u8],
+    w: usize,
+    ScanSpan { r0, r1, c0, end }: ScanSpan,
+) -> (u64, f32) {
+    let (stride, words) = (acc.stride, acc.words);
+    let th = |v: u8| match (BIN, v >= 128) {
+        (false, _) => v,
+        (true, true) => 255,
+        (true, false) => 0,
+    };
+    let mut max_winding = 0.0f32;
+    let mut lit_sum = 0u64;
+    for r in r0..r1 {
+        let row = &mut acc.cells[r * stride..(r + 1) * stride];
+        let marks = &mut acc.touched[r * words..(r + 1) * words];
+        let dst = &mut data[r * w..(r + 1) * w];
+        let mut sum = 0.0f32;
+        let mut val = 0u8;
+        // `val` thresholded (BIN).
+        let mut tv = 0u8;
+        let mut col = c0;
+        for (wi, m) in marks.iter_mut().enumerate() {
+            let mut bits = std::mem::take(m);
+            while bits != 0 {
+                let b = wi * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                // Between marked blocks every cell is zero: the value repeats.
+                let from = bs.max(col).min(end);
+                if val != 0 {
+                    dst[col..from].fill(tv);
+                    lit_sum += val as u64 * (from - col) as u64;
+                }
+                let to = be.min(end).max(from);
+                for c in from..to {
+                    let a = row[c];
+                    if a != 0.0 {
+                        sum += a;
+                        // Cleared as it is read: the buffer is all zeros after the scan.
+                        row[c] = 0.0;
+                        let v = sum.abs();
+                        max_winding = max_winding.max(v);
+                        val = (v.min(1.0) * 255.0 + 0.5) as u8;
+                        tv = th(val);
+                    }
+                    dst[c] = tv;
+                    lit_sum += val as u64;
+                }
+                // Cells right of the field (edges carry area one column past their
+                // rightmost pixel): not part of the mask, just cleared.
+                row[to.max(bs)..be].fill(0.0);
+                col = to;
+            }
+        }
+        if val != 0 && col < end {
+            dst[col..end].fill(tv);
+            lit_sum += val as u64 * (end - col) as u64;
+        }
+    }
+    (lit_sum, max_winding)
+}
+
+/// [`scan_cells`] for masks through a map (`emit`): the same values, read the same way,
+/// but written run by run. The value changes only at nonzero cells: the scan follows runs
+/// of equal coverage and writes each run once, when it ends (zero runs are left as they
+/// are), so a run of full coverage is one copy from the map's full-coverage row.
+#[inline(never)]
+fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
+    acc: &mut Accum,
+    data: &mut [u8],
+    w: usize,
+    ScanSpan { r0, r1, c0, end }: ScanSpan,
+    emit: E,
+    outside: &mut bool,
+) -> (u64, f32) {
+    let [ar0, ar1, ac0, ac1] = emit.area();
+    let (stride, words) = (acc.stride, acc.words);
+    let mut max_winding = 0.0f32;
+    let mut lit_sum = 0u64;
+    for r in r0..r1 {
+        let row = &mut acc.cells[r * stride..(r + 1) * stride];
+        let marks = &mut acc.touched[r * words..(r + 1) * words];
+        let mut sink = Runs::<E, BIN, CHECK> {
+            er: emit.row(r),
+            dst: &mut data[r * w..(r + 1) * w],
+            lit_sum: 0,
+            lo: usize::MAX,
+            hi: 0,
+        };
+        let mut sum = 0.0f32;
+        // The current run: columns start.. of coverage `val`.
+        let mut val = 0u8;
+        let mut start = c0;
+        for (wi, m) in marks.iter_mut().enumerate() {
+            let mut bits = std::mem::take(m);
+            while bits != 0 {
+                let b = wi * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                let from = bs.max(c0).min(end);
+                let to = be.min(end).max(from);
+                // Indexed (not zipped): measurably fewer instructions in this hot loop.
+                #[allow(clippy::needless_range_loop)]
+                for c in from..to {
+                    let a = row[c];
+                    if a != 0.0 {
+                        sum += a;
+                        // Cleared as it is read: the buffer is all zeros after the scan.
+                        row[c] = 0.0;
+                        let v = sum.abs();
+                        max_winding = max_winding.max(v);
+                        let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
+                        if nv != val {
+                            sink.end(start, c, val);
+                            (start, val) = (c, nv);
+                        }
+                    }
+                }
+                // Cells right of the field (edges carry area one column past their
+                // rightmost pixel): not part of the mask, just cleared.
+                row[to.max(bs)..be].fill(0.0);
+            }
+        }
+        if start < end {
+            sink.end(start, end, val);
+        }
+        lit_sum += sink.lit_sum;
+        if CHECK && sink.lo < sink.hi {
+            *outside |= r < ar0 || r >= ar1 || sink.lo < ac0 || sink.hi > ac1;
+        }
+    }
+    (lit_sum, max_winding)
+}
+
+/// Where [`scan_runs`] puts the runs of one row.
+struct Runs<'a, E: Emit + 'a, const BIN: bool, const CHECK: bool> {
+    er: E::Row<'a>,
+    dst: &'a mut [u8],
+    /// Sum of the coverage values of the row.
+    lit_sum: u64,
+    /// Columns lo..hi hold the row's lit pixels (thresholded coverage above zero); kept
+    /// when `CHECK` (the lit box is not inside the map's area).
+    lo: usize,
+    hi: usize,
+}
+
+impl<E: Emit, const BIN: bool, const CHECK: bool> Runs<'_, E, BIN, CHECK> {
+    /// Columns a..b have coverage `v`.
+    #[inline(always)]
+    fn end(&mut self, a: usize, b: usize, v: u8) {
+        if v != 0 {
+            self.lit_sum += v as u64 * (b - a) as u64;
+            let t = match (BIN, v >= 128) {
+                (false, _) => v,
+                (true, true) => 255,
+                (true, false) => 0,
+            };
+            if t != 0 {
+                E::fill(self.er, self.dst, a, b, t);
+                if CHECK {
+                    self.lo = self.lo.min(a);
+                    self.hi = self.hi.max(b);
+                }
+            }
+        }
     }
 }
 
@@ -403,6 +752,7 @@ fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
 /// Adds the signed-area contribution of the line (x0,y0)→(x1,y1) (pixel units, y down)
 /// to the accumulation buffer: after a prefix sum along each row, every cell holds the
 /// winding-weighted area of its pixel inside the polygon.
+#[inline(always)]
 fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
     let stride = accum.stride;
     if y0 == y1 {

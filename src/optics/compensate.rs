@@ -3,8 +3,10 @@
 //! Everything that depends only on the calibration and the field is computed once per job
 //! in [`Compensator::new`]: P at every pixel centre, the target E*, and either one
 //! 256-entry lookup table per zone (zone mode) or the full-coverage gray, its level index
-//! and E*/P per pixel (pixel mode). [`Compensator::apply`] then rewrites a layer's coverage
-//! mask in place, touching only lit pixels:
+//! and E*/P per pixel (pixel mode). The rasterizer then applies it while it writes each
+//! layer's mask (the compensator is its [`crate::raster::CoverageMap`], see
+//! [`crate::raster::Rasterizer::render`]), or [`Compensator::apply`] rewrites a finished
+//! coverage mask in place, touching only lit pixels; both give the same bytes:
 //!
 //! * coverage c = v/255 of a pixel asks for irradiance c·E*; the pixel gets the 8-bit level
 //!   whose S·P is nearest to it (so an anti-aliased edge pixel gets S⁻¹(c·E*/P), never
@@ -19,7 +21,7 @@ use super::response::Levels;
 use super::{Calibration, Dither, Mode};
 use crate::bundle::Spreads;
 use crate::profile::Field;
-use crate::raster::Mask;
+use crate::raster::{map_words, Mask};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Per-job compensation tables for one projector's calibration over the field.
@@ -141,61 +143,80 @@ fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     best.map_or(emax, |b| b.1)
 }
 
-/// Maps coverage values `data` to grays in place: 0 stays 0, 255 takes `full` (the
-/// full-coverage gray of the same pixel), others `edge(index, value)`. Eight bytes at a
-/// time: runs of all-off words are skipped and runs of all-on words copied from `full` in
-/// tight loops, so the work is a few instructions per eight pixels away from part edges.
-#[inline]
-fn map_row(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
-    let n = data.len().min(full.len());
-    let (data, full) = (&mut data[..n], &full[..n]);
-    let rd = |d: &[u8], i: usize| u64::from_ne_bytes(d[i..i + 8].try_into().expect("8 bytes"));
-    let px = |d: &mut u8, f: u8, i: usize| {
-        *d = match *d {
-            0 => 0,
-            255 => f,
-            v => edge(i, v),
-        }
-    };
-    let mut i = 0;
-    while i + 8 <= n {
-        let w = rd(data, i);
-        if w == 0 {
-            i += 8;
-            while i + 8 <= n && rd(data, i) == 0 {
-                i += 8;
-            }
-        } else if w == u64::MAX {
-            data[i..i + 8].copy_from_slice(&full[i..i + 8]);
-            i += 8;
-            while i + 8 <= n && rd(data, i) == u64::MAX {
-                data[i..i + 8].copy_from_slice(&full[i..i + 8]);
-                i += 8;
-            }
-        } else {
-            for k in i..i + 8 {
-                px(&mut data[k], full[k], k);
-            }
-            i += 8;
+/// (max − min) / mean of values added one by one, %.
+#[derive(Debug, Clone, Copy)]
+struct Spread {
+    lo: f64,
+    hi: f64,
+    sum: f64,
+    n: usize,
+}
+
+impl Spread {
+    fn new() -> Spread {
+        Spread {
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+            sum: 0.0,
+            n: 0,
         }
     }
-    for k in i..n {
-        px(&mut data[k], full[k], k);
+
+    #[inline(always)]
+    fn add(&mut self, x: f64) {
+        self.lo = self.lo.min(x);
+        self.hi = self.hi.max(x);
+        self.sum += x;
+        self.n += 1;
+    }
+
+    /// Adds `v as f64 * s` for every `v` of `vals`, in order. The extremes come from the
+    /// extremes of `vals`: rounding is monotone, so the product of the smallest value is
+    /// the smallest product (largest for negative `s`).
+    #[inline]
+    fn add_run(&mut self, vals: &[f32], s: f64) {
+        let Some(&first) = vals.first() else {
+            return;
+        };
+        let (lo, hi) = vals
+            .iter()
+            .fold((first, first), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        let (a, b) = (lo as f64 * s, hi as f64 * s);
+        self.lo = self.lo.min(a.min(b));
+        self.hi = self.hi.max(a.max(b));
+        let mut sum = self.sum;
+        for &v in vals {
+            sum += v as f64 * s;
+        }
+        self.sum = sum;
+        self.n += vals.len();
+    }
+
+    fn pct(&self) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        (self.hi - self.lo) / (self.sum / self.n as f64) * 100.0
     }
 }
 
 fn spread(v: impl Iterator<Item = f64>) -> f64 {
-    let (mut lo, mut hi, mut sum, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
-    for x in v {
-        lo = lo.min(x);
-        hi = hi.max(x);
-        sum += x;
-        n += 1;
+    let mut s = Spread::new();
+    v.for_each(|x| s.add(x));
+    s.pct()
+}
+
+/// The runs of equal values of a non-decreasing `zone_of_col`: (zone column, first
+/// column, end column).
+fn zone_segments(zone_of_col: &[u16]) -> Vec<(usize, usize, usize)> {
+    let mut out: Vec<(usize, usize, usize)> = Vec::new();
+    for (c, &z) in zone_of_col.iter().enumerate() {
+        match out.last_mut() {
+            Some(l) if l.0 == z as usize => l.2 = c + 1,
+            _ => out.push((z as usize, c, c + 1)),
+        }
     }
-    if n == 0 {
-        return 0.0;
-    }
-    (hi - lo) / (sum / n as f64) * 100.0
+    out
 }
 
 /// P at every pixel centre of the field (row-major, top row first), following the
@@ -219,30 +240,37 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
             (xc >= px0 && xc <= px1).then(|| (xc - fm.origin_mm[0]) * inv)
         })
         .collect();
+    let ua = us.iter().position(Option::is_some).unwrap_or(w);
+    let ub = us.iter().rposition(Option::is_some).map_or(ua, |i| i + 1);
+    let uv: Vec<f64> = us[ua..ub].iter().map(|u| u.unwrap_or(f64::NAN)).collect();
     let mut out = vec![0f32; w * h];
     let mut cache = super::field::RowCache::default();
     let mut exact = vec![0f64; w];
     for (r, row) in out.chunks_exact_mut(w).enumerate() {
         let y = (h as f64 - r as f64 - 0.5) * p;
         let yc = y.clamp(y0 - m, y1 + m);
-        let mut rest = false;
-        if yc >= py0 && yc <= py1 {
+        let rest = if yc >= py0 && yc <= py1 {
             let a = fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv);
-            for (o, u) in row.iter_mut().zip(&us) {
-                match u {
-                    Some(u) => *o = a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32,
-                    None => rest = true,
-                }
+            let seg = &mut row[ua..ub];
+            // Horner in u; a cubic's four coefficients as an array (unrolled).
+            match <[f64; 4]>::try_from(a.as_slice()) {
+                Ok(a4) => horner_run(seg, &uv, |u| {
+                    a4.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
+                }),
+                Err(_) => horner_run(seg, &uv, |u| {
+                    a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
+                }),
             }
             // Separate passes: exp must not be evaluated (speculatively) for polynomials.
             match form {
-                Form::Exponential => row.iter_mut().for_each(|o| *o = scf * o.exp()),
-                Form::InverseSquare => row.iter_mut().for_each(|o| *o = scf / (*o * *o)),
-                Form::Polynomial => row.iter_mut().for_each(|o| *o *= scf),
+                Form::Exponential => seg.iter_mut().for_each(|o| *o = scf * o.exp()),
+                Form::InverseSquare => seg.iter_mut().for_each(|o| *o = scf / (*o * *o)),
+                Form::Polynomial => seg.iter_mut().for_each(|o| *o *= scf),
             }
+            ua > 0 || ub < w
         } else {
-            rest = true;
-        }
+            true
+        };
         if rest {
             fm.eval_row(y, &xs, &mut cache, &mut exact);
             let inside_row = yc >= py0 && yc <= py1;
@@ -254,6 +282,13 @@ fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
         }
     }
     out
+}
+
+#[inline(always)]
+fn horner_run(seg: &mut [f32], us: &[f64], f: impl Fn(f64) -> f32) {
+    for (o, &u) in seg.iter_mut().zip(us) {
+        *o = f(u);
+    }
 }
 
 impl Compensator {
@@ -324,7 +359,6 @@ impl Compensator {
         // most of the field several times per job).
         let inside_rows_iter = || (r0..=r1).map(move |r| r * w + c0..r * w + c1 + 1);
         let inside_iter = || inside_rows_iter().flatten();
-        let mean = inside_iter().map(|i| pp[i] as f64).sum::<f64>() / pixels_inside as f64 * s_max;
 
         // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
         // holding its centre. Zone rows are stored top first, like the image.
@@ -341,16 +375,32 @@ impl Compensator {
             })
             .collect();
         let nz = zcols * zrows;
+        let segs = zone_segments(&zone_of_col);
+        // One pass over P, row-major like every sum here (the sums do not depend on how
+        // the passes are arranged): the zone sums (all pixels), and over the calibrated
+        // area the mean and the spread before compensation.
         let mut zsum = vec![0f64; nz];
         let mut zcnt = vec![0usize; nz];
-        for r in 0..h {
+        let mut inside_sum = 0.0f64;
+        let mut before_px = Spread::new();
+        for (r, row) in pp.chunks_exact(w).enumerate() {
             let zr = zone_of_row[r] as usize * zcols;
-            for c in 0..w {
-                let z = zr + zone_of_col[c] as usize;
-                zsum[z] += pp[r * w + c] as f64;
-                zcnt[z] += 1;
+            for &(zc, a, b) in &segs {
+                let mut acc = zsum[zr + zc];
+                for &v in &row[a..b] {
+                    acc += v as f64;
+                }
+                zsum[zr + zc] = acc;
+                zcnt[zr + zc] += b - a;
+            }
+            if (r0..=r1).contains(&r) {
+                for &v in &row[c0..=c1] {
+                    inside_sum += v as f64;
+                }
+                before_px.add_run(&row[c0..=c1], s_max);
             }
         }
+        let mean = inside_sum / pixels_inside as f64 * s_max;
         let zone_p: Vec<f64> = zsum
             .iter()
             .zip(&zcnt)
@@ -373,7 +423,7 @@ impl Compensator {
                 .filter(|&z| zone_inside[z])
                 .map(|z| zone_p[z] * s_max),
         );
-        let before_pixel = spread(inside_iter().map(|i| pp[i] as f64 * s_max));
+        let before_pixel = before_px.pct();
 
         let mut comp = Compensator {
             mode,
@@ -478,19 +528,20 @@ impl Compensator {
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
                 // Per-pixel prediction: each row of a zone shows one gray.
-                let zone_of_col = &comp.zone_of_col;
                 let zone_of_row = &comp.zone_of_row;
                 let pp = &pp;
-                let after_pixel = spread((r0..=r1).flat_map(|r| {
+                let mut after_px = Spread::new();
+                for r in r0..=r1 {
                     let zr = zone_of_row[r] as usize * zcols;
-                    let row_s: Vec<f64> = (0..zcols)
-                        .map(|zc| {
-                            let (g0, g1, k) = mix[zr + zc];
-                            s_of(if upper_row(r, k) { g1 } else { g0 })
-                        })
-                        .collect();
-                    (c0..=c1).map(move |c| pp[r * w + c] as f64 * row_s[zone_of_col[c] as usize])
-                }));
+                    let row = &pp[r * w..(r + 1) * w];
+                    for &(zc, a, b) in &segs {
+                        let (a, b) = (a.max(c0), b.min(c1 + 1));
+                        let (g0, g1, k) = mix[zr + zc];
+                        let sz = s_of(if upper_row(r, k) { g1 } else { g0 });
+                        after_px.add_run(&row[a..b.max(a)], sz);
+                    }
+                }
+                let after_pixel = after_px.pct();
                 // Tables: the lower-gray table of every zone, plus an upper-gray one for
                 // mixing zones; each row of a zone uses one of them (`upper_row`).
                 let mut tables = Vec::with_capacity(nz + mixed as usize);
@@ -528,8 +579,8 @@ impl Compensator {
                 let mut full = vec![0u8; w * h];
                 for (r, row) in full.chunks_exact_mut(w).enumerate() {
                     let tabs = &row_tables[r * zcols..(r + 1) * zcols];
-                    for (o, &zc) in row.iter_mut().zip(&comp.zone_of_col) {
-                        *o = tables[tabs[zc as usize] as usize][255];
+                    for &(zc, a, b) in &segs {
+                        row[a..b].fill(tables[tabs[zc] as usize][255]);
                     }
                 }
                 comp.full = full;
@@ -692,7 +743,7 @@ impl Compensator {
         let tabs = &self.row_tables[r * self.zcols..(r + 1) * self.zcols];
         let cols = &self.zone_of_col[a..b];
         let full = &self.full[r * self.w + a..r * self.w + b];
-        map_row(&mut row[a..b], full, |k, v| {
+        map_words(&mut row[a..b], full, |k, v| {
             self.tables[tabs[cols[k] as usize] as usize][v as usize]
         });
     }
@@ -704,7 +755,7 @@ impl Compensator {
         let base = r * self.w;
         let fidx = &self.full_idx[base + a..base + b];
         let t = &self.t[base + a..base + b];
-        map_row(&mut row[a..b], &self.full[base + a..base + b], |k, v| {
+        map_words(&mut row[a..b], &self.full[base + a..base + b], |k, v| {
             let target = v as f64 / 255.0 * t[k] as f64;
             lv.gray[lv.nearest_from(fidx[k] as usize, target)]
         });
@@ -781,6 +832,50 @@ impl Compensator {
         } else {
             0.0
         }
+    }
+}
+
+/// The rasterizer applies the compensation while it writes a layer's mask
+/// ([`crate::raster::Rasterizer::render`]), with the same values as
+/// [`Compensator::apply_in`]: full coverage takes the gray map, other coverage the zone's
+/// table (zone mode) or a search from the pixel's full-coverage level (pixel mode); the
+/// scan reports layers lit outside the calibrated area (on the coverage, as
+/// [`apply_in`](Compensator::apply_in) counts them). Not fused (the rasterizer calls
+/// [`apply_in`](Compensator::apply_in) on the finished coverage): error diffusion (pixel
+/// mode, `--dither on`), which reads the neighbours' coverage.
+impl crate::raster::CoverageMap for Compensator {
+    fn fusable(&self, _: [usize; 4]) -> bool {
+        !(self.mode == Mode::Pixel && self.dither == Dither::On)
+    }
+
+    fn area(&self) -> [usize; 4] {
+        let ([r0, r1], [c0, c1]) = (self.inside_rows, self.inside_cols);
+        [r0, r1, c0, c1]
+    }
+
+    fn lit_outside(&self) {
+        self.layers_outside.fetch_add(1, Ordering::Relaxed);
+    }
+
+    #[inline(always)]
+    fn full_row(&self, r: usize) -> &[u8] {
+        &self.full[r * self.w..(r + 1) * self.w]
+    }
+
+    #[inline(always)]
+    fn edge(&self, r: usize, c: usize, v: u8) -> u8 {
+        if self.mode == Mode::Zone {
+            let t = self.row_tables[r * self.zcols + self.zone_of_col[c] as usize];
+            self.tables[t as usize][v as usize]
+        } else {
+            let (lv, i) = (&self.levels, r * self.w + c);
+            let target = v as f64 / 255.0 * self.t[i] as f64;
+            lv.gray[lv.nearest_from(self.full_idx[i] as usize, target)]
+        }
+    }
+
+    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) {
+        self.apply_in(m, lit_box);
     }
 }
 
@@ -886,6 +981,98 @@ mod tests {
             // Target: the dimmest zone (or pixel) fully on, give or take the window.
             let t = c.prediction.target;
             assert!((0.95..=(1.0 + 2.5 / 40.0) * 1.02).contains(&t), "{t}");
+        }
+    }
+
+    #[test]
+    fn compensation_in_the_scan_equals_rasterize_then_apply() {
+        // Fixed-seed random star polygons (some overlapping: the nonzero fallback; some
+        // reaching above the calibrated area: the unfused path) on a 40 × 30 mm field of
+        // 0.2 mm pixels, every mode, dithering and binary/anti-aliased: the mask drawn with
+        // the compensation in the scan equals coverage → threshold → `apply_in`, the lit
+        // area is that of the coverage, and the layers outside are counted alike.
+        use crate::raster::{threshold, CoverageMap, Rasterizer, Scratch};
+        let (mut cal, _) = setup();
+        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
+        let field = Field {
+            width_px: 200,
+            height_px: 150,
+            pixel_mm: 0.2,
+        };
+        let raster = Rasterizer::new(field);
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let star = |rnd: &mut dyn FnMut() -> f64| {
+            let (cx, cy) = (2.0 + rnd() * 36.0, 2.0 + rnd() * 27.0);
+            let n = 3 + (rnd() * 40.0) as usize;
+            let rmax = 0.3 + rnd() * 12.0;
+            (0..n)
+                .map(|i| {
+                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                    let rad = rmax * (0.3 + 0.7 * rnd());
+                    [
+                        (cx + rad * a.cos()).clamp(0.0, 40.0),
+                        (cy + rad * a.sin()).clamp(0.0, 30.0),
+                    ]
+                })
+                .collect::<Vec<[f64; 2]>>()
+        };
+        let layers: Vec<Vec<Vec<[f64; 2]>>> = (0..48)
+            .map(|case| {
+                let first = star(&mut rnd);
+                let mut shapes = vec![first.clone()];
+                if case % 5 == 0 {
+                    // The same shell shifted by 0.3 mm: overlapping shells.
+                    shapes.push(first.iter().map(|p| [p[0] + 0.3, p[1]]).collect());
+                }
+                shapes
+            })
+            .collect();
+        for (mode, dither) in [
+            (Mode::Zone, Dither::Auto),
+            (Mode::Zone, Dither::On),
+            (Mode::Zone, Dither::Off),
+            (Mode::Pixel, Dither::Off),
+            (Mode::Pixel, Dither::On),
+        ] {
+            for binary in [false, true] {
+                let fused = Compensator::new(&cal, &field, mode, dither).unwrap();
+                let reference = Compensator::new(&cal, &field, mode, dither).unwrap();
+                let (mut s_fused, mut s_ref) = (Scratch::default(), Scratch::default());
+                let mut in_scan = 0;
+                for (case, shapes) in layers.iter().enumerate() {
+                    let mut want = raster.coverage(shapes, &mut s_ref);
+                    let area = s_ref.lit_pixels(&want);
+                    let lit = s_ref.lit_box();
+                    if binary {
+                        threshold(&mut want);
+                    }
+                    reference.apply_in(&mut want, lit);
+                    let got = raster.render(shapes, &mut s_fused, binary, Some(&fused));
+                    let what = format!("{mode:?} {dither:?} binary {binary} case {case}");
+                    assert!(got == want, "{what}: masks differ");
+                    assert_eq!(s_fused.lit_pixels(&got), area, "{what}: lit area");
+                    in_scan += fused.fusable(lit) as usize;
+                    s_fused.recycle(got);
+                    s_ref.recycle(want);
+                }
+                assert_eq!(
+                    fused.layers_outside(),
+                    reference.layers_outside(),
+                    "{mode:?} {dither:?} binary {binary}"
+                );
+                assert!(fused.layers_outside() > 0);
+                let pixel_dither = mode == Mode::Pixel && dither == Dither::On;
+                assert!(
+                    pixel_dither || in_scan > 20,
+                    "{mode:?} {dither:?}: {in_scan}"
+                );
+            }
         }
     }
 
