@@ -244,8 +244,12 @@ impl Rasterizer {
                     (true, true) => scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o),
                 }
             }
-            (None, false) => scan_cells::<false>(acc, &mut out.data, w, span),
-            (None, true) => scan_cells::<true>(acc, &mut out.data, w, span),
+            (None, false) => {
+                scan_runs::<_, false, false>(acc, &mut out.data, w, span, Plain, &mut outside)
+            }
+            (None, true) => {
+                scan_runs::<_, true, false>(acc, &mut out.data, w, span, Plain, &mut outside)
+            }
         };
         scratch.lit_sum = Some(lit_sum);
         let mut mapped = fused.is_some();
@@ -450,6 +454,22 @@ trait Emit {
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
 }
 
+/// The coverage itself (no map).
+struct Plain;
+
+impl Emit for Plain {
+    type Row<'a> = ();
+    #[inline(always)]
+    fn row(&self, _: usize) {}
+    fn area(&self) -> [usize; 4] {
+        [0, usize::MAX, 0, usize::MAX]
+    }
+    #[inline(always)]
+    fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
+        dst[a..b].fill(v);
+    }
+}
+
 /// Values through a [`CoverageMap`].
 struct Mapped<'m, M>(&'m M);
 
@@ -533,79 +553,15 @@ struct ScanSpan {
     end: usize,
 }
 
-/// The prefix-sum scan of the accumulation buffer for masks without a map: writes the
-/// coverage (thresholded when `BIN`), clears the buffer and its block marks as it reads
-/// them, and returns the sum of the coverage values (before threshold) and the largest
-/// winding seen. Only the touched blocks are visited: between them every cell is zero and
-/// the value repeats. Each cell of a touched block is written as it is read.
-fn scan_cells<const BIN: bool>(
-    acc: &mut Accum,
-    data: &mut [u8],
-    w: usize,
-    ScanSpan { r0, r1, c0, end }: ScanSpan,
-) -> (u64, f32) {
-    let (stride, words) = (acc.stride, acc.words);
-    let th = |v: u8| match (BIN, v >= 128) {
-        (false, _) => v,
-        (true, true) => 255,
-        (true, false) => 0,
-    };
-    let mut max_winding = 0.0f32;
-    let mut lit_sum = 0u64;
-    for r in r0..r1 {
-        let row = &mut acc.cells[r * stride..(r + 1) * stride];
-        let marks = &mut acc.touched[r * words..(r + 1) * words];
-        let dst = &mut data[r * w..(r + 1) * w];
-        let mut sum = 0.0f32;
-        let mut val = 0u8;
-        // `val` thresholded (BIN).
-        let mut tv = 0u8;
-        let mut col = c0;
-        for (wi, m) in marks.iter_mut().enumerate() {
-            let mut bits = std::mem::take(m);
-            while bits != 0 {
-                let b = wi * 64 + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
-                // Between marked blocks every cell is zero: the value repeats.
-                let from = bs.max(col).min(end);
-                if val != 0 {
-                    dst[col..from].fill(tv);
-                    lit_sum += val as u64 * (from - col) as u64;
-                }
-                let to = be.min(end).max(from);
-                for c in from..to {
-                    let a = row[c];
-                    if a != 0.0 {
-                        sum += a;
-                        // Cleared as it is read: the buffer is all zeros after the scan.
-                        row[c] = 0.0;
-                        let v = sum.abs();
-                        max_winding = max_winding.max(v);
-                        val = (v.min(1.0) * 255.0 + 0.5) as u8;
-                        tv = th(val);
-                    }
-                    dst[c] = tv;
-                    lit_sum += val as u64;
-                }
-                // Cells right of the field (edges carry area one column past their
-                // rightmost pixel): not part of the mask, just cleared.
-                row[to.max(bs)..be].fill(0.0);
-                col = to;
-            }
-        }
-        if val != 0 && col < end {
-            dst[col..end].fill(tv);
-            lit_sum += val as u64 * (end - col) as u64;
-        }
-    }
-    (lit_sum, max_winding)
-}
-
-/// [`scan_cells`] for masks through a map (`emit`): the same values, read the same way,
-/// but written run by run. The value changes only at nonzero cells: the scan follows runs
-/// of equal coverage and writes each run once, when it ends (zero runs are left as they
-/// are), so a run of full coverage is one copy from the map's full-coverage row.
+/// The prefix-sum scan of the accumulation buffer: writes the coverage (thresholded when
+/// `BIN`) through `emit` (as is, or through a light-compensation map), clears the buffer
+/// and its block marks as it reads them, and returns the sum of the coverage values (before
+/// threshold) and the largest winding seen. Only the touched blocks are visited: between
+/// them every cell is zero and the value repeats. The value changes only at nonzero cells:
+/// the scan follows runs of equal coverage and writes each run once, when it ends (zero
+/// runs are left as they are), so a run of full coverage is one fill, or one copy from the
+/// map's full-coverage row. With `CHECK`, sets `outside` if a lit pixel lies outside
+/// `emit`'s area.
 #[inline(never)]
 fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,

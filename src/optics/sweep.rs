@@ -35,7 +35,11 @@ fn field(step: usize) -> Field {
 }
 
 fn calibrate(p: Field2, s: Resp, seed: u64, f: &Field) -> Calibration {
-    let r = readings(p, s, 0.015, seed);
+    fit_readings(&readings(p, s, 0.015, seed), f)
+}
+
+/// The calibration `dmdsl calibrate` fits to `r` (5 mm zones, 5 mm extrapolation).
+fn fit_readings(r: &[Reading], f: &Field) -> Calibration {
     let opts = FitOptions {
         units: Units::MwCm2,
         zone_mm: 5.0,
@@ -43,32 +47,19 @@ fn calibrate(p: Field2, s: Resp, seed: u64, f: &Field) -> Calibration {
         field_mm: (f.width_mm(), f.height_mm()),
         degree: None,
     };
-    fit(&r, Path::new("m.csv"), &opts).unwrap().calibration
+    fit(r, Path::new("m.csv"), &opts).unwrap().calibration
 }
 
 /// (zone-mean spread, per-pixel spread) of the true irradiance of the plate mask over the
 /// calibrated 65 × 45 mm area.
 fn judge(mask: &[u8], f: &Field, p: Field2, s: Resp) -> (f64, f64) {
     let (w, h, px) = (f.width_px as usize, f.height_px as usize, f.pixel_mm);
-    let mut sum = [[0.0f64; 13]; 9];
-    let mut n = [[0usize; 13]; 9];
-    let mut inside = Vec::new();
-    for (i, &g) in mask.iter().enumerate() {
+    zone_and_pixel_spreads(mask.iter().enumerate().map(|(i, &g)| {
         let (r, c) = (i / w, i % w);
         let (x, y) = ((c as f64 + 0.5) * px, (h as f64 - r as f64 - 0.5) * px);
-        if y <= 45.0 {
-            let e = if g == 0 { 0.0 } else { p(x, y) * s(g as f64) };
-            let (zc, zr) = ((x / 5.0) as usize, (y / 5.0) as usize);
-            sum[zr][zc] += e;
-            n[zr][zc] += 1;
-            inside.push(e);
-        }
-    }
-    let means: Vec<f64> = (0..9)
-        .flat_map(|r| (0..13).map(move |c| (r, c)))
-        .map(|(r, c)| sum[r][c] / n[r][c] as f64)
-        .collect();
-    (spread(&means), spread(&inside))
+        let e = if g == 0 { 0.0 } else { p(x, y) * s(g as f64) };
+        (x, y, e)
+    }))
 }
 
 /// The plate mask: every pixel fully covered.
@@ -162,17 +153,7 @@ fn sweep_report() {
                 let perr = spread(&ratios);
                 let tfit = t.elapsed().as_secs_f64();
                 // Noise-free fit: model bias alone.
-                let cal0 = {
-                    let r = readings(p, s, 0.0, 1);
-                    let opts = FitOptions {
-                        units: Units::MwCm2,
-                        zone_mm: 5.0,
-                        extrapolate_mm: 5.0,
-                        field_mm: (f.width_mm(), f.height_mm()),
-                        degree: None,
-                    };
-                    fit(&r, Path::new("m.csv"), &opts).unwrap().calibration
-                };
+                let cal0 = fit_readings(&readings(p, s, 0.0, 1), &f);
                 let mut r0 = Vec::new();
                 for i in 0..=130 {
                     for j in 0..=90 {

@@ -79,6 +79,27 @@ pub fn spread(v: &[f64]) -> f64 {
     (hi - lo) / (v.iter().sum::<f64>() / v.len() as f64) * 100.0
 }
 
+/// (zone-mean spread, per-pixel spread) of irradiance samples `(x_mm, y_mm, E)` over the
+/// calibrated 65 × 45 mm area: means of the 13 × 9 zones of 5 mm, and every sample there.
+pub fn zone_and_pixel_spreads(e: impl IntoIterator<Item = (f64, f64, f64)>) -> (f64, f64) {
+    let mut sum = [[0.0f64; 13]; 9];
+    let mut n = [[0usize; 13]; 9];
+    let mut inside = Vec::new();
+    for (x, y, v) in e {
+        if y <= 45.0 {
+            let (zc, zr) = ((x / 5.0) as usize, (y / 5.0) as usize);
+            sum[zr][zc] += v;
+            n[zr][zc] += 1;
+            inside.push(v);
+        }
+    }
+    let means: Vec<f64> = (0..9)
+        .flat_map(|r| (0..13).map(move |c| (r, c)))
+        .map(|(r, c)| sum[r][c] / n[r][c] as f64)
+        .collect();
+    (spread(&means), spread(&inside))
+}
+
 /// Readings `(x_mm, y_mm, gray, irradiance)` at the 13 × 9 zone centres (5 mm zones from
 /// the bottom-left corner) for every gray of [`GRAYS`], with relative normal noise.
 pub fn centre_readings(p: Field2, s: Resp, noise: f64, seed: u64) -> Vec<(f64, f64, u32, f64)> {

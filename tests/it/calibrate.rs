@@ -47,24 +47,20 @@ fn true_irradiance(mask: &[u8], p: Field2, s: Resp) -> Vec<(f64, f64, f64)> {
         .collect()
 }
 
-/// Zone means of 5 mm zones inside the calibrated 65 × 45 mm area, and all pixels there.
-fn zone_and_pixel_spreads(e: &[(f64, f64, f64)]) -> (f64, f64) {
-    let mut sum = [[0.0f64; 13]; 9];
-    let mut n = [[0usize; 13]; 9];
-    let mut inside = Vec::new();
-    for &(x, y, v) in e {
-        if y <= 45.0 {
-            let (zc, zr) = ((x / 5.0) as usize, (y / 5.0) as usize);
-            sum[zr][zc] += v;
-            n[zr][zc] += 1;
-            inside.push(v);
+/// P of `cal` (full-on irradiance) within 1 % of the truth `p · s255` on a 2.5 mm grid
+/// over the calibrated area.
+fn assert_p_recovered(cal: &dmdsl::optics::Calibration, p: Field2, s255: f64) {
+    for i in 0..=26 {
+        for j in 0..=18 {
+            let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
+            let want = p(x, y) * s255;
+            let got = cal.field.eval(x, y);
+            assert!(
+                (got / want - 1.0).abs() < 0.01,
+                "P({x}, {y}) = {got} vs {want}"
+            );
         }
     }
-    let means: Vec<f64> = (0..9)
-        .flat_map(|r| (0..13).map(move |c| (r, c)))
-        .map(|(r, c)| sum[r][c] / n[r][c] as f64)
-        .collect();
-    (spread(&means), spread(&inside))
 }
 
 fn calibrate(dir: &Path, p: Field2, s: Resp, seed: u64) -> (PathBuf, serde_json::Value) {
@@ -134,17 +130,7 @@ fn fit_recovers_known_p_and_s_and_writes_plots() {
     );
     // P is the irradiance at gray 255 (S normalised there): within 1 % everywhere inside.
     let s255 = s_published(255.0);
-    for i in 0..=26 {
-        for j in 0..=18 {
-            let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
-            let want = p_cubic(x, y) * s255;
-            let got = cal.field.eval(x, y);
-            assert!(
-                (got / want - 1.0).abs() < 0.01,
-                "P({x}, {y}) = {got} vs {want}"
-            );
-        }
-    }
+    assert_p_recovered(&cal, p_cubic, s255);
     // S relative to gray 255: within 1 % on the measured range.
     let c = cal.response.curve();
     for g in 135..=255 {
@@ -177,18 +163,7 @@ fn vignetting_is_fitted_with_the_cos4_form() {
     assert_eq!(f.form, dmdsl::optics::field::Form::InverseSquare);
     assert_eq!(f.degree, 2);
     assert_eq!(f.cv_inv_rms_pct.len(), 1, "{:?}", f.cv_inv_rms_pct);
-    let s255 = s_gamma(255.0);
-    for i in 0..=26 {
-        for j in 0..=18 {
-            let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
-            let want = p_vignette(x, y) * s255;
-            let got = cal.field.eval(x, y);
-            assert!(
-                (got / want - 1.0).abs() < 0.01,
-                "P({x}, {y}) = {got} vs {want}"
-            );
-        }
-    }
+    assert_p_recovered(&cal, p_vignette, s_gamma(255.0));
 }
 
 #[test]
@@ -206,11 +181,11 @@ fn zone_mode_flattens_true_zone_means() {
         let (mask, job) = slice_plate(&dir, &["--calibration", cal.to_str().unwrap()]);
         assert_eq!(job["settings"]["compensation"], "zone");
         let e = true_irradiance(&mask, p, s);
-        let (zone, _) = zone_and_pixel_spreads(&e);
+        let (zone, _) = zone_and_pixel_spreads(e);
         assert!(zone <= 2.5, "case {k}: zone-mean spread {zone:.2} %");
         // Uncompensated, the same plate is far from flat.
         let (mask0, _) = slice_plate(&dir, &["--compensation", "off"]);
-        let (zone0, _) = zone_and_pixel_spreads(&true_irradiance(&mask0, p, s));
+        let (zone0, _) = zone_and_pixel_spreads(true_irradiance(&mask0, p, s));
         assert!(zone0 > 30.0, "case {k}: {zone0}");
     }
 }
@@ -238,7 +213,7 @@ fn pixel_mode_flattens_true_pixels() {
         );
         assert_eq!(job["optics"]["mode"], "pixel");
         let e = true_irradiance(&mask, p, s);
-        let (_, pixel) = zone_and_pixel_spreads(&e);
+        let (_, pixel) = zone_and_pixel_spreads(e);
         // 3 %, or 5 % where one gray step moves irradiance by more than 2 %.
         let coarse = mask
             .iter()
@@ -276,7 +251,7 @@ fn builtin_published_fit_flattens_the_published_model() {
     assert_eq!(o["gray_map_sha256"], sha);
     // Physically: zone means of P·S under the published model within 4.5 %.
     let e = true_irradiance(&mask, p_published, s_published);
-    let (zone, _) = zone_and_pixel_spreads(&e);
+    let (zone, _) = zone_and_pixel_spreads(e);
     assert!(zone <= 4.5, "{zone}");
     assert!(o["predicted"]["after_zone_pct"].as_f64().unwrap() <= 4.5);
     // One gray step of the published S is 2–3 % here, so some zones mix two grays.
