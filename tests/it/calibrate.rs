@@ -164,6 +164,28 @@ fn vignetting_is_fitted_with_the_cos4_form() {
     assert_eq!(f.degree, 2);
     assert_eq!(f.cv_inv_rms_pct.len(), 1, "{:?}", f.cv_inv_rms_pct);
     assert_p_recovered(&cal, p_vignette, s_gamma(255.0));
+    // Hand-edited so that the polynomial crosses zero inside the area (P infinite there):
+    // refused with a one-line error naming the file, exit 2, no bundle.
+    let coef = text.find("[field.coefficients]").unwrap();
+    let end = text[coef..].find("\n\n").map_or(text.len(), |e| coef + e);
+    let bad = format!(
+        "{}[field.coefficients]\nc = 0.1\nx = -1.0\n{}",
+        &text[..coef],
+        &text[end..]
+    );
+    std::fs::write(dir.join("bad.toml"), bad).unwrap();
+    write_stl(
+        &dir.join("b.stl"),
+        &box_tris([0.0, 0.0, 0.0], [5.0, 5.0, 0.1]),
+    );
+    let o = run_in(&dir, &["slice", "b.stl", "--calibration", "bad.toml"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.toml") && err.contains("changes sign") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("b.dmdjob").exists());
 }
 
 #[test]
