@@ -257,7 +257,7 @@ struct LayerIn<'a> {
 
 struct LayerOut {
     area_mm2: f64,
-    analysis: LayerAnalysis,
+    analysis: plan::analysis::Analysed,
     analysis_s: f64,
     masks: Vec<MaskRef>,
 }
@@ -457,16 +457,24 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
 
     let t3 = Instant::now();
     let analysis_cpu_s = outs.iter().map(|o| o.analysis_s).sum();
+    // A layer equal to the layer below that its worker could not copy takes the layer
+    // below's analysis here.
+    let mut analyses: Vec<LayerAnalysis> = Vec::with_capacity(n);
+    for o in &outs {
+        let a = o.analysis.resolve(analyses.last());
+        analyses.push(a);
+    }
     let infos: Vec<LayerInfo> = outs
         .iter()
+        .zip(&analyses)
         .enumerate()
-        .map(|(i, o)| LayerInfo {
+        .map(|(i, (o, a))| LayerInfo {
             index: i,
             z_mm: (i + 1) as f64 * h,
             thickness_mm: h,
             area_mm2: o.area_mm2,
-            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
-            islands: o.analysis.islands,
+            max_fill_distance_mm: a.max_fill_distance_mm,
+            islands: a.islands,
         })
         .collect();
     let plan = plan::plan(&profile, &infos).map_err(|msg| Error::Job {
@@ -485,7 +493,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
         all_layered_time_s: plan.all_layered_time_s,
     };
-    for ((info, o), p) in infos.iter().zip(outs).zip(plan.layers) {
+    for (((info, o), a), p) in infos.iter().zip(outs).zip(&analyses).zip(plan.layers) {
         totals.print_time_s += p.time_s;
         totals.exposure_s += p.exposure_s;
         totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
@@ -497,9 +505,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             mode: p.mode,
             exposure_s: p.exposure_s,
             area_mm2: o.area_mm2,
-            max_fill_distance_mm: o.analysis.max_fill_distance_mm,
-            islands: o.analysis.islands,
-            bbox_mm: o.analysis.bbox_mm,
+            max_fill_distance_mm: a.max_fill_distance_mm,
+            islands: a.islands,
+            bbox_mm: a.bbox_mm,
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
@@ -642,7 +650,7 @@ fn layer_masks(
     }
     scratch.recycle(field_mask);
     let ta = ThreadClock::start();
-    let analysis = analyser.analyse(
+    let analysis = analyser.analyse_or_defer(
         i,
         &layer.section.contours,
         layer.below.map(|b| b.contours.as_slice()),

@@ -23,6 +23,10 @@
 //!   missed.
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
 //!
+//! A layer whose section equals the layer below's once collinear points are left out (a
+//! prism: see [`COLLINEAR_MM`]) takes the layer below's analysis with no islands instead
+//! of being analysed again ([`Analyser`]).
+//!
 //! Overlapping shells (sections filled by the nonzero rule) are not merged first: an edge
 //! of one shell lying inside another still counts as boundary, so the max fill distance of
 //! such a section is a lower bound.
@@ -53,17 +57,172 @@ pub fn analyse(cur: &[Contour], prev: Option<&[Contour]>, row_mm: f64) -> LayerA
     Analyser::new(row_mm).analyse(usize::MAX, cur, prev)
 }
 
-/// Analyses consecutive layers, reusing the row scan (for the islands) of the previous
-/// call when it analysed the layer below. A worker handling a block of consecutive layers
-/// keeps one. Results never depend on the reuse.
+/// Points closer than this to the segment joining their neighbours are left out of the
+/// analysed section, mm. The slicer cuts every triangle edge crossing the layer, so a
+/// straight wall made of several triangles gives points on the line between its corners
+/// that slide along it from layer to layer: without them, consecutive sections of a
+/// prism are equal and their analysis is done once. Moving the boundary by at most this
+/// much moves a fill distance by at most as much.
+pub const COLLINEAR_MM: f64 = 1e-9;
+
+/// At most this many consecutive points are left out (each left-out point is checked
+/// against the final segment, so the cost stays linear).
+const COLLINEAR_RUN: usize = 16;
+
+/// Whether `b` lies within [`COLLINEAR_MM`] of the segment `a`–`d` (and between its ends).
+#[inline]
+fn near_segment(a: [f64; 2], b: [f64; 2], d: [f64; 2]) -> bool {
+    const EPS2: f64 = COLLINEAR_MM * COLLINEAR_MM;
+    let (ux, uy) = (d[0] - a[0], d[1] - a[1]);
+    let (vx, vy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = ux * ux + uy * uy;
+    let cross = ux * vy - uy * vx;
+    // Most points are corners: off the line.
+    if cross * cross > EPS2 * l2 {
+        return false;
+    }
+    if l2 == 0.0 {
+        return vx * vx + vy * vy <= EPS2;
+    }
+    (0.0..=l2).contains(&(ux * vx + uy * vy))
+}
+
+/// `c` without its collinear points (within [`COLLINEAR_MM`] of the segment that replaces
+/// them), starting at its smallest point (x, then y), into `out`. The result depends only
+/// on the contour's geometry and direction, not on where it started, so two layers with
+/// the same walls give equal contours. Every point of either boundary is within
+/// [`COLLINEAR_MM`] of the other.
+fn simplify_contour(c: &[[f64; 2]], out: &mut Vec<[f64; 2]>) {
+    out.clear();
+    let n = c.len();
+    // Start at a corner: a point off the segment of its two neighbours.
+    let corner = (0..n).find(|&i| {
+        let a = c[if i == 0 { n - 1 } else { i - 1 }];
+        !near_segment(a, c[i], c[if i + 1 == n { 0 } else { i + 1 }])
+    });
+    let first = match corner.filter(|_| n > 3) {
+        Some(s) => leave_out_collinear(c, s, out),
+        None => {
+            out.extend_from_slice(c);
+            (0..n).fold(0, |m, i| if less(c[i], c[m]) { i } else { m })
+        }
+    };
+    out.rotate_left(first);
+}
+
+/// `p < q` by x, then y.
+#[inline]
+fn less(p: [f64; 2], q: [f64; 2]) -> bool {
+    p[0] < q[0] || (p[0] == q[0] && p[1] < q[1])
+}
+
+/// The points of `c` from its corner `s` on, without those within [`COLLINEAR_MM`] of
+/// the segment that replaces them, into `out`; returns the index in `out` of the
+/// smallest point.
+fn leave_out_collinear(c: &[[f64; 2]], s: usize, out: &mut Vec<[f64; 2]>) -> usize {
+    let n = c.len();
+    // The k-th point from the corner on (k = n is the corner again).
+    let at = |k: usize| c[if s + k >= n { s + k - n } else { s + k }];
+    let mut anchor = c[s];
+    out.push(anchor);
+    let mut min = 0;
+    // Points left out since the anchor, as steps from the corner.
+    let mut left = [0usize; COLLINEAR_RUN];
+    let mut nl = 0;
+    let mut d = at(1);
+    for k in 1..n {
+        let b = d;
+        d = at(k + 1);
+        if nl < COLLINEAR_RUN
+            && near_segment(anchor, b, d)
+            && left[..nl].iter().all(|&i| near_segment(anchor, at(i), d))
+        {
+            left[nl] = k;
+            nl += 1;
+        } else {
+            if less(b, out[min]) {
+                min = out.len();
+            }
+            out.push(b);
+            anchor = b;
+            nl = 0;
+        }
+    }
+    min
+}
+
+/// [`simplify_contour`] of every contour into `out` (its vectors are reused).
+fn simplify_section(contours: &[Contour], out: &mut Vec<Contour>) {
+    out.resize_with(contours.len(), Vec::new);
+    for (c, o) in contours.iter().zip(out.iter_mut()) {
+        simplify_contour(c, o);
+    }
+}
+
+/// What [`Analyser::analyse_or_defer`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Analysed {
+    /// The layer's analysis.
+    Done(LayerAnalysis),
+    /// The layer's section equals the layer below's (collinear points left out, see
+    /// [`COLLINEAR_MM`]), whose analysis this analyser does not have: the layer's analysis
+    /// is that one with no islands (every region rests on itself). See
+    /// [`Analysed::resolve`].
+    SameAsBelow,
+}
+
+impl Analysed {
+    /// The layer's analysis, given the (resolved) analysis of the layer below.
+    ///
+    /// # Panics
+    /// If the result is [`Analysed::SameAsBelow`] and `below` is `None` (layer 0 is never
+    /// the same as a layer below).
+    pub fn resolve(self, below: Option<&LayerAnalysis>) -> LayerAnalysis {
+        match self {
+            Analysed::Done(a) => a,
+            Analysed::SameAsBelow => LayerAnalysis {
+                islands: 0,
+                ..*below.expect("a layer equal to the layer below has one")
+            },
+        }
+    }
+}
+
+/// The last layer an [`Analyser`] saw.
+#[derive(Debug, Clone, Copy)]
+struct Last {
+    index: usize,
+    /// Its analysis; `None` when it was deferred as [`Analysed::SameAsBelow`].
+    analysis: Option<LayerAnalysis>,
+    /// Its bounding box.
+    bbox: Option<[[f64; 2]; 2]>,
+    /// Whether `Analyser::last_runs` holds its row scan.
+    runs: bool,
+    /// Whether `Analyser::last_section` holds its section without collinear points.
+    section: bool,
+}
+
+/// Analyses consecutive layers. A worker handling a block of consecutive layers keeps one:
+/// it reuses the row scan (for the islands) of the layer below, and a layer whose section
+/// equals the layer below's (a prism: see [`COLLINEAR_MM`]) takes that layer's analysis,
+/// with no islands, instead of being analysed again.
+///
+/// So a layer's analysis is: the layer below's, with no islands, when the two sections are
+/// equal without their collinear points; otherwise that of its own contours (the fill
+/// distance and bounding box of `cur`, the islands of `cur` over the contours below). It
+/// never depends on the order of the calls or on where blocks start.
 #[derive(Debug)]
 pub struct Analyser {
     row_mm: f64,
-    last: Option<(usize, Runs)>,
+    last: Option<Last>,
+    /// The last layer's section without collinear points (when `Last::section`).
+    last_section: Vec<Contour>,
+    last_runs: Runs,
     /// Buffers reused from layer to layer (results never depend on them).
+    section: Vec<Contour>,
     scratch: ScanScratch,
-    cur: Runs,
-    below: Runs,
+    runs: Runs,
+    below_runs: Runs,
     search: SearchScratch,
 }
 
@@ -73,54 +232,118 @@ impl Analyser {
         Analyser {
             row_mm,
             last: None,
+            last_section: Vec::new(),
+            last_runs: Runs::default(),
+            section: Vec::new(),
             scratch: ScanScratch::default(),
-            cur: Runs::default(),
-            below: Runs::default(),
+            runs: Runs::default(),
+            below_runs: Runs::default(),
             search: SearchScratch::default(),
         }
     }
 
     /// Analyses layer `index` (contours `cur`) over the layer below (`prev`: the contours
-    /// of layer `index − 1`, `None` for layer 0).
+    /// of layer `index − 1`, `None` for layer 0). A layer equal to the layer below whose
+    /// analysis this analyser does not have is analysed from its own contours, with no
+    /// islands.
     pub fn analyse(
         &mut self,
         index: usize,
         cur: &[Contour],
         prev: Option<&[Contour]>,
     ) -> LayerAnalysis {
-        let last = self.last.take();
-        let reuse =
-            matches!(&last, Some((i, _)) if index != usize::MAX && i.wrapping_add(1) == index);
-        match last {
-            // The scan of the layer below, kept from the previous call.
-            Some((_, r)) if reuse => self.below = r,
-            // Its buffers, for the next scan.
-            Some((_, r)) => self.cur = r,
-            None => {}
+        match self.analyse_or_defer(index, cur, prev) {
+            Analysed::Done(a) => a,
+            Analysed::SameAsBelow => {
+                let a = LayerAnalysis {
+                    max_fill_distance_mm: search(&Edges::new(cur), PRECISION_MM, &mut self.search)
+                        .0,
+                    islands: 0,
+                    bbox_mm: bbox(cur),
+                };
+                if let Some(l) = self.last.as_mut() {
+                    l.analysis = Some(a);
+                }
+                a
+            }
         }
-        let mut runs = std::mem::take(&mut self.cur);
-        runs.scan(cur, self.row_mm, &mut self.scratch);
+    }
+
+    /// [`Analyser::analyse`], except that a layer whose section equals the layer below's
+    /// is not analysed again: its result is copied when this analyser has the layer
+    /// below's, otherwise it is [`Analysed::SameAsBelow`] (the caller resolves it from the
+    /// layer below).
+    pub fn analyse_or_defer(
+        &mut self,
+        index: usize,
+        cur: &[Contour],
+        prev: Option<&[Contour]>,
+    ) -> Analysed {
+        let bb = bbox(cur);
+        let last = self.last.take();
+        // This analyser's last layer is the layer below: what it kept of it serves.
+        let below = last.filter(|l| index != usize::MAX && l.index.wrapping_add(1) == index);
+        let keep = index != usize::MAX;
+        // Equal sections have equal bounding boxes: only then are they compared (a box
+        // is cheap, leaving out collinear points is not).
+        let mut simplified = false;
+        if let (Some(p), Some(_)) = (prev, bb) {
+            let below_bb = match below {
+                Some(l) => l.bbox,
+                None => bbox(p),
+            };
+            if below_bb == bb {
+                simplify_section(cur, &mut self.section);
+                if !below.is_some_and(|l| l.section) {
+                    simplify_section(p, &mut self.last_section);
+                }
+                simplified = true;
+                if self.section == self.last_section {
+                    let copied = below
+                        .and_then(|l| l.analysis)
+                        .map(|a| LayerAnalysis { islands: 0, ..a });
+                    // The row scan kept (if any) is the layer below's, not this one's.
+                    self.last = keep.then_some(Last {
+                        index,
+                        analysis: copied,
+                        bbox: bb,
+                        runs: false,
+                        section: true,
+                    });
+                    return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
+                }
+            }
+        }
+        self.runs.scan(cur, self.row_mm, &mut self.scratch);
         let islands = match prev {
             None => 0,
             Some(p) => {
-                if !reuse {
-                    self.below.scan(p, self.row_mm, &mut self.scratch);
-                }
-                count_islands(&runs, &self.below)
+                let scanned = if below.is_some_and(|l| l.runs) {
+                    &self.last_runs
+                } else {
+                    self.below_runs.scan(p, self.row_mm, &mut self.scratch);
+                    &self.below_runs
+                };
+                count_islands(&self.runs, scanned)
             }
         };
-        // The scan of the layer below is no longer needed: its buffers serve the next one.
-        std::mem::swap(&mut self.cur, &mut self.below);
-        if index != usize::MAX {
-            self.last = Some((index, runs));
-        } else {
-            self.below = runs;
-        }
-        LayerAnalysis {
+        let a = LayerAnalysis {
             max_fill_distance_mm: search(&Edges::new(cur), PRECISION_MM, &mut self.search).0,
             islands,
-            bbox_mm: bbox(cur),
+            bbox_mm: bb,
+        };
+        std::mem::swap(&mut self.runs, &mut self.last_runs);
+        if simplified {
+            std::mem::swap(&mut self.section, &mut self.last_section);
         }
+        self.last = keep.then_some(Last {
+            index,
+            analysis: Some(a),
+            bbox: bb,
+            runs: true,
+            section: simplified,
+        });
+        Analysed::Done(a)
     }
 }
 
@@ -1793,6 +2016,151 @@ mod tests {
         }
         // The layers do have islands (the test exercises the supported/unsupported logic).
         assert!(islands > 0);
+    }
+
+    /// `c` with points inserted on its edges at fractions drawn from `rnd` (0–3 per edge),
+    /// starting at point `start`: the same polygon as the slicer cuts it at another height.
+    fn with_collinear_points(c: &Contour, start: usize, rnd: &mut impl FnMut() -> f64) -> Contour {
+        let n = c.len();
+        let mut out = Vec::new();
+        for k in 0..n {
+            let (a, b) = (c[(start + k) % n], c[(start + k + 1) % n]);
+            out.push(a);
+            let mut ts: Vec<f64> = (0..(rnd() * 4.0) as usize).map(|_| rnd()).collect();
+            ts.sort_by(f64::total_cmp);
+            for t in ts {
+                out.push([a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]);
+            }
+        }
+        out
+    }
+
+    /// Largest distance from a vertex of `a` to the polygon (closed polyline) `b`.
+    fn vertex_gap(a: &Contour, b: &Contour) -> f64 {
+        let e = Edges::new(std::slice::from_ref(b));
+        a.iter().map(|&p| e.distance(p)).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn collinear_points_are_left_out_wherever_the_contour_starts() {
+        let mut rnd = xorshift(0xc011_1ea7);
+        for case in 0..200 {
+            // Random star-shaped polygons, some with collinear corners of their own.
+            let n = 3 + case % 9;
+            let base: Contour = (0..n)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * (i as f64 + 0.3 * rnd()) / n as f64;
+                    let r = 2.0 + 8.0 * rnd();
+                    [20.0 + r * a.cos(), 15.0 + r * a.sin()]
+                })
+                .collect();
+            let mut want = Vec::new();
+            simplify_contour(&base, &mut want);
+            for start in [0, n / 2, n - 1] {
+                let cut = with_collinear_points(&base, start, &mut rnd);
+                let mut got = Vec::new();
+                simplify_contour(&cut, &mut got);
+                assert_eq!(got, want, "case {case}, start {start}");
+                // Every point of either boundary lies within the tolerance of the other.
+                assert!(vertex_gap(&cut, &got) <= COLLINEAR_MM, "case {case}");
+                assert!(vertex_gap(&got, &cut) <= COLLINEAR_MM, "case {case}");
+            }
+        }
+    }
+
+    #[test]
+    fn simplified_contours_stay_within_the_tolerance_on_fine_arcs() {
+        // Arc points so dense that each lies within the tolerance of its neighbours'
+        // chord: leaving out a long run of them would cut the arc, the run limit and the
+        // check against the final segment must not.
+        let r = 10.0;
+        let step = (2.0 * COLLINEAR_MM / r).sqrt() * 0.9;
+        let mut c: Contour = (0..2000)
+            .map(|i| {
+                let a = i as f64 * step;
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect();
+        c.push([0.0, 0.0]);
+        let mut got = Vec::new();
+        simplify_contour(&c, &mut got);
+        assert!(got.len() < c.len(), "some points are left out");
+        assert!(vertex_gap(&c, &got) <= COLLINEAR_MM);
+        assert!(vertex_gap(&got, &c) <= COLLINEAR_MM);
+        // Too few points: kept as they are. A flat contour (there and back along a line)
+        // stays one.
+        let c = vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]];
+        simplify_contour(&c, &mut got);
+        assert_eq!(got, c);
+        let c = vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [1.0, 0.0]];
+        simplify_contour(&c, &mut got);
+        assert_eq!(got, vec![[0.0, 0.0], [2.0, 0.0]]);
+    }
+
+    #[test]
+    fn prism_layers_are_analysed_once_with_the_same_results() {
+        // A prism cut at random heights: the same polygons with different collinear
+        // points; some layers differ (a hole comes and goes). Analysed in blocks (deferred
+        // at block starts, resolved afterwards) and out of order, the results must be what
+        // a fresh analysis gives for every layer.
+        let p = 0.0634765625;
+        let mut rnd = xorshift(0x9e15_3a11);
+        let outer = ngon(25.0, 20.0, 12.0, 24, true);
+        let hole = rect(20.0, 15.0, 24.0, 19.0);
+        let hole: Contour = hole.into_iter().rev().collect();
+        let layers: Vec<Vec<Contour>> = (0..23)
+            .map(|i| {
+                let mut l = vec![with_collinear_points(&outer, i % 5, &mut rnd)];
+                if (8..15).contains(&i) {
+                    l.push(with_collinear_points(&hole, i % 3, &mut rnd));
+                }
+                l
+            })
+            .collect();
+        // Reference: one analyser over all layers in order.
+        let mut seq = Analyser::new(p);
+        let fresh: Vec<LayerAnalysis> = (0..layers.len())
+            .map(|i| {
+                seq.analyse(
+                    i,
+                    &layers[i],
+                    i.checked_sub(1).map(|j| layers[j].as_slice()),
+                )
+            })
+            .collect();
+        for block in [1, 2, 4, 7] {
+            let mut out: Vec<Analysed> = Vec::new();
+            let mut deferred = 0;
+            for b in 0..layers.len().div_ceil(block) {
+                let mut a = Analyser::new(p);
+                for i in b * block..((b + 1) * block).min(layers.len()) {
+                    let below = i.checked_sub(1).map(|j| layers[j].as_slice());
+                    let r = a.analyse_or_defer(i, &layers[i], below);
+                    deferred += usize::from(r == Analysed::SameAsBelow);
+                    out.push(r);
+                }
+            }
+            let mut got: Vec<LayerAnalysis> = Vec::new();
+            for r in out {
+                let v = r.resolve(got.last());
+                got.push(v);
+            }
+            assert_eq!(got, fresh, "blocks of {block}");
+            // 20 layers equal the one below: deferred when their worker has no result to
+            // copy (a block's first layer, and those after it while they stay equal).
+            assert!(deferred <= 20, "blocks of {block}");
+            if block == 1 {
+                assert_eq!(deferred, 20);
+            }
+        }
+        // The hole is an island-free change: fill distances differ with and without it.
+        assert!(fresh[10].max_fill_distance_mm < fresh[5].max_fill_distance_mm - 1.0);
+        // Out of order: the plain `analyse` never defers.
+        let mut a = Analyser::new(p);
+        for &i in &[3usize, 4, 4, 10, 9, 20, 21, 0, 1] {
+            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
+            assert_eq!(a.analyse(i, &layers[i], below), fresh[i], "layer {i}");
+        }
     }
 
     #[test]
