@@ -1,5 +1,5 @@
-//! The per-layer analysis alone, as the slicer runs it (an `Analyser` per block of 4
-//! layers, layers equal to the layer below resolved afterwards), for instruction counts
+//! The per-layer analysis alone, as the slicer runs it (an `Analyser` per block of
+//! `job::BLOCK` layers, layers equal to the layer below resolved afterwards), for instruction counts
 //! and result checks.
 //!
 //! `cargo run --release --example analysis_check -- MODEL > layers.txt`
@@ -30,10 +30,10 @@ fn main() {
     .expect("model fits");
     let (sections, _) = dmdsl::slice::slice(&mesh, h, n);
     let mut results: Vec<analysis::LayerAnalysis> = Vec::with_capacity(n);
-    for (b, block) in sections.chunks(4).enumerate() {
+    for (b, block) in sections.chunks(dmdsl::job::BLOCK).enumerate() {
         let mut a = analysis::Analyser::new(field.pixel_mm);
         for (k, s) in block.iter().enumerate() {
-            let i = 4 * b + k;
+            let i = dmdsl::job::BLOCK * b + k;
             let below = i.checked_sub(1).map(|j| sections[j].contours.as_slice());
             let r = a.analyse_or_defer(i, &s.contours, below);
             // Blocks run in order here, so the layer below is always resolved.

@@ -79,10 +79,10 @@ fn main() {
     });
     let (t_all, _) = best_of(reps, || {
         let mut total = 0.0;
-        for (b, block) in sections.chunks(4).enumerate() {
+        for (b, block) in sections.chunks(dmdsl::job::BLOCK).enumerate() {
             let mut a = analysis::Analyser::new(field.pixel_mm);
             for (k, s) in block.iter().enumerate() {
-                let i = 4 * b + k;
+                let i = dmdsl::job::BLOCK * b + k;
                 let below = i.checked_sub(1).map(|j| sections[j].contours.as_slice());
                 total += a.analyse(i, &s.contours, below).max_fill_distance_mm;
             }

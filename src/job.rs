@@ -2,7 +2,7 @@
 //! hash → write; then plan and write the manifest, atomically.
 //!
 //! One thread slices windows of 32 layers and hands each window to rayon's pool in blocks
-//! of 4 consecutive layers as soon as it is cut (no barrier between windows); at most 96
+//! of 8 consecutive layers as soon as it is cut (no barrier between windows); at most 96
 //! layers wait for a worker, and a worker keeps only its current mask, so memory does not
 //! grow with the number of layers. Every output byte depends only on the input and the
 //! settings, never on the thread count or timing.
@@ -192,8 +192,11 @@ pub fn encode_png(m: &Mask) -> Vec<u8> {
 
 /// Layers sliced at a time: memory depends on this, not on the number of layers.
 const WINDOW: usize = 32;
-/// Consecutive layers one worker processes in order.
-const BLOCK: usize = 4;
+/// Consecutive layers one worker processes in order. Its first layer's analysis scans the
+/// layer below again (islands) and cannot copy the analysis of an equal layer below
+/// (prisms): larger blocks do that less often (8 rather than 4: −2.8 % analysis
+/// instructions on logo_hires), smaller ones balance the workers better at the end.
+pub const BLOCK: usize = 8;
 /// Layers sliced but not yet made into masks, at most (bounds memory).
 const MAX_AHEAD: usize = 3 * WINDOW;
 
