@@ -1,6 +1,6 @@
 //! The per-layer analysis alone, as the slicer runs it (an `Analyser` per block of
-//! `job::BLOCK` layers, layers equal to the layer below resolved afterwards), for instruction counts
-//! and result checks.
+//! `job::BLOCK` layers, layers equal to the layer below resolved afterwards), for
+//! instruction counts and result checks.
 //!
 //! `cargo run --release --example analysis_check -- MODEL > layers.txt`
 //!
