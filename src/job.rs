@@ -378,6 +378,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         let mut scratch = Pooled::take(scratch_pool);
                         let scratch = &mut *scratch;
                         let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
+                        let mut made = None;
                         for k in ks {
                             if stop.load(Ordering::Relaxed) || cancelled() {
                                 return Err(Error::Interrupted);
@@ -396,7 +397,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                                 profile,
                                 raster,
                                 scratch,
-                                &mut analyser,
+                                (&mut analyser, &mut made),
                                 &layer,
                                 binary,
                                 tiled,
@@ -595,13 +596,25 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     })
 }
 
+/// The masks a worker made for its previous layer, kept for a following layer with the
+/// same section.
+struct Made {
+    index: usize,
+    /// Whether they were drawn from the section without collinear points (the layer was
+    /// equal to the layer below).
+    simplified: bool,
+    area_mm2: f64,
+    /// PNG bytes, SHA-256 and projector of each mask.
+    pngs: Vec<(Vec<u8>, String, u32)>,
+}
+
 #[allow(clippy::too_many_arguments)]
 fn layer_masks(
     writer: &BundleWriter,
     profile: &Profile,
     raster: &Rasterizer,
     scratch: &mut Scratch,
-    analyser: &mut plan::analysis::Analyser,
+    (analyser, made): (&mut plan::analysis::Analyser, &mut Option<Made>),
     layer: &LayerIn,
     binary: bool,
     tiled: bool,
@@ -611,54 +624,92 @@ fn layer_masks(
     tiler: Option<&Tiler>,
 ) -> Result<LayerOut> {
     let i = layer.index;
-    let section = &layer.section.contours;
-    // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
-    let (warped, area_scale) = match correction {
-        Some(c) => {
-            let w = c.warp_section(section, model, i)?;
-            let s = distortion::area_scale(section, &w);
-            (Some(w), s)
-        }
-        None => (None, 1.0),
-    };
-    // Coverage (thresholded when binary), compensated while it is drawn: coverage → gray
-    // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
-    let comp = optics.map(|o| &o.compensator);
-    let field_mask = raster.render(warped.as_deref().unwrap_or(section), scratch, binary, comp);
-    let area_mm2 = scratch.lit_pixels(&field_mask) * px_area * area_scale;
-    let mut masks = Vec::with_capacity(profile.projector.len());
-    for (k, p) in profile.projector.iter().enumerate() {
-        let view = match tiler {
-            Some(t) => std::borrow::Cow::Owned(t.render(k, &field_mask)),
-            None => projector_view(&field_mask, p),
-        };
-        let png = match &view {
-            // The field mask itself: zero outside the rasterizer's lit box.
-            std::borrow::Cow::Borrowed(m) => {
-                crate::png::encode_gray8_in(m.width, m.height, &m.data, scratch.lit_box())
-            }
-            std::borrow::Cow::Owned(m) => encode_png(m),
-        };
-        let file = if tiled {
+    let below = layer.below.map(|b| b.contours.as_slice());
+    // A layer whose section equals the layer below's once collinear points are left out
+    // (prisms; plan::analysis) is drawn from that simplified section, so equal layers get
+    // equal masks: when this worker drew the layer below that way, its bytes serve again.
+    let ta = ThreadClock::start();
+    let same = analyser.equals_below(i, &layer.section.contours, below);
+    let mut analysis_s = ta.elapsed_s();
+    let file_name = |k: usize| {
+        if tiled {
             format!("masks/p{k}/{i:05}.png")
         } else {
             format!("masks/{i:05}.png")
+        }
+    };
+    let mut masks = Vec::with_capacity(profile.projector.len());
+    let reusable = made
+        .take()
+        .filter(|m| same && m.simplified && m.index + 1 == i);
+    let area_mm2 = if let Some(m) = reusable {
+        for (k, (png, sha, projector)) in m.pngs.iter().enumerate() {
+            let file = file_name(k);
+            writer.write_file(&file, png)?;
+            masks.push(MaskRef {
+                file,
+                sha256: sha.clone(),
+                projector: *projector,
+            });
+        }
+        *made = Some(Made { index: i, ..m });
+        m.area_mm2
+    } else {
+        let section: &[crate::slice::Contour] = if same {
+            analyser.simplified_section()
+        } else {
+            &layer.section.contours
         };
-        writer.write_file(&file, &png)?;
-        masks.push(MaskRef {
-            file,
-            sha256: bundle::sha256_hex(&png),
-            projector: k as u32,
+        // Distortion pre-warp (geometry::distortion): rasterize where the projector must
+        // aim.
+        let (warped, area_scale) = match correction {
+            Some(c) => {
+                let w = c.warp_section(section, model, i)?;
+                let s = distortion::area_scale(section, &w);
+                (Some(w), s)
+            }
+            None => (None, 1.0),
+        };
+        // Coverage (thresholded when binary), compensated while it is drawn: coverage →
+        // gray through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
+        let comp = optics.map(|o| &o.compensator);
+        let field_mask = raster.render(warped.as_deref().unwrap_or(section), scratch, binary, comp);
+        let area_mm2 = scratch.lit_pixels(&field_mask) * px_area * area_scale;
+        let mut pngs = Vec::with_capacity(profile.projector.len());
+        for (k, p) in profile.projector.iter().enumerate() {
+            let view = match tiler {
+                Some(t) => std::borrow::Cow::Owned(t.render(k, &field_mask)),
+                None => projector_view(&field_mask, p),
+            };
+            let png = match &view {
+                // The field mask itself: zero outside the rasterizer's lit box.
+                std::borrow::Cow::Borrowed(m) => {
+                    crate::png::encode_gray8_in(m.width, m.height, &m.data, scratch.lit_box())
+                }
+                std::borrow::Cow::Owned(m) => encode_png(m),
+            };
+            let file = file_name(k);
+            writer.write_file(&file, &png)?;
+            let sha = bundle::sha256_hex(&png);
+            masks.push(MaskRef {
+                file,
+                sha256: sha.clone(),
+                projector: k as u32,
+            });
+            pngs.push((png, sha, k as u32));
+        }
+        scratch.recycle(field_mask);
+        *made = Some(Made {
+            index: i,
+            simplified: same,
+            area_mm2,
+            pngs,
         });
-    }
-    scratch.recycle(field_mask);
+        area_mm2
+    };
     let ta = ThreadClock::start();
-    let analysis = analyser.analyse_or_defer(
-        i,
-        &layer.section.contours,
-        layer.below.map(|b| b.contours.as_slice()),
-    );
-    let analysis_s = ta.elapsed_s();
+    let analysis = analyser.analyse_or_defer(i, &layer.section.contours, below);
+    analysis_s += ta.elapsed_s();
     Ok(LayerOut {
         area_mm2,
         analysis,

@@ -202,6 +202,16 @@ struct Last {
     section: bool,
 }
 
+/// What [`Analyser::equals_below`] found for a layer.
+#[derive(Debug, Clone, Copy)]
+struct Compared {
+    index: usize,
+    bbox: Option<[[f64; 2]; 2]>,
+    /// Whether `Analyser::section` holds its section without collinear points.
+    simplified: bool,
+    same: bool,
+}
+
 /// Analyses consecutive layers. A worker handling a block of consecutive layers keeps one:
 /// it reuses the row scan (for the islands) of the layer below, and a layer whose section
 /// equals the layer below's (a prism: see [`COLLINEAR_MM`]) takes that layer's analysis,
@@ -215,6 +225,8 @@ struct Last {
 pub struct Analyser {
     row_mm: f64,
     last: Option<Last>,
+    /// The comparison of the layer being analysed with the layer below, once made.
+    compared: Option<Compared>,
     /// The last layer's section without collinear points (when `Last::section`).
     last_section: Vec<Contour>,
     last_runs: Runs,
@@ -232,6 +244,7 @@ impl Analyser {
         Analyser {
             row_mm,
             last: None,
+            compared: None,
             last_section: Vec::new(),
             last_runs: Runs::default(),
             section: Vec::new(),
@@ -269,6 +282,65 @@ impl Analyser {
         }
     }
 
+    /// Whether layer `index`'s section (`cur`) equals the layer below's (`prev`) once
+    /// collinear points are left out (see [`COLLINEAR_MM`]); then
+    /// [`Analyser::simplified_section`] is that section. The answer is kept for the
+    /// following [`Analyser::analyse_or_defer`] of the same layer.
+    pub fn equals_below(
+        &mut self,
+        index: usize,
+        cur: &[Contour],
+        prev: Option<&[Contour]>,
+    ) -> bool {
+        if let Some(c) = self
+            .compared
+            .filter(|c| c.index == index && index != usize::MAX)
+        {
+            return c.same;
+        }
+        let bb = bbox(cur);
+        // This analyser's last layer is the layer below: what it kept of it serves.
+        let below = self
+            .last
+            .filter(|l| index != usize::MAX && l.index.wrapping_add(1) == index);
+        let mut c = Compared {
+            index,
+            bbox: bb,
+            simplified: false,
+            same: false,
+        };
+        // Equal sections have equal bounding boxes: only then are they compared (a box
+        // is cheap, leaving out collinear points is not).
+        if let (Some(p), Some(_)) = (prev, bb) {
+            let below_bb = match below {
+                Some(l) => l.bbox,
+                None => bbox(p),
+            };
+            if below_bb == bb {
+                simplify_section(cur, &mut self.section);
+                if !below.is_some_and(|l| l.section) {
+                    simplify_section(p, &mut self.last_section);
+                    // `last_section` now holds the layer below's section: the last
+                    // layer's only if that is the layer below.
+                    let follows = below.is_some();
+                    if let Some(l) = self.last.as_mut() {
+                        l.section = follows;
+                    }
+                }
+                c.simplified = true;
+                c.same = self.section == self.last_section;
+            }
+        }
+        self.compared = Some(c);
+        c.same
+    }
+
+    /// The section of the layer [`Analyser::equals_below`] last found equal to the layer
+    /// below, collinear points left out.
+    pub fn simplified_section(&self) -> &[Contour] {
+        &self.section
+    }
+
     /// [`Analyser::analyse`], except that a layer whose section equals the layer below's
     /// is not analysed again: its result is copied when this analyser has the layer
     /// below's, otherwise it is [`Analysed::SameAsBelow`] (the caller resolves it from the
@@ -279,40 +351,26 @@ impl Analyser {
         cur: &[Contour],
         prev: Option<&[Contour]>,
     ) -> Analysed {
-        let bb = bbox(cur);
+        self.equals_below(index, cur, prev);
+        let c = self.compared.take().expect("just compared");
+        let bb = c.bbox;
         let last = self.last.take();
-        // This analyser's last layer is the layer below: what it kept of it serves.
         let below = last.filter(|l| index != usize::MAX && l.index.wrapping_add(1) == index);
         let keep = index != usize::MAX;
-        // Equal sections have equal bounding boxes: only then are they compared (a box
-        // is cheap, leaving out collinear points is not).
-        let mut simplified = false;
-        if let (Some(p), Some(_)) = (prev, bb) {
-            let below_bb = match below {
-                Some(l) => l.bbox,
-                None => bbox(p),
-            };
-            if below_bb == bb {
-                simplify_section(cur, &mut self.section);
-                if !below.is_some_and(|l| l.section) {
-                    simplify_section(p, &mut self.last_section);
-                }
-                simplified = true;
-                if self.section == self.last_section {
-                    let copied = below
-                        .and_then(|l| l.analysis)
-                        .map(|a| LayerAnalysis { islands: 0, ..a });
-                    // The row scan kept (if any) is the layer below's, not this one's.
-                    self.last = keep.then_some(Last {
-                        index,
-                        analysis: copied,
-                        bbox: bb,
-                        runs: false,
-                        section: true,
-                    });
-                    return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
-                }
-            }
+        let simplified = c.simplified;
+        if c.same {
+            let copied = below
+                .and_then(|l| l.analysis)
+                .map(|a| LayerAnalysis { islands: 0, ..a });
+            // The row scan kept (if any) is the layer below's, not this one's.
+            self.last = keep.then_some(Last {
+                index,
+                analysis: copied,
+                bbox: bb,
+                runs: false,
+                section: true,
+            });
+            return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
         }
         self.runs.scan(cur, self.row_mm, &mut self.scratch);
         let islands = match prev {
@@ -2135,6 +2193,17 @@ mod tests {
                 let mut a = Analyser::new(p);
                 for i in b * block..((b + 1) * block).min(layers.len()) {
                     let below = i.checked_sub(1).map(|j| layers[j].as_slice());
+                    // Asking first (as the slicer does, for the masks) changes nothing.
+                    if block != 4 {
+                        let hole = |i: usize| (8..15).contains(&i);
+                        let want = i > 0 && hole(i) == hole(i - 1);
+                        assert_eq!(a.equals_below(i, &layers[i], below), want, "layer {i}");
+                        if want {
+                            let mut s = Vec::new();
+                            simplify_section(&layers[i - 1], &mut s);
+                            assert_eq!(a.simplified_section(), s.as_slice());
+                        }
+                    }
                     let r = a.analyse_or_defer(i, &layers[i], below);
                     deferred += usize::from(r == Analysed::SameAsBelow);
                     out.push(r);

@@ -431,3 +431,84 @@ fn part_taller_than_the_stage_travel_is_a_one_line_error() {
     );
     assert!(!dir.join("tall.dmdjob").exists());
 }
+
+#[test]
+fn prism_layers_share_masks_and_analysis_whatever_the_threads() {
+    // A tower of prisms: a 96-gon cylinder, a square tube, a square block. Every side
+    // quad is two triangles, so each layer's contours hold points sliding along the walls
+    // (never equal point lists): layers equal to the layer below once those are left out
+    // reuse its analysis and mask bytes. Bundles must not depend on the thread count, and
+    // every layer after the first two of a section must repeat the layer below.
+    let tris: Vec<Tri> = [
+        prism(&ngon(10.0, 96), 0.0, 2.0),
+        tube(&square(9.0), &square(7.0), 2.0, 4.0),
+        prism(&square(14.0), 4.0, 5.0),
+    ]
+    .concat();
+    let dir = tempdir("plan-prism-reuse");
+    write_stl(&dir.join("tower.stl"), &tris);
+    let mut bundles = Vec::new();
+    for threads in ["1", "3"] {
+        let out = format!("t{threads}.dmdjob");
+        let o = std::process::Command::new(bin())
+            .args([
+                "slice",
+                "tower.stl",
+                "-q",
+                "--layer-height",
+                "0.1",
+                "-o",
+                &out,
+            ])
+            .env("RAYON_NUM_THREADS", threads)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        bundles.push(tree(&dir.join(out)));
+    }
+    assert!(
+        bundles[0] == bundles[1],
+        "bundles differ with the thread count"
+    );
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("t1.dmdjob/job.json")).unwrap()).unwrap();
+    let ls = layers(&job);
+    assert_eq!(ls.len(), 50);
+    // (first layer, fill distance, area) of each section.
+    let a96 = 0.5 * 96.0 * 100.0 * (2.0 * PI / 96.0).sin();
+    let sections = [
+        (0, 10.0 * (PI / 96.0).cos(), a96),
+        // A 1 mm wall; its corners hold the largest circle: w·(2 − √2).
+        (20, 2.0 - 2f64.sqrt(), 81.0 - 49.0),
+        (40, 7.0, 196.0),
+    ];
+    for (i, l) in ls.iter().enumerate() {
+        let &(first, fill, area) = sections.iter().rev().find(|s| s.0 <= i).unwrap();
+        let mfd = f(&l["max_fill_distance_mm"]);
+        assert!(
+            fill - 0.02 <= mfd && mfd <= fill + 1e-6,
+            "layer {i}: {mfd} vs {fill}"
+        );
+        let a = f(&l["area_mm2"]);
+        assert!(
+            (a - area).abs() <= 0.005 * area,
+            "layer {i}: area {a} vs {area}"
+        );
+        assert_eq!(l["islands"], 0, "layer {i}");
+        if i >= first + 2 {
+            let below = &ls[i - 1];
+            assert_eq!(
+                l["masks"][0]["sha256"], below["masks"][0]["sha256"],
+                "layer {i}"
+            );
+            assert_eq!(l["max_fill_distance_mm"], below["max_fill_distance_mm"]);
+            assert_eq!(l["area_mm2"], below["area_mm2"]);
+        }
+    }
+    // The masks differ between sections, and the files really are there.
+    assert_ne!(ls[10]["masks"][0]["sha256"], ls[30]["masks"][0]["sha256"]);
+    let (w, h, px) = read_gray(&dir.join("t1.dmdjob/masks/00045.png"));
+    assert_eq!((w, h), (1024, 768));
+    assert!(px.iter().any(|&v| v > 0));
+}
