@@ -319,7 +319,8 @@ pub struct FitReport {
     pub cv_max_at: String,
     /// Largest correction in the table, |aim − seen|, mm.
     pub max_correction_mm: f64,
-    /// Warped points outside the convex hull of the seen points (extrapolated).
+    /// Warped points outside the convex hull of the seen points (extrapolated); layers
+    /// that repeat the layer below's masks are not warped again and not counted.
     pub extrapolated_points: u64,
 }
 
