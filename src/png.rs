@@ -98,7 +98,7 @@ struct Bits {
 
 impl Bits {
     /// Appends the low `bits` bits of `value` (at most 32) in deflate's LSB-first order.
-    #[inline]
+    #[inline(always)]
     fn put(&mut self, value: u32, bits: u32) {
         self.acc |= (value as u64) << self.n;
         self.n += bits;
@@ -120,7 +120,7 @@ impl Bits {
     }
 
     /// A back-reference of `len` (3..=258) bytes at distance 1.
-    #[inline]
+    #[inline(always)]
     fn repeat(&mut self, len: usize) {
         let (code, bits) = self.codes.repeat[len];
         self.put(code, bits as u32);
@@ -183,7 +183,7 @@ fn length_code(len: usize) -> (u32, u32, u32) {
 }
 
 /// Emits `k` copies of byte `v` (the literal is the first copy, then distance-1 repeats).
-#[inline]
+#[inline(always)]
 fn emit_run(bits: &mut Bits, v: u8, k: usize) {
     let (lit, lit_len) = bits.codes.literal[v as usize];
     let (lit, lit_len) = (lit as u32, lit_len as u32);
@@ -193,7 +193,7 @@ fn emit_run(bits: &mut Bits, v: u8, k: usize) {
         }
         return;
     }
-    let mut k = k - 1;
+    let k = k - 1;
     if k <= 258 {
         // One write: the literal (≤ 9 bits) then the repeat (≤ 18 bits).
         let (rep, rep_len) = bits.codes.repeat[k];
@@ -201,8 +201,21 @@ fn emit_run(bits: &mut Bits, v: u8, k: usize) {
         return;
     }
     bits.put(lit, lit_len);
+    long_repeat(bits, k);
+}
+
+/// `k` (> 258) copies of the previous byte as distance-1 back-references: 258 long ones
+/// two per write (the 13-bit code of length 258 twice), then at most three to finish.
+#[inline(never)]
+fn long_repeat(bits: &mut Bits, mut k: usize) {
+    let (code, len) = bits.codes.repeat[258];
+    let (two, two_len) = (code | code << len, 2 * len as u32);
+    // Never leave 1 or 2 bytes: a repeat is at least 3 long.
+    while k >= 2 * 258 + 3 {
+        bits.put(two, two_len);
+        k -= 2 * 258;
+    }
     while k > 258 {
-        // Never leave 1 or 2 bytes: a repeat is at least 3 long.
         let l = if k - 258 < 3 { k - 3 } else { 258 };
         bits.repeat(l);
         k -= l;
@@ -250,6 +263,39 @@ fn run_len(s: &[u8], v: u8) -> usize {
     i
 }
 
+/// The pending run of the stream (it spans row boundaries: filter bytes are 0, like empty
+/// pixels) and where finished runs go.
+struct Runs {
+    bits: Bits,
+    adler: Adler,
+    /// Value and length of the pending run.
+    v: u8,
+    k: usize,
+}
+
+impl Runs {
+    /// Appends `k` (> 0) bytes of value `v`.
+    #[inline(always)]
+    fn push(&mut self, v: u8, k: usize) {
+        if v == self.v {
+            self.k += k;
+        } else {
+            self.end();
+            self.v = v;
+            self.k = k;
+        }
+    }
+
+    /// Writes the pending run (if any).
+    #[inline(always)]
+    fn end(&mut self) {
+        if self.k > 0 {
+            emit_run(&mut self.bits, self.v, self.k);
+            self.adler.run(self.v, self.k as u64);
+        }
+    }
+}
+
 /// The zlib stream of the PNG scanlines (each row preceded by filter byte 0).
 fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
     let [r0, r1, c0, c1] = lit_box;
@@ -264,59 +310,44 @@ fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
     bits.put(0x01, 8);
     bits.put(1, 1); // BFINAL
     bits.put(1, 2); // BTYPE = 01, fixed Huffman
-    let mut adler = Adler {
-        a: 1,
-        b: 0,
-        pending: 0,
+    let mut runs = Runs {
+        bits,
+        adler: Adler {
+            a: 1,
+            b: 0,
+            pending: 0,
+        },
+        v: 0,
+        k: 0,
     };
-    // The pending run spans row boundaries (filter bytes are 0, like empty pixels).
-    let (mut rv, mut rk) = (0u8, 0usize);
     for r in 0..h {
-        let row = &data[r * w..(r + 1) * w];
         // filter byte 0
-        if rk > 0 && rv == 0 {
-            rk += 1;
-        } else {
-            if rk > 0 {
-                emit_run(&mut bits, rv, rk);
-                adler.run(rv, rk as u64);
-            }
-            rv = 0;
-            rk = 1;
-        }
+        runs.push(0, 1);
         if !(r0..r1).contains(&r) {
-            rk += w; // an empty row continues the zero run
+            runs.k += w; // an empty row continues the zero run
             continue;
         }
         // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
         // whole row had been scanned, so the stream does not depend on the box.
-        let mut push = |v: u8, k: usize, bits: &mut Bits, adler: &mut Adler| {
-            if k == 0 {
-                return;
-            }
-            if v == rv {
-                rk += k;
-            } else {
-                emit_run(bits, rv, rk);
-                adler.run(rv, rk as u64);
-                rv = v;
-                rk = k;
-            }
-        };
-        push(0, c0, &mut bits, &mut adler);
-        let mut i = c0;
-        while i < c1 {
+        let row = &data[r * w + c0..r * w + c1];
+        if c0 > 0 {
+            runs.push(0, c0);
+        }
+        let mut i = 0;
+        while i < row.len() {
             let v = row[i];
-            let k = run_len(&row[i..c1], v);
-            push(v, k, &mut bits, &mut adler);
+            let k = run_len(&row[i..], v);
+            runs.push(v, k);
             i += k;
         }
-        push(0, w - c1, &mut bits, &mut adler);
+        if w > c1 {
+            runs.push(0, w - c1);
+        }
     }
-    if rk > 0 {
-        emit_run(&mut bits, rv, rk);
-        adler.run(rv, rk as u64);
-    }
+    runs.end();
+    let Runs {
+        mut bits, adler, ..
+    } = runs;
     bits.put(0, 7); // end of block (symbol 256: seven zero bits)
     let mut out = bits.finish();
     let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
