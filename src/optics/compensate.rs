@@ -170,20 +170,20 @@ impl Spread {
         self.n += 1;
     }
 
-    /// Adds `v as f64 * s` for every `v` of `vals`, in order. The extremes come from the
-    /// extremes of `vals`: rounding is monotone, so the product of the smallest value is
-    /// the smallest product (largest for negative `s`).
+    /// The extremes part of adding `v as f64 * s` for values `v` whose smallest is `lo`
+    /// and largest `hi`: rounding is monotone, so the product of the smallest value is the
+    /// smallest product (largest for negative `s`).
     #[inline]
-    fn add_run(&mut self, vals: &[f32], s: f64) {
-        let Some(&first) = vals.first() else {
-            return;
-        };
-        let (lo, hi) = vals
-            .iter()
-            .fold((first, first), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    fn add_extremes(&mut self, lo: f32, hi: f32, s: f64) {
         let (a, b) = (lo as f64 * s, hi as f64 * s);
         self.lo = self.lo.min(a.min(b));
         self.hi = self.hi.max(a.max(b));
+    }
+
+    /// The sum and count part of adding `v as f64 * s` for every `v` of `vals`, in order
+    /// (with [`add_extremes`](Self::add_extremes), the same as adding them one by one).
+    #[inline]
+    fn add_sum(&mut self, vals: &[f32], s: f64) {
         let mut sum = self.sum;
         for &v in vals {
             sum += v as f64 * s;
@@ -378,26 +378,55 @@ impl Compensator {
         let segs = zone_segments(&zone_of_col);
         // One pass over P, row-major like every sum here (the sums do not depend on how
         // the passes are arranged): the zone sums (all pixels), and over the calibrated
-        // area the mean and the spread before compensation.
+        // area the mean and the spread before compensation. Each inside pixel is read once
+        // for all three; the extremes of each row's zone segment are kept for the
+        // per-pixel prediction after compensation (the same values, so the same result).
         let mut zsum = vec![0f64; nz];
         let mut zcnt = vec![0usize; nz];
         let mut inside_sum = 0.0f64;
         let mut before_px = Spread::new();
+        let mut seg_extremes: Vec<(f32, f32)> = Vec::with_capacity((r1 + 1 - r0) * segs.len());
         for (r, row) in pp.chunks_exact(w).enumerate() {
             let zr = zone_of_row[r] as usize * zcols;
+            let inside_row = (r0..=r1).contains(&r);
             for &(zc, a, b) in &segs {
                 let mut acc = zsum[zr + zc];
-                for &v in &row[a..b] {
-                    acc += v as f64;
+                if inside_row {
+                    // Columns a..ia and ib..b are outside the calibrated area.
+                    let ia = a.max(c0).min(b);
+                    let ib = b.min(c1 + 1).max(ia);
+                    for &v in &row[a..ia] {
+                        acc += v as f64;
+                    }
+                    let vals = &row[ia..ib];
+                    // Plain comparisons (one instruction each, where `f32::min` is
+                    // several); like it, they skip NaN.
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    let (mut ins, mut bsum) = (inside_sum, before_px.sum);
+                    for &v in vals {
+                        let x = v as f64;
+                        acc += x;
+                        ins += x;
+                        bsum += x * s_max;
+                        lo = if v < lo { v } else { lo };
+                        hi = if v > hi { v } else { hi };
+                    }
+                    (inside_sum, before_px.sum) = (ins, bsum);
+                    if !vals.is_empty() {
+                        before_px.add_extremes(lo, hi, s_max);
+                        before_px.n += vals.len();
+                    }
+                    seg_extremes.push((lo, hi));
+                    for &v in &row[ib..b] {
+                        acc += v as f64;
+                    }
+                } else {
+                    for &v in &row[a..b] {
+                        acc += v as f64;
+                    }
                 }
                 zsum[zr + zc] = acc;
                 zcnt[zr + zc] += b - a;
-            }
-            if (r0..=r1).contains(&r) {
-                for &v in &row[c0..=c1] {
-                    inside_sum += v as f64;
-                }
-                before_px.add_run(&row[c0..=c1], s_max);
             }
         }
         let mean = inside_sum / pixels_inside as f64 * s_max;
@@ -531,14 +560,20 @@ impl Compensator {
                 let zone_of_row = &comp.zone_of_row;
                 let pp = &pp;
                 let mut after_px = Spread::new();
+                let mut extremes = seg_extremes.iter();
                 for r in r0..=r1 {
                     let zr = zone_of_row[r] as usize * zcols;
                     let row = &pp[r * w..(r + 1) * w];
                     for &(zc, a, b) in &segs {
-                        let (a, b) = (a.max(c0), b.min(c1 + 1));
+                        let (a, b) = (a.max(c0).min(b), b.min(c1 + 1));
                         let (g0, g1, k) = mix[zr + zc];
                         let sz = s_of(if upper_row(r, k) { g1 } else { g0 });
-                        after_px.add_run(&row[a..b.max(a)], sz);
+                        let &(lo, hi) = extremes.next().expect("one per row and segment");
+                        let vals = &row[a..b.max(a)];
+                        if !vals.is_empty() {
+                            after_px.add_extremes(lo, hi, sz);
+                            after_px.add_sum(vals, sz);
+                        }
                     }
                 }
                 let after_pixel = after_px.pct();
@@ -835,6 +870,19 @@ impl Compensator {
     }
 }
 
+/// One row of a [`Compensator`] as the rasterizer's scan uses it
+/// ([`crate::raster::CoverageMap::row`]).
+#[derive(Clone, Copy)]
+pub struct CompRow<'a> {
+    comp: &'a Compensator,
+    r: usize,
+    /// The row of the gray map (full coverage).
+    full: &'a [u8],
+    /// Zone mode: the row's table index of each zone column.
+    tabs: &'a [u32],
+    zone: bool,
+}
+
 /// The rasterizer applies the compensation while it writes a layer's mask
 /// ([`crate::raster::Rasterizer::render`]), with the same values as
 /// [`Compensator::apply_in`]: full coverage takes the gray map, other coverage the zone's
@@ -857,20 +905,62 @@ impl crate::raster::CoverageMap for Compensator {
         self.layers_outside.fetch_add(1, Ordering::Relaxed);
     }
 
+    type Row<'a> = CompRow<'a>;
+
     #[inline(always)]
-    fn full_row(&self, r: usize) -> &[u8] {
-        &self.full[r * self.w..(r + 1) * self.w]
+    fn row(&self, r: usize) -> CompRow<'_> {
+        let zone = self.mode == Mode::Zone;
+        CompRow {
+            comp: self,
+            r,
+            full: &self.full[r * self.w..(r + 1) * self.w],
+            tabs: if zone {
+                &self.row_tables[r * self.zcols..(r + 1) * self.zcols]
+            } else {
+                &[]
+            },
+            zone,
+        }
     }
 
     #[inline(always)]
-    fn edge(&self, r: usize, c: usize, v: u8) -> u8 {
-        if self.mode == Mode::Zone {
-            let t = self.row_tables[r * self.zcols + self.zone_of_col[c] as usize];
-            self.tables[t as usize][v as usize]
+    fn fill(row: CompRow<'_>, dst: &mut [u8], a: usize, b: usize, v: u8) {
+        let d = &mut dst[a..b];
+        if v == 255 {
+            let f = &row.full[a..b];
+            if d.len() <= 8 {
+                d.iter_mut().zip(f).for_each(|(x, &g)| *x = g);
+            } else {
+                d.copy_from_slice(f);
+            }
+        } else if row.zone {
+            // One table per zone (and row): a run inside one zone is one value. The zone
+            // of a column never decreases along the row.
+            let (comp, tabs) = (row.comp, row.tabs);
+            let zones = &comp.zone_of_col[a..b];
+            let table = |z: u16| &comp.tables[tabs[z as usize] as usize];
+            let (first, last) = (zones[0], zones[zones.len() - 1]);
+            if first == last {
+                let g = table(first)[v as usize];
+                if d.len() == 1 {
+                    d[0] = g;
+                } else {
+                    d.fill(g);
+                }
+            } else {
+                for (x, &z) in d.iter_mut().zip(zones) {
+                    *x = table(z)[v as usize];
+                }
+            }
         } else {
-            let (lv, i) = (&self.levels, r * self.w + c);
-            let target = v as f64 / 255.0 * self.t[i] as f64;
-            lv.gray[lv.nearest_from(self.full_idx[i] as usize, target)]
+            let (comp, r) = (row.comp, row.r);
+            let lv = &comp.levels;
+            let f = v as f64 / 255.0;
+            for (k, x) in d.iter_mut().enumerate() {
+                let i = r * comp.w + a + k;
+                let target = f * comp.t[i] as f64;
+                *x = lv.gray[lv.nearest_from(comp.full_idx[i] as usize, target)];
+            }
         }
     }
 
