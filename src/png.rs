@@ -223,44 +223,23 @@ fn long_repeat(bits: &mut Bits, mut k: usize) {
     bits.repeat(k);
 }
 
-/// Length of the run of byte `v` starting at `s[0]`: compares 32 bytes per step and finds
-/// the first different byte from the lowest set bit of the XOR.
-#[inline]
+/// Length of the run of byte `v` starting at `s[0]`: compares eight bytes per step and
+/// finds the first different byte from the lowest set bit of the XOR. A plain loop (no
+/// unrolling, no bounds checks): few instructions per step and few registers, which
+/// matters as much here, where the typical run is a few words long.
+#[inline(always)]
 fn run_len(s: &[u8], v: u8) -> usize {
     let pat = u64::from_ne_bytes([v; 8]);
-    let word = |i: usize| u64::from_le_bytes(s[i..i + 8].try_into().expect("8 bytes")) ^ pat;
-    let first_diff = |x: u64| (x.trailing_zeros() / 8) as usize;
-    // Most runs in a mask are short (anti-aliased edges): look at one word first.
-    if s.len() < 8 {
-        return s.iter().take_while(|&&b| b == v).count();
-    }
-    let x = word(0);
-    if x != 0 {
-        return first_diff(x);
-    }
-    let mut i = 8;
-    while i + 32 <= s.len() {
-        let x = [word(i), word(i + 8), word(i + 16), word(i + 24)];
-        if x[0] | x[1] | x[2] | x[3] != 0 {
-            for (k, &x) in x.iter().enumerate() {
-                if x != 0 {
-                    return i + 8 * k + first_diff(x);
-                }
-            }
-        }
-        i += 32;
-    }
-    while i + 8 <= s.len() {
-        let x = word(i);
+    let mut words = s.chunks_exact(8);
+    let mut i = 0;
+    for w in &mut words {
+        let x = u64::from_le_bytes(w.try_into().expect("8 bytes")) ^ pat;
         if x != 0 {
-            return i + first_diff(x);
+            return i + (x.trailing_zeros() / 8) as usize;
         }
         i += 8;
     }
-    while i < s.len() && s[i] == v {
-        i += 1;
-    }
-    i
+    i + words.remainder().iter().take_while(|&&b| b == v).count()
 }
 
 /// The pending run of the stream (it spans row boundaries: filter bytes are 0, like empty
