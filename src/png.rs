@@ -400,6 +400,112 @@ mod tests {
         }
     }
 
+    /// The same stream written the slow, obvious way: raw scanlines, runs found byte by
+    /// byte, codes written bit by bit, Adler-32 byte by byte.
+    fn reference_png(w: usize, h: usize, data: &[u8]) -> Vec<u8> {
+        let raw: Vec<u8> = data
+            .chunks(w)
+            .flat_map(|row| [0].iter().chain(row))
+            .copied()
+            .collect();
+        let mut bits: Vec<bool> = Vec::new();
+        let huff = |bits: &mut Vec<bool>, code: u32, len: u32| {
+            (0..len).rev().for_each(|i| bits.push(code >> i & 1 == 1))
+        };
+        let plain =
+            |bits: &mut Vec<bool>, v: u32, n: u32| (0..n).for_each(|i| bits.push(v >> i & 1 == 1));
+        plain(&mut bits, 0x78, 8);
+        plain(&mut bits, 0x01, 8);
+        plain(&mut bits, 1, 1);
+        plain(&mut bits, 1, 2);
+        let mut i = 0;
+        while i < raw.len() {
+            let v = raw[i];
+            let k = raw[i..].iter().take_while(|&&b| b == v).count();
+            i += k;
+            let lit = |bits: &mut Vec<bool>| match v {
+                0..=143 => huff(bits, 0x30 + v as u32, 8),
+                _ => huff(bits, 0x190 + v as u32 - 144, 9),
+            };
+            if k < 4 {
+                (0..k).for_each(|_| lit(&mut bits));
+                continue;
+            }
+            lit(&mut bits);
+            let mut m = k - 1;
+            while m > 0 {
+                let l = if m <= 258 {
+                    m
+                } else if m - 258 < 3 {
+                    m - 3
+                } else {
+                    258
+                };
+                let (sym, extra_bits, extra) = length_code(l);
+                match sym {
+                    257..=279 => huff(&mut bits, sym - 256, 7),
+                    _ => huff(&mut bits, 0xC0 + sym - 280, 8),
+                }
+                plain(&mut bits, extra, extra_bits);
+                huff(&mut bits, 0, 5); // distance 1
+                m -= l;
+            }
+        }
+        huff(&mut bits, 0, 7); // end of block
+        let mut idat: Vec<u8> = bits
+            .chunks(8)
+            .map(|b| b.iter().enumerate().map(|(j, &x)| (x as u8) << j).sum())
+            .collect();
+        let (mut a, mut b) = (1u32, 0u32);
+        for &x in &raw {
+            a = (a + x as u32) % 65521;
+            b = (b + a) % 65521;
+        }
+        idat.extend_from_slice(&(b << 16 | a).to_be_bytes());
+        let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut ihdr = (w as u32).to_be_bytes().to_vec();
+        ihdr.extend_from_slice(&(h as u32).to_be_bytes());
+        ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+        chunk(&mut out, b"IHDR", &ihdr);
+        chunk(&mut out, b"IDAT", &idat);
+        chunk(&mut out, b"IEND", &[]);
+        out
+    }
+
+    #[test]
+    fn bytes_match_the_obvious_encoder() {
+        // Pins the exact stream (not just what a decoder reads back): masks are hashed
+        // into job.json, so a change of bytes is a change of output.
+        let mut seed = 0x0bad_5eed_1234_5678u64;
+        for (w, h) in [(1, 1), (9, 4), (300, 7), (1024, 40), (700, 600)] {
+            for pattern in 0..4 {
+                let mut d = vec![0u8; w * h];
+                let mut i = 0;
+                while i < d.len() {
+                    let r = xorshift(&mut seed);
+                    let k = match (pattern, r % 4) {
+                        (0, _) => d.len(),
+                        (1, 0) => (r >> 8) as usize % 3000 + 1,
+                        (_, 0) => (r >> 8) as usize % 300 + 1,
+                        _ => (r >> 8) as usize % 9 + 1,
+                    };
+                    let v = match pattern {
+                        0 | 1 => [0u8, 255, 131][(r >> 40) as usize % 3],
+                        _ => (r >> 40) as u8,
+                    };
+                    let k = k.min(d.len() - i);
+                    d[i..i + k].fill(v);
+                    i += k;
+                }
+                let want = reference_png(w, h, &d);
+                assert!(
+                    encode_gray8(w as u32, h as u32, &d) == want,
+                    "{w}x{h} {pattern}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn boxed_encoding_is_byte_identical() {
         let (w, h) = (300usize, 200usize);

@@ -526,8 +526,21 @@ impl Compensator {
                     if tz > s_max * (1.0 + 1e-9) {
                         unreachable += 1;
                     }
-                    for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
-                        *out = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                    if tz >= 0.0 {
+                        // Targets grow with v: walk the level thresholds upwards (the
+                        // same levels as `nearest`'s search, in one pass per zone).
+                        let mut i = 0;
+                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
+                            let t = v as f64 / 255.0 * tz;
+                            while i < lv.mid.len() && lv.mid[i] <= t {
+                                i += 1;
+                            }
+                            *out = lv.gray[i];
+                        }
+                    } else {
+                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
+                            *out = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                        }
                     }
                     let g = luts[z][255];
                     zone_after[z] = pz * s_of(g);
@@ -1071,6 +1084,68 @@ mod tests {
             // Target: the dimmest zone (or pixel) fully on, give or take the window.
             let t = c.prediction.target;
             assert!((0.95..=(1.0 + 2.5 / 40.0) * 1.02).contains(&t), "{t}");
+        }
+    }
+
+    #[test]
+    fn prediction_and_zone_tables_match_a_direct_computation() {
+        // The set-up's fused pass (zone sums, mean, spreads) and its table walk must give
+        // exactly what the plain definitions give, also when the calibrated area cuts
+        // through zones and rows (0.7 mm pixels: zone edges fall inside pixel columns).
+        let (mut cal, _) = setup();
+        let field = Field {
+            width_px: 57,
+            height_px: 43,
+            pixel_mm: 0.7,
+        };
+        for area in [[0.0, 0.0, 40.0, 30.0], [3.5, 2.2, 33.0, 27.5]] {
+            cal.field.area_mm = area;
+            let pp = pixel_p(&cal.field, &field);
+            let (w, h, p) = (57usize, 43usize, 0.7);
+            let inside = |i: usize| {
+                let (x, y) = ((i % w) as f64 + 0.5, h as f64 - (i / w) as f64 - 0.5);
+                let (x, y) = (x * p, y * p);
+                x >= area[0] && x <= area[2] && y >= area[1] && y <= area[3]
+            };
+            for (mode, dither) in [
+                (Mode::Zone, Dither::Auto),
+                (Mode::Zone, Dither::On),
+                (Mode::Zone, Dither::Off),
+                (Mode::Pixel, Dither::Off),
+            ] {
+                let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+                let pr = &c.prediction;
+                let what = format!("{area:?} {mode:?} {dither:?}");
+                let (mut before, mut after) = (Spread::new(), Spread::new());
+                let (mut sum, mut n) = (0.0f64, 0usize);
+                for i in (0..w * h).filter(|&i| inside(i)) {
+                    sum += pp[i] as f64;
+                    n += 1;
+                    before.add(pp[i] as f64 * pr.s_max);
+                    after.add(pp[i] as f64 * c.s_of(c.full[i]));
+                }
+                assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
+                assert_eq!(pr.spreads.before_pixel_pct, before.pct(), "{what}");
+                if mode == Mode::Pixel {
+                    continue;
+                }
+                assert_eq!(pr.spreads.after_pixel_pct, after.pct(), "{what}");
+                // Each zone's lower table: the nearest level to coverage × E*/P̄ (entry
+                // 255 is the zone's full gray, which may mix two levels).
+                let lv = &c.levels;
+                for (z, &pz) in pr.zone_p.iter().enumerate() {
+                    // A zone without pixels (NaN mean) cannot be reached.
+                    let tz = if pz > 0.0 {
+                        pr.target / pz
+                    } else {
+                        f64::INFINITY
+                    };
+                    for v in 1..255 {
+                        let want = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                        assert_eq!(c.tables[z][v], want, "{what} zone {z} v {v}");
+                    }
+                }
+            }
         }
     }
 
