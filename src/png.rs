@@ -98,7 +98,7 @@ struct Bits {
 
 impl Bits {
     /// Appends the low `bits` bits of `value` (at most 32) in deflate's LSB-first order.
-    #[inline]
+    #[inline(always)]
     fn put(&mut self, value: u32, bits: u32) {
         self.acc |= (value as u64) << self.n;
         self.n += bits;
@@ -120,7 +120,7 @@ impl Bits {
     }
 
     /// A back-reference of `len` (3..=258) bytes at distance 1.
-    #[inline]
+    #[inline(always)]
     fn repeat(&mut self, len: usize) {
         let (code, bits) = self.codes.repeat[len];
         self.put(code, bits as u32);
@@ -183,7 +183,7 @@ fn length_code(len: usize) -> (u32, u32, u32) {
 }
 
 /// Emits `k` copies of byte `v` (the literal is the first copy, then distance-1 repeats).
-#[inline]
+#[inline(always)]
 fn emit_run(bits: &mut Bits, v: u8, k: usize) {
     let (lit, lit_len) = bits.codes.literal[v as usize];
     let (lit, lit_len) = (lit as u32, lit_len as u32);
@@ -193,7 +193,7 @@ fn emit_run(bits: &mut Bits, v: u8, k: usize) {
         }
         return;
     }
-    let mut k = k - 1;
+    let k = k - 1;
     if k <= 258 {
         // One write: the literal (≤ 9 bits) then the repeat (≤ 18 bits).
         let (rep, rep_len) = bits.codes.repeat[k];
@@ -201,8 +201,21 @@ fn emit_run(bits: &mut Bits, v: u8, k: usize) {
         return;
     }
     bits.put(lit, lit_len);
+    long_repeat(bits, k);
+}
+
+/// `k` (> 258) copies of the previous byte as distance-1 back-references: 258 long ones
+/// two per write (the 13-bit code of length 258 twice), then at most three to finish.
+#[inline(never)]
+fn long_repeat(bits: &mut Bits, mut k: usize) {
+    let (code, len) = bits.codes.repeat[258];
+    let (two, two_len) = (code | code << len, 2 * len as u32);
+    // Never leave 1 or 2 bytes: a repeat is at least 3 long.
+    while k >= 2 * 258 + 3 {
+        bits.put(two, two_len);
+        k -= 2 * 258;
+    }
     while k > 258 {
-        // Never leave 1 or 2 bytes: a repeat is at least 3 long.
         let l = if k - 258 < 3 { k - 3 } else { 258 };
         bits.repeat(l);
         k -= l;
@@ -210,44 +223,56 @@ fn emit_run(bits: &mut Bits, v: u8, k: usize) {
     bits.repeat(k);
 }
 
-/// Length of the run of byte `v` starting at `s[0]`: compares 32 bytes per step and finds
-/// the first different byte from the lowest set bit of the XOR.
-#[inline]
+/// Length of the run of byte `v` starting at `s[0]`: compares eight bytes per step and
+/// finds the first different byte from the lowest set bit of the XOR. A plain loop (no
+/// unrolling, no bounds checks): few instructions per step and few registers, which
+/// matters as much here, where the typical run is a few words long.
+#[inline(always)]
 fn run_len(s: &[u8], v: u8) -> usize {
     let pat = u64::from_ne_bytes([v; 8]);
-    let word = |i: usize| u64::from_le_bytes(s[i..i + 8].try_into().expect("8 bytes")) ^ pat;
-    let first_diff = |x: u64| (x.trailing_zeros() / 8) as usize;
-    // Most runs in a mask are short (anti-aliased edges): look at one word first.
-    if s.len() < 8 {
-        return s.iter().take_while(|&&b| b == v).count();
-    }
-    let x = word(0);
-    if x != 0 {
-        return first_diff(x);
-    }
-    let mut i = 8;
-    while i + 32 <= s.len() {
-        let x = [word(i), word(i + 8), word(i + 16), word(i + 24)];
-        if x[0] | x[1] | x[2] | x[3] != 0 {
-            for (k, &x) in x.iter().enumerate() {
-                if x != 0 {
-                    return i + 8 * k + first_diff(x);
-                }
-            }
-        }
-        i += 32;
-    }
-    while i + 8 <= s.len() {
-        let x = word(i);
+    let mut words = s.chunks_exact(8);
+    let mut i = 0;
+    for w in &mut words {
+        let x = u64::from_le_bytes(w.try_into().expect("8 bytes")) ^ pat;
         if x != 0 {
-            return i + first_diff(x);
+            return i + (x.trailing_zeros() / 8) as usize;
         }
         i += 8;
     }
-    while i < s.len() && s[i] == v {
-        i += 1;
+    i + words.remainder().iter().take_while(|&&b| b == v).count()
+}
+
+/// The pending run of the stream (it spans row boundaries: filter bytes are 0, like empty
+/// pixels) and where finished runs go.
+struct Runs {
+    bits: Bits,
+    adler: Adler,
+    /// Value and length of the pending run.
+    v: u8,
+    k: usize,
+}
+
+impl Runs {
+    /// Appends `k` (> 0) bytes of value `v`.
+    #[inline(always)]
+    fn push(&mut self, v: u8, k: usize) {
+        if v == self.v {
+            self.k += k;
+        } else {
+            self.end();
+            self.v = v;
+            self.k = k;
+        }
     }
-    i
+
+    /// Writes the pending run (if any).
+    #[inline(always)]
+    fn end(&mut self) {
+        if self.k > 0 {
+            emit_run(&mut self.bits, self.v, self.k);
+            self.adler.run(self.v, self.k as u64);
+        }
+    }
 }
 
 /// The zlib stream of the PNG scanlines (each row preceded by filter byte 0).
@@ -264,59 +289,44 @@ fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
     bits.put(0x01, 8);
     bits.put(1, 1); // BFINAL
     bits.put(1, 2); // BTYPE = 01, fixed Huffman
-    let mut adler = Adler {
-        a: 1,
-        b: 0,
-        pending: 0,
+    let mut runs = Runs {
+        bits,
+        adler: Adler {
+            a: 1,
+            b: 0,
+            pending: 0,
+        },
+        v: 0,
+        k: 0,
     };
-    // The pending run spans row boundaries (filter bytes are 0, like empty pixels).
-    let (mut rv, mut rk) = (0u8, 0usize);
     for r in 0..h {
-        let row = &data[r * w..(r + 1) * w];
         // filter byte 0
-        if rk > 0 && rv == 0 {
-            rk += 1;
-        } else {
-            if rk > 0 {
-                emit_run(&mut bits, rv, rk);
-                adler.run(rv, rk as u64);
-            }
-            rv = 0;
-            rk = 1;
-        }
+        runs.push(0, 1);
         if !(r0..r1).contains(&r) {
-            rk += w; // an empty row continues the zero run
+            runs.k += w; // an empty row continues the zero run
             continue;
         }
         // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
         // whole row had been scanned, so the stream does not depend on the box.
-        let mut push = |v: u8, k: usize, bits: &mut Bits, adler: &mut Adler| {
-            if k == 0 {
-                return;
-            }
-            if v == rv {
-                rk += k;
-            } else {
-                emit_run(bits, rv, rk);
-                adler.run(rv, rk as u64);
-                rv = v;
-                rk = k;
-            }
-        };
-        push(0, c0, &mut bits, &mut adler);
-        let mut i = c0;
-        while i < c1 {
+        let row = &data[r * w + c0..r * w + c1];
+        if c0 > 0 {
+            runs.push(0, c0);
+        }
+        let mut i = 0;
+        while i < row.len() {
             let v = row[i];
-            let k = run_len(&row[i..c1], v);
-            push(v, k, &mut bits, &mut adler);
+            let k = run_len(&row[i..], v);
+            runs.push(v, k);
             i += k;
         }
-        push(0, w - c1, &mut bits, &mut adler);
+        if w > c1 {
+            runs.push(0, w - c1);
+        }
     }
-    if rk > 0 {
-        emit_run(&mut bits, rv, rk);
-        adler.run(rv, rk as u64);
-    }
+    runs.end();
+    let Runs {
+        mut bits, adler, ..
+    } = runs;
     bits.put(0, 7); // end of block (symbol 256: seven zero bits)
     let mut out = bits.finish();
     let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
@@ -386,6 +396,112 @@ mod tests {
                 let (dw, dh, back) = decode(&png);
                 assert_eq!((dw, dh), (w as u32, h as u32));
                 assert!(back == d, "{w}x{h} pattern {pattern}");
+            }
+        }
+    }
+
+    /// The same stream written the slow, obvious way: raw scanlines, runs found byte by
+    /// byte, codes written bit by bit, Adler-32 byte by byte.
+    fn reference_png(w: usize, h: usize, data: &[u8]) -> Vec<u8> {
+        let raw: Vec<u8> = data
+            .chunks(w)
+            .flat_map(|row| [0].iter().chain(row))
+            .copied()
+            .collect();
+        let mut bits: Vec<bool> = Vec::new();
+        let huff = |bits: &mut Vec<bool>, code: u32, len: u32| {
+            (0..len).rev().for_each(|i| bits.push(code >> i & 1 == 1))
+        };
+        let plain =
+            |bits: &mut Vec<bool>, v: u32, n: u32| (0..n).for_each(|i| bits.push(v >> i & 1 == 1));
+        plain(&mut bits, 0x78, 8);
+        plain(&mut bits, 0x01, 8);
+        plain(&mut bits, 1, 1);
+        plain(&mut bits, 1, 2);
+        let mut i = 0;
+        while i < raw.len() {
+            let v = raw[i];
+            let k = raw[i..].iter().take_while(|&&b| b == v).count();
+            i += k;
+            let lit = |bits: &mut Vec<bool>| match v {
+                0..=143 => huff(bits, 0x30 + v as u32, 8),
+                _ => huff(bits, 0x190 + v as u32 - 144, 9),
+            };
+            if k < 4 {
+                (0..k).for_each(|_| lit(&mut bits));
+                continue;
+            }
+            lit(&mut bits);
+            let mut m = k - 1;
+            while m > 0 {
+                let l = if m <= 258 {
+                    m
+                } else if m - 258 < 3 {
+                    m - 3
+                } else {
+                    258
+                };
+                let (sym, extra_bits, extra) = length_code(l);
+                match sym {
+                    257..=279 => huff(&mut bits, sym - 256, 7),
+                    _ => huff(&mut bits, 0xC0 + sym - 280, 8),
+                }
+                plain(&mut bits, extra, extra_bits);
+                huff(&mut bits, 0, 5); // distance 1
+                m -= l;
+            }
+        }
+        huff(&mut bits, 0, 7); // end of block
+        let mut idat: Vec<u8> = bits
+            .chunks(8)
+            .map(|b| b.iter().enumerate().map(|(j, &x)| (x as u8) << j).sum())
+            .collect();
+        let (mut a, mut b) = (1u32, 0u32);
+        for &x in &raw {
+            a = (a + x as u32) % 65521;
+            b = (b + a) % 65521;
+        }
+        idat.extend_from_slice(&(b << 16 | a).to_be_bytes());
+        let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+        let mut ihdr = (w as u32).to_be_bytes().to_vec();
+        ihdr.extend_from_slice(&(h as u32).to_be_bytes());
+        ihdr.extend_from_slice(&[8, 0, 0, 0, 0]);
+        chunk(&mut out, b"IHDR", &ihdr);
+        chunk(&mut out, b"IDAT", &idat);
+        chunk(&mut out, b"IEND", &[]);
+        out
+    }
+
+    #[test]
+    fn bytes_match_the_obvious_encoder() {
+        // Pins the exact stream (not just what a decoder reads back): masks are hashed
+        // into job.json, so a change of bytes is a change of output.
+        let mut seed = 0x0bad_5eed_1234_5678u64;
+        for (w, h) in [(1, 1), (9, 4), (300, 7), (1024, 40), (700, 600)] {
+            for pattern in 0..4 {
+                let mut d = vec![0u8; w * h];
+                let mut i = 0;
+                while i < d.len() {
+                    let r = xorshift(&mut seed);
+                    let k = match (pattern, r % 4) {
+                        (0, _) => d.len(),
+                        (1, 0) => (r >> 8) as usize % 3000 + 1,
+                        (_, 0) => (r >> 8) as usize % 300 + 1,
+                        _ => (r >> 8) as usize % 9 + 1,
+                    };
+                    let v = match pattern {
+                        0 | 1 => [0u8, 255, 131][(r >> 40) as usize % 3],
+                        _ => (r >> 40) as u8,
+                    };
+                    let k = k.min(d.len() - i);
+                    d[i..i + k].fill(v);
+                    i += k;
+                }
+                let want = reference_png(w, h, &d);
+                assert!(
+                    encode_gray8(w as u32, h as u32, &d) == want,
+                    "{w}x{h} {pattern}"
+                );
             }
         }
     }

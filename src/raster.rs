@@ -409,10 +409,15 @@ pub trait CoverageMap {
     fn area(&self) -> [usize; 4];
     /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area).
     fn lit_outside(&self);
-    /// Row `r` of the full-coverage map: what coverage 255 becomes in each column.
-    fn full_row(&self, r: usize) -> &[u8];
-    /// What coverage `v` (1..=254) becomes at row `r`, column `c`.
-    fn edge(&self, r: usize, c: usize, v: u8) -> u8;
+    /// What the map needs for one row (looked up once per row, not per pixel).
+    type Row<'a>: Copy
+    where
+        Self: 'a;
+    /// The per-row state of row `r`.
+    fn row(&self, r: usize) -> Self::Row<'_>;
+    /// Writes columns a..b of a mask row `dst` (zero there) for coverage `v` (1..=255):
+    /// what coverage `v` becomes in each of those columns.
+    fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
     /// Maps a finished coverage mask in place; it is zero outside `lit_box`.
     fn apply(&self, m: &mut Mask, lit_box: [usize; 4]);
 }
@@ -430,12 +435,11 @@ impl CoverageMap for NoMap {
     fn lit_outside(&self) {
         match *self {}
     }
-    fn full_row(&self, _: usize) -> &[u8] {
+    type Row<'a> = ();
+    fn row(&self, _: usize) {
         match *self {}
     }
-    fn edge(&self, _: usize, _: usize, _: u8) -> u8 {
-        match *self {}
-    }
+    fn fill(_: (), _: &mut [u8], _: usize, _: usize, _: u8) {}
     fn apply(&self, _: &mut Mask, _: [usize; 4]) {
         match *self {}
     }
@@ -475,30 +479,19 @@ struct Mapped<'m, M>(&'m M);
 
 impl<M: CoverageMap> Emit for Mapped<'_, M> {
     type Row<'a>
-        = (&'a M, &'a [u8], usize)
+        = M::Row<'a>
     where
         Self: 'a;
     #[inline(always)]
-    fn row(&self, r: usize) -> (&M, &[u8], usize) {
-        (self.0, self.0.full_row(r), r)
+    fn row(&self, r: usize) -> M::Row<'_> {
+        self.0.row(r)
     }
     fn area(&self) -> [usize; 4] {
         self.0.area()
     }
     #[inline(always)]
-    fn fill((m, full, r): (&M, &[u8], usize), dst: &mut [u8], a: usize, b: usize, v: u8) {
-        let (d, f) = (&mut dst[a..b], &full[a..b]);
-        if v == 255 {
-            if d.len() <= 8 {
-                d.iter_mut().zip(f).for_each(|(x, &g)| *x = g);
-            } else {
-                d.copy_from_slice(f);
-            }
-        } else {
-            for (c, x) in d.iter_mut().enumerate() {
-                *x = m.edge(r, a + c, v);
-            }
-        }
+    fn fill(row: M::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8) {
+        M::fill(row, dst, a, b, v);
     }
 }
 
@@ -597,21 +590,24 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
                 let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
                 let from = bs.max(c0).min(end);
                 let to = be.min(end).max(from);
-                // Indexed (not zipped): measurably fewer instructions in this hot loop.
-                #[allow(clippy::needless_range_loop)]
-                for c in from..to {
+                // Most cells of a touched block are zero: one vectorizable pass marks the
+                // nonzero ones, then only those are visited (in column order).
+                let mut nonzero = nonzero_cells(&row[bs..be]);
+                nonzero &= (1u64 << (to - bs)) - 1;
+                nonzero &= !((1u64 << (from - bs)) - 1);
+                while nonzero != 0 {
+                    let c = bs + nonzero.trailing_zeros() as usize;
+                    nonzero &= nonzero - 1;
                     let a = row[c];
-                    if a != 0.0 {
-                        sum += a;
-                        // Cleared as it is read: the buffer is all zeros after the scan.
-                        row[c] = 0.0;
-                        let v = sum.abs();
-                        max_winding = max_winding.max(v);
-                        let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
-                        if nv != val {
-                            sink.end(start, c, val);
-                            (start, val) = (c, nv);
-                        }
+                    sum += a;
+                    // Cleared as it is read: the buffer is all zeros after the scan.
+                    row[c] = 0.0;
+                    let v = sum.abs();
+                    max_winding = max_winding.max(v);
+                    let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
+                    if nv != val {
+                        sink.end(start, c, val);
+                        (start, val) = (c, nv);
                     }
                 }
                 // Cells right of the field (edges carry area one column past their
@@ -628,6 +624,17 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         }
     }
     (lit_sum, max_winding)
+}
+
+/// Bit i set where `cells[i]` (at most [`BLOCK`] cells) is nonzero. A whole block is one
+/// branch-free pass the compiler vectorizes.
+#[inline(always)]
+fn nonzero_cells(cells: &[f32]) -> u64 {
+    let mark = |m: u64, (i, &a): (usize, &f32)| m | (((a != 0.0) as u64) << i);
+    match <&[f32; BLOCK]>::try_from(cells) {
+        Ok(block) => block.iter().enumerate().fold(0, mark),
+        Err(_) => cells.iter().enumerate().fold(0, mark),
+    }
 }
 
 /// Where [`scan_runs`] puts the runs of one row.

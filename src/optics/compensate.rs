@@ -170,20 +170,20 @@ impl Spread {
         self.n += 1;
     }
 
-    /// Adds `v as f64 * s` for every `v` of `vals`, in order. The extremes come from the
-    /// extremes of `vals`: rounding is monotone, so the product of the smallest value is
-    /// the smallest product (largest for negative `s`).
+    /// The extremes part of adding `v as f64 * s` for values `v` whose smallest is `lo`
+    /// and largest `hi`: rounding is monotone, so the product of the smallest value is the
+    /// smallest product (largest for negative `s`).
     #[inline]
-    fn add_run(&mut self, vals: &[f32], s: f64) {
-        let Some(&first) = vals.first() else {
-            return;
-        };
-        let (lo, hi) = vals
-            .iter()
-            .fold((first, first), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    fn add_extremes(&mut self, lo: f32, hi: f32, s: f64) {
         let (a, b) = (lo as f64 * s, hi as f64 * s);
         self.lo = self.lo.min(a.min(b));
         self.hi = self.hi.max(a.max(b));
+    }
+
+    /// The sum and count part of adding `v as f64 * s` for every `v` of `vals`, in order
+    /// (with [`add_extremes`](Self::add_extremes), the same as adding them one by one).
+    #[inline]
+    fn add_sum(&mut self, vals: &[f32], s: f64) {
         let mut sum = self.sum;
         for &v in vals {
             sum += v as f64 * s;
@@ -378,26 +378,55 @@ impl Compensator {
         let segs = zone_segments(&zone_of_col);
         // One pass over P, row-major like every sum here (the sums do not depend on how
         // the passes are arranged): the zone sums (all pixels), and over the calibrated
-        // area the mean and the spread before compensation.
+        // area the mean and the spread before compensation. Each inside pixel is read once
+        // for all three; the extremes of each row's zone segment are kept for the
+        // per-pixel prediction after compensation (the same values, so the same result).
         let mut zsum = vec![0f64; nz];
         let mut zcnt = vec![0usize; nz];
         let mut inside_sum = 0.0f64;
         let mut before_px = Spread::new();
+        let mut seg_extremes: Vec<(f32, f32)> = Vec::with_capacity((r1 + 1 - r0) * segs.len());
         for (r, row) in pp.chunks_exact(w).enumerate() {
             let zr = zone_of_row[r] as usize * zcols;
+            let inside_row = (r0..=r1).contains(&r);
             for &(zc, a, b) in &segs {
                 let mut acc = zsum[zr + zc];
-                for &v in &row[a..b] {
-                    acc += v as f64;
+                if inside_row {
+                    // Columns a..ia and ib..b are outside the calibrated area.
+                    let ia = a.max(c0).min(b);
+                    let ib = b.min(c1 + 1).max(ia);
+                    for &v in &row[a..ia] {
+                        acc += v as f64;
+                    }
+                    let vals = &row[ia..ib];
+                    // Plain comparisons (one instruction each, where `f32::min` is
+                    // several); like it, they skip NaN.
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    let (mut ins, mut bsum) = (inside_sum, before_px.sum);
+                    for &v in vals {
+                        let x = v as f64;
+                        acc += x;
+                        ins += x;
+                        bsum += x * s_max;
+                        lo = if v < lo { v } else { lo };
+                        hi = if v > hi { v } else { hi };
+                    }
+                    (inside_sum, before_px.sum) = (ins, bsum);
+                    if !vals.is_empty() {
+                        before_px.add_extremes(lo, hi, s_max);
+                        before_px.n += vals.len();
+                    }
+                    seg_extremes.push((lo, hi));
+                    for &v in &row[ib..b] {
+                        acc += v as f64;
+                    }
+                } else {
+                    for &v in &row[a..b] {
+                        acc += v as f64;
+                    }
                 }
                 zsum[zr + zc] = acc;
                 zcnt[zr + zc] += b - a;
-            }
-            if (r0..=r1).contains(&r) {
-                for &v in &row[c0..=c1] {
-                    inside_sum += v as f64;
-                }
-                before_px.add_run(&row[c0..=c1], s_max);
             }
         }
         let mean = inside_sum / pixels_inside as f64 * s_max;
@@ -497,8 +526,21 @@ impl Compensator {
                     if tz > s_max * (1.0 + 1e-9) {
                         unreachable += 1;
                     }
-                    for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
-                        *out = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                    if tz >= 0.0 {
+                        // Targets grow with v: walk the level thresholds upwards (the
+                        // same levels as `nearest`'s search, in one pass per zone).
+                        let mut i = 0;
+                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
+                            let t = v as f64 / 255.0 * tz;
+                            while i < lv.mid.len() && lv.mid[i] <= t {
+                                i += 1;
+                            }
+                            *out = lv.gray[i];
+                        }
+                    } else {
+                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
+                            *out = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                        }
                     }
                     let g = luts[z][255];
                     zone_after[z] = pz * s_of(g);
@@ -531,14 +573,20 @@ impl Compensator {
                 let zone_of_row = &comp.zone_of_row;
                 let pp = &pp;
                 let mut after_px = Spread::new();
+                let mut extremes = seg_extremes.iter();
                 for r in r0..=r1 {
                     let zr = zone_of_row[r] as usize * zcols;
                     let row = &pp[r * w..(r + 1) * w];
                     for &(zc, a, b) in &segs {
-                        let (a, b) = (a.max(c0), b.min(c1 + 1));
+                        let (a, b) = (a.max(c0).min(b), b.min(c1 + 1));
                         let (g0, g1, k) = mix[zr + zc];
                         let sz = s_of(if upper_row(r, k) { g1 } else { g0 });
-                        after_px.add_run(&row[a..b.max(a)], sz);
+                        let &(lo, hi) = extremes.next().expect("one per row and segment");
+                        let vals = &row[a..b.max(a)];
+                        if !vals.is_empty() {
+                            after_px.add_extremes(lo, hi, sz);
+                            after_px.add_sum(vals, sz);
+                        }
                     }
                 }
                 let after_pixel = after_px.pct();
@@ -835,6 +883,19 @@ impl Compensator {
     }
 }
 
+/// One row of a [`Compensator`] as the rasterizer's scan uses it
+/// ([`crate::raster::CoverageMap::row`]).
+#[derive(Clone, Copy)]
+pub struct CompRow<'a> {
+    comp: &'a Compensator,
+    r: usize,
+    /// The row of the gray map (full coverage).
+    full: &'a [u8],
+    /// Zone mode: the row's table index of each zone column.
+    tabs: &'a [u32],
+    zone: bool,
+}
+
 /// The rasterizer applies the compensation while it writes a layer's mask
 /// ([`crate::raster::Rasterizer::render`]), with the same values as
 /// [`Compensator::apply_in`]: full coverage takes the gray map, other coverage the zone's
@@ -857,20 +918,62 @@ impl crate::raster::CoverageMap for Compensator {
         self.layers_outside.fetch_add(1, Ordering::Relaxed);
     }
 
+    type Row<'a> = CompRow<'a>;
+
     #[inline(always)]
-    fn full_row(&self, r: usize) -> &[u8] {
-        &self.full[r * self.w..(r + 1) * self.w]
+    fn row(&self, r: usize) -> CompRow<'_> {
+        let zone = self.mode == Mode::Zone;
+        CompRow {
+            comp: self,
+            r,
+            full: &self.full[r * self.w..(r + 1) * self.w],
+            tabs: if zone {
+                &self.row_tables[r * self.zcols..(r + 1) * self.zcols]
+            } else {
+                &[]
+            },
+            zone,
+        }
     }
 
     #[inline(always)]
-    fn edge(&self, r: usize, c: usize, v: u8) -> u8 {
-        if self.mode == Mode::Zone {
-            let t = self.row_tables[r * self.zcols + self.zone_of_col[c] as usize];
-            self.tables[t as usize][v as usize]
+    fn fill(row: CompRow<'_>, dst: &mut [u8], a: usize, b: usize, v: u8) {
+        let d = &mut dst[a..b];
+        if v == 255 {
+            let f = &row.full[a..b];
+            if d.len() <= 8 {
+                d.iter_mut().zip(f).for_each(|(x, &g)| *x = g);
+            } else {
+                d.copy_from_slice(f);
+            }
+        } else if row.zone {
+            // One table per zone (and row): a run inside one zone is one value. The zone
+            // of a column never decreases along the row.
+            let (comp, tabs) = (row.comp, row.tabs);
+            let zones = &comp.zone_of_col[a..b];
+            let table = |z: u16| &comp.tables[tabs[z as usize] as usize];
+            let (first, last) = (zones[0], zones[zones.len() - 1]);
+            if first == last {
+                let g = table(first)[v as usize];
+                if d.len() == 1 {
+                    d[0] = g;
+                } else {
+                    d.fill(g);
+                }
+            } else {
+                for (x, &z) in d.iter_mut().zip(zones) {
+                    *x = table(z)[v as usize];
+                }
+            }
         } else {
-            let (lv, i) = (&self.levels, r * self.w + c);
-            let target = v as f64 / 255.0 * self.t[i] as f64;
-            lv.gray[lv.nearest_from(self.full_idx[i] as usize, target)]
+            let (comp, r) = (row.comp, row.r);
+            let lv = &comp.levels;
+            let f = v as f64 / 255.0;
+            for (k, x) in d.iter_mut().enumerate() {
+                let i = r * comp.w + a + k;
+                let target = f * comp.t[i] as f64;
+                *x = lv.gray[lv.nearest_from(comp.full_idx[i] as usize, target)];
+            }
         }
     }
 
@@ -981,6 +1084,68 @@ mod tests {
             // Target: the dimmest zone (or pixel) fully on, give or take the window.
             let t = c.prediction.target;
             assert!((0.95..=(1.0 + 2.5 / 40.0) * 1.02).contains(&t), "{t}");
+        }
+    }
+
+    #[test]
+    fn prediction_and_zone_tables_match_a_direct_computation() {
+        // The set-up's fused pass (zone sums, mean, spreads) and its table walk must give
+        // exactly what the plain definitions give, also when the calibrated area cuts
+        // through zones and rows (0.7 mm pixels: zone edges fall inside pixel columns).
+        let (mut cal, _) = setup();
+        let field = Field {
+            width_px: 57,
+            height_px: 43,
+            pixel_mm: 0.7,
+        };
+        for area in [[0.0, 0.0, 40.0, 30.0], [3.5, 2.2, 33.0, 27.5]] {
+            cal.field.area_mm = area;
+            let pp = pixel_p(&cal.field, &field);
+            let (w, h, p) = (57usize, 43usize, 0.7);
+            let inside = |i: usize| {
+                let (x, y) = ((i % w) as f64 + 0.5, h as f64 - (i / w) as f64 - 0.5);
+                let (x, y) = (x * p, y * p);
+                x >= area[0] && x <= area[2] && y >= area[1] && y <= area[3]
+            };
+            for (mode, dither) in [
+                (Mode::Zone, Dither::Auto),
+                (Mode::Zone, Dither::On),
+                (Mode::Zone, Dither::Off),
+                (Mode::Pixel, Dither::Off),
+            ] {
+                let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+                let pr = &c.prediction;
+                let what = format!("{area:?} {mode:?} {dither:?}");
+                let (mut before, mut after) = (Spread::new(), Spread::new());
+                let (mut sum, mut n) = (0.0f64, 0usize);
+                for i in (0..w * h).filter(|&i| inside(i)) {
+                    sum += pp[i] as f64;
+                    n += 1;
+                    before.add(pp[i] as f64 * pr.s_max);
+                    after.add(pp[i] as f64 * c.s_of(c.full[i]));
+                }
+                assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
+                assert_eq!(pr.spreads.before_pixel_pct, before.pct(), "{what}");
+                if mode == Mode::Pixel {
+                    continue;
+                }
+                assert_eq!(pr.spreads.after_pixel_pct, after.pct(), "{what}");
+                // Each zone's lower table: the nearest level to coverage × E*/P̄ (entry
+                // 255 is the zone's full gray, which may mix two levels).
+                let lv = &c.levels;
+                for (z, &pz) in pr.zone_p.iter().enumerate() {
+                    // A zone without pixels (NaN mean) cannot be reached.
+                    let tz = if pz > 0.0 {
+                        pr.target / pz
+                    } else {
+                        f64::INFINITY
+                    };
+                    for v in 1..255 {
+                        let want = lv.gray[lv.nearest(v as f64 / 255.0 * tz)];
+                        assert_eq!(c.tables[z][v], want, "{what} zone {z} v {v}");
+                    }
+                }
+            }
         }
     }
 
