@@ -512,3 +512,35 @@ fn prism_layers_share_masks_and_analysis_whatever_the_threads() {
     assert_eq!((w, h), (1024, 768));
     assert!(px.iter().any(|&v| v > 0));
 }
+
+#[test]
+fn prism_reaching_outside_the_calibrated_area_counts_every_layer() {
+    // The built-in calibration covers y 0..45 mm of the 48.77 mm field: a prism from
+    // y 42 to 47 reaches outside on every layer, and every layer must be counted even
+    // though its section repeats the layer below's.
+    let mut poly = ngon(2.5, 48);
+    for p in &mut poly {
+        p[0] += 30.0;
+        p[1] += 44.5;
+    }
+    let tris = prism(&poly, 0.0, 2.0);
+    let dir = tempdir("plan-prism-outside");
+    let (summary, _) = slice_json(
+        &dir,
+        "p.stl",
+        &tris,
+        &["--keep-position", "--layer-height", "0.1"],
+    );
+    let warnings: Vec<&str> = summary["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.starts_with("20 layers reach outside the calibrated area")),
+        "{warnings:?}"
+    );
+}
