@@ -444,6 +444,20 @@ const FOLLOWED_MAX: u8 = 3;
 /// Spacing of the cover points along the walls, in cell half-sizes.
 const ALONG: f64 = 0.67;
 
+/// Most boundary points added to a cell's own cover test when its walls' points do not
+/// cover it ([`cover_more`]): each one the boundary point nearest to a point the test
+/// found uncovered (a third wall near a peak, or a wall point between the samples).
+const EXTRA: usize = 3;
+
+/// Most points of a cover test: the six wall points and the [`EXTRA`] ones.
+const MAX_PTS: usize = 6 + EXTRA;
+
+/// Cells whose cover test is completed by [`cover_more`]: `(h·√2)² ≤ COVER_GATE · T ·
+/// precision`. Larger cells are rarely covered (their uncovered points are deeper than
+/// `T`) and are split (measured 16, 32, 64: 32 is cheapest on logo_hires and
+/// torus_hires).
+const COVER_GATE: f64 = 32.0;
+
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
     /// Edge `v` goes from contour point `v` to point `next[v]` (the points of all contours
@@ -1006,7 +1020,7 @@ fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 /// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
-/// of `q` (at most 8 points). When it is not, no point of the square is farther than
+/// of `q` (at most [`MAX_PTS`] points). When it is not, no point of the square is farther than
 /// `sqrt(t2)` from the boundary the points lie on: the square is covered by discs of
 /// radius `sqrt(t2)` around boundary points.
 ///
@@ -1015,8 +1029,15 @@ fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// or at a circumcentre of three points inside it: the test checks those candidates and
 /// stops at the first one that is far from every point.
 fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
-    let mut p = [[0.0f64; 2]; 8];
-    let mut r2 = [0.0f64; 8];
+    uncovered(c, h, q, t2).is_some()
+}
+
+/// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
+/// `sqrt(t2)` from every point of `q` (at most [`MAX_PTS`] points), or `None` when the
+/// discs of radius `sqrt(t2)` around the points cover the square.
+fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
+    let mut p = [[0.0f64; 2]; MAX_PTS];
+    let mut r2 = [0.0f64; MAX_PTS];
     let mut n = 0;
     for qj in q {
         let v = [qj[0] - c[0], qj[1] - c[1]];
@@ -1024,7 +1045,7 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
         // A point whose disc holds the whole square covers it alone; one whose disc
         // misses the square covers none of it and can be left out.
         if (ax + h).powi(2) + (ay + h).powi(2) <= t2 {
-            return false;
+            return None;
         }
         if (ax - h).max(0.0).powi(2) + (ay - h).max(0.0).powi(2) > t2 {
             continue;
@@ -1033,14 +1054,18 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
         r2[n] = v[0] * v[0] + v[1] * v[1];
         n += 1;
     }
+    // The witness, back in the section's coordinates.
+    let at = |x: [f64; 2]| Some([c[0] + x[0], c[1] + x[1]]);
     if n == 0 {
-        return true;
+        return at([0.0, 0.0]);
     }
     let p = &p[..n];
     // True when x is farther than t from all points.
     let far = |x: [f64; 2]| p.iter().all(|pj| d2(x, *pj) > t2);
-    if far([-h, -h]) || far([h, -h]) || far([-h, h]) || far([h, h]) {
-        return true;
+    for x in [[-h, -h], [h, -h], [-h, h], [h, h]] {
+        if far(x) {
+            return at(x);
+        }
     }
     for i in 0..n {
         for j in i + 1..n {
@@ -1050,7 +1075,7 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
                 for x in [-h, h] {
                     let y = (k - nv[0] * x) / nv[1];
                     if y.abs() <= h && far([x, y]) {
-                        return true;
+                        return at([x, y]);
                     }
                 }
             }
@@ -1058,7 +1083,7 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
                 for y in [-h, h] {
                     let x = (k - nv[1] * y) / nv[0];
                     if x.abs() <= h && far([x, y]) {
-                        return true;
+                        return at([x, y]);
                     }
                 }
             }
@@ -1074,13 +1099,13 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
                             / den,
                     ];
                     if u[0].abs() <= h && u[1].abs() <= h && far(u) {
-                        return true;
+                        return at(u);
                     }
                 }
             }
         }
     }
-    false
+    None
 }
 
 /// Largest inscribed circle of the section (nonzero winding): `(radius, centre)`, mm.
@@ -1120,7 +1145,11 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 ///    either side. If discs of radius `T` around them
 ///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
-///    Otherwise a ridge probe (half-way between the two walls) may raise the best;
+///    When they do not, a cell small enough ([`COVER_GATE`]) gets up to [`EXTRA`] more
+///    points, each the boundary point nearest to a point the test found uncovered (a
+///    third wall at a peak, a wall point between the samples: [`cover_more`]), and is
+///    tested again (the walls-only test of step 2 likewise);
+///    otherwise a ridge probe (half-way between the two walls) may raise the best;
 /// 5. the four children are tested against the same points at once, and only those not
 ///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
 ///    `q` or the far-wall point, if smaller) as their key.
@@ -1150,6 +1179,60 @@ impl std::fmt::Debug for SearchScratch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("SearchScratch")
     }
+}
+
+/// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
+/// `(centre, half-size)`: adds the boundary point nearest to `x` to `pts` (first `n`
+/// used) and tries again, at most [`EXTRA`] times; returns whether the square is now
+/// covered at radius `T` = best depth + `precision`. The nearest point is first looked
+/// for by following the cell's `walls` (edges, `u32::MAX`: none) along their contours
+/// to `x` ([`Edges::descend`]); only when that point is farther than `T` is the exact
+/// nearest edge searched. Every point added is a boundary point, so a cover stays a
+/// proof. If `x` is inside the section and deeper than `T`, it becomes the best centre
+/// (and the square cannot be covered).
+#[allow(clippy::too_many_arguments)]
+fn cover_more(
+    e: &Edges,
+    sq: ([f64; 2], f64),
+    pts: &mut [[f64; 2]; MAX_PTS],
+    n: &mut usize,
+    mut x: [f64; 2],
+    walls: [u32; 2],
+    best: (&mut [f64; 2], &mut f64, &mut u32),
+    precision: f64,
+) -> bool {
+    let (best_c, best_d, best_near) = best;
+    let stop = (*n + EXTRA).min(MAX_PTS);
+    while *n < stop {
+        let t = *best_d + precision;
+        let mut found = (f64::INFINITY, u32::MAX);
+        for w in walls {
+            if w != u32::MAX {
+                let r = e.descend(w, x);
+                if r.0 < found.0 {
+                    found = r;
+                }
+            }
+        }
+        let (dx, ix) = if found.0 <= t * t {
+            (found.0.sqrt(), found.1)
+        } else {
+            e.nearest_from(x, found)
+        };
+        if dx > t {
+            if e.inside(x) {
+                (*best_c, *best_d, *best_near) = (x, dx, ix);
+            }
+            return false;
+        }
+        pts[*n] = e.closest_point(ix, x);
+        *n += 1;
+        match uncovered(sq.0, sq.1, &pts[..*n], t * t) {
+            None => return true,
+            Some(w) => x = w,
+        }
+    }
+    false
 }
 
 /// [`max_fill_distance_with`] with buffers `sc`.
@@ -1241,7 +1324,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
             ins = Some(inside);
             // The centre cannot beat the best: try to drop the cell with these walls alone.
             if inside && u <= best_d && t > 0.0 && w2.is_some() {
-                let mut pts = [[0.0; 2]; 6];
+                let mut pts = [[0.0; 2]; MAX_PTS];
                 let mut n = 0;
                 for (_, i) in std::iter::once(w1).chain(w2) {
                     let q = e.closest_point(i, c.c);
@@ -1249,7 +1332,24 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                     pts[n..n + 3].copy_from_slice(&[q, a, b]);
                     n += 3;
                 }
-                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                if let Some(x) = uncovered(c.c, c.h, &pts[..n], t * t) {
+                    let walls = [w1.1, w2.map_or(u32::MAX, |w| w.1)];
+                    let mut m = n;
+                    if reach * reach <= COVER_GATE * t * precision
+                        && cover_more(
+                            e,
+                            (c.c, c.h),
+                            &mut pts,
+                            &mut m,
+                            x,
+                            walls,
+                            (&mut best_c, &mut best_d, &mut best_near),
+                            precision,
+                        )
+                    {
+                        continue;
+                    }
+                } else {
                     continue;
                 }
                 // Not covered: split it with these walls (no search: the centre cannot
@@ -1275,7 +1375,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
             if lip - best_d <= precision {
                 continue;
             }
-            let mut pts = [[0.0; 2]; 6];
+            let mut pts = [[0.0; 2]; MAX_PTS];
             let mut n = 0;
             let mut far_edge = u32::MAX;
             if d > 0.0 {
@@ -1296,7 +1396,25 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                     far_edge = i2;
                 }
                 let t = best_d + precision;
-                if !points_exceed(c.c, c.h, &pts[..n], t * t) {
+                if let Some(x) = uncovered(c.c, c.h, &pts[..n], t * t) {
+                    // The children are tested against the walls' points only (more
+                    // points make every test dearer than the few children they drop).
+                    let mut m = n;
+                    if reach * reach <= COVER_GATE * t * precision
+                        && cover_more(
+                            e,
+                            (c.c, c.h),
+                            &mut pts,
+                            &mut m,
+                            x,
+                            [near, far_edge],
+                            (&mut best_c, &mut best_d, &mut best_near),
+                            precision,
+                        )
+                    {
+                        continue;
+                    }
+                } else {
                     continue;
                 }
                 // Ridge probe: half-way between the two walls along the line through q and
@@ -1326,7 +1444,9 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
         };
         let qh = c.h / 2.0;
         let idx = if n > 0 {
-            arena.push((pts, n as u8));
+            let mut kept = [[0.0; 2]; 6];
+            kept.copy_from_slice(&pts[..6]);
+            arena.push((kept, n as u8));
             (arena.len() - 1) as u32
         } else {
             u32::MAX
@@ -1894,6 +2014,121 @@ mod tests {
     }
 
     #[test]
+    fn uncovered_gives_a_point_of_the_square_far_from_every_point() {
+        // The witness of a failed cover test must lie in the square and be farther than
+        // the radius from every point (cover_more adds the boundary point nearest to it);
+        // when there is none the square is covered (checked on a grid).
+        let mut rnd = xorshift(0x51a2c3d4e5f60718);
+        let mut seen = [0, 0];
+        for _ in 0..400 {
+            let n = 1 + (rnd() * MAX_PTS as f64) as usize;
+            let q: Vec<[f64; 2]> = (0..n)
+                .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
+                .collect();
+            let c = [rnd() - 0.5, rnd() - 0.5];
+            let h = 0.1 + rnd();
+            let t = 0.3 + 2.0 * rnd();
+            match uncovered(c, h, &q, t * t) {
+                Some(w) => {
+                    assert!(
+                        (w[0] - c[0]).abs() <= h * (1.0 + 1e-12)
+                            && (w[1] - c[1]).abs() <= h * (1.0 + 1e-12),
+                        "{w:?} outside {c:?} ± {h}"
+                    );
+                    assert!(q.iter().all(|&p| d2(w, p) > t * t), "{w:?} {q:?} {t}");
+                    seen[1] += 1;
+                }
+                None => {
+                    let steps = 40;
+                    let step = 2.0 * h / steps as f64;
+                    for i in 0..=steps {
+                        for j in 0..=steps {
+                            let x = [c[0] - h + step * i as f64, c[1] - h + step * j as f64];
+                            let m = q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min);
+                            assert!(m <= t * t * (1.0 + 1e-9), "{x:?} uncovered: {q:?} {t}");
+                        }
+                    }
+                    seen[0] += 1;
+                }
+            }
+        }
+        assert!(seen[0] > 50 && seen[1] > 50, "{seen:?}");
+    }
+
+    /// A disc of radius `r` with a cross of half-width `a` cut out (or, with `hole` > 0,
+    /// a ring with that inner radius): four separate pieces, each bounded by finely
+    /// tessellated arcs (`k` points per arc, on the circles) and two straight cuts.
+    fn cross_cut_pieces(r: f64, hole: f64, a: f64, k: usize) -> Vec<Contour> {
+        let arc = |rad: f64, from: f64, to: f64| -> Vec<[f64; 2]> {
+            (0..k)
+                .map(|i| {
+                    let t = from + (to - from) * i as f64 / (k - 1) as f64;
+                    [rad * t.cos(), rad * t.sin()]
+                })
+                .collect()
+        };
+        let mut out = Vec::new();
+        for quad in 0..4 {
+            let (sx, sy) = ([1.0, -1.0, -1.0, 1.0][quad], [1.0, 1.0, -1.0, -1.0][quad]);
+            // First quadrant piece, counter-clockwise, then mirrored.
+            let mut c: Contour = Vec::new();
+            let o = (a / r).asin();
+            c.extend(arc(r, o, std::f64::consts::FRAC_PI_2 - o));
+            if hole > 0.0 {
+                let i = (a / hole).asin();
+                c.extend(arc(hole, std::f64::consts::FRAC_PI_2 - i, i));
+            } else {
+                c.push([a, a]);
+            }
+            let mut c: Contour = c.into_iter().map(|p| [sx * p[0], sy * p[1]]).collect();
+            if sx * sy < 0.0 {
+                c.reverse();
+            }
+            out.push(c);
+        }
+        out
+    }
+
+    #[test]
+    fn three_wall_peaks_are_resolved() {
+        // Triangles: the largest circle is the incircle (touching all three walls),
+        // r = 2·area / perimeter.
+        let mut rnd = xorshift(0x7f4a7c159e3779b9);
+        for _ in 0..12 {
+            let p: Vec<[f64; 2]> = (0..3)
+                .map(|_| [30.0 * rnd() - 15.0, 30.0 * rnd() - 15.0])
+                .collect();
+            let area2 = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
+            if area2.abs() < 20.0 {
+                continue;
+            }
+            let per = d2(p[0], p[1]).sqrt() + d2(p[1], p[2]).sqrt() + d2(p[2], p[0]).sqrt();
+            let exact = area2.abs() / per;
+            let v = mfd(&[p]);
+            assert!(v <= exact + 1e-9 && v >= exact - 0.005, "{v} vs {exact}");
+        }
+        // Quarter discs (logo_hires's layers): the circle touches both cuts and the arc,
+        // √2·(a + r) = R − r; the chords of the arc move it by < 1e-4 mm.
+        let (big, a) = (19.5, 2.0);
+        let exact = (big - std::f64::consts::SQRT_2 * a) / (1.0 + std::f64::consts::SQRT_2);
+        let pieces = cross_cut_pieces(big, 0.0, a, 340);
+        let (v, c) = max_fill_distance(&pieces);
+        assert!(
+            v <= exact + 1e-9 && v >= exact - 0.005,
+            "{v} vs {exact} at {c:?}"
+        );
+        let e = Edges::new(&pieces);
+        let brute = brute_max(&e, [-20.0, -20.0], 0.1, (400, 400), 8, 0.002, 30);
+        assert!(v <= brute + 0.0015 && v >= brute - 0.005, "{v} vs {brute}");
+        // Ring pieces: a whole arc of centres at half the ring's width.
+        let pieces = cross_cut_pieces(19.9, 11.25, 4.0, 340);
+        let half = (19.9 - 11.25) / 2.0;
+        let v = mfd(&pieces);
+        assert!((v - half).abs() <= 0.005, "{v} vs {half}");
+    }
+
+    #[test]
     fn matches_brute_force_on_random_polygons_with_holes() {
         // A random star with a random star-shaped hole (and a second part), the kind of
         // section where the far wall and the contour neighbours come from other contours.
@@ -2224,11 +2459,22 @@ mod tests {
         }
         // The hole is an island-free change: fill distances differ with and without it.
         assert!(fresh[10].max_fill_distance_mm < fresh[5].max_fill_distance_mm - 1.0);
-        // Out of order: the plain `analyse` never defers.
+        // Out of order: the plain `analyse` never defers. A layer equal to the layer below
+        // that it has not analysed is analysed from its own contours (the same polygon
+        // with other collinear points: the search may take another path and stop at
+        // another circle, both within the guarantee), so its fill distance agrees within
+        // PRECISION_MM, not bit for bit (measured: up to 1.4e-4 mm here).
         let mut a = Analyser::new(p);
         for &i in &[3usize, 4, 4, 10, 9, 20, 21, 0, 1] {
             let below = i.checked_sub(1).map(|j| layers[j].as_slice());
-            assert_eq!(a.analyse(i, &layers[i], below), fresh[i], "layer {i}");
+            let got = a.analyse(i, &layers[i], below);
+            assert_eq!(
+                (got.islands, got.bbox_mm),
+                (fresh[i].islands, fresh[i].bbox_mm),
+                "layer {i}"
+            );
+            let d = (got.max_fill_distance_mm - fresh[i].max_fill_distance_mm).abs();
+            assert!(d <= PRECISION_MM, "layer {i}: {got:?} vs {:?}", fresh[i]);
         }
     }
 
