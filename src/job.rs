@@ -603,9 +603,9 @@ struct Made {
     /// Whether they were drawn from the section without collinear points (the layer was
     /// equal to the layer below).
     simplified: bool,
-    /// Whether a copy counts for nothing else: no light compensation, or the layer lies
-    /// inside its calibrated area (the compensation counts the layers reaching outside).
-    plain: bool,
+    /// Whether drawing them reported the layer to the light compensation as reaching
+    /// outside the calibrated area (a copy reports it again: every such layer counts).
+    outside: bool,
     area_mm2: f64,
     /// PNG bytes, SHA-256 and projector of each mask.
     pngs: Vec<(Vec<u8>, String, u32)>,
@@ -644,8 +644,14 @@ fn layer_masks(
     let mut masks = Vec::with_capacity(profile.projector.len());
     let reusable = made
         .take()
-        .filter(|m| same && m.simplified && m.plain && m.index + 1 == i);
+        .filter(|m| same && m.simplified && m.index + 1 == i);
     let area_mm2 = if let Some(m) = reusable {
+        if m.outside {
+            if let Some(o) = optics {
+                use crate::raster::CoverageMap;
+                o.compensator.lit_outside();
+            }
+        }
         for (k, (png, sha, projector)) in m.pngs.iter().enumerate() {
             let file = file_name(k);
             writer.write_file(&file, png)?;
@@ -678,11 +684,7 @@ fn layer_masks(
         let comp = optics.map(|o| &o.compensator);
         let field_mask = raster.render(warped.as_deref().unwrap_or(section), scratch, binary, comp);
         let area_mm2 = scratch.lit_pixels(&field_mask) * px_area * area_scale;
-        let plain = comp.is_none_or(|c| {
-            use crate::raster::CoverageMap;
-            let ([ar0, ar1, ac0, ac1], [r0, r1, c0, c1]) = (c.area(), scratch.lit_box());
-            r0 >= ar0 && r1 <= ar1 && c0 >= ac0 && c1 <= ac1
-        });
+        let outside = comp.is_some() && scratch.reported_outside();
         let mut pngs = Vec::with_capacity(profile.projector.len());
         for (k, p) in profile.projector.iter().enumerate() {
             let view = match tiler {
@@ -710,7 +712,7 @@ fn layer_masks(
         *made = Some(Made {
             index: i,
             simplified: same,
-            plain,
+            outside,
             area_mm2,
             pngs,
         });

@@ -81,6 +81,9 @@ pub struct Scratch {
     /// Recycled mask buffers with the box outside which each is known to be zero.
     spare: Vec<(Vec<u8>, [usize; 4])>,
     lit: [usize; 4],
+    /// Whether the last [`Rasterizer::render`] reported its layer to the map as lit
+    /// outside the map's area.
+    reported_outside: bool,
 }
 
 impl Scratch {
@@ -88,6 +91,13 @@ impl Scratch {
     /// and columns c0..c1 (lets later passes skip the empty part of the field).
     pub fn lit_box(&self) -> [usize; 4] {
         self.lit
+    }
+
+    /// Whether the last [`Rasterizer::render`] with a map reported its layer as lit
+    /// outside the map's area ([`CoverageMap::lit_outside`]): a caller repeating that
+    /// layer's mask without drawing it reports it again.
+    pub fn reported_outside(&self) -> bool {
+        self.reported_outside
     }
 
     /// The lit area of the last [`Rasterizer::coverage`] mask in pixels (sum of values /
@@ -263,11 +273,14 @@ impl Rasterizer {
             }
             mapped = false;
         }
-        match (map, mapped) {
+        scratch.reported_outside = match (map, mapped) {
             (Some(m), false) => m.apply(&mut out, lit),
-            (Some(m), true) if outside => m.lit_outside(),
-            _ => {}
-        }
+            (Some(m), true) if outside => {
+                m.lit_outside();
+                true
+            }
+            _ => false,
+        };
         out
     }
 
@@ -418,8 +431,9 @@ pub trait CoverageMap {
     /// Writes columns a..b of a mask row `dst` (zero there) for coverage `v` (1..=255):
     /// what coverage `v` becomes in each of those columns.
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
-    /// Maps a finished coverage mask in place; it is zero outside `lit_box`.
-    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]);
+    /// Maps a finished coverage mask in place; it is zero outside `lit_box`. Returns
+    /// whether the layer is lit outside [`area`](Self::area) (and reported as such).
+    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool;
 }
 
 /// No map (the [`Rasterizer::coverage`] and [`Rasterizer::binary`] masks).
@@ -440,7 +454,7 @@ impl CoverageMap for NoMap {
         match *self {}
     }
     fn fill(_: (), _: &mut [u8], _: usize, _: usize, _: u8) {}
-    fn apply(&self, _: &mut Mask, _: [usize; 4]) {
+    fn apply(&self, _: &mut Mask, _: [usize; 4]) -> bool {
         match *self {}
     }
 }

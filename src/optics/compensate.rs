@@ -729,7 +729,10 @@ impl Compensator {
     /// (zone mode: the zone's gray for this row; pixel mode: the per-pixel gray map), other
     /// words go pixel by pixel (zone mode: a 256-entry table per zone and row parity;
     /// pixel mode: a search from the full-coverage level).
-    pub fn apply_in(&self, m: &mut Mask, lit_box: [usize; 4]) {
+    ///
+    /// Returns whether the layer reaches outside the calibrated area (it is then counted
+    /// in [`layers_outside`](Self::layers_outside)).
+    pub fn apply_in(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool {
         assert_eq!(
             (m.width as usize, m.height as usize),
             (self.w, self.h),
@@ -739,9 +742,10 @@ impl Compensator {
         let [br0, br1, bc0, bc1] = lit_box;
         let (br1, bc1) = (br1.min(self.h), bc1.min(w));
         if br0 >= br1 || bc0 >= bc1 {
-            return;
+            return false;
         }
-        if self.lit_outside(m, [br0, br1, bc0, bc1]) {
+        let outside = self.lit_outside(m, [br0, br1, bc0, bc1]);
+        if outside {
             self.layers_outside.fetch_add(1, Ordering::Relaxed);
         }
         match (self.mode, self.dither) {
@@ -765,6 +769,7 @@ impl Compensator {
             }
             (Mode::Off, _) => {}
         }
+        outside
     }
 
     /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
@@ -977,8 +982,8 @@ impl crate::raster::CoverageMap for Compensator {
         }
     }
 
-    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) {
-        self.apply_in(m, lit_box);
+    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool {
+        self.apply_in(m, lit_box)
     }
 }
 
