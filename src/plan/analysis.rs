@@ -1145,9 +1145,9 @@ pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
 ///    either side. If discs of radius `T` around them
 ///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
-///    When they do not, a cell small enough ([`COVER_GATE`]) gets up to [`EXTRA`] more
+///    When they do not, a cell small enough (`COVER_GATE`) gets up to `EXTRA` more
 ///    points, each the boundary point nearest to a point the test found uncovered (a
-///    third wall at a peak, a wall point between the samples: [`cover_more`]), and is
+///    third wall at a peak, a wall point between the samples: `cover_more`), and is
 ///    tested again (the walls-only test of step 2 likewise);
 ///    otherwise a ridge probe (half-way between the two walls) may raise the best;
 /// 5. the four children are tested against the same points at once, and only those not
