@@ -88,9 +88,11 @@ fn near_segment(a: [f64; 2], b: [f64; 2], d: [f64; 2]) -> bool {
 }
 
 /// `c` without its collinear points (within [`COLLINEAR_MM`] of the segment that replaces
-/// them), starting at its smallest point (x, then y), into `out`. The result depends only
-/// on the contour's geometry and direction, not on where it started, so two layers with
-/// the same walls give equal contours. Every point of either boundary is within
+/// them), starting at its smallest point (x, then y), into `out`. For contours whose
+/// corners stand clear of the tolerance the result depends only on the geometry and
+/// direction, not on where the contour started, so two layers with the same walls give
+/// equal contours (a near-degenerate corner can make them differ: the layers are then
+/// analysed separately, never wrongly). Every point of either boundary is within
 /// [`COLLINEAR_MM`] of the other.
 fn simplify_contour(c: &[[f64; 2]], out: &mut Vec<[f64; 2]>) {
     out.clear();
