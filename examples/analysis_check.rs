@@ -10,6 +10,7 @@
 //! results are below (at most `PRECISION_MM` allowed) and above that reference.
 //! Under `RAYON_NUM_THREADS=1 valgrind --tool=callgrind` the inclusive cost of
 //! `Analyser::analyse` matches that of `dmdsl slice` within 0.1 %.
+mod common;
 use dmdsl::plan::analysis;
 use dmdsl::profile::Profile;
 
@@ -19,15 +20,7 @@ fn main() {
     let p = Profile::default_profile();
     let h = p.slicing.layer_height_mm.get();
     let field = p.field();
-    let mut mesh = dmdsl::mesh::load(&path).expect("model loads");
-    let (_, n) = dmdsl::job::place_mesh(
-        &path,
-        &mut mesh,
-        &field,
-        dmdsl::job::PlacementMode::Center,
-        h,
-    )
-    .expect("model fits");
+    let (mesh, n) = common::placed(&path, &field, h);
     let (sections, _) = dmdsl::slice::slice(&mesh, h, n);
     let mut results: Vec<analysis::LayerAnalysis> = Vec::with_capacity(n);
     for (b, block) in sections.chunks(dmdsl::job::BLOCK).enumerate() {

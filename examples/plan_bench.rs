@@ -8,6 +8,7 @@
 //! slice` run (its `--json` timings include `analysis_cpu_s`). The machine is shared and noisy,
 //! hence the best-of-N.
 
+mod common;
 use dmdsl::plan::analysis;
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
@@ -41,15 +42,7 @@ fn main() {
         .map(|s| s.parse().expect("repeats"))
         .unwrap_or(5);
     let field = p.field();
-    let mut mesh = dmdsl::mesh::load(&path).expect("model loads");
-    let (_, n) = dmdsl::job::place_mesh(
-        &path,
-        &mut mesh,
-        &field,
-        dmdsl::job::PlacementMode::Center,
-        h,
-    )
-    .expect("model fits");
+    let (mesh, n) = common::placed(&path, &field, h);
     let (t_slice, (sections, _)) = best_of(reps, || dmdsl::slice::slice(&mesh, h, n));
     let r = Rasterizer::new(field);
     let mut sc = Scratch::default();

@@ -1183,6 +1183,29 @@ impl std::fmt::Debug for SearchScratch {
     }
 }
 
+/// Whether discs of radius `T` = best depth + `precision` around `pts[..n]` (boundary
+/// points) cover the square `sq` = `(centre, half-size)`; a square small enough
+/// (`(h·√2)² ≤ COVER_GATE · T · precision`) that they do not cover is completed with
+/// [`cover_more`] (which may raise the best and uses `pts` beyond `n`).
+fn covered(
+    e: &Edges,
+    sq: ([f64; 2], f64),
+    pts: &mut [[f64; 2]; MAX_PTS],
+    n: usize,
+    walls: [u32; 2],
+    best: (&mut [f64; 2], &mut f64, &mut u32),
+    precision: f64,
+) -> bool {
+    let t = *best.1 + precision;
+    let Some(x) = uncovered(sq.0, sq.1, &pts[..n], t * t) else {
+        return true;
+    };
+    let reach = sq.1 * std::f64::consts::SQRT_2;
+    let mut m = n;
+    reach * reach <= COVER_GATE * t * precision
+        && cover_more(e, sq, pts, &mut m, x, walls, best, precision)
+}
+
 /// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
 /// `(centre, half-size)`: adds the boundary point nearest to `x` to `pts` (first `n`
 /// used) and tries again, at most [`EXTRA`] times; returns whether the square is now
@@ -1334,24 +1357,9 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                     pts[n..n + 3].copy_from_slice(&[q, a, b]);
                     n += 3;
                 }
-                if let Some(x) = uncovered(c.c, c.h, &pts[..n], t * t) {
-                    let walls = [w1.1, w2.map_or(u32::MAX, |w| w.1)];
-                    let mut m = n;
-                    if reach * reach <= COVER_GATE * t * precision
-                        && cover_more(
-                            e,
-                            (c.c, c.h),
-                            &mut pts,
-                            &mut m,
-                            x,
-                            walls,
-                            (&mut best_c, &mut best_d, &mut best_near),
-                            precision,
-                        )
-                    {
-                        continue;
-                    }
-                } else {
+                let walls = [w1.1, w2.map_or(u32::MAX, |w| w.1)];
+                let best = (&mut best_c, &mut best_d, &mut best_near);
+                if covered(e, (c.c, c.h), &mut pts, n, walls, best, precision) {
                     continue;
                 }
                 // Not covered: split it with these walls (no search: the centre cannot
@@ -1397,26 +1405,18 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                     e.along(i2, q2, ALONG * c.h).into_iter().for_each(&mut add);
                     far_edge = i2;
                 }
-                let t = best_d + precision;
-                if let Some(x) = uncovered(c.c, c.h, &pts[..n], t * t) {
-                    // The children are tested against the walls' points only (more
-                    // points make every test dearer than the few children they drop).
-                    let mut m = n;
-                    if reach * reach <= COVER_GATE * t * precision
-                        && cover_more(
-                            e,
-                            (c.c, c.h),
-                            &mut pts,
-                            &mut m,
-                            x,
-                            [near, far_edge],
-                            (&mut best_c, &mut best_d, &mut best_near),
-                            precision,
-                        )
-                    {
-                        continue;
-                    }
-                } else {
+                // The children are tested against the walls' points only (more points
+                // make every test dearer than the few children they drop).
+                let best = (&mut best_c, &mut best_d, &mut best_near);
+                if covered(
+                    e,
+                    (c.c, c.h),
+                    &mut pts,
+                    n,
+                    [near, far_edge],
+                    best,
+                    precision,
+                ) {
                     continue;
                 }
                 // Ridge probe: half-way between the two walls along the line through q and

@@ -398,22 +398,18 @@ fn dithered_output_does_not_depend_on_thread_count() {
     for threads in ["1", "2"] {
         for (mode, dither) in [("pixel", "on"), ("zone", "on")] {
             let out = format!("t{threads}{mode}.dmdjob");
-            let o = std::process::Command::new(bin())
-                .args([
-                    "slice",
-                    "b.stl",
-                    "-o",
-                    &out,
-                    "-q",
-                    "--compensation",
-                    mode,
-                    "--dither",
-                    dither,
-                ])
-                .env("RAYON_NUM_THREADS", threads)
-                .current_dir(&dir)
-                .output()
-                .unwrap();
+            let args = [
+                "slice",
+                "b.stl",
+                "-o",
+                &out,
+                "-q",
+                "--compensation",
+                mode,
+                "--dither",
+                dither,
+            ];
+            let o = run_threads(&dir, &args, threads);
             ok(&o);
             sums.push(std::fs::read(dir.join(&out).join("job.json")).unwrap());
         }

@@ -61,6 +61,16 @@ pub fn run_in(cwd: &Path, args: &[&str]) -> Output {
         .expect("run dmdsl")
 }
 
+/// Runs `dmdsl` with `args` in directory `cwd` on a pool of `threads` worker threads.
+pub fn run_threads(cwd: &Path, args: &[&str], threads: &str) -> Output {
+    Command::new(bin())
+        .args(args)
+        .env("RAYON_NUM_THREADS", threads)
+        .current_dir(cwd)
+        .output()
+        .expect("run dmdsl")
+}
+
 /// Stderr as a string.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -450,20 +450,16 @@ fn prism_layers_share_masks_and_analysis_whatever_the_threads() {
     let mut bundles = Vec::new();
     for threads in ["1", "3"] {
         let out = format!("t{threads}.dmdjob");
-        let o = std::process::Command::new(bin())
-            .args([
-                "slice",
-                "tower.stl",
-                "-q",
-                "--layer-height",
-                "0.1",
-                "-o",
-                &out,
-            ])
-            .env("RAYON_NUM_THREADS", threads)
-            .current_dir(&dir)
-            .output()
-            .unwrap();
+        let args = [
+            "slice",
+            "tower.stl",
+            "-q",
+            "--layer-height",
+            "0.1",
+            "-o",
+            &out,
+        ];
+        let o = run_threads(&dir, &args, threads);
         assert!(o.status.success(), "{}", stderr(&o));
         bundles.push(tree(&dir.join(out)));
     }

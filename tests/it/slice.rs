@@ -245,20 +245,9 @@ fn byte_identical_whatever_the_thread_count() {
     let mut bundles = Vec::new();
     for threads in ["1", "2", "3"] {
         let out = format!("b{threads}.dmdjob");
-        let o = std::process::Command::new(bin())
-            .args([
-                "slice",
-                f.to_str().unwrap(),
-                "-q",
-                "--layer-height",
-                "1",
-                "-o",
-                &out,
-            ])
-            .env("RAYON_NUM_THREADS", threads)
-            .current_dir(&dir)
-            .output()
-            .unwrap();
+        let f = f.to_str().unwrap();
+        let args = ["slice", f, "-q", "--layer-height", "1", "-o", &out];
+        let o = run_threads(&dir, &args, threads);
         assert!(o.status.success(), "{}", stderr(&o));
         bundles.push(tree(&dir.join(out)));
     }
