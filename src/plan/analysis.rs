@@ -430,11 +430,20 @@ pub fn bbox(contours: &[Contour]) -> Option<[[f64; 2]; 2]> {
     let mut it = contours.iter().flatten();
     let first = *it.next()?;
     let mut b = [first, first];
+    // Plain comparisons (`f64::min` also orders NaNs, which contours do not have).
     for p in it {
-        b[0][0] = b[0][0].min(p[0]);
-        b[0][1] = b[0][1].min(p[1]);
-        b[1][0] = b[1][0].max(p[0]);
-        b[1][1] = b[1][1].max(p[1]);
+        if p[0] < b[0][0] {
+            b[0][0] = p[0];
+        }
+        if p[1] < b[0][1] {
+            b[0][1] = p[1];
+        }
+        if p[0] > b[1][0] {
+            b[1][0] = p[0];
+        }
+        if p[1] > b[1][1] {
+            b[1][1] = p[1];
+        }
     }
     Some(b)
 }
