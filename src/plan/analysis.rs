@@ -1142,15 +1142,16 @@ fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
 /// An empty section gives `(0, [0, 0])`.
 ///
 /// The search ([`max_fill_distance_with`]) runs on the contours without the points within
-/// [`COARSE_MM`] of the segment that replaces them (the points a fine mesh puts on gently
-/// curved walls: on logo_hires 59 % of them), which moves the boundary by at most `δ ≤`
-/// [`COARSE_MM`], the largest distance of a left-out point. It runs at precision
-/// [`PRECISION_MM`] − 2δ and finds a centre `c` at depth `r'` on the coarse contours; the
-/// result is `r' − δ`. The circle of that radius around `c` lies inside the section (`c`
-/// is farther than `δ` from the coarse boundary, so on the same side of both), and
+/// [`COARSE_MM`] of the segment that replaces them (most of the points a fine mesh puts on
+/// gently curved walls), which moves the boundary by at most `δ ≤` [`COARSE_MM`], the
+/// largest distance of a left-out point. It runs at precision [`PRECISION_MM`] − 2δ and
+/// finds a centre `c` at depth `r'` on the coarse contours; the result is `max(r' − δ, 0)`.
+/// When `r' > δ` the circle of radius `r' − δ` around `c` lies inside the section (`c` is
+/// farther than `δ` from the coarse boundary, so on the same side of both boundaries), and
 /// `r' − δ ≥ (largest on the coarse contours − precision) − δ ≥ largest − 2δ −
-/// precision = largest − PRECISION_MM`. Contours with nothing to leave out (`δ = 0`) are
-/// searched as they are.
+/// precision = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most `2δ`, so 0
+/// is within the guarantee. Contours with nothing to leave out (`δ = 0`) are searched as
+/// they are.
 pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
     fill_distance(contours, &mut SearchScratch::default())
 }
