@@ -1149,8 +1149,8 @@ fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
 /// When `r' > δ` the circle of radius `r' − δ` around `c` lies inside the section (`c` is
 /// farther than `δ` from the coarse boundary, so on the same side of both boundaries), and
 /// `r' − δ ≥ (largest on the coarse contours − precision) − δ ≥ largest − 2δ −
-/// precision = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most `2δ`, so 0
-/// is within the guarantee. Contours with nothing to leave out (`δ = 0`) are searched as
+/// precision = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most `r' +
+/// precision + δ ≤` [`PRECISION_MM`], so 0 is within the guarantee. Contours with nothing to leave out (`δ = 0`) are searched as
 /// they are.
 pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
     fill_distance(contours, &mut SearchScratch::default())
