@@ -471,7 +471,7 @@ const LEAF: usize = 8;
 const FOLLOWED_MAX: u8 = 3;
 
 /// Spacing of the cover points along the walls, in cell half-sizes.
-const ALONG: f64 = 0.67;
+const ALONG: f64 = 0.6;
 
 /// Most boundary points added to a cell's own cover test when its walls' points do not
 /// cover it ([`cover_more`]): each one the boundary point nearest to a point the test
@@ -1286,7 +1286,7 @@ fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]
 ///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
 /// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
 ///    boundary point behind the centre (the other wall of a ridge; its search starts from
-///    the far wall of step 2) and, on the contours of both, the points about `⅔·h` away on
+///    the far wall of step 2) and, on the contours of both, the points about `0.6·h` away on
 ///    either side. If discs of radius `T` around them
 ///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
 ///    (walls of constant thickness, rings) from being subdivided down to the precision.
