@@ -354,8 +354,7 @@ impl JobOptics {
         let pr = &c.prediction;
         let p = &profile.projector[self.projector];
         writer.create_dir("optics")?;
-        let full = c.gray_map();
-        let map = crate::raster::projector_view(&full, p);
+        let map = crate::raster::projector_view(c.gray_map(), p);
         let bytes = png(&map);
         let file = format!("optics/{}-gray-map.png", p.name);
         writer.write_file(&file, &bytes)?;
