@@ -41,8 +41,12 @@ pub struct Compensator {
     tables: Vec<[u8; 256]>,
     /// Index into `tables` of each zone column for each image row ([r · zcols + zc]).
     row_tables: Vec<u32>,
-    /// The full-coverage gray of every pixel (both modes; the gray map).
-    full: Mask,
+    /// The full-coverage gray of every pixel (both modes; the gray map), as distinct rows
+    /// (`w` bytes each) and the index of each image row's: in zone mode a row is one gray
+    /// per zone segment, so rows repeat (about 15 distinct rows per zone row, instead of a
+    /// w × h map to allocate and fill); in pixel mode every row is its own.
+    gray_rows: Vec<u8>,
+    gray_row_of: Vec<u32>,
     // Pixel mode: level index of `full` and E*/P per pixel.
     full_idx: Vec<u16>,
     t: Vec<f32>,
@@ -425,9 +429,11 @@ fn field_sums_in<const AVX2: bool>(
                         }
                         stats_lanes(v)
                     };
-                    let (sa, la, ha) = stats(&buf[a..ia]);
-                    let (si, li, hi_) = stats(&buf[ia..ib]);
-                    let (sb, lb, hb) = stats(&buf[ib..b]);
+                    // (Most rows lie inside the area, or outside it: skip empty parts.)
+                    let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
+                    let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
+                    let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
+                    let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
                     *acc += sa + si + sb;
                     inside_sum += si;
                     lo = lo.min(la).min(li).min(lb);
@@ -851,7 +857,8 @@ impl Compensator {
             zone_of_row,
             tables: Vec::new(),
             row_tables: Vec::new(),
-            full: Mask::zeros(0, 0),
+            gray_rows: Vec::new(),
+            gray_row_of: Vec::new(),
             full_idx: Vec::new(),
             t: Vec::new(),
             inside_rows,
@@ -994,19 +1001,25 @@ impl Compensator {
                         })
                     })
                     .collect();
-                // The full-coverage gray of every pixel.
-                let mut full = vec![0u8; w * h];
-                for (r, row) in full.chunks_exact_mut(w).enumerate() {
-                    let tabs = &row_tables[r * zcols..(r + 1) * zcols];
-                    for &(zc, a, b) in &segs {
-                        row[a..b].fill(tables[tabs[zc] as usize][255]);
-                    }
+                // The full-coverage gray of every pixel: rows with the same tables have the
+                // same grays.
+                let mut distinct: std::collections::HashMap<&[u32], u32> =
+                    std::collections::HashMap::new();
+                let mut gray_rows = Vec::new();
+                let mut gray_row_of = Vec::with_capacity(h);
+                for tabs in row_tables.chunks_exact(zcols) {
+                    let next = distinct.len() as u32;
+                    let k = *distinct.entry(tabs).or_insert_with(|| {
+                        for &(zc, a, b) in &segs {
+                            gray_rows
+                                .resize(gray_rows.len() + b - a, tables[tabs[zc] as usize][255]);
+                        }
+                        next
+                    });
+                    gray_row_of.push(k);
                 }
-                comp.full = Mask {
-                    width: w as u32,
-                    height: h as u32,
-                    data: full,
-                };
+                comp.gray_rows = gray_rows;
+                comp.gray_row_of = gray_row_of;
                 comp.tables = tables;
                 comp.row_tables = row_tables;
                 comp.prediction.mixed_zones = mixed;
@@ -1066,11 +1079,8 @@ impl Compensator {
                 pr.spreads.after_zone_pct = after_zone;
                 pr.spreads.after_pixel_pct = after_pixel;
                 pr.unreachable = unreachable;
-                comp.full = Mask {
-                    width: w as u32,
-                    height: h as u32,
-                    data: full,
-                };
+                comp.gray_rows = full;
+                comp.gray_row_of = (0..h as u32).collect();
                 comp.full_idx = full_idx;
                 comp.t = t;
             }
@@ -1174,7 +1184,7 @@ impl Compensator {
     fn zone_row(&self, row: &mut [u8], r: usize, a: usize, b: usize) {
         let tabs = &self.row_tables[r * self.zcols..(r + 1) * self.zcols];
         let cols = &self.zone_of_col[a..b];
-        let full = &self.full.data[r * self.w + a..r * self.w + b];
+        let full = &self.gray_row(r)[a..b];
         map_words(&mut row[a..b], full, |k, v| {
             self.tables[tabs[cols[k] as usize] as usize][v as usize]
         });
@@ -1187,14 +1197,10 @@ impl Compensator {
         let base = r * self.w;
         let fidx = &self.full_idx[base + a..base + b];
         let t = &self.t[base + a..base + b];
-        map_words(
-            &mut row[a..b],
-            &self.full.data[base + a..base + b],
-            |k, v| {
-                let target = v as f64 / 255.0 * t[k] as f64;
-                lv.gray[lv.nearest_from(fidx[k] as usize, target)]
-            },
-        );
+        map_words(&mut row[a..b], &self.gray_row(r)[a..b], |k, v| {
+            let target = v as f64 / 255.0 * t[k] as f64;
+            lv.gray[lv.nearest_from(fidx[k] as usize, target)]
+        });
     }
 
     fn apply_dither(&self, m: &mut Mask, r0: usize, r1: usize) {
@@ -1248,10 +1254,48 @@ impl Compensator {
         }
     }
 
+    /// Row `r` of the gray map (the full-coverage gray of each pixel).
+    #[inline(always)]
+    fn gray_row(&self, r: usize) -> &[u8] {
+        let k = self.gray_row_of[r] as usize * self.w;
+        &self.gray_rows[k..k + self.w]
+    }
+
     /// The full-coverage gray of every pixel (what a plate covering the field gets, without
     /// error diffusion), in field orientation.
-    pub fn gray_map(&self) -> &Mask {
-        &self.full
+    pub fn gray_map(&self) -> Mask {
+        let mut data = Vec::with_capacity(self.w * self.h);
+        for r in 0..self.h {
+            data.extend_from_slice(self.gray_row(r));
+        }
+        Mask {
+            width: self.w as u32,
+            height: self.h as u32,
+            data,
+        }
+    }
+
+    /// The gray map as projector `p` shows it ([`crate::raster::projector_view`]),
+    /// encoded by `png`, which must give [`crate::png::encode_gray8`]'s bytes (the
+    /// bundle's mask encoder): when `p` shows the field as it is, the map is encoded row by
+    /// row with [`crate::png::encode_gray8_rows`] (the same bytes) without making it.
+    pub fn gray_map_png(
+        &self,
+        p: &crate::profile::Projector,
+        png: impl Fn(&Mask) -> Vec<u8>,
+    ) -> Vec<u8> {
+        let identity = p.offset_px == [0, 0]
+            && p.width_px as usize == self.w
+            && p.height_px as usize == self.h
+            && !p.mirror_x
+            && !p.mirror_y;
+        if identity {
+            let (w, h) = (self.w as u32, self.h as u32);
+            crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
+        } else {
+            let m = self.gray_map();
+            png(&crate::raster::projector_view(&m, p))
+        }
     }
 
     /// S of pixel value `g` on the levels used (0 for values outside the valid range other
@@ -1310,7 +1354,7 @@ impl crate::raster::CoverageMap for Compensator {
         CompRow {
             comp: self,
             r,
-            full: &self.full.data[r * self.w..(r + 1) * self.w],
+            full: self.gray_row(r),
             tabs: if zone {
                 &self.row_tables[r * self.zcols..(r + 1) * self.zcols]
             } else {
@@ -1508,7 +1552,7 @@ mod tests {
                     sum += pp[i] as f64;
                     n += 1;
                     before.add(pp[i] as f64 * pr.s_max);
-                    after.add(pp[i] as f64 * c.s_of(c.full.data[i]));
+                    after.add(pp[i] as f64 * c.s_of(c.gray_row(i / w)[i % w]));
                 }
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
@@ -1942,6 +1986,54 @@ mod tests {
                 // SAFETY: the CPU has AVX2.
                 assert_eq!(unsafe { stats_avx2(&vals) }, (s, lo, hi), "len {len}");
             }
+        }
+    }
+
+    #[test]
+    fn gray_map_rows_and_png_equal_the_per_zone_grays() {
+        // The gray map kept as distinct rows is, pixel for pixel, the full-coverage gray
+        // of the pixel's zone table for its row (zone mode) and the per-pixel gray (pixel
+        // mode: checked against `apply` on a plate); its PNG, encoded row by row, is
+        // `encode_gray8` of the map, also as mirrored projectors see it.
+        let (mut cal, _) = setup();
+        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
+        let field = Field {
+            width_px: 200,
+            height_px: 150,
+            pixel_mm: 0.2,
+        };
+        let (w, h) = (200usize, 150usize);
+        for (mode, dither) in [
+            (Mode::Zone, Dither::Auto),
+            (Mode::Zone, Dither::On),
+            (Mode::Zone, Dither::Off),
+            (Mode::Pixel, Dither::Off),
+        ] {
+            let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+            let map = c.gray_map();
+            if mode == Mode::Zone {
+                assert!(c.gray_rows.len() / w < h / 2, "{}", c.gray_rows.len() / w);
+                for r in 0..h {
+                    for col in 0..w {
+                        let t = c.row_tables[r * c.zcols + c.zone_of_col[col] as usize];
+                        assert_eq!(map.data[r * w + col], c.tables[t as usize][255]);
+                    }
+                }
+            }
+            let mut plate = Mask {
+                width: w as u32,
+                height: h as u32,
+                data: vec![255; w * h],
+            };
+            c.apply(&mut plate);
+            assert!(plate == map, "{mode:?} {dither:?}");
+            let mut p = crate::profile::Profile::default_profile().projector[0].clone();
+            (p.width_px, p.height_px) = (w as u32, h as u32);
+            let png = |m: &Mask| crate::png::encode_gray8(m.width, m.height, &m.data);
+            assert_eq!(c.gray_map_png(&p, png), png(&map));
+            p.mirror_x = true;
+            let view = crate::raster::projector_view(&map, &p);
+            assert_eq!(c.gray_map_png(&p, png), png(&view));
         }
     }
 }
