@@ -95,9 +95,12 @@ impl Poly {
             .collect()
     }
 
-    /// Value at (u, v).
+    /// Value at (u, v): Horner in u over [`in_u`](Self::in_u)'s coefficients (the same
+    /// operations, without allocating them).
     pub fn eval(&self, u: f64, v: f64) -> f64 {
-        self.in_u(v).iter().rev().fold(0.0, |acc, c| acc * u + c)
+        self.coef.iter().rev().fold(0.0, |acc, cb| {
+            acc * u + cb.iter().rev().fold(0.0, |a, c| a * v + c)
+        })
     }
 
     /// Value and gradient (∂/∂u, ∂/∂v) at (u, v).
@@ -373,6 +376,14 @@ mod tests {
         assert!((fu - (q.eval(0.7 + h, -0.4) - q.eval(0.7 - h, -0.4)) / (2.0 * h)).abs() < 1e-6);
         assert!((fv - (q.eval(0.7, -0.4 + h) - q.eval(0.7, -0.4 - h)) / (2.0 * h)).abs() < 1e-6);
         assert!(toml::from_str::<Poly>("yx = 1.0").is_err());
+        // eval is Horner in u over in_u's coefficients, bit for bit.
+        for (k, (u, v)) in [(0.7, -0.4), (-3.1, 2.9), (0.0, 0.0), (12.5, -7.25)]
+            .into_iter()
+            .enumerate()
+        {
+            let want = q.in_u(v).iter().rev().fold(0.0, |acc, c| acc * u + c);
+            assert_eq!(q.eval(u, v).to_bits(), want.to_bits(), "{k}");
+        }
         assert!(toml::from_str::<Poly>("xxxxxxx = 1.0").is_err());
     }
 
