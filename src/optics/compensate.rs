@@ -1055,19 +1055,25 @@ impl Compensator {
                     full_idx[i] = idx as u16;
                     t[i] = ti as f32;
                 }
+                // Per zone, pixel by pixel in row-major order (a zone's pixels in a row
+                // are one segment); the gray sums are exact in any order.
                 let mut zs = vec![0f64; nz];
-                let mut zg = vec![0f64; nz];
+                let mut zg = vec![0u64; nz];
                 for r in 0..h {
-                    for c in 0..w {
-                        let i = r * w + c;
-                        let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
-                        zs[z] += pp[i] as f64 * lv.s[full_idx[i] as usize];
-                        zg[z] += full[i] as f64;
+                    let zr = comp.zone_of_row[r] as usize * zcols;
+                    for &(zc, a, b) in &segs {
+                        let (a, b) = (r * w + a, r * w + b);
+                        let mut acc = zs[zr + zc];
+                        for (&v, &k) in pp[a..b].iter().zip(&full_idx[a..b]) {
+                            acc += v as f64 * lv.s[k as usize];
+                        }
+                        zs[zr + zc] = acc;
+                        zg[zr + zc] += full[a..b].iter().map(|&g| g as u64).sum::<u64>();
                     }
                 }
                 let zone_after: Vec<f64> = (0..nz).map(|z| zs[z] / zcnt[z].max(1) as f64).collect();
                 let zone_gray = (0..nz)
-                    .map(|z| (zg[z] / zcnt[z].max(1) as f64).round() as u8)
+                    .map(|z| (zg[z] as f64 / zcnt[z].max(1) as f64).round() as u8)
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
                 let after_pixel =
@@ -1573,6 +1579,17 @@ mod tests {
                     assert_eq!(pz.to_bits(), want.to_bits(), "{what} zone {z}");
                 }
                 if mode == Mode::Pixel {
+                    // Zone means after: P · S(gray) added pixel by pixel in row-major order.
+                    let mut za = vec![0f64; pr.zone_p.len()];
+                    for (i, &v) in pp.iter().enumerate() {
+                        let z =
+                            c.zone_of_row[i / w] as usize * c.zcols + c.zone_of_col[i % w] as usize;
+                        za[z] += v as f64 * c.levels.s[c.full_idx[i] as usize];
+                    }
+                    for (z, &a) in pr.zone_after.iter().enumerate() {
+                        let want = za[z] / zn[z].max(1) as f64;
+                        assert_eq!(a.to_bits(), want.to_bits(), "{what} zone {z}");
+                    }
                     continue;
                 }
                 assert!(close(pr.spreads.after_pixel_pct, after.pct()), "{what}");
