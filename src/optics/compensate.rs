@@ -166,10 +166,12 @@ impl Spread {
         }
     }
 
+    /// Adds `x` (plain comparisons, one instruction each where `f64::min` is several;
+    /// like it, they skip NaN).
     #[inline(always)]
     fn add(&mut self, x: f64) {
-        self.lo = self.lo.min(x);
-        self.hi = self.hi.max(x);
+        self.lo = if x < self.lo { x } else { self.lo };
+        self.hi = if x > self.hi { x } else { self.hi };
         self.sum += x;
         self.n += 1;
     }
@@ -798,10 +800,6 @@ impl Compensator {
             src.row::<false>(r, &mut row);
             ((row[c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
         });
-        // Pixels of the calibrated area, row by row (a plain nested loop: this runs over
-        // most of the field several times per job).
-        let inside_rows_iter = || (r0..=r1).map(move |r| r * w + c0..r * w + c1 + 1);
-        let inside_iter = || inside_rows_iter().flatten();
 
         // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
         // holding its centre. Zone rows are stored top first, like the image.
@@ -1032,43 +1030,73 @@ impl Compensator {
                 pr.unreachable = unreachable;
             }
             Mode::Pixel => {
-                let pmin = inside_iter()
-                    .map(|i| pp[i] as f64)
-                    .fold(f64::INFINITY, f64::min);
+                // The smallest P of the calibrated area: of its row segments' smallest.
+                let pmin = fs.seg_extremes.iter().fold(f64::INFINITY, |m, &(lo, _)| {
+                    if (lo as f64) < m {
+                        lo as f64
+                    } else {
+                        m
+                    }
+                });
                 let target = forced_target.unwrap_or(pmin * s_max);
                 let mut unreachable = 0;
                 let mut full = vec![0u8; w * h];
                 let mut full_idx = vec![0u16; w * h];
                 let mut t = vec![0f32; w * h];
                 let mut idx = lv.gray.len() - 1;
-                for i in 0..w * h {
-                    let ti = if pp[i] > 0.0 {
-                        target / pp[i] as f64
-                    } else {
-                        f64::INFINITY
-                    };
-                    if ti > s_max * (1.0 + 1e-6) {
-                        unreachable += 1;
-                    }
-                    idx = lv.nearest_from(idx, ti);
-                    full[i] = lv.gray[idx];
-                    full_idx[i] = idx as u16;
-                    t[i] = ti as f32;
-                }
-                // Per zone, pixel by pixel in row-major order (a zone's pixels in a row
-                // are one segment); the gray sums are exact in any order.
+                // Row by row: E*/P (divisions, vectorized), the nearest level searched from
+                // the previous pixel's, then per zone P · S(level) added pixel by pixel in
+                // row-major order (a zone's pixels in a row are one segment) and, over the
+                // calibrated area, the spread after, also in row-major order. The gray sums
+                // are exact in any order.
                 let mut zs = vec![0f64; nz];
                 let mut zg = vec![0u64; nz];
+                let mut after_px = Spread::new();
+                let mut ti_row = vec![0f64; w];
+                let [ir0, ir1, ic0, ic1] = inside;
                 for r in 0..h {
+                    let base = r * w;
+                    let prow = &pp[base..base + w];
+                    for (o, &v) in ti_row.iter_mut().zip(prow) {
+                        *o = if v > 0.0 {
+                            target / v as f64
+                        } else {
+                            f64::INFINITY
+                        };
+                    }
+                    unreachable += ti_row
+                        .iter()
+                        .filter(|&&ti| ti > s_max * (1.0 + 1e-6))
+                        .count() as u64;
+                    let frow = &mut full[base..base + w];
+                    let irow = &mut full_idx[base..base + w];
+                    let trow = &mut t[base..base + w];
+                    for c in 0..w {
+                        let ti = ti_row[c];
+                        idx = lv.nearest_from(idx, ti);
+                        frow[c] = lv.gray[idx];
+                        irow[c] = idx as u16;
+                        trow[c] = ti as f32;
+                    }
                     let zr = comp.zone_of_row[r] as usize * zcols;
+                    let inside_row = (ir0..ir1).contains(&r);
                     for &(zc, a, b) in &segs {
-                        let (a, b) = (r * w + a, r * w + b);
+                        let (ia, ib) = if inside_row {
+                            let ia = a.max(ic0).min(b);
+                            (ia, b.min(ic1).max(ia))
+                        } else {
+                            (b, b)
+                        };
                         let mut acc = zs[zr + zc];
-                        for (&v, &k) in pp[a..b].iter().zip(&full_idx[a..b]) {
-                            acc += v as f64 * lv.s[k as usize];
+                        for c in a..b {
+                            let x = prow[c] as f64 * lv.s[irow[c] as usize];
+                            acc += x;
+                            if c >= ia && c < ib {
+                                after_px.add(x);
+                            }
                         }
                         zs[zr + zc] = acc;
-                        zg[zr + zc] += full[a..b].iter().map(|&g| g as u64).sum::<u64>();
+                        zg[zr + zc] += frow[a..b].iter().map(|&g| g as u64).sum::<u64>();
                     }
                 }
                 let zone_after: Vec<f64> = (0..nz).map(|z| zs[z] / zcnt[z].max(1) as f64).collect();
@@ -1076,8 +1104,7 @@ impl Compensator {
                     .map(|z| (zg[z] as f64 / zcnt[z].max(1) as f64).round() as u8)
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
-                let after_pixel =
-                    spread(inside_iter().map(|i| pp[i] as f64 * lv.s[full_idx[i] as usize]));
+                let after_pixel = after_px.pct();
                 let pr = &mut comp.prediction;
                 pr.target = target;
                 pr.zone_gray = zone_gray;
