@@ -16,7 +16,24 @@ pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
 /// only the box is scanned. The bytes are the same as `encode_gray8`'s.
 pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
     assert_eq!(data.len(), width as usize * height as usize, "mask size");
-    let idat = zlib_rows(width as usize, height as usize, data, lit_box);
+    let w = width as usize;
+    encode_rows(width, height, |r| &data[r * w..(r + 1) * w], lit_box)
+}
+
+/// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
+/// image in one piece (the same bytes).
+pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
+    encode_rows(width, height, row, [0, height as usize, 0, width as usize])
+}
+
+#[inline(always)]
+fn encode_rows<'a>(
+    width: u32,
+    height: u32,
+    row: impl Fn(usize) -> &'a [u8],
+    lit_box: [usize; 4],
+) -> Vec<u8> {
+    let idat = zlib_rows(width as usize, height as usize, row, lit_box);
     let mut out = Vec::with_capacity(idat.len() + 64);
     out.extend_from_slice(b"\x89PNG\r\n\x1a\n");
     let mut ihdr = Vec::with_capacity(13);
@@ -275,8 +292,15 @@ impl Runs {
     }
 }
 
-/// The zlib stream of the PNG scanlines (each row preceded by filter byte 0).
-fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
+/// The zlib stream of the PNG scanlines (each row preceded by filter byte 0); row `r` of
+/// the image is `row_of(r)` (`w` bytes).
+#[inline(always)]
+fn zlib_rows<'a>(
+    w: usize,
+    h: usize,
+    row_of: impl Fn(usize) -> &'a [u8],
+    lit_box: [usize; 4],
+) -> Vec<u8> {
     let [r0, r1, c0, c1] = lit_box;
     let (c0, c1) = (c0.min(w), c1.min(w).max(c0.min(w)));
     let mut bits = Bits {
@@ -308,7 +332,7 @@ fn zlib_rows(w: usize, h: usize, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
         }
         // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
         // whole row had been scanned, so the stream does not depend on the box.
-        let row = &data[r * w + c0..r * w + c1];
+        let row = &row_of(r)[c0..c1];
         if c0 > 0 {
             runs.push(0, c0);
         }
@@ -393,6 +417,8 @@ mod tests {
                     }
                 }
                 let png = encode_gray8(w as u32, h as u32, &d);
+                let by_rows = encode_gray8_rows(w as u32, h as u32, |r| &d[r * w..(r + 1) * w]);
+                assert!(by_rows == png, "{w}x{h} pattern {pattern}: by rows");
                 let (dw, dh, back) = decode(&png);
                 assert_eq!((dw, dh), (w as u32, h as u32));
                 assert!(back == d, "{w}x{h} pattern {pattern}");

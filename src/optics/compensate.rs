@@ -41,8 +41,12 @@ pub struct Compensator {
     tables: Vec<[u8; 256]>,
     /// Index into `tables` of each zone column for each image row ([r · zcols + zc]).
     row_tables: Vec<u32>,
-    /// The full-coverage gray of every pixel (both modes; the gray map).
-    full: Vec<u8>,
+    /// The full-coverage gray of every pixel (both modes; the gray map), as distinct rows
+    /// (`w` bytes each) and the index of each image row's: in zone mode a row is one gray
+    /// per zone segment, so rows repeat (about 15 distinct rows per zone row, instead of a
+    /// w × h map to allocate and fill); in pixel mode every row is its own.
+    gray_rows: Vec<u8>,
+    gray_row_of: Vec<u32>,
     // Pixel mode: level index of `full` and E*/P per pixel.
     full_idx: Vec<u16>,
     t: Vec<f32>,
@@ -162,34 +166,25 @@ impl Spread {
         }
     }
 
+    /// Adds `x` (plain comparisons, one instruction each where `f64::min` is several;
+    /// like it, they skip NaN).
     #[inline(always)]
     fn add(&mut self, x: f64) {
-        self.lo = self.lo.min(x);
-        self.hi = self.hi.max(x);
+        self.lo = if x < self.lo { x } else { self.lo };
+        self.hi = if x > self.hi { x } else { self.hi };
         self.sum += x;
         self.n += 1;
     }
 
     /// The extremes part of adding `v as f64 * s` for values `v` whose smallest is `lo`
     /// and largest `hi`: rounding is monotone, so the product of the smallest value is the
-    /// smallest product (largest for negative `s`).
+    /// smallest product (largest for negative `s`). The sum and count are added by the
+    /// caller ([`pixel_spreads`]).
     #[inline]
     fn add_extremes(&mut self, lo: f32, hi: f32, s: f64) {
         let (a, b) = (lo as f64 * s, hi as f64 * s);
         self.lo = self.lo.min(a.min(b));
         self.hi = self.hi.max(a.max(b));
-    }
-
-    /// The sum and count part of adding `v as f64 * s` for every `v` of `vals`, in order
-    /// (with [`add_extremes`](Self::add_extremes), the same as adding them one by one).
-    #[inline]
-    fn add_sum(&mut self, vals: &[f32], s: f64) {
-        let mut sum = self.sum;
-        for &v in vals {
-            sum += v as f64 * s;
-        }
-        self.sum = sum;
-        self.n += vals.len();
     }
 
     fn pct(&self) -> f64 {
@@ -219,76 +214,512 @@ fn zone_segments(zone_of_col: &[u16]) -> Vec<(usize, usize, usize)> {
     out
 }
 
-/// P at every pixel centre of the field (row-major, top row first), following the
-/// extrapolation rule: inside the polynomial's rectangle Horner in u with the row's
-/// coefficients, elsewhere [`FieldModel::eval_row`] (the same values as `eval`).
-fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
-    let (w, h) = (field.width_px as usize, field.height_px as usize);
-    let p = field.pixel_mm;
-    let m = fm.extrapolate_mm.get();
-    let [x0, y0, x1, y1] = fm.area_mm;
-    let [px0, py0, px1, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
-    let inv = 1.0 / fm.length_unit_mm.get();
-    let scf = fm.scale.get() as f32;
-    let form = fm.form;
-    let xs: Vec<f64> = (0..w).map(|c| (c as f64 + 0.5) * p).collect();
-    // Columns whose clamped x lies in the polynomial's rectangle: one contiguous run.
-    let us: Vec<Option<f64>> = xs
+/// Whether every f64 sum of `n` f32 values from `lo` to `hi` (all positive, normal, finite)
+/// is exact, whatever the order of the additions: each value is then a whole multiple of
+/// the unit in the last place of `lo`'s binade, q = 2^(e_lo − 23), and every partial sum a
+/// whole multiple of q below n · 2^(e_hi + 1), which f64 holds exactly if that is at most
+/// 2^53 · q.
+fn sums_are_exact(lo: f32, hi: f32, n: usize) -> bool {
+    if !(lo >= f32::MIN_POSITIVE && hi.is_finite() && lo <= hi) {
+        return false;
+    }
+    let e = |v: f32| (v.to_bits() >> 23) as usize;
+    let log2n = (usize::BITS - n.saturating_sub(1).leading_zeros()) as usize;
+    log2n + e(hi) - e(lo) + 24 <= 53
+}
+
+/// The f64 sum of f32 values and their smallest and largest (plain comparisons, which
+/// skip NaN), in four lanes. The sum is the same as adding them one by one only when every
+/// sum of them is exact ([`sums_are_exact`]); the extremes are the same except, possibly,
+/// which of +0 and −0 is the smallest or largest.
+#[inline(always)]
+fn stats_lanes(vals: &[f32]) -> (f64, f32, f32) {
+    let mut acc = [0f64; 4];
+    let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
+    let mut chunks = vals.chunks_exact(4);
+    for c in &mut chunks {
+        for k in 0..4 {
+            let v = c[k];
+            acc[k] += v as f64;
+            lo[k] = if v < lo[k] { v } else { lo[k] };
+            hi[k] = if v > hi[k] { v } else { hi[k] };
+        }
+    }
+    finish_stats(&acc, &lo, &hi, chunks.remainder())
+}
+
+/// [`stats_lanes`] with AVX2 (eight lanes): the same sum when it is exact, the same
+/// extremes (VMINPS/VMAXPS compare like the plain comparisons).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn stats_avx2(vals: &[f32]) -> (f64, f32, f32) {
+    use std::arch::x86_64::*;
+    let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let (mut lo, mut hi) = (
+        _mm256_set1_ps(f32::INFINITY),
+        _mm256_set1_ps(f32::NEG_INFINITY),
+    );
+    let mut chunks = vals.chunks_exact(8);
+    for c in &mut chunks {
+        // SAFETY: `c` holds eight f32.
+        let v = unsafe { _mm256_loadu_ps(c.as_ptr()) };
+        s0 = _mm256_add_pd(s0, _mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+        s1 = _mm256_add_pd(s1, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)));
+        // VMINPS a, b = a < b ? a : b.
+        lo = _mm256_min_ps(v, lo);
+        hi = _mm256_max_ps(v, hi);
+    }
+    let (mut acc, mut l, mut h) = ([0f64; 8], [0f32; 8], [0f32; 8]);
+    // SAFETY: the arrays hold 4 + 4 f64 and 8 f32.
+    unsafe {
+        _mm256_storeu_pd(acc.as_mut_ptr(), s0);
+        _mm256_storeu_pd(acc.as_mut_ptr().add(4), s1);
+        _mm256_storeu_ps(l.as_mut_ptr(), lo);
+        _mm256_storeu_ps(h.as_mut_ptr(), hi);
+    }
+    finish_stats(&acc, &l, &h, chunks.remainder())
+}
+
+/// Combines the lanes of [`stats_lanes`] and adds the values left over.
+#[inline(always)]
+fn finish_stats(acc: &[f64], lo: &[f32], hi: &[f32], rest: &[f32]) -> (f64, f32, f32) {
+    let mut sum = acc.iter().fold(0.0, |s, &a| s + a);
+    for &v in rest {
+        sum += v as f64;
+    }
+    let (mut l, mut h) = min_max(rest);
+    for (&a, &b) in lo.iter().zip(hi) {
+        l = if a < l { a } else { l };
+        h = if b > h { b } else { h };
+    }
+    (sum, l, h)
+}
+
+/// Smallest and largest of `vals` (plain comparisons, which skip NaN).
+#[inline]
+fn min_max(vals: &[f32]) -> (f32, f32) {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for &v in vals {
+        lo = if v < lo { v } else { lo };
+        hi = if v > hi { v } else { hi };
+    }
+    (lo, hi)
+}
+
+/// What the set-up's pass over P gives ([`field_sums`]).
+struct FieldSums {
+    /// Sum of P over each zone, and the zone's pixel count.
+    zsum: Vec<f64>,
+    zcnt: Vec<usize>,
+    /// Sum of P over the calibrated area.
+    inside_sum: f64,
+    /// Per row of the calibrated area and zone segment (`segs`) cut to it: the sum of P,
+    /// and its smallest and largest value (row-major; empty cuts included).
+    seg_sums: Vec<f64>,
+    seg_extremes: Vec<(f32, f32)>,
+}
+
+/// Where the set-up reads P: row by row from the model (zone mode), or from the whole
+/// field's values (pixel mode, which keeps them for its per-pixel tables).
+enum PSource<'a> {
+    Rows(FieldRows<'a>),
+    Field(&'a [f32]),
+}
+
+impl PSource<'_> {
+    /// P at the pixel centres of image row `r` into `row` (`AVX2`: see [`FieldRows::row`]).
+    #[inline(always)]
+    fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
+        match self {
+            PSource::Rows(rows) => rows.row::<AVX2>(r, row),
+            PSource::Field(pp) => row.copy_from_slice(&pp[r * row.len()..(r + 1) * row.len()]),
+        }
+    }
+}
+
+/// [`field_sums_in`], with AVX2 when the CPU has it: the same operations on wider
+/// vectors (no fused multiply-add), so the same bits.
+fn field_sums(
+    src: &mut PSource,
+    w: usize,
+    segs: &[(usize, usize, usize)],
+    zone_of_row: &[u16],
+    zcols: usize,
+    inside: [usize; 4],
+) -> FieldSums {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { field_sums_avx2(src, w, segs, zone_of_row, zcols, inside) };
+    }
+    field_sums_in::<false>(src, w, segs, zone_of_row, zcols, inside)
+}
+
+/// [`field_sums_in`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn field_sums_avx2(
+    src: &mut PSource,
+    w: usize,
+    segs: &[(usize, usize, usize)],
+    zone_of_row: &[u16],
+    zcols: usize,
+    inside: [usize; 4],
+) -> FieldSums {
+    field_sums_in::<true>(src, w, segs, zone_of_row, zcols, inside)
+}
+
+/// The set-up's one pass over P (rows from `src`): the sum of P over every zone and
+/// over the calibrated area `inside` = [r0, r1, c0, c1) (half-open), and per row and zone
+/// segment of that area the sum and extremes of P (for the per-pixel spreads).
+///
+/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
+/// checked on the field's extremes: true for any real calibration) the order of the
+/// additions does not matter (the zone sums are those of adding the values one by one in
+/// row-major order, bit for bit) and the values are added four at a time; otherwise a
+/// second pass adds them one by one in row-major order.
+/// `AVX2`: true only when called from [`field_sums_avx2`].
+#[inline(always)]
+fn field_sums_in<const AVX2: bool>(
+    src: &mut PSource,
+    w: usize,
+    segs: &[(usize, usize, usize)],
+    zone_of_row: &[u16],
+    zcols: usize,
+    [r0, r1, c0, c1]: [usize; 4],
+) -> FieldSums {
+    let nz = zone_of_row
         .iter()
-        .map(|&x| {
-            let xc = x.clamp(x0 - m, x1 + m);
-            (xc >= px0 && xc <= px1).then(|| (xc - fm.origin_mm[0]) * inv)
-        })
-        .collect();
-    let ua = us.iter().position(Option::is_some).unwrap_or(w);
-    let ub = us.iter().rposition(Option::is_some).map_or(ua, |i| i + 1);
-    let uv: Vec<f64> = us[ua..ub].iter().map(|u| u.unwrap_or(f64::NAN)).collect();
-    let mut out = vec![0f32; w * h];
-    let mut cache = super::field::RowCache::default();
-    let mut exact = vec![0f64; w];
-    for (r, row) in out.chunks_exact_mut(w).enumerate() {
-        let y = (h as f64 - r as f64 - 0.5) * p;
-        let yc = y.clamp(y0 - m, y1 + m);
-        let rest = if yc >= py0 && yc <= py1 {
-            let a = fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv);
-            let seg = &mut row[ua..ub];
-            // Horner in u; a cubic's four coefficients as an array (unrolled).
-            match <[f64; 4]>::try_from(a.as_slice()) {
-                Ok(a4) => horner_run(seg, &uv, |u| {
-                    a4.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
-                }),
-                Err(_) => horner_run(seg, &uv, |u| {
-                    a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32
-                }),
-            }
-            // Separate passes: exp must not be evaluated (speculatively) for polynomials.
-            match form {
-                Form::Exponential => seg.iter_mut().for_each(|o| *o = scf * o.exp()),
-                Form::InverseSquare => seg.iter_mut().for_each(|o| *o = scf / (*o * *o)),
-                Form::Polynomial => seg.iter_mut().for_each(|o| *o *= scf),
-            }
-            ua > 0 || ub < w
-        } else {
-            true
-        };
-        if rest {
-            fm.eval_row(y, &xs, &mut cache, &mut exact);
-            let inside_row = yc >= py0 && yc <= py1;
-            for ((o, u), &e) in row.iter_mut().zip(&us).zip(&exact) {
-                if !inside_row || u.is_none() {
-                    *o = e as f32;
+        .map(|&z| z as usize + 1)
+        .max()
+        .unwrap_or(1)
+        * zcols;
+    let mut zcnt = vec![0usize; nz];
+    for &zr in zone_of_row {
+        for &(zc, a, b) in segs {
+            zcnt[zr as usize * zcols + zc] += b - a;
+        }
+    }
+    let mut buf = vec![0f32; w];
+    let n_in = r1.saturating_sub(r0) * segs.len();
+    for exact in [true, false] {
+        let mut zsum = vec![0f64; nz];
+        let mut inside_sum = 0.0f64;
+        let mut seg_sums = Vec::with_capacity(n_in);
+        let mut seg_extremes = Vec::with_capacity(n_in);
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (r, &zr) in zone_of_row.iter().enumerate() {
+            src.row::<AVX2>(r, &mut buf);
+            let zr = zr as usize * zcols;
+            let inside_row = (r0..r1).contains(&r);
+            for &(zc, a, b) in segs {
+                // Columns a..ia and ib..b are outside the calibrated area.
+                let (ia, ib) = if inside_row {
+                    let ia = a.max(c0).min(b);
+                    (ia, b.min(c1).max(ia))
+                } else {
+                    (b, b)
+                };
+                let acc = &mut zsum[zr + zc];
+                let (ins, ilo, ihi) = if exact {
+                    let stats = |v: &[f32]| {
+                        #[cfg(target_arch = "x86_64")]
+                        if AVX2 {
+                            // SAFETY: AVX2 is true only in `field_sums_avx2`, which runs
+                            // on CPUs with AVX2.
+                            return unsafe { stats_avx2(v) };
+                        }
+                        stats_lanes(v)
+                    };
+                    // (Most rows lie inside the area, or outside it: skip empty parts.)
+                    let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
+                    let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
+                    let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
+                    let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
+                    *acc += sa + si + sb;
+                    inside_sum += si;
+                    lo = lo.min(la).min(li).min(lb);
+                    hi = hi.max(ha).max(hi_).max(hb);
+                    (si, li, hi_)
+                } else {
+                    let mut ins = 0.0;
+                    for &v in &buf[a..ia] {
+                        *acc += v as f64;
+                    }
+                    for &v in &buf[ia..ib] {
+                        *acc += v as f64;
+                        inside_sum += v as f64;
+                        ins += v as f64;
+                    }
+                    for &v in &buf[ib..b] {
+                        *acc += v as f64;
+                    }
+                    let (l, h) = min_max(&buf[ia..ib]);
+                    (ins, l, h)
+                };
+                if inside_row {
+                    seg_sums.push(ins);
+                    seg_extremes.push((ilo, ihi));
                 }
             }
         }
+        if !exact
+            || (sums_are_exact(lo, hi, w * zone_of_row.len())
+                && inside_sum.is_finite()
+                && zsum.iter().all(|s| s.is_finite()))
+        {
+            return FieldSums {
+                zsum,
+                zcnt,
+                inside_sum,
+                seg_sums,
+                seg_extremes,
+            };
+        }
     }
-    out
+    unreachable!("the second pass returns")
 }
 
-#[inline(always)]
-fn horner_run(seg: &mut [f32], us: &[f64], f: impl Fn(f64) -> f32) {
-    for (o, &u) in seg.iter_mut().zip(us) {
-        *o = f(u);
+/// The per-pixel spread over the calibrated area when the pixels of row r of zone column
+/// zc show S = `s_of(r, zc)`: the extremes of P · S from each row segment's extremes
+/// (rounding is monotone), the mean from each row segment's sum of P ([`FieldSums`]).
+fn pixel_spread(
+    fs: &FieldSums,
+    segs: &[(usize, usize, usize)],
+    [r0, r1, c0, c1]: [usize; 4],
+    s_of: impl Fn(usize, usize) -> f64,
+) -> f64 {
+    let mut sp = Spread::new();
+    let mut k = 0;
+    for r in r0..r1 {
+        for &(zc, a, b) in segs {
+            let n = b.min(c1).saturating_sub(a.max(c0));
+            if n > 0 {
+                let s = s_of(r, zc);
+                let (lo, hi) = fs.seg_extremes[k];
+                sp.add_extremes(lo, hi, s);
+                sp.sum += fs.seg_sums[k] * s;
+                sp.n += n;
+            }
+            k += 1;
+        }
     }
+    sp.pct()
+}
+
+/// P at the pixel centres of the field, one row at a time (no w × h buffer). Inside the
+/// polynomial's rectangle: Horner in u with the row's coefficients (in f64, rounded to f32,
+/// times the scale in f32); elsewhere [`FieldModel::eval`] rounded to f32 (its linear
+/// continuation from the polynomial's value and gradient at the nearest point of the
+/// rectangle, computed once per column for the rows above and below it, once per row
+/// for the columns left and right of it).
+struct FieldRows<'a> {
+    fm: &'a FieldModel,
+    h: usize,
+    p: f64,
+    /// Per column: the clamped x minus its nearest point of the rectangle, mm, and u
+    /// there.
+    dx: Vec<f64>,
+    u: Vec<f64>,
+    /// The columns inside the rectangle: one contiguous run [ua, ub).
+    ua: usize,
+    ub: usize,
+    /// Value and gradient of the polynomial along the rectangle's bottom and top edges,
+    /// per column (computed when first needed).
+    edge: [Vec<[f64; 3]>; 2],
+}
+
+impl<'a> FieldRows<'a> {
+    fn new(fm: &'a FieldModel, field: &Field) -> FieldRows<'a> {
+        let w = field.width_px as usize;
+        let p = field.pixel_mm;
+        let m = fm.extrapolate_mm.get();
+        let [x0, _, x1, _] = fm.area_mm;
+        let [px0, _, px1, _] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
+        let s = 1.0 / fm.length_unit_mm.get();
+        let (mut dx, mut u) = (Vec::with_capacity(w), Vec::with_capacity(w));
+        for c in 0..w {
+            let xc = ((c as f64 + 0.5) * p).clamp(x0 - m, x1 + m);
+            let xp = xc.clamp(px0, px1);
+            dx.push(xc - xp);
+            u.push((xp - fm.origin_mm[0]) * s);
+        }
+        // Columns with xp == xc (dx == 0 also for xp == xc == −0.0, which cannot differ).
+        let inside = |c: usize| {
+            let xc = ((c as f64 + 0.5) * p).clamp(x0 - m, x1 + m);
+            xc >= px0 && xc <= px1
+        };
+        let ua = (0..w).position(inside).unwrap_or(w);
+        let ub = (0..w).rposition(inside).map_or(ua, |i| i + 1);
+        debug_assert!((ua..ub).all(inside));
+        FieldRows {
+            fm,
+            h: field.height_px as usize,
+            p,
+            dx,
+            u,
+            ua,
+            ub,
+            edge: [Vec::new(), Vec::new()],
+        }
+    }
+
+    /// P at the pixel centres of image row `r` (row 0 = top) into `row` (`w` values).
+    /// `AVX2`: true only where the CPU has AVX2 (inlined into [`field_sums_avx2`]); the
+    /// same values either way.
+    #[inline(always)]
+    fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
+        let fm = self.fm;
+        let m = fm.extrapolate_mm.get();
+        let [_, y0, _, y1] = fm.area_mm;
+        let [_, py0, _, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
+        let s = 1.0 / fm.length_unit_mm.get();
+        let (ua, ub) = (self.ua, self.ub);
+        let y = (self.h as f64 - r as f64 - 0.5) * self.p;
+        let yc = y.clamp(y0 - m, y1 + m);
+        let yp = yc.clamp(py0, py1);
+        let v = (yp - fm.origin_mm[1]) * s;
+        let dy = yc - yp;
+        let (dx, u) = (&self.dx, &self.u);
+        if yp == yc {
+            let a = fm.coefficients.in_u(v);
+            let seg = &mut row[ua..ub];
+            let scf = fm.scale.get() as f32;
+            // Separate passes: exp must not be evaluated (speculatively) for polynomials.
+            let horner = |seg: &mut [f32], scale: f32| {
+                #[cfg(target_arch = "x86_64")]
+                if AVX2 {
+                    // SAFETY: AVX2 is true only where the CPU has AVX2.
+                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale) };
+                }
+                horner_f32(seg, &u[ua..ub], &a, scale)
+            };
+            match fm.form {
+                Form::Polynomial => horner(seg, scf),
+                Form::Exponential => {
+                    horner(seg, 1.0);
+                    seg.iter_mut().for_each(|o| *o = scf * o.exp())
+                }
+                Form::InverseSquare => {
+                    horner(seg, 1.0);
+                    seg.iter_mut().for_each(|o| *o = scf / (*o * *o))
+                }
+            }
+            // Left and right of the rectangle: one nearest point per side (both sides
+            // in one run if the rectangle lies between two pixel centres).
+            let mut g = (f64::NAN, [0.0; 3]);
+            for c in (0..ua).chain(ub..row.len()) {
+                if u[c].to_bits() != g.0.to_bits() {
+                    let (f, fu, fv) = fm.coefficients.eval_grad(u[c], v);
+                    g = (u[c], [f, fu, fv]);
+                }
+                row[c] = fm.continued(g.1, dx[c], dy) as f32;
+            }
+        } else {
+            // Above or below the rectangle: the nearest point of each column is on its
+            // top or bottom edge.
+            let side = (yp == py1) as usize;
+            let edge = &mut self.edge[side];
+            if edge.is_empty() {
+                *edge = u
+                    .iter()
+                    .map(|&uc| {
+                        let (f, fu, fv) = fm.coefficients.eval_grad(uc, v);
+                        [f, fu, fv]
+                    })
+                    .collect();
+            }
+            for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                *o = fm.continued(g, d, dy) as f32;
+            }
+        }
+    }
+}
+
+/// `out[i]` = the polynomial with coefficients `a` (constant first) at `us[i]` by Horner's
+/// rule in f64 (from 0: 0·u + a_n, …), rounded to f32, times `scale` in f32 (1 is exact);
+/// four lanes at a time.
+#[inline(always)]
+fn horner_f32(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
+    #[inline(always)]
+    fn lanes<const N: usize>(o: &mut [f32], u: &[f64], a: &[f64], scale: f32) {
+        let mut acc = [0f64; N];
+        for &k in a.iter().rev() {
+            for l in 0..N {
+                acc[l] = acc[l] * u[l] + k;
+            }
+        }
+        for l in 0..N {
+            o[l] = acc[l] as f32 * scale;
+        }
+    }
+    let mut oc = out.chunks_exact_mut(4);
+    let mut uc = us.chunks_exact(4);
+    match <[f64; 4]>::try_from(a) {
+        // A cubic (the common case): coefficients known to the unrolled loop.
+        Ok(a4) => {
+            for (o, u) in (&mut oc).zip(&mut uc) {
+                lanes::<4>(o, u, &a4, scale);
+            }
+        }
+        Err(_) => {
+            for (o, u) in (&mut oc).zip(&mut uc) {
+                lanes::<4>(o, u, a, scale);
+            }
+        }
+    }
+    for (o, u) in oc.into_remainder().iter_mut().zip(uc.remainder()) {
+        lanes::<1>(std::slice::from_mut(o), std::slice::from_ref(u), a, scale);
+    }
+}
+
+/// [`horner_f32`] with AVX2 (four f64 lanes; the same multiplications and additions, not
+/// fused, and the same roundings to f32, so the same values).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
+    use std::arch::x86_64::*;
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn run<const N: usize>(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) -> usize {
+        let mut k = [_mm256_setzero_pd(); super::field::MAX_DEGREE + 1];
+        for (k, &c) in k.iter_mut().zip(a.iter().rev()) {
+            *k = _mm256_set1_pd(c);
+        }
+        let k = &k[..if N > 0 { N } else { a.len() }];
+        let sc = _mm_set1_ps(scale);
+        let n = out.len().min(us.len()) / 4 * 4;
+        for (o, u) in out[..n].chunks_exact_mut(4).zip(us.chunks_exact(4)) {
+            // SAFETY: `u` holds four f64.
+            let u = unsafe { _mm256_loadu_pd(u.as_ptr()) };
+            let mut acc = _mm256_setzero_pd();
+            for &k in k {
+                acc = _mm256_add_pd(_mm256_mul_pd(acc, u), k);
+            }
+            let f = _mm_mul_ps(_mm256_cvtpd_ps(acc), sc);
+            // SAFETY: `o` holds four f32.
+            unsafe { _mm_storeu_ps(o.as_mut_ptr(), f) };
+        }
+        n
+    }
+    // A cubic's four coefficients as a fixed count (unrolled).
+    let n = if a.len() == 4 {
+        run::<4>(out, us, a, scale)
+    } else {
+        run::<0>(out, us, a, scale)
+    };
+    horner_f32(&mut out[n..], &us[n..], a, scale);
+}
+
+/// P at every pixel centre of the field (row-major, top row first); see [`FieldRows`].
+fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
+    let w = field.width_px as usize;
+    let mut rows = FieldRows::new(fm, field);
+    let mut out = vec![0f32; w * field.height_px as usize];
+    for (r, row) in out.chunks_exact_mut(w).enumerate() {
+        rows.row::<false>(r, row);
+    }
+    out
 }
 
 impl Compensator {
@@ -349,16 +780,26 @@ impl Compensator {
         let pixels_inside = (c1 + 1 - c0) * (r1 + 1 - r0);
         let pixels_outside = (w * h - pixels_inside) as u64;
 
-        let pp = pixel_p(fm, field);
+        // P: pixel mode keeps it for the whole field (its per-pixel tables need it); zone
+        // mode evaluates it row by row in its one pass over the field (no w × h buffer to
+        // allocate and fill).
+        let pp = if mode == Mode::Pixel {
+            pixel_p(fm, field)
+        } else {
+            Vec::new()
+        };
+        let mut src = if pp.is_empty() {
+            PSource::Rows(FieldRows::new(fm, field))
+        } else {
+            PSource::Field(&pp)
+        };
         debug_assert!({
             let (c, r) = (w / 3, h / 3);
             let direct = fm.eval((c as f64 + 0.5) * p, (h as f64 - r as f64 - 0.5) * p);
-            ((pp[r * w + c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
+            let mut row = vec![0f32; w];
+            src.row::<false>(r, &mut row);
+            ((row[c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
         });
-        // Pixels of the calibrated area, row by row (a plain nested loop: this runs over
-        // most of the field several times per job).
-        let inside_rows_iter = || (r0..=r1).map(move |r| r * w + c0..r * w + c1 + 1);
-        let inside_iter = || inside_rows_iter().flatten();
 
         // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
         // holding its centre. Zone rows are stored top first, like the image.
@@ -376,63 +817,13 @@ impl Compensator {
             .collect();
         let nz = zcols * zrows;
         let segs = zone_segments(&zone_of_col);
-        // One pass over P, row-major like every sum here (the sums do not depend on how
-        // the passes are arranged): the zone sums (all pixels), and over the calibrated
-        // area the mean and the spread before compensation. Each inside pixel is read once
-        // for all three; the extremes of each row's zone segment are kept for the
-        // per-pixel prediction after compensation (the same values, so the same result).
-        let mut zsum = vec![0f64; nz];
-        let mut zcnt = vec![0usize; nz];
-        let mut inside_sum = 0.0f64;
-        let mut before_px = Spread::new();
-        let mut seg_extremes: Vec<(f32, f32)> = Vec::with_capacity((r1 + 1 - r0) * segs.len());
-        for (r, row) in pp.chunks_exact(w).enumerate() {
-            let zr = zone_of_row[r] as usize * zcols;
-            let inside_row = (r0..=r1).contains(&r);
-            for &(zc, a, b) in &segs {
-                let mut acc = zsum[zr + zc];
-                if inside_row {
-                    // Columns a..ia and ib..b are outside the calibrated area.
-                    let ia = a.max(c0).min(b);
-                    let ib = b.min(c1 + 1).max(ia);
-                    for &v in &row[a..ia] {
-                        acc += v as f64;
-                    }
-                    let vals = &row[ia..ib];
-                    // Plain comparisons (one instruction each, where `f32::min` is
-                    // several); like it, they skip NaN.
-                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                    let (mut ins, mut bsum) = (inside_sum, before_px.sum);
-                    for &v in vals {
-                        let x = v as f64;
-                        acc += x;
-                        ins += x;
-                        bsum += x * s_max;
-                        lo = if v < lo { v } else { lo };
-                        hi = if v > hi { v } else { hi };
-                    }
-                    (inside_sum, before_px.sum) = (ins, bsum);
-                    if !vals.is_empty() {
-                        before_px.add_extremes(lo, hi, s_max);
-                        before_px.n += vals.len();
-                    }
-                    seg_extremes.push((lo, hi));
-                    for &v in &row[ib..b] {
-                        acc += v as f64;
-                    }
-                } else {
-                    for &v in &row[a..b] {
-                        acc += v as f64;
-                    }
-                }
-                zsum[zr + zc] = acc;
-                zcnt[zr + zc] += b - a;
-            }
-        }
+        let inside = [r0, r1 + 1, c0, c1 + 1];
+        let fs = field_sums(&mut src, w, &segs, &zone_of_row, zcols, inside);
+        let (zsum, zcnt, inside_sum) = (&fs.zsum, fs.zcnt.as_slice(), fs.inside_sum);
         let mean = inside_sum / pixels_inside as f64 * s_max;
         let zone_p: Vec<f64> = zsum
             .iter()
-            .zip(&zcnt)
+            .zip(zcnt)
             .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
             .collect();
         let zone_inside: Vec<bool> = (0..nz)
@@ -452,7 +843,6 @@ impl Compensator {
                 .filter(|&z| zone_inside[z])
                 .map(|z| zone_p[z] * s_max),
         );
-        let before_pixel = before_px.pct();
 
         let mut comp = Compensator {
             mode,
@@ -465,7 +855,8 @@ impl Compensator {
             zone_of_row,
             tables: Vec::new(),
             row_tables: Vec::new(),
-            full: Vec::new(),
+            gray_rows: Vec::new(),
+            gray_row_of: Vec::new(),
             full_idx: Vec::new(),
             t: Vec::new(),
             inside_rows,
@@ -482,7 +873,7 @@ impl Compensator {
                 zone_after: vec![0.0; nz],
                 spreads: Spreads {
                     before_zone_pct: before_zone,
-                    before_pixel_pct: before_pixel,
+                    before_pixel_pct: pixel_spread(&fs, &segs, inside, |_, _| s_max),
                     after_zone_pct: 0.0,
                     after_pixel_pct: 0.0,
                 },
@@ -571,25 +962,10 @@ impl Compensator {
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
                 // Per-pixel prediction: each row of a zone shows one gray.
                 let zone_of_row = &comp.zone_of_row;
-                let pp = &pp;
-                let mut after_px = Spread::new();
-                let mut extremes = seg_extremes.iter();
-                for r in r0..=r1 {
-                    let zr = zone_of_row[r] as usize * zcols;
-                    let row = &pp[r * w..(r + 1) * w];
-                    for &(zc, a, b) in &segs {
-                        let (a, b) = (a.max(c0).min(b), b.min(c1 + 1));
-                        let (g0, g1, k) = mix[zr + zc];
-                        let sz = s_of(if upper_row(r, k) { g1 } else { g0 });
-                        let &(lo, hi) = extremes.next().expect("one per row and segment");
-                        let vals = &row[a..b.max(a)];
-                        if !vals.is_empty() {
-                            after_px.add_extremes(lo, hi, sz);
-                            after_px.add_sum(vals, sz);
-                        }
-                    }
-                }
-                let after_pixel = after_px.pct();
+                let after_pixel = pixel_spread(&fs, &segs, inside, |r, zc| {
+                    let (g0, g1, k) = mix[zone_of_row[r] as usize * zcols + zc];
+                    s_of(if upper_row(r, k) { g1 } else { g0 })
+                });
                 // Tables: the lower-gray table of every zone, plus an upper-gray one for
                 // mixing zones; each row of a zone uses one of them (`upper_row`).
                 let mut tables = Vec::with_capacity(nz + mixed as usize);
@@ -623,15 +999,25 @@ impl Compensator {
                         })
                     })
                     .collect();
-                // The full-coverage gray of every pixel.
-                let mut full = vec![0u8; w * h];
-                for (r, row) in full.chunks_exact_mut(w).enumerate() {
-                    let tabs = &row_tables[r * zcols..(r + 1) * zcols];
-                    for &(zc, a, b) in &segs {
-                        row[a..b].fill(tables[tabs[zc] as usize][255]);
-                    }
+                // The full-coverage gray of every pixel: rows with the same tables have the
+                // same grays.
+                let mut distinct: std::collections::HashMap<&[u32], u32> =
+                    std::collections::HashMap::new();
+                let mut gray_rows = Vec::new();
+                let mut gray_row_of = Vec::with_capacity(h);
+                for tabs in row_tables.chunks_exact(zcols) {
+                    let next = distinct.len() as u32;
+                    let k = *distinct.entry(tabs).or_insert_with(|| {
+                        for &(zc, a, b) in &segs {
+                            gray_rows
+                                .resize(gray_rows.len() + b - a, tables[tabs[zc] as usize][255]);
+                        }
+                        next
+                    });
+                    gray_row_of.push(k);
                 }
-                comp.full = full;
+                comp.gray_rows = gray_rows;
+                comp.gray_row_of = gray_row_of;
                 comp.tables = tables;
                 comp.row_tables = row_tables;
                 comp.prediction.mixed_zones = mixed;
@@ -644,46 +1030,81 @@ impl Compensator {
                 pr.unreachable = unreachable;
             }
             Mode::Pixel => {
-                let pmin = inside_iter()
-                    .map(|i| pp[i] as f64)
-                    .fold(f64::INFINITY, f64::min);
+                // The smallest P of the calibrated area: of its row segments' smallest.
+                let pmin = fs.seg_extremes.iter().fold(f64::INFINITY, |m, &(lo, _)| {
+                    if (lo as f64) < m {
+                        lo as f64
+                    } else {
+                        m
+                    }
+                });
                 let target = forced_target.unwrap_or(pmin * s_max);
                 let mut unreachable = 0;
                 let mut full = vec![0u8; w * h];
                 let mut full_idx = vec![0u16; w * h];
                 let mut t = vec![0f32; w * h];
                 let mut idx = lv.gray.len() - 1;
-                for i in 0..w * h {
-                    let ti = if pp[i] > 0.0 {
-                        target / pp[i] as f64
-                    } else {
-                        f64::INFINITY
-                    };
-                    if ti > s_max * (1.0 + 1e-6) {
-                        unreachable += 1;
-                    }
-                    idx = lv.nearest_from(idx, ti);
-                    full[i] = lv.gray[idx];
-                    full_idx[i] = idx as u16;
-                    t[i] = ti as f32;
-                }
+                // Row by row: E*/P (divisions, vectorized), the nearest level searched from
+                // the previous pixel's, then per zone P · S(level) added pixel by pixel in
+                // row-major order (a zone's pixels in a row are one segment) and, over the
+                // calibrated area, the spread after, also in row-major order. The gray sums
+                // are exact in any order.
                 let mut zs = vec![0f64; nz];
-                let mut zg = vec![0f64; nz];
+                let mut zg = vec![0u64; nz];
+                let mut after_px = Spread::new();
+                let mut ti_row = vec![0f64; w];
+                let [ir0, ir1, ic0, ic1] = inside;
                 for r in 0..h {
+                    let base = r * w;
+                    let prow = &pp[base..base + w];
+                    for (o, &v) in ti_row.iter_mut().zip(prow) {
+                        *o = if v > 0.0 {
+                            target / v as f64
+                        } else {
+                            f64::INFINITY
+                        };
+                    }
+                    unreachable += ti_row
+                        .iter()
+                        .filter(|&&ti| ti > s_max * (1.0 + 1e-6))
+                        .count() as u64;
+                    let frow = &mut full[base..base + w];
+                    let irow = &mut full_idx[base..base + w];
+                    let trow = &mut t[base..base + w];
                     for c in 0..w {
-                        let i = r * w + c;
-                        let z = comp.zone_of_row[r] as usize * zcols + comp.zone_of_col[c] as usize;
-                        zs[z] += pp[i] as f64 * lv.s[full_idx[i] as usize];
-                        zg[z] += full[i] as f64;
+                        let ti = ti_row[c];
+                        idx = lv.nearest_from(idx, ti);
+                        frow[c] = lv.gray[idx];
+                        irow[c] = idx as u16;
+                        trow[c] = ti as f32;
+                    }
+                    let zr = comp.zone_of_row[r] as usize * zcols;
+                    let inside_row = (ir0..ir1).contains(&r);
+                    for &(zc, a, b) in &segs {
+                        let (ia, ib) = if inside_row {
+                            let ia = a.max(ic0).min(b);
+                            (ia, b.min(ic1).max(ia))
+                        } else {
+                            (b, b)
+                        };
+                        let mut acc = zs[zr + zc];
+                        for c in a..b {
+                            let x = prow[c] as f64 * lv.s[irow[c] as usize];
+                            acc += x;
+                            if c >= ia && c < ib {
+                                after_px.add(x);
+                            }
+                        }
+                        zs[zr + zc] = acc;
+                        zg[zr + zc] += frow[a..b].iter().map(|&g| g as u64).sum::<u64>();
                     }
                 }
                 let zone_after: Vec<f64> = (0..nz).map(|z| zs[z] / zcnt[z].max(1) as f64).collect();
                 let zone_gray = (0..nz)
-                    .map(|z| (zg[z] / zcnt[z].max(1) as f64).round() as u8)
+                    .map(|z| (zg[z] as f64 / zcnt[z].max(1) as f64).round() as u8)
                     .collect();
                 let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
-                let after_pixel =
-                    spread(inside_iter().map(|i| pp[i] as f64 * lv.s[full_idx[i] as usize]));
+                let after_pixel = after_px.pct();
                 let pr = &mut comp.prediction;
                 pr.target = target;
                 pr.zone_gray = zone_gray;
@@ -691,7 +1112,8 @@ impl Compensator {
                 pr.spreads.after_zone_pct = after_zone;
                 pr.spreads.after_pixel_pct = after_pixel;
                 pr.unreachable = unreachable;
-                comp.full = full;
+                comp.gray_rows = full;
+                comp.gray_row_of = (0..h as u32).collect();
                 comp.full_idx = full_idx;
                 comp.t = t;
             }
@@ -795,7 +1217,7 @@ impl Compensator {
     fn zone_row(&self, row: &mut [u8], r: usize, a: usize, b: usize) {
         let tabs = &self.row_tables[r * self.zcols..(r + 1) * self.zcols];
         let cols = &self.zone_of_col[a..b];
-        let full = &self.full[r * self.w + a..r * self.w + b];
+        let full = &self.gray_row(r)[a..b];
         map_words(&mut row[a..b], full, |k, v| {
             self.tables[tabs[cols[k] as usize] as usize][v as usize]
         });
@@ -808,7 +1230,7 @@ impl Compensator {
         let base = r * self.w;
         let fidx = &self.full_idx[base + a..base + b];
         let t = &self.t[base + a..base + b];
-        map_words(&mut row[a..b], &self.full[base + a..base + b], |k, v| {
+        map_words(&mut row[a..b], &self.gray_row(r)[a..b], |k, v| {
             let target = v as f64 / 255.0 * t[k] as f64;
             lv.gray[lv.nearest_from(fidx[k] as usize, target)]
         });
@@ -865,13 +1287,47 @@ impl Compensator {
         }
     }
 
+    /// Row `r` of the gray map (the full-coverage gray of each pixel).
+    #[inline(always)]
+    fn gray_row(&self, r: usize) -> &[u8] {
+        let k = self.gray_row_of[r] as usize * self.w;
+        &self.gray_rows[k..k + self.w]
+    }
+
     /// The full-coverage gray of every pixel (what a plate covering the field gets, without
     /// error diffusion), in field orientation.
     pub fn gray_map(&self) -> Mask {
+        let mut data = Vec::with_capacity(self.w * self.h);
+        for r in 0..self.h {
+            data.extend_from_slice(self.gray_row(r));
+        }
         Mask {
             width: self.w as u32,
             height: self.h as u32,
-            data: self.full.clone(),
+            data,
+        }
+    }
+
+    /// The gray map as projector `p` shows it ([`crate::raster::projector_view`]),
+    /// encoded by `png`, which must give [`crate::png::encode_gray8`]'s bytes (the
+    /// bundle's mask encoder): when `p` shows the field as it is, the map is encoded row by
+    /// row with [`crate::png::encode_gray8_rows`] (the same bytes) without making it.
+    pub fn gray_map_png(
+        &self,
+        p: &crate::profile::Projector,
+        png: impl Fn(&Mask) -> Vec<u8>,
+    ) -> Vec<u8> {
+        let identity = p.offset_px == [0, 0]
+            && p.width_px as usize == self.w
+            && p.height_px as usize == self.h
+            && !p.mirror_x
+            && !p.mirror_y;
+        if identity {
+            let (w, h) = (self.w as u32, self.h as u32);
+            crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
+        } else {
+            let m = self.gray_map();
+            png(&crate::raster::projector_view(&m, p))
         }
     }
 
@@ -931,7 +1387,7 @@ impl crate::raster::CoverageMap for Compensator {
         CompRow {
             comp: self,
             r,
-            full: &self.full[r * self.w..(r + 1) * self.w],
+            full: self.gray_row(r),
             tabs: if zone {
                 &self.row_tables[r * self.zcols..(r + 1) * self.zcols]
             } else {
@@ -1094,9 +1550,11 @@ mod tests {
 
     #[test]
     fn prediction_and_zone_tables_match_a_direct_computation() {
-        // The set-up's fused pass (zone sums, mean, spreads) and its table walk must give
-        // exactly what the plain definitions give, also when the calibrated area cuts
-        // through zones and rows (0.7 mm pixels: zone edges fall inside pixel columns).
+        // The set-up's pass (zone sums, mean, spreads) and its table walk must give what
+        // the plain definitions give (adding P pixel by pixel in row-major order), also
+        // when the calibrated area cuts through zones and rows (0.7 mm pixels: zone edges
+        // fall inside pixel columns): exactly, except the per-pixel spreads' means, which
+        // the set-up takes from exact sums (one rounding instead of one per pixel).
         let (mut cal, _) = setup();
         let field = Field {
             width_px: 57,
@@ -1127,14 +1585,41 @@ mod tests {
                     sum += pp[i] as f64;
                     n += 1;
                     before.add(pp[i] as f64 * pr.s_max);
-                    after.add(pp[i] as f64 * c.s_of(c.full[i]));
+                    after.add(pp[i] as f64 * c.s_of(c.gray_row(i / w)[i % w]));
                 }
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
-                assert_eq!(pr.spreads.before_pixel_pct, before.pct(), "{what}");
+                let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+                assert!(close(pr.spreads.before_pixel_pct, before.pct()), "{what}");
+                // Zone means: the sums of P added one by one in row-major order.
+                let (mut zs, mut zn) = (vec![0f64; pr.zone_p.len()], vec![0usize; pr.zone_p.len()]);
+                for (i, &v) in pp.iter().enumerate() {
+                    let z = c.zone_of_row[i / w] as usize * c.zcols + c.zone_of_col[i % w] as usize;
+                    zs[z] += v as f64;
+                    zn[z] += 1;
+                }
+                for (z, &pz) in pr.zone_p.iter().enumerate() {
+                    let want = if zn[z] > 0 {
+                        zs[z] / zn[z] as f64
+                    } else {
+                        f64::NAN
+                    };
+                    assert_eq!(pz.to_bits(), want.to_bits(), "{what} zone {z}");
+                }
                 if mode == Mode::Pixel {
+                    // Zone means after: P · S(gray) added pixel by pixel in row-major order.
+                    let mut za = vec![0f64; pr.zone_p.len()];
+                    for (i, &v) in pp.iter().enumerate() {
+                        let z =
+                            c.zone_of_row[i / w] as usize * c.zcols + c.zone_of_col[i % w] as usize;
+                        za[z] += v as f64 * c.levels.s[c.full_idx[i] as usize];
+                    }
+                    for (z, &a) in pr.zone_after.iter().enumerate() {
+                        let want = za[z] / zn[z].max(1) as f64;
+                        assert_eq!(a.to_bits(), want.to_bits(), "{what} zone {z}");
+                    }
                     continue;
                 }
-                assert_eq!(pr.spreads.after_pixel_pct, after.pct(), "{what}");
+                assert!(close(pr.spreads.after_pixel_pct, after.pct()), "{what}");
                 // Each zone's lower table: the nearest level to coverage × E*/P̄ (entry
                 // 255 is the zone's full gray, which may mix two levels).
                 let lv = &c.levels;
@@ -1288,5 +1773,311 @@ mod tests {
             }
         }
         assert!((sum / n as f64 - 1.0).abs() < 0.003, "{}", sum / n as f64);
+    }
+
+    /// A tiny fixed-seed PRNG (xorshift), uniform in [0, 1).
+    fn rng(seed: u64) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// A random calibration field over a 40 × 30 mm area: every form, degrees 1 to
+    /// [`MAX_DEGREE`](crate::optics::field::MAX_DEGREE), sometimes a smaller polynomial
+    /// rectangle (linear continuation), sometimes one narrower than a pixel.
+    fn random_field(rnd: &mut impl FnMut() -> f64, case: usize) -> FieldModel {
+        let degree = 1 + case % crate::optics::field::MAX_DEGREE;
+        let form = [Form::Polynomial, Form::Exponential, Form::InverseSquare][case % 3];
+        let n = Poly::terms(degree);
+        let mut coef: Vec<f64> = (0..n).map(|_| (rnd() - 0.5) * 0.2).collect();
+        coef[0] = 1.0 + rnd();
+        let area = [
+            rnd() * 4.0,
+            rnd() * 3.0,
+            36.0 + rnd() * 4.0,
+            26.0 + rnd() * 4.0,
+        ];
+        let poly_area = match case % 4 {
+            0 => None,
+            1 => Some([area[0] + 2.5, area[1] + 2.5, area[2] - 2.5, area[3] - 2.5]),
+            2 => Some([20.01, area[1] + 1.0, 20.02, area[3] - 1.0]),
+            _ => Some([area[0] + 1.0, 15.01, area[2] - 1.0, 15.02]),
+        };
+        FieldModel {
+            origin_mm: [20.0 + rnd(), 15.0 + rnd()],
+            length_unit_mm: Positive::new(10.0 + 20.0 * rnd()).unwrap(),
+            scale: Positive::new(0.5 + rnd() * 1e-3).unwrap(),
+            form,
+            coefficients: Poly::from_terms(degree, &coef),
+            area_mm: area,
+            polynomial_area_mm: poly_area,
+            extrapolate_mm: NonNegative::new(rnd() * 6.0).unwrap(),
+        }
+    }
+
+    /// P at a pixel centre as the set-up defines it: inside the polynomial's rectangle
+    /// Horner in u (f64) rounded to f32 and scaled in f32, elsewhere `eval` rounded to f32.
+    fn p_reference(fm: &FieldModel, field: &Field, r: usize, c: usize) -> f32 {
+        let p = field.pixel_mm;
+        let (x, y) = (
+            (c as f64 + 0.5) * p,
+            (field.height_px as f64 - r as f64 - 0.5) * p,
+        );
+        let m = fm.extrapolate_mm.get();
+        let [x0, y0, x1, y1] = fm.area_mm;
+        let [px0, py0, px1, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
+        let (xc, yc) = (x.clamp(x0 - m, x1 + m), y.clamp(y0 - m, y1 + m));
+        if !(xc >= px0 && xc <= px1 && yc >= py0 && yc <= py1) {
+            return fm.eval(x, y) as f32;
+        }
+        let inv = 1.0 / fm.length_unit_mm.get();
+        let a = fm.coefficients.in_u((yc - fm.origin_mm[1]) * inv);
+        let u = (xc - fm.origin_mm[0]) * inv;
+        let q = a.iter().rev().fold(0.0, |acc, k| acc * u + k) as f32;
+        let scf = fm.scale.get() as f32;
+        match fm.form {
+            Form::Polynomial => q * scf,
+            Form::Exponential => scf * q.exp(),
+            Form::InverseSquare => scf / (q * q),
+        }
+    }
+
+    #[test]
+    fn field_rows_equal_the_definition_with_and_without_avx2() {
+        let mut rnd = rng(0x9e37_79b9_7f4a_7c15);
+        for case in 0..36 {
+            let fm = random_field(&mut rnd, case);
+            let field = Field {
+                width_px: 61 + (case as u32 % 5) * 7,
+                height_px: 47,
+                pixel_mm: 0.73,
+            };
+            let (w, h) = (field.width_px as usize, field.height_px as usize);
+            let mut rows = FieldRows::new(&fm, &field);
+            let (mut a, mut b) = (vec![0f32; w], vec![0f32; w]);
+            for r in 0..h {
+                rows.row::<false>(r, &mut a);
+                #[cfg(target_arch = "x86_64")]
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU has AVX2.
+                    unsafe { avx2_row(&mut rows, r, &mut b) };
+                    assert_eq!(a, b, "case {case} row {r}: AVX2");
+                }
+                for (c, &v) in a.iter().enumerate() {
+                    let want = p_reference(&fm, &field, r, c);
+                    assert_eq!(v.to_bits(), want.to_bits(), "case {case} row {r} col {c}");
+                }
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn avx2_row(rows: &mut FieldRows, r: usize, out: &mut [f32]) {
+        rows.row::<true>(r, out)
+    }
+
+    /// Zones and their row segments of `field` as the set-up makes them.
+    fn zone_geometry(field: &Field, zmm: f64) -> (Vec<u16>, Vec<u16>, usize) {
+        let (w, h, p) = (
+            field.width_px as usize,
+            field.height_px as usize,
+            field.pixel_mm,
+        );
+        let zcols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+        let zrows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+        let zc: Vec<u16> = (0..w)
+            .map(|c| (((c as f64 + 0.5) * p / zmm) as usize).min(zcols - 1) as u16)
+            .collect();
+        let zr: Vec<u16> = (0..h)
+            .map(|r| {
+                let zb = (((h as f64 - r as f64 - 0.5) * p / zmm) as usize).min(zrows - 1);
+                (zrows - 1 - zb) as u16
+            })
+            .collect();
+        (zc, zr, zcols)
+    }
+
+    #[test]
+    fn field_sums_equal_adding_pixel_by_pixel() {
+        // Random fields (and one whose values span too many binades for exact sums: the
+        // one-by-one fallback): the zone and inside sums are those of adding P pixel by
+        // pixel in row-major order, bit for bit, with and without AVX2; the per-segment
+        // sums and extremes are those of the segment's pixels.
+        let mut rnd = rng(0x2545_f491_4f6c_dd1d);
+        for case in 0..25 {
+            let mut fm = random_field(&mut rnd, case);
+            if case == 24 {
+                fm.form = Form::Exponential;
+                fm.coefficients = Poly::from_terms(1, &[0.0, 40.0, 0.0]);
+            }
+            let field = Field {
+                width_px: 83,
+                height_px: 61,
+                pixel_mm: 0.53,
+            };
+            let (w, h) = (83usize, 61usize);
+            let pp = pixel_p(&fm, &field);
+            let (lo, hi) = min_max(&pp);
+            assert_eq!(
+                sums_are_exact(lo, hi, w * h),
+                case != 24,
+                "case {case}: {lo} {hi}"
+            );
+            let (zone_of_col, zone_of_row, zcols) = zone_geometry(&field, 5.0);
+            let segs = zone_segments(&zone_of_col);
+            let inside = [3, 55, 5, 71];
+            let mut results = vec![field_sums_in::<false>(
+                &mut PSource::Rows(FieldRows::new(&fm, &field)),
+                w,
+                &segs,
+                &zone_of_row,
+                zcols,
+                inside,
+            )];
+            results.push(field_sums(
+                &mut PSource::Field(&pp),
+                w,
+                &segs,
+                &zone_of_row,
+                zcols,
+                inside,
+            ));
+            results.push(field_sums(
+                &mut PSource::Rows(FieldRows::new(&fm, &field)),
+                w,
+                &segs,
+                &zone_of_row,
+                zcols,
+                inside,
+            ));
+            let nz = zcols * (*zone_of_row.iter().max().unwrap() as usize + 1);
+            let (mut zs, mut zn, mut ins) = (vec![0f64; nz], vec![0usize; nz], 0.0f64);
+            for (i, &v) in pp.iter().enumerate() {
+                let (r, c) = (i / w, i % w);
+                let z = zone_of_row[r] as usize * zcols + zone_of_col[c] as usize;
+                zs[z] += v as f64;
+                zn[z] += 1;
+                if (inside[0]..inside[1]).contains(&r) && (inside[2]..inside[3]).contains(&c) {
+                    ins += v as f64;
+                }
+            }
+            for fs in &results {
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&fs.zsum), bits(&zs), "case {case}");
+                assert_eq!(fs.zcnt, zn, "case {case}");
+                assert_eq!(fs.inside_sum.to_bits(), ins.to_bits(), "case {case}");
+                let mut k = 0;
+                for r in inside[0]..inside[1] {
+                    for &(_, a, b) in &segs {
+                        let (a, b) = (a.max(inside[2]).min(b), b.min(inside[3]));
+                        let vals = &pp[r * w + a..r * w + b.max(a)];
+                        let s = vals.iter().fold(0.0, |s, &v| s + v as f64);
+                        assert_eq!(fs.seg_sums[k].to_bits(), s.to_bits(), "case {case}");
+                        assert_eq!(fs.seg_extremes[k], min_max(vals), "case {case}");
+                        k += 1;
+                    }
+                }
+                assert_eq!(k, fs.seg_sums.len());
+            }
+        }
+    }
+
+    #[test]
+    fn exact_sums_bound() {
+        // 2^20 values within one binade: 20 + 0 + 24 = 44 bits, exact; spanning 9 binades
+        // 53 bits, exact; 10 binades, not.
+        assert!(sums_are_exact(1.0, 1.5, 1 << 20));
+        assert!(sums_are_exact(1.0, 1023.0, 1 << 20));
+        assert!(!sums_are_exact(1.0, 1024.0, 1 << 20));
+        assert!(sums_are_exact(1.0, 1024.0, 1 << 19));
+        // Zero, negative, subnormal, infinite or NaN bounds: never.
+        for (lo, hi) in [
+            (0.0, 1.0),
+            (-1.0, 1.0),
+            (1e-40, 1e-39),
+            (1.0, f32::INFINITY),
+            (f32::NAN, 1.0),
+        ] {
+            assert!(!sums_are_exact(lo, hi, 4), "{lo} {hi}");
+        }
+        // Exact means exact: a worst case of the bound adds without rounding.
+        let (lo, hi) = (1.0f32 + f32::EPSILON, 511.999_97f32);
+        let n = 1usize << 20;
+        assert!(sums_are_exact(lo, hi, n));
+        let mut s = 0.0f64;
+        for k in 0..n {
+            s += if k % 2 == 0 { lo } else { hi } as f64;
+        }
+        let want = (n / 2) as f64 * (lo as f64 + hi as f64);
+        assert_eq!(s, want);
+    }
+
+    #[test]
+    fn stats_lanes_and_avx2_agree_with_one_by_one() {
+        let mut rnd = rng(7);
+        for len in (0..40).chain([257, 1024]) {
+            let vals: Vec<f32> = (0..len).map(|_| (1.0 + rnd() * 3.0) as f32).collect();
+            let s = vals.iter().fold(0.0, |s, &v| s + v as f64);
+            let (lo, hi) = min_max(&vals);
+            assert_eq!(stats_lanes(&vals), (s, lo, hi), "len {len}");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2.
+                assert_eq!(unsafe { stats_avx2(&vals) }, (s, lo, hi), "len {len}");
+            }
+        }
+    }
+
+    #[test]
+    fn gray_map_rows_and_png_equal_the_per_zone_grays() {
+        // The gray map kept as distinct rows is, pixel for pixel, the full-coverage gray
+        // of the pixel's zone table for its row (zone mode) and the per-pixel gray (pixel
+        // mode: checked against `apply` on a plate); its PNG, encoded row by row, is
+        // `encode_gray8` of the map, also as mirrored projectors see it.
+        let (mut cal, _) = setup();
+        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
+        let field = Field {
+            width_px: 200,
+            height_px: 150,
+            pixel_mm: 0.2,
+        };
+        let (w, h) = (200usize, 150usize);
+        for (mode, dither) in [
+            (Mode::Zone, Dither::Auto),
+            (Mode::Zone, Dither::On),
+            (Mode::Zone, Dither::Off),
+            (Mode::Pixel, Dither::Off),
+        ] {
+            let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+            let map = c.gray_map();
+            if mode == Mode::Zone {
+                assert!(c.gray_rows.len() / w < h / 2, "{}", c.gray_rows.len() / w);
+                for r in 0..h {
+                    for col in 0..w {
+                        let t = c.row_tables[r * c.zcols + c.zone_of_col[col] as usize];
+                        assert_eq!(map.data[r * w + col], c.tables[t as usize][255]);
+                    }
+                }
+            }
+            let mut plate = Mask {
+                width: w as u32,
+                height: h as u32,
+                data: vec![255; w * h],
+            };
+            c.apply(&mut plate);
+            assert!(plate == map, "{mode:?} {dither:?}");
+            let mut p = crate::profile::Profile::default_profile().projector[0].clone();
+            (p.width_px, p.height_px) = (w as u32, h as u32);
+            let png = |m: &Mask| crate::png::encode_gray8(m.width, m.height, &m.data);
+            assert_eq!(c.gray_map_png(&p, png), png(&map));
+            p.mirror_x = true;
+            let view = crate::raster::projector_view(&map, &p);
+            assert_eq!(c.gray_map_png(&p, png), png(&view));
+        }
     }
 }

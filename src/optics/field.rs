@@ -95,9 +95,12 @@ impl Poly {
             .collect()
     }
 
-    /// Value at (u, v).
+    /// Value at (u, v): Horner in u over [`in_u`](Self::in_u)'s coefficients (the same
+    /// operations, without allocating them).
     pub fn eval(&self, u: f64, v: f64) -> f64 {
-        self.in_u(v).iter().rev().fold(0.0, |acc, c| acc * u + c)
+        self.coef.iter().rev().fold(0.0, |acc, cb| {
+            acc * u + cb.iter().rev().fold(0.0, |a, c| a * v + c)
+        })
     }
 
     /// Value and gradient (∂/∂u, ∂/∂v) at (u, v).
@@ -173,13 +176,6 @@ impl Serialize for Poly {
         }
         map.end()
     }
-}
-
-/// Per-column memory of [`FieldModel::eval_row`].
-#[derive(Debug, Default)]
-pub struct RowCache {
-    /// [xp, yp, f, fu, fv] per column: the clamped point and the polynomial there.
-    cols: Vec<[f64; 5]>,
 }
 
 /// How the polynomial gives P.
@@ -259,65 +255,29 @@ impl FieldModel {
         let yp = yc.clamp(py0, py1);
         let s = 1.0 / self.length_unit_mm.get();
         let (u, v) = ((xp - self.origin_mm[0]) * s, (yp - self.origin_mm[1]) * s);
-        let sc = self.scale.get();
-        let q = if xp == xc && yp == yc {
-            self.coefficients.eval(u, v)
+        if xp == xc && yp == yc {
+            self.form
+                .apply(self.scale.get(), self.coefficients.eval(u, v))
         } else {
             let (f, fu, fv) = self.coefficients.eval_grad(u, v);
-            let lin = f + (fu * (xc - xp) + fv * (yc - yp)) * s;
-            match self.form {
-                Form::Polynomial => lin.max(0.1 * f),
-                Form::Exponential => lin,
-                Form::InverseSquare => lin.max(0.5 * f),
-            }
-        };
-        self.form.apply(sc, q)
+            self.continued([f, fu, fv], xc - xp, yc - yp)
+        }
     }
 
-    /// [`eval`](Self::eval) at (`xs[i]`, y) for every i into `out`, bit for bit, but
-    /// evaluating the polynomial's value and gradient at a clamped point only once per
-    /// distinct point: the columns left and right of `polynomial_area_mm` share one per
-    /// row, and rows above or below it share one per column (`cache`, reused across calls).
-    pub fn eval_row(&self, y: f64, xs: &[f64], cache: &mut RowCache, out: &mut [f64]) {
-        let m = self.extrapolate_mm.get();
-        let [x0, y0, x1, y1] = self.area_mm;
-        let yc = y.clamp(y0 - m, y1 + m);
-        let [px0, py0, px1, py1] = self.polynomial_area_mm.unwrap_or(self.area_mm);
-        let yp = yc.clamp(py0, py1);
+    /// P at a point (dx, dy) mm from the nearest point of the polynomial's rectangle
+    /// (within the extrapolation margin), from the polynomial's value and gradient `g` =
+    /// [f, ∂f/∂u, ∂f/∂v] there: the linear continuation of [`eval`](Self::eval).
+    #[inline(always)]
+    pub fn continued(&self, g: [f64; 3], dx: f64, dy: f64) -> f64 {
+        let [f, fu, fv] = g;
         let s = 1.0 / self.length_unit_mm.get();
-        let v = (yp - self.origin_mm[1]) * s;
-        let sc = self.scale.get();
-        if cache.cols.len() != xs.len() {
-            cache.cols = vec![[f64::NAN; 5]; xs.len()];
-        }
-        let mut last = [f64::NAN; 5];
-        for (i, (&x, o)) in xs.iter().zip(out.iter_mut()).enumerate() {
-            let xc = x.clamp(x0 - m, x1 + m);
-            let xp = xc.clamp(px0, px1);
-            let u = (xp - self.origin_mm[0]) * s;
-            let q = if xp == xc && yp == yc {
-                self.coefficients.eval(u, v)
-            } else {
-                let g = if last[0] == xp && last[1] == yp {
-                    last
-                } else if cache.cols[i][0] == xp && cache.cols[i][1] == yp {
-                    cache.cols[i]
-                } else {
-                    let (f, fu, fv) = self.coefficients.eval_grad(u, v);
-                    [xp, yp, f, fu, fv]
-                };
-                last = g;
-                cache.cols[i] = g;
-                let (f, fu, fv) = (g[2], g[3], g[4]);
-                let lin = f + (fu * (xc - xp) + fv * (yc - yp)) * s;
-                match self.form {
-                    Form::Polynomial => lin.max(0.1 * f),
-                    Form::Exponential => lin,
-                    Form::InverseSquare => lin.max(0.5 * f),
-                }
-            };
-            *o = self.form.apply(sc, q);
-        }
+        let lin = f + (fu * dx + fv * dy) * s;
+        let q = match self.form {
+            Form::Polynomial => lin.max(0.1 * f),
+            Form::Exponential => lin,
+            Form::InverseSquare => lin.max(0.5 * f),
+        };
+        self.form.apply(self.scale.get(), q)
     }
 
     /// True if (x, y) lies in the calibrated area.
@@ -416,28 +376,13 @@ mod tests {
         assert!((fu - (q.eval(0.7 + h, -0.4) - q.eval(0.7 - h, -0.4)) / (2.0 * h)).abs() < 1e-6);
         assert!((fv - (q.eval(0.7, -0.4 + h) - q.eval(0.7, -0.4 - h)) / (2.0 * h)).abs() < 1e-6);
         assert!(toml::from_str::<Poly>("yx = 1.0").is_err());
-        // eval_row is eval, bit for bit, inside and outside the polynomial's rectangle.
-        for form in [Form::Polynomial, Form::Exponential, Form::InverseSquare] {
-            let fm = FieldModel {
-                origin_mm: [30.0, 20.0],
-                length_unit_mm: Positive::new(30.0).unwrap(),
-                scale: Positive::new(1.0).unwrap(),
-                form,
-                coefficients: Poly::from_terms(4, &vals),
-                area_mm: [0.0, 0.0, 60.0, 40.0],
-                polynomial_area_mm: Some([2.5, 2.5, 57.5, 37.5]),
-                extrapolate_mm: NonNegative::new(5.0).unwrap(),
-            };
-            let xs: Vec<f64> = (0..140).map(|i| i as f64 * 0.5 - 2.0).collect();
-            let mut cache = RowCache::default();
-            let mut out = vec![0.0; xs.len()];
-            for j in 0..100 {
-                let y = j as f64 * 0.5 - 3.0;
-                fm.eval_row(y, &xs, &mut cache, &mut out);
-                for (&x, &o) in xs.iter().zip(&out) {
-                    assert_eq!(o.to_bits(), fm.eval(x, y).to_bits(), "{x} {y}");
-                }
-            }
+        // eval is Horner in u over in_u's coefficients, bit for bit.
+        for (k, (u, v)) in [(0.7, -0.4), (-3.1, 2.9), (0.0, 0.0), (12.5, -7.25)]
+            .into_iter()
+            .enumerate()
+        {
+            let want = q.in_u(v).iter().rev().fold(0.0, |acc, c| acc * u + c);
+            assert_eq!(q.eval(u, v).to_bits(), want.to_bits(), "{k}");
         }
         assert!(toml::from_str::<Poly>("xxxxxxx = 1.0").is_err());
     }

@@ -354,9 +354,7 @@ impl JobOptics {
         let pr = &c.prediction;
         let p = &profile.projector[self.projector];
         writer.create_dir("optics")?;
-        let full = c.gray_map();
-        let map = crate::raster::projector_view(&full, p);
-        let bytes = png(&map);
+        let bytes = c.gray_map_png(p, png);
         let file = format!("optics/{}-gray-map.png", p.name);
         writer.write_file(&file, &bytes)?;
         let (zc, zr) = pr.zone_grid;

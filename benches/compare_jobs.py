@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""Compares the job.json (and the masks/ and optics/ files) that two dmdsl binaries write.
+
+Usage: compare_jobs.py REF_BIN NEW_BIN OUTDIR CASE...
+  CASE = MODEL.stl[,ARG,ARG...]   (extra `dmdsl slice` arguments, comma-separated)
+
+For each case: every value of job.json that differs (path, ref, new; for numbers the
+relative difference), and whether the masks/ and optics/ files are byte-identical.
+Exit status 1 if anything differs.
+"""
+import hashlib, json, os, shutil, subprocess, sys
+
+
+def files(d):
+    out = {}
+    for sub in ("masks", "optics"):
+        for root, _, names in os.walk(os.path.join(d, sub)):
+            for n in names:
+                p = os.path.join(root, n)
+                out[os.path.relpath(p, d)] = hashlib.sha256(open(p, "rb").read()).hexdigest()
+    return out
+
+
+def diff(a, b, path, out):
+    if type(a) != type(b):
+        out.append((path, a, b))
+    elif isinstance(a, dict):
+        for k in sorted(set(a) | set(b)):
+            diff(a.get(k), b.get(k), f"{path}.{k}", out)
+    elif isinstance(a, list):
+        if len(a) != len(b):
+            out.append((path + ".len", len(a), len(b)))
+        for i, (x, y) in enumerate(zip(a, b)):
+            diff(x, y, f"{path}[{i}]", out)
+    elif a != b:
+        out.append((path, a, b))
+
+
+def main():
+    ref, new, outdir, cases = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
+    os.makedirs(outdir, exist_ok=True)
+    bad = 0
+    for case in cases:
+        model, *args = case.split(",")
+        res = []
+        for tag, b in (("ref", ref), ("new", new)):
+            d = os.path.join(outdir, tag + ".dmdjob")
+            shutil.rmtree(d, ignore_errors=True)
+            p = subprocess.run([b, "slice", model, "-q", "-o", d] + args, capture_output=True)
+            j = json.load(open(os.path.join(d, "job.json"))) if p.returncode in (0, 1) else None
+            res.append((p.returncode, p.stderr, j, files(d) if j else {}))
+        (ra, ea, ja, fa), (rb, eb, jb, fb) = res
+        d = []
+        if ja is not None and jb is not None:
+            diff(ja, jb, "", d)
+        same_files = fa == fb
+        name = os.path.basename(model) + " " + " ".join(args)
+        if ra != rb or ea != eb or d or not same_files:
+            bad += 1
+            print(f"DIFF {name}: rc {ra}/{rb} stderr {'same' if ea == eb else 'differs'} files {'same' if same_files else 'DIFFER'}")
+            for p, x, y in d:
+                rel = ""
+                if isinstance(x, float) and isinstance(y, float) and x != 0:
+                    rel = f" (relative {abs(y - x) / abs(x):.1e})"
+                print(f"    {p}: {x} -> {y}{rel}")
+        else:
+            print(f"same {name}")
+    print(f"{len(cases)} cases, {bad} differ")
+    sys.exit(1 if bad else 0)
+
+
+if __name__ == "__main__":
+    main()
