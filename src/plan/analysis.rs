@@ -34,6 +34,9 @@
 //! of one shell lying inside another still counts as boundary, so the max fill distance of
 //! such a section is a lower bound.
 
+// A `bench-no-analysis` build skips the scans and the search: their state goes unused.
+#![cfg_attr(feature = "bench-no-analysis", allow(dead_code))]
+
 use crate::slice::Contour;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -384,6 +387,43 @@ impl Analyser {
             });
             return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
         }
+        // Benchmark builds that measure what the analysis adds to slicing (Cargo feature
+        // `bench-no-analysis`, never for real jobs): no scans, no search; the comparison
+        // with the layer below (which the masks of prisms use too) stays.
+        #[cfg(feature = "bench-no-analysis")]
+        {
+            let _ = (cur, prev);
+            let a = LayerAnalysis {
+                max_fill_distance_mm: 0.0,
+                islands: 0,
+                bbox_mm: bb,
+            };
+            if simplified {
+                std::mem::swap(&mut self.section, &mut self.last_section);
+            }
+            self.last = keep.then_some(Last {
+                index,
+                analysis: Some(a),
+                bbox: bb,
+                runs: false,
+                section: simplified,
+            });
+            Analysed::Done(a)
+        }
+        #[cfg(not(feature = "bench-no-analysis"))]
+        self.analyse_layer(index, cur, prev, (below, bb, keep, simplified))
+    }
+
+    /// The analysis of a layer not equal to the layer below (see
+    /// [`Analyser::analyse_or_defer`]).
+    #[cfg(not(feature = "bench-no-analysis"))]
+    fn analyse_layer(
+        &mut self,
+        index: usize,
+        cur: &[Contour],
+        prev: Option<&[Contour]>,
+        (below, bb, keep, simplified): (Option<Last>, Option<[[f64; 2]; 2]>, bool, bool),
+    ) -> Analysed {
         let mut coarse = std::mem::take(&mut self.search.coarse);
         let dev = coarsen_section(cur, &mut coarse);
         self.runs.scan(&coarse, self.row_mm, &mut self.scratch);
