@@ -1452,6 +1452,19 @@ mod tests {
 
     /// A 40 × 30 mm field of 1 mm pixels; P = 1 + x/40 (x in mm), S(g) = (g/255)²
     /// measured 50..255 and anchored at 0.
+    /// [`setup`]'s calibration measured on 40 × 26 mm only, over a 40 × 30 mm field of
+    /// 0.2 mm pixels (so the top of the field lies outside the calibrated area).
+    fn small_setup() -> (Calibration, Field) {
+        let (mut cal, _) = setup();
+        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
+        let field = Field {
+            width_px: 200,
+            height_px: 150,
+            pixel_mm: 0.2,
+        };
+        (cal, field)
+    }
+
     fn setup() -> (Calibration, Field) {
         let pts: Vec<[f64; 2]> = std::iter::once([0.0, 0.0])
             .chain(
@@ -1647,13 +1660,7 @@ mod tests {
         // the compensation in the scan equals coverage → threshold → `apply_in`, the lit
         // area is that of the coverage, and the layers outside are counted alike.
         use crate::raster::{threshold, CoverageMap, Rasterizer, Scratch};
-        let (mut cal, _) = setup();
-        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
-        let field = Field {
-            width_px: 200,
-            height_px: 150,
-            pixel_mm: 0.2,
-        };
+        let (cal, field) = small_setup();
         let raster = Rasterizer::new(field);
         let mut seed = 0x2545_f491_4f6c_dd1du64;
         let mut rnd = || {
@@ -2039,13 +2046,7 @@ mod tests {
         // of the pixel's zone table for its row (zone mode) and the per-pixel gray (pixel
         // mode: checked against `apply` on a plate); its PNG, encoded row by row, is
         // `encode_gray8` of the map, also as mirrored projectors see it.
-        let (mut cal, _) = setup();
-        cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
-        let field = Field {
-            width_px: 200,
-            height_px: 150,
-            pixel_mm: 0.2,
-        };
+        let (cal, field) = small_setup();
         let (w, h) = (200usize, 150usize);
         for (mode, dither) in [
             (Mode::Zone, Dither::Auto),

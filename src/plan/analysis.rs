@@ -78,12 +78,7 @@ const COLLINEAR_RUN: usize = 16;
 /// Whether `b` lies within [`COLLINEAR_MM`] of the segment `a`–`d` (and between its ends).
 #[inline]
 fn near_segment(a: [f64; 2], b: [f64; 2], d: [f64; 2]) -> bool {
-    within_segment(a, b, d, COLLINEAR_MM * COLLINEAR_MM)
-}
-
-/// Whether `b` lies within `sqrt(eps2)` of the segment `a`–`d` (and between its ends).
-#[inline]
-fn within_segment(a: [f64; 2], b: [f64; 2], d: [f64; 2], eps2: f64) -> bool {
+    let eps2 = COLLINEAR_MM * COLLINEAR_MM;
     let (ux, uy) = (d[0] - a[0], d[1] - a[1]);
     let (vx, vy) = (b[0] - a[0], b[1] - a[1]);
     let l2 = ux * ux + uy * uy;
@@ -387,43 +382,34 @@ impl Analyser {
             });
             return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
         }
-        // Benchmark builds that measure what the analysis adds to slicing (Cargo feature
-        // `bench-no-analysis`, never for real jobs): no scans, no search; the comparison
-        // with the layer below (which the masks of prisms use too) stays.
-        #[cfg(feature = "bench-no-analysis")]
-        {
-            let _ = (cur, prev);
-            let a = LayerAnalysis {
-                max_fill_distance_mm: 0.0,
-                islands: 0,
-                bbox_mm: bb,
-            };
-            if simplified {
-                std::mem::swap(&mut self.section, &mut self.last_section);
-            }
-            self.last = keep.then_some(Last {
-                index,
-                analysis: Some(a),
-                bbox: bb,
-                runs: false,
-                section: simplified,
-            });
-            Analysed::Done(a)
+        let (islands, fill) = self.islands_and_fill(cur, prev, below);
+        let a = LayerAnalysis {
+            max_fill_distance_mm: fill,
+            islands,
+            bbox_mm: bb,
+        };
+        if simplified {
+            std::mem::swap(&mut self.section, &mut self.last_section);
         }
-        #[cfg(not(feature = "bench-no-analysis"))]
-        self.analyse_layer(index, cur, prev, (below, bb, keep, simplified))
+        self.last = keep.then_some(Last {
+            index,
+            analysis: Some(a),
+            bbox: bb,
+            runs: !cfg!(feature = "bench-no-analysis"),
+            section: simplified,
+        });
+        Analysed::Done(a)
     }
 
-    /// The analysis of a layer not equal to the layer below (see
-    /// [`Analyser::analyse_or_defer`]).
+    /// Islands of `cur` over `prev` and its max fill distance (the row scan of `cur` kept
+    /// as the last layer's); `below`: what this analyser kept of the layer below.
     #[cfg(not(feature = "bench-no-analysis"))]
-    fn analyse_layer(
+    fn islands_and_fill(
         &mut self,
-        index: usize,
         cur: &[Contour],
         prev: Option<&[Contour]>,
-        (below, bb, keep, simplified): (Option<Last>, Option<[[f64; 2]; 2]>, bool, bool),
-    ) -> Analysed {
+        below: Option<Last>,
+    ) -> (u32, f64) {
         let mut coarse = std::mem::take(&mut self.search.coarse);
         let dev = coarsen_section(cur, &mut coarse);
         self.runs.scan(&coarse, self.row_mm, &mut self.scratch);
@@ -445,23 +431,21 @@ impl Analyser {
         };
         let fill = search_coarse(&coarse, dev, &mut self.search);
         self.search.coarse = coarse;
-        let a = LayerAnalysis {
-            max_fill_distance_mm: fill.0,
-            islands,
-            bbox_mm: bb,
-        };
         std::mem::swap(&mut self.runs, &mut self.last_runs);
-        if simplified {
-            std::mem::swap(&mut self.section, &mut self.last_section);
-        }
-        self.last = keep.then_some(Last {
-            index,
-            analysis: Some(a),
-            bbox: bb,
-            runs: true,
-            section: simplified,
-        });
-        Analysed::Done(a)
+        (islands, fill.0)
+    }
+
+    /// Benchmark builds that measure what the analysis adds to slicing (Cargo feature
+    /// `bench-no-analysis`, never for real jobs): no scans, no search; the comparison with
+    /// the layer below (which the masks of prisms use too) stays.
+    #[cfg(feature = "bench-no-analysis")]
+    fn islands_and_fill(
+        &mut self,
+        _: &[Contour],
+        _: Option<&[Contour]>,
+        _: Option<Last>,
+    ) -> (u32, f64) {
+        (0, 0.0)
     }
 }
 
