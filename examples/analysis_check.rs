@@ -1,5 +1,6 @@
 //! The per-layer analysis alone, as the slicer runs it (an `Analyser` per block of
-//! `job::BLOCK` layers, layers equal to the layer below resolved afterwards), for
+//! `job::BLOCK` layers, given each layer's lit pixels from the rasterizer; layers equal to
+//! the layer below and the islands of a block's first layer resolved afterwards), for
 //! instruction counts and result checks.
 //!
 //! `cargo run --release --example analysis_check -- MODEL > layers.txt`
@@ -22,16 +23,34 @@ fn main() {
     let field = p.field();
     let (mesh, n) = common::placed(&path, &field, h);
     let (sections, _) = dmdsl::slice::slice(&mesh, h, n);
-    let mut results: Vec<analysis::LayerAnalysis> = Vec::with_capacity(n);
+    // The rasterizer as the slicer runs it: it keeps the lit pixels of each mask (drawn
+    // from the section without collinear points when it equals the layer below's). Its
+    // cost is not the analysis's.
+    let raster = dmdsl::raster::Rasterizer::new(field);
+    let mut sc = dmdsl::raster::Scratch::default();
+    sc.record_runs = true;
+    let mut out: Vec<analysis::Analysed> = Vec::with_capacity(n);
+    let mut lit: Vec<analysis::LitRuns> = Vec::with_capacity(n);
     for (b, block) in sections.chunks(dmdsl::job::BLOCK).enumerate() {
-        let mut a = analysis::Analyser::new(field.pixel_mm);
+        let mut a = analysis::Analyser::new();
         for (k, s) in block.iter().enumerate() {
             let i = dmdsl::job::BLOCK * b + k;
             let below = i.checked_sub(1).map(|j| sections[j].contours.as_slice());
-            let r = a.analyse_or_defer(i, &s.contours, below);
-            // Blocks run in order here, so the layer below is always resolved.
-            results.push(r.resolve(results.last()));
+            let same = a.equals_below(i, &s.contours, below);
+            let m = if same {
+                raster.coverage(a.simplified_section(), &mut sc)
+            } else {
+                raster.coverage(&s.contours, &mut sc)
+            };
+            sc.recycle(m);
+            out.push(a.analyse_or_defer(i, &s.contours, Some(&sc.lit_runs), below));
+            lit.push(sc.lit_runs.clone());
         }
+    }
+    let mut results: Vec<analysis::LayerAnalysis> = Vec::with_capacity(n);
+    for (i, r) in out.into_iter().enumerate() {
+        let r = r.with_islands(|| analysis::islands(&lit[i], &lit[i - 1]));
+        results.push(r.resolve(results.last()));
     }
     let mut out = String::new();
     for (i, r) in results.iter().enumerate() {

@@ -58,14 +58,27 @@ fn main() {
             .map(|s| analysis::max_fill_distance(&s.contours).0)
             .sum::<f64>()
     });
+    // The lit pixels of every layer, as the slicer's rasterizer keeps them (outside the
+    // timings below).
+    let lit_runs: Vec<analysis::LitRuns> = {
+        let mut sc = Scratch::default();
+        sc.record_runs = true;
+        sections
+            .iter()
+            .map(|s| {
+                let m = r.coverage(&s.contours, &mut sc);
+                sc.recycle(m);
+                sc.lit_runs.clone()
+            })
+            .collect()
+    };
     // Islands alone, and the whole analysis as the slicer runs it: an analyser per block
-    // of 4 layers, which rescans the layer below only for the first layer of a block.
+    // of layers, which counts the islands of a block's first layer over the layer below's
+    // lit pixels.
     let (t_isl, isl) = best_of(reps, || {
         (0..sections.len())
             .map(|i| match i.checked_sub(1) {
-                Some(j) => {
-                    analysis::islands(&sections[i].contours, &sections[j].contours, field.pixel_mm)
-                }
+                Some(j) => analysis::islands(&lit_runs[i], &lit_runs[j]),
                 None => 0,
             })
             .sum::<u32>()
@@ -73,11 +86,15 @@ fn main() {
     let (t_all, _) = best_of(reps, || {
         let mut total = 0.0;
         for (b, block) in sections.chunks(dmdsl::job::BLOCK).enumerate() {
-            let mut a = analysis::Analyser::new(field.pixel_mm);
+            let mut a = analysis::Analyser::new();
             for (k, s) in block.iter().enumerate() {
                 let i = dmdsl::job::BLOCK * b + k;
-                let below = i.checked_sub(1).map(|j| sections[j].contours.as_slice());
-                total += a.analyse(i, &s.contours, below).max_fill_distance_mm;
+                let below = i
+                    .checked_sub(1)
+                    .map(|j| (sections[j].contours.as_slice(), &lit_runs[j]));
+                total += a
+                    .analyse(i, &s.contours, &lit_runs[i], below)
+                    .max_fill_distance_mm;
             }
         }
         total

@@ -263,6 +263,10 @@ struct LayerOut {
     analysis: plan::analysis::Analysed,
     analysis_s: f64,
     masks: Vec<MaskRef>,
+    /// The layer's lit pixels, kept where another block needs them: for its own islands
+    /// ([`plan::analysis::Analysed::NeedsBelow`]) or those of the next layer (the last
+    /// layer of a block).
+    runs: Option<plan::analysis::LitRuns>,
 }
 
 /// Slices a model into a job bundle. See the module docs for the pipeline.
@@ -377,8 +381,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                         // page-fault on every block.
                         let mut scratch = Pooled::take(scratch_pool);
                         let scratch = &mut *scratch;
-                        let mut analyser = plan::analysis::Analyser::new(field.pixel_mm);
+                        let mut analyser = plan::analysis::Analyser::new();
                         let mut made = None;
+                        let last = ks.end - 1;
                         for k in ks {
                             if stop.load(Ordering::Relaxed) || cancelled() {
                                 return Err(Error::Interrupted);
@@ -392,7 +397,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                                     Some(&sections[k - 1])
                                 },
                             };
-                            let out = layer_masks(
+                            let mut out = layer_masks(
                                 writer,
                                 profile,
                                 raster,
@@ -406,6 +411,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                                 (correction, path),
                                 tiler,
                             )?;
+                            // The next block's first layer counts its islands over these.
+                            if k == last && start + k + 1 < n && out.runs.is_none() {
+                                out.runs = analyser.last_runs().cloned();
+                            }
                             let _ = slots[start + k].set(out);
                             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
                             if let Some(p) = opts.progress {
@@ -462,11 +471,16 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let t3 = Instant::now();
     let analysis_cpu_s = outs.iter().map(|o| o.analysis_s).sum();
     // A layer equal to the layer below that its worker could not copy takes the layer
-    // below's analysis here.
+    // below's analysis here, and a block's first layer counts its islands over the last
+    // layer of the block below.
     let mut analyses: Vec<LayerAnalysis> = Vec::with_capacity(n);
-    for o in &outs {
-        let a = o.analysis.resolve(analyses.last());
-        analyses.push(a);
+    for (i, o) in outs.iter().enumerate() {
+        let a = o.analysis.with_islands(|| {
+            let own = o.runs.as_ref().expect("kept with the analysis");
+            let below = outs[i - 1].runs.as_ref().expect("kept by the block below");
+            plan::analysis::islands(own, below)
+        });
+        analyses.push(a.resolve(analyses.last()));
     }
     let infos: Vec<LayerInfo> = outs
         .iter()
@@ -632,6 +646,8 @@ fn layer_masks(
     // (prisms; plan::analysis) is drawn from that simplified section, so equal layers get
     // equal masks: when this worker drew the layer below that way, its bytes serve again.
     let ta = ThreadClock::start();
+    // The rasterizer keeps each mask's lit pixels for the islands.
+    scratch.record_runs = !cfg!(feature = "bench-no-analysis");
     let same = analyser.equals_below(i, &layer.section.contours, below);
     let mut analysis_s = ta.elapsed_s();
     let file_name = |k: usize| {
@@ -645,6 +661,9 @@ fn layer_masks(
     let reusable = made
         .take()
         .filter(|m| same && m.simplified && m.index + 1 == i);
+    // The mask's lit pixels are the scratch's when it is drawn, the layer below's (which
+    // the analyser keeps) when its bytes serve again.
+    let drawn = reusable.is_none();
     let area_mm2 = if let Some(m) = reusable {
         if m.outside {
             if let Some(o) = optics {
@@ -719,13 +738,17 @@ fn layer_masks(
         area_mm2
     };
     let ta = ThreadClock::start();
-    let analysis = analyser.analyse_or_defer(i, &layer.section.contours, below);
+    let lit = drawn.then_some(&scratch.lit_runs);
+    let analysis = analyser.analyse_or_defer(i, &layer.section.contours, lit, below);
+    let runs = matches!(analysis, plan::analysis::Analysed::NeedsBelow(_))
+        .then(|| scratch.lit_runs.clone());
     analysis_s += ta.elapsed_s();
     Ok(LayerOut {
         area_mm2,
         analysis,
         analysis_s,
         masks,
+        runs,
     })
 }
 

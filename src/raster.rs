@@ -68,9 +68,63 @@ impl Mask {
     }
 }
 
+/// The lit pixels of a mask (coverage at least 50 %, the pixels a binary mask lights) as
+/// runs `[row, first column, end column)` in image coordinates (row 0 at the top), sorted
+/// by row then column; runs of a row neither overlap nor touch.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LitRuns {
+    /// The runs.
+    pub runs: Vec<[u32; 3]>,
+}
+
+impl LitRuns {
+    /// Appends columns `a..b` of row `r` (after every run so far), joined to the last run
+    /// when they touch it.
+    #[inline(always)]
+    fn push(&mut self, r: usize, a: usize, b: usize) {
+        let (r, a, b) = (r as u32, a as u32, b as u32);
+        match self.runs.last_mut() {
+            Some(l) if l[0] == r && l[2] == a => l[2] = b,
+            _ => self.runs.push([r, a, b]),
+        }
+    }
+
+    /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (zero outside).
+    pub fn of_mask(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> LitRuns {
+        let mut l = LitRuns::default();
+        l.scan_mask(m, [r0, r1, c0, c1]);
+        l
+    }
+
+    fn scan_mask(&mut self, m: &Mask, [r0, r1, c0, c1]: [usize; 4]) {
+        self.runs.clear();
+        let w = m.width as usize;
+        for r in r0..r1 {
+            let row = &m.data[r * w..(r + 1) * w];
+            let mut c = c0;
+            while c < c1 {
+                if row[c] >= 128 {
+                    let a = c;
+                    while c < c1 && row[c] >= 128 {
+                        c += 1;
+                    }
+                    self.push(r, a, c);
+                } else {
+                    c += 1;
+                }
+            }
+        }
+    }
+}
+
 /// Reusable scratch memory for [`Rasterizer::coverage`] (one per worker thread).
 #[derive(Debug, Default)]
 pub struct Scratch {
+    /// When set, [`Rasterizer::render`] keeps the lit runs of each mask it draws in
+    /// [`Scratch::lit_runs`].
+    pub record_runs: bool,
+    /// The lit runs of the last [`Rasterizer::render`] mask (when `record_runs`).
+    pub lit_runs: LitRuns,
     acc: Vec<f32>,
     /// Sum of the last [`Rasterizer::coverage`] mask's values, counted by the scan (`None`
     /// when the nonzero fallback drew the mask).
@@ -190,6 +244,7 @@ impl Rasterizer {
         };
         scratch.lit = [0; 4];
         scratch.lit_sum = Some(0);
+        scratch.lit_runs.runs.clear();
         if contours.is_empty() {
             return out;
         }
@@ -238,6 +293,7 @@ impl Rasterizer {
             end: c1.min(w),
         };
         let mut outside = false;
+        let runs = scratch.record_runs.then_some(&mut scratch.lit_runs);
         let (lit_sum, max_winding) = match (fused, binary) {
             (Some(m), binary) => {
                 // Whether the scan must look for lit pixels outside the map's area.
@@ -247,18 +303,24 @@ impl Rasterizer {
                 let o = &mut outside;
                 match (binary, check) {
                     (false, false) => {
-                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o)
+                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o, runs)
                     }
-                    (false, true) => scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o),
-                    (true, false) => scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o),
-                    (true, true) => scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o),
+                    (false, true) => {
+                        scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o, runs)
+                    }
+                    (true, false) => {
+                        scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o, runs)
+                    }
+                    (true, true) => {
+                        scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o, runs)
+                    }
                 }
             }
             (None, false) => {
-                scan_runs::<_, false, false>(acc, &mut out.data, w, span, Plain, &mut outside)
+                scan_runs::<_, false, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
             }
             (None, true) => {
-                scan_runs::<_, true, false>(acc, &mut out.data, w, span, Plain, &mut outside)
+                scan_runs::<_, true, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
             }
         };
         scratch.lit_sum = Some(lit_sum);
@@ -268,6 +330,9 @@ impl Rasterizer {
             // two boundaries meet; redo the layer with the exact nonzero rule.
             self.coverage_nonzero(contours, &mut out);
             scratch.lit_sum = Some(box_sum(&out, lit));
+            if scratch.record_runs {
+                scratch.lit_runs.scan_mask(&out, lit);
+            }
             if binary {
                 threshold_in(&mut out, lit);
             }
@@ -568,7 +633,7 @@ struct ScanSpan {
 /// the scan follows runs of equal coverage and writes each run once, when it ends (zero
 /// runs are left as they are), so a run of full coverage is one fill, or one copy from the
 /// map's full-coverage row. With `CHECK`, sets `outside` if a lit pixel lies outside
-/// `emit`'s area.
+/// `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it.
 #[inline(never)]
 fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,
@@ -577,6 +642,7 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     ScanSpan { r0, r1, c0, end }: ScanSpan,
     emit: E,
     outside: &mut bool,
+    mut lit: Option<&mut LitRuns>,
 ) -> (u64, f32) {
     let [ar0, ar1, ac0, ac1] = emit.area();
     let (stride, words) = (acc.stride, acc.words);
@@ -596,6 +662,8 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         // The current run: columns start.. of coverage `val`.
         let mut val = 0u8;
         let mut start = c0;
+        // Where the lit run (coverage ≥ 50 %) being followed started.
+        let mut lit_from = 0u32;
         for (wi, m) in marks.iter_mut().enumerate() {
             let mut bits = std::mem::take(m);
             while bits != 0 {
@@ -621,6 +689,16 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
                     let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
                     if nv != val {
                         sink.end(start, c, val);
+                        // Lit (≥ 128) on one side of c only: a lit run starts or ends.
+                        if (nv ^ val) & 0x80 != 0 {
+                            if let Some(l) = lit.as_deref_mut() {
+                                if nv >= 128 {
+                                    lit_from = c as u32;
+                                } else {
+                                    l.runs.push([r as u32, lit_from, c as u32]);
+                                }
+                            }
+                        }
                         (start, val) = (c, nv);
                     }
                 }
@@ -631,6 +709,12 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         }
         if start < end {
             sink.end(start, end, val);
+        }
+        // A lit run reaching the end of the row.
+        if val >= 128 {
+            if let Some(l) = lit.as_deref_mut() {
+                l.runs.push([r as u32, lit_from, end as u32]);
+            }
         }
         lit_sum += sink.lit_sum;
         if CHECK && sink.lo < sink.hi {

@@ -15,15 +15,15 @@
 //!   polygons and an L-shape). The search runs on coarse contours: without the points
 //!   within [`COARSE_MM`] of the segment replacing them, at a precision tightened by twice
 //!   the boundary's move (see [`max_fill_distance`]).
-//! * **Islands** = connected regions of the layer that do not overlap the layer below
-//!   (they would print onto nothing). Both layers are scanned exactly at the centres of
-//!   the pixel rows (nonzero winding), regions are the connected runs across rows, and a
-//!   region is supported when one of its runs overlaps a run of the layer below (when
-//!   every run overlaps one, the usual case, no region is unsupported and the runs are
-//!   not joined into regions at all; the rows are scanned on the same coarse contours,
-//!   moved by at most [`COARSE_MM`]). Layer 0
-//!   rests on the platform: it has no islands. Features thinner than a pixel row can be
-//!   missed.
+//! * **Islands** = connected regions of the layer's lit pixels that do not overlap the
+//!   layer below's (they would print onto nothing). The pixels are those the masks light:
+//!   coverage of at least 50 % ([`crate::raster::LitRuns`], kept by the rasterizer as it
+//!   draws the mask, so no second scan of the contours). Regions are 4-connected: runs of
+//!   adjacent rows sharing a column. A region is supported when one of its runs shares a
+//!   pixel with a run of the layer below (when every run does, the usual case, no region
+//!   is unsupported and the runs are not joined into regions at all). Layer 0 rests on the
+//!   platform: it has no islands. Features that light no pixel are not counted (they do
+//!   not print).
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
 //!
 //! A layer whose section equals the layer below's once collinear points are left out (a
@@ -37,6 +37,7 @@
 // A `bench-no-analysis` build skips the scans and the search: their state goes unused.
 #![cfg_attr(feature = "bench-no-analysis", allow(dead_code))]
 
+pub use crate::raster::LitRuns;
 use crate::slice::Contour;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -56,11 +57,15 @@ pub struct LayerAnalysis {
     pub bbox_mm: Option<[[f64; 2]; 2]>,
 }
 
-/// Analyses one layer: `cur` its contours, `prev` the contours of the layer below (`None`
-/// for layer 0, which rests on the platform), `row_mm` the pixel pitch of the scan rows
-/// used for islands.
-pub fn analyse(cur: &[Contour], prev: Option<&[Contour]>, row_mm: f64) -> LayerAnalysis {
-    Analyser::new(row_mm).analyse(usize::MAX, cur, prev)
+/// Analyses one layer: `cur` its contours and `lit` its mask's lit pixels, `prev` the
+/// contours and lit pixels of the layer below (`None` for layer 0, which rests on the
+/// platform).
+pub fn analyse(
+    cur: &[Contour],
+    lit: &LitRuns,
+    prev: Option<(&[Contour], &LitRuns)>,
+) -> LayerAnalysis {
+    Analyser::new().analyse(usize::MAX, cur, lit, prev)
 }
 
 /// Points closer than this to the segment joining their neighbours are left out of the
@@ -177,17 +182,35 @@ pub enum Analysed {
     /// is that one with no islands (every region rests on itself). See
     /// [`Analysed::resolve`].
     SameAsBelow,
+    /// The layer's analysis but for its islands (0 here), which need the lit pixels of the
+    /// layer below, which this analyser did not see: see [`Analysed::with_islands`].
+    NeedsBelow(LayerAnalysis),
 }
 
 impl Analysed {
+    /// A [`Analysed::NeedsBelow`] result completed: `islands(lit, below)` with `lit` the
+    /// layer's lit pixels and `below` those of the layer below ([`islands`]). Other
+    /// results are returned as they are, without calling it.
+    pub fn with_islands(self, islands: impl FnOnce() -> u32) -> Analysed {
+        match self {
+            Analysed::NeedsBelow(a) => Analysed::Done(LayerAnalysis {
+                islands: islands(),
+                ..a
+            }),
+            r => r,
+        }
+    }
+
     /// The layer's analysis, given the (resolved) analysis of the layer below.
     ///
     /// # Panics
     /// If the result is [`Analysed::SameAsBelow`] and `below` is `None` (layer 0 is never
-    /// the same as a layer below).
+    /// the same as a layer below), or if it is [`Analysed::NeedsBelow`] (complete it with
+    /// [`Analysed::with_islands`] first).
     pub fn resolve(self, below: Option<&LayerAnalysis>) -> LayerAnalysis {
         match self {
             Analysed::Done(a) => a,
+            Analysed::NeedsBelow(_) => panic!("islands over the layer below not counted"),
             Analysed::SameAsBelow => LayerAnalysis {
                 islands: 0,
                 ..*below.expect("a layer equal to the layer below has one")
@@ -204,7 +227,7 @@ struct Last {
     analysis: Option<LayerAnalysis>,
     /// Its bounding box.
     bbox: Option<[[f64; 2]; 2]>,
-    /// Whether `Analyser::last_runs` holds its row scan.
+    /// Whether `Analyser::last_runs` holds its lit pixels.
     runs: bool,
     /// Whether `Analyser::last_section` holds its section without collinear points.
     section: bool,
@@ -221,63 +244,50 @@ struct Compared {
 }
 
 /// Analyses consecutive layers. A worker handling a block of consecutive layers keeps one:
-/// it reuses the row scan (for the islands) of the layer below, and a layer whose section
+/// it keeps the lit pixels (for the islands) of the layer below, and a layer whose section
 /// equals the layer below's (a prism: see [`COLLINEAR_MM`]) takes that layer's analysis,
 /// with no islands, instead of being analysed again.
 ///
 /// So a layer's analysis is: the layer below's, with no islands, when the two sections are
 /// equal without their collinear points; otherwise that of its own contours (the fill
-/// distance and bounding box of `cur`, the islands of `cur` over the contours below). It
+/// distance and bounding box of `cur`, the islands of its lit pixels over those below). It
 /// never depends on the order of the calls or on where blocks start.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct Analyser {
-    row_mm: f64,
     last: Option<Last>,
     /// The comparison of the layer being analysed with the layer below, once made.
     compared: Option<Compared>,
     /// The last layer's section without collinear points (when `Last::section`).
     last_section: Vec<Contour>,
-    last_runs: Runs,
+    last_runs: LitRuns,
     /// Buffers reused from layer to layer (results never depend on them).
     section: Vec<Contour>,
-    scratch: ScanScratch,
-    runs: Runs,
-    below_runs: Runs,
-    /// The layer below's contours, coarsened, when it is scanned again.
-    coarse_below: Vec<Contour>,
     search: SearchScratch,
 }
 
 impl Analyser {
-    /// An analyser scanning islands at rows of pitch `row_mm`.
-    pub fn new(row_mm: f64) -> Analyser {
-        Analyser {
-            row_mm,
-            last: None,
-            compared: None,
-            last_section: Vec::new(),
-            last_runs: Runs::default(),
-            section: Vec::new(),
-            scratch: ScanScratch::default(),
-            runs: Runs::default(),
-            below_runs: Runs::default(),
-            coarse_below: Vec::new(),
-            search: SearchScratch::default(),
-        }
+    /// A new analyser.
+    pub fn new() -> Analyser {
+        Analyser::default()
     }
 
-    /// Analyses layer `index` (contours `cur`) over the layer below (`prev`: the contours
-    /// of layer `index − 1`, `None` for layer 0). A layer equal to the layer below whose
-    /// analysis this analyser does not have is analysed from its own contours, with no
-    /// islands.
+    /// Analyses layer `index` (contours `cur`, its mask's lit pixels `lit`) over the layer
+    /// below (`prev`: the contours and lit pixels of layer `index − 1`, `None` for layer
+    /// 0). A layer equal to the layer below whose analysis this analyser does not have is
+    /// analysed from its own contours, with no islands.
     pub fn analyse(
         &mut self,
         index: usize,
         cur: &[Contour],
-        prev: Option<&[Contour]>,
+        lit: &LitRuns,
+        prev: Option<(&[Contour], &LitRuns)>,
     ) -> LayerAnalysis {
-        match self.analyse_or_defer(index, cur, prev) {
+        match self.analyse_or_defer(index, cur, Some(lit), prev.map(|p| p.0)) {
             Analysed::Done(a) => a,
+            Analysed::NeedsBelow(a) => LayerAnalysis {
+                islands: prev.map_or(0, |p| islands(lit, p.1)),
+                ..a
+            },
             Analysed::SameAsBelow => {
                 let a = LayerAnalysis {
                     max_fill_distance_mm: fill_distance(cur, &mut self.search).0,
@@ -354,11 +364,14 @@ impl Analyser {
     /// [`Analyser::analyse`], except that a layer whose section equals the layer below's
     /// is not analysed again: its result is copied when this analyser has the layer
     /// below's, otherwise it is [`Analysed::SameAsBelow`] (the caller resolves it from the
-    /// layer below).
+    /// layer below); and that islands over a layer below this analyser did not see are
+    /// left to the caller ([`Analysed::NeedsBelow`]). `lit`: the layer's lit pixels, or
+    /// `None` when its mask is the layer below's (then the section must be equal to it).
     pub fn analyse_or_defer(
         &mut self,
         index: usize,
         cur: &[Contour],
+        lit: Option<&LitRuns>,
         prev: Option<&[Contour]>,
     ) -> Analysed {
         self.equals_below(index, cur, prev);
@@ -372,22 +385,38 @@ impl Analyser {
             let copied = below
                 .and_then(|l| l.analysis)
                 .map(|a| LayerAnalysis { islands: 0, ..a });
-            // The row scan kept (if any) is the layer below's, not this one's.
+            // The lit pixels kept: this layer's, or the layer below's when its mask is
+            // that one.
+            let runs = match lit {
+                Some(l) => {
+                    self.last_runs.clone_from(l);
+                    true
+                }
+                None => below.is_some_and(|l| l.runs),
+            };
             self.last = keep.then_some(Last {
                 index,
                 analysis: copied,
                 bbox: bb,
-                runs: false,
+                runs,
                 section: true,
             });
             return copied.map_or(Analysed::SameAsBelow, Analysed::Done);
         }
-        let (islands, fill) = self.islands_and_fill(cur, prev, below);
+        let lit = lit.expect("a layer unlike the layer below has its own mask");
+        let islands = match prev {
+            None => Some(0),
+            Some(_) => below
+                .filter(|l| l.runs)
+                .map(|_| count_islands(lit, &self.last_runs)),
+        };
+        let fill = self.fill(cur);
         let a = LayerAnalysis {
             max_fill_distance_mm: fill,
-            islands,
+            islands: islands.unwrap_or(0),
             bbox_mm: bb,
         };
+        self.last_runs.clone_from(lit);
         if simplified {
             std::mem::swap(&mut self.section, &mut self.last_section);
         }
@@ -395,57 +424,33 @@ impl Analyser {
             index,
             analysis: Some(a),
             bbox: bb,
-            runs: !cfg!(feature = "bench-no-analysis"),
+            runs: true,
             section: simplified,
         });
-        Analysed::Done(a)
+        match islands {
+            Some(_) => Analysed::Done(a),
+            None => Analysed::NeedsBelow(a),
+        }
     }
 
-    /// Islands of `cur` over `prev` and its max fill distance (the row scan of `cur` kept
-    /// as the last layer's); `below`: what this analyser kept of the layer below.
+    /// The lit pixels of the last layer analysed, when this analyser has them.
+    pub fn last_runs(&self) -> Option<&LitRuns> {
+        self.last.filter(|l| l.runs).map(|_| &self.last_runs)
+    }
+
+    /// The max fill distance of `cur`.
     #[cfg(not(feature = "bench-no-analysis"))]
-    fn islands_and_fill(
-        &mut self,
-        cur: &[Contour],
-        prev: Option<&[Contour]>,
-        below: Option<Last>,
-    ) -> (u32, f64) {
-        let mut coarse = std::mem::take(&mut self.search.coarse);
-        let dev = coarsen_section(cur, &mut coarse);
-        self.runs.scan(&coarse, self.row_mm, &mut self.scratch);
-        let islands = match prev {
-            None => 0,
-            Some(p) => {
-                let scanned = if below.is_some_and(|l| l.runs) {
-                    &self.last_runs
-                } else {
-                    let mut coarse_below = std::mem::take(&mut self.coarse_below);
-                    coarsen_section(p, &mut coarse_below);
-                    self.below_runs
-                        .scan(&coarse_below, self.row_mm, &mut self.scratch);
-                    self.coarse_below = coarse_below;
-                    &self.below_runs
-                };
-                count_islands(&self.runs, scanned)
-            }
-        };
-        let fill = search_coarse(&coarse, dev, &mut self.search);
-        self.search.coarse = coarse;
-        std::mem::swap(&mut self.runs, &mut self.last_runs);
-        (islands, fill.0)
+    fn fill(&mut self, cur: &[Contour]) -> f64 {
+        fill_distance(cur, &mut self.search).0
     }
 
     /// Benchmark builds that measure what the analysis adds to slicing (Cargo feature
-    /// `bench-no-analysis`, never for real jobs): no scans, no search; the comparison with
-    /// the layer below (which the masks of prisms use too) stays.
+    /// `bench-no-analysis`, never for real jobs): no search (the islands count is
+    /// skipped too: the slicer does not record lit pixels); the comparison with the layer
+    /// below (which the masks of prisms use too) stays.
     #[cfg(feature = "bench-no-analysis")]
-    fn islands_and_fill(
-        &mut self,
-        _: &[Contour],
-        _: Option<&[Contour]>,
-        _: Option<Last>,
-    ) -> (u32, f64) {
-        (0, 0.0)
+    fn fill(&mut self, _: &[Contour]) -> f64 {
+        0.0
     }
 }
 
@@ -1732,162 +1737,6 @@ fn polish(
 // ---------------------------------------------------------------------------------------
 // Islands.
 
-/// The inside runs of a section along the pixel-row centres `y = (k + 0.5)·row_mm`.
-#[derive(Debug, Clone, Default)]
-pub struct Runs {
-    /// `(k, x_start, x_end)` sorted by row then x.
-    runs: Vec<(i64, f64, f64)>,
-    /// `(k, first, end)` index range of each row's runs.
-    rows: Vec<(i64, usize, usize)>,
-}
-
-impl Runs {
-    /// Scans `contours` (nonzero winding) at the rows of pitch `row_mm`.
-    pub fn new(contours: &[Contour], row_mm: f64) -> Runs {
-        let mut r = Runs::default();
-        r.scan(contours, row_mm, &mut ScanScratch::default());
-        r
-    }
-
-    /// [`Runs::new`] into `self`, reusing its buffers and `sc`'s.
-    fn scan(&mut self, contours: &[Contour], row_mm: f64, sc: &mut ScanScratch) {
-        runs(contours, row_mm, sc, &mut self.runs);
-        rows(&self.runs, &mut self.rows);
-    }
-}
-
-/// Buffers of the row scan, kept between layers.
-#[derive(Debug, Default)]
-struct ScanScratch {
-    vrow: Vec<i64>,
-    start: Vec<u32>,
-    fill: Vec<u32>,
-    xs: Vec<(f64, i32)>,
-}
-
-/// `⌈x⌉` as an integer (exact; the library `ceil` is a software call on baseline x86-64).
-fn ceil_i64(x: f64) -> i64 {
-    let t = x as i64;
-    if (t as f64) < x {
-        t.saturating_add(1)
-    } else {
-        t
-    }
-}
-
-/// Sorts a (short) row of crossings by x: insertion sort (the order of equal keys does
-/// not matter: the winding sums between distinct x are the same).
-fn sort_row(row: &mut [(f64, i32)]) {
-    for i in 1..row.len() {
-        let v = row[i];
-        let mut j = i;
-        while j > 0 && row[j - 1].0.total_cmp(&v.0).is_gt() {
-            row[j] = row[j - 1];
-            j -= 1;
-        }
-        row[j] = v;
-    }
-}
-
-fn runs(contours: &[Contour], row_mm: f64, sc: &mut ScanScratch, out: &mut Vec<(i64, f64, f64)>) {
-    out.clear();
-    // An edge crosses rows k0..k1 (exclusive), k0 = ⌈lo/row − ½⌉, k1 = ⌈hi/row − ½⌉: the
-    // rows with lo <= y_k < hi up to rounding. Two edges meeting at a vertex compute its
-    // row from the same y, so the vertex counts exactly once.
-    let inv_row = 1.0 / row_mm;
-    // The row of every vertex, contour after contour, computed once.
-    let vrow = &mut sc.vrow;
-    vrow.clear();
-    vrow.extend(
-        contours
-            .iter()
-            .flatten()
-            .map(|p| ceil_i64(p[1] * inv_row - 0.5)),
-    );
-    let (mut kmin, mut kmax) = (i64::MAX, i64::MIN);
-    for &k in vrow.iter() {
-        kmin = kmin.min(k);
-        kmax = kmax.max(k);
-    }
-    if kmin >= kmax {
-        return;
-    }
-    let nrows = (kmax - kmin) as usize;
-    // Counting sort of the crossings by row, then by x within each (short) row.
-    let start = &mut sc.start;
-    start.clear();
-    start.resize(nrows + 1, 0);
-    let mut first = 0;
-    for c in contours {
-        let rows = &vrow[first..first + c.len()];
-        first += c.len();
-        let Some(&last) = rows.last() else {
-            continue;
-        };
-        let mut a = last;
-        for &b in rows {
-            let (k0, k1) = if a <= b { (a, b) } else { (b, a) };
-            for k in k0..k1 {
-                start[(k - kmin) as usize + 1] += 1;
-            }
-            a = b;
-        }
-    }
-    for r in 0..nrows {
-        start[r + 1] += start[r];
-    }
-    let fill = &mut sc.fill;
-    fill.clear();
-    fill.extend_from_slice(start);
-    let xs = &mut sc.xs;
-    xs.clear();
-    xs.resize(start[nrows] as usize, (0.0, 0));
-    let mut first = 0;
-    for c in contours {
-        let rows = &vrow[first..first + c.len()];
-        for i in 0..c.len() {
-            let j = if i + 1 == c.len() { 0 } else { i + 1 };
-            let (a, b) = (rows[i], rows[j]);
-            if a == b {
-                continue;
-            }
-            let (p, q) = (c[i], c[j]);
-            let (lo, hi, dir, k0, k1) = if a < b {
-                (p, q, 1, a, b)
-            } else {
-                (q, p, -1, b, a)
-            };
-            let slope = (hi[0] - lo[0]) / (hi[1] - lo[1]);
-            for k in k0..k1 {
-                let y = (k as f64 + 0.5) * row_mm;
-                let r = (k - kmin) as usize;
-                xs[fill[r] as usize] = (lo[0] + (y - lo[1]) * slope, dir);
-                fill[r] += 1;
-            }
-        }
-        first += c.len();
-    }
-    for r in 0..nrows {
-        let row = &mut xs[start[r] as usize..start[r + 1] as usize];
-        if row.is_empty() {
-            continue;
-        }
-        sort_row(row);
-        let k = kmin + r as i64;
-        let mut w = 0;
-        let mut x0 = 0.0;
-        for &(x, d) in row.iter() {
-            let was = w != 0;
-            w += d;
-            if !was && w != 0 {
-                x0 = x;
-            } else if was && w == 0 && x > x0 {
-                out.push((k, x0, x));
-            }
-        }
-    }
-}
-
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         parent[i as usize] = parent[parent[i as usize] as usize];
@@ -1896,46 +1745,42 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
-/// Index ranges of each row's runs: `(k, start, end)`.
-fn rows(r: &[(i64, f64, f64)], out: &mut Vec<(i64, usize, usize)>) {
+/// Index ranges of each row's runs: `(row, start, end)`.
+fn rows(r: &[[u32; 3]], out: &mut Vec<(u32, usize, usize)>) {
     out.clear();
     for (i, run) in r.iter().enumerate() {
         match out.last_mut() {
-            Some(last) if last.0 == run.0 => last.2 = i + 1,
-            _ => out.push((run.0, i, i + 1)),
+            Some(last) if last.0 == run[0] => last.2 = i + 1,
+            _ => out.push((run[0], i, i + 1)),
         }
     }
 }
 
-/// Number of connected regions of `cur` that overlap no part of `prev` (scanned at the
-/// centres of pixel rows of pitch `row_mm`, on the contours without the points within
-/// [`COARSE_MM`] of the segment replacing them, as [`Analyser`] does).
-pub fn islands(cur: &[Contour], prev: &[Contour], row_mm: f64) -> u32 {
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    coarsen_section(cur, &mut a);
-    coarsen_section(prev, &mut b);
-    count_islands(&Runs::new(&a, row_mm), &Runs::new(&b, row_mm))
+/// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
+/// with the lit pixels `prev` of the layer below.
+pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+    count_islands(cur, prev)
 }
 
-/// Whether every run of `cur` overlaps a run of `prev` in the same row: then every region
-/// is supported (the usual case), without joining runs into regions.
-fn all_runs_supported(cur: &Runs, prev: &Runs) -> bool {
+/// Whether every run of `cur` shares a pixel with a run of `prev` in the same row: then
+/// every region is supported (the usual case), without joining runs into regions.
+fn all_runs_supported(cur: &LitRuns, prev: &LitRuns) -> bool {
     let (rc, rp) = (&cur.runs, &prev.runs);
-    // Both sorted by row then x, and a row's runs are disjoint: one merge-walk.
+    // Both sorted by row then column, and a row's runs are disjoint: one merge-walk.
     let mut j = 0;
     for r in rc {
         // Skip the runs below that end before this one starts (in this row or earlier).
-        while j < rp.len() && (rp[j].0 < r.0 || (rp[j].0 == r.0 && rp[j].2 <= r.1)) {
+        while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
             j += 1;
         }
-        if j == rp.len() || rp[j].0 != r.0 || rp[j].1 >= r.2 {
+        if j == rp.len() || rp[j][0] != r[0] || rp[j][1] >= r[2] {
             return false;
         }
     }
     true
 }
 
-fn count_islands(cur: &Runs, prev: &Runs) -> u32 {
+fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
     if cur.runs.is_empty() || all_runs_supported(cur, prev) {
         return 0;
     }
@@ -1943,14 +1788,16 @@ fn count_islands(cur: &Runs, prev: &Runs) -> u32 {
 }
 
 /// [`count_islands`] by joining the runs into regions (union-find).
-fn join_and_count(cur: &Runs, prev: &Runs) -> u32 {
-    let (rc, rows_c) = (&cur.runs, &cur.rows);
-    let (rp, rows_p) = (&prev.runs, &prev.rows);
+fn join_and_count(cur: &LitRuns, prev: &LitRuns) -> u32 {
+    let (rc, rp) = (&cur.runs, &prev.runs);
     if rc.is_empty() {
         return 0;
     }
+    let (mut rows_c, mut rows_p) = (Vec::new(), Vec::new());
+    rows(rc, &mut rows_c);
+    rows(rp, &mut rows_p);
     let mut parent: Vec<u32> = (0..rc.len() as u32).collect();
-    // Union runs of adjacent rows that overlap in x.
+    // Union runs of adjacent rows that share a column.
     for w in rows_c.windows(2) {
         let (a, b) = (w[0], w[1]);
         if b.0 != a.0 + 1 {
@@ -1958,21 +1805,21 @@ fn join_and_count(cur: &Runs, prev: &Runs) -> u32 {
         }
         let (mut i, mut j) = (a.1, b.1);
         while i < a.2 && j < b.2 {
-            if rc[i].1 < rc[j].2 && rc[j].1 < rc[i].2 {
+            if rc[i][1] < rc[j][2] && rc[j][1] < rc[i][2] {
                 let (x, y) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
                 parent[x as usize] = y;
             }
-            if rc[i].2 < rc[j].2 {
+            if rc[i][2] < rc[j][2] {
                 i += 1;
             } else {
                 j += 1;
             }
         }
     }
-    // A region is supported when one of its runs overlaps a run of the layer below.
+    // A region is supported when one of its runs shares a pixel with a run below.
     let mut supported = vec![false; rc.len()];
     let mut pi = 0;
-    for &(k, s, e) in rows_c {
+    for &(k, s, e) in &rows_c {
         while pi < rows_p.len() && rows_p[pi].0 < k {
             pi += 1;
         }
@@ -1982,11 +1829,11 @@ fn join_and_count(cur: &Runs, prev: &Runs) -> u32 {
         let (_, ps, pe) = rows_p[pi];
         let (mut i, mut j) = (s, ps);
         while i < e && j < pe {
-            if rc[i].1 < rp[j].2 && rp[j].1 < rc[i].2 {
+            if rc[i][1] < rp[j][2] && rp[j][1] < rc[i][2] {
                 let r = find(&mut parent, i as u32);
                 supported[r as usize] = true;
             }
-            if rc[i].2 < rp[j].2 {
+            if rc[i][2] < rp[j][2] {
                 i += 1;
             } else {
                 j += 1;
@@ -2025,6 +1872,27 @@ mod tests {
 
     fn mfd(c: &[Contour]) -> f64 {
         max_fill_distance(c).0
+    }
+
+    /// The lit pixels of a section on the default profile's field, as the slicer's
+    /// rasterizer keeps them.
+    fn lit(c: &[Contour]) -> LitRuns {
+        let raster =
+            crate::raster::Rasterizer::new(crate::profile::Profile::default_profile().field());
+        let mut sc = crate::raster::Scratch::default();
+        sc.record_runs = true;
+        let m = raster.coverage(c, &mut sc);
+        // The runs the scan kept are those of the finished mask.
+        assert_eq!(
+            sc.lit_runs,
+            LitRuns::of_mask(&m, [0, m.height as usize, 0, m.width as usize])
+        );
+        sc.lit_runs
+    }
+
+    /// [`islands`] of two sections.
+    fn islands_of(cur: &[Contour], prev: &[Contour]) -> u32 {
+        islands(&lit(cur), &lit(prev))
     }
 
     #[test]
@@ -2467,25 +2335,6 @@ mod tests {
     }
 
     #[test]
-    fn ceil_i64_is_ceil() {
-        for x in [
-            -3.0,
-            -2.5,
-            -0.5,
-            -1e-300,
-            0.0,
-            1e-300,
-            0.5,
-            1.0,
-            2.0000000000000004,
-            7.99,
-            1e15,
-        ] {
-            assert_eq!(ceil_i64(x), x.ceil() as i64, "{x}");
-        }
-    }
-
-    #[test]
     fn inside_and_distance() {
         let sq = [rect(0.0, 0.0, 10.0, 10.0), {
             let mut h = rect(4.0, 4.0, 6.0, 6.0);
@@ -2503,67 +2352,82 @@ mod tests {
 
     #[test]
     fn islands_count_unsupported_regions() {
-        let p = 0.0634765625;
         let base = [rect(0.0, 0.0, 10.0, 10.0)];
         // Same region: supported.
-        assert_eq!(islands(&base, &base, p), 0);
+        assert_eq!(islands_of(&base, &base), 0);
         // Two new regions, one overlapping the base and one beside it.
         let two = [rect(5.0, 5.0, 8.0, 8.0), rect(20.0, 0.0, 25.0, 5.0)];
-        assert_eq!(islands(&two, &base, p), 1);
+        assert_eq!(islands_of(&two, &base), 1);
         // Nothing below at all.
-        assert_eq!(islands(&two, &[], p), 2);
+        assert_eq!(islands_of(&two, &[]), 2);
         // A ring counts once, and rests on a base touching only part of it.
         let ring = [
             ngon(40.0, 30.0, 10.0, 64, true),
             ngon(40.0, 30.0, 8.0, 64, false),
         ];
-        assert_eq!(islands(&ring, &[], p), 1);
-        assert_eq!(islands(&ring, &[rect(48.0, 28.0, 52.0, 32.0)], p), 0);
+        assert_eq!(islands_of(&ring, &[]), 1);
+        assert_eq!(islands_of(&ring, &[rect(48.0, 28.0, 52.0, 32.0)]), 0);
         // A base inside the ring's hole does not support it.
-        assert_eq!(islands(&ring, &[rect(38.0, 28.0, 42.0, 32.0)], p), 1);
-        assert_eq!(islands(&[], &base, p), 0);
+        assert_eq!(islands_of(&ring, &[rect(38.0, 28.0, 42.0, 32.0)]), 1);
+        assert_eq!(islands_of(&[], &base), 0);
+        // Pixels, not contours: a region lighting no pixel is no island, and regions that
+        // touch only at a corner are two (4-connected).
+        assert_eq!(islands_of(&[rect(30.0, 30.0, 30.02, 30.02)], &[]), 0);
+        let px = 0.0634765625;
+        let corner = [
+            rect(0.0, 0.0, 10.0 * px, 10.0 * px),
+            rect(10.0 * px, 10.0 * px, 20.0 * px, 20.0 * px),
+        ];
+        assert_eq!(islands_of(&corner, &[]), 2);
+        // A base covering less than half of every pixel it touches supports nothing.
+        let thin = [rect(0.0, 0.0, 10.0, 0.4 * px)];
+        assert_eq!(islands_of(&base, &thin), 1);
     }
 
     #[test]
     fn analyser_reuses_the_layer_below_without_changing_results() {
-        let p = 0.0634765625;
         let layers = [
             vec![rect(0.0, 0.0, 10.0, 10.0)],
             vec![rect(5.0, 5.0, 8.0, 8.0), rect(20.0, 0.0, 25.0, 5.0)],
             vec![rect(20.0, 0.0, 25.0, 5.0), rect(30.0, 0.0, 31.0, 1.0)],
         ];
-        let mut a = Analyser::new(p);
+        let lits: Vec<LitRuns> = layers.iter().map(|l| lit(l)).collect();
+        let below = |i: usize| i.checked_sub(1).map(|j| (layers[j].as_slice(), &lits[j]));
+        let mut a = Analyser::new();
         let seq: Vec<u32> = (0..3)
-            .map(|i| {
-                a.analyse(
-                    i,
-                    &layers[i],
-                    i.checked_sub(1).map(|j| layers[j].as_slice()),
-                )
-                .islands
-            })
+            .map(|i| a.analyse(i, &layers[i], &lits[i], below(i)).islands)
             .collect();
         assert_eq!(seq, vec![0, 1, 1]);
-        // Out of order (a fresh scan of the layer below) gives the same.
-        assert_eq!(analyse(&layers[2], Some(&layers[1]), p).islands, 1);
-        assert_eq!(a.analyse(1, &layers[1], Some(&layers[0])).islands, 1);
+        // Out of order (the layer below's lit pixels given) gives the same.
+        assert_eq!(analyse(&layers[2], &lits[2], below(2)).islands, 1);
+        assert_eq!(a.analyse(1, &layers[1], &lits[1], below(1)).islands, 1);
+        // Without the layer below's: the islands are left to the caller.
+        let mut b = Analyser::new();
+        let r = b.analyse_or_defer(2, &layers[2], Some(&lits[2]), Some(&layers[1]));
+        assert!(matches!(r, Analysed::NeedsBelow(_)));
+        assert_eq!(
+            r.with_islands(|| islands(&lits[2], &lits[1]))
+                .resolve(None)
+                .islands,
+            1
+        );
     }
 
     #[test]
     fn analyse_fills_all_fields() {
-        let a = analyse(&[rect(1.0, 2.0, 11.0, 12.0)], None, 0.0634765625);
+        let sq = [rect(1.0, 2.0, 11.0, 12.0)];
+        let a = analyse(&sq, &lit(&sq), None);
         assert!((a.max_fill_distance_mm - 5.0).abs() <= 0.005);
         assert_eq!(a.islands, 0);
         assert_eq!(a.bbox_mm, Some([[1.0, 2.0], [11.0, 12.0]]));
-        assert_eq!(analyse(&[], None, 0.1).bbox_mm, None);
+        assert_eq!(analyse(&[], &LitRuns::default(), None).bbox_mm, None);
     }
 
     #[test]
     fn analyser_buffers_never_change_results() {
         // Random layers of scattered squares (some overlapping: several runs per row),
         // analysed in and out of order by one analyser (every reuse and recycling path),
-        // must give what fresh scans give.
-        let p = 0.25;
+        // must give what a fresh analysis gives.
         let mut rnd = xorshift(0x5eed_1a7e_u64);
         let layers: Vec<Vec<Contour>> = (0..12)
             .map(|_| {
@@ -2576,16 +2440,14 @@ mod tests {
                     .collect()
             })
             .collect();
-        let fresh = |i: usize| {
-            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
-            analyse(&layers[i], below, p)
-        };
-        let mut a = Analyser::new(p);
+        let lits: Vec<LitRuns> = layers.iter().map(|l| lit(l)).collect();
+        let below = |i: usize| i.checked_sub(1).map(|j| (layers[j].as_slice(), &lits[j]));
+        let fresh = |i: usize| analyse(&layers[i], &lits[i], below(i));
+        let mut a = Analyser::new();
         let order: [usize; 16] = [0, 1, 2, 3, 5, 6, 4, 5, 11, 10, 11, 7, 8, 9, 1, 2];
         let mut islands = 0;
         for &i in &order {
-            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
-            let got = a.analyse(i, &layers[i], below);
+            let got = a.analyse(i, &layers[i], &lits[i], below(i));
             assert_eq!(got, fresh(i), "layer {i}");
             islands += got.islands;
         }
@@ -2678,7 +2540,6 @@ mod tests {
         // points; some layers differ (a hole comes and goes). Analysed in blocks (deferred
         // at block starts, resolved afterwards) and out of order, the results must be what
         // a fresh analysis gives for every layer.
-        let p = 0.0634765625;
         let mut rnd = xorshift(0x9e15_3a11);
         let outer = ngon(25.0, 20.0, 12.0, 24, true);
         let hole = rect(20.0, 15.0, 24.0, 19.0);
@@ -2692,22 +2553,18 @@ mod tests {
                 l
             })
             .collect();
+        let lits: Vec<LitRuns> = layers.iter().map(|l| lit(l)).collect();
+        let below2 = |i: usize| i.checked_sub(1).map(|j| (layers[j].as_slice(), &lits[j]));
         // Reference: one analyser over all layers in order.
-        let mut seq = Analyser::new(p);
+        let mut seq = Analyser::new();
         let fresh: Vec<LayerAnalysis> = (0..layers.len())
-            .map(|i| {
-                seq.analyse(
-                    i,
-                    &layers[i],
-                    i.checked_sub(1).map(|j| layers[j].as_slice()),
-                )
-            })
+            .map(|i| seq.analyse(i, &layers[i], &lits[i], below2(i)))
             .collect();
         for block in [1, 2, 4, 7] {
             let mut out: Vec<Analysed> = Vec::new();
             let mut deferred = 0;
             for b in 0..layers.len().div_ceil(block) {
-                let mut a = Analyser::new(p);
+                let mut a = Analyser::new();
                 for i in b * block..((b + 1) * block).min(layers.len()) {
                     let below = i.checked_sub(1).map(|j| layers[j].as_slice());
                     // Asking first (as the slicer does, for the masks) changes nothing.
@@ -2721,9 +2578,9 @@ mod tests {
                             assert_eq!(a.simplified_section(), s.as_slice());
                         }
                     }
-                    let r = a.analyse_or_defer(i, &layers[i], below);
+                    let r = a.analyse_or_defer(i, &layers[i], Some(&lits[i]), below);
                     deferred += usize::from(r == Analysed::SameAsBelow);
-                    out.push(r);
+                    out.push(r.with_islands(|| islands(&lits[i], &lits[i - 1])));
                 }
             }
             let mut got: Vec<LayerAnalysis> = Vec::new();
@@ -2746,10 +2603,9 @@ mod tests {
         // with other collinear points: the search may take another path and stop at
         // another circle, both within the guarantee), so its fill distance agrees within
         // PRECISION_MM, not bit for bit (measured: up to 1.4e-4 mm here).
-        let mut a = Analyser::new(p);
+        let mut a = Analyser::new();
         for &i in &[3usize, 4, 4, 10, 9, 20, 21, 0, 1] {
-            let below = i.checked_sub(1).map(|j| layers[j].as_slice());
-            let got = a.analyse(i, &layers[i], below);
+            let got = a.analyse(i, &layers[i], &lits[i], below2(i));
             assert_eq!(
                 (got.islands, got.bbox_mm),
                 (fresh[i].islands, fresh[i].bbox_mm),
@@ -2765,7 +2621,6 @@ mod tests {
         // Random layers of scattered squares and rings over random layers below: when
         // every run rests on a run below, joining finds no island either, and the count
         // with the shortcut is the count without it.
-        let p = 0.25;
         let mut rnd = xorshift(0x1d5_0a7e_u64);
         let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
             let n = 1 + (rnd() * 5.0) as usize;
@@ -2787,7 +2642,7 @@ mod tests {
             let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
             // Sometimes the layer below is the same or larger, so all runs rest on it.
             let below = if rnd() < 0.3 { cur.clone() } else { below };
-            let (rc, rp) = (Runs::new(&cur, p), Runs::new(&below, p));
+            let (rc, rp) = (lit(&cur), lit(&below));
             let joined = join_and_count(&rc, &rp);
             if all_runs_supported(&rc, &rp) {
                 assert_eq!(joined, 0);
@@ -2797,26 +2652,6 @@ mod tests {
             islands += joined;
         }
         assert!(shortcut > 40 && islands > 40, "{shortcut} {islands}");
-    }
-
-    #[test]
-    fn sort_row_sorts_by_x() {
-        let mut rnd = xorshift(7);
-        for n in 0..40 {
-            let mut row: Vec<(f64, i32)> = (0..n)
-                .map(|k| ((rnd() * 8.0).floor(), if k % 2 == 0 { 1 } else { -1 }))
-                .collect();
-            let mut want: Vec<f64> = row.iter().map(|r| r.0).collect();
-            want.sort_by(f64::total_cmp);
-            let mut dirs: Vec<i32> = row.iter().map(|r| r.1).collect();
-            sort_row(&mut row);
-            assert_eq!(row.iter().map(|r| r.0).collect::<Vec<_>>(), want);
-            // A permutation: the directions are all still there.
-            let mut got: Vec<i32> = row.iter().map(|r| r.1).collect();
-            got.sort();
-            dirs.sort();
-            assert_eq!(got, dirs);
-        }
     }
 
     #[test]
