@@ -34,7 +34,8 @@
 //! of one shell lying inside another still counts as boundary, so the max fill distance of
 //! such a section is a lower bound.
 
-// A `bench-no-analysis` build skips the scans and the search: their state goes unused.
+// A `bench-no-analysis` build skips the search (and the rasterizer keeps no lit runs):
+// their state goes unused.
 #![cfg_attr(feature = "bench-no-analysis", allow(dead_code))]
 
 pub use crate::raster::LitRuns;
