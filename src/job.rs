@@ -5,8 +5,9 @@
 //! of 8 consecutive layers as soon as it is cut (no barrier between windows); at most 96
 //! layers wait for a worker, and a worker keeps only its current mask, so memory does not
 //! grow with the number of layers (but for the lit runs of a block's first and last layers,
-//! a few kilobytes each, kept until the end for the islands of the blocks' first layers). Every output byte depends only on the input and the
-//! settings, never on the thread count or timing.
+//! a few kilobytes each, kept until the end for the islands of the blocks' first layers).
+//! Every output byte depends only on the input and the settings, never on the thread count
+//! or timing.
 
 use crate::bundle::{
     self, BundleWriter, Generator, Layer, Manifest, MaskRef, Placement, Settings, Source, Totals,
