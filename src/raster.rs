@@ -78,17 +78,6 @@ pub struct LitRuns {
 }
 
 impl LitRuns {
-    /// Appends columns `a..b` of row `r` (after every run so far), joined to the last run
-    /// when they touch it.
-    #[inline(always)]
-    fn push(&mut self, r: usize, a: usize, b: usize) {
-        let (r, a, b) = (r as u32, a as u32, b as u32);
-        match self.runs.last_mut() {
-            Some(l) if l[0] == r && l[2] == a => l[2] = b,
-            _ => self.runs.push([r, a, b]),
-        }
-    }
-
     /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (zero outside).
     pub fn of_mask(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> LitRuns {
         let mut l = LitRuns::default();
@@ -108,7 +97,7 @@ impl LitRuns {
                     while c < c1 && row[c] >= 128 {
                         c += 1;
                     }
-                    self.push(r, a, c);
+                    self.runs.push([r as u32, a as u32, c as u32]);
                 } else {
                     c += 1;
                 }

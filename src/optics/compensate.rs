@@ -507,6 +507,29 @@ fn pixel_spread(
     sp.pct()
 }
 
+/// The zones of `field`: `zone_mm` squares from the bottom-left corner; a pixel belongs to
+/// the zone holding its centre. Returns each image column's zone column, each image row's
+/// zone row (zone rows top first, like the image), and the numbers of zone columns and rows.
+fn zone_geometry(field: &Field, zmm: f64) -> (Vec<u16>, Vec<u16>, usize, usize) {
+    let (w, h, p) = (
+        field.width_px as usize,
+        field.height_px as usize,
+        field.pixel_mm,
+    );
+    let zcols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+    let zrows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
+    let zone_of_col = (0..w)
+        .map(|c| (((c as f64 + 0.5) * p / zmm) as usize).min(zcols - 1) as u16)
+        .collect();
+    let zone_of_row = (0..h)
+        .map(|r| {
+            let zb = (((h as f64 - r as f64 - 0.5) * p / zmm) as usize).min(zrows - 1);
+            (zrows - 1 - zb) as u16
+        })
+        .collect();
+    (zone_of_col, zone_of_row, zcols, zrows)
+}
+
 /// P at the pixel centres of the field, one row at a time (no w × h buffer). Inside the
 /// polynomial's rectangle: Horner in u with the row's coefficients (in f64, rounded to f32,
 /// times the scale in f32); elsewhere [`FieldModel::eval`] rounded to f32 (its linear
@@ -801,20 +824,8 @@ impl Compensator {
             ((row[c] as f64) - direct).abs() <= 1e-5 * direct.abs().max(1e-30)
         });
 
-        // Zones: `zone_mm` squares from the bottom-left corner; a pixel belongs to the zone
-        // holding its centre. Zone rows are stored top first, like the image.
         let zmm = cal.zone_mm.get();
-        let zcols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
-        let zrows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
-        let zone_of_col: Vec<u16> = (0..w)
-            .map(|c| (((c as f64 + 0.5) * p / zmm) as usize).min(zcols - 1) as u16)
-            .collect();
-        let zone_of_row: Vec<u16> = (0..h)
-            .map(|r| {
-                let zb = (((h as f64 - r as f64 - 0.5) * p / zmm) as usize).min(zrows - 1);
-                (zrows - 1 - zb) as u16
-            })
-            .collect();
+        let (zone_of_col, zone_of_row, zcols, zrows) = zone_geometry(field, zmm);
         let nz = zcols * zrows;
         let segs = zone_segments(&zone_of_col);
         let inside = [r0, r1 + 1, c0, c1 + 1];
@@ -1888,27 +1899,6 @@ mod tests {
         rows.row::<true>(r, out)
     }
 
-    /// Zones and their row segments of `field` as the set-up makes them.
-    fn zone_geometry(field: &Field, zmm: f64) -> (Vec<u16>, Vec<u16>, usize) {
-        let (w, h, p) = (
-            field.width_px as usize,
-            field.height_px as usize,
-            field.pixel_mm,
-        );
-        let zcols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
-        let zrows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
-        let zc: Vec<u16> = (0..w)
-            .map(|c| (((c as f64 + 0.5) * p / zmm) as usize).min(zcols - 1) as u16)
-            .collect();
-        let zr: Vec<u16> = (0..h)
-            .map(|r| {
-                let zb = (((h as f64 - r as f64 - 0.5) * p / zmm) as usize).min(zrows - 1);
-                (zrows - 1 - zb) as u16
-            })
-            .collect();
-        (zc, zr, zcols)
-    }
-
     #[test]
     fn field_sums_equal_adding_pixel_by_pixel() {
         // Random fields (and one whose values span too many binades for exact sums: the
@@ -1935,7 +1925,7 @@ mod tests {
                 case != 24,
                 "case {case}: {lo} {hi}"
             );
-            let (zone_of_col, zone_of_row, zcols) = zone_geometry(&field, 5.0);
+            let (zone_of_col, zone_of_row, zcols, _) = zone_geometry(&field, 5.0);
             let segs = zone_segments(&zone_of_col);
             let inside = [3, 55, 5, 71];
             let mut results = vec![field_sums_in::<false>(
