@@ -629,8 +629,18 @@ impl<'a> FieldRows<'a> {
                     })
                     .collect();
             }
-            for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
-                *o = fm.continued(g, d, dy) as f32;
+            if fm.form == Form::Polynomial {
+                // `continued` written out (the same operations; a loop the compiler
+                // vectorizes): scale · max(f + (fu·dx + fv·dy)·s, f/10).
+                let scale = fm.scale.get();
+                for ((o, &[f, fu, fv]), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                    let lin = f + (fu * d + fv * dy) * s;
+                    *o = (scale * lin.max(0.1 * f)) as f32;
+                }
+            } else {
+                for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                    *o = fm.continued(g, d, dy) as f32;
+                }
             }
         }
     }
@@ -909,6 +919,8 @@ impl Compensator {
                 let mut mixed = 0u64;
                 let mut unreachable = 0;
                 let mut luts = vec![[0u8; 256]; nz];
+                // v / 255 for each coverage value v.
+                let coverage: [f64; 256] = std::array::from_fn(|v| v as f64 / 255.0);
                 let mut mix = vec![(0u8, 0u8, 0u8); nz];
                 let mut zone_after = vec![0.0; nz];
                 for z in 0..nz {
@@ -921,8 +933,8 @@ impl Compensator {
                         // Targets grow with v: walk the level thresholds upwards (the
                         // same levels as `nearest`'s search, in one pass per zone).
                         let mut i = 0;
-                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
-                            let t = v as f64 / 255.0 * tz;
+                        for (out, &c) in luts[z].iter_mut().zip(&coverage).skip(1) {
+                            let t = c * tz;
                             while i < lv.mid.len() && lv.mid[i] <= t {
                                 i += 1;
                             }
@@ -984,36 +996,55 @@ impl Compensator {
                     }
                 }
                 let zone_of_row = &comp.zone_of_row;
-                let row_tables: Vec<u32> = (0..h)
-                    .flat_map(|r| {
-                        let zr = zone_of_row[r] as usize * zcols;
-                        let mix = &mix;
-                        let upper_idx = &upper_idx;
-                        (0..zcols).map(move |zc| {
-                            let z = zr + zc;
-                            if upper_row(r, mix[z].2) {
-                                upper_idx[z]
-                            } else {
-                                z as u32
-                            }
-                        })
-                    })
-                    .collect();
+                let mut row_tables: Vec<u32> = Vec::with_capacity(h * zcols);
+                for (r, &zr) in zone_of_row.iter().enumerate() {
+                    let zr = zr as usize * zcols;
+                    for (z, (&(_, _, k), &u)) in
+                        (zr..).zip(mix[zr..zr + zcols].iter().zip(&upper_idx[zr..zr + zcols]))
+                    {
+                        row_tables.push(if upper_row(r, k) { u } else { z as u32 });
+                    }
+                }
                 // The full-coverage gray of every pixel: rows with the same tables have the
-                // same grays.
-                let mut distinct: std::collections::HashMap<&[u32], u32> =
-                    std::collections::HashMap::new();
+                // same grays. Tables belong to one zone, so only rows of the same zone row
+                // can be the same, and there rows with the same r mod 64 are (`upper_row`):
+                // a row new in its phase is looked for among the distinct rows of its zone
+                // row; distinct rows are numbered in order of appearance.
                 let mut gray_rows = Vec::new();
-                let mut gray_row_of = Vec::with_capacity(h);
-                for tabs in row_tables.chunks_exact(zcols) {
-                    let next = distinct.len() as u32;
-                    let k = *distinct.entry(tabs).or_insert_with(|| {
-                        for &(zc, a, b) in &segs {
-                            gray_rows
-                                .resize(gray_rows.len() + b - a, tables[tabs[zc] as usize][255]);
+                let mut gray_row_of: Vec<u32> = Vec::with_capacity(h);
+                // Distinct rows so far (index, first image row) of the current zone row,
+                // and the index of each phase seen there.
+                let mut in_zone_row: Vec<(u32, usize)> = Vec::new();
+                let mut by_phase = [u32::MAX; 64];
+                let mut next = 0u32;
+                for r in 0..h {
+                    if r > 0 && zone_of_row[r] != zone_of_row[r - 1] {
+                        in_zone_row.clear();
+                        by_phase = [u32::MAX; 64];
+                    }
+                    if by_phase[r & 63] != u32::MAX {
+                        gray_row_of.push(by_phase[r & 63]);
+                        continue;
+                    }
+                    let tabs = &row_tables[r * zcols..(r + 1) * zcols];
+                    let found = in_zone_row
+                        .iter()
+                        .find(|&&(_, r0)| &row_tables[r0 * zcols..(r0 + 1) * zcols] == tabs);
+                    let k = match found {
+                        Some(&(k, _)) => k,
+                        None => {
+                            for &(zc, a, b) in &segs {
+                                gray_rows.resize(
+                                    gray_rows.len() + b - a,
+                                    tables[tabs[zc] as usize][255],
+                                );
+                            }
+                            in_zone_row.push((next, r));
+                            next += 1;
+                            next - 1
                         }
-                        next
-                    });
+                    };
+                    by_phase[r & 63] = k;
                     gray_row_of.push(k);
                 }
                 comp.gray_rows = gray_rows;
