@@ -248,17 +248,18 @@ fn stats_lanes(vals: &[f32]) -> (f64, f32, f32) {
     finish_stats(&acc, &lo, &hi, chunks.remainder())
 }
 
-/// [`stats_lanes`] with AVX2 (eight lanes): the same sum when it is exact, the same
-/// extremes (VMINPS/VMAXPS compare like the plain comparisons).
+/// [`stats_lanes`] with AVX2 (eight lanes, the last ones masked): the same sum when it is
+/// exact, the same extremes (VMINPS/VMAXPS compare like the plain comparisons).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn stats_avx2(vals: &[f32]) -> (f64, f32, f32) {
     use std::arch::x86_64::*;
     let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let (mut lo, mut hi) = (
+    let (inf, ninf) = (
         _mm256_set1_ps(f32::INFINITY),
         _mm256_set1_ps(f32::NEG_INFINITY),
     );
+    let (mut lo, mut hi) = (inf, ninf);
     let mut chunks = vals.chunks_exact(8);
     for c in &mut chunks {
         // SAFETY: `c` holds eight f32.
@@ -269,15 +270,33 @@ fn stats_avx2(vals: &[f32]) -> (f64, f32, f32) {
         lo = _mm256_min_ps(v, lo);
         hi = _mm256_max_ps(v, hi);
     }
-    let (mut acc, mut l, mut h) = ([0f64; 8], [0f32; 8], [0f32; 8]);
-    // SAFETY: the arrays hold 4 + 4 f64 and 8 f32.
-    unsafe {
-        _mm256_storeu_pd(acc.as_mut_ptr(), s0);
-        _mm256_storeu_pd(acc.as_mut_ptr().add(4), s1);
-        _mm256_storeu_ps(l.as_mut_ptr(), lo);
-        _mm256_storeu_ps(h.as_mut_ptr(), hi);
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        // The last 1 to 7 values: the other lanes load +0 (adding nothing to the sums)
+        // and take ±∞ for the extremes.
+        let mask = _mm256_cmpgt_epi32(
+            _mm256_set1_epi32(rest.len() as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        // SAFETY: only the lanes of `mask` (the first `rest.len()`) are read.
+        let v = unsafe { _mm256_maskload_ps(rest.as_ptr(), mask) };
+        s0 = _mm256_add_pd(s0, _mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+        s1 = _mm256_add_pd(s1, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)));
+        let m = _mm256_castsi256_ps(mask);
+        lo = _mm256_min_ps(_mm256_blendv_ps(inf, v, m), lo);
+        hi = _mm256_max_ps(_mm256_blendv_ps(ninf, v, m), hi);
     }
-    finish_stats(&acc, &l, &h, chunks.remainder())
+    // Horizontal: lanes 0–3 with 4–7, then pairs, then the last two.
+    let s = _mm256_add_pd(s0, s1);
+    let s = _mm_add_pd(_mm256_castpd256_pd128(s), _mm256_extractf128_pd::<1>(s));
+    let sum = _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)));
+    let l = _mm_min_ps(_mm256_castps256_ps128(lo), _mm256_extractf128_ps::<1>(lo));
+    let l = _mm_min_ps(l, _mm_movehl_ps(l, l));
+    let l = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps::<1>(l, l)));
+    let h = _mm_max_ps(_mm256_castps256_ps128(hi), _mm256_extractf128_ps::<1>(hi));
+    let h = _mm_max_ps(h, _mm_movehl_ps(h, h));
+    let h = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps::<1>(h, h)));
+    (sum, l, h)
 }
 
 /// Combines the lanes of [`stats_lanes`] and adds the values left over.
@@ -327,6 +346,14 @@ enum PSource<'a> {
 }
 
 impl PSource<'_> {
+    /// Another source of the same values, for a pass over other rows.
+    fn split(&self) -> Self {
+        match self {
+            PSource::Rows(rows) => PSource::Rows(rows.clone()),
+            PSource::Field(pp) => PSource::Field(pp),
+        }
+    }
+
     /// P at the pixel centres of image row `r` into `row` (`AVX2`: see [`FieldRows::row`]).
     #[inline(always)]
     fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
@@ -337,8 +364,7 @@ impl PSource<'_> {
     }
 }
 
-/// [`field_sums_in`], with AVX2 when the CPU has it: the same operations on wider
-/// vectors (no fused multiply-add), so the same bits.
+/// [`field_sums_with`], with AVX2 when the CPU has it.
 fn field_sums(
     src: &mut PSource,
     w: usize,
@@ -348,45 +374,32 @@ fn field_sums(
     inside: [usize; 4],
 ) -> FieldSums {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2.
-        return unsafe { field_sums_avx2(src, w, segs, zone_of_row, zcols, inside) };
-    }
-    field_sums_in::<false>(src, w, segs, zone_of_row, zcols, inside)
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2 = false;
+    field_sums_with(avx2, src, w, segs, zone_of_row, zcols, inside)
 }
 
-/// [`field_sums_in`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn field_sums_avx2(
+/// The set-up's pass over P (rows from `src`): the sum of P over every zone and over the
+/// calibrated area `inside` = [r0, r1, c0, c1) (half-open), and per row and zone segment
+/// of that area the sum and extremes of P (for the per-pixel spreads).
+///
+/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
+/// checked on the field's extremes: true for any real calibration) the order of the
+/// additions does not matter (the zone sums are those of adding the values one by one in
+/// row-major order, bit for bit): the top and bottom halves of the field are then summed
+/// side by side (rayon) and their sums added, the values four or eight at a time;
+/// otherwise a second pass adds them one by one in row-major order. `avx2` (only where
+/// the CPU has it): the same operations on wider vectors (no fused multiply-add), so the
+/// same bits.
+fn field_sums_with(
+    avx2: bool,
     src: &mut PSource,
     w: usize,
     segs: &[(usize, usize, usize)],
     zone_of_row: &[u16],
     zcols: usize,
     inside: [usize; 4],
-) -> FieldSums {
-    field_sums_in::<true>(src, w, segs, zone_of_row, zcols, inside)
-}
-
-/// The set-up's one pass over P (rows from `src`): the sum of P over every zone and
-/// over the calibrated area `inside` = [r0, r1, c0, c1) (half-open), and per row and zone
-/// segment of that area the sum and extremes of P (for the per-pixel spreads).
-///
-/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
-/// checked on the field's extremes: true for any real calibration) the order of the
-/// additions does not matter (the zone sums are those of adding the values one by one in
-/// row-major order, bit for bit) and the values are added four at a time; otherwise a
-/// second pass adds them one by one in row-major order.
-/// `AVX2`: true only when called from [`field_sums_avx2`].
-#[inline(always)]
-fn field_sums_in<const AVX2: bool>(
-    src: &mut PSource,
-    w: usize,
-    segs: &[(usize, usize, usize)],
-    zone_of_row: &[u16],
-    zcols: usize,
-    [r0, r1, c0, c1]: [usize; 4],
 ) -> FieldSums {
     let nz = zone_of_row
         .iter()
@@ -400,84 +413,170 @@ fn field_sums_in<const AVX2: bool>(
             zcnt[zr as usize * zcols + zc] += b - a;
         }
     }
+    let h = zone_of_row.len();
+    let geo = PassGeometry {
+        w,
+        segs,
+        zone_of_row,
+        zcols,
+        inside,
+        nz,
+    };
+    let run = |src: &mut PSource, rows: std::ops::Range<usize>, exact: bool| {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is true only where the CPU has AVX2.
+            return unsafe { pass_avx2(src, &geo, rows, exact) };
+        }
+        pass_in::<false>(src, &geo, rows, exact)
+    };
+    let mid = h / 2;
+    let mut other = src.split();
+    let (top, bottom) = rayon::join(|| run(src, 0..mid, true), || run(&mut other, mid..h, true));
+    let mut p = top;
+    for (a, b) in p.zsum.iter_mut().zip(&bottom.zsum) {
+        *a += b;
+    }
+    p.inside_sum += bottom.inside_sum;
+    p.seg_sums.extend_from_slice(&bottom.seg_sums);
+    p.seg_extremes.extend_from_slice(&bottom.seg_extremes);
+    let (lo, hi) = (p.lo.min(bottom.lo), p.hi.max(bottom.hi));
+    let exact = sums_are_exact(lo, hi, w * h)
+        && p.inside_sum.is_finite()
+        && p.zsum.iter().all(|s| s.is_finite());
+    if !exact {
+        p = run(src, 0..h, false);
+    }
+    FieldSums {
+        zsum: p.zsum,
+        zcnt,
+        inside_sum: p.inside_sum,
+        seg_sums: p.seg_sums,
+        seg_extremes: p.seg_extremes,
+    }
+}
+
+/// What a pass over rows of the field works on ([`field_sums_with`]).
+struct PassGeometry<'a> {
+    w: usize,
+    segs: &'a [(usize, usize, usize)],
+    zone_of_row: &'a [u16],
+    zcols: usize,
+    inside: [usize; 4],
+    nz: usize,
+}
+
+/// The sums and extremes of a pass over some rows ([`pass_in`]).
+struct Pass {
+    zsum: Vec<f64>,
+    inside_sum: f64,
+    seg_sums: Vec<f64>,
+    seg_extremes: Vec<(f32, f32)>,
+    /// Smallest and largest P of those rows (exact passes only).
+    lo: f32,
+    hi: f32,
+}
+
+/// [`pass_in`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn pass_avx2(
+    src: &mut PSource,
+    geo: &PassGeometry,
+    rows: std::ops::Range<usize>,
+    exact: bool,
+) -> Pass {
+    pass_in::<true>(src, geo, rows, exact)
+}
+
+/// One pass over image rows `rows` of P (see [`field_sums_with`]): `exact`: each row
+/// segment's values summed four or eight at a time (exact sums only), otherwise one by
+/// one in row-major order. `AVX2`: true only when called from [`pass_avx2`].
+#[inline(always)]
+fn pass_in<const AVX2: bool>(
+    src: &mut PSource,
+    geo: &PassGeometry,
+    rows: std::ops::Range<usize>,
+    exact: bool,
+) -> Pass {
+    let &PassGeometry {
+        w,
+        segs,
+        zone_of_row,
+        zcols,
+        inside: [r0, r1, c0, c1],
+        nz,
+    } = geo;
     let mut buf = vec![0f32; w];
-    let n_in = r1.saturating_sub(r0) * segs.len();
-    for exact in [true, false] {
-        let mut zsum = vec![0f64; nz];
-        let mut inside_sum = 0.0f64;
-        let mut seg_sums = Vec::with_capacity(n_in);
-        let mut seg_extremes = Vec::with_capacity(n_in);
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (r, &zr) in zone_of_row.iter().enumerate() {
-            src.row::<AVX2>(r, &mut buf);
-            let zr = zr as usize * zcols;
-            let inside_row = (r0..r1).contains(&r);
-            for &(zc, a, b) in segs {
-                // Columns a..ia and ib..b are outside the calibrated area.
-                let (ia, ib) = if inside_row {
-                    let ia = a.max(c0).min(b);
-                    (ia, b.min(c1).max(ia))
-                } else {
-                    (b, b)
+    let n_in = (r1.min(rows.end)).saturating_sub(r0.max(rows.start)) * segs.len();
+    let mut zsum = vec![0f64; nz];
+    let mut inside_sum = 0.0f64;
+    let mut seg_sums = Vec::with_capacity(n_in);
+    let mut seg_extremes = Vec::with_capacity(n_in);
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for r in rows {
+        src.row::<AVX2>(r, &mut buf);
+        let zr = zone_of_row[r] as usize * zcols;
+        let inside_row = (r0..r1).contains(&r);
+        for &(zc, a, b) in segs {
+            // Columns a..ia and ib..b are outside the calibrated area.
+            let (ia, ib) = if inside_row {
+                let ia = a.max(c0).min(b);
+                (ia, b.min(c1).max(ia))
+            } else {
+                (b, b)
+            };
+            let acc = &mut zsum[zr + zc];
+            let (ins, ilo, ihi) = if exact {
+                let stats = |v: &[f32]| {
+                    #[cfg(target_arch = "x86_64")]
+                    if AVX2 {
+                        // SAFETY: AVX2 is true only in `pass_avx2`, which runs on CPUs
+                        // with AVX2.
+                        return unsafe { stats_avx2(v) };
+                    }
+                    stats_lanes(v)
                 };
-                let acc = &mut zsum[zr + zc];
-                let (ins, ilo, ihi) = if exact {
-                    let stats = |v: &[f32]| {
-                        #[cfg(target_arch = "x86_64")]
-                        if AVX2 {
-                            // SAFETY: AVX2 is true only in `field_sums_avx2`, which runs
-                            // on CPUs with AVX2.
-                            return unsafe { stats_avx2(v) };
-                        }
-                        stats_lanes(v)
-                    };
-                    // (Most rows lie inside the area, or outside it: skip empty parts.)
-                    let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
-                    let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
-                    let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
-                    let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
-                    *acc += sa + si + sb;
-                    inside_sum += si;
-                    lo = lo.min(la).min(li).min(lb);
-                    hi = hi.max(ha).max(hi_).max(hb);
-                    (si, li, hi_)
-                } else {
-                    let mut ins = 0.0;
-                    for &v in &buf[a..ia] {
-                        *acc += v as f64;
-                    }
-                    for &v in &buf[ia..ib] {
-                        *acc += v as f64;
-                        inside_sum += v as f64;
-                        ins += v as f64;
-                    }
-                    for &v in &buf[ib..b] {
-                        *acc += v as f64;
-                    }
-                    let (l, h) = min_max(&buf[ia..ib]);
-                    (ins, l, h)
-                };
-                if inside_row {
-                    seg_sums.push(ins);
-                    seg_extremes.push((ilo, ihi));
+                // (Most rows lie inside the area, or outside it: skip empty parts.)
+                let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
+                let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
+                let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
+                let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
+                *acc += sa + si + sb;
+                inside_sum += si;
+                lo = lo.min(la).min(li).min(lb);
+                hi = hi.max(ha).max(hi_).max(hb);
+                (si, li, hi_)
+            } else {
+                let mut ins = 0.0;
+                for &v in &buf[a..ia] {
+                    *acc += v as f64;
                 }
+                for &v in &buf[ia..ib] {
+                    *acc += v as f64;
+                    inside_sum += v as f64;
+                    ins += v as f64;
+                }
+                for &v in &buf[ib..b] {
+                    *acc += v as f64;
+                }
+                let (l, h) = min_max(&buf[ia..ib]);
+                (ins, l, h)
+            };
+            if inside_row {
+                seg_sums.push(ins);
+                seg_extremes.push((ilo, ihi));
             }
         }
-        if !exact
-            || (sums_are_exact(lo, hi, w * zone_of_row.len())
-                && inside_sum.is_finite()
-                && zsum.iter().all(|s| s.is_finite()))
-        {
-            return FieldSums {
-                zsum,
-                zcnt,
-                inside_sum,
-                seg_sums,
-                seg_extremes,
-            };
-        }
     }
-    unreachable!("the second pass returns")
+    Pass {
+        zsum,
+        inside_sum,
+        seg_sums,
+        seg_extremes,
+        lo,
+        hi,
+    }
 }
 
 /// The per-pixel spread over the calibrated area when the pixels of row r of zone column
@@ -513,6 +612,7 @@ fn pixel_spread(
 /// continuation from the polynomial's value and gradient at the nearest point of the
 /// rectangle, computed once per column for the rows above and below it, once per row
 /// for the columns left and right of it).
+#[derive(Clone)]
 struct FieldRows<'a> {
     fm: &'a FieldModel,
     h: usize,
@@ -565,7 +665,7 @@ impl<'a> FieldRows<'a> {
     }
 
     /// P at the pixel centres of image row `r` (row 0 = top) into `row` (`w` values).
-    /// `AVX2`: true only where the CPU has AVX2 (inlined into [`field_sums_avx2`]); the
+    /// `AVX2`: true only where the CPU has AVX2 (inlined into [`pass_avx2`]); the
     /// same values either way.
     #[inline(always)]
     fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
@@ -1969,7 +2069,8 @@ mod tests {
             let (zone_of_col, zone_of_row, zcols) = zone_geometry(&field, 5.0);
             let segs = zone_segments(&zone_of_col);
             let inside = [3, 55, 5, 71];
-            let mut results = vec![field_sums_in::<false>(
+            let mut results = vec![field_sums_with(
+                false,
                 &mut PSource::Rows(FieldRows::new(&fm, &field)),
                 w,
                 &segs,
