@@ -621,6 +621,8 @@ struct FieldRows<'a> {
     /// there.
     dx: Vec<f64>,
     u: Vec<f64>,
+    /// Whether every u is finite.
+    finite_u: bool,
     /// The columns inside the rectangle: one contiguous run [ua, ub).
     ua: usize,
     ub: usize,
@@ -657,6 +659,7 @@ impl<'a> FieldRows<'a> {
             h: field.height_px as usize,
             p,
             dx,
+            finite_u: u.iter().all(|x| x.is_finite()),
             u,
             ua,
             ub,
@@ -683,6 +686,7 @@ impl<'a> FieldRows<'a> {
         let (dx, u) = (&self.dx, &self.u);
         if yp == yc {
             let a = fm.coefficients.in_u(v);
+            let from_top = self.finite_u && a.last().is_some_and(|&c| c.is_finite() && c != 0.0);
             let seg = &mut row[ua..ub];
             let scf = fm.scale.get() as f32;
             // Separate passes: exp must not be evaluated (speculatively) for polynomials.
@@ -690,7 +694,7 @@ impl<'a> FieldRows<'a> {
                 #[cfg(target_arch = "x86_64")]
                 if AVX2 {
                     // SAFETY: AVX2 is true only where the CPU has AVX2.
-                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale) };
+                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale, from_top) };
                 }
                 horner_f32(seg, &u[ua..ub], &a, scale)
             };
@@ -784,14 +788,21 @@ fn horner_f32(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
 }
 
 /// [`horner_f32`] with AVX2 (four f64 lanes; the same multiplications and additions, not
-/// fused, and the same roundings to f32, so the same values).
+/// fused, and the same roundings to f32, so the same values). `from_top`: every u is
+/// finite and the highest coefficient finite and nonzero, so Horner's first step
+/// (0·u + a_n) gives a_n exactly and is left out.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
+fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32, from_top: bool) {
     use std::arch::x86_64::*;
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn run<const N: usize>(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) -> usize {
+    fn run<const N: usize, const TOP: bool>(
+        out: &mut [f32],
+        us: &[f64],
+        a: &[f64],
+        scale: f32,
+    ) -> usize {
         let mut k = [_mm256_setzero_pd(); super::field::MAX_DEGREE + 1];
         for (k, &c) in k.iter_mut().zip(a.iter().rev()) {
             *k = _mm256_set1_pd(c);
@@ -802,8 +813,12 @@ fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
         for (o, u) in out[..n].chunks_exact_mut(4).zip(us.chunks_exact(4)) {
             // SAFETY: `u` holds four f64.
             let u = unsafe { _mm256_loadu_pd(u.as_ptr()) };
-            let mut acc = _mm256_setzero_pd();
-            for &k in k {
+            let (mut acc, rest) = if TOP {
+                (k[0], &k[1..])
+            } else {
+                (_mm256_setzero_pd(), k)
+            };
+            for &k in rest {
                 acc = _mm256_add_pd(_mm256_mul_pd(acc, u), k);
             }
             let f = _mm_mul_ps(_mm256_cvtpd_ps(acc), sc);
@@ -813,10 +828,11 @@ fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
         n
     }
     // A cubic's four coefficients as a fixed count (unrolled).
-    let n = if a.len() == 4 {
-        run::<4>(out, us, a, scale)
-    } else {
-        run::<0>(out, us, a, scale)
+    let n = match (a.len() == 4, from_top && !a.is_empty()) {
+        (true, true) => run::<4, true>(out, us, a, scale),
+        (true, false) => run::<4, false>(out, us, a, scale),
+        (false, true) => run::<0, true>(out, us, a, scale),
+        (false, false) => run::<0, false>(out, us, a, scale),
     };
     horner_f32(&mut out[n..], &us[n..], a, scale);
 }
@@ -2008,6 +2024,34 @@ mod tests {
                 for (c, &v) in a.iter().enumerate() {
                     let want = p_reference(&fm, &field, r, c);
                     assert_eq!(v.to_bits(), want.to_bits(), "case {case} row {r} col {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn horner_avx2_from_the_top_equals_horner_from_zero() {
+        // Leaving out Horner's first step (0·u + a_n = a_n for finite u and a finite
+        // nonzero a_n) changes no bit; with a zero top coefficient the full rule runs.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let mut rnd = rng(0x5851_f42d_4c95_7f2d);
+            for case in 0..40 {
+                let n = 1 + case % 7;
+                let mut a: Vec<f64> = (0..n).map(|_| (rnd() - 0.5) * 3.0).collect();
+                if case % 5 == 4 {
+                    *a.last_mut().unwrap() = if case % 2 == 0 { 0.0 } else { -0.0 };
+                }
+                let us: Vec<f64> = (0..37).map(|_| (rnd() - 0.5) * 8.0).collect();
+                let top = a.last().is_some_and(|&c| c.is_finite() && c != 0.0);
+                let mut want = vec![0f32; us.len()];
+                horner_f32(&mut want, &us, &a, 0.7);
+                for from_top in [top, false] {
+                    let mut got = vec![0f32; us.len()];
+                    // SAFETY: the CPU has AVX2.
+                    unsafe { horner_avx2(&mut got, &us, &a, 0.7, from_top) };
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "case {case} from_top {from_top}");
                 }
             }
         }
