@@ -3,9 +3,8 @@
 //!
 //! One thread slices windows of 32 layers and hands each window to rayon's pool in blocks
 //! of 8 consecutive layers as soon as it is cut (no barrier between windows); at most 96
-//! layers wait for a worker, and a worker keeps only its current mask (plus, shared, the
-//! masks of the last few prism sections drawn: `SharedMade`), so memory does not grow
-//! with the number of layers. Every output byte depends only on the input and the
+//! layers wait for a worker, and a worker keeps only its current mask, so memory does not
+//! grow with the number of layers. Every output byte depends only on the input and the
 //! settings, never on the thread count or timing.
 
 use crate::bundle::{
