@@ -588,19 +588,27 @@ fn pixel_spread(
     [r0, r1, c0, c1]: [usize; 4],
     s_of: impl Fn(usize, usize) -> f64,
 ) -> f64 {
-    let mut sp = Spread::new();
-    let mut k = 0;
-    for r in r0..r1 {
-        for &(zc, a, b) in segs {
+    // The segments that reach into the area: (index in the row, zone column, pixels).
+    let cut: Vec<(usize, usize, usize)> = segs
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &(zc, a, b))| {
             let n = b.min(c1).saturating_sub(a.max(c0));
-            if n > 0 {
-                let s = s_of(r, zc);
-                let (lo, hi) = fs.seg_extremes[k];
-                sp.add_extremes(lo, hi, s);
-                sp.sum += fs.seg_sums[k] * s;
-                sp.n += n;
-            }
-            k += 1;
+            (n > 0).then_some((j, zc, n))
+        })
+        .collect();
+    let mut sp = Spread::new();
+    for (r, (sums, extremes)) in (r0..r1).zip(
+        fs.seg_sums
+            .chunks_exact(segs.len())
+            .zip(fs.seg_extremes.chunks_exact(segs.len())),
+    ) {
+        for &(j, zc, n) in &cut {
+            let s = s_of(r, zc);
+            let (lo, hi) = extremes[j];
+            sp.add_extremes(lo, hi, s);
+            sp.sum += sums[j] * s;
+            sp.n += n;
         }
     }
     sp.pct()
@@ -1048,13 +1056,14 @@ impl Compensator {
                     if tz >= 0.0 {
                         // Targets grow with v: walk the level thresholds upwards (the
                         // same levels as `nearest`'s search, in one pass per zone).
+                        let (mid, lut) = (&lv.mid[..], &mut luts[z]);
                         let mut i = 0;
-                        for (out, &c) in luts[z].iter_mut().zip(&coverage).skip(1) {
-                            let t = c * tz;
-                            while i < lv.mid.len() && lv.mid[i] <= t {
+                        for v in 1..256 {
+                            let t = coverage[v] * tz;
+                            while i < mid.len() && mid[i] <= t {
                                 i += 1;
                             }
-                            *out = lv.gray[i];
+                            lut[v] = lv.gray[i];
                         }
                     } else {
                         for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
