@@ -335,6 +335,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let binary = profile.slicing.binary;
     let mut slicer = slice::Slicer::new(&mesh, h, n);
     let scratch_pool = Mutex::new(Vec::new());
+    let shared_made = SharedMade::default();
+    // Reusing masks across blocks (SharedMade): one projector, no distortion correction.
+    let shared_made = (!tiled && correction.is_none()).then_some(&shared_made);
     // One slot per layer, filled by whichever worker makes it.
     let slots: Vec<OnceLock<LayerOut>> = (0..n).map(|_| OnceLock::new()).collect();
     let failure: Mutex<Option<Error>> = Mutex::new(None);
@@ -404,7 +407,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                                 profile,
                                 raster,
                                 scratch,
-                                (&mut analyser, &mut made),
+                                (&mut analyser, &mut made, shared_made),
                                 &layer,
                                 binary,
                                 tiled,
@@ -619,12 +622,66 @@ struct Made {
     /// Whether they were drawn from the section without collinear points (the layer was
     /// equal to the layer below).
     simplified: bool,
+    masks: Arc<MadeMasks>,
+}
+
+/// What drawing one section gave.
+struct MadeMasks {
     /// Whether drawing them reported the layer to the light compensation as reaching
     /// outside the calibrated area (a copy reports it again: every such layer counts).
     outside: bool,
     area_mm2: f64,
     /// PNG bytes, SHA-256 and projector of each mask.
     pngs: Vec<(Vec<u8>, String, u32)>,
+    /// The lit pixels (for the islands) when drawn from a simplified section, which
+    /// [`SharedMade`] may hand to another worker; empty otherwise.
+    runs: plan::analysis::LitRuns,
+}
+
+/// Entries of [`SharedMade`] at most (each holds one layer's PNG files and section).
+const SHARED_MADE: usize = 4;
+
+/// The masks recently drawn from simplified sections (layers equal to the layer below),
+/// shared by the workers: the first layer of a block, whose layer below another worker
+/// drew, reuses them when its simplified section is the same, bit for bit (prisms; within
+/// a block [`Made`] does this). The same section draws the same bytes, so a hit changes
+/// only the speed, never the output, whichever worker drew it first. Only for one
+/// projector without a distortion correction (where drawing a layer counts nothing but
+/// what [`MadeMasks`] replays); at most [`SHARED_MADE`] entries, the oldest dropped.
+#[derive(Default)]
+struct SharedMade(Mutex<Vec<(Vec<crate::slice::Contour>, Arc<MadeMasks>)>>);
+
+/// Whether two sections are the same, bit for bit (−0 ≠ +0, NaN = NaN).
+fn same_bits(a: &[crate::slice::Contour], b: &[crate::slice::Contour]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(p, q)| {
+            p.len() == q.len()
+                && p.iter().zip(q).all(|(u, v)| {
+                    u[0].to_bits() == v[0].to_bits() && u[1].to_bits() == v[1].to_bits()
+                })
+        })
+}
+
+impl SharedMade {
+    fn get(&self, section: &[crate::slice::Contour]) -> Option<Arc<MadeMasks>> {
+        let v = self.0.lock().ok()?;
+        v.iter()
+            .rev()
+            .find(|(s, _)| same_bits(s, section))
+            .map(|(_, m)| Arc::clone(m))
+    }
+
+    fn put(&self, section: &[crate::slice::Contour], masks: &Arc<MadeMasks>) {
+        if let Ok(mut v) = self.0.lock() {
+            if v.iter().any(|(s, _)| same_bits(s, section)) {
+                return;
+            }
+            if v.len() >= SHARED_MADE {
+                v.remove(0);
+            }
+            v.push((section.to_vec(), Arc::clone(masks)));
+        }
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -633,7 +690,11 @@ fn layer_masks(
     profile: &Profile,
     raster: &Rasterizer,
     scratch: &mut Scratch,
-    (analyser, made): (&mut plan::analysis::Analyser, &mut Option<Made>),
+    (analyser, made, shared): (
+        &mut plan::analysis::Analyser,
+        &mut Option<Made>,
+        Option<&SharedMade>,
+    ),
     layer: &LayerIn,
     binary: bool,
     tiled: bool,
@@ -662,9 +723,17 @@ fn layer_masks(
     let mut masks = Vec::with_capacity(profile.projector.len());
     let reusable = made
         .take()
-        .filter(|m| same && m.simplified && m.index + 1 == i);
+        .filter(|m| same && m.simplified && m.index + 1 == i)
+        .map(|m| m.masks);
+    // Drawn by this worker for the layer below: the analyser keeps that layer's lit pixels.
+    let from_below = reusable.is_some();
+    let reusable = reusable.or_else(|| {
+        let shared = shared.filter(|_| same)?;
+        shared.get(analyser.simplified_section())
+    });
     // The mask's lit pixels are the scratch's when it is drawn, the layer below's (which
-    // the analyser keeps) when its bytes serve again.
+    // the analyser keeps) when this worker's bytes serve again, and those kept with the
+    // shared masks when another worker drew them.
     let drawn = reusable.is_none();
     let area_mm2 = if let Some(m) = reusable {
         if m.outside {
@@ -682,8 +751,13 @@ fn layer_masks(
                 projector: *projector,
             });
         }
-        *made = Some(Made { index: i, ..m });
-        m.area_mm2
+        let area_mm2 = m.area_mm2;
+        *made = Some(Made {
+            index: i,
+            simplified: true,
+            masks: m,
+        });
+        area_mm2
     } else {
         let section: &[crate::slice::Contour] = if same {
             analyser.simplified_section()
@@ -730,17 +804,34 @@ fn layer_masks(
             pngs.push((png, sha, k as u32));
         }
         scratch.recycle(field_mask);
-        *made = Some(Made {
-            index: i,
-            simplified: same,
+        let masks = Arc::new(MadeMasks {
             outside,
             area_mm2,
             pngs,
+            runs: if same && shared.is_some() {
+                scratch.lit_runs.clone()
+            } else {
+                plan::analysis::LitRuns::default()
+            },
+        });
+        if let Some(shared) = shared.filter(|_| same) {
+            shared.put(section, &masks);
+        }
+        *made = Some(Made {
+            index: i,
+            simplified: same,
+            masks,
         });
         area_mm2
     };
     let ta = ThreadClock::start();
-    let lit = drawn.then_some(&scratch.lit_runs);
+    let lit = if drawn {
+        Some(&scratch.lit_runs)
+    } else if from_below {
+        None
+    } else {
+        made.as_ref().map(|m| &m.masks.runs)
+    };
     let analysis = analyser.analyse_or_defer(i, &layer.section.contours, lit, below);
     let runs = matches!(analysis, plan::analysis::Analysed::NeedsBelow(_))
         .then(|| scratch.lit_runs.clone());
@@ -817,6 +908,67 @@ mod clock_tests {
         if cfg!(unix) {
             // A sleeping thread uses (almost) no CPU.
             assert!(slept < 0.03, "{slept}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod shared_made_tests {
+    use super::{same_bits, MadeMasks, SharedMade, SHARED_MADE};
+    use std::sync::Arc;
+
+    fn masks(tag: u8) -> Arc<MadeMasks> {
+        Arc::new(MadeMasks {
+            outside: tag % 2 == 1,
+            area_mm2: tag as f64,
+            pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0)],
+            runs: Default::default(),
+        })
+    }
+
+    fn square(x: f64) -> Vec<Vec<[f64; 2]>> {
+        vec![vec![[x, 0.0], [x + 1.0, 0.0], [x + 1.0, 1.0], [x, 1.0]]]
+    }
+
+    #[test]
+    fn sections_compare_bit_for_bit() {
+        assert!(same_bits(&square(1.0), &square(1.0)));
+        assert!(!same_bits(&square(1.0), &square(1.0 + 1e-15)));
+        // −0 and +0 are equal numbers but not the same section (their masks could differ
+        // in principle; a hit must never change a byte).
+        assert!(!same_bits(&square(0.0), &square(-0.0)));
+        let nan = vec![vec![[f64::NAN, 0.0]]];
+        assert!(same_bits(&nan, &nan));
+        // Contour count and lengths.
+        let mut two = square(1.0);
+        two.push(vec![[5.0, 5.0]]);
+        assert!(!same_bits(&square(1.0), &two));
+        let mut short = square(1.0);
+        short[0].pop();
+        assert!(!same_bits(&square(1.0), &short));
+        assert!(same_bits(&[], &[]));
+    }
+
+    #[test]
+    fn finds_the_same_section_keeps_a_few_and_drops_the_oldest() {
+        let cache = SharedMade::default();
+        assert!(cache.get(&square(0.0)).is_none());
+        cache.put(&square(0.0), &masks(0));
+        let got = cache.get(&square(0.0)).expect("hit");
+        assert_eq!((got.area_mm2, got.outside), (0.0, false));
+        assert!(cache.get(&square(0.5)).is_none());
+        // A second put of the same section keeps the first entry (same bytes anyway).
+        cache.put(&square(0.0), &masks(9));
+        assert_eq!(cache.get(&square(0.0)).unwrap().area_mm2, 0.0);
+        for k in 1..=SHARED_MADE as u8 {
+            cache.put(&square(k as f64), &masks(k));
+        }
+        assert_eq!(cache.0.lock().unwrap().len(), SHARED_MADE);
+        assert!(cache.get(&square(0.0)).is_none(), "the oldest is dropped");
+        for k in 1..=SHARED_MADE as u8 {
+            let m = cache.get(&square(k as f64)).expect("kept");
+            assert_eq!(m.pngs[0].0, vec![k; 3]);
+            assert_eq!(m.outside, k % 2 == 1);
         }
     }
 }

@@ -239,8 +239,8 @@ impl Rasterizer {
         }
         let words = stride.div_ceil(BLOCK).div_ceil(64);
         if scratch.acc.len() != stride * h {
-            scratch.acc = vec![0.0; stride * h];
-            scratch.touched = vec![0; words * h];
+            scratch.acc = zeroed_by_writes(stride * h);
+            scratch.touched = zeroed_by_writes(words * h);
         }
         let acc = &mut Accum {
             cells: &mut scratch.acc,
@@ -713,6 +713,22 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     (lit_sum, max_winding)
 }
 
+/// A zeroed buffer whose pages are first touched by writes. A fresh zeroed allocation is
+/// mapped lazily: reading a page first maps the shared zero page, and the write that
+/// follows must copy it and flush the other CPUs' TLBs (an inter-processor interrupt per
+/// page, costly in a VM) — what the accumulation's `+=` and the block marks' `|=` would
+/// do on their first pass. Written first, each page costs one plain fault.
+fn zeroed_by_writes<T: Copy + Default>(n: usize) -> Vec<T> {
+    let mut v = vec![T::default(); n];
+    let step = (4096 / std::mem::size_of::<T>().max(1)).max(1);
+    for i in (0..n).step_by(step) {
+        // SAFETY: i < n = v.len(); volatile, so the store of a value the allocation
+        // already holds is not left out.
+        unsafe { std::ptr::write_volatile(v.as_mut_ptr().add(i), T::default()) };
+    }
+    v
+}
+
 /// Bit i set where `cells[i]` (at most [`BLOCK`] cells) is nonzero. A whole block is one
 /// branch-free pass the compiler vectorizes.
 #[inline(always)]
@@ -919,6 +935,17 @@ pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zeroed_by_writes_is_zeroed() {
+        for n in [0, 1, 1023, 1024, 1025, 5000] {
+            let a: Vec<f32> = zeroed_by_writes(n);
+            assert_eq!(a.len(), n);
+            assert!(a.iter().all(|&v| v.to_bits() == 0));
+            let b: Vec<u64> = zeroed_by_writes(n);
+            assert!(b.len() == n && b.iter().all(|&v| v == 0));
+        }
+    }
 
     #[test]
     fn floor_and_ceil_of_non_negative_floats() {

@@ -248,17 +248,18 @@ fn stats_lanes(vals: &[f32]) -> (f64, f32, f32) {
     finish_stats(&acc, &lo, &hi, chunks.remainder())
 }
 
-/// [`stats_lanes`] with AVX2 (eight lanes): the same sum when it is exact, the same
-/// extremes (VMINPS/VMAXPS compare like the plain comparisons).
+/// [`stats_lanes`] with AVX2 (eight lanes, the last ones masked): the same sum when it is
+/// exact, the same extremes (VMINPS/VMAXPS compare like the plain comparisons).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn stats_avx2(vals: &[f32]) -> (f64, f32, f32) {
     use std::arch::x86_64::*;
     let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
-    let (mut lo, mut hi) = (
+    let (inf, ninf) = (
         _mm256_set1_ps(f32::INFINITY),
         _mm256_set1_ps(f32::NEG_INFINITY),
     );
+    let (mut lo, mut hi) = (inf, ninf);
     let mut chunks = vals.chunks_exact(8);
     for c in &mut chunks {
         // SAFETY: `c` holds eight f32.
@@ -269,15 +270,33 @@ fn stats_avx2(vals: &[f32]) -> (f64, f32, f32) {
         lo = _mm256_min_ps(v, lo);
         hi = _mm256_max_ps(v, hi);
     }
-    let (mut acc, mut l, mut h) = ([0f64; 8], [0f32; 8], [0f32; 8]);
-    // SAFETY: the arrays hold 4 + 4 f64 and 8 f32.
-    unsafe {
-        _mm256_storeu_pd(acc.as_mut_ptr(), s0);
-        _mm256_storeu_pd(acc.as_mut_ptr().add(4), s1);
-        _mm256_storeu_ps(l.as_mut_ptr(), lo);
-        _mm256_storeu_ps(h.as_mut_ptr(), hi);
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        // The last 1 to 7 values: the other lanes load +0 (adding nothing to the sums)
+        // and take ±∞ for the extremes.
+        let mask = _mm256_cmpgt_epi32(
+            _mm256_set1_epi32(rest.len() as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        // SAFETY: only the lanes of `mask` (the first `rest.len()`) are read.
+        let v = unsafe { _mm256_maskload_ps(rest.as_ptr(), mask) };
+        s0 = _mm256_add_pd(s0, _mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+        s1 = _mm256_add_pd(s1, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)));
+        let m = _mm256_castsi256_ps(mask);
+        lo = _mm256_min_ps(_mm256_blendv_ps(inf, v, m), lo);
+        hi = _mm256_max_ps(_mm256_blendv_ps(ninf, v, m), hi);
     }
-    finish_stats(&acc, &l, &h, chunks.remainder())
+    // Horizontal: lanes 0–3 with 4–7, then pairs, then the last two.
+    let s = _mm256_add_pd(s0, s1);
+    let s = _mm_add_pd(_mm256_castpd256_pd128(s), _mm256_extractf128_pd::<1>(s));
+    let sum = _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)));
+    let l = _mm_min_ps(_mm256_castps256_ps128(lo), _mm256_extractf128_ps::<1>(lo));
+    let l = _mm_min_ps(l, _mm_movehl_ps(l, l));
+    let l = _mm_cvtss_f32(_mm_min_ss(l, _mm_shuffle_ps::<1>(l, l)));
+    let h = _mm_max_ps(_mm256_castps256_ps128(hi), _mm256_extractf128_ps::<1>(hi));
+    let h = _mm_max_ps(h, _mm_movehl_ps(h, h));
+    let h = _mm_cvtss_f32(_mm_max_ss(h, _mm_shuffle_ps::<1>(h, h)));
+    (sum, l, h)
 }
 
 /// Combines the lanes of [`stats_lanes`] and adds the values left over.
@@ -327,6 +346,14 @@ enum PSource<'a> {
 }
 
 impl PSource<'_> {
+    /// Another source of the same values, for a pass over other rows.
+    fn split(&self) -> Self {
+        match self {
+            PSource::Rows(rows) => PSource::Rows(rows.clone()),
+            PSource::Field(pp) => PSource::Field(pp),
+        }
+    }
+
     /// P at the pixel centres of image row `r` into `row` (`AVX2`: see [`FieldRows::row`]).
     #[inline(always)]
     fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
@@ -337,8 +364,7 @@ impl PSource<'_> {
     }
 }
 
-/// [`field_sums_in`], with AVX2 when the CPU has it: the same operations on wider
-/// vectors (no fused multiply-add), so the same bits.
+/// [`field_sums_with`], with AVX2 when the CPU has it.
 fn field_sums(
     src: &mut PSource,
     w: usize,
@@ -348,45 +374,32 @@ fn field_sums(
     inside: [usize; 4],
 ) -> FieldSums {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2.
-        return unsafe { field_sums_avx2(src, w, segs, zone_of_row, zcols, inside) };
-    }
-    field_sums_in::<false>(src, w, segs, zone_of_row, zcols, inside)
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx2 = false;
+    field_sums_with(avx2, src, w, segs, zone_of_row, zcols, inside)
 }
 
-/// [`field_sums_in`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn field_sums_avx2(
+/// The set-up's pass over P (rows from `src`): the sum of P over every zone and over the
+/// calibrated area `inside` = [r0, r1, c0, c1) (half-open), and per row and zone segment
+/// of that area the sum and extremes of P (for the per-pixel spreads).
+///
+/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
+/// checked on the field's extremes: true for any real calibration) the order of the
+/// additions does not matter (the zone sums are those of adding the values one by one in
+/// row-major order, bit for bit): the top and bottom halves of the field are then summed
+/// side by side (rayon) and their sums added, the values four or eight at a time;
+/// otherwise a second pass adds them one by one in row-major order. `avx2` (only where
+/// the CPU has it): the same operations on wider vectors (no fused multiply-add), so the
+/// same bits.
+fn field_sums_with(
+    avx2: bool,
     src: &mut PSource,
     w: usize,
     segs: &[(usize, usize, usize)],
     zone_of_row: &[u16],
     zcols: usize,
     inside: [usize; 4],
-) -> FieldSums {
-    field_sums_in::<true>(src, w, segs, zone_of_row, zcols, inside)
-}
-
-/// The set-up's one pass over P (rows from `src`): the sum of P over every zone and
-/// over the calibrated area `inside` = [r0, r1, c0, c1) (half-open), and per row and zone
-/// segment of that area the sum and extremes of P (for the per-pixel spreads).
-///
-/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
-/// checked on the field's extremes: true for any real calibration) the order of the
-/// additions does not matter (the zone sums are those of adding the values one by one in
-/// row-major order, bit for bit) and the values are added four at a time; otherwise a
-/// second pass adds them one by one in row-major order.
-/// `AVX2`: true only when called from [`field_sums_avx2`].
-#[inline(always)]
-fn field_sums_in<const AVX2: bool>(
-    src: &mut PSource,
-    w: usize,
-    segs: &[(usize, usize, usize)],
-    zone_of_row: &[u16],
-    zcols: usize,
-    [r0, r1, c0, c1]: [usize; 4],
 ) -> FieldSums {
     let nz = zone_of_row
         .iter()
@@ -400,84 +413,170 @@ fn field_sums_in<const AVX2: bool>(
             zcnt[zr as usize * zcols + zc] += b - a;
         }
     }
+    let h = zone_of_row.len();
+    let geo = PassGeometry {
+        w,
+        segs,
+        zone_of_row,
+        zcols,
+        inside,
+        nz,
+    };
+    let run = |src: &mut PSource, rows: std::ops::Range<usize>, exact: bool| {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is true only where the CPU has AVX2.
+            return unsafe { pass_avx2(src, &geo, rows, exact) };
+        }
+        pass_in::<false>(src, &geo, rows, exact)
+    };
+    let mid = h / 2;
+    let mut other = src.split();
+    let (top, bottom) = rayon::join(|| run(src, 0..mid, true), || run(&mut other, mid..h, true));
+    let mut p = top;
+    for (a, b) in p.zsum.iter_mut().zip(&bottom.zsum) {
+        *a += b;
+    }
+    p.inside_sum += bottom.inside_sum;
+    p.seg_sums.extend_from_slice(&bottom.seg_sums);
+    p.seg_extremes.extend_from_slice(&bottom.seg_extremes);
+    let (lo, hi) = (p.lo.min(bottom.lo), p.hi.max(bottom.hi));
+    let exact = sums_are_exact(lo, hi, w * h)
+        && p.inside_sum.is_finite()
+        && p.zsum.iter().all(|s| s.is_finite());
+    if !exact {
+        p = run(src, 0..h, false);
+    }
+    FieldSums {
+        zsum: p.zsum,
+        zcnt,
+        inside_sum: p.inside_sum,
+        seg_sums: p.seg_sums,
+        seg_extremes: p.seg_extremes,
+    }
+}
+
+/// What a pass over rows of the field works on ([`field_sums_with`]).
+struct PassGeometry<'a> {
+    w: usize,
+    segs: &'a [(usize, usize, usize)],
+    zone_of_row: &'a [u16],
+    zcols: usize,
+    inside: [usize; 4],
+    nz: usize,
+}
+
+/// The sums and extremes of a pass over some rows ([`pass_in`]).
+struct Pass {
+    zsum: Vec<f64>,
+    inside_sum: f64,
+    seg_sums: Vec<f64>,
+    seg_extremes: Vec<(f32, f32)>,
+    /// Smallest and largest P of those rows (exact passes only).
+    lo: f32,
+    hi: f32,
+}
+
+/// [`pass_in`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn pass_avx2(
+    src: &mut PSource,
+    geo: &PassGeometry,
+    rows: std::ops::Range<usize>,
+    exact: bool,
+) -> Pass {
+    pass_in::<true>(src, geo, rows, exact)
+}
+
+/// One pass over image rows `rows` of P (see [`field_sums_with`]): `exact`: each row
+/// segment's values summed four or eight at a time (exact sums only), otherwise one by
+/// one in row-major order. `AVX2`: true only when called from [`pass_avx2`].
+#[inline(always)]
+fn pass_in<const AVX2: bool>(
+    src: &mut PSource,
+    geo: &PassGeometry,
+    rows: std::ops::Range<usize>,
+    exact: bool,
+) -> Pass {
+    let &PassGeometry {
+        w,
+        segs,
+        zone_of_row,
+        zcols,
+        inside: [r0, r1, c0, c1],
+        nz,
+    } = geo;
     let mut buf = vec![0f32; w];
-    let n_in = r1.saturating_sub(r0) * segs.len();
-    for exact in [true, false] {
-        let mut zsum = vec![0f64; nz];
-        let mut inside_sum = 0.0f64;
-        let mut seg_sums = Vec::with_capacity(n_in);
-        let mut seg_extremes = Vec::with_capacity(n_in);
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (r, &zr) in zone_of_row.iter().enumerate() {
-            src.row::<AVX2>(r, &mut buf);
-            let zr = zr as usize * zcols;
-            let inside_row = (r0..r1).contains(&r);
-            for &(zc, a, b) in segs {
-                // Columns a..ia and ib..b are outside the calibrated area.
-                let (ia, ib) = if inside_row {
-                    let ia = a.max(c0).min(b);
-                    (ia, b.min(c1).max(ia))
-                } else {
-                    (b, b)
+    let n_in = (r1.min(rows.end)).saturating_sub(r0.max(rows.start)) * segs.len();
+    let mut zsum = vec![0f64; nz];
+    let mut inside_sum = 0.0f64;
+    let mut seg_sums = Vec::with_capacity(n_in);
+    let mut seg_extremes = Vec::with_capacity(n_in);
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for r in rows {
+        src.row::<AVX2>(r, &mut buf);
+        let zr = zone_of_row[r] as usize * zcols;
+        let inside_row = (r0..r1).contains(&r);
+        for &(zc, a, b) in segs {
+            // Columns a..ia and ib..b are outside the calibrated area.
+            let (ia, ib) = if inside_row {
+                let ia = a.max(c0).min(b);
+                (ia, b.min(c1).max(ia))
+            } else {
+                (b, b)
+            };
+            let acc = &mut zsum[zr + zc];
+            let (ins, ilo, ihi) = if exact {
+                let stats = |v: &[f32]| {
+                    #[cfg(target_arch = "x86_64")]
+                    if AVX2 {
+                        // SAFETY: AVX2 is true only in `pass_avx2`, which runs on CPUs
+                        // with AVX2.
+                        return unsafe { stats_avx2(v) };
+                    }
+                    stats_lanes(v)
                 };
-                let acc = &mut zsum[zr + zc];
-                let (ins, ilo, ihi) = if exact {
-                    let stats = |v: &[f32]| {
-                        #[cfg(target_arch = "x86_64")]
-                        if AVX2 {
-                            // SAFETY: AVX2 is true only in `field_sums_avx2`, which runs
-                            // on CPUs with AVX2.
-                            return unsafe { stats_avx2(v) };
-                        }
-                        stats_lanes(v)
-                    };
-                    // (Most rows lie inside the area, or outside it: skip empty parts.)
-                    let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
-                    let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
-                    let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
-                    let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
-                    *acc += sa + si + sb;
-                    inside_sum += si;
-                    lo = lo.min(la).min(li).min(lb);
-                    hi = hi.max(ha).max(hi_).max(hb);
-                    (si, li, hi_)
-                } else {
-                    let mut ins = 0.0;
-                    for &v in &buf[a..ia] {
-                        *acc += v as f64;
-                    }
-                    for &v in &buf[ia..ib] {
-                        *acc += v as f64;
-                        inside_sum += v as f64;
-                        ins += v as f64;
-                    }
-                    for &v in &buf[ib..b] {
-                        *acc += v as f64;
-                    }
-                    let (l, h) = min_max(&buf[ia..ib]);
-                    (ins, l, h)
-                };
-                if inside_row {
-                    seg_sums.push(ins);
-                    seg_extremes.push((ilo, ihi));
+                // (Most rows lie inside the area, or outside it: skip empty parts.)
+                let none = (0.0, f32::INFINITY, f32::NEG_INFINITY);
+                let (sa, la, ha) = if a < ia { stats(&buf[a..ia]) } else { none };
+                let (si, li, hi_) = if ia < ib { stats(&buf[ia..ib]) } else { none };
+                let (sb, lb, hb) = if ib < b { stats(&buf[ib..b]) } else { none };
+                *acc += sa + si + sb;
+                inside_sum += si;
+                lo = lo.min(la).min(li).min(lb);
+                hi = hi.max(ha).max(hi_).max(hb);
+                (si, li, hi_)
+            } else {
+                let mut ins = 0.0;
+                for &v in &buf[a..ia] {
+                    *acc += v as f64;
                 }
+                for &v in &buf[ia..ib] {
+                    *acc += v as f64;
+                    inside_sum += v as f64;
+                    ins += v as f64;
+                }
+                for &v in &buf[ib..b] {
+                    *acc += v as f64;
+                }
+                let (l, h) = min_max(&buf[ia..ib]);
+                (ins, l, h)
+            };
+            if inside_row {
+                seg_sums.push(ins);
+                seg_extremes.push((ilo, ihi));
             }
         }
-        if !exact
-            || (sums_are_exact(lo, hi, w * zone_of_row.len())
-                && inside_sum.is_finite()
-                && zsum.iter().all(|s| s.is_finite()))
-        {
-            return FieldSums {
-                zsum,
-                zcnt,
-                inside_sum,
-                seg_sums,
-                seg_extremes,
-            };
-        }
     }
-    unreachable!("the second pass returns")
+    Pass {
+        zsum,
+        inside_sum,
+        seg_sums,
+        seg_extremes,
+        lo,
+        hi,
+    }
 }
 
 /// The per-pixel spread over the calibrated area when the pixels of row r of zone column
@@ -489,19 +588,27 @@ fn pixel_spread(
     [r0, r1, c0, c1]: [usize; 4],
     s_of: impl Fn(usize, usize) -> f64,
 ) -> f64 {
-    let mut sp = Spread::new();
-    let mut k = 0;
-    for r in r0..r1 {
-        for &(zc, a, b) in segs {
+    // The segments that reach into the area: (index in the row, zone column, pixels).
+    let cut: Vec<(usize, usize, usize)> = segs
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &(zc, a, b))| {
             let n = b.min(c1).saturating_sub(a.max(c0));
-            if n > 0 {
-                let s = s_of(r, zc);
-                let (lo, hi) = fs.seg_extremes[k];
-                sp.add_extremes(lo, hi, s);
-                sp.sum += fs.seg_sums[k] * s;
-                sp.n += n;
-            }
-            k += 1;
+            (n > 0).then_some((j, zc, n))
+        })
+        .collect();
+    let mut sp = Spread::new();
+    for (r, (sums, extremes)) in (r0..r1).zip(
+        fs.seg_sums
+            .chunks_exact(segs.len())
+            .zip(fs.seg_extremes.chunks_exact(segs.len())),
+    ) {
+        for &(j, zc, n) in &cut {
+            let s = s_of(r, zc);
+            let (lo, hi) = extremes[j];
+            sp.add_extremes(lo, hi, s);
+            sp.sum += sums[j] * s;
+            sp.n += n;
         }
     }
     sp.pct()
@@ -536,6 +643,7 @@ fn zone_geometry(field: &Field, zmm: f64) -> (Vec<u16>, Vec<u16>, usize, usize) 
 /// continuation from the polynomial's value and gradient at the nearest point of the
 /// rectangle, computed once per column for the rows above and below it, once per row
 /// for the columns left and right of it).
+#[derive(Clone)]
 struct FieldRows<'a> {
     fm: &'a FieldModel,
     h: usize,
@@ -544,6 +652,8 @@ struct FieldRows<'a> {
     /// there.
     dx: Vec<f64>,
     u: Vec<f64>,
+    /// Whether every u is finite.
+    finite_u: bool,
     /// The columns inside the rectangle: one contiguous run [ua, ub).
     ua: usize,
     ub: usize,
@@ -580,6 +690,7 @@ impl<'a> FieldRows<'a> {
             h: field.height_px as usize,
             p,
             dx,
+            finite_u: u.iter().all(|x| x.is_finite()),
             u,
             ua,
             ub,
@@ -588,7 +699,7 @@ impl<'a> FieldRows<'a> {
     }
 
     /// P at the pixel centres of image row `r` (row 0 = top) into `row` (`w` values).
-    /// `AVX2`: true only where the CPU has AVX2 (inlined into [`field_sums_avx2`]); the
+    /// `AVX2`: true only where the CPU has AVX2 (inlined into [`pass_avx2`]); the
     /// same values either way.
     #[inline(always)]
     fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
@@ -606,6 +717,7 @@ impl<'a> FieldRows<'a> {
         let (dx, u) = (&self.dx, &self.u);
         if yp == yc {
             let a = fm.coefficients.in_u(v);
+            let from_top = self.finite_u && a.last().is_some_and(|&c| c.is_finite() && c != 0.0);
             let seg = &mut row[ua..ub];
             let scf = fm.scale.get() as f32;
             // Separate passes: exp must not be evaluated (speculatively) for polynomials.
@@ -613,7 +725,7 @@ impl<'a> FieldRows<'a> {
                 #[cfg(target_arch = "x86_64")]
                 if AVX2 {
                     // SAFETY: AVX2 is true only where the CPU has AVX2.
-                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale) };
+                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale, from_top) };
                 }
                 horner_f32(seg, &u[ua..ub], &a, scale)
             };
@@ -652,8 +764,18 @@ impl<'a> FieldRows<'a> {
                     })
                     .collect();
             }
-            for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
-                *o = fm.continued(g, d, dy) as f32;
+            if fm.form == Form::Polynomial {
+                // `continued` written out (the same operations; a loop the compiler
+                // vectorizes): scale · max(f + (fu·dx + fv·dy)·s, f/10).
+                let scale = fm.scale.get();
+                for ((o, &[f, fu, fv]), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                    let lin = f + (fu * d + fv * dy) * s;
+                    *o = (scale * lin.max(0.1 * f)) as f32;
+                }
+            } else {
+                for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                    *o = fm.continued(g, d, dy) as f32;
+                }
             }
         }
     }
@@ -697,14 +819,21 @@ fn horner_f32(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
 }
 
 /// [`horner_f32`] with AVX2 (four f64 lanes; the same multiplications and additions, not
-/// fused, and the same roundings to f32, so the same values).
+/// fused, and the same roundings to f32, so the same values). `from_top`: every u is
+/// finite and the highest coefficient finite and nonzero, so Horner's first step
+/// (0·u + a_n) gives a_n exactly and is left out.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
+fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32, from_top: bool) {
     use std::arch::x86_64::*;
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn run<const N: usize>(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) -> usize {
+    fn run<const N: usize, const TOP: bool>(
+        out: &mut [f32],
+        us: &[f64],
+        a: &[f64],
+        scale: f32,
+    ) -> usize {
         let mut k = [_mm256_setzero_pd(); super::field::MAX_DEGREE + 1];
         for (k, &c) in k.iter_mut().zip(a.iter().rev()) {
             *k = _mm256_set1_pd(c);
@@ -715,8 +844,12 @@ fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
         for (o, u) in out[..n].chunks_exact_mut(4).zip(us.chunks_exact(4)) {
             // SAFETY: `u` holds four f64.
             let u = unsafe { _mm256_loadu_pd(u.as_ptr()) };
-            let mut acc = _mm256_setzero_pd();
-            for &k in k {
+            let (mut acc, rest) = if TOP {
+                (k[0], &k[1..])
+            } else {
+                (_mm256_setzero_pd(), k)
+            };
+            for &k in rest {
                 acc = _mm256_add_pd(_mm256_mul_pd(acc, u), k);
             }
             let f = _mm_mul_ps(_mm256_cvtpd_ps(acc), sc);
@@ -726,10 +859,11 @@ fn horner_avx2(out: &mut [f32], us: &[f64], a: &[f64], scale: f32) {
         n
     }
     // A cubic's four coefficients as a fixed count (unrolled).
-    let n = if a.len() == 4 {
-        run::<4>(out, us, a, scale)
-    } else {
-        run::<0>(out, us, a, scale)
+    let n = match (a.len() == 4, from_top && !a.is_empty()) {
+        (true, true) => run::<4, true>(out, us, a, scale),
+        (true, false) => run::<4, false>(out, us, a, scale),
+        (false, true) => run::<0, true>(out, us, a, scale),
+        (false, false) => run::<0, false>(out, us, a, scale),
     };
     horner_f32(&mut out[n..], &us[n..], a, scale);
 }
@@ -920,6 +1054,8 @@ impl Compensator {
                 let mut mixed = 0u64;
                 let mut unreachable = 0;
                 let mut luts = vec![[0u8; 256]; nz];
+                // v / 255 for each coverage value v.
+                let coverage: [f64; 256] = std::array::from_fn(|v| v as f64 / 255.0);
                 let mut mix = vec![(0u8, 0u8, 0u8); nz];
                 let mut zone_after = vec![0.0; nz];
                 for z in 0..nz {
@@ -931,13 +1067,14 @@ impl Compensator {
                     if tz >= 0.0 {
                         // Targets grow with v: walk the level thresholds upwards (the
                         // same levels as `nearest`'s search, in one pass per zone).
+                        let (mid, lut) = (&lv.mid[..], &mut luts[z]);
                         let mut i = 0;
-                        for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
-                            let t = v as f64 / 255.0 * tz;
-                            while i < lv.mid.len() && lv.mid[i] <= t {
+                        for v in 1..256 {
+                            let t = coverage[v] * tz;
+                            while i < mid.len() && mid[i] <= t {
                                 i += 1;
                             }
-                            *out = lv.gray[i];
+                            lut[v] = lv.gray[i];
                         }
                     } else {
                         for (v, out) in luts[z].iter_mut().enumerate().skip(1) {
@@ -995,36 +1132,55 @@ impl Compensator {
                     }
                 }
                 let zone_of_row = &comp.zone_of_row;
-                let row_tables: Vec<u32> = (0..h)
-                    .flat_map(|r| {
-                        let zr = zone_of_row[r] as usize * zcols;
-                        let mix = &mix;
-                        let upper_idx = &upper_idx;
-                        (0..zcols).map(move |zc| {
-                            let z = zr + zc;
-                            if upper_row(r, mix[z].2) {
-                                upper_idx[z]
-                            } else {
-                                z as u32
-                            }
-                        })
-                    })
-                    .collect();
+                let mut row_tables: Vec<u32> = Vec::with_capacity(h * zcols);
+                for (r, &zr) in zone_of_row.iter().enumerate() {
+                    let zr = zr as usize * zcols;
+                    for (z, (&(_, _, k), &u)) in
+                        (zr..).zip(mix[zr..zr + zcols].iter().zip(&upper_idx[zr..zr + zcols]))
+                    {
+                        row_tables.push(if upper_row(r, k) { u } else { z as u32 });
+                    }
+                }
                 // The full-coverage gray of every pixel: rows with the same tables have the
-                // same grays.
-                let mut distinct: std::collections::HashMap<&[u32], u32> =
-                    std::collections::HashMap::new();
+                // same grays. Tables belong to one zone, so only rows of the same zone row
+                // can be the same, and there rows with the same r mod 64 are (`upper_row`):
+                // a row new in its phase is looked for among the distinct rows of its zone
+                // row; distinct rows are numbered in order of appearance.
                 let mut gray_rows = Vec::new();
-                let mut gray_row_of = Vec::with_capacity(h);
-                for tabs in row_tables.chunks_exact(zcols) {
-                    let next = distinct.len() as u32;
-                    let k = *distinct.entry(tabs).or_insert_with(|| {
-                        for &(zc, a, b) in &segs {
-                            gray_rows
-                                .resize(gray_rows.len() + b - a, tables[tabs[zc] as usize][255]);
+                let mut gray_row_of: Vec<u32> = Vec::with_capacity(h);
+                // Distinct rows so far (index, first image row) of the current zone row,
+                // and the index of each phase seen there.
+                let mut in_zone_row: Vec<(u32, usize)> = Vec::new();
+                let mut by_phase = [u32::MAX; 64];
+                let mut next = 0u32;
+                for r in 0..h {
+                    if r > 0 && zone_of_row[r] != zone_of_row[r - 1] {
+                        in_zone_row.clear();
+                        by_phase = [u32::MAX; 64];
+                    }
+                    if by_phase[r & 63] != u32::MAX {
+                        gray_row_of.push(by_phase[r & 63]);
+                        continue;
+                    }
+                    let tabs = &row_tables[r * zcols..(r + 1) * zcols];
+                    let found = in_zone_row
+                        .iter()
+                        .find(|&&(_, r0)| &row_tables[r0 * zcols..(r0 + 1) * zcols] == tabs);
+                    let k = match found {
+                        Some(&(k, _)) => k,
+                        None => {
+                            for &(zc, a, b) in &segs {
+                                gray_rows.resize(
+                                    gray_rows.len() + b - a,
+                                    tables[tabs[zc] as usize][255],
+                                );
+                            }
+                            in_zone_row.push((next, r));
+                            next += 1;
+                            next - 1
                         }
-                        next
-                    });
+                    };
+                    by_phase[r & 63] = k;
                     gray_row_of.push(k);
                 }
                 comp.gray_rows = gray_rows;
@@ -1893,6 +2049,34 @@ mod tests {
         }
     }
 
+    #[test]
+    fn horner_avx2_from_the_top_equals_horner_from_zero() {
+        // Leaving out Horner's first step (0·u + a_n = a_n for finite u and a finite
+        // nonzero a_n) changes no bit; with a zero top coefficient the full rule runs.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let mut rnd = rng(0x5851_f42d_4c95_7f2d);
+            for case in 0..40 {
+                let n = 1 + case % 7;
+                let mut a: Vec<f64> = (0..n).map(|_| (rnd() - 0.5) * 3.0).collect();
+                if case % 5 == 4 {
+                    *a.last_mut().unwrap() = if case % 2 == 0 { 0.0 } else { -0.0 };
+                }
+                let us: Vec<f64> = (0..37).map(|_| (rnd() - 0.5) * 8.0).collect();
+                let top = a.last().is_some_and(|&c| c.is_finite() && c != 0.0);
+                let mut want = vec![0f32; us.len()];
+                horner_f32(&mut want, &us, &a, 0.7);
+                for from_top in [top, false] {
+                    let mut got = vec![0f32; us.len()];
+                    // SAFETY: the CPU has AVX2.
+                    unsafe { horner_avx2(&mut got, &us, &a, 0.7, from_top) };
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&got), bits(&want), "case {case} from_top {from_top}");
+                }
+            }
+        }
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn avx2_row(rows: &mut FieldRows, r: usize, out: &mut [f32]) {
@@ -1928,7 +2112,8 @@ mod tests {
             let (zone_of_col, zone_of_row, zcols, _) = zone_geometry(&field, 5.0);
             let segs = zone_segments(&zone_of_col);
             let inside = [3, 55, 5, 71];
-            let mut results = vec![field_sums_in::<false>(
+            let mut results = vec![field_sums_with(
+                false,
                 &mut PSource::Rows(FieldRows::new(&fm, &field)),
                 w,
                 &segs,

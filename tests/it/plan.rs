@@ -401,6 +401,50 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
 }
 
 #[test]
+fn islands_over_masks_shared_across_blocks_whatever_the_threads() {
+    // A pillar (a prism: its masks are reused within and across blocks of 8 layers) and
+    // two boxes beside it that start in mid-air, one on a block's first layer (16) and one
+    // inside a block (27): each counts its islands over the lit pixels of a layer below
+    // whose mask another block drew.
+    let mut tris = box_tris([0.0, 0.0, 0.0], [5.0, 5.0, 4.0]);
+    tris.extend(box_tris([10.0, 0.0, 1.6], [14.0, 4.0, 4.0]));
+    tris.extend(box_tris([0.0, 10.0, 2.7], [4.0, 14.0, 4.0]));
+    let dir = tempdir("plan-islands-shared");
+    write_stl(&dir.join("isl.stl"), &tris);
+    let mut want = vec![0u64; 40];
+    want[16] = 1;
+    want[27] = 1;
+    let mut bundles = Vec::new();
+    for threads in ["1", "2"] {
+        let out = format!("t{threads}.dmdjob");
+        let args = [
+            "slice",
+            "isl.stl",
+            "-q",
+            "--layer-height",
+            "0.1",
+            "-o",
+            &out,
+        ];
+        let o = run_threads(&dir, &args, threads);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let job: Value =
+            serde_json::from_slice(&std::fs::read(dir.join(&out).join("job.json")).unwrap())
+                .unwrap();
+        let isl: Vec<u64> = layers(&job)
+            .iter()
+            .map(|l| l["islands"].as_u64().unwrap())
+            .collect();
+        assert_eq!(isl, want, "{threads} threads");
+        bundles.push(tree(&dir.join(out)));
+    }
+    assert!(
+        bundles[0] == bundles[1],
+        "bundles differ with the thread count"
+    );
+}
+
+#[test]
 fn part_taller_than_the_stage_travel_is_a_one_line_error() {
     let dir = tempdir("plan-travel");
     let src = crate::common::stdout(&run_in(&dir, &["profile", "show", "hybrid-bottomup"]));
