@@ -312,11 +312,29 @@ impl FieldModel {
         }
         let unit = self.length_unit_mm.get();
         let mut sign = 0.0;
+        // P at the samples as `eval` computes it, without its per-point set-up: inside the
+        // polynomial's rectangle the inner polynomials in v of each sample row once, then
+        // Horner in u over them (the same operations as `Poly::eval`, so the same values).
+        let s = 1.0 / unit;
+        let [px0, py0, px1, py1] = self.polynomial_area_mm.unwrap_or(self.area_mm);
+        let ys: Vec<f64> = (0..=ny).map(|j| (y0 + j as f64 * 0.5).min(y1)).collect();
+        let inner: Vec<Option<Vec<f64>>> = ys
+            .iter()
+            .map(|&y| {
+                (py0 <= y && y <= py1).then(|| self.coefficients.in_u((y - self.origin_mm[1]) * s))
+            })
+            .collect();
+        let scale = self.scale.get();
         for i in 0..=nx {
-            for j in 0..=ny {
-                let x = (x0 + i as f64 * 0.5).min(x1);
-                let y = (y0 + j as f64 * 0.5).min(y1);
-                let p = self.eval(x, y);
+            let x = (x0 + i as f64 * 0.5).min(x1);
+            let u = (px0 <= x && x <= px1).then(|| (x - self.origin_mm[0]) * s);
+            for (&y, q) in ys.iter().zip(&inner) {
+                let p = match (u, q) {
+                    (Some(u), Some(q)) => self
+                        .form
+                        .apply(scale, q.iter().rev().fold(0.0, |acc, &c| acc * u + c)),
+                    _ => self.eval(x, y),
+                };
                 if !(p.is_finite() && p > 0.0) {
                     return Err(format!(
                         "field: P({x:.1} mm, {y:.1} mm) = {p:.4e} is not positive inside the calibrated area"
@@ -415,5 +433,48 @@ mod tests {
         fm.coefficients = Poly::from_terms(2, &[0.205, -1.0, 0.0, 0.0, 0.0, 0.0]);
         let e = fm.validate().unwrap_err();
         assert!(e.contains("changes sign"), "{e}");
+    }
+
+    #[test]
+    fn validation_names_the_first_sample_where_p_is_not_positive() {
+        // P = 1 − 0.2·u with u = x/10 mm: zero at x = 50 mm.
+        let mut fm = FieldModel {
+            origin_mm: [0.0, 0.0],
+            length_unit_mm: Positive::new(10.0).unwrap(),
+            scale: Positive::new(1.0).unwrap(),
+            form: Form::Polynomial,
+            coefficients: Poly::from_terms(1, &[1.0, -0.2, 0.0]),
+            area_mm: [0.0, 0.0, 60.0, 40.0],
+            polynomial_area_mm: None,
+            extrapolate_mm: NonNegative::new(5.0).unwrap(),
+        };
+        // The first sample (x outer, y inner, 0.5 mm apart) where eval is not positive.
+        let first_bad = |fm: &FieldModel| {
+            (0..=120).find_map(|i| {
+                (0..=80).find_map(|j| {
+                    let (x, y) = (i as f64 * 0.5, j as f64 * 0.5);
+                    (fm.eval(x, y) <= 0.0).then_some((x, y))
+                })
+            })
+        };
+        assert_eq!(first_bad(&fm), Some((50.0, 0.0)));
+        let e = fm.validate().unwrap_err();
+        assert!(e.contains("P(50.0 mm, 0.0 mm) = 0.0000e0"), "{e}");
+        // Beyond a polynomial rectangle ending at x = 45 mm P is continued linearly and
+        // kept above a tenth of its edge value: positive everywhere.
+        fm.polynomial_area_mm = Some([0.0, 0.0, 45.0, 40.0]);
+        assert_eq!(first_bad(&fm), None);
+        assert!(fm.validate().is_ok());
+        // A rectangle ending below the area's top: rows above it take eval's own path.
+        fm.polynomial_area_mm = Some([0.0, 0.0, 60.0, 30.0]);
+        assert_eq!(first_bad(&fm), Some((50.0, 0.0)));
+        assert!(fm.validate().unwrap_err().contains("P(50.0 mm, 0.0 mm)"));
+        fm.coefficients = Poly::from_terms(1, &[1.0, 0.0, -0.3]);
+        // P = 1 − 0.3·v: zero at y = 33.3 mm, above the rectangle (continued there).
+        assert_eq!(first_bad(&fm), None);
+        assert!(fm.validate().is_ok());
+        fm.polynomial_area_mm = None;
+        assert_eq!(first_bad(&fm), Some((0.0, 33.5)));
+        assert!(fm.validate().unwrap_err().contains("P(0.0 mm, 33.5 mm)"));
     }
 }
