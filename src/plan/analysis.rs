@@ -1358,10 +1358,42 @@ impl std::fmt::Debug for SearchScratch {
     }
 }
 
+/// Points of a square that its cover test found uncovered, each with the squared radius
+/// it was found at: farther than that from every point tested (the first `n` points and
+/// any [`cover_more`] added), so from the first `n` too. A child square holding one is
+/// not covered by those points either: its own test is skipped.
+#[derive(Clone, Copy, Default)]
+struct Witnesses {
+    x: [([f64; 2], f64); 1 + EXTRA],
+    n: usize,
+}
+
+impl Witnesses {
+    fn push(&mut self, x: [f64; 2], t2: f64) {
+        if self.n < self.x.len() {
+            self.x[self.n] = (x, t2);
+            self.n += 1;
+        }
+    }
+
+    /// Whether one of them lies in the square `[c ± h]` and is farther than `sqrt(t2)`
+    /// from every point of `q` (checked again only when `t2` is larger than the radius it
+    /// was found at).
+    fn uncover(&self, c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
+        self.x[..self.n].iter().any(|&(w, w2)| {
+            (w[0] - c[0]).abs() <= h
+                && (w[1] - c[1]).abs() <= h
+                && (t2 <= w2 || q.iter().all(|p| d2(w, *p) > t2))
+        })
+    }
+}
+
 /// Whether discs of radius `T` = best depth + `precision` around `pts[..n]` (boundary
 /// points) cover the square `sq` = `(centre, half-size)`; a square small enough
 /// (`(h·√2)² ≤ COVER_GATE · T · precision`) that they do not cover is completed with
-/// [`cover_more`] (which may raise the best and uses `pts` beyond `n`).
+/// [`cover_more`] (which may raise the best and uses `pts` beyond `n`). The uncovered
+/// points found go to `wit`.
+#[allow(clippy::too_many_arguments)]
 fn covered(
     e: &Edges,
     sq: ([f64; 2], f64),
@@ -1370,15 +1402,17 @@ fn covered(
     walls: [u32; 2],
     best: (&mut [f64; 2], &mut f64, &mut u32),
     precision: f64,
+    wit: &mut Witnesses,
 ) -> bool {
     let t = *best.1 + precision;
     let Some(x) = uncovered(sq.0, sq.1, &pts[..n], t * t) else {
         return true;
     };
+    wit.push(x, t * t);
     let reach = sq.1 * std::f64::consts::SQRT_2;
     let mut m = n;
     reach * reach <= COVER_GATE * t * precision
-        && cover_more(e, sq, pts, &mut m, x, walls, best, precision)
+        && cover_more(e, sq, pts, &mut m, x, walls, best, precision, wit)
 }
 
 /// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
@@ -1389,7 +1423,7 @@ fn covered(
 /// to `x` ([`Edges::descend`]); only when that point is farther than `T` is the exact
 /// nearest edge searched. Every point added is a boundary point, so a cover stays a
 /// proof. If `x` is inside the section and deeper than `T`, it becomes the best centre
-/// (and the square cannot be covered).
+/// (and the square cannot be covered). The uncovered points found go to `wit`.
 #[allow(clippy::too_many_arguments)]
 fn cover_more(
     e: &Edges,
@@ -1400,6 +1434,7 @@ fn cover_more(
     walls: [u32; 2],
     best: (&mut [f64; 2], &mut f64, &mut u32),
     precision: f64,
+    wit: &mut Witnesses,
 ) -> bool {
     let (best_c, best_d, best_near) = best;
     let stop = (*n + EXTRA).min(MAX_PTS);
@@ -1429,7 +1464,10 @@ fn cover_more(
         *n += 1;
         match uncovered(sq.0, sq.1, &pts[..*n], t * t) {
             None => return true,
-            Some(w) => x = w,
+            Some(w) => {
+                x = w;
+                wit.push(w, t * t);
+            }
         }
     }
     false
@@ -1499,6 +1537,8 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
         // The inside test of the centre, once made.
         let mut ins = None;
         let mut local = None;
+        // Points of the cell that its cover test found uncovered.
+        let mut wit = Witnesses::default();
         if c.hint != u32::MAX {
             // The walls of the parent, followed along their contours to the points nearest
             // to this centre.
@@ -1534,7 +1574,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                 }
                 let walls = [w1.1, w2.map_or(u32::MAX, |w| w.1)];
                 let best = (&mut best_c, &mut best_d, &mut best_near);
-                if covered(e, (c.c, c.h), &mut pts, n, walls, best, precision) {
+                if covered(e, (c.c, c.h), &mut pts, n, walls, best, precision, &mut wit) {
                     continue;
                 }
                 // Not covered: split it with these walls (no search: the centre cannot
@@ -1583,6 +1623,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                 // The children are tested against the walls' points only (more points
                 // make every test dearer than the few children they drop).
                 let best = (&mut best_c, &mut best_d, &mut best_near);
+                wit.n = 0;
                 if covered(
                     e,
                     (c.c, c.h),
@@ -1591,6 +1632,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
                     [near, far_edge],
                     best,
                     precision,
+                    &mut wit,
                 ) {
                     continue;
                 }
@@ -1633,7 +1675,11 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
             let cc = [c.c[0] + sx * qh, c.c[1] + sy * qh];
             let mut cmax = lip;
             if n > 0 {
-                if !points_exceed(cc, qh, &pts[..n], t * t) {
+                // A child holding an uncovered point of the cell's test is not covered
+                // by the same points.
+                if !wit.uncover(cc, qh, &pts[..n], t * t)
+                    && !points_exceed(cc, qh, &pts[..n], t * t)
+                {
                     continue;
                 }
                 cmax = cmax.min(far_corner(cc, qh, pts[0]));
