@@ -1153,8 +1153,8 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
         (1, 0, h, 1, 3),
     ] {
         // A disc holding both ends holds the edge.
-        if by[k0] == by[k1] || d2(corners[k1], p[by[k0]]) <= t2 || d2(corners[k0], p[by[k1]]) <= t2
-        {
+        let (c0, c1) = (corners[k0], corners[k1]);
+        if by[k0] == by[k1] || d2(c1, p[by[k0]]) <= t2 || d2(c0, p[by[k1]]) <= t2 {
             continue;
         }
         let mut m = 0;
@@ -2201,6 +2201,56 @@ mod tests {
             decided[exceed as usize] += 1;
         }
         assert!(decided[0] > 50 && decided[1] > 50, "{decided:?}");
+    }
+
+    #[test]
+    fn exceeds_agrees_with_the_candidates() {
+        // The cover decided from the edges' chords and the circles' crossings against
+        // the candidates of `uncovered` (corners, bisector crossings, circumcentres), on
+        // random squares and points with radii around the covering one; and its witness
+        // lies in the square, farther than the radius from every point.
+        let mut rnd = xorshift(0x0e8c_ee45_1234_5678);
+        let mut seen = [0, 0, 0];
+        for case in 0..20000 {
+            let n = 1 + (rnd() * MAX_PTS as f64) as usize;
+            let c = [rnd() - 0.5, rnd() - 0.5];
+            let h = 0.1 + rnd();
+            let (q, t): (Vec<[f64; 2]>, f64) = if case % 2 == 0 {
+                let q = (0..n)
+                    .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
+                    .collect();
+                (q, 0.3 + 2.0 * rnd())
+            } else {
+                // Points around the square's centre: the discs often cover its edges
+                // and leave a hole inside.
+                let r = h * (1.0 + rnd());
+                let q = (0..n)
+                    .map(|k| {
+                        let a = std::f64::consts::TAU * (k as f64 + 0.3 * rnd()) / n as f64;
+                        [c[0] + r * a.cos(), c[1] + r * a.sin()]
+                    })
+                    .collect();
+                (q, r * (0.8 + 0.4 * rnd()))
+            };
+            let (exceed, w) = exceeds(c, h, &q, t * t);
+            assert_eq!(
+                exceed,
+                uncovered(c, h, &q, t * t).is_some(),
+                "{q:?} {c:?} {h} {t}"
+            );
+            assert_eq!(witness(c, h, &q, t * t), uncovered(c, h, &q, t * t));
+            if let Some(w) = w {
+                assert!(exceed);
+                let inside = |x: f64| x.abs() <= h * (1.0 + 1e-12);
+                assert!(
+                    inside(w[0] - c[0]) && inside(w[1] - c[1]),
+                    "{w:?} {c:?} {h}"
+                );
+                assert!(q.iter().all(|&p| d2(w, p) > t * t), "{w:?} {q:?} {t}");
+            }
+            seen[usize::from(exceed) + usize::from(w.is_some())] += 1;
+        }
+        assert!(seen.iter().all(|&k| k > 500), "{seen:?}");
     }
 
     #[test]
