@@ -1178,9 +1178,9 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
             if next == reach {
                 // Nothing goes beyond `reach`: the edge is uncovered up to the next start.
                 let mut end = h;
-                for k in 0..m {
-                    if lo[k] > reach && lo[k] < end {
-                        end = lo[k];
+                for &l in &lo[..m] {
+                    if l > reach && l < end {
+                        end = l;
                     }
                 }
                 let mut x = [0.0; 2];
