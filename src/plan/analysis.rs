@@ -1081,12 +1081,7 @@ fn d2(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
 /// of `q` (at most [`MAX_PTS`] points). When it is not, no point of the square is farther than
 /// `sqrt(t2)` from the boundary the points lie on: the square is covered by discs of
-/// radius `sqrt(t2)` around boundary points.
-///
-/// `x ↦ min_j |x − q_j|²` is convex on each Voronoi cell of the points, so its maximum over
-/// the square is at a corner, where a bisector of two points crosses an edge of the square,
-/// or at a circumcentre of three points inside it: the test checks those candidates and
-/// stops at the first one that is far from every point.
+/// radius `sqrt(t2)` around boundary points. Decided by [`exceeds`].
 fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
     exceeds(c, h, q, t2).0
 }
@@ -1219,6 +1214,11 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
 /// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
 /// `sqrt(t2)` from every point of `q` (at most [`MAX_PTS`] points), or `None` when the
 /// discs of radius `sqrt(t2)` around the points cover the square.
+///
+/// `x ↦ min_j |x − q_j|²` is convex on each Voronoi cell of the points, so its maximum over
+/// the square is at a corner, where a bisector of two points crosses an edge of the square,
+/// or at a circumcentre of three points inside it: the test checks those candidates (in a
+/// fixed order) and stops at the first one that is far from every point.
 fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
     let mut p = [[0.0f64; 2]; MAX_PTS];
     let mut r2 = [0.0f64; MAX_PTS];
@@ -1452,7 +1452,8 @@ fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]
 ///    otherwise a ridge probe (half-way between the two walls) may raise the best;
 /// 5. the four children are tested against the same points at once, and only those not
 ///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
-///    `q` or the far-wall point, if smaller) as their key.
+///    `q` or the far-wall point, if smaller) as their key; a child holding an uncovered
+///    point the cell's own test found ([`Witnesses`]) is queued without a test.
 ///
 /// The search ends when the largest key left is within `precision` of the best depth.
 /// The best centre found is finally polished by a local pattern search on the exact
