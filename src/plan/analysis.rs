@@ -575,22 +575,23 @@ fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
                 first: i as u32,
                 count: (j - i) as u32,
             };
-            // Each edge starts where the previous one ended: the start points and the last
-            // end point are all the points (plain comparisons: no NaN handling needed).
-            for s in &segs[i..j] {
-                for (x, y) in [(s[0], s[1]), (s[2], s[3])] {
-                    if x < n.lo[0] {
-                        n.lo[0] = x;
-                    }
-                    if x > n.hi[0] {
-                        n.hi[0] = x;
-                    }
-                    if y < n.lo[1] {
-                        n.lo[1] = y;
-                    }
-                    if y > n.hi[1] {
-                        n.hi[1] = y;
-                    }
+            // Each edge starts where the previous one ended (the same values): the start
+            // points and the last end point are all the points, each visited once (plain
+            // comparisons: no NaN handling needed).
+            let run = &segs[i..j];
+            let tail = run.last().map(|s| (s[2], s[3]));
+            for (x, y) in run.iter().map(|s| (s[0], s[1])).chain(tail) {
+                if x < n.lo[0] {
+                    n.lo[0] = x;
+                }
+                if x > n.hi[0] {
+                    n.hi[0] = x;
+                }
+                if y < n.lo[1] {
+                    n.lo[1] = y;
+                }
+                if y > n.hi[1] {
+                    n.hi[1] = y;
                 }
             }
             nodes.push(n);
@@ -632,11 +633,21 @@ impl Edges {
         let mut next: Vec<u32> = Vec::with_capacity(total);
         let mut prev: Vec<u32> = Vec::with_capacity(total);
         for c in contours {
-            // The start points first (repeated ones left out), then the end points.
+            // The start points (repeated ones left out), each one also the end point of the
+            // edge before it; the last edge's end point is set once the contour is done.
             let first = segs.len();
-            let mut last = [f64::NAN; 2];
-            for &p in c {
+            let Some((&p0, rest)) = c.split_first() else {
+                ends.push(segs.len());
+                continue;
+            };
+            segs.push([p0[0], p0[1], 0.0, 0.0]);
+            let mut last = p0;
+            for &p in rest {
                 if p != last {
+                    if let Some(s) = segs.last_mut() {
+                        s[2] = p[0];
+                        s[3] = p[1];
+                    }
                     segs.push([p[0], p[1], 0.0, 0.0]);
                     last = p;
                 }
@@ -655,12 +666,9 @@ impl Edges {
             next.push(first as u32);
             prev.push(end as u32 - 1);
             prev.extend(first as u32..end as u32 - 1);
-            for v in first..end {
-                let w = if v + 1 == end { first } else { v + 1 };
-                let (x, y) = (segs[w][0], segs[w][1]);
-                segs[v][2] = x;
-                segs[v][3] = y;
-            }
+            let (x, y) = (segs[first][0], segs[first][1]);
+            segs[end - 1][2] = x;
+            segs[end - 1][3] = y;
             ends.push(segs.len());
         }
         let nodes = if segs.is_empty() {
@@ -675,7 +683,10 @@ impl Edges {
         };
         let nb = (segs.len() / 4).clamp(1, 4096);
         let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
-        let band_of = |y: f64| ((((y - y0) * band_inv) as usize).min(nb - 1)) as u32;
+        // `y ≥ y0` (the lowest point), so the product is not negative and far below 2^63:
+        // truncating through `i64` (one instruction) gives what `as usize` gives.
+        let top = nb as i64 - 1;
+        let band_of = |y: f64| (((y - y0) * band_inv) as i64).min(top) as u32;
         // The band of each contour point (the start of each edge), once; edge `v` spans
         // the bands of its two points.
         let vband: Vec<u32> = segs.iter().map(|s| band_of(s[1])).collect();
@@ -1320,20 +1331,6 @@ pub const COARSE_MM: f64 = 0.0005;
 /// the final segment).
 const COARSE_RUN: usize = 16;
 
-/// Squared distance from `b` to the line through `a` and `d` (`b` itself when they
-/// coincide).
-#[inline]
-fn line_d2(a: [f64; 2], b: [f64; 2], d: [f64; 2]) -> f64 {
-    let (ux, uy) = (d[0] - a[0], d[1] - a[1]);
-    let (vx, vy) = (b[0] - a[0], b[1] - a[1]);
-    let l2 = ux * ux + uy * uy;
-    if l2 == 0.0 {
-        return vx * vx + vy * vy;
-    }
-    let cross = ux * vy - uy * vx;
-    cross * cross / l2
-}
-
 /// `c` without the points within [`COARSE_MM`] of the segment that replaces them (and
 /// between its ends), into `out`; returns the largest squared distance of a left-out point
 /// to its segment (0 when none is left out). With `δ` its root, every point of either
@@ -1347,46 +1344,83 @@ fn coarsen(c: &[[f64; 2]], out: &mut Vec<[f64; 2]>) -> f64 {
         out.extend_from_slice(c);
         return 0.0;
     }
+    out.reserve(n);
     const EPS2: f64 = COARSE_MM * COARSE_MM;
     let mut dev2: f64 = 0.0;
     let mut anchor = c[0];
     out.push(anchor);
-    // The points left out since the anchor: `c[k - nl..k]`.
-    let mut nl = 0;
+    // The points left out since the anchor: `c[s..k]` (`s` is where the run starts).
+    let mut s = 1;
     for k in 1..n {
         let b = c[k];
         let d = if k + 1 < n { c[k + 1] } else { c[0] };
-        // Whether p lies within the tolerance of the segment from the anchor to d (and
-        // between its ends).
-        let (ux, uy) = (d[0] - anchor[0], d[1] - anchor[1]);
-        let l2 = ux * ux + uy * uy;
-        let tol = EPS2 * l2;
-        let near = |p: &[f64; 2]| {
-            let (vx, vy) = (p[0] - anchor[0], p[1] - anchor[1]);
+        let run = &c[s..k];
+        // Whether b and the run's points all lie within the tolerance of the segment from
+        // the anchor to d (and between its ends).
+        let left_out = run.len() < COARSE_RUN && {
+            let (ux, uy) = (d[0] - anchor[0], d[1] - anchor[1]);
+            let l2 = ux * ux + uy * uy;
             if l2 == 0.0 {
                 // d repeats the anchor: only points within the tolerance of it.
-                return vx * vx + vy * vy <= EPS2;
+                let near = |p: &[f64; 2]| {
+                    let (vx, vy) = (p[0] - anchor[0], p[1] - anchor[1]);
+                    vx * vx + vy * vy <= EPS2
+                };
+                near(&b) && run.iter().all(near)
+            } else {
+                let tol = EPS2 * l2;
+                let near = |p: &[f64; 2]| {
+                    let (vx, vy) = (p[0] - anchor[0], p[1] - anchor[1]);
+                    let cross = ux * vy - uy * vx;
+                    let dot = ux * vx + uy * vy;
+                    cross * cross <= tol && dot >= 0.0 && dot <= l2
+                };
+                near(&b) && run.iter().all(near)
             }
-            let cross = ux * vy - uy * vx;
-            let dot = ux * vx + uy * vy;
-            cross * cross <= tol && dot >= 0.0 && dot <= l2
         };
-        if nl < COARSE_RUN && near(&b) && c[k - nl..k].iter().all(near) {
-            nl += 1;
-        } else {
+        if !left_out {
             // The run ends: its points' distances to their final segment (anchor to b).
-            for p in &c[k - nl..k] {
-                dev2 = dev2.max(line_d2(anchor, *p, b));
+            // (Plain comparisons: the squares are neither NaN nor −0.)
+            let r = run_d2(anchor, run, b);
+            if r > dev2 {
+                dev2 = r;
             }
             out.push(b);
             anchor = b;
-            nl = 0;
+            s = k + 1;
         }
     }
-    for p in &c[n - nl..] {
-        dev2 = dev2.max(line_d2(anchor, *p, c[0]));
+    dev2.max(run_d2(anchor, &c[s..], c[0]))
+}
+
+/// Largest squared distance of the points `run` to the line through `a` and `d` (to `a`
+/// when they coincide; 0 when `run` is empty). The division by the squared length is done
+/// once, on the largest squared cross product: division rounds monotonically, so this is
+/// the largest of the per-point quotients, the same value.
+#[inline]
+fn run_d2(a: [f64; 2], run: &[[f64; 2]], d: [f64; 2]) -> f64 {
+    let (ux, uy) = (d[0] - a[0], d[1] - a[1]);
+    let l2 = ux * ux + uy * uy;
+    let mut m: f64 = 0.0;
+    if l2 == 0.0 {
+        for p in run {
+            let (vx, vy) = (p[0] - a[0], p[1] - a[1]);
+            m = m.max(vx * vx + vy * vy);
+        }
+        return m;
     }
-    dev2
+    if run.is_empty() {
+        return 0.0;
+    }
+    for p in run {
+        let (vx, vy) = (p[0] - a[0], p[1] - a[1]);
+        let cross = ux * vy - uy * vx;
+        let q = cross * cross;
+        if q > m {
+            m = q;
+        }
+    }
+    m / l2
 }
 
 /// [`coarsen`] of every contour into `out` (its vectors are reused); returns the largest
