@@ -1487,7 +1487,7 @@ fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]
 /// 5. the four children are tested against the same points at once, and only those not
 ///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
 ///    `q` or the far-wall point, if smaller) as their key; a child holding an uncovered
-///    point the cell's own test found ([`Witnesses`]) is queued without a test.
+///    point the cell's own test found (`Witnesses`) is queued without a test.
 ///
 /// The search ends when the largest key left is within `precision` of the best depth.
 /// The best centre found is finally polished by a local pattern search on the exact
