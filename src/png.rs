@@ -417,8 +417,11 @@ fn emit_copy(bits: &mut Bits, mut k: usize, dist: (u32, u32)) {
 /// of the [`COPY_ROWS`] rows above is a copy of the nearest such row.
 ///
 /// A row is coded as runs while it is scanned, with its [`signature`]. When the signature
-/// is that of one of the rows above and the bytes (in the box) are equal, the row's codes are taken
-/// back (the stream is cut back to where the row began) and the copy written instead.
+/// is that of one of the rows above and the bytes (in the box) are equal, the row's codes
+/// are taken back (the stream is cut back to where the row began) and the copy written
+/// instead. After a copy the next row is first compared with the rows above as it is
+/// (rows repeat in stretches), and copied without a scan when one is equal. A copy adds
+/// its bytes to the Adler-32 from its source row's [`AdlerDelta`].
 #[inline(always)]
 fn zlib_rows<'a>(
     w: usize,
