@@ -343,6 +343,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let failure: Mutex<Option<Error>> = Mutex::new(None);
     let stop = AtomicBool::new(false);
     let in_flight = AtomicUsize::new(0);
+    let gray_map: OnceLock<Result<(String, String)>> = OnceLock::new();
     let cancelled = || opts.cancel.is_some_and(|c| c.load(Ordering::Relaxed));
     let mut t_slice = 0.0;
     let tm = Instant::now();
@@ -352,6 +353,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     // bounded); while it waits, the slicing thread makes masks itself.
     rayon::scope(|scope| {
         let (slots, failure, stop, in_flight) = (&slots, &failure, &stop, &in_flight);
+        let gray_map = &gray_map;
         let (scratch_pool, done, raster, profile) = (&scratch_pool, &done, &raster, &profile);
         let (writer, optics, tiler, correction) = (
             &writer,
@@ -359,6 +361,14 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             tiler.as_ref(),
             correction.as_ref(),
         );
+        // The gray map depends on the set-up only: written while the masks are made (its
+        // encoding would otherwise wait for the last layer).
+        if let Some(o) = optics {
+            scope.spawn(move |_| {
+                let r = o.write_gray_map(writer, profile, encode_png);
+                let _ = gray_map.set(r);
+            });
+        }
         let mut prev: Option<Arc<Vec<Section>>> = None;
         for start in (0..n).step_by(WINDOW) {
             while in_flight.load(Ordering::Acquire) > MAX_AHEAD && !stop.load(Ordering::Relaxed) {
@@ -538,7 +548,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     }
     let optics_record = match &optics {
         Some(o) => {
-            let (record, w) = o.finish(&writer, &profile, encode_png)?;
+            let written = gray_map
+                .into_inner()
+                .expect("written in the masks' scope")?;
+            let (record, w) = o.finish_with(written)?;
             warnings.extend(w);
             Some(record)
         }

@@ -350,13 +350,34 @@ impl JobOptics {
         profile: &Profile,
         png: impl Fn(&crate::raster::Mask) -> Vec<u8>,
     ) -> Result<(crate::bundle::Optics, Vec<String>)> {
-        let c = &self.compensator;
-        let pr = &c.prediction;
+        let gray_map = self.write_gray_map(writer, profile, png)?;
+        self.finish_with(gray_map)
+    }
+
+    /// Writes the gray map into the bundle (it does not depend on the layers: the slicer
+    /// writes it while the masks are made) and returns its file and SHA-256.
+    pub fn write_gray_map(
+        &self,
+        writer: &crate::bundle::BundleWriter,
+        profile: &Profile,
+        png: impl Fn(&crate::raster::Mask) -> Vec<u8>,
+    ) -> Result<(String, String)> {
         let p = &profile.projector[self.projector];
         writer.create_dir("optics")?;
-        let bytes = c.gray_map_png(p, png);
+        let bytes = self.compensator.gray_map_png(p, png);
         let file = format!("optics/{}-gray-map.png", p.name);
         writer.write_file(&file, &bytes)?;
+        Ok((file, crate::bundle::sha256_hex(&bytes)))
+    }
+
+    /// After all layers, with the gray map written ([`write_gray_map`](Self::write_gray_map)):
+    /// the manifest record and the warnings for the job.
+    pub fn finish_with(
+        &self,
+        (file, gray_map_sha256): (String, String),
+    ) -> Result<(crate::bundle::Optics, Vec<String>)> {
+        let c = &self.compensator;
+        let pr = &c.prediction;
         let (zc, zr) = pr.zone_grid;
         let zone_grays = if c.mode() == Mode::Zone {
             (0..zr)
@@ -395,7 +416,7 @@ impl JobOptics {
             zone_mm: self.calibration.zone_mm.get(),
             zone_grays,
             gray_map: file,
-            gray_map_sha256: crate::bundle::sha256_hex(&bytes),
+            gray_map_sha256,
             predicted: pr.spreads,
             zones_outside: pr.zones_outside,
             pixels_outside: pr.pixels_outside,
