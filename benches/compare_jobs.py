@@ -1,24 +1,42 @@
 #!/usr/bin/env python3
 """Compares the job.json (and the masks/ and optics/ files) that two dmdsl binaries write.
 
-Usage: compare_jobs.py REF_BIN NEW_BIN OUTDIR CASE...
+Usage: compare_jobs.py [--pixels] REF_BIN NEW_BIN OUTDIR CASE...
   CASE = MODEL.stl[,ARG,ARG...]   (extra `dmdsl slice` arguments, comma-separated)
 
 For each case: every value of job.json that differs (path, ref, new; for numbers the
 relative difference), and whether the masks/ and optics/ files are byte-identical.
-Exit status 1 if anything differs.
+With --pixels (for a change of the PNG encoding: other bytes, the same images) PNG files
+are compared decoded (Pillow), the SHA-256 fields of job.json are left out, and the PNG
+bytes of both are totalled. Exit status 1 if anything differs.
 """
 import hashlib, json, os, shutil, subprocess, sys
 
 
-def files(d):
+def files(d, pixels):
+    """Each masks/ and optics/ file's SHA-256: of its bytes, or with `pixels` of a PNG's
+    decoded mode, size and pixels (and its size in bytes)."""
     out = {}
     for sub in ("masks", "optics"):
         for root, _, names in os.walk(os.path.join(d, sub)):
             for n in names:
                 p = os.path.join(root, n)
-                out[os.path.relpath(p, d)] = hashlib.sha256(open(p, "rb").read()).hexdigest()
+                data = open(p, "rb").read()
+                if pixels and n.endswith(".png"):
+                    from PIL import Image
+
+                    im = Image.open(p)
+                    data = f"{im.mode} {im.size}".encode() + im.tobytes()
+                out[os.path.relpath(p, d)] = (hashlib.sha256(data).hexdigest(), os.path.getsize(p))
     return out
+
+
+def strip_sha(v):
+    if isinstance(v, dict):
+        return {k: strip_sha(x) for k, x in v.items() if not k.endswith("sha256")}
+    if isinstance(v, list):
+        return [strip_sha(x) for x in v]
+    return v
 
 
 def diff(a, b, path, out):
@@ -37,7 +55,11 @@ def diff(a, b, path, out):
 
 
 def main():
-    ref, new, outdir, cases = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
+    argv = sys.argv[1:]
+    pixels = argv[:1] == ["--pixels"]
+    if pixels:
+        argv = argv[1:]
+    ref, new, outdir, cases = argv[0], argv[1], argv[2], argv[3:]
     os.makedirs(outdir, exist_ok=True)
     bad = 0
     for case in cases:
@@ -48,13 +70,21 @@ def main():
             shutil.rmtree(d, ignore_errors=True)
             p = subprocess.run([b, "slice", model, "-q", "-o", d] + args, capture_output=True)
             j = json.load(open(os.path.join(d, "job.json"))) if p.returncode in (0, 1) else None
-            res.append((p.returncode, p.stderr, j, files(d) if j else {}))
+            if j is not None and pixels:
+                j = strip_sha(j)
+            res.append((p.returncode, p.stderr, j, files(d, pixels) if j else {}))
         (ra, ea, ja, fa), (rb, eb, jb, fb) = res
         d = []
         if ja is not None and jb is not None:
             diff(ja, jb, "", d)
-        same_files = fa == fb
+        if pixels:
+            same_files = {k: v[0] for k, v in fa.items()} == {k: v[0] for k, v in fb.items()}
+        else:
+            same_files = fa == fb
         name = os.path.basename(model) + " " + " ".join(args)
+        if pixels:
+            sa, sb = (sum(v[1] for k, v in f.items() if k.endswith(".png")) for f in (fa, fb))
+            name += f" (PNG bytes {sa} -> {sb}, {100 * (sb / max(sa, 1) - 1):+.1f} %)"
         if ra != rb or ea != eb or d or not same_files:
             bad += 1
             print(f"DIFF {name}: rc {ra}/{rb} stderr {'same' if ea == eb else 'differs'} files {'same' if same_files else 'DIFFER'}")
