@@ -83,6 +83,16 @@ fn slice_json(dir: &Path, stl: &str, tris: &[Tri], extra: &[&str]) -> (Value, Va
     (summary, job)
 }
 
+/// `dmdsl slice STL -q --layer-height 0.1 -o t<threads>.dmdjob` in `dir` on `threads`
+/// worker threads; the bundle's path.
+fn slice_with_threads(dir: &Path, stl: &str, threads: &str) -> std::path::PathBuf {
+    let out = format!("t{threads}.dmdjob");
+    let args = ["slice", stl, "-q", "--layer-height", "0.1", "-o", &out];
+    let o = run_threads(dir, &args, threads);
+    assert!(o.status.success(), "{}", stderr(&o));
+    dir.join(out)
+}
+
 fn layers(job: &Value) -> &Vec<Value> {
     job["layers"].as_array().unwrap()
 }
@@ -416,27 +426,15 @@ fn islands_over_masks_shared_across_blocks_whatever_the_threads() {
     want[27] = 1;
     let mut bundles = Vec::new();
     for threads in ["1", "2"] {
-        let out = format!("t{threads}.dmdjob");
-        let args = [
-            "slice",
-            "isl.stl",
-            "-q",
-            "--layer-height",
-            "0.1",
-            "-o",
-            &out,
-        ];
-        let o = run_threads(&dir, &args, threads);
-        assert!(o.status.success(), "{}", stderr(&o));
+        let out = slice_with_threads(&dir, "isl.stl", threads);
         let job: Value =
-            serde_json::from_slice(&std::fs::read(dir.join(&out).join("job.json")).unwrap())
-                .unwrap();
+            serde_json::from_slice(&std::fs::read(out.join("job.json")).unwrap()).unwrap();
         let isl: Vec<u64> = layers(&job)
             .iter()
             .map(|l| l["islands"].as_u64().unwrap())
             .collect();
         assert_eq!(isl, want, "{threads} threads");
-        bundles.push(tree(&dir.join(out)));
+        bundles.push(tree(&out));
     }
     assert!(
         bundles[0] == bundles[1],
@@ -493,19 +491,7 @@ fn prism_layers_share_masks_and_analysis_whatever_the_threads() {
     write_stl(&dir.join("tower.stl"), &tris);
     let mut bundles = Vec::new();
     for threads in ["1", "3"] {
-        let out = format!("t{threads}.dmdjob");
-        let args = [
-            "slice",
-            "tower.stl",
-            "-q",
-            "--layer-height",
-            "0.1",
-            "-o",
-            &out,
-        ];
-        let o = run_threads(&dir, &args, threads);
-        assert!(o.status.success(), "{}", stderr(&o));
-        bundles.push(tree(&dir.join(out)));
+        bundles.push(tree(&slice_with_threads(&dir, "tower.stl", threads)));
     }
     assert!(
         bundles[0] == bundles[1],
