@@ -756,39 +756,53 @@ impl Edges {
         if self.nodes.is_empty() {
             return (f64::INFINITY, u32::MAX);
         }
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let n = &self.nodes[stack[sp] as usize];
-            if box_d2(p, n) >= best {
-                continue;
-            }
-            if n.count > 0 {
-                let f = n.first as usize;
-                for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
-                    let d = seg_d2(p, s);
-                    if d < best {
-                        best = d;
-                        arg = (f + k) as u32;
+        // Depth first, nearer child first: the node visited and its box distance, and the
+        // farther children left for later with theirs (each box distance computed once).
+        // A node is skipped when its box is no nearer than the best (which only shrinks).
+        // At most one node per level waits: 32 hold any tree over u32-indexed edges.
+        let mut wait_i = [0u32; 32];
+        let mut wait_d = [0.0f64; 32];
+        let mut sp = 0usize;
+        let root = self.nodes.len() - 1;
+        let (mut i, mut dn) = (root as u32, box_d2(p, &self.nodes[root]));
+        loop {
+            if dn < best {
+                let n = &self.nodes[i as usize];
+                if n.count > 0 {
+                    let f = n.first as usize;
+                    for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
+                        let d = seg_d2(p, s);
+                        if d < best {
+                            best = d;
+                            arg = (f + k) as u32;
+                        }
                     }
-                }
-            } else {
-                let (l, r) = (n.first, n.first + 1);
-                let dl = box_d2(p, &self.nodes[l as usize]);
-                let dr = box_d2(p, &self.nodes[r as usize]);
-                // Visit the nearer child first: push it last.
-                let (far, near) = if dl <= dr { (r, l) } else { (l, r) };
-                if sp + 2 <= stack.len() {
-                    stack[sp] = far;
-                    stack[sp + 1] = near;
-                    sp += 2;
                 } else {
-                    // Deeper than any balanced tree of < 2^60 edges; keep it correct anyway.
-                    return self.nearest_brute(p);
+                    let (l, r) = (n.first, n.first + 1);
+                    let dl = box_d2(p, &self.nodes[l as usize]);
+                    let dr = box_d2(p, &self.nodes[r as usize]);
+                    let (far, near) = if dl <= dr {
+                        ((r, dr), (l, dl))
+                    } else {
+                        ((l, dl), (r, dr))
+                    };
+                    if far.1 < best {
+                        if sp == wait_i.len() {
+                            // Deeper than any tree over u32-indexed edges; correct anyway.
+                            return self.nearest_brute(p);
+                        }
+                        (wait_i[sp], wait_d[sp]) = far;
+                        sp += 1;
+                    }
+                    (i, dn) = near;
+                    continue;
                 }
             }
+            if sp == 0 {
+                break;
+            }
+            sp -= 1;
+            (i, dn) = (wait_i[sp], wait_d[sp]);
         }
         (best.sqrt(), arg)
     }
@@ -1040,16 +1054,26 @@ struct Cell {
 }
 
 /// A queued cell: its key (`Cell::max`) and its index in the search's cell arena. The
-/// queue compares keys only, so it moves 16 bytes per step instead of a whole cell.
+/// queue compares keys only, so it moves 16 bytes per step instead of a whole cell. The
+/// key is kept as the integer [`f64::total_cmp`] orders by (one comparison per step).
 #[derive(Debug, Clone, Copy)]
 struct Queued {
-    max: f64,
+    key: i64,
     cell: u32,
+}
+
+impl Queued {
+    /// `max` as an integer ordered as [`f64::total_cmp`] orders the floats (its own
+    /// transform: negative values have their magnitude bits flipped).
+    fn key(max: f64) -> i64 {
+        let b = max.to_bits() as i64;
+        b ^ (((b >> 63) as u64) >> 1) as i64
+    }
 }
 
 impl PartialEq for Queued {
     fn eq(&self, o: &Self) -> bool {
-        self.max == o.max
+        self.key == o.key
     }
 }
 impl Eq for Queued {}
@@ -1060,7 +1084,7 @@ impl PartialOrd for Queued {
 }
 impl Ord for Queued {
     fn cmp(&self, o: &Self) -> Ordering {
-        self.max.total_cmp(&o.max)
+        self.key.cmp(&o.key)
     }
 }
 
@@ -1074,7 +1098,7 @@ struct Queue {
 impl Queue {
     fn push(&mut self, c: Cell) {
         self.heap.push(Queued {
-            max: c.max,
+            key: Queued::key(c.max),
             cell: self.cells.len() as u32,
         });
         self.cells.push(c);
