@@ -1005,9 +1005,9 @@ impl Edges {
         for &i in &self.band_items[self.band_start[k] as usize..self.band_start[k + 1] as usize] {
             let s = &self.segs[i as usize];
             let (ay, by) = (s[1], s[3]);
-            let up = ay <= p[1] && p[1] < by;
-            let down = by <= p[1] && p[1] < ay;
-            if up || down {
+            // Upward (`ay ≤ y < by`) or downward (`by ≤ y < ay`) across the line.
+            let up = ay <= p[1];
+            if up != (by <= p[1]) {
                 let x = s[0] + (p[1] - ay) * (s[2] - s[0]) / (by - ay);
                 if x > p[0] {
                     w += if up { 1 } else { -1 };
@@ -1122,12 +1122,40 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
 }
 
 /// [`uncovered`], but only after [`exceeds`] (cheaper when the square is covered) has
-/// found the square not covered.
+/// found the square not covered. A corner (or centre) [`exceeds`] found far from every
+/// point is the point [`uncovered`] gives (the same points left out, the same candidates
+/// first, in the same order); otherwise the corners are known not to be far and
+/// [`uncovered`] starts after them.
 fn witness(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
-    if exceeds(c, h, q, t2).0 {
-        uncovered(c, h, q, t2)
-    } else {
-        None
+    match cover_test(c, h, q, t2) {
+        Cover::Covered => None,
+        Cover::Corner(x) => Some(x),
+        Cover::Edge(_) | Cover::Inside => uncovered(c, h, q, t2, false),
+    }
+}
+
+/// What [`cover_test`] found.
+enum Cover {
+    /// The discs cover the square.
+    Covered,
+    /// The square's centre (no disc meets the square) or the first of its corners (in
+    /// [`uncovered`]'s order) that no disc holds.
+    Corner([f64; 2]),
+    /// A point of an edge that no disc holds (the corners are all held).
+    Edge([f64; 2]),
+    /// Two circles cross inside the square where no third disc holds (corners and edges
+    /// are all held).
+    Inside,
+}
+
+/// [`cover_test`]: whether some point of the square `[c ± h]` is farther than `sqrt(t2)`
+/// from every point of `q` and, when that was found on an edge or at a corner, such a
+/// point.
+fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
+    match cover_test(c, h, q, t2) {
+        Cover::Covered => (false, None),
+        Cover::Corner(x) | Cover::Edge(x) => (true, Some(x)),
+        Cover::Inside => (true, None),
     }
 }
 
@@ -1141,9 +1169,10 @@ fn witness(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
 /// circles (a bounded region outside a disc cannot be bounded by that circle alone),
 /// whose corners are crossings of two circles that no third disc holds. An edge is
 /// covered when the discs' chords on its line cover it (a sweep over at most
-/// [`MAX_PTS`] intervals). Returns whether some point of the square is farther than `t`
-/// from every point and, when that was found on an edge or at a corner, such a point.
-fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
+/// [`MAX_PTS`] intervals). Returns what decided it, the tests made in this order:
+/// a disc holding the square, the centre when no disc meets it, the corners, the edges,
+/// the crossings.
+fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
     let mut p = [[0.0f64; 2]; MAX_PTS];
     let mut n = 0;
     for qj in q {
@@ -1151,7 +1180,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
         let (ax, ay) = (v[0].abs(), v[1].abs());
         // As in `uncovered`: one disc holds the square, or a disc misses it.
         if (ax + h).powi(2) + (ay + h).powi(2) <= t2 {
-            return (false, None);
+            return Cover::Covered;
         }
         if (ax - h).max(0.0).powi(2) + (ay - h).max(0.0).powi(2) > t2 {
             continue;
@@ -1159,9 +1188,9 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
         p[n] = v;
         n += 1;
     }
-    let at = |x: [f64; 2]| (true, Some([c[0] + x[0], c[1] + x[1]]));
+    let at = |x: [f64; 2]| [c[0] + x[0], c[1] + x[1]];
     if n == 0 {
-        return at([0.0, 0.0]);
+        return Cover::Corner(at([0.0, 0.0]));
     }
     let p = &p[..n];
     // The corners, each with the first point whose disc holds it.
@@ -1170,7 +1199,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
     for (k, &x) in corners.iter().enumerate() {
         match p.iter().position(|pj| d2(x, *pj) <= t2) {
             Some(j) => by[k] = j,
-            None => return at(x),
+            None => return Cover::Corner(at(x)),
         }
     }
     // The edges: coordinate `b` fixed at `s`, coordinate `a` running over [−h, h], from
@@ -1215,7 +1244,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
                 }
                 let mut x = [0.0; 2];
                 (x[a], x[b]) = (0.5 * (reach + end), s);
-                return at(x);
+                return Cover::Edge(at(x));
             }
             reach = next;
         }
@@ -1238,12 +1267,12 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
                         .enumerate()
                         .all(|(k, pk)| k == i || k == j || d2(v, *pk) > t2)
                 {
-                    return (true, None);
+                    return Cover::Inside;
                 }
             }
         }
     }
-    (false, None)
+    Cover::Covered
 }
 
 /// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
@@ -1254,7 +1283,10 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
 /// the square is at a corner, where a bisector of two points crosses an edge of the square,
 /// or at a circumcentre of three points inside it: the test checks those candidates (in a
 /// fixed order) and stops at the first one that is far from every point.
-fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
+///
+/// The corners are tried only when `corners` (else they must be known to be held by
+/// some disc: the result is the same).
+fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64, corners: bool) -> Option<[f64; 2]> {
     let mut p = [[0.0f64; 2]; MAX_PTS];
     let mut r2 = [0.0f64; MAX_PTS];
     let mut n = 0;
@@ -1281,9 +1313,11 @@ fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
     let p = &p[..n];
     // True when x is farther than t from all points.
     let far = |x: [f64; 2]| p.iter().all(|pj| d2(x, *pj) > t2);
-    for x in [[-h, -h], [h, -h], [-h, h], [h, h]] {
-        if far(x) {
-            return at(x);
+    if corners {
+        for x in [[-h, -h], [h, -h], [-h, h], [h, h]] {
+            if far(x) {
+                return at(x);
+            }
         }
     }
     for i in 0..n {
@@ -2294,10 +2328,10 @@ mod tests {
             let (exceed, w) = exceeds(c, h, &q, t * t);
             assert_eq!(
                 exceed,
-                uncovered(c, h, &q, t * t).is_some(),
+                uncovered(c, h, &q, t * t, true).is_some(),
                 "{q:?} {c:?} {h} {t}"
             );
-            assert_eq!(witness(c, h, &q, t * t), uncovered(c, h, &q, t * t));
+            assert_eq!(witness(c, h, &q, t * t), uncovered(c, h, &q, t * t, true));
             if let Some(w) = w {
                 assert!(exceed);
                 let inside = |x: f64| x.abs() <= h * (1.0 + 1e-12);
@@ -2327,7 +2361,7 @@ mod tests {
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let t = 0.3 + 2.0 * rnd();
-            match uncovered(c, h, &q, t * t) {
+            match uncovered(c, h, &q, t * t, true) {
                 Some(w) => {
                     assert!(
                         (w[0] - c[0]).abs() <= h * (1.0 + 1e-12)
