@@ -1226,14 +1226,23 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
                 m += 1;
             }
         }
+        // The chords that start by `reach` are used up: they end by the next `reach`, so
+        // only the others are kept for the following rounds.
         let mut reach = -h;
         while reach < h {
             let mut next = reach;
+            let mut kept = 0;
             for k in 0..m {
-                if lo[k] <= reach && hi[k] > next {
-                    next = hi[k];
+                if lo[k] <= reach {
+                    if hi[k] > next {
+                        next = hi[k];
+                    }
+                } else {
+                    (lo[kept], hi[kept]) = (lo[k], hi[k]);
+                    kept += 1;
                 }
             }
+            m = kept;
             if next == reach {
                 // Nothing goes beyond `reach`: the edge is uncovered up to the next start.
                 let mut end = h;
