@@ -756,39 +756,53 @@ impl Edges {
         if self.nodes.is_empty() {
             return (f64::INFINITY, u32::MAX);
         }
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let n = &self.nodes[stack[sp] as usize];
-            if box_d2(p, n) >= best {
-                continue;
-            }
-            if n.count > 0 {
-                let f = n.first as usize;
-                for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
-                    let d = seg_d2(p, s);
-                    if d < best {
-                        best = d;
-                        arg = (f + k) as u32;
+        // Depth first, nearer child first: the node visited and its box distance, and the
+        // farther children left for later with theirs (each box distance computed once).
+        // A node is skipped when its box is no nearer than the best (which only shrinks).
+        // At most one node per level waits: 32 hold any tree over u32-indexed edges.
+        let mut wait_i = [0u32; 32];
+        let mut wait_d = [0.0f64; 32];
+        let mut sp = 0usize;
+        let root = self.nodes.len() - 1;
+        let (mut i, mut dn) = (root as u32, box_d2(p, &self.nodes[root]));
+        loop {
+            if dn < best {
+                let n = &self.nodes[i as usize];
+                if n.count > 0 {
+                    let f = n.first as usize;
+                    for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
+                        let d = seg_d2(p, s);
+                        if d < best {
+                            best = d;
+                            arg = (f + k) as u32;
+                        }
                     }
-                }
-            } else {
-                let (l, r) = (n.first, n.first + 1);
-                let dl = box_d2(p, &self.nodes[l as usize]);
-                let dr = box_d2(p, &self.nodes[r as usize]);
-                // Visit the nearer child first: push it last.
-                let (far, near) = if dl <= dr { (r, l) } else { (l, r) };
-                if sp + 2 <= stack.len() {
-                    stack[sp] = far;
-                    stack[sp + 1] = near;
-                    sp += 2;
                 } else {
-                    // Deeper than any balanced tree of < 2^60 edges; keep it correct anyway.
-                    return self.nearest_brute(p);
+                    let (l, r) = (n.first, n.first + 1);
+                    let dl = box_d2(p, &self.nodes[l as usize]);
+                    let dr = box_d2(p, &self.nodes[r as usize]);
+                    let (far, near) = if dl <= dr {
+                        ((r, dr), (l, dl))
+                    } else {
+                        ((l, dl), (r, dr))
+                    };
+                    if far.1 < best {
+                        if sp == wait_i.len() {
+                            // Deeper than any tree over u32-indexed edges; correct anyway.
+                            return self.nearest_brute(p);
+                        }
+                        (wait_i[sp], wait_d[sp]) = far;
+                        sp += 1;
+                    }
+                    (i, dn) = near;
+                    continue;
                 }
             }
+            if sp == 0 {
+                break;
+            }
+            sp -= 1;
+            (i, dn) = (wait_i[sp], wait_d[sp]);
         }
         (best.sqrt(), arg)
     }
@@ -991,9 +1005,9 @@ impl Edges {
         for &i in &self.band_items[self.band_start[k] as usize..self.band_start[k + 1] as usize] {
             let s = &self.segs[i as usize];
             let (ay, by) = (s[1], s[3]);
-            let up = ay <= p[1] && p[1] < by;
-            let down = by <= p[1] && p[1] < ay;
-            if up || down {
+            // Upward (`ay ≤ y < by`) or downward (`by ≤ y < ay`) across the line.
+            let up = ay <= p[1];
+            if up != (by <= p[1]) {
                 let x = s[0] + (p[1] - ay) * (s[2] - s[0]) / (by - ay);
                 if x > p[0] {
                     w += if up { 1 } else { -1 };
@@ -1040,16 +1054,26 @@ struct Cell {
 }
 
 /// A queued cell: its key (`Cell::max`) and its index in the search's cell arena. The
-/// queue compares keys only, so it moves 16 bytes per step instead of a whole cell.
+/// queue compares keys only, so it moves 16 bytes per step instead of a whole cell. The
+/// key is kept as the integer [`f64::total_cmp`] orders by (one comparison per step).
 #[derive(Debug, Clone, Copy)]
 struct Queued {
-    max: f64,
+    key: i64,
     cell: u32,
+}
+
+impl Queued {
+    /// `max` as an integer ordered as [`f64::total_cmp`] orders the floats (its own
+    /// transform: negative values have their magnitude bits flipped).
+    fn key(max: f64) -> i64 {
+        let b = max.to_bits() as i64;
+        b ^ (((b >> 63) as u64) >> 1) as i64
+    }
 }
 
 impl PartialEq for Queued {
     fn eq(&self, o: &Self) -> bool {
-        self.max == o.max
+        self.key == o.key
     }
 }
 impl Eq for Queued {}
@@ -1060,7 +1084,7 @@ impl PartialOrd for Queued {
 }
 impl Ord for Queued {
     fn cmp(&self, o: &Self) -> Ordering {
-        self.max.total_cmp(&o.max)
+        self.key.cmp(&o.key)
     }
 }
 
@@ -1074,7 +1098,7 @@ struct Queue {
 impl Queue {
     fn push(&mut self, c: Cell) {
         self.heap.push(Queued {
-            max: c.max,
+            key: Queued::key(c.max),
             cell: self.cells.len() as u32,
         });
         self.cells.push(c);
@@ -1098,12 +1122,40 @@ fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
 }
 
 /// [`uncovered`], but only after [`exceeds`] (cheaper when the square is covered) has
-/// found the square not covered.
+/// found the square not covered. A corner (or centre) [`exceeds`] found far from every
+/// point is the point [`uncovered`] gives (the same points left out, the same candidates
+/// first, in the same order); otherwise the corners are known not to be far and
+/// [`uncovered`] starts after them.
 fn witness(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
-    if exceeds(c, h, q, t2).0 {
-        uncovered(c, h, q, t2)
-    } else {
-        None
+    match cover_test(c, h, q, t2) {
+        Cover::Covered => None,
+        Cover::Corner(x) => Some(x),
+        Cover::Edge(_) | Cover::Inside => uncovered(c, h, q, t2, false),
+    }
+}
+
+/// What [`cover_test`] found.
+enum Cover {
+    /// The discs cover the square.
+    Covered,
+    /// The square's centre (no disc meets the square) or the first of its corners (in
+    /// [`uncovered`]'s order) that no disc holds.
+    Corner([f64; 2]),
+    /// A point of an edge that no disc holds (the corners are all held).
+    Edge([f64; 2]),
+    /// Two circles cross inside the square where no third disc holds (corners and edges
+    /// are all held).
+    Inside,
+}
+
+/// [`cover_test`]: whether some point of the square `[c ± h]` is farther than `sqrt(t2)`
+/// from every point of `q` and, when that was found on an edge or at a corner, such a
+/// point.
+fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
+    match cover_test(c, h, q, t2) {
+        Cover::Covered => (false, None),
+        Cover::Corner(x) | Cover::Edge(x) => (true, Some(x)),
+        Cover::Inside => (true, None),
     }
 }
 
@@ -1117,9 +1169,10 @@ fn witness(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
 /// circles (a bounded region outside a disc cannot be bounded by that circle alone),
 /// whose corners are crossings of two circles that no third disc holds. An edge is
 /// covered when the discs' chords on its line cover it (a sweep over at most
-/// [`MAX_PTS`] intervals). Returns whether some point of the square is farther than `t`
-/// from every point and, when that was found on an edge or at a corner, such a point.
-fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
+/// [`MAX_PTS`] intervals). Returns what decided it, the tests made in this order:
+/// a disc holding the square, the centre when no disc meets it, the corners, the edges,
+/// the crossings.
+fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
     let mut p = [[0.0f64; 2]; MAX_PTS];
     let mut n = 0;
     for qj in q {
@@ -1127,7 +1180,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
         let (ax, ay) = (v[0].abs(), v[1].abs());
         // As in `uncovered`: one disc holds the square, or a disc misses it.
         if (ax + h).powi(2) + (ay + h).powi(2) <= t2 {
-            return (false, None);
+            return Cover::Covered;
         }
         if (ax - h).max(0.0).powi(2) + (ay - h).max(0.0).powi(2) > t2 {
             continue;
@@ -1135,9 +1188,9 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
         p[n] = v;
         n += 1;
     }
-    let at = |x: [f64; 2]| (true, Some([c[0] + x[0], c[1] + x[1]]));
+    let at = |x: [f64; 2]| [c[0] + x[0], c[1] + x[1]];
     if n == 0 {
-        return at([0.0, 0.0]);
+        return Cover::Corner(at([0.0, 0.0]));
     }
     let p = &p[..n];
     // The corners, each with the first point whose disc holds it.
@@ -1146,7 +1199,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
     for (k, &x) in corners.iter().enumerate() {
         match p.iter().position(|pj| d2(x, *pj) <= t2) {
             Some(j) => by[k] = j,
-            None => return at(x),
+            None => return Cover::Corner(at(x)),
         }
     }
     // The edges: coordinate `b` fixed at `s`, coordinate `a` running over [−h, h], from
@@ -1173,14 +1226,23 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
                 m += 1;
             }
         }
+        // The chords that start by `reach` are used up: they end by the next `reach`, so
+        // only the others are kept for the following rounds.
         let mut reach = -h;
         while reach < h {
             let mut next = reach;
+            let mut kept = 0;
             for k in 0..m {
-                if lo[k] <= reach && hi[k] > next {
-                    next = hi[k];
+                if lo[k] <= reach {
+                    if hi[k] > next {
+                        next = hi[k];
+                    }
+                } else {
+                    (lo[kept], hi[kept]) = (lo[k], hi[k]);
+                    kept += 1;
                 }
             }
+            m = kept;
             if next == reach {
                 // Nothing goes beyond `reach`: the edge is uncovered up to the next start.
                 let mut end = h;
@@ -1191,7 +1253,7 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
                 }
                 let mut x = [0.0; 2];
                 (x[a], x[b]) = (0.5 * (reach + end), s);
-                return at(x);
+                return Cover::Edge(at(x));
             }
             reach = next;
         }
@@ -1214,12 +1276,12 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
                         .enumerate()
                         .all(|(k, pk)| k == i || k == j || d2(v, *pk) > t2)
                 {
-                    return (true, None);
+                    return Cover::Inside;
                 }
             }
         }
     }
-    (false, None)
+    Cover::Covered
 }
 
 /// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
@@ -1230,7 +1292,10 @@ fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 
 /// the square is at a corner, where a bisector of two points crosses an edge of the square,
 /// or at a circumcentre of three points inside it: the test checks those candidates (in a
 /// fixed order) and stops at the first one that is far from every point.
-fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
+///
+/// The corners are tried only when `corners` (else they must be known to be held by
+/// some disc: the result is the same).
+fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64, corners: bool) -> Option<[f64; 2]> {
     let mut p = [[0.0f64; 2]; MAX_PTS];
     let mut r2 = [0.0f64; MAX_PTS];
     let mut n = 0;
@@ -1257,9 +1322,11 @@ fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
     let p = &p[..n];
     // True when x is farther than t from all points.
     let far = |x: [f64; 2]| p.iter().all(|pj| d2(x, *pj) > t2);
-    for x in [[-h, -h], [h, -h], [-h, h], [h, h]] {
-        if far(x) {
-            return at(x);
+    if corners {
+        for x in [[-h, -h], [h, -h], [-h, h], [h, h]] {
+            if far(x) {
+                return at(x);
+            }
         }
     }
     for i in 0..n {
@@ -2722,10 +2789,10 @@ mod tests {
             let (exceed, w) = exceeds(c, h, &q, t * t);
             assert_eq!(
                 exceed,
-                uncovered(c, h, &q, t * t).is_some(),
+                uncovered(c, h, &q, t * t, true).is_some(),
                 "{q:?} {c:?} {h} {t}"
             );
-            assert_eq!(witness(c, h, &q, t * t), uncovered(c, h, &q, t * t));
+            assert_eq!(witness(c, h, &q, t * t), uncovered(c, h, &q, t * t, true));
             if let Some(w) = w {
                 assert!(exceed);
                 let inside = |x: f64| x.abs() <= h * (1.0 + 1e-12);
@@ -2755,7 +2822,7 @@ mod tests {
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let t = 0.3 + 2.0 * rnd();
-            match uncovered(c, h, &q, t * t) {
+            match uncovered(c, h, &q, t * t, true) {
                 Some(w) => {
                     assert!(
                         (w[0] - c[0]).abs() <= h * (1.0 + 1e-12)
