@@ -1917,7 +1917,6 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
         } else {
             u32::MAX
         };
-        let t = best_d + precision;
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             let cc = [c.c[0] + sx * qh, c.c[1] + sy * qh];
             let mut cmax = lip;
@@ -2213,32 +2212,21 @@ impl Edges {
     /// wall cannot be followed far enough.
     fn wall(&self, v: u32, c: [f64; 2], h: f64, grow: bool) -> Option<(Wall, u32, usize)> {
         let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
-        let (mut first, mut last) = (v, v);
         let mut len = usize::from(grow);
-        if grow {
-            loop {
-                let p = self.prev[first as usize];
-                if !self.seg_meets(p, lo, hi) {
-                    break;
-                }
-                first = p;
+        // The run's end each way: along `dir` (prev or next) while the edges meet the square.
+        let mut run_end = |dir: &[u32]| {
+            let mut k = v;
+            while grow && self.seg_meets(dir[k as usize], lo, hi) {
+                k = dir[k as usize];
                 len += 1;
                 if len > SLAB_EDGES {
                     return None;
                 }
             }
-            loop {
-                let w = self.next[last as usize];
-                if !self.seg_meets(w, lo, hi) {
-                    break;
-                }
-                last = w;
-                len += 1;
-                if len > SLAB_EDGES {
-                    return None;
-                }
-            }
-        }
+            Some(k)
+        };
+        let first = run_end(&self.prev)?;
+        let last = run_end(&self.next)?;
         let end = self.next[last as usize];
         let corners = Convex::square(c, h);
         // Projections on the line from `a` along the unit vector `u`: of the corners, and
