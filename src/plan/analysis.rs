@@ -2108,12 +2108,7 @@ struct Convex {
 impl Convex {
     fn square(c: [f64; 2], h: f64) -> Convex {
         let mut v = [[0.0; 2]; 8];
-        v[..4].copy_from_slice(&[
-            [c[0] - h, c[1] - h],
-            [c[0] + h, c[1] - h],
-            [c[0] + h, c[1] + h],
-            [c[0] - h, c[1] + h],
-        ]);
+        v[..4].copy_from_slice(&corners(c, h));
         Convex { v, n: 4 }
     }
 
@@ -2479,7 +2474,9 @@ impl Edges {
 // ---------------------------------------------------------------------------------------
 // Cells between curved walls.
 
-/// Most contour points an [`Arc`] is followed each way from its edge.
+/// Most contour points an [`Arc`] is followed each way from its edge to cover the
+/// square's projection on that edge's line (and three times as many to reach the rays of
+/// the square's corners).
 const ARC_WALK: usize = 64;
 
 /// Radius of the circle a straight wall is seen on, mm (far enough that a wall a few
@@ -3470,6 +3467,27 @@ mod tests {
         out
     }
 
+    /// Asserts that no point of a `(k + 1)²` grid over the square `(c, h)` (a cell a test
+    /// dropped) is deeper than `max` in the section of `e`.
+    fn assert_no_deeper(e: &Edges, (c, h): ([f64; 2], f64), max: f64, k: usize) {
+        let root = e.nodes.last().unwrap();
+        for a in 0..=k {
+            for b in 0..=k {
+                let x = [
+                    c[0] - h + 2.0 * h * a as f64 / k as f64,
+                    c[1] - h + 2.0 * h * b as f64 / k as f64,
+                ];
+                let d = e.signed_distance(x);
+                assert!(
+                    d <= max,
+                    "cell {c:?} ± {h} dropped at radius {max}, but {x:?} is {d} deep \
+                     (root {:?})",
+                    (root.lo, root.hi)
+                );
+            }
+        }
+    }
+
     #[test]
     fn walls_cover_never_hides_a_deep_point() {
         // Whenever the walls drop a cell, no point of it inside the section is deeper than
@@ -3478,7 +3496,6 @@ mod tests {
         let (mut tried, mut dropped) = (0, 0);
         for section in thin_sections(&mut rnd) {
             let e = Edges::new(&section);
-            let root = e.nodes.last().unwrap();
             for _ in 0..400 {
                 // Cells near the boundary: around a random boundary point.
                 let i = (rnd() * e.segs.len() as f64) as usize % e.segs.len();
@@ -3495,22 +3512,7 @@ mod tests {
                     continue;
                 }
                 dropped += 1;
-                let k = 40;
-                for a in 0..=k {
-                    for b in 0..=k {
-                        let x = [
-                            c[0] - h + 2.0 * h * a as f64 / k as f64,
-                            c[1] - h + 2.0 * h * b as f64 / k as f64,
-                        ];
-                        assert!(
-                            e.signed_distance(x) <= t + 1e-12,
-                            "cell {c:?} ± {h} dropped at radius {t}, but {x:?} is {} deep \
-                             (root {:?})",
-                            e.signed_distance(x),
-                            (root.lo, root.hi)
-                        );
-                    }
-                }
+                assert_no_deeper(&e, (c, h), t + 1e-12, 40);
             }
         }
         assert!(dropped * 10 > tried, "{dropped} of {tried} dropped");
@@ -3632,20 +3634,7 @@ mod tests {
                     continue;
                 }
                 dropped += 1;
-                let k = 32;
-                for a in 0..=k {
-                    for b in 0..=k {
-                        let x = [
-                            c[0] - h + 2.0 * h * a as f64 / k as f64,
-                            c[1] - h + 2.0 * h * b as f64 / k as f64,
-                        ];
-                        assert!(
-                            e.signed_distance(x) <= t + 1e-9,
-                            "cell {c:?} ± {h} dropped at radius {t}, but {x:?} is {} deep",
-                            e.signed_distance(x),
-                        );
-                    }
-                }
+                assert_no_deeper(&e, (c, h), t + 1e-9, 32);
             }
         }
         assert!(dropped * 4 > tried, "{dropped} of {tried} dropped");
