@@ -526,6 +526,9 @@ pub struct Edges {
     next: Vec<u32>,
     prev: Vec<u32>,
     nodes: Vec<Node>,
+    /// The edges under each node: a range of consecutive indexes `[first, end)` (leaves
+    /// are runs of consecutive edges, and each level pairs neighbours).
+    spans: Vec<[u32; 2]>,
     band_y0: f64,
     band_inv: f64,
     band_start: Vec<u32>,
@@ -562,8 +565,9 @@ fn union(a: &Node, b: &Node) -> ([f64; 2], [f64; 2]) {
 /// Builds the hierarchy bottom-up in contour order: leaves are runs of up to [`LEAF`]
 /// consecutive edges of one contour (a short piece of curve, so a tight box), and each
 /// level pairs neighbours of the level below. Linear time; the root is the last node.
-fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
+fn build(segs: &[Seg], contour_ends: &[usize]) -> (Vec<Node>, Vec<[u32; 2]>) {
     let mut nodes: Vec<Node> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
+    let mut spans: Vec<[u32; 2]> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
     let mut start = 0;
     for &end in contour_ends {
         let mut i = start;
@@ -595,6 +599,7 @@ fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
                 }
             }
             nodes.push(n);
+            spans.push([i as u32, j as u32]);
             i = j;
         }
         start = end;
@@ -612,16 +617,18 @@ fn build(segs: &[Seg], contour_ends: &[usize]) -> Vec<Node> {
                     first: k as u32,
                     count: 0,
                 });
+                spans.push([spans[k][0], spans[k + 1][1]]);
             } else {
                 // An odd node out moves up unchanged.
                 let a = nodes[k];
                 nodes.push(a);
+                spans.push(spans[k]);
             }
             k += 2;
         }
         (lo, hi) = (hi, nodes.len());
     }
-    nodes
+    (nodes, spans)
 }
 
 impl Edges {
@@ -671,8 +678,8 @@ impl Edges {
             segs[end - 1][3] = y;
             ends.push(segs.len());
         }
-        let nodes = if segs.is_empty() {
-            Vec::new()
+        let (nodes, spans) = if segs.is_empty() {
+            (Vec::new(), Vec::new())
         } else {
             build(&segs, &ends)
         };
@@ -724,6 +731,7 @@ impl Edges {
             next,
             prev,
             nodes,
+            spans,
             band_y0: y0,
             band_inv,
             band_start: start,
@@ -805,6 +813,37 @@ impl Edges {
             (i, dn) = (wait_i[sp], wait_d[sp]);
         }
         (best.sqrt(), arg)
+    }
+
+    /// A point inside the section on the inward normal through the middle of edge `v`
+    /// (the interior is on the edges' left), about half-way to the wall across: steps
+    /// along the normal from `s0`, doubling while the edge is still the nearest wall (up
+    /// to `cap`), then half-way between the step and the wall across. With its depth and
+    /// nearest edge; `None` when it is not inside the section.
+    fn ridge_probe(&self, v: u32, s0: f64, cap: f64) -> Option<([f64; 2], f64, u32)> {
+        let g = self.segs[v as usize];
+        let u = unit([g[2] - g[0], g[3] - g[1]])?;
+        let (m, n) = ([0.5 * (g[0] + g[2]), 0.5 * (g[1] + g[3])], [-u[1], u[0]]);
+        let at = |s: f64| [m[0] + n[0] * s, m[1] + n[1] * s];
+        let depth = |s: f64| {
+            let p = at(s);
+            self.nearest_from(p, (seg_d2(p, &g), v))
+        };
+        let mut s = s0;
+        let (mut d, mut near) = depth(s);
+        while d >= 0.999 * s && s < cap {
+            s *= 2.0;
+            (d, near) = depth(s);
+        }
+        if d < 0.999 * s {
+            let s2 = 0.5 * (s + d);
+            let (d2, n2) = depth(s2);
+            if d2 > d {
+                (s, d, near) = (s2, d2, n2);
+            }
+        }
+        let p = at(s);
+        self.inside(p).then_some((p, d, near))
     }
 
     /// The boundary point nearest to `p` among those on the far side of `p` from `q`
@@ -1521,8 +1560,10 @@ fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]
 ///
 /// Best-first search over square cells ordered by an upper bound of the signed distance
 /// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
-/// dropped as soon as it is shown to hold no point deeper than `T`. Popping a cell of
-/// half-size `h`:
+/// dropped as soon as it is shown to hold no point deeper than `T`. When the first
+/// `SEED_AFTER` cells have found no centre inside the section (a thin one), the best
+/// depth starts from points on a few walls' inward normals (`Edges::ridge_probe`).
+/// Popping a cell of half-size `h`:
 /// 1. its parent's boundary points (below) still cover it at radius `T` (only tried when
 ///    `T` has grown since it was queued: they did not cover it then): dropped without a
 ///    search;
@@ -1561,7 +1602,12 @@ fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]
 ///    around their centres of curvature, show it shallow (`Edges::arcs_cover`): between
 ///    the two walls of a ring the mean of their bounds is the ring's half-width over the
 ///    whole cell, however long the ring; tried while it pays (`ARC_TRIAL`);
-/// 7. the four children are tested against the same points at once, and only those not
+/// 7. a cell of half-size at least `8·precision` that is larger than `T` or whose centre
+///    is outside the section is dropped when it straddles a ring whose two walls, seen as
+///    arcs, show it shallow (`Edges::ring_cover`): a thin ring's cells stick out of it on
+///    both sides, however large; tried while it pays, and on every `RING_PROBE`-th
+///    cell;
+/// 8. the four children are tested against the same points at once, and only those not
 ///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
 ///    `q` or the far-wall point, if smaller) as their key; a child holding an uncovered
 ///    point the cell's own test found (`Witnesses`) is queued without a test.
@@ -1733,6 +1779,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
     let half = size / 2.0;
     sc.arcs.clear();
     let (mut arc_tries, mut arc_hits) = (0usize, 0usize);
+    let (mut ring_tries, mut ring_hits, mut ring_seen) = (0usize, 0usize, 0usize);
     let heap = &mut sc.queue;
     heap.heap.clear();
     heap.cells.clear();
@@ -1759,6 +1806,7 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
     let mut best_d = f64::NEG_INFINITY;
     let mut best_c = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
     let mut best_near = u32::MAX;
+    let mut pops = 0usize;
     let arena = &mut sc.arena;
     arena.clear();
     let far_corner = |c: [f64; 2], h: f64, q: [f64; 2]| {
@@ -1766,6 +1814,19 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
         (dx * dx + dy * dy).sqrt()
     };
     while let Some(c) = heap.pop() {
+        // No centre inside the section yet (a thin section: a ring's first layers): a
+        // few points on its walls' inward normals give the depth to beat.
+        if pops == SEED_AFTER && best_d <= 0.0 {
+            for k in 0..SEEDS {
+                let v = (k * e.segs.len() / SEEDS) as u32;
+                if let Some((p, d, near)) = e.ridge_probe(v, precision, size) {
+                    if d > best_d {
+                        (best_c, best_d, best_near) = (p, d, near);
+                    }
+                }
+            }
+        }
+        pops += 1;
         if c.max - best_d <= precision {
             // The heap is ordered by the bound: no remaining cell can do better.
             break;
@@ -1927,6 +1988,21 @@ fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) 
             if e.arcs_cover(c.c, c.h, t, [near, far_edge], &mut sc.arcs) {
                 arc_hits += 1;
                 continue;
+            }
+        }
+        // A cell across a ring (its centre outside the section, or the cell larger than
+        // the depth to beat): dropped when the ring's two walls show it shallow.
+        if c.h >= ARC_MIN_H * precision && (c.h >= t || n == 0) {
+            ring_seen += 1;
+            if ring_tries < ARC_TRIAL
+                || ring_hits * ARC_RATE >= ring_tries
+                || ring_seen % RING_PROBE == 0
+            {
+                ring_tries += 1;
+                if e.ring_cover(c.c, c.h, t, near, &mut sc.arcs) {
+                    ring_hits += 1;
+                    continue;
+                }
             }
         }
         let qh = c.h / 2.0;
@@ -2506,6 +2582,24 @@ const ARC_TRIAL: usize = 2;
 /// See [`ARC_TRIAL`].
 const ARC_RATE: usize = 4;
 
+/// [`Edges::ring_cover`] is tried as [`Edges::arcs_cover`] is ([`ARC_TRIAL`], [`ARC_RATE`]),
+/// and also on every `RING_PROBE`-th cell it could be tried on when that has stopped: a
+/// search's first cells are large and seldom dropped, and without the probes one failed
+/// start would stop the tries for the whole search (logo_hires search instructions: no
+/// probes 643 M, every 16th 557 M, every 8th 511 M; every 2nd or every cell save it a
+/// little more but cost mcad_gear 3 % and 7 %).
+const RING_PROBE: usize = 8;
+
+/// After its first `SEED_AFTER` cells with no centre inside the section, a search takes
+/// the best of [`Edges::ridge_probe`] on `SEEDS` edges spread over the contours as the
+/// depth to beat: a thin section (a ring's first layers) has few cells whose centre is
+/// inside it, and until one is found every cell is split (logo_hires: search 584 → 511 M
+/// instructions; seeding every search costs bunny00 +4 %).
+const SEED_AFTER: usize = 4;
+
+/// See [`SEED_AFTER`].
+const SEEDS: usize = 2;
+
 /// A stretch of a contour, the points `back` to `fwd` (consecutive indexes), seen from a
 /// centre `o`: every point of it (its edges included) lies at a distance in the band
 /// `[lo, hi]` from `o`, and all of it lies in the open half-plane `{y : w·(y − o) > 0}`,
@@ -2547,6 +2641,16 @@ impl Arc {
                 && self.sigma * cross(self.rb, y) >= 0.0
                 && self.sigma * cross(y, self.rf) >= 0.0
         })
+    }
+
+    /// Whether the edges `[s0, s1)` (`s0 < s1`) are all the stretch's.
+    fn has_span(&self, [s0, s1]: [u32; 2]) -> bool {
+        match self.wrap {
+            None => self.back <= s0 && s1 <= self.fwd,
+            Some((first, last)) => {
+                (self.back <= s0 && s1 <= last + 1) || (first <= s0 && s1 <= self.fwd)
+            }
+        }
     }
 
     /// Whether edge `v` is one of the stretch's.
@@ -2914,6 +3018,114 @@ impl Edges {
             if arc_bound((c, &cs), (&a, side, near), Some((&b, b_side, b_near))) > t {
                 return false;
             }
+        }
+        true
+    }
+}
+
+impl Edges {
+    /// An edge whose bounding box meets the square `[c ± h]` and that is none of `arcs`'
+    /// stretches' (`u32::MAX` when the index is too deep to tell), or `None` when every
+    /// edge meeting the square is one of theirs.
+    fn stray(&self, c: [f64; 2], h: f64, arcs: &[&Arc]) -> Option<u32> {
+        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
+        let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let k = stack[sp] as usize;
+            let n = &self.nodes[k];
+            if !(n.lo[0] <= hi[0] && n.hi[0] >= lo[0] && n.lo[1] <= hi[1] && n.hi[1] >= lo[1])
+                || arcs.iter().any(|a| a.has_span(self.spans[k]))
+            {
+                continue;
+            }
+            if n.count > 0 {
+                let f = n.first;
+                for v in f..f + n.count {
+                    if self.seg_meets(v, lo, hi) && !arcs.iter().any(|a| a.has(v)) {
+                        return Some(v);
+                    }
+                }
+            } else {
+                if sp + 2 > stack.len() {
+                    return Some(u32::MAX);
+                }
+                stack[sp] = n.first;
+                stack[sp + 1] = n.first + 1;
+                sp += 2;
+            }
+        }
+        None
+    }
+
+    /// Whether no point of the square `[c ± h]` is deeper than `t`, shown from two walls
+    /// crossing it seen as [`Arc`]s, one inside the other (a ring's): `A` through `near`
+    /// and `B` through an edge meeting the square that is not `A`'s; every edge meeting
+    /// the square must be one of theirs. With `I` the inner arc and `O` the outer one, the
+    /// bands must be nested with room to spare, `lo_O − hi_I > |o_I − o_O|`: then `O`'s
+    /// stretch lies beyond `I`'s band and `I`'s before `O`'s, and the square falls into
+    /// five parts: before `I`'s band (a disc's piece: convex, no edge meets it, one inside
+    /// test at its point nearest `o_I`), `I`'s band (depth at most its width), between the
+    /// bands, `O`'s band, and beyond `O`'s band (no edge meets it; each piece holds a
+    /// corner: one inside test at each such corner). Between the bands no inside test is
+    /// needed: a point there is beyond `I` and before `O`, so [`arc_bound`]'s mean bounds
+    /// its depth whether it is inside the section or not (outside, the depth is negative).
+    /// Unlike [`Edges::arcs_cover`], the centre need not be inside the section, and the
+    /// square may be larger than `t`: a cell straddling a thin ring. `false` means not
+    /// shown.
+    fn ring_cover(&self, c: [f64; 2], h: f64, t: f64, near: u32, cache: &mut ArcCache) -> bool {
+        if near == u32::MAX {
+            return false;
+        }
+        let cs = corners(c, h);
+        let Some(a) = cache.get(self, near, c, h, &cs) else {
+            return false;
+        };
+        let v = match self.stray(c, h, &[&a]) {
+            Some(v) if v != u32::MAX => v,
+            _ => return false,
+        };
+        let Some(b) = cache.get(self, v, c, h, &cs) else {
+            return false;
+        };
+        if self.stray(c, h, &[&a, &b]).is_some() {
+            return false;
+        }
+        let oo = d2(a.o, b.o).sqrt();
+        let (i, o) = if b.lo - a.hi > oo {
+            (a, b)
+        } else if a.lo - b.hi > oo {
+            (b, a)
+        } else {
+            return false;
+        };
+        let (ni, fi) = i.near_far(c, h, &cs);
+        let (no, fo) = o.near_far(c, h, &cs);
+        // The bands, where they meet the square.
+        if (ni <= i.hi && fi >= i.lo && i.hi - i.lo > t)
+            || (no <= o.hi && fo >= o.lo && o.hi - o.lo > t)
+        {
+            return false;
+        }
+        let cc = (c, &cs);
+        // Between the bands.
+        if fi > i.hi && no < o.lo && arc_bound(cc, (&i, true, ni), Some((&o, false, no))) > t {
+            return false;
+        }
+        // Before the inner band, beyond the outer one: bounded, or outside the section.
+        if ni < i.lo
+            && arc_bound(cc, (&i, false, ni), Some((&o, false, no))) > t
+            && self.inside(clamp_to(c, h, i.o))
+        {
+            return false;
+        }
+        if fo > o.hi
+            && arc_bound(cc, (&i, true, ni), Some((&o, true, no))) > t
+            && cs.iter().any(|x| o.rho(*x) > o.hi && self.inside(*x))
+        {
+            return false;
         }
         true
     }
@@ -3638,6 +3850,148 @@ mod tests {
             }
         }
         assert!(dropped * 4 > tried, "{dropped} of {tried} dropped");
+    }
+
+    /// The largest depth found in the square `(c, h)` by a plain branch and bound (exact
+    /// signed distances at cell centres, 1-Lipschitz bound): a point really that deep,
+    /// and no point of the square is deeper by more than `tol`.
+    fn cell_max(e: &Edges, (c, h): ([f64; 2], f64), tol: f64) -> f64 {
+        let mut best = f64::NEG_INFINITY;
+        let mut stack = vec![(c, h)];
+        while let Some((c, h)) = stack.pop() {
+            let d = e.signed_distance(c);
+            best = best.max(d);
+            if d + h * std::f64::consts::SQRT_2 <= best + tol {
+                continue;
+            }
+            let q = h / 2.0;
+            for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+                stack.push(([c[0] + sx * q, c[1] + sy * q], q));
+            }
+        }
+        best
+    }
+
+    /// Rings of all widths (thin ones as a fine mesh's first layers have, off-centre,
+    /// coarse and fine), an elliptic ring, the thin rings' complement (a gap between two
+    /// parts of the section) and a disc.
+    fn ring_sections(rnd: &mut impl FnMut() -> f64) -> Vec<Vec<Contour>> {
+        let mut out = Vec::new();
+        for k in 0..6 {
+            let r = 3.0 + 10.0 * rnd();
+            let w = if k % 2 == 0 {
+                0.01 + 0.3 * rnd()
+            } else {
+                0.5 + 3.0 * rnd()
+            };
+            let n = 48 + (600.0 * rnd()) as usize;
+            let off = if k < 3 { 0.0 } else { 0.3 * w * rnd() };
+            out.push(vec![
+                ngon(0.0, 0.0, r + w, n, true),
+                ngon(off, 0.0, r, n, false),
+            ]);
+        }
+        let ellipse = |a: f64, b: f64, ccw: bool| -> Contour {
+            let mut c: Contour = (0..400)
+                .map(|i| {
+                    let t = std::f64::consts::TAU * i as f64 / 400.0;
+                    [a * t.cos(), b * t.sin()]
+                })
+                .collect();
+            if !ccw {
+                c.reverse();
+            }
+            c
+        };
+        out.push(vec![ellipse(12.0, 8.0, true), ellipse(11.8, 7.9, false)]);
+        out.push(vec![
+            ngon(0.0, 0.0, 20.0, 400, true),
+            ngon(0.0, 0.0, 8.2, 300, false),
+            ngon(0.0, 0.0, 8.0, 300, true),
+        ]);
+        // A thin ring with discs beside it, in its hole and out of it: third walls.
+        // (The discs' edges come first: a stray edge is looked for from the last ones.)
+        let mut islands: Vec<Contour> = (0..6)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / 6.0;
+                let r = if k % 2 == 0 { 11.0 } else { 9.1 };
+                ngon(r * a.cos(), r * a.sin(), 0.4, 120, true)
+            })
+            .collect();
+        islands.push(ngon(0.0, 0.0, 10.1, 720, true));
+        islands.push(ngon(0.0, 0.0, 10.0, 720, false));
+        out.push(islands);
+        out.push(vec![ngon(1.0, -2.0, 6.0, 300, true)]);
+        out
+    }
+
+    #[test]
+    fn ring_cover_never_hides_a_deep_point() {
+        // Whenever the two walls drop a cell (its centre inside the section or not, the
+        // cell larger than the radius asked or not), no point of it is deeper than the
+        // radius asked by more than the check's tolerance; and they do drop cells.
+        let mut rnd = xorshift(0x0052_1ac0_fe55);
+        let (mut tried, mut dropped) = (0, 0);
+        for section in ring_sections(&mut rnd) {
+            let e = Edges::new(&section);
+            let mut cache = ArcCache::default();
+            for _ in 0..150 {
+                // Cells around a random boundary point, up to 3 mm from it.
+                let i = (rnd() * e.segs.len() as f64) as usize % e.segs.len();
+                let q = e.vert(i as u32);
+                let c = [q[0] + 4.0 * rnd() - 2.0, q[1] + 4.0 * rnd() - 2.0];
+                let h = 0.05 + 3.0 * rnd();
+                // About the cell's largest depth, a little below or above.
+                let m = cell_max(&e, (c, h), 0.004);
+                let t = m - 0.02 + 0.06 * rnd();
+                if t <= 0.0 {
+                    continue;
+                }
+                if rnd() < 0.2 {
+                    cache.clear();
+                }
+                tried += 1;
+                let near = e.nearest(c, u32::MAX).1;
+                if !e.ring_cover(c, h, t, near, &mut cache) {
+                    continue;
+                }
+                dropped += 1;
+                let found = cell_max(&e, (c, h), 0.004);
+                assert!(
+                    found <= t + 1e-9,
+                    "cell {c:?} ± {h} dropped at radius {t}, but a point is {found} deep"
+                );
+            }
+        }
+        assert!(dropped * 6 > tried, "{dropped} of {tried} dropped");
+    }
+
+    #[test]
+    fn ring_cover_drops_cells_across_a_thin_ring_and_no_deeper() {
+        // A ring between circles of radius 10 and 10.1 (depth 0.05 at most): cells larger
+        // than the ring, straddling it, centres inside and outside the section.
+        let ring = vec![
+            ngon(0.0, 0.0, 10.1, 720, true),
+            ngon(0.0, 0.0, 10.0, 720, false),
+        ];
+        let e = Edges::new(&ring);
+        let mut cache = ArcCache::default();
+        for (c, h) in [([10.05, 0.0], 1.0), ([0.3, -9.5], 1.5), ([7.0, 7.3], 0.5)] {
+            let near = e.nearest(c, u32::MAX).1;
+            assert!(e.ring_cover(c, h, 0.051, near, &mut cache), "{c:?}");
+            assert!(!e.ring_cover(c, h, 0.045, near, &mut cache), "{c:?}");
+        }
+        // The same walls around a gap (the section is the disc inside and the part
+        // outside): the parts beside the gap are deep.
+        let gap = vec![
+            ngon(0.0, 0.0, 30.0, 720, true),
+            ngon(0.0, 0.0, 10.1, 720, false),
+            ngon(0.0, 0.0, 10.0, 720, true),
+        ];
+        let g = Edges::new(&gap);
+        let c = [10.05, 0.0];
+        let near = g.nearest(c, u32::MAX).1;
+        assert!(!g.ring_cover(c, 1.0, 0.5, near, &mut ArcCache::default()));
     }
 
     #[test]
