@@ -549,6 +549,31 @@ fn seg_d2(p: [f64; 2], s: &Seg) -> f64 {
     ex * ex + ey * ey
 }
 
+/// [`seg_d2`] when it is below `best`, else `None`: the distance to the edge's line is
+/// compared before it is divided out.
+#[inline]
+fn seg_d2_below(p: [f64; 2], s: &Seg, best: f64) -> Option<f64> {
+    let (ax, ay, bx, by) = (s[0], s[1], s[2], s[3]);
+    let (dx, dy) = (bx - ax, by - ay);
+    let (px, py) = (p[0] - ax, p[1] - ay);
+    let l2 = dx * dx + dy * dy;
+    let dot = px * dx + py * dy;
+    let d = if dot <= 0.0 || l2 == 0.0 {
+        px * px + py * py
+    } else if dot >= l2 {
+        let (qx, qy) = (p[0] - bx, p[1] - by);
+        qx * qx + qy * qy
+    } else {
+        let cr = px * dy - py * dx;
+        let c2 = cr * cr;
+        if c2 >= best * l2 {
+            return None;
+        }
+        c2 / l2
+    };
+    (d < best).then_some(d)
+}
+
 fn box_d2(p: [f64; 2], n: &Node) -> f64 {
     let dx = (n.lo[0] - p[0]).max(0.0).max(p[0] - n.hi[0]);
     let dy = (n.lo[1] - p[1]).max(0.0).max(p[1] - n.hi[1]);
@@ -779,8 +804,7 @@ impl Edges {
                 if n.count > 0 {
                     let f = n.first as usize;
                     for (k, s) in self.segs[f..f + n.count as usize].iter().enumerate() {
-                        let d = seg_d2(p, s);
-                        if d < best {
+                        if let Some(d) = seg_d2_below(p, s, best) {
                             best = d;
                             arg = (f + k) as u32;
                         }
