@@ -12,7 +12,9 @@ that prisms' masks use stays):
 Interleaved rounds of `dmdsl slice MODEL -q -o /dev/shm/planning_time.dmdjob` with both
 binaries (default profile); process CPU (user + sys, from wait4) and wall time. Prints per
 model the medians and the ratios BIN / BIN_NO_ANALYSIS: the wall ratio is what a user
-waits for, the CPU ratio what the analysis costs on a busy machine.
+waits for, the CPU ratio what the analysis costs on a busy machine. Then, per model, the
+rounds' own ratios (each round runs both binaries back to back): their median and
+quartiles, less sensitive to the load of a shared machine drifting over the run.
 """
 import os, shutil, statistics, subprocess, sys, time
 
@@ -46,6 +48,15 @@ def main():
         name = os.path.splitext(os.path.basename(m))[0]
         print(f"{name:16s} {w0:.3f} → {w1:.3f} s ({100 * (w1 / w0 - 1):+.1f} %)"
               f"      {c0:.3f} → {c1:.3f} s ({100 * (c1 / c0 - 1):+.1f} %)")
+    print("model            per-round ratios, median [quartiles]: wall / CPU")
+    for m in models:
+        name = os.path.splitext(os.path.basename(m))[0]
+        cols = []
+        for k in (1, 0):
+            r = sorted(f[k] / b[k] - 1 for b, f in zip(res[(m, bare)], res[(m, full)]))
+            q = statistics.quantiles(r, n=4) if len(r) > 1 else [r[0]] * 3
+            cols.append(f"{100 * q[1]:+.1f} % [{100 * q[0]:+.1f}, {100 * q[2]:+.1f}]")
+        print(f"{name:16s} {cols[0]}   /   {cols[1]}")
 
 
 if __name__ == "__main__":
