@@ -2610,8 +2610,8 @@ const ARC_RATE: usize = 4;
 /// and also on every `RING_PROBE`-th cell it could be tried on when that has stopped: a
 /// search's first cells are large and seldom dropped, and without the probes one failed
 /// start would stop the tries for the whole search (logo_hires search instructions: no
-/// probes 643 M, every 16th 557 M, every 8th 511 M; every 2nd or every cell save it a
-/// little more but cost mcad_gear 3 % and 7 %).
+/// probes 643 M before the seeds of [`SEED_AFTER`], with them every 16th 557 M, every 8th
+/// 511 M; every 2nd or every cell save it a little more but cost mcad_gear 3 % and 7 %).
 const RING_PROBE: usize = 8;
 
 /// After its first `SEED_AFTER` cells with no centre inside the section, a search takes
