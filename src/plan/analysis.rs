@@ -3259,6 +3259,20 @@ mod tests {
         c
     }
 
+    /// An ellipse of half-axes `a` and `b` around the origin, 400 points.
+    fn ellipse(a: f64, b: f64, ccw: bool) -> Contour {
+        let mut c: Contour = (0..400)
+            .map(|i| {
+                let t = std::f64::consts::TAU * i as f64 / 400.0;
+                [a * t.cos(), b * t.sin()]
+            })
+            .collect();
+        if !ccw {
+            c.reverse();
+        }
+        c
+    }
+
     fn mfd(c: &[Contour]) -> f64 {
         max_fill_distance(c).0
     }
@@ -3800,18 +3814,6 @@ mod tests {
             ]);
         }
         out.push(cross_cut_pieces(12.0, 7.0, 1.5, 240));
-        let ellipse = |a: f64, b: f64, ccw: bool| -> Contour {
-            let mut c: Contour = (0..400)
-                .map(|i| {
-                    let t = std::f64::consts::TAU * i as f64 / 400.0;
-                    [a * t.cos(), b * t.sin()]
-                })
-                .collect();
-            if !ccw {
-                c.reverse();
-            }
-            c
-        };
         out.push(vec![ellipse(12.0, 8.0, true), ellipse(9.0, 5.0, false)]);
         out.push(vec![ngon(1.0, -2.0, 6.0, 300, true)]);
         out.push(vec![(0..500)
@@ -3915,18 +3917,6 @@ mod tests {
                 ngon(off, 0.0, r, n, false),
             ]);
         }
-        let ellipse = |a: f64, b: f64, ccw: bool| -> Contour {
-            let mut c: Contour = (0..400)
-                .map(|i| {
-                    let t = std::f64::consts::TAU * i as f64 / 400.0;
-                    [a * t.cos(), b * t.sin()]
-                })
-                .collect();
-            if !ccw {
-                c.reverse();
-            }
-            c
-        };
         out.push(vec![ellipse(12.0, 8.0, true), ellipse(11.8, 7.9, false)]);
         out.push(vec![
             ngon(0.0, 0.0, 20.0, 400, true),
