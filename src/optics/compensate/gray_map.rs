@@ -1,0 +1,177 @@
+//! The gray map: the full-coverage gray of every pixel (what a plate covering the field
+//! gets, without error diffusion). The apply path reads it for fully covered pixels, and
+//! the job writes it as a PNG beside the masks.
+
+use super::zone_mode::ZoneTables;
+use super::zones::ZoneGrid;
+use super::{Compensator, Mask};
+
+/// The full-coverage gray of every pixel as distinct rows (`w` bytes each) and the index
+/// of each image row's: in zone mode a row is one gray per zone segment, so rows repeat
+/// (about 15 distinct rows per zone row, instead of a w × h map to allocate and fill); in
+/// pixel mode every row is its own.
+#[derive(Debug)]
+pub(super) struct GrayMap {
+    pub(super) rows: Vec<u8>,
+    pub(super) row_of: Vec<u32>,
+}
+
+impl GrayMap {
+    /// Pixel mode's map: `full` holds every pixel's gray, row-major, `h` rows.
+    pub(super) fn per_pixel(full: Vec<u8>, h: usize) -> GrayMap {
+        GrayMap {
+            rows: full,
+            row_of: (0..h as u32).collect(),
+        }
+    }
+
+    /// Zone mode's map: entry 255 of each pixel's table.
+    ///
+    /// Rows with the same tables have the same grays. Tables belong to one zone, so only
+    /// rows of the same zone row can be the same, and there rows with the same r mod 64
+    /// are ([`upper_row`](super::zone_mode::upper_row)): a row new in its phase is looked
+    /// for among the distinct rows of its zone row; distinct rows are numbered in order of
+    /// appearance.
+    pub(super) fn of_zone_tables(zone_tables: &ZoneTables, zones: &ZoneGrid) -> GrayMap {
+        let (tables, row_tables) = (&zone_tables.tables, &zone_tables.of_row);
+        let (zone_of_row, zcols, h) = (&zones.of_row, zones.cols, zones.of_row.len());
+        let mut gray_rows = Vec::new();
+        let mut gray_row_of: Vec<u32> = Vec::with_capacity(h);
+        // Distinct rows so far (index, first image row) of the current zone row,
+        // and the index of each phase seen there.
+        let mut in_zone_row: Vec<(u32, usize)> = Vec::new();
+        let mut by_phase = [u32::MAX; 64];
+        let mut next = 0u32;
+        for r in 0..h {
+            if r > 0 && zone_of_row[r] != zone_of_row[r - 1] {
+                in_zone_row.clear();
+                by_phase = [u32::MAX; 64];
+            }
+            if by_phase[r & 63] != u32::MAX {
+                gray_row_of.push(by_phase[r & 63]);
+                continue;
+            }
+            let tabs = &row_tables[r * zcols..(r + 1) * zcols];
+            let found = in_zone_row
+                .iter()
+                .find(|&&(_, r0)| &row_tables[r0 * zcols..(r0 + 1) * zcols] == tabs);
+            let k = match found {
+                Some(&(k, _)) => k,
+                None => {
+                    for &(zc, a, b) in &zones.segments {
+                        gray_rows.resize(gray_rows.len() + b - a, tables[tabs[zc] as usize][255]);
+                    }
+                    in_zone_row.push((next, r));
+                    next += 1;
+                    next - 1
+                }
+            };
+            by_phase[r & 63] = k;
+            gray_row_of.push(k);
+        }
+        GrayMap {
+            rows: gray_rows,
+            row_of: gray_row_of,
+        }
+    }
+}
+
+impl Compensator {
+    /// Row `r` of the gray map (the full-coverage gray of each pixel).
+    #[inline(always)]
+    pub(super) fn gray_row(&self, r: usize) -> &[u8] {
+        let k = self.gray_map.row_of[r] as usize * self.w;
+        &self.gray_map.rows[k..k + self.w]
+    }
+
+    /// The full-coverage gray of every pixel (what a plate covering the field gets, without
+    /// error diffusion), in field orientation.
+    pub fn gray_map(&self) -> Mask {
+        let mut data = Vec::with_capacity(self.w * self.h);
+        for r in 0..self.h {
+            data.extend_from_slice(self.gray_row(r));
+        }
+        Mask {
+            width: self.w as u32,
+            height: self.h as u32,
+            data,
+        }
+    }
+
+    /// The gray map as projector `p` shows it ([`crate::raster::projector_view`]),
+    /// encoded by `png`, which must give [`crate::png::encode_gray8`]'s bytes (the
+    /// bundle's mask encoder): when `p` shows the field as it is, the map is encoded row by
+    /// row with [`crate::png::encode_gray8_rows`] (the same bytes) without making it.
+    pub fn gray_map_png(
+        &self,
+        p: &crate::profile::Projector,
+        png: impl Fn(&Mask) -> Vec<u8>,
+    ) -> Vec<u8> {
+        let identity = p.offset_px == [0, 0]
+            && p.width_px as usize == self.w
+            && p.height_px as usize == self.h
+            && !p.mirror_x
+            && !p.mirror_y;
+        if identity {
+            let (w, h) = (self.w as u32, self.h as u32);
+            crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
+        } else {
+            let m = self.gray_map();
+            png(&crate::raster::projector_view(&m, p))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_support::small_setup;
+    use super::super::{Dither, Mode};
+    use super::*;
+
+    #[test]
+    fn gray_map_rows_and_png_equal_the_per_zone_grays() {
+        // The gray map kept as distinct rows is, pixel for pixel, the full-coverage gray
+        // of the pixel's zone table for its row (zone mode) and the per-pixel gray (pixel
+        // mode: checked against `apply` on a plate); its PNG, encoded row by row, is
+        // `encode_gray8` of the map, also as mirrored projectors see it.
+        let (cal, field) = small_setup();
+        let (w, h) = (200usize, 150usize);
+        for (mode, dither) in [
+            (Mode::Zone, Dither::Auto),
+            (Mode::Zone, Dither::On),
+            (Mode::Zone, Dither::Off),
+            (Mode::Pixel, Dither::Off),
+        ] {
+            let c = Compensator::new(&cal, &field, mode, dither).unwrap();
+            let map = c.gray_map();
+            if mode == Mode::Zone {
+                assert!(
+                    c.gray_map.rows.len() / w < h / 2,
+                    "{}",
+                    c.gray_map.rows.len() / w
+                );
+                for r in 0..h {
+                    for col in 0..w {
+                        let t =
+                            c.zone_tables.of_row[r * c.zones.cols + c.zones.of_col[col] as usize];
+                        assert_eq!(map.data[r * w + col], c.zone_tables.tables[t as usize][255]);
+                    }
+                }
+            }
+            let mut plate = Mask {
+                width: w as u32,
+                height: h as u32,
+                data: vec![255; w * h],
+            };
+            c.apply(&mut plate);
+            assert!(plate == map, "{mode:?} {dither:?}");
+            let mut p = crate::profile::Profile::default_profile().projector[0].clone();
+            (p.width_px, p.height_px) = (w as u32, h as u32);
+            let png = |m: &Mask| crate::png::encode_gray8(m.width, m.height, &m.data);
+            assert_eq!(c.gray_map_png(&p, png), png(&map));
+            p.mirror_x = true;
+            let view = crate::raster::projector_view(&map, &p);
+            assert_eq!(c.gray_map_png(&p, png), png(&view));
+        }
+    }
+}
