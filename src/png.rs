@@ -10,11 +10,10 @@
 //! zone, and the rows of a zone row repeat with a short period (mixing zones alternate
 //! two grays over the rows). A row of four or more runs equal to one of the eight rows
 //! above is therefore coded as a copy of it (rows compared by a signature, then their
-//! bytes): box's zone-mode masks 12.0 → 7.6 KB, the off-mode ones 7.8 → 7.1 KB. After a
+//! bytes), which makes zone-compensated masks much smaller than runs alone. After a
 //! copied row the next is compared with the rows above before it is scanned, and a copy
-//! adds its bytes to the Adler-32 from the source row's sums, so repeating rows cost less
-//! than scanning (the zone gray map 1.6 → 1.25 M instructions). The cost: about 10 % more
-//! instructions encoding logo_hires, whose rows never repeat (+1.2 % of its process).
+//! adds its bytes to the Adler-32 from the source row's sums, so a repeating row costs
+//! less than scanning it; masks whose rows never repeat pay for the signature of each row.
 //! The output is a standard PNG that any decoder reads (tests decode it with `image`).
 
 /// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
@@ -294,8 +293,8 @@ fn long_repeat(bits: &mut Bits, mut k: usize) {
 
 /// Length of the run of byte `v` starting at `s[0]`: compares eight bytes per step and
 /// finds the first different byte from the lowest set bit of the XOR. A plain loop (no
-/// unrolling, no bounds checks): few instructions per step and few registers, which
-/// matters as much here, where the typical run is a few words long.
+/// unrolling, no bounds checks) keeps each step short and light on registers, which
+/// matters here, where the typical run is a few words long.
 #[inline(always)]
 fn run_len(s: &[u8], v: u8) -> usize {
     let pat = u64::from_ne_bytes([v; 8]);
