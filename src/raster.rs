@@ -1,8 +1,8 @@
 //! Rasterization of layer sections into 8-bit masks in field pixel coordinates.
 //!
-//! Orientation (BRIEF §3, PrusaSlicer's landscape convention): the mask is a top view,
-//! +X to the right, +Y up; build-plane point (x, y) measured from the field's
-//! bottom-left corner lies in column `floor(x / p)`, row `H − 1 − floor(y / p)`.
+//! Orientation (PrusaSlicer's landscape convention): the mask is a top view, +X to the
+//! right, +Y up; build-plane point (x, y) measured from the field's bottom-left corner
+//! lies in column `floor(x / p)`, row `H − 1 − floor(y / p)`.
 //!
 //! * Anti-aliased masks (the default) hold the exact fraction of each pixel's area
 //!   inside the section, `round(255 · coverage)`, computed analytically with a signed-area
