@@ -1,0 +1,248 @@
+//! One layer's work in a block: its masks (drawn, or written again from an equal layer's,
+//! see [`mask_reuse`](super::mask_reuse)), their files, and the layer's analysis.
+
+use super::clock::ThreadClock;
+use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
+use crate::bundle::{self, BundleWriter, MaskRef};
+use crate::error::Result;
+use crate::geometry::distortion::{self, Correction};
+use crate::geometry::tile::Tiler;
+use crate::optics::JobOptics;
+use crate::plan::analysis::{Analysed, Analyser, LitRuns};
+use crate::profile::Profile;
+use crate::raster::{projector_view, Rasterizer, Scratch};
+use crate::slice::{Contour, Section};
+use std::borrow::Cow;
+use std::path::Path;
+use std::sync::Arc;
+
+/// What every layer of a job is made with.
+pub(super) struct LayerContext<'a> {
+    /// Where the mask files go.
+    pub writer: &'a BundleWriter,
+    /// The machine (its projectors).
+    pub profile: &'a Profile,
+    /// The field's rasterizer.
+    pub raster: &'a Rasterizer,
+    /// Light compensation of the single projector, if any.
+    pub optics: Option<&'a JobOptics>,
+    /// Blending and compensation of several projectors, if tiled.
+    pub tiler: Option<&'a Tiler>,
+    /// Lens distortion pre-warp, if any.
+    pub correction: Option<&'a Correction>,
+    /// The model file (named by pre-warp errors).
+    pub model: &'a Path,
+    /// Masks of recent prism layers, shared by the workers (`None` where they cannot be
+    /// reused: see [`RecentPrismMasks`]).
+    pub recent: Option<&'a RecentPrismMasks>,
+    /// Binary masks (coverage thresholded).
+    pub binary: bool,
+    /// Area of one field pixel, mm².
+    pub px_area_mm2: f64,
+}
+
+impl LayerContext<'_> {
+    /// The bundle path of projector `k`'s mask of layer `i`.
+    fn mask_file(&self, k: usize, i: usize) -> String {
+        if self.tiler.is_some() {
+            format!("masks/p{k}/{i:05}.png")
+        } else {
+            format!("masks/{i:05}.png")
+        }
+    }
+}
+
+/// One layer handed to a block's worker.
+pub(super) struct LayerIn<'a> {
+    /// The layer's index.
+    pub index: usize,
+    /// Its section.
+    pub section: &'a Section,
+    /// The section of the layer below (None for layer 0), for analyses that compare layers.
+    pub below: Option<&'a Section>,
+}
+
+/// What a worker made of one layer.
+pub(super) struct LayerOut {
+    /// Lit area, mm².
+    pub area_mm2: f64,
+    /// The layer's analysis, possibly left for the layer below to complete.
+    pub analysis: Analysed,
+    /// CPU time of the analysis, s.
+    pub analysis_s: f64,
+    /// The mask files written.
+    pub masks: Vec<MaskRef>,
+    /// The layer's lit pixels, kept where another block needs them: for its own islands
+    /// ([`Analysed::NeedsBelow`]) or those of the next layer (the last layer of a block).
+    pub runs: Option<LitRuns>,
+}
+
+/// What a block's worker carries from one layer to the next.
+#[derive(Default)]
+pub(super) struct BlockWorker {
+    /// The analysis of consecutive layers.
+    pub analyser: Analyser,
+    /// The masks of the previous layer.
+    previous: Option<PreviousLayerMasks>,
+}
+
+/// Where a layer's masks came from.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Origin {
+    /// Drawn for this layer: its lit pixels are the scratch's.
+    Drawn,
+    /// This worker's previous layer's: the analyser keeps their lit pixels.
+    PreviousLayer,
+    /// Another worker's, from [`RecentPrismMasks`]: their lit pixels are kept with them.
+    Recent,
+}
+
+/// Makes layer `layer`'s masks, writes their files and analyses the layer.
+pub(super) fn layer_masks(
+    ctx: &LayerContext,
+    worker: &mut BlockWorker,
+    scratch: &mut Scratch,
+    layer: &LayerIn,
+) -> Result<LayerOut> {
+    let i = layer.index;
+    let below = layer.below.map(|b| b.contours.as_slice());
+    let clock = ThreadClock::start();
+    // The rasterizer keeps each mask's lit pixels for the islands.
+    scratch.record_runs = !cfg!(feature = "bench-no-analysis");
+    let same = worker
+        .analyser
+        .equals_below(i, &layer.section.contours, below);
+    let mut analysis_s = clock.elapsed_s();
+    let (drawn, origin) = match reusable(ctx, worker, i, same) {
+        Some(reused) => reused,
+        None => (draw(ctx, worker, scratch, layer, same)?, Origin::Drawn),
+    };
+    if drawn.outside && origin != Origin::Drawn {
+        if let Some(o) = ctx.optics {
+            use crate::raster::CoverageMap;
+            o.compensator.lit_outside();
+        }
+    }
+    let masks = write_masks(ctx, &drawn, i)?;
+    let area_mm2 = drawn.area_mm2;
+    worker.previous = Some(PreviousLayerMasks {
+        index: i,
+        simplified: same,
+        masks: drawn,
+    });
+    let clock = ThreadClock::start();
+    let lit = match origin {
+        Origin::Drawn => Some(&scratch.lit_runs),
+        Origin::PreviousLayer => None,
+        Origin::Recent => worker.previous.as_ref().map(|m| &m.masks.runs),
+    };
+    let analysis = worker
+        .analyser
+        .analyse_or_defer(i, &layer.section.contours, lit, below);
+    let runs = matches!(analysis, Analysed::NeedsBelow(_)).then(|| scratch.lit_runs.clone());
+    analysis_s += clock.elapsed_s();
+    Ok(LayerOut {
+        area_mm2,
+        analysis,
+        analysis_s,
+        masks,
+        runs,
+    })
+}
+
+/// Masks drawn already for layer `i`'s section, when it equals (`same`) the layer below's:
+/// this worker's for the layer below, or any worker's for a recent equal section.
+fn reusable(
+    ctx: &LayerContext,
+    worker: &mut BlockWorker,
+    i: usize,
+    same: bool,
+) -> Option<(Arc<DrawnMasks>, Origin)> {
+    if let Some(m) = worker.previous.take().and_then(|p| p.serving(i, same)) {
+        return Some((m, Origin::PreviousLayer));
+    }
+    let recent = ctx.recent.filter(|_| same)?;
+    let m = recent.get(worker.analyser.simplified_section())?;
+    Some((m, Origin::Recent))
+}
+
+/// Draws layer `layer`'s masks: from its section without collinear points when it equals
+/// the layer below's (`same`; then they are offered to the recent prism masks), else from
+/// its own section.
+fn draw(
+    ctx: &LayerContext,
+    worker: &BlockWorker,
+    scratch: &mut Scratch,
+    layer: &LayerIn,
+    same: bool,
+) -> Result<Arc<DrawnMasks>> {
+    let i = layer.index;
+    let section: &[Contour] = if same {
+        worker.analyser.simplified_section()
+    } else {
+        &layer.section.contours
+    };
+    // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
+    let (warped, area_scale) = match ctx.correction {
+        Some(c) => {
+            let w = c.warp_section(section, ctx.model, i)?;
+            let s = distortion::area_scale(section, &w);
+            (Some(w), s)
+        }
+        None => (None, 1.0),
+    };
+    // Coverage (thresholded when binary), compensated while it is drawn: coverage → gray
+    // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
+    let comp = ctx.optics.map(|o| &o.compensator);
+    let drawn_section = warped.as_deref().unwrap_or(section);
+    let field_mask = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
+    let area_mm2 = scratch.lit_pixels(&field_mask) * ctx.px_area_mm2 * area_scale;
+    let outside = comp.is_some() && scratch.reported_outside();
+    let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
+    for (k, p) in ctx.profile.projector.iter().enumerate() {
+        let view = match ctx.tiler {
+            Some(t) => Cow::Owned(t.render(k, &field_mask)),
+            None => projector_view(&field_mask, p),
+        };
+        let png = match &view {
+            // The field mask itself: zero outside the rasterizer's lit box.
+            Cow::Borrowed(m) => {
+                crate::png::encode_gray8_in(m.width, m.height, &m.data, scratch.lit_box())
+            }
+            Cow::Owned(m) => super::encode_png(m),
+        };
+        let sha = bundle::sha256_hex(&png);
+        pngs.push((png, sha, k as u32));
+    }
+    scratch.recycle(field_mask);
+    let recent = ctx.recent.filter(|_| same);
+    let masks = Arc::new(DrawnMasks {
+        outside,
+        area_mm2,
+        pngs,
+        runs: if recent.is_some() {
+            scratch.lit_runs.clone()
+        } else {
+            LitRuns::default()
+        },
+    });
+    if let Some(recent) = recent {
+        recent.put(section, &masks);
+    }
+    Ok(masks)
+}
+
+/// Writes layer `i`'s mask files and returns their records.
+fn write_masks(ctx: &LayerContext, drawn: &DrawnMasks, i: usize) -> Result<Vec<MaskRef>> {
+    let mut masks = Vec::with_capacity(drawn.pngs.len());
+    for (k, (png, sha, projector)) in drawn.pngs.iter().enumerate() {
+        let file = ctx.mask_file(k, i);
+        ctx.writer.write_file(&file, png)?;
+        masks.push(MaskRef {
+            file,
+            sha256: sha.clone(),
+            projector: *projector,
+        });
+    }
+    Ok(masks)
+}

@@ -1,0 +1,170 @@
+//! The manifest: each layer's record and the totals, from the per-layer outputs and the
+//! plan, and the records of the source, the settings and the machine.
+
+use super::layer::LayerOut;
+use super::optics_records::OpticsRecords;
+use super::PlacementMode;
+use crate::bundle::{self, Generator, Layer, Manifest, Placement, Settings, Source, Totals};
+use crate::error::{Error, Result};
+use crate::geometry::distortion::FitReport;
+use crate::mesh::Mesh;
+use crate::plan::{self, LayerAnalysis, LayerInfo};
+use crate::profile::{Process, Profile};
+use crate::slice;
+use std::path::Path;
+
+/// The part as read and placed.
+pub(super) struct PlacedPart<'a> {
+    /// The model file.
+    pub path: &'a Path,
+    /// SHA-256 of the file.
+    pub sha256: String,
+    /// The mesh, placed on the build plane.
+    pub mesh: Mesh,
+    /// Its bounding box in the file's coordinates, mm.
+    pub bbox_in_file: [[f64; 3]; 2],
+    /// The placement rule.
+    pub mode: PlacementMode,
+    /// The translation that placed it, mm.
+    pub translate_mm: [f64; 3],
+}
+
+/// The layers' records and totals, as planned.
+pub(super) struct PlannedLayers {
+    /// Each layer's record.
+    pub layers: Vec<Layer>,
+    /// Their totals.
+    pub totals: Totals,
+    /// The planner's warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Completes the layers' analyses, plans the layers (`plan`) and builds their records; a
+/// plan that cannot be made is an error naming `model`.
+pub(super) fn plan_layers(
+    profile: &Profile,
+    outs: Vec<LayerOut>,
+    model: &Path,
+) -> Result<PlannedLayers> {
+    let h = profile.slicing.layer_height_mm.get();
+    let n = outs.len();
+    let analyses = resolve_analyses(&outs);
+    let infos: Vec<LayerInfo> = outs
+        .iter()
+        .zip(&analyses)
+        .enumerate()
+        .map(|(i, (o, a))| LayerInfo {
+            index: i,
+            z_mm: (i + 1) as f64 * h,
+            thickness_mm: h,
+            area_mm2: o.area_mm2,
+            max_fill_distance_mm: a.max_fill_distance_mm,
+            islands: a.islands,
+        })
+        .collect();
+    let plan = plan::plan(profile, &infos).map_err(|msg| Error::Job {
+        path: model.into(),
+        msg,
+    })?;
+    let hybrid = profile.process == Process::Hybrid;
+    let mut layers = Vec::with_capacity(n);
+    let mut totals = Totals {
+        layers: n as u64,
+        height_mm: n as f64 * h,
+        print_time_s: 0.0,
+        exposure_s: 0.0,
+        resin_volume_ml: 0.0,
+        continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
+        all_layered_time_s: plan.all_layered_time_s,
+    };
+    for (((info, o), a), p) in infos.iter().zip(outs).zip(&analyses).zip(plan.layers) {
+        totals.print_time_s += p.time_s;
+        totals.exposure_s += p.exposure_s;
+        totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
+        layers.push(Layer {
+            index: info.index as u64,
+            z_mm: info.z_mm,
+            slice_z_mm: slice::plane_z(info.index, h),
+            thickness_mm: h,
+            mode: p.mode,
+            exposure_s: p.exposure_s,
+            area_mm2: o.area_mm2,
+            max_fill_distance_mm: a.max_fill_distance_mm,
+            islands: a.islands,
+            bbox_mm: a.bbox_mm,
+            masks: o.masks,
+            steps: p.steps,
+            time_s: p.time_s,
+        });
+    }
+    Ok(PlannedLayers {
+        layers,
+        totals,
+        warnings: plan.warnings,
+    })
+}
+
+/// The layers' analyses in order. A layer equal to the layer below that its worker could
+/// not copy takes the layer below's analysis here, and a block's first layer counts its
+/// islands over the last layer of the block below.
+fn resolve_analyses(outs: &[LayerOut]) -> Vec<LayerAnalysis> {
+    let mut analyses: Vec<LayerAnalysis> = Vec::with_capacity(outs.len());
+    for (i, o) in outs.iter().enumerate() {
+        let a = o.analysis.with_islands(|| {
+            let own = o.runs.as_ref().expect("kept with the analysis");
+            let below = outs[i - 1].runs.as_ref().expect("kept by the block below");
+            plan::analysis::islands(own, below)
+        });
+        analyses.push(a.resolve(analyses.last()));
+    }
+    analyses
+}
+
+/// The manifest of a job: `part` sliced on `profile` into the `planned` layers, with
+/// the light compensation's records, the distortion fit report and every warning.
+pub(super) fn manifest(
+    part: &PlacedPart,
+    profile: &Profile,
+    planned: PlannedLayers,
+    optics: OpticsRecords,
+    distortion: Option<FitReport>,
+    warnings: Vec<String>,
+) -> Manifest {
+    Manifest {
+        format: bundle::FORMAT.into(),
+        version: bundle::VERSION,
+        generator: Generator::current(),
+        source: source(part),
+        settings: Settings {
+            layer_height_mm: profile.slicing.layer_height_mm.get(),
+            binary: profile.slicing.binary,
+            compensation: optics.compensation,
+            distortion,
+        },
+        machine: profile.clone(),
+        totals: planned.totals,
+        warnings,
+        layers: planned.layers,
+        optics: optics.optics,
+        projector_optics: optics.projector_optics,
+    }
+}
+
+/// The manifest's record of the model file and its placement.
+fn source(part: &PlacedPart) -> Source {
+    Source {
+        file: part
+            .path
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        sha256: part.sha256.clone(),
+        triangles: part.mesh.report.triangles_in_file,
+        bbox_mm: part.bbox_in_file,
+        placement: Placement {
+            mode: part.mode.as_str().into(),
+            translate_mm: part.translate_mm,
+        },
+        mesh: part.mesh.report.clone(),
+    }
+}

@@ -1,0 +1,98 @@
+//! What a job is asked ([`SliceOptions`]) and what it reports ([`SliceSummary`]).
+
+use super::PlacementMode;
+use crate::bundle::Totals;
+use crate::geometry::distortion::{DistortionChoice, FitReport};
+use crate::mesh::MeshReport;
+use crate::profile::Profile;
+use crate::units::Positive;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+/// Options of [`slice_to_bundle`](super::slice_to_bundle).
+pub struct SliceOptions<'a> {
+    /// The model file.
+    pub input: PathBuf,
+    /// Bundle path; `None`: `<input stem>.dmdjob` in the current directory.
+    pub output: Option<PathBuf>,
+    /// Machine profile (already resolved).
+    pub profile: Profile,
+    /// Overrides the profile's layer height.
+    pub layer_height_mm: Option<Positive>,
+    /// Overrides the profile's binary setting.
+    pub binary: Option<bool>,
+    /// Placement rule.
+    pub placement: PlacementMode,
+    /// Light compensation (mode, dithering).
+    pub optics: crate::optics::OpticsOptions,
+    /// Called with (layers done, layers total) as layers are written.
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
+    /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
+    pub cancel: Option<&'a AtomicBool>,
+    /// Lens distortion correction (`--distortion`; default: the profile's).
+    pub distortion: DistortionChoice,
+}
+
+impl SliceOptions<'_> {
+    /// The profile with this job's overrides (layer height, binary) applied.
+    pub(super) fn job_profile(&self) -> Profile {
+        let mut profile = self.profile.clone();
+        if let Some(h) = self.layer_height_mm {
+            profile.slicing.layer_height_mm = h;
+        }
+        if let Some(b) = self.binary {
+            profile.slicing.binary = b;
+        }
+        profile
+    }
+}
+
+/// Wall time of each stage, s.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Timings {
+    /// Reading, welding and validating the mesh.
+    pub load_s: f64,
+    /// Cutting and chaining contours (time spent by the slicing task; part of `masks_s`'s
+    /// wall time, overlapping the mask work).
+    pub slice_s: f64,
+    /// Slicing, rasterizing, encoding, hashing and writing masks, and the layer analysis
+    /// (wall time of the parallel stage).
+    pub masks_s: f64,
+    /// Layer analysis (max fill distance, islands), summed over the worker threads (CPU
+    /// time, part of `masks_s`'s wall time).
+    pub analysis_cpu_s: f64,
+    /// Planning and writing the manifest.
+    pub finish_s: f64,
+    /// Everything.
+    pub total_s: f64,
+}
+
+/// What [`slice_to_bundle`](super::slice_to_bundle) produced.
+#[derive(Debug, Clone, Serialize)]
+pub struct SliceSummary {
+    /// The bundle written.
+    pub bundle: PathBuf,
+    /// Number of layers.
+    pub layers: usize,
+    /// Warnings (mesh defects, repairs).
+    pub warnings: Vec<String>,
+    /// Mesh validation report.
+    pub mesh: MeshReport,
+    /// Totals as in the manifest.
+    pub totals: Totals,
+    /// Stage timings.
+    pub timings: Timings,
+    /// Distortion fit report, when a correction was applied.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<FitReport>,
+}
+
+/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
+pub fn default_output(input: &Path) -> PathBuf {
+    let stem = input
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "part".into());
+    PathBuf::from(format!("{stem}.dmdjob"))
+}
