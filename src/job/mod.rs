@@ -2,9 +2,10 @@
 //! hash → write; then plan and write the manifest, atomically.
 //!
 //! One task slices windows of 32 layers and hands each window to rayon's pool in blocks
-//! of 8 consecutive layers as soon as it is cut (no barrier between windows); at most 96
-//! layers wait for a worker, and a worker keeps only its current mask, so memory does not
-//! grow with the number of layers (but for the lit runs of a block's first and
+//! of 8 consecutive layers as soon as it is cut (no barrier between windows); when 96
+//! layers wait for a worker, the slicing waits without holding a thread (it parks and the
+//! block that makes room resumes it), and a worker keeps only its current mask, so memory
+//! does not grow with the number of layers (but for the lit runs of a block's first and
 //! last layers, a few kilobytes each, kept until the end for the islands of the blocks'
 //! first layers). Every output byte depends only on the input and the settings, never on
 //! the thread count or timing.

@@ -1,10 +1,16 @@
 //! The pipeline driver: windows of sections → blocks of layers → each layer's work.
 //!
-//! One slicing thread cuts windows of [`WINDOW`] layers and spawns each window's layers
-//! as blocks of [`BLOCK`] consecutive layers on rayon's pool as soon as they are cut (no
-//! barrier between windows), so the slicing overlaps the mask work. At most [`MAX_AHEAD`]
-//! layers wait (memory stays bounded); while it waits, the slicing thread makes masks
-//! itself.
+//! One slicing task cuts windows of [`WINDOW`] layers and spawns each window's layers as
+//! blocks of [`BLOCK`] consecutive layers on rayon's pool as soon as they are cut (no
+//! barrier between windows), so the slicing overlaps the mask work. Before it cuts a
+//! window, the layers sliced but not yet made into masks must be at most [`MAX_AHEAD`];
+//! otherwise the task parks its state (the slicer, the last window) in the [`Backlog`] and
+//! returns, and its worker thread goes on with the queued blocks. The block whose end
+//! brings the count back under the limit spawns the slicing task again. So memory is
+//! bounded whatever the number of layers, no thread spins or sleeps, and no worker blocks
+//! waiting for room: the slicer must run on the pool, since it cuts its windows with the
+//! pool's other workers (a slicer blocked on a bounded channel would hold a worker idle
+//! and deadlock a pool of one thread).
 //!
 //! The first error (or Ctrl-C, `cancel`) stops the slicing before its next window and
 //! every block before its next layer. Each layer's result goes to its own slot, so the
@@ -26,7 +32,8 @@ const WINDOW: usize = 32;
 /// (prisms): larger blocks do that less often (8 rather than 4: −2.8 % analysis
 /// instructions on logo_hires), smaller ones balance the workers better at the end.
 pub const BLOCK: usize = 8;
-/// Layers sliced but not yet made into masks, at most (bounds memory).
+/// Layers sliced but not yet made into masks before the slicer waits (bounds memory: at
+/// most this plus one window are held).
 const MAX_AHEAD: usize = 3 * WINDOW;
 
 /// How the caller follows and stops a job.
@@ -72,8 +79,7 @@ pub(super) fn run<'a>(
         layers,
         slots: (0..layers).map(|_| OnceLock::new()).collect(),
         scratch: ScratchPool::default(),
-        in_flight: AtomicUsize::new(0),
-        finished: Mutex::new(None),
+        backlog: Backlog::default(),
         stop: AtomicBool::new(false),
         failure: Mutex::new(None),
         done: AtomicUsize::new(0),
@@ -100,10 +106,7 @@ struct Pipeline<'a> {
     /// One slot per layer, filled by whichever worker makes it.
     slots: Vec<OnceLock<LayerOut>>,
     scratch: ScratchPool,
-    /// Layers sliced and not yet made into masks.
-    in_flight: AtomicUsize,
-    /// The slicing state once it has cut its last window.
-    finished: Mutex<Option<Cursor<'a>>>,
+    backlog: Backlog<'a>,
     /// Set by the first error: the rest stops.
     stop: AtomicBool,
     /// The first real error (others may just be the stop it caused).
@@ -136,9 +139,7 @@ impl Pipeline<'_> {
         if self.control.cancelled() {
             return Err(Error::Interrupted);
         }
-        let cursor = (self.finished.into_inner())
-            .unwrap_or_else(|p| p.into_inner())
-            .expect("the slicing loop ends before the pool does");
+        let cursor = self.backlog.into_finished();
         Ok(Sliced {
             layers: self
                 .slots
@@ -174,21 +175,76 @@ impl Cursor<'_> {
     }
 }
 
-/// The slicing loop: cuts windows and spawns their blocks, waiting (and making masks)
-/// while more than [`MAX_AHEAD`] layers wait.
+/// The layers sliced and not yet made into masks, and the slicing task while it waits
+/// for them to be fewer than [`MAX_AHEAD`].
+#[derive(Default)]
+struct Backlog<'a>(Mutex<BacklogState<'a>>);
+
+#[derive(Default)]
+struct BacklogState<'a> {
+    /// Layers sliced and not yet made into masks.
+    waiting: usize,
+    /// The slicing task, waiting for room.
+    parked: Option<Cursor<'a>>,
+    /// The slicing task, done.
+    finished: Option<Cursor<'a>>,
+}
+
+impl<'a> Backlog<'a> {
+    /// `cursor` back when there is room for another window; otherwise it is kept until a
+    /// block's end makes room ([`Backlog::leave`]).
+    fn room_or_park(&self, cursor: Cursor<'a>) -> Option<Cursor<'a>> {
+        let mut s = lock(&self.0);
+        if s.waiting > MAX_AHEAD {
+            s.parked = Some(cursor);
+            return None;
+        }
+        Some(cursor)
+    }
+
+    /// Counts `layers` sliced layers in.
+    fn enter(&self, layers: usize) {
+        lock(&self.0).waiting += layers;
+    }
+
+    /// Counts a block's `layers` off; returns the parked slicing task when that made room.
+    fn leave(&self, layers: usize) -> Option<Cursor<'a>> {
+        let mut s = lock(&self.0);
+        s.waiting -= layers;
+        if s.waiting > MAX_AHEAD {
+            return None;
+        }
+        s.parked.take()
+    }
+
+    /// Keeps the slicing task once it has cut its last window.
+    fn finish(&self, cursor: Cursor<'a>) {
+        lock(&self.0).finished = Some(cursor);
+    }
+
+    fn into_finished(self) -> Cursor<'a> {
+        let s = self.0.into_inner().unwrap_or_else(|p| p.into_inner());
+        s.finished
+            .expect("the slicing task ends before the pool does")
+    }
+}
+
+/// The slicing task: cuts windows and spawns their blocks while there is room, then parks
+/// (see the module docs).
 fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: Cursor<'a>) {
-    while cursor.next < p.layers {
-        while p.in_flight.load(Ordering::Acquire) > MAX_AHEAD && !p.stop.load(Ordering::Relaxed) {
-            if rayon::yield_now() != Some(rayon::Yield::Executed) {
-                std::thread::sleep(std::time::Duration::from_micros(50));
-            }
+    loop {
+        if cursor.next >= p.layers || p.stopped() {
+            p.backlog.finish(cursor);
+            return;
         }
-        if p.stopped() {
-            break;
-        }
+        cursor = match p.backlog.room_or_park(cursor) {
+            Some(c) => c,
+            None => return,
+        };
         let start = cursor.next;
         let sections = cursor.cut();
         let m = sections.len();
+        p.backlog.enter(m);
         for b in 0..m.div_ceil(BLOCK) {
             let block = Block {
                 start,
@@ -196,12 +252,10 @@ fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: C
                 prev: cursor.prev.clone(),
                 ks: b * BLOCK..((b + 1) * BLOCK).min(m),
             };
-            p.in_flight.fetch_add(block.ks.len(), Ordering::AcqRel);
-            scope.spawn(move |_| run_block(p, block));
+            scope.spawn(move |scope| run_block(scope, p, block));
         }
         cursor.prev = Some(sections);
     }
-    *lock(&p.finished) = Some(cursor);
 }
 
 /// Consecutive layers of one window, made in order by one worker.
@@ -216,10 +270,14 @@ struct Block {
     ks: Range<usize>,
 }
 
-fn run_block(p: &Pipeline, block: Block) {
+fn run_block<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, block: Block) {
     // Counts the block's layers off even if it panics (the panic reaches the caller when
-    // the scope ends; the slicing thread must not wait).
-    let _leaving = Leaving(&p.in_flight, block.ks.len());
+    // the scope ends; the slicing task must not stay parked).
+    let _leaving = Leaving {
+        scope,
+        p,
+        layers: block.ks.len(),
+    };
     if let Err(e) = make_block(p, &block) {
         p.fail(e);
     }
@@ -260,12 +318,23 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
     Ok(())
 }
 
-/// Subtracts a block's layer count from the layers in flight when the block ends.
-struct Leaving<'a>(&'a AtomicUsize, usize);
+/// Counts a block's layers off when it ends, resuming the slicing task when that makes
+/// room; a block that panics stops the rest.
+struct Leaving<'x, 's, 'a: 's> {
+    scope: &'x rayon::Scope<'s>,
+    p: &'s Pipeline<'a>,
+    layers: usize,
+}
 
-impl Drop for Leaving<'_> {
+impl Drop for Leaving<'_, '_, '_> {
     fn drop(&mut self) {
-        self.0.fetch_sub(self.1, Ordering::AcqRel);
+        if std::thread::panicking() {
+            self.p.stop.store(true, Ordering::Relaxed);
+        }
+        if let Some(cursor) = self.p.backlog.leave(self.layers) {
+            let p = self.p;
+            self.scope.spawn(move |scope| feed(scope, p, cursor));
+        }
     }
 }
 
