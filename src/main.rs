@@ -4,6 +4,7 @@
 //! defective mesh); 2 usage or input error; 130 interrupted.
 
 use clap::{Args, Parser, Subcommand};
+use dmdsl::exec::report::hms;
 use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions};
 use dmdsl::profile::{self, Profile};
@@ -112,7 +113,7 @@ enum DitherArg {
 /// Light compensation mode.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum CompensationArg {
-    /// One gray per zone (seeds/000).
+    /// One gray per zone (Xu et al. 2010, Chinese J. Lasers 37(7)).
     Zone,
     /// One gray per pixel from the smooth fit.
     Pixel,
@@ -501,9 +502,4 @@ fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         print!("{}", dmdsl::exec::report::render_human(&report));
     }
     Ok(if report.ok { 0 } else { 1 })
-}
-
-fn hms(s: f64) -> String {
-    let s = s.round() as u64;
-    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
 }
