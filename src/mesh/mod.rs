@@ -4,10 +4,13 @@
 //! `solid`) or OBJ (through tobj, triangulated), welds corners with bit-identical
 //! coordinates into shared vertices, builds the edge table the slicer chains through,
 //! and produces a [`MeshReport`] like admesh's. Defective meshes load with warnings;
-//! only files that hold no usable geometry are errors.
+//! only files that hold no usable geometry are errors. [`binary_stl`] writes binary STL
+//! (for tests and tools that make meshes).
 
 mod obj;
 mod stl;
+
+pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};

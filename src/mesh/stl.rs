@@ -1,4 +1,4 @@
-//! STL reader: binary and ASCII, told apart by content and size.
+//! STL reader (binary and ASCII, told apart by content and size) and binary writer.
 
 use super::Soup;
 use crate::error::{Error, Result};
@@ -58,6 +58,25 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
             ),
         )),
     }
+}
+
+/// Encodes `triangles` as a binary STL: an 80-byte header of zeros, the count, and per
+/// triangle a zero normal (readers recompute it from the corners), the corners and a zero
+/// attribute word. [`load`](super::load) reads it back corner for corner.
+pub fn binary_stl(triangles: &[[[f32; 3]; 3]]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(84 + 50 * triangles.len());
+    b.resize(80, 0u8);
+    b.extend((triangles.len() as u32).to_le_bytes());
+    for t in triangles {
+        b.extend([0u8; 12]);
+        for v in t {
+            for c in v {
+                b.extend(c.to_le_bytes());
+            }
+        }
+        b.extend([0u8; 2]);
+    }
+    b
 }
 
 fn parse_binary(b: &[u8], n: usize) -> Soup {
@@ -216,18 +235,8 @@ mod tests {
     }
 
     fn binary(tris: &[[[f32; 3]; 3]], header: &[u8]) -> Vec<u8> {
-        let mut b = vec![0u8; 80];
+        let mut b = binary_stl(tris);
         b[..header.len()].copy_from_slice(header);
-        b.extend((tris.len() as u32).to_le_bytes());
-        for t in tris {
-            b.extend([0u8; 12]);
-            for v in t {
-                for c in v {
-                    b.extend(c.to_le_bytes());
-                }
-            }
-            b.extend([0u8; 2]);
-        }
         b
     }
 
@@ -240,6 +249,11 @@ mod tests {
         let (b, fb) = parse(p, &binary(&a, b"solid but binary")).unwrap();
         assert_eq!(fb, "stl-binary");
         assert_eq!(a, b);
+        // Header, count, then 50 bytes a triangle.
+        let bytes = binary_stl(&a);
+        assert_eq!(bytes.len(), 84 + 50);
+        assert_eq!(&bytes[80..84], &1u32.to_le_bytes());
+        assert_eq!(&bytes[84 + 12 + 12..84 + 12 + 16], &1f32.to_le_bytes());
     }
 
     #[test]

@@ -88,20 +88,9 @@ pub fn read_gray(path: &Path) -> (u32, u32, Vec<u8>) {
     (g.width(), g.height(), g.into_raw())
 }
 
-/// Writes a binary STL from triangles.
+/// Writes a binary STL from triangles ([`dmdsl::mesh::binary_stl`]).
 pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]]) {
-    let mut b = vec![0u8; 80];
-    b.extend((tris.len() as u32).to_le_bytes());
-    for t in tris {
-        b.extend([0u8; 12]);
-        for v in t {
-            for c in v {
-                b.extend(c.to_le_bytes());
-            }
-        }
-        b.extend([0u8; 2]);
-    }
-    std::fs::write(path, b).unwrap();
+    std::fs::write(path, dmdsl::mesh::binary_stl(tris)).unwrap();
 }
 
 /// Triangles of an axis-aligned box [lo, hi], outward facing.
