@@ -15,7 +15,7 @@
 //! * the whole `exec::run` as `dmdsl run` does it (3 runs).
 
 use dmdsl::bundle::*;
-use dmdsl::exec::{self, check::Checker, sim, trace::TraceWriter, RunOptions};
+use dmdsl::exec::{self, check::Checker, sim, testutil, trace::TraceWriter, RunOptions};
 use dmdsl::motion::move_time;
 use dmdsl::profile::Profile;
 use dmdsl::raster::Mask;
@@ -206,64 +206,13 @@ fn synthetic(path: &Path, n: usize) -> Manifest {
             + c;
         pos = z;
         let (png, sha) = &pngs[i % pngs.len()];
-        let file = format!("masks/{i:05}.png");
-        w.write_file(&file, png).unwrap();
-        layers.push(Layer {
-            index: i as u64,
-            z_mm: z,
-            slice_z_mm: z - h / 2.0,
-            thickness_mm: h,
-            mode: Mode::Layered,
-            exposure_s,
-            area_mm2: 100.0,
-            masks: vec![MaskRef {
-                file,
-                sha256: sha.clone(),
-                projector: 0,
-            }],
-            steps,
-            time_s,
-            max_fill_distance_mm: 0.0,
-            islands: 0,
-            bbox_mm: None,
-        });
+        let mut layer = testutil::layer(i, z, h, Mode::Layered, exposure_s, steps, time_s);
+        layer.area_mm2 = 100.0;
+        layer.masks[0].sha256 = sha.clone();
+        w.write_file(&layer.masks[0].file, png).unwrap();
+        layers.push(layer);
     }
-    let manifest = Manifest {
-        format: FORMAT.into(),
-        version: VERSION,
-        generator: Generator::current(),
-        source: Source {
-            file: "synthetic".into(),
-            sha256: String::new(),
-            triangles: 0,
-            bbox_mm: [[0.0; 3], [10.0, 10.0, n as f64 * h]],
-            placement: Placement {
-                mode: "keep".into(),
-                translate_mm: [0.0; 3],
-            },
-            mesh: Default::default(),
-        },
-        settings: Settings {
-            layer_height_mm: h,
-            binary: false,
-            compensation: "off".into(),
-            distortion: None,
-        },
-        totals: Totals {
-            layers: n as u64,
-            height_mm: n as f64 * h,
-            print_time_s: layers.iter().map(|l| l.time_s).sum(),
-            exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
-            resin_volume_ml: 0.0,
-            continuous_layers: None,
-            all_layered_time_s: None,
-        },
-        machine: profile,
-        warnings: vec![],
-        layers,
-        optics: None,
-        projector_optics: Vec::new(),
-    };
+    let manifest = testutil::manifest(profile, layers);
     w.finish(&manifest).unwrap();
     manifest
 }

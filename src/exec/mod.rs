@@ -14,6 +14,8 @@
 //!    [`trace::TraceWriter`] (`--trace`), [`report::PlotCollector`] (`--plot`).
 //! 4. [`report::Report`]: the summary, `--json`, exit status.
 //!
+//! [`testutil`] builds manifests by hand for the executor's tests and benchmarks.
+//!
 //! See `docs/EXECUTOR.md` for the model and every check.
 
 pub mod check;
@@ -22,8 +24,7 @@ pub mod sim;
 pub mod trace;
 pub mod verify;
 
-#[cfg(test)]
-mod testutil;
+pub mod testutil;
 
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};

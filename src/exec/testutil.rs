@@ -1,4 +1,5 @@
-//! Hand-written manifests and a collecting sink for the executor's unit tests.
+//! Hand-written manifests and a collecting sink, for the executor's tests and benchmarks
+//! (`benches/exec.rs`): jobs whose every step and estimate a test states itself.
 
 use super::sim::{LayerRecord, Segment, Sink};
 use crate::bundle::*;
