@@ -251,16 +251,21 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     })
 }
 
-/// Writes `bytes` to `path` through a temporary sibling renamed into place.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
-    let tmp = path.with_file_name(format!(
+/// The temporary sibling (`.NAME.tmp-PID`) a file is written to before it is renamed into
+/// place, or `None` when `path` has no file name.
+fn temp_sibling(path: &Path) -> Option<PathBuf> {
+    let name = path.file_name()?;
+    Some(path.with_file_name(format!(
         ".{}.tmp-{}",
         name.to_string_lossy(),
         std::process::id()
-    ));
+    )))
+}
+
+/// Writes `bytes` to `path` through a temporary sibling renamed into place.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temp_sibling(path)
+        .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
     std::fs::write(&tmp, bytes).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)

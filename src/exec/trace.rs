@@ -41,14 +41,8 @@ pub struct TraceWriter {
 impl TraceWriter {
     /// Starts a trace at `path` for the segments of `layers` (all if `None`).
     pub fn create(path: &Path, layers: Option<RangeInclusive<usize>>, m: Machine) -> Result<Self> {
-        let name = path
-            .file_name()
+        let tmp = super::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
-        let tmp = path.with_file_name(format!(
-            ".{}.tmp-{}",
-            name.to_string_lossy(),
-            std::process::id()
-        ));
         let f = File::create(&tmp).map_err(|e| Error::io(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 16, f);
         let err = writeln!(w, "{HEADER}").err();
