@@ -7,39 +7,32 @@
 //! on the seam): the coverage raster of the 2016-px field and the blend/LUT split into the two
 //! projector masks, against the plain crop of the untiled profile.
 
+#[path = "../examples/common/mod.rs"]
+mod common;
+
+use common::median;
 use dmdsl::geometry::blend::Response;
 use dmdsl::geometry::distortion::{Correction, Table};
 use dmdsl::geometry::tile::Tiler;
-use dmdsl::job::{place_mesh, PlacementMode};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use std::path::PathBuf;
 use std::time::Instant;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() {
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .collect();
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let args = common::args();
     let model = args
         .first()
         .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("fixtures/bunny00.stl"));
+        .unwrap_or_else(|| common::fixture("bunny00.stl"));
     let table = args
         .get(1)
         .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("fixtures/lens_table.csv"));
+        .unwrap_or_else(|| common::fixture("lens_table.csv"));
     let h = 0.05;
     let profile = Profile::default_profile();
     let field = profile.field();
-    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
-    let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, h).unwrap();
+    let (mesh, n) = common::placed(&model, &field, h);
     let sections = dmdsl::slice::slice(&mesh, h, n).0;
 
     let t = Instant::now();
@@ -108,8 +101,7 @@ fn main() {
     };
     let tiled = Profile::resolve("tiled-2x1").unwrap();
     let tfield = tiled.field();
-    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
-    place_mesh(&model, &mut mesh, &tfield, PlacementMode::Center, h).unwrap();
+    let (mesh, _) = common::placed(&model, &tfield, h);
     let tsections = dmdsl::slice::slice(&mesh, h, n).0;
     let t = Instant::now();
     let tiler = Tiler::new(

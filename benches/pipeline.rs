@@ -4,34 +4,29 @@
 //! (default: fixtures/bunny00.stl at 0.05 mm). Prints the median of 5 runs per stage,
 //! per layer, single-threaded, so the numbers compare across machines and commits.
 
-use dmdsl::job::{encode_png, place_mesh, PlacementMode};
+#[path = "../examples/common/mod.rs"]
+mod common;
+
+use common::median;
+use dmdsl::job::encode_png;
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use std::path::PathBuf;
 use std::time::Instant;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() {
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .collect();
+    let args = common::args();
     let model = args
         .first()
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/bunny00.stl"));
+        .unwrap_or_else(|| common::fixture("bunny00.stl"));
     let h: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.05);
     let profile = Profile::default_profile();
     let field = profile.field();
 
     let t = Instant::now();
-    let mut mesh = dmdsl::mesh::load(&model).expect("model loads");
+    let (mesh, n) = common::placed(&model, &field, h);
     let load_s = t.elapsed().as_secs_f64();
-    let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, h).unwrap();
 
     let mut slice_t = Vec::new();
     let mut sections = Vec::new();
@@ -69,7 +64,7 @@ fn main() {
         model.display(),
         mesh.triangles.len()
     );
-    println!("load+weld+validate  {:8.2} ms total", load_s * 1e3);
+    println!("load and place      {:8.2} ms total", load_s * 1e3);
     println!("slice (all layers)  {:8.2} ms total", median(slice_t) * 1e3);
     println!("coverage raster     {:8.3} ms/layer", per(cov_t));
     println!(

@@ -6,7 +6,9 @@
 //! against the polygons' exact area, how many pixels each puts on the other side of the
 //! 50 % level than the exact coverage does, and the time per layer.
 
-use dmdsl::job::{place_mesh, PlacementMode};
+#[path = "../examples/common/mod.rs"]
+mod common;
+
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
 use dmdsl::slice::{signed_area, Contour};
@@ -39,14 +41,9 @@ fn tiny_skia_mask(contours: &[Contour], aa: bool, pixel: f64, h_px: u32) -> Vec<
 }
 
 fn main() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let mut models: Vec<PathBuf> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .map(PathBuf::from)
-        .collect();
+    let mut models: Vec<PathBuf> = common::args().into_iter().map(PathBuf::from).collect();
     if models.is_empty() {
-        models.push(root.join("fixtures/bunny00.stl"));
+        models.push(common::fixture("bunny00.stl"));
     }
     let profile = Profile::default_profile();
     let field = profile.field();
@@ -54,8 +51,7 @@ fn main() {
     println!("| model | method | area error | pixels across 50 % vs exact (% of lit) | ms/layer |");
     println!("|---|---|---:|---:|---:|");
     for model in models {
-        let mut mesh = dmdsl::mesh::load(&model).unwrap();
-        let (_, n) = place_mesh(&model, &mut mesh, &field, PlacementMode::Center, 0.05).unwrap();
+        let (mesh, n) = common::placed(&model, &field, 0.05);
         let sections = dmdsl::slice::slice(&mesh, 0.05, n).0;
         let exact_area: f64 = sections
             .iter()

@@ -13,16 +13,12 @@
 //! `Analyser::analyse` matches that of `dmdsl slice` within 0.1 %.
 mod common;
 use dmdsl::plan::analysis;
-use dmdsl::profile::Profile;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = std::path::PathBuf::from(&args[1]);
-    let p = Profile::default_profile();
-    let h = p.slicing.layer_height_mm.get();
-    let field = p.field();
-    let (mesh, n) = common::placed(&path, &field, h);
-    let (sections, _) = dmdsl::slice::slice(&mesh, h, n);
+    let (sections, field) = common::default_sections(&path);
+    let n = sections.len();
     // The rasterizer as the slicer runs it: it keeps the lit pixels of each mask (drawn
     // from the section without collinear points when it equals the layer below's). Its
     // cost is not the analysis's.

@@ -12,7 +12,6 @@
 //! target/release/examples/layer_cost MODEL`
 mod common;
 use dmdsl::plan::analysis;
-use dmdsl::profile::Profile;
 use std::time::Instant;
 
 fn main() {
@@ -33,11 +32,8 @@ fn main() {
     } else {
         3
     };
-    let p = Profile::default_profile();
-    let h = p.slicing.layer_height_mm.get();
-    let field = p.field();
-    let (mesh, n) = common::placed(&path, &field, h);
-    let (sections, _) = dmdsl::slice::slice(&mesh, h, n);
+    let (sections, _) = common::default_sections(&path);
+    let n = sections.len();
     let mut total = 0.0;
     for (i, s) in sections
         .iter()
