@@ -16,19 +16,12 @@ use dmdsl::geometry::distortion::{Correction, Table};
 use dmdsl::geometry::tile::Tiler;
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
-use std::path::PathBuf;
 use std::time::Instant;
 
 fn main() {
     let args = common::args();
-    let model = args
-        .first()
-        .map(PathBuf::from)
-        .unwrap_or_else(|| common::fixture("bunny00.stl"));
-    let table = args
-        .get(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| common::fixture("lens_table.csv"));
+    let model = common::path_arg(&args, 0, "bunny00.stl");
+    let table = common::path_arg(&args, 1, "lens_table.csv");
     let h = 0.05;
     let profile = Profile::default_profile();
     let field = profile.field();

@@ -11,15 +11,11 @@ use common::median;
 use dmdsl::job::encode_png;
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
-use std::path::PathBuf;
 use std::time::Instant;
 
 fn main() {
     let args = common::args();
-    let model = args
-        .first()
-        .map(PathBuf::from)
-        .unwrap_or_else(|| common::fixture("bunny00.stl"));
+    let model = common::path_arg(&args, 0, "bunny00.stl");
     let h: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.05);
     let profile = Profile::default_profile();
     let field = profile.field();

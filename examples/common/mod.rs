@@ -34,6 +34,13 @@ pub fn args() -> Vec<String> {
         .collect()
 }
 
+/// Argument `i` of `args` as a path, or fixture `name` when there is none.
+pub fn path_arg(args: &[String], i: usize, name: &str) -> PathBuf {
+    args.get(i)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| fixture(name))
+}
+
 /// A file under the repository's `fixtures/`.
 pub fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
