@@ -27,6 +27,8 @@ pub(super) struct PlacedPart<'a> {
     pub mode: PlacementMode,
     /// The translation that placed it, mm.
     pub translate_mm: [f64; 3],
+    /// Number of layers.
+    pub layers: usize,
 }
 
 /// The layers' records and totals, as planned.

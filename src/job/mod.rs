@@ -31,16 +31,17 @@ pub use placement::{place_mesh, placement, PlacementMode};
 
 use crate::bundle::{self, BundleWriter};
 use crate::error::{Error, Result};
-use crate::geometry::distortion::{self, Correction};
+use crate::geometry::distortion::{self, Correction, FitReport};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh};
 use crate::optics::JobOptics;
 use crate::profile::Profile;
 use crate::raster::{Mask, Rasterizer};
-use crate::slice::Slicer;
+use crate::slice::{SliceStats, Slicer};
 use layer::LayerContext;
 use manifest::PlacedPart;
 use mask_reuse::RecentPrismMasks;
+use optics_records::WrittenGrayMap;
 use pipeline::Control;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -65,86 +66,25 @@ struct SetUp {
 pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let t0 = Instant::now();
     let mut profile = opts.job_profile();
-    let path = opts.input.as_path();
-    // The machine's per-job set-up (light compensation tables, distortion fit) and reading
-    // the model are independent: they run side by side. Set-up errors are reported first.
-    let (setup, loaded) = rayon::join(|| set_up(opts, &mut profile), || read_model(path));
-    let setup = setup?;
-    let (sha256, mut mesh) = loaded?;
-    let h = profile.slicing.layer_height_mm.get();
-    let field = profile.field();
-    let bbox_in_file = mesh.bbox();
-    let (translate_mm, n) = place_mesh(path, &mut mesh, &field, opts.placement, h)?;
-    let part = PlacedPart {
-        path,
-        sha256,
-        mesh,
-        bbox_in_file,
-        mode: opts.placement,
-        translate_mm,
-    };
-    let mut warnings = part.mesh.report.warnings();
+    let (setup, part) = load_and_place(opts, &mut profile)?;
     let load_s = t0.elapsed().as_secs_f64();
-
-    let writer =
-        BundleWriter::create(&opts.output.clone().unwrap_or_else(|| default_output(path)))?;
-    if setup.tiler.is_some() {
-        for k in 0..profile.projector.len() {
-            writer.create_dir(&format!("masks/p{k}"))?;
-        }
-    }
-    let raster = Rasterizer::new(field);
-    let recent = RecentPrismMasks::default();
-    let ctx = LayerContext {
-        writer: &writer,
-        profile: &profile,
-        raster: &raster,
-        optics: setup.optics.as_ref(),
-        tiler: setup.tiler.as_ref(),
-        correction: setup.correction.as_ref(),
-        model: path,
-        // Reusing masks across blocks: one projector, no distortion correction.
-        recent: (setup.tiler.is_none() && setup.correction.is_none()).then_some(&recent),
-        binary: profile.slicing.binary,
-        px_area_mm2: field.pixel_mm * field.pixel_mm,
-    };
+    let writer = open_bundle(opts, &profile, &setup)?;
     let control = Control {
         progress: opts.progress,
         cancel: opts.cancel,
     };
-    let gray_map = OnceLock::new();
-    let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, &control, || {
-        // The gray map depends on the set-up only: written while the masks are made (its
-        // encoding would otherwise wait for the last layer).
-        if let Some(o) = ctx.optics {
-            let _ = gray_map.set(optics_records::write_gray_map(o, &writer, &profile));
-        }
-    })?;
-    let stats = sliced.stats;
-    if stats.repaired_layers > 0 {
-        warnings.push(format!(
-            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
-            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
-        ));
-    }
-    let distortion_report = setup.correction.as_ref().map(Correction::report);
-    if let Some(r) = distortion_report
-        .as_ref()
-        .filter(|r| r.extrapolated_points > 0)
-    {
-        warnings.push(format!(
-            "distortion: {} warped points lie outside the area the table ({}) measured; their correction is extrapolated",
-            r.extrapolated_points, r.source
-        ));
-    }
+    let (sliced, gray_map) = make_layers(&profile, &setup, &part, &writer, &control)?;
 
     let t_finish = Instant::now();
+    let distortion_report = setup.correction.as_ref().map(Correction::report);
+    let mut warnings = part.mesh.report.warnings();
+    warnings.extend(slicing_warnings(&sliced.stats, distortion_report.as_ref()));
     let analysis_cpu_s = sliced.layers.iter().map(|o| o.analysis_s).sum();
-    let mut planned = manifest::plan_layers(&profile, sliced.layers, path)?;
+    let mut planned = manifest::plan_layers(&profile, sliced.layers, part.path)?;
     warnings.append(&mut planned.warnings);
     let mut optics = optics_records::optics_records(
         setup.optics.as_ref(),
-        gray_map.into_inner(),
+        gray_map,
         setup.tiler.as_ref(),
         &writer,
         &profile,
@@ -165,7 +105,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let finish_s = t_finish.elapsed().as_secs_f64();
     Ok(SliceSummary {
         bundle,
-        layers: n,
+        layers: part.layers,
         warnings: manifest.warnings,
         mesh: part.mesh.report,
         totals: manifest.totals,
@@ -179,6 +119,103 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         },
         distortion: distortion_report,
     })
+}
+
+/// Sets the machine up for the job (completing `profile`) and reads and places the model.
+/// The two are independent: they run side by side. Set-up errors are reported first.
+fn load_and_place<'a>(
+    opts: &'a SliceOptions,
+    profile: &mut Profile,
+) -> Result<(SetUp, PlacedPart<'a>)> {
+    let path = opts.input.as_path();
+    let (setup, loaded) = rayon::join(|| set_up(opts, profile), || read_model(path));
+    let setup = setup?;
+    let (sha256, mut mesh) = loaded?;
+    let h = profile.slicing.layer_height_mm.get();
+    let bbox_in_file = mesh.bbox();
+    let (translate_mm, layers) = place_mesh(path, &mut mesh, &profile.field(), opts.placement, h)?;
+    let part = PlacedPart {
+        path,
+        sha256,
+        mesh,
+        bbox_in_file,
+        mode: opts.placement,
+        translate_mm,
+        layers,
+    };
+    Ok((setup, part))
+}
+
+/// Creates the bundle's staging directory, with a mask folder per projector when tiled.
+fn open_bundle(opts: &SliceOptions, profile: &Profile, setup: &SetUp) -> Result<BundleWriter> {
+    let out = opts
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&opts.input));
+    let writer = BundleWriter::create(&out)?;
+    if setup.tiler.is_some() {
+        for k in 0..profile.projector.len() {
+            writer.create_dir(&format!("masks/p{k}"))?;
+        }
+    }
+    Ok(writer)
+}
+
+/// Slices the placed part and makes every layer's masks (the pipeline), writing the
+/// single projector's gray map beside them; returns the layers and the gray map's file
+/// and SHA-256.
+fn make_layers(
+    profile: &Profile,
+    setup: &SetUp,
+    part: &PlacedPart,
+    writer: &BundleWriter,
+    control: &Control,
+) -> Result<(pipeline::Sliced, Option<WrittenGrayMap>)> {
+    let h = profile.slicing.layer_height_mm.get();
+    let field = profile.field();
+    let n = part.layers;
+    let raster = Rasterizer::new(field);
+    let recent = RecentPrismMasks::default();
+    let ctx = LayerContext {
+        writer,
+        profile,
+        raster: &raster,
+        optics: setup.optics.as_ref(),
+        tiler: setup.tiler.as_ref(),
+        correction: setup.correction.as_ref(),
+        model: part.path,
+        // Reusing masks across blocks: one projector, no distortion correction.
+        recent: (setup.tiler.is_none() && setup.correction.is_none()).then_some(&recent),
+        binary: profile.slicing.binary,
+        px_area_mm2: field.pixel_mm * field.pixel_mm,
+    };
+    let gray_map = OnceLock::new();
+    let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {
+        // The gray map depends on the set-up only: written while the masks are made (its
+        // encoding would otherwise wait for the last layer).
+        if let Some(o) = ctx.optics {
+            let _ = gray_map.set(optics_records::write_gray_map(o, writer, profile));
+        }
+    })?;
+    Ok((sliced, gray_map.into_inner()))
+}
+
+/// Warnings about the slicing: contours repaired, distortion corrections extrapolated.
+fn slicing_warnings(stats: &SliceStats, distortion: Option<&FitReport>) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if stats.repaired_layers > 0 {
+        warnings.push(format!(
+            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
+            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
+        ));
+    }
+    if let Some(r) = distortion.filter(|r| r.extrapolated_points > 0) {
+        warnings.push(format!(
+            "distortion: {} warped points lie outside the area the table ({}) measured; their correction is extrapolated",
+            r.extrapolated_points, r.source
+        ));
+    }
+    warnings
 }
 
 /// The machine's per-job set-up for `profile` (which it completes): light compensation

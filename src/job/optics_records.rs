@@ -9,12 +9,15 @@ use crate::geometry::tile::Tiler;
 use crate::optics::JobOptics;
 use crate::profile::Profile;
 
-/// Writes the single projector's gray map; returns its file and SHA-256.
+/// The single projector's gray map as written: its file and SHA-256.
+pub(super) type WrittenGrayMap = Result<(String, String)>;
+
+/// Writes the single projector's gray map.
 pub(super) fn write_gray_map(
     optics: &JobOptics,
     writer: &BundleWriter,
     profile: &Profile,
-) -> Result<(String, String)> {
+) -> WrittenGrayMap {
     optics.write_gray_map(writer, profile, encode_png)
 }
 
@@ -35,7 +38,7 @@ pub(super) struct OpticsRecords {
 /// now.
 pub(super) fn optics_records(
     optics: Option<&JobOptics>,
-    gray_map: Option<Result<(String, String)>>,
+    gray_map: Option<WrittenGrayMap>,
     tiler: Option<&Tiler>,
     writer: &BundleWriter,
     profile: &Profile,
