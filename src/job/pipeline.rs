@@ -29,8 +29,8 @@ use std::time::Instant;
 const WINDOW: usize = 32;
 /// Consecutive layers one worker processes in order. Its first layer's analysis scans the
 /// layer below again (islands) and cannot copy the analysis of an equal layer below
-/// (prisms): larger blocks do that less often (8 rather than 4: −2.8 % analysis
-/// instructions on logo_hires), smaller ones balance the workers better at the end.
+/// (prisms): larger blocks do that less often, smaller ones balance the workers better at
+/// the end (docs/PLANNING.md has the measurement behind 8).
 pub const BLOCK: usize = 8;
 /// Layers sliced but not yet made into masks before the slicer waits (bounds memory: at
 /// most this plus one window are held).

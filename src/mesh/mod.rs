@@ -447,7 +447,7 @@ impl Mesh {
     }
 }
 
-/// An outward-facing cube of edge `s` with its lowest corner at `at` (test helper).
+/// An outward-facing cube of edge `s` with its lowest corner at `at` (for unit tests).
 #[cfg(test)]
 pub(crate) fn cube_soup(s: f32, at: [f32; 3]) -> Soup {
     let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
