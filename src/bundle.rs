@@ -27,10 +27,11 @@
 //!   (`close_s`); the next layer's mask is preloaded, so switching masks inside a run
 //!   takes no time. Duration of a sweep `|to_mm − from| / speed_mm_s`; dose time the same.
 
+/// The hash the manifest records for every file (model, masks, gray maps, tables).
+pub use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
 /// Value of the manifest's `format` field.
@@ -126,7 +127,62 @@ pub struct Settings {
     pub compensation: String,
     /// Distortion correction applied to the masks: its table and fit report.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub distortion: Option<crate::geometry::distortion::FitReport>,
+    pub distortion: Option<FitReport>,
+}
+
+/// Quality of the distortion correction fitted to a measured table (filled by
+/// `geometry::distortion`), recorded in the manifest and printed by the CLI.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Table file name, or "profile NAME" for inline points.
+    pub source: String,
+    /// SHA-256 of the table.
+    pub sha256: String,
+    /// Number of measured points.
+    pub points: usize,
+    /// Total degree of the least-squares polynomial (chosen by cross-validation).
+    pub degree: u32,
+    /// Weight κ of the natural-neighbour residual interpolant (0: polynomial only, 1: the
+    /// correction passes through every table point).
+    pub residual_weight: f64,
+    /// RMS distance between the polynomial and the table points, mm.
+    pub poly_rms_mm: f64,
+    /// Largest such distance, mm.
+    pub poly_max_mm: f64,
+    /// Where the largest polynomial residual is ("line 37").
+    pub poly_max_at: String,
+    /// Leave-one-out prediction error of the correction (polynomial + κ·residual), RMS, mm:
+    /// an honest estimate of its accuracy between points (it includes measurement noise).
+    pub cv_rms_mm: f64,
+    /// Largest leave-one-out error, mm.
+    pub cv_max_mm: f64,
+    /// Where the largest leave-one-out error is.
+    pub cv_max_at: String,
+    /// Largest correction in the table, |aim − seen|, mm.
+    pub max_correction_mm: f64,
+    /// Warped points outside the convex hull of the seen points (extrapolated); layers
+    /// that repeat the layer below's masks are not warped again and not counted.
+    pub extrapolated_points: u64,
+}
+
+impl FitReport {
+    /// One-line human summary.
+    pub fn summary(&self) -> String {
+        format!(
+            "distortion {}: {} points, degree-{} polynomial + {:.2} x residual interpolant; fit residual RMS {:.4} mm (max {:.4} mm, {}), cross-validated error RMS {:.4} mm (max {:.4} mm, {}); largest correction {:.3} mm",
+            self.source,
+            self.points,
+            self.degree,
+            self.residual_weight,
+            self.poly_rms_mm,
+            self.poly_max_mm,
+            self.poly_max_at,
+            self.cv_rms_mm,
+            self.cv_max_mm,
+            self.cv_max_at,
+            self.max_correction_mm
+        )
+    }
 }
 
 /// Light compensation of a job (see docs/CALIBRATION.md). Irradiances are in `units`.
@@ -306,17 +362,6 @@ pub enum Step {
     },
 }
 
-/// SHA-256 of `bytes` as lowercase hex.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    let d = Sha256::digest(bytes);
-    let mut s = String::with_capacity(64);
-    for b in d {
-        use std::fmt::Write;
-        let _ = write!(s, "{b:02x}");
-    }
-    s
-}
-
 impl Manifest {
     /// Reads and checks `job.json` of the bundle at `dir`.
     pub fn read(dir: &Path) -> Result<Manifest> {
@@ -487,14 +532,6 @@ impl Drop for BundleWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sha256_of_empty() {
-        assert_eq!(
-            sha256_hex(b""),
-            "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
-        );
-    }
 
     #[test]
     fn step_json_shape() {

@@ -8,6 +8,7 @@
 #![warn(missing_docs)]
 
 pub mod bundle;
+pub mod digest;
 pub mod error;
 pub mod exec;
 pub mod geometry;

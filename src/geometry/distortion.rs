@@ -22,10 +22,11 @@
 //! midpoint lies within 0.05 px of the chord (the sag bound). A warped point outside the
 //! projector's field is a target the projector cannot reach: an error naming the point.
 
+use crate::bundle::FitReport;
 use crate::error::{Error, Result};
+use crate::profile::{DistortionConfig, Profile};
 use crate::slice::Contour;
 use nalgebra::{DMatrix, DVector};
-use serde::{Deserialize, Serialize};
 use spade::handles::FixedVertexHandle;
 use spade::{DelaunayTriangulation, HasPosition, Point2, Triangulation};
 use std::path::{Path, PathBuf};
@@ -42,39 +43,6 @@ pub const MAX_DEGREE: usize = 5;
 /// Fewest table points accepted.
 pub const MIN_POINTS: usize = 6;
 
-/// The `[distortion]` section of a profile: a table file (relative to the profile file) or
-/// inline points `[x_mm, y_mm, seen_x_mm, seen_y_mm]`. Exactly one of the two.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DistortionConfig {
-    /// CSV table, relative to the profile file's directory.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub table: Option<String>,
-    /// Inline measured points `[x_mm, y_mm, seen_x_mm, seen_y_mm]`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub points: Option<Vec<[f64; 4]>>,
-}
-
-impl DistortionConfig {
-    /// Checks that exactly one source is given and inline numbers are finite.
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        match (&self.table, &self.points) {
-            (Some(_), Some(_)) => Err("[distortion]: give `table` or `points`, not both".into()),
-            (None, None) => Err("[distortion]: needs `table` or `points`".into()),
-            (Some(t), None) if t.trim().is_empty() => Err("[distortion].table is empty".into()),
-            (None, Some(p)) => {
-                for (i, r) in p.iter().enumerate() {
-                    if r.iter().any(|v| !v.is_finite()) {
-                        return Err(format!("[distortion].points[{i}]: numbers must be finite"));
-                    }
-                }
-                Ok(())
-            }
-            _ => Ok(()),
-        }
-    }
-}
-
 /// Which correction a job uses (the command line's `--distortion`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub enum DistortionChoice {
@@ -90,10 +58,7 @@ pub enum DistortionChoice {
 /// Resolves and fits the correction of a job. On success the profile's `[distortion]` is
 /// replaced by the table's points inline (or removed when off), so the manifest's machine is
 /// self-contained.
-pub fn for_job(
-    choice: &DistortionChoice,
-    profile: &mut crate::profile::Profile,
-) -> Result<Option<Correction>> {
+pub fn for_job(choice: &DistortionChoice, profile: &mut Profile) -> Result<Option<Correction>> {
     let table = match choice {
         DistortionChoice::Off => {
             profile.distortion = None;
@@ -189,7 +154,7 @@ impl Table {
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            sha256: crate::bundle::sha256_hex(&bytes),
+            sha256: crate::digest::sha256_hex(&bytes),
             pairs,
         })
     }
@@ -214,7 +179,7 @@ impl Table {
             origin: PathBuf::from(format!("profile {profile} [distortion].points")),
             unit: "point",
             source: format!("profile {profile}"),
-            sha256: crate::bundle::sha256_hex(csv.as_bytes()),
+            sha256: crate::digest::sha256_hex(csv.as_bytes()),
             pairs,
         }
     }
@@ -288,60 +253,6 @@ pub fn parse_csv(path: &Path, text: &str) -> Result<Vec<Pair>> {
         });
     }
     Ok(pairs)
-}
-
-/// Fit quality, recorded in the manifest and printed by the CLI.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FitReport {
-    /// Table file name, or "profile NAME" for inline points.
-    pub source: String,
-    /// SHA-256 of the table.
-    pub sha256: String,
-    /// Number of measured points.
-    pub points: usize,
-    /// Total degree of the least-squares polynomial (chosen by cross-validation).
-    pub degree: u32,
-    /// Weight κ of the natural-neighbour residual interpolant (0: polynomial only, 1: the
-    /// correction passes through every table point).
-    pub residual_weight: f64,
-    /// RMS distance between the polynomial and the table points, mm.
-    pub poly_rms_mm: f64,
-    /// Largest such distance, mm.
-    pub poly_max_mm: f64,
-    /// Where the largest polynomial residual is ("line 37").
-    pub poly_max_at: String,
-    /// Leave-one-out prediction error of the correction (polynomial + κ·residual), RMS, mm:
-    /// an honest estimate of its accuracy between points (it includes measurement noise).
-    pub cv_rms_mm: f64,
-    /// Largest leave-one-out error, mm.
-    pub cv_max_mm: f64,
-    /// Where the largest leave-one-out error is.
-    pub cv_max_at: String,
-    /// Largest correction in the table, |aim − seen|, mm.
-    pub max_correction_mm: f64,
-    /// Warped points outside the convex hull of the seen points (extrapolated); layers
-    /// that repeat the layer below's masks are not warped again and not counted.
-    pub extrapolated_points: u64,
-}
-
-impl FitReport {
-    /// One-line human summary.
-    pub fn summary(&self) -> String {
-        format!(
-            "distortion {}: {} points, degree-{} polynomial + {:.2} x residual interpolant; fit residual RMS {:.4} mm (max {:.4} mm, {}), cross-validated error RMS {:.4} mm (max {:.4} mm, {}); largest correction {:.3} mm",
-            self.source,
-            self.points,
-            self.degree,
-            self.residual_weight,
-            self.poly_rms_mm,
-            self.poly_max_mm,
-            self.poly_max_at,
-            self.cv_rms_mm,
-            self.cv_max_mm,
-            self.cv_max_at,
-            self.max_correction_mm
-        )
-    }
 }
 
 #[derive(Debug, Clone, Copy)]

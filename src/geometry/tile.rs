@@ -16,11 +16,24 @@
 //! `coverage × share` (rounded to 8 bits), compensated: each projector delivers its share of
 //! E* through its own P(x, y)·S(g).
 
-use super::blend::{self, BlendCurve, Rect, Response, LUT_STEPS};
+use super::blend::{self, Rect, Response, LUT_STEPS};
+use crate::bundle::Optics;
+use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
-use crate::optics::{Compensator, Dither, JobOptics, Mode, OpticsOptions};
-use crate::profile::{Field, Profile, Projector};
+use crate::optics::{Compensator, Dither, GrayMap, JobOptics, Mode, OpticsOptions};
+use crate::profile::{BlendCurve, Field, Profile, Projector};
 use crate::raster::Mask;
+
+/// What the tiling stage of a compensated job hands back after the last layer.
+#[derive(Debug, Default)]
+pub struct TiledOptics {
+    /// Each projector's gray map, for the bundle.
+    pub gray_maps: Vec<GrayMap>,
+    /// Each projector's manifest record (`projector_optics`).
+    pub records: Vec<Optics>,
+    /// Warnings for the job.
+    pub warnings: Vec<String>,
+}
 
 /// Fixed-point factor of a full share (f = 1).
 const FULL: u32 = 16 << 16;
@@ -218,32 +231,30 @@ impl Tiler {
             .map_or(Mode::Off, |o| o.compensator.mode())
     }
 
-    /// After all layers: each projector's gray map into the bundle, the per-projector
+    /// After all layers: each projector's gray map (encoded by `png`), the per-projector
     /// manifest records and the job's warnings.
-    pub fn finish(
-        &self,
-        writer: &crate::bundle::BundleWriter,
-        profile: &Profile,
-        png: impl Fn(&Mask) -> Vec<u8>,
-    ) -> Result<(Vec<crate::bundle::Optics>, Vec<String>)> {
+    pub fn finish(&self, profile: &Profile, png: impl Fn(&Mask) -> Vec<u8>) -> TiledOptics {
         // The gray maps are projector-sized: view them without the field offsets.
         let mut local = profile.clone();
         for p in &mut local.projector {
             p.offset_px = [0, 0];
         }
-        let mut records = Vec::with_capacity(self.optics.len());
-        let mut warnings = Vec::new();
+        let mut out = TiledOptics::default();
         for (k, o) in self.optics.iter().enumerate() {
-            let (r, w) = o.finish(writer, &local, &png)?;
-            records.push(r);
+            let map = o.gray_map(&local, &png);
+            let sha = sha256_hex(&map.png);
+            let (r, w) = o.finish_with((map.file.clone(), sha));
+            out.gray_maps.push(map);
+            out.records.push(r);
             for w in w {
                 // The exposure warnings are the same for every projector.
                 if k == 0 || !o.exposure.warnings.contains(&w) {
-                    warnings.push(format!("projector {}: {w}", profile.projector[k].name));
+                    out.warnings
+                        .push(format!("projector {}: {w}", profile.projector[k].name));
                 }
             }
         }
-        Ok((records, warnings))
+        out
     }
 
     /// Number of projectors.

@@ -4,9 +4,9 @@
 use super::layer::LayerOut;
 use super::optics_records::OpticsRecords;
 use super::PlacementMode;
+use crate::bundle::FitReport;
 use crate::bundle::{self, Generator, Layer, Manifest, Placement, Settings, Source, Totals};
 use crate::error::{Error, Result};
-use crate::geometry::distortion::FitReport;
 use crate::mesh::Mesh;
 use crate::plan::{self, LayerAnalysis, LayerInfo};
 use crate::profile::{Process, Profile};

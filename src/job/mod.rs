@@ -29,9 +29,10 @@ pub use options::{default_output, SliceOptions, SliceSummary, Timings};
 pub use pipeline::BLOCK;
 pub use placement::{place_mesh, placement, PlacementMode};
 
+use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
 use crate::error::{Error, Result};
-use crate::geometry::distortion::{self, Correction, FitReport};
+use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh};
 use crate::optics::JobOptics;

@@ -3,11 +3,12 @@
 //! for several projectors, each projector's gray map and record from the tiler.
 
 use super::encode_png;
-use crate::bundle::{BundleWriter, Optics};
+use crate::bundle::{self, BundleWriter, Optics};
 use crate::error::Result;
 use crate::geometry::tile::Tiler;
-use crate::optics::JobOptics;
+use crate::optics::{GrayMap, JobOptics};
 use crate::profile::Profile;
+use std::path::Path;
 
 /// The single projector's gray map as written: its file and SHA-256.
 pub(super) type WrittenGrayMap = Result<(String, String)>;
@@ -18,7 +19,16 @@ pub(super) fn write_gray_map(
     writer: &BundleWriter,
     profile: &Profile,
 ) -> WrittenGrayMap {
-    optics.write_gray_map(writer, profile, encode_png)
+    write_one(writer, &optics.gray_map(profile, encode_png))
+}
+
+/// Writes a gray map into the bundle; returns its file and SHA-256.
+fn write_one(writer: &BundleWriter, map: &GrayMap) -> Result<(String, String)> {
+    if let Some(dir) = Path::new(&map.file).parent() {
+        writer.create_dir(&dir.to_string_lossy())?;
+    }
+    writer.write_file(&map.file, &map.png)?;
+    Ok((map.file.clone(), bundle::sha256_hex(&map.png)))
 }
 
 /// The manifest's light-compensation records.
@@ -47,7 +57,7 @@ pub(super) fn optics_records(
     let optics = match optics {
         Some(o) => {
             let written = gray_map.expect("written beside the masks")?;
-            let (record, w) = o.finish_with(written)?;
+            let (record, w) = o.finish_with(written);
             warnings.extend(w);
             Some(record)
         }
@@ -55,9 +65,12 @@ pub(super) fn optics_records(
     };
     let projector_optics = match tiler {
         Some(t) => {
-            let (records, w) = t.finish(writer, profile, encode_png)?;
-            warnings.extend(w);
-            records
+            let done = t.finish(profile, encode_png);
+            for map in &done.gray_maps {
+                write_one(writer, map)?;
+            }
+            warnings.extend(done.warnings);
+            done.records
         }
         None => Vec::new(),
     };

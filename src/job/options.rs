@@ -1,8 +1,9 @@
 //! What a job is asked ([`SliceOptions`]) and what it reports ([`SliceSummary`]).
 
 use super::PlacementMode;
+use crate::bundle::FitReport;
 use crate::bundle::Totals;
-use crate::geometry::distortion::{DistortionChoice, FitReport};
+use crate::geometry::distortion::DistortionChoice;
 use crate::mesh::MeshReport;
 use crate::profile::Profile;
 use crate::units::Positive;

@@ -2,22 +2,21 @@
 //!
 //! Stages (see `docs/PLANNING.md`):
 //! 1. [`analysis`] (run per layer inside the slicing workers): max fill distance
-//!    (seeds/001's DisMax-Min, the largest inscribed circle of the exact contours),
-//!    unsupported islands, bounding box.
-//! 2. [`plan`]: per process ([`config`] holds the profile sections) the mode, exposure and
-//!    step list of each layer (`steps`), then the time estimate under the bundle's timing
-//!    contract ([`timing`]). For the hybrid process it also plans the same job all layered,
-//!    for the time comparison seeds/001 reports.
+//!    (DisMax-Min of the hybrid continuous/layered method, the largest inscribed circle of
+//!    the exact contours), unsupported islands, bounding box.
+//! 2. [`plan`]: per process (the profile's process sections, [`crate::profile::Recoat`],
+//!    [`crate::profile::Peel`], [`crate::profile::Hybrid`]) the mode, exposure and step
+//!    list of each layer (`steps`), then the time estimate under the bundle's timing
+//!    contract ([`timing`]). For the hybrid process it also plans the same job all
+//!    layered, for the time comparison the hybrid method reports.
 //!
 //! The planner is pure: the same layers and profile give the same plan, bit for bit.
 
 pub mod analysis;
-pub mod config;
 mod steps;
 pub mod timing;
 
 pub use analysis::LayerAnalysis;
-pub use config::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};

@@ -5,10 +5,9 @@
 //! prepare a layer belong to that layer; their height is the highest `to_mm` of the layer
 //! minus the layer's exposure position.
 
-use super::config::{Hybrid, Peel, Recoat};
 use super::{LayerInfo, LayerPlan, Notes};
 use crate::bundle::{Mode, Step};
-use crate::profile::Profile;
+use crate::profile::{Hybrid, Peel, Profile, Recoat, WaitModel};
 
 /// Stage limits the steps must respect.
 pub(super) struct Limits {
@@ -80,7 +79,7 @@ pub(super) fn top_down(
             }
             steps.push(lim.mv(l.z_mm, r.return_speed_mm_s.get()));
             let (w, raw) = r.wait_for(l.max_fill_distance_mm, l.thickness_mm, mu);
-            if raw > w && r.wait_model == super::config::WaitModel::Leveling {
+            if raw > w && r.wait_model == WaitModel::Leveling {
                 notes.wait_capped += 1;
                 notes.wait_model_max_s = notes.wait_model_max_s.max(raw);
             }
@@ -127,7 +126,7 @@ pub(super) fn bottom_up(
     out
 }
 
-/// seeds/001 hybrid. `force_layered`: plan every slice layered (the comparison plan).
+/// Hybrid continuous/layered. `force_layered`: plan every slice layered (the comparison plan).
 pub(super) fn hybrid(
     p: &Profile,
     h: &Hybrid,

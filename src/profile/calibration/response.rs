@@ -3,11 +3,12 @@
 //!
 //! Two representations are stored in calibration files:
 //! * `polynomial`: a polynomial in the pixel value (`variable = "pixel"`) or in the
-//!   attenuation z = 255 − pixel value (`variable = "attenuation"`, the seeds/000 reading),
-//!   valid on an explicit gray range over which it must be strictly increasing in g;
+//!   attenuation z = 255 − pixel value (`variable = "attenuation"`, the reading of Xu et
+//!   al. 2010), valid on an explicit gray range over which it must be strictly increasing
+//!   in g;
 //! * `table`: points (g, S) strictly increasing in both, joined by a not-a-knot cubic
-//!   spline (`interpolation = "spline"`, exact for cubic responses such as seeds/000's)
-//!   or by a monotone cubic (`"pchip"`, Fritsch–Carlson), valid from the first to the
+//!   spline (`interpolation = "spline"`, exact for cubic responses such as that of Xu et
+//!   al. 2010) or by a monotone cubic (`"pchip"`, Fritsch–Carlson), valid from the first to the
 //!   last point. This is what `dmdsl calibrate` writes (spline when it is monotone on the
 //!   measured range, else PCHIP). Its first point may be [0, 0] (mirror off, no light):
 //!   then S between 0 and the next point is a monotone cubic from (0, 0) that meets the
@@ -25,7 +26,7 @@ use serde::{Deserialize, Serialize};
 pub enum GrayVariable {
     /// The pixel value g (0 = off, 255 = fully on).
     Pixel,
-    /// The attenuation z = 255 − g (seeds/000's "gray": z = 0 is the fully-on mirror).
+    /// The attenuation z = 255 − g (the "gray" of Xu et al. 2010: z = 0 is the fully-on mirror).
     Attenuation,
 }
 
@@ -517,7 +518,7 @@ mod tests {
 
     #[test]
     fn spline_is_exact_for_cubic_responses_and_anchor_is_monotone() {
-        // seeds/000's S in pixel values, sampled at 7 levels: the not-a-knot spline
+        // The S of Xu et al. 2010 in pixel values, sampled at 7 levels: the not-a-knot spline
         // reproduces it (PCHIP would be off by ~1 %).
         let s = |g: f64| {
             let z = 255.0 - g;

@@ -1,5 +1,5 @@
 //! The field factor P(x, y): irradiance across the build plane at the brightest valid gray
-//! (up to the factor S), a bivariate polynomial. seeds/000 uses a cubic (10 terms);
+//! (up to the factor S), a bivariate polynomial. Xu et al. 2010 use a cubic (10 terms);
 //! `dmdsl calibrate` fits degree 3 unless cross-validation shows that a higher degree
 //! (up to [`MAX_DEGREE`]) predicts held-out zones better.
 
@@ -182,7 +182,7 @@ impl Serialize for Poly {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Form {
-    /// P = scale · poly(u, v) (seeds/000).
+    /// P = scale · poly(u, v) (Xu et al. 2010).
     #[default]
     Polynomial,
     /// P = scale · exp(poly(u, v)): for fields that fall off multiplicatively (vignetting,
@@ -211,15 +211,15 @@ impl Form {
 /// P(x_mm, y_mm) = scale · poly(u, v) (or scale · exp(poly(u, v)), scale / poly(u, v)²,
 /// see [`Form`]) with u = (x_mm − `origin_mm[0]`) / length_unit_mm and
 /// v = (y_mm − `origin_mm[1]`) / length_unit_mm; (x_mm, y_mm) are build-plane coordinates from
-/// the field's bottom-left corner (BRIEF §3).
+/// the field's bottom-left corner (+x right, +y up).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldModel {
     /// Build-plane point where u = v = 0, mm.
     pub origin_mm: [f64; 2],
-    /// Length that is one unit of u and v, mm (10 = centimetres, the seeds/000 reading).
+    /// Length that is one unit of u and v, mm (10 = centimetres, the reading of Xu et al. 2010).
     pub length_unit_mm: Positive,
-    /// Factor applied to the polynomial (1e-8 in seeds/000).
+    /// Factor applied to the polynomial (1e-8 in Xu et al. 2010).
     pub scale: Positive,
     /// Polynomial (default), exponential of a polynomial, or inverse square of one.
     #[serde(default)]

@@ -6,6 +6,16 @@
 //! typo never silently falls back to a default. The fully resolved profile is copied into
 //! every job manifest, which is how the executor learns the machine it simulates.
 
+mod blend;
+pub mod calibration;
+mod distortion;
+mod process;
+
+pub use blend::BlendCurve;
+pub use calibration::Calibration;
+pub use distortion::DistortionConfig;
+pub use process::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
+
 use crate::error::{Error, Result};
 use crate::units::{NonNegative, Positive};
 use serde::{Deserialize, Serialize};
@@ -15,14 +25,14 @@ use std::path::Path;
 pub const BUILTIN: &[(&str, &str)] = &[
     (
         "xu2010-topdown",
-        include_str!("../profiles/xu2010-topdown.toml"),
+        include_str!("../../profiles/xu2010-topdown.toml"),
     ),
     (
         "hybrid-bottomup",
-        include_str!("../profiles/hybrid-bottomup.toml"),
+        include_str!("../../profiles/hybrid-bottomup.toml"),
     ),
-    ("bottom-up", include_str!("../profiles/bottom-up.toml")),
-    ("tiled-2x1", include_str!("../profiles/tiled-2x1.toml")),
+    ("bottom-up", include_str!("../../profiles/bottom-up.toml")),
+    ("tiled-2x1", include_str!("../../profiles/tiled-2x1.toml")),
 ];
 
 /// Name of the profile used when `--profile` is not given.
@@ -32,11 +42,11 @@ pub const DEFAULT_PROFILE: &str = "xu2010-topdown";
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Process {
-    /// Platform sinks into the vat; layers cure at the free resin surface (seeds/000).
+    /// Platform sinks into the vat; layers cure at the free resin surface (Xu et al. 2010).
     TopDown,
     /// Platform rises from a window; each layer is peeled off the window.
     BottomUp,
-    /// Bottom-up over a liquid interface; continuous where resin can refill (seeds/001).
+    /// Bottom-up over a liquid interface; continuous where resin can refill.
     Hybrid,
 }
 
@@ -75,10 +85,10 @@ pub struct Profile {
     pub hybrid: Option<Hybrid>,
     /// Lens distortion correction table (docs/GEOMETRY.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub distortion: Option<crate::geometry::distortion::DistortionConfig>,
+    pub distortion: Option<DistortionConfig>,
     /// Edge blending across projector overlaps (default: raised cosine; docs/GEOMETRY.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub blend: Option<crate::geometry::blend::BlendCurve>,
+    pub blend: Option<BlendCurve>,
 }
 
 /// One DMD projector.
@@ -102,7 +112,7 @@ pub struct Projector {
     /// Light-uniformity calibration of this projector (`[projector.calibration]`; see
     /// docs/CALIBRATION.md). Without one the projector's masks are not compensated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibration: Option<crate::optics::Calibration>,
+    pub calibration: Option<Calibration>,
 }
 
 /// Slicing settings.
@@ -196,9 +206,6 @@ pub struct Resin {
     /// Dynamic viscosity, Pa·s.
     pub viscosity_pa_s: Positive,
 }
-
-/// The process sections live with the planner that uses them.
-pub use crate::plan::config::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 /// Size of the whole build field.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -315,7 +322,7 @@ impl Profile {
         if let Some(b) = &self.blend {
             b.validate()?;
         }
-        crate::plan::config::validate(self)
+        process::validate(self)
     }
 
     /// The build field covered by the union of the projectors.
@@ -359,7 +366,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn builtins_parse_and_default_matches_brief() {
+    fn builtins_parse_and_the_default_field_is_1024_by_768() {
         for (name, src) in BUILTIN {
             let p = Profile::from_toml(src, name).unwrap();
             assert_eq!(&p.name, name);

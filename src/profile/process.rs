@@ -1,8 +1,9 @@
 //! Process sections of a machine profile: `[recoat]` (top-down), `[peel]` (bottom-up) and
-//! `[hybrid]` (seeds/001). Like the rest of a profile every key is required and unknown
-//! keys are errors; [`validate`] checks the rules serde cannot express.
+//! `[hybrid]` (model-guided hybrid continuous/layered printing). Like the rest of a profile
+//! every key is required and unknown keys are errors; [`validate`] checks the rules serde
+//! cannot express. The planner (`plan`) turns them into steps.
 
-use crate::profile::{Process, Profile};
+use super::{Process, Profile};
 use crate::units::{NonNegative, Positive};
 use serde::{Deserialize, Serialize};
 
@@ -17,7 +18,7 @@ pub enum WaitModel {
     Leveling,
 }
 
-/// Top-down recoat by natural leveling (seeds/000): after each exposure the stage dips
+/// Top-down recoat by natural leveling (as in Xu et al. 2010): after each exposure the stage dips
 /// `dip_mm` deeper than the next layer so resin floods the part, comes back and waits for
 /// the free surface to level.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -153,7 +154,7 @@ pub struct OlhStep {
     pub lift_mm: Positive,
 }
 
-/// seeds/001's model-guided hybrid: a slice prints continuously (the stage sweeps at
+/// Model-guided hybrid continuous/layered printing: a slice prints continuously (the stage sweeps at
 /// `continuous_speed_mm_s` while its mask is shown) when its max fill distance is at most
 /// the maximum fillable distance `mfd_mm`; otherwise layered, lifting the optimal lift
 /// height of its range (`[[hybrid.olh]]`) and coming back down to the next layer.
@@ -295,7 +296,7 @@ mod tests {
     }
 
     #[test]
-    fn seeds001_table_with_tolerance() {
+    fn olh_table_with_tolerance() {
         let h = hybrid();
         assert!(h.continuous(2.5));
         assert!(h.continuous(2.519));
@@ -322,7 +323,7 @@ mod tests {
                 * (r.density_kg_m3.get() * 9.81 + r.surface_tension_n_m.get() * k * k));
         let got = r.leveling_time_s(5.0, 0.1, 0.5);
         assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
-        // Minutes for a 0.1 mm film over tens of mm (BRIEF §5).
+        // Minutes for a 0.1 mm film over tens of mm.
         assert!(got > 60.0 && got < 3600.0, "{got}");
         // Grows with the flat extent and the viscosity, falls with the film thickness.
         assert!(r.leveling_time_s(6.0, 0.1, 0.5) > got);
