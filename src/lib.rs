@@ -19,9 +19,11 @@ pub mod optics;
 pub mod plan;
 pub mod plot;
 pub mod png;
+pub mod polyfit;
 pub mod profile;
 pub mod raster;
 pub mod slice;
+pub mod table;
 pub mod units;
 
 pub use error::{Error, Result};

@@ -1,15 +1,15 @@
 //! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements.
 //!
 //! Input: a CSV table with the header `x_mm,y_mm,gray,irradiance_mw_cm2` (any column order;
-//! `#` comment lines and blank lines ignored): a zone centre in build-plane mm (origin at
+//! `#` comments and blank lines ignored; read by [`crate::table`]): a zone centre in build-plane mm (origin at
 //! the field's bottom-left corner), the pixel value shown there (255 = fully on) and the
 //! measured irradiance. Any grid of zones, any set of gray levels, repeated readings.
 //!
 //! Method (docs/CALIBRATION.md): the model is bilinear in the cubic's 10 coefficients and
 //! one free value s_j per measured gray level, so it is fitted by alternating least
 //! squares on relative residuals (radiometer noise is proportional to the reading):
-//! with s fixed the coefficients solve a 10-unknown linear least-squares problem (SVD of
-//! the column-scaled design matrix, whose condition number is checked); with P fixed each
+//! with s fixed the coefficients solve a 10-unknown linear least-squares problem (QR of
+//! the column-scaled design matrix, [`crate::polyfit`], whose condition number is checked); with P fixed each
 //! s_j has a closed form. The valid gray range is the run of levels, from the brightest
 //! down, over which s keeps falling; P is then refitted on those levels only, s is
 //! normalised to 1 at the brightest level (so P is the full-on irradiance) and S(g) is the
@@ -19,8 +19,11 @@ use super::field::{FieldModel, Form, Poly, MAX_DEGREE};
 use super::response::{Interpolation, Response};
 use super::{Calibration, FitSummary, Units};
 use crate::error::{Error, Result};
+use crate::polyfit::LeastSquares;
+use crate::table::{self, cell_error, Columns};
 use crate::units::{NonNegative, Positive};
 use nalgebra::{DMatrix, DVector};
+use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -51,94 +54,65 @@ pub struct Reading {
     pub irradiance: f64,
 }
 
-/// Parses a measurement table. Errors name `path` and the line.
-pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Reading>> {
-    let err = |line: usize, msg: String| Error::input(path, format!("line {line}: {msg}"));
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-    let Some((hl, header)) = lines.next() else {
-        return Err(Error::input(
-            path,
-            format!("empty file; expected the header {}", COLUMNS.join(",")),
-        ));
-    };
-    let names: Vec<&str> = header.split(',').map(str::trim).collect();
-    let mut col = [usize::MAX; 4];
-    for (i, n) in names.iter().enumerate() {
-        match COLUMNS.iter().position(|c| c == n) {
-            Some(k) if col[k] != usize::MAX => {
-                return Err(err(hl, format!("column {n:?} appears twice")));
-            }
-            Some(k) => col[k] = i,
-            None => {
-                return Err(err(
-                    hl,
-                    format!(
-                        "unknown column {n:?} (expected the header {})",
-                        COLUMNS.join(",")
-                    ),
-                ))
-            }
-        }
-    }
-    if let Some(k) = col.iter().position(|&c| c == usize::MAX) {
-        return Err(err(
-            hl,
-            format!(
-                "missing column {:?} (expected the header {})",
-                COLUMNS[k],
-                COLUMNS.join(",")
-            ),
-        ));
-    }
-    let mut out = Vec::new();
-    for (ln, l) in lines {
-        let f: Vec<&str> = l.split(',').map(str::trim).collect();
-        if f.len() != names.len() {
-            return Err(err(
-                ln,
-                format!("expected {} columns, found {}", names.len(), f.len()),
-            ));
-        }
-        let num = |k: usize| -> Result<f64> {
-            let s = f[col[k]];
-            match s.parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                _ => Err(err(ln, format!("{} {s:?} is not a number", COLUMNS[k]))),
-            }
-        };
-        let (x, y, g, e) = (num(0)?, num(1)?, num(2)?, num(3)?);
-        if !(0.0..=255.0).contains(&g) || g.fract() != 0.0 {
-            return Err(err(
-                ln,
-                format!("gray {g} must be an integer pixel value 0..255"),
-            ));
-        }
-        if e <= 0.0 {
-            return Err(err(ln, format!("irradiance_mw_cm2 must be > 0, got {e}")));
-        }
-        out.push(Reading {
-            line: ln as u64,
-            x_mm: x,
-            y_mm: y,
-            gray: g as u8,
-            irradiance: e,
-        });
-    }
-    if out.is_empty() {
+/// The measurement table's columns (header required, any order).
+const TABLE: Columns = Columns {
+    names: &COLUMNS,
+    header_optional: false,
+};
+
+/// A row of the measurement table, as read.
+#[derive(Debug, Deserialize)]
+struct TableRow {
+    x_mm: f64,
+    y_mm: f64,
+    gray: f64,
+    irradiance_mw_cm2: f64,
+}
+
+/// Checks the rows' values: gray an integer pixel value, irradiance positive.
+fn readings(path: &Path, rows: Vec<table::Row<TableRow>>) -> Result<Vec<Reading>> {
+    if rows.is_empty() {
         return Err(Error::input(path, "no measurements after the header"));
     }
-    Ok(out)
+    rows.into_iter()
+        .map(|table::Row { line, value: r }| {
+            let (g, e) = (r.gray, r.irradiance_mw_cm2);
+            if !(0.0..=255.0).contains(&g) || g.fract() != 0.0 {
+                return Err(cell_error(
+                    path,
+                    line,
+                    "gray",
+                    format!("{g} is not an integer pixel value 0..255"),
+                ));
+            }
+            if e <= 0.0 {
+                return Err(cell_error(
+                    path,
+                    line,
+                    "irradiance_mw_cm2",
+                    format!("must be > 0, got {e}"),
+                ));
+            }
+            Ok(Reading {
+                line,
+                x_mm: r.x_mm,
+                y_mm: r.y_mm,
+                gray: g as u8,
+                irradiance: e,
+            })
+        })
+        .collect()
+}
+
+/// Parses a measurement table. Errors name `path`, the line and the column.
+pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Reading>> {
+    readings(path, table::parse(path, text, &TABLE)?)
 }
 
 /// Reads and parses a measurement file.
 pub fn read_csv(path: &Path) -> Result<Vec<Reading>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_csv(&text, path)
+    let (_, rows) = table::read(path, &TABLE)?;
+    readings(path, rows)
 }
 
 /// Fit options.
@@ -273,33 +247,24 @@ fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
     })
 }
 
-/// Least squares A·x ≈ b for a column-scaled A (columns of unit norm) through the normal
-/// equations (Cholesky; A is at most 28 columns wide). With `check`, the condition number
-/// of A (from the eigenvalues of AᵀA) is computed and must not exceed [`MAX_CONDITION`].
-/// Returns (x, condition number or 0 when not checked).
+/// Least squares A·x ≈ b for a column-scaled A (columns of unit norm; at most 28 columns)
+/// by [`LeastSquares`] (QR). With `check`, the condition number of A must not exceed
+/// [`MAX_CONDITION`]. Returns (x, condition number or 0 when not checked), or the
+/// condition number (infinite when A is singular).
 fn solve_scaled(
     a: &DMatrix<f64>,
     b: &DVector<f64>,
     check: bool,
 ) -> std::result::Result<(DVector<f64>, f64), f64> {
-    let ata = a.tr_mul(a);
+    let ls = LeastSquares::new(a.clone()).ok_or(f64::INFINITY)?;
     let mut cond = 0.0;
     if check {
-        let ev = ata.clone().symmetric_eigenvalues();
-        let (lo, hi) = (ev.min(), ev.max());
-        cond = if lo > 0.0 {
-            (hi / lo).sqrt()
-        } else {
-            f64::INFINITY
-        };
+        cond = ls.condition();
         if cond.is_nan() || cond > MAX_CONDITION {
             return Err(cond);
         }
     }
-    match ata.cholesky() {
-        Some(ch) => Ok((ch.solve(&a.tr_mul(b)), cond)),
-        None => Err(f64::INFINITY),
-    }
+    ls.solve(b).map(|x| (x, cond)).ok_or(f64::INFINITY)
 }
 
 /// Alternating least squares on relative residuals over `rows` (levels 0..nlev), for P =
@@ -756,8 +721,8 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
             form,
             coefficients: poly,
             area_mm: area,
-            // Degree ≤ 3 extrapolates reliably (seeds/000 uses its cubic on the whole grid);
-            // higher degrees continue linearly beyond the measured zone centres.
+            // Degree ≤ 3 extrapolates reliably (Xu et al. 2010 use their cubic on the whole
+            // grid); higher degrees continue linearly beyond the measured zone centres.
             polynomial_area_mm: (degree > 3).then(|| [min(&xs), min(&ys), max(&xs), max(&ys)]),
             extrapolate_mm: NonNegative::new(opts.extrapolate_mm).ok_or_else(|| {
                 Error::Usage(format!(
@@ -807,34 +772,39 @@ mod tests {
     }
 
     #[test]
-    fn csv_errors_name_file_and_line() {
+    fn csv_errors_name_file_line_and_column() {
         let e = |t: &str| parse_csv(t, p()).unwrap_err().to_string();
+        let h = "x_mm,y_mm,gray,irradiance_mw_cm2\n";
         assert_eq!(
             e("x_mm,y_mm,gray\n1,2,3\n"),
             "m.csv: line 1: missing column \"irradiance_mw_cm2\" (expected the header x_mm,y_mm,gray,irradiance_mw_cm2)"
         );
         assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2,z\n").contains("line 1: unknown column \"z\""));
         assert_eq!(
-            e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,3\n# c\n1,2,255\n"),
-            "m.csv: line 4: expected 4 columns, found 3"
+            e(&format!("{h}1,2,255,3\n# c\n1,2,255\n")),
+            "m.csv: line 4: expected 4 columns (x_mm,y_mm,gray,irradiance_mw_cm2), found 3"
         );
         assert_eq!(
-            e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,3,4\n"),
-            "m.csv: line 2: expected 4 columns, found 5"
+            e(&format!("{h}1,abc,255,3\n")),
+            "m.csv: line 2, column y_mm: \"abc\" is not a number"
         );
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,abc,255,3\n")
-            .contains("line 2: y_mm \"abc\" is not a number"));
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,0\n")
-            .contains("line 2: irradiance_mw_cm2 must be > 0, got 0"));
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255,-1\n").contains("must be > 0"));
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,255.5,1\n")
-            .contains("line 2: gray 255.5 must be an integer"));
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n1,2,NaN,1\n").contains("is not a number"));
+        assert_eq!(
+            e(&format!("{h}1,2,255,0\n")),
+            "m.csv: line 2, column irradiance_mw_cm2: must be > 0, got 0"
+        );
+        assert!(e(&format!("{h}1,2,255,-1\n")).contains("must be > 0"));
+        assert_eq!(
+            e(&format!("{h}1,2,255.5,1\n")),
+            "m.csv: line 2, column gray: 255.5 is not an integer pixel value 0..255"
+        );
+        assert!(
+            e(&format!("{h}1,2,NaN,1\n")).contains("column gray: \"NaN\" is not a finite number")
+        );
         assert!(e("").contains("empty file"));
-        assert!(e("x_mm,y_mm,gray,irradiance_mw_cm2\n").contains("no measurements"));
-        // Column order is free; CRLF and comments are fine.
+        assert!(e(h).contains("no measurements"));
+        // Column order is free; CRLF, comments and a gray written as a decimal are fine.
         let r = parse_csv(
-            "# m\r\ngray,irradiance_mw_cm2,x_mm,y_mm\r\n200,1.5,3,4\r\n",
+            "# m\r\ngray,irradiance_mw_cm2,x_mm,y_mm\r\n200.0,1.5,3,4 # zone 7\r\n",
             p(),
         )
         .unwrap();

@@ -443,17 +443,17 @@ fn bad_measurements_are_one_line_errors_with_exit_2() {
     expect_error(
         &dir,
         &format!("{h}1,2,255,1.0,7\n"),
-        "line 2: expected 4 columns, found 5",
+        "line 2: expected 4 columns (x_mm,y_mm,gray,irradiance_mw_cm2), found 5",
     );
     expect_error(
         &dir,
         &format!("{h}1,2,255,abc\n"),
-        "line 2: irradiance_mw_cm2 \"abc\" is not a number",
+        "line 2, column irradiance_mw_cm2: \"abc\" is not a number",
     );
     expect_error(
         &dir,
         &format!("{h}1,2,255,1\n1,3,255,0\n"),
-        "line 3: irradiance_mw_cm2 must be > 0",
+        "line 3, column irradiance_mw_cm2: must be > 0",
     );
     expect_error(&dir, &format!("{h}1,2,255,-2\n"), "must be > 0");
     // Too few zones: 9 positions for a 10-term cubic.

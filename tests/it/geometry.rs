@@ -367,12 +367,12 @@ fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
         (
             "cols.csv",
             "x_mm,y_mm,seen_x_mm,seen_y_mm\n1,2,3,4\n5,6,7\n",
-            "cols.csv: line 3: expected 4 comma-separated columns",
+            "cols.csv: line 3: expected 4 columns (x_mm,y_mm,seen_x_mm,seen_y_mm), found 3",
         ),
         (
             "num.csv",
             "1,2,3,4\n5,6,seven,8\n",
-            "num.csv: line 2: column 3 (seen_x_mm): `seven` is not a finite number",
+            "num.csv: line 2, column seen_x_mm: \"seven\" is not a number",
         ),
         (
             "few.csv",

@@ -24,16 +24,9 @@ pub struct Poly {
     coef: Vec<Vec<f64>>,
 }
 
-/// The monomials (a, b) of total degree ≤ `degree`, by degree then descending a.
-pub fn monomials(degree: usize) -> Vec<(usize, usize)> {
-    let mut m = Vec::new();
-    for t in 0..=degree {
-        for a in (0..=t).rev() {
-            m.push((a, t - a));
-        }
-    }
-    m
-}
+/// The monomials (a, b) of total degree ≤ `degree`, by degree then descending a (the
+/// order of [`Poly::basis`] and [`Poly::from_terms`]).
+pub use crate::polyfit::monomials;
 
 /// Name of monomial u^a v^b in the file format.
 pub fn monomial_name(a: usize, b: usize) -> String {
@@ -69,21 +62,14 @@ impl Poly {
 
     /// Number of terms of a polynomial of `degree`.
     pub fn terms(degree: usize) -> usize {
-        (degree + 1) * (degree + 2) / 2
+        crate::polyfit::terms(degree)
     }
 
     /// The basis functions at (u, v), in [`monomials`] order.
     pub fn basis(degree: usize, u: f64, v: f64) -> Vec<f64> {
-        let mut pu = vec![1.0; degree + 1];
-        let mut pv = vec![1.0; degree + 1];
-        for k in 1..=degree {
-            pu[k] = pu[k - 1] * u;
-            pv[k] = pv[k - 1] * v;
-        }
-        monomials(degree)
-            .into_iter()
-            .map(|(a, b)| pu[a] * pv[b])
-            .collect()
+        let mut out = vec![0.0; Poly::terms(degree)];
+        crate::polyfit::basis_into(degree, u, v, &mut out);
+        out
     }
 
     /// Coefficients of the polynomial in u for fixed v: `out[a] = Σ_b coef[a][b]·v^b`.

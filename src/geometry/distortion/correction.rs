@@ -1,0 +1,212 @@
+//! The fitted correction G (wanted build-plane point → point the projector must aim at):
+//! polynomial + κ · residual interpolant, with its fit report and the bounds the warper
+//! uses to skip refinement.
+
+use super::polynomial::PolyMap;
+use super::residual::{self, Tri};
+use super::table::{Pair, Table};
+use super::warp::{ring_area, Warper};
+use super::{MIN_POINTS, SAG_PX};
+use crate::bundle::FitReport;
+use crate::error::{Error, Result};
+use crate::slice::Contour;
+use spade::Triangulation;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// The fitted correction G: wanted build-plane point → point the projector must aim at.
+#[derive(Debug)]
+pub struct Correction {
+    pub(super) poly: PolyMap,
+    pub(super) tri: Tri,
+    /// Weight of the residual interpolant.
+    pub(super) kappa: f64,
+    pub(super) field_mm: [f64; 2],
+    /// Sag tolerance, mm.
+    pub(super) tol_mm: f64,
+    /// Convex hull of the seen points, counter-clockwise.
+    pub(super) hull: Vec<[f64; 2]>,
+    /// Bound on |d²G/ds²| of the polynomial along any unit direction over the field, 1/mm.
+    pub(super) curv: f64,
+    /// Bound on the slope of the residual interpolant.
+    pub(super) lip: f64,
+    pub(super) extrapolated: AtomicU64,
+    pub(super) report: FitReport,
+}
+
+impl Correction {
+    /// Fits the correction of `table` for a projector field of `field_mm` (width, height) with
+    /// pixels of `pixel_mm`.
+    pub fn fit(table: &Table, field_mm: [f64; 2], pixel_mm: f64) -> Result<Correction> {
+        check_points(table, field_mm)?;
+        let Some((poly, loo)) = PolyMap::fit_best(&table.pairs) else {
+            return Err(Error::input(
+                &table.origin,
+                "the seen points are collinear (or nearly): measure points spread over the field",
+            ));
+        };
+        let (tri, resid) = residual::triangulate(table, &poly)?;
+        if tri.num_inner_faces() == 0 {
+            return Err(Error::input(
+                &table.origin,
+                "the seen points are collinear: measure points spread over the field",
+            ));
+        }
+        let loo_r = residual::leave_one_out(&tri, table)?;
+        let kappa = residual::weight(&loo, &loo_r);
+        let report = fit_report(table, &poly, kappa, &resid, &loo, &loo_r);
+        let mut hull = residual::hull(&tri);
+        if ring_area(&hull) < 0.0 {
+            hull.reverse();
+        }
+        let curv = poly.curvature_bound(field_mm);
+        let lip = residual::steepest_edge(&tri);
+        Ok(Correction {
+            poly,
+            tri,
+            kappa,
+            field_mm,
+            tol_mm: SAG_PX * pixel_mm,
+            hull,
+            curv,
+            // Sibson's interpolant can be steeper than its steepest Delaunay edge; margin 2.
+            lip: 2.0 * lip,
+            extrapolated: AtomicU64::new(0),
+            report,
+        })
+    }
+
+    /// The fit report (with the count of extrapolated points warped so far).
+    pub fn report(&self) -> FitReport {
+        let mut r = self.report.clone();
+        r.extrapolated_points = self.extrapolated.load(Ordering::Relaxed);
+        r
+    }
+
+    /// A per-thread evaluator (holds the interpolation buffers).
+    pub fn warper(&self) -> Warper<'_> {
+        Warper::new(self)
+    }
+
+    /// Warps a layer's contours; an unreachable point is an [`Error::Job`] naming the
+    /// model, the layer and the point.
+    pub fn warp_section(
+        &self,
+        contours: &[Contour],
+        model: &Path,
+        layer: usize,
+    ) -> Result<Vec<Contour>> {
+        let mut w = self.warper();
+        let out = w.warp(contours).map_err(|u| Error::Job {
+            path: model.into(),
+            msg: format!(
+                "layer {layer}: build-plane point ({:.3}, {:.3}) mm cannot be reached: with the distortion correction ({}) the projector would have to aim at ({:.3}, {:.3}) mm, outside its field 0..{} x 0..{} mm",
+                u.target[0], u.target[1], self.report.source, u.aim[0], u.aim[1], self.field_mm[0], self.field_mm[1]
+            ),
+        });
+        self.extrapolated
+            .fetch_add(w.extrapolated(), Ordering::Relaxed);
+        out
+    }
+}
+
+/// Checks the table before fitting: enough points, every aim point inside the projector
+/// field, no seen point twice.
+fn check_points(table: &Table, field_mm: [f64; 2]) -> Result<()> {
+    let pairs = &table.pairs;
+    let n = pairs.len();
+    if n < MIN_POINTS {
+        return Err(Error::input(
+            &table.origin,
+            format!("a distortion table needs at least {MIN_POINTS} points, found {n}"),
+        ));
+    }
+    let eps = 1e-9;
+    for p in pairs {
+        if p.aim[0] < -eps
+            || p.aim[1] < -eps
+            || p.aim[0] > field_mm[0] + eps
+            || p.aim[1] > field_mm[1] + eps
+        {
+            return Err(table.err(
+                p.line,
+                format!(
+                    "x_mm,y_mm = ({}, {}) is outside the projector field 0..{} x 0..{} mm",
+                    p.aim[0], p.aim[1], field_mm[0], field_mm[1]
+                ),
+            ));
+        }
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| {
+        let (pa, pb) = (pairs[a].seen, pairs[b].seen);
+        pa[0].total_cmp(&pb[0]).then(pa[1].total_cmp(&pb[1]))
+    });
+    for w in order.windows(2) {
+        let (a, b) = (&pairs[w[0]], &pairs[w[1]]);
+        if (a.seen[0] - b.seen[0]).abs() < 1e-9 && (a.seen[1] - b.seen[1]).abs() < 1e-9 {
+            let (l0, l1) = (a.line.min(b.line), a.line.max(b.line));
+            return Err(table.err(
+                l1,
+                format!(
+                    "same seen point ({}, {}) as {} {l0}",
+                    b.seen[0], b.seen[1], table.unit
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// RMS, largest value and its index.
+fn rms_max(v: impl Iterator<Item = f64>) -> (f64, f64, usize) {
+    let (mut s, mut mx, mut arg, mut k) = (0.0, -1.0, 0, 0);
+    for (i, d) in v.enumerate() {
+        s += d * d;
+        if d > mx {
+            mx = d;
+            arg = i;
+        }
+        k += 1;
+    }
+    ((s / k.max(1) as f64).sqrt(), mx.max(0.0), arg)
+}
+
+/// The fit report: the polynomial's residuals `resid`, the combined model's leave-one-out
+/// errors (polynomial `loo` less κ × interpolant `loo_r`), the largest correction.
+fn fit_report(
+    table: &Table,
+    poly: &PolyMap,
+    kappa: f64,
+    resid: &[[f64; 2]],
+    loo: &[[f64; 2]],
+    loo_r: &[[f64; 2]],
+) -> FitReport {
+    let pairs: &[Pair] = &table.pairs;
+    let at = |i: usize| format!("{} {}", table.unit, pairs[i].line);
+    let (poly_rms, poly_max, poly_arg) = rms_max(resid.iter().map(|r| r[0].hypot(r[1])));
+    let (cv_rms, cv_max, cv_arg) = rms_max(
+        loo.iter()
+            .zip(loo_r)
+            .map(|(e, r)| (e[0] - kappa * r[0]).hypot(e[1] - kappa * r[1])),
+    );
+    let max_corr = pairs
+        .iter()
+        .map(|p| (p.aim[0] - p.seen[0]).hypot(p.aim[1] - p.seen[1]))
+        .fold(0.0, f64::max);
+    FitReport {
+        source: table.source.clone(),
+        sha256: table.sha256.clone(),
+        points: pairs.len(),
+        degree: poly.degree as u32,
+        residual_weight: kappa,
+        poly_rms_mm: poly_rms,
+        poly_max_mm: poly_max,
+        poly_max_at: at(poly_arg),
+        cv_rms_mm: cv_rms,
+        cv_max_mm: cv_max,
+        cv_max_at: at(cv_arg),
+        max_correction_mm: max_corr,
+        extrapolated_points: 0,
+    }
+}
