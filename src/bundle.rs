@@ -299,8 +299,8 @@ pub struct Layer {
     pub exposure_s: f64,
     /// Area of the section, mm² (from anti-aliased coverage).
     pub area_mm2: f64,
-    /// Largest distance from a point of the section to its boundary (seeds/001's
-    /// DisMax-Min: the radius of the largest inscribed circle), mm.
+    /// Largest distance from a point of the section to its boundary (DisMax-Min of the
+    /// hybrid continuous/layered method: the radius of the largest inscribed circle), mm.
     #[serde(default)]
     pub max_fill_distance_mm: f64,
     /// Connected regions of the section that do not rest on the layer below.

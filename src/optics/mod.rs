@@ -285,3 +285,41 @@ impl JobOptics {
         (record, warnings)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::synthetic::{p_published, s_published};
+    use crate::profile::Profile;
+
+    /// The default profile carries the published fit of Xu et al. 2010 (x, y in cm,
+    /// z = 255 − pixel value) as its calibration data; the synthetic calibration sets write
+    /// the same P and S out as formulas, once.
+    #[test]
+    fn the_default_profile_carries_the_published_fit() {
+        let cal = Profile::default_profile().projector[0]
+            .calibration
+            .clone()
+            .expect("the default profile is calibrated");
+        for (x, y) in [
+            (2.5, 2.5),
+            (32.5, 22.5),
+            (62.5, 42.5),
+            (10.0, 40.0),
+            (65.0, 0.0),
+        ] {
+            let (got, want) = (cal.field.eval(x, y), 1e-8 * p_published(x, y));
+            assert!(
+                (got / want - 1.0).abs() < 1e-12,
+                "P({x}, {y}) = {got}, want {want}"
+            );
+        }
+        let [lo, hi] = cal.response.valid_gray();
+        for g in lo..=hi {
+            let (got, want) = (cal.response.eval(g as f64), s_published(g as f64));
+            assert!(
+                (got / want - 1.0).abs() < 1e-12,
+                "S({g}) = {got}, want {want}"
+            );
+        }
+    }
+}

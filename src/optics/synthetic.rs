@@ -32,7 +32,8 @@ pub fn p_gauss(x: f64, y: f64) -> f64 {
     2.0 * (-((x - 40.0).powi(2) + (y - 20.0).powi(2)) / (2.0 * 30.0f64.powi(2))).exp()
         * (1.0 + 0.004 * y)
 }
-/// seeds/000's published P (x, y in cm), 5.6 : 1.
+/// The published P of Xu et al. 2010 (x, y in cm), 5.6 : 1 (the built-in default profile
+/// carries the same cubic as data).
 pub fn p_published(x: f64, y: f64) -> f64 {
     let (x, y) = (x / 10.0, y / 10.0);
     -1.1 * x * x * x - 0.8 * y * y * y
@@ -60,7 +61,8 @@ pub fn p_lens(x: f64, y: f64) -> f64 {
         * (1.0 + 0.005 * (x - 32.5))
         * (1.0 + 0.01 * (x / 9.0).sin() * (y / 13.0).cos())
 }
-/// seeds/000's S with z = 255 − pixel value (steps of 2–3 % near its operating point).
+/// The published S of Xu et al. 2010 with z = 255 − pixel value (steps of 2–3 % near its
+/// operating point).
 pub fn s_published(g: f64) -> f64 {
     let z = 255.0 - g;
     -1e-6 * z * z * z + 5.78e-4 * z * z - 0.101 * z + 5.72

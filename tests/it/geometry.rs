@@ -669,7 +669,7 @@ fn tiled_blend_goes_through_a_nonlinear_response() {
     assert!(worst < 0.02, "irradiance sum off by {worst}");
     // ... which takes gray sums far above 255 ...
     assert!(gray_sum_max > 330, "{gray_sum_max}");
-    // ... while halving the gray (seeds/003 scheme B) would give under half the dose.
+    // ... while halving the gray (scheme B of Zhang et al. 2024) would give under half the dose.
     let half = 2.0 * s.eval(128.0);
     assert!(half < 0.5, "{half}");
 }

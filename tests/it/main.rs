@@ -1,9 +1,11 @@
 //! Integration tests: one test binary that runs `dmdsl` as a user would and checks the
-//! files it writes. Each module covers one command.
+//! files it writes. Each module covers one command; `layers` checks the source tree's module
+//! dependencies.
 
 mod calibrate;
 mod common;
 mod geometry;
+mod layers;
 mod plan;
 mod run;
 mod slice;
