@@ -389,69 +389,246 @@ fn form_name(f: Form) -> &'static str {
     }
 }
 
-/// Fits a calibration to `readings` (from `path`, named in errors).
-pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitResult> {
-    let bad = |m: String| Error::input(path, m);
-    // Distinct positions (in sorted order: that order makes the CV folds) and levels.
-    let key = |r: &Reading| ((r.x_mm * 1e6).round() as i64, (r.y_mm * 1e6).round() as i64);
-    let mut pos: BTreeMap<(i64, i64), usize> = BTreeMap::new();
-    for r in readings {
-        pos.insert(key(r), 0);
-    }
-    for (i, v) in pos.values_mut().enumerate() {
-        *v = i;
-    }
-    let npos = pos.len();
-    let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
-    let min_terms = Poly::terms(3);
-    if npos < min_terms {
-        return Err(bad(format!(
-            "only {npos} distinct zone positions; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
-        )));
-    }
-    if let Some(d) = opts.degree {
-        if !(3..=MAX_DEGREE).contains(&d) {
-            return Err(Error::Usage(format!(
-                "degree {d}: P's degree must be 3..={MAX_DEGREE}"
-            )));
+/// A zone position's key: its centre in nm.
+fn key(r: &Reading) -> (i64, i64) {
+    ((r.x_mm * 1e6).round() as i64, (r.y_mm * 1e6).round() as i64)
+}
+
+/// The measured set-up of a fit: the readings, their distinct zone positions (numbered in
+/// sorted order: that order makes the CV folds) and gray levels, and the calibrated area
+/// with the normalized coordinates (u, v) of P.
+struct Setup<'a> {
+    readings: &'a [Reading],
+    path: &'a Path,
+    /// Number of each distinct zone position.
+    pos: BTreeMap<(i64, i64), usize>,
+    /// The distinct gray levels, ascending.
+    grays: Vec<u8>,
+    /// Span of the zone centres [x0, y0, x1, y1], mm.
+    span: [f64; 4],
+    /// Calibrated area [x0, y0, x1, y1], mm.
+    area: [f64; 4],
+    /// Where u = v = 0, mm.
+    origin: [f64; 2],
+    /// Length of one unit of u and v, mm.
+    unit: f64,
+}
+
+impl<'a> Setup<'a> {
+    /// Checks that the readings can determine a model and finds the calibrated area.
+    fn new(readings: &'a [Reading], path: &'a Path, opts: &FitOptions) -> Result<Setup<'a>> {
+        let bad = |m: String| Error::input(path, m);
+        let mut pos: BTreeMap<(i64, i64), usize> = BTreeMap::new();
+        for r in readings {
+            pos.insert(key(r), 0);
         }
-        if npos < Poly::terms(d) {
+        for (i, v) in pos.values_mut().enumerate() {
+            *v = i;
+        }
+        let npos = pos.len();
+        let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
+        let min_terms = Poly::terms(3);
+        if npos < min_terms {
             return Err(bad(format!(
-                "only {npos} distinct zone positions; a degree-{d} P(x, y) has {} terms",
-                Poly::terms(d)
+                "only {npos} distinct zone positions; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
             )));
         }
-    }
-    if grays.len() < 3 {
-        return Err(bad(format!(
-            "only {} distinct gray levels ({}); S(g) needs at least 3",
-            grays.len(),
-            grays
+        if let Some(d) = opts.degree {
+            if !(3..=MAX_DEGREE).contains(&d) {
+                return Err(Error::Usage(format!(
+                    "degree {d}: P's degree must be 3..={MAX_DEGREE}"
+                )));
+            }
+            if npos < Poly::terms(d) {
+                return Err(bad(format!(
+                    "only {npos} distinct zone positions; a degree-{d} P(x, y) has {} terms",
+                    Poly::terms(d)
+                )));
+            }
+        }
+        if grays.len() < 3 {
+            return Err(bad(format!(
+                "only {} distinct gray levels ({}); S(g) needs at least 3",
+                grays.len(),
+                grays
+                    .iter()
+                    .map(|g| g.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+        // A cubic needs at least 4 distinct coordinates along each axis.
+        for axis in ["x", "y"] {
+            let vals: std::collections::BTreeSet<i64> = readings
                 .iter()
-                .map(|g| g.to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )));
+                .map(|r| {
+                    let t = if axis == "x" { r.x_mm } else { r.y_mm };
+                    (t * 1e6).round() as i64
+                })
+                .collect();
+            if vals.len() < 4 {
+                return Err(bad(format!(
+                    "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
+                    vals.len()
+                )));
+            }
+        }
+        let (span, area) = calibrated_area(readings, opts.field_mm, path)?;
+        Ok(Setup {
+            readings,
+            path,
+            pos,
+            grays: grays.into_iter().collect(),
+            span,
+            area,
+            origin: [(area[0] + area[2]) / 2.0, (area[1] + area[3]) / 2.0],
+            unit: ((area[2] - area[0]).max(area[3] - area[1]) / 2.0).max(1e-3),
+        })
     }
 
-    // A cubic needs at least 4 distinct coordinates along each axis.
-    for axis in ["x", "y"] {
-        let vals: std::collections::BTreeSet<i64> = readings
+    /// An input error naming the measurement file.
+    fn bad(&self, m: String) -> Error {
+        Error::input(self.path, m)
+    }
+
+    /// The error of an ill-conditioned design of condition number `cond`.
+    fn ill(&self, cond: f64) -> Error {
+        self.bad(format!(
+            "ill-conditioned fit (condition number {cond:.2e}): the {} zone positions do not determine a cubic P(x, y); measure zones spread over the field in both x and y",
+            self.pos.len()
+        ))
+    }
+
+    /// The normalized coordinates of a point, mm.
+    fn uv_of(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            (x - self.origin[0]) / self.unit,
+            (y - self.origin[1]) / self.unit,
+        )
+    }
+
+    /// The index of a measured gray level.
+    fn gidx(&self, g: u8) -> usize {
+        self.grays.binary_search(&g).expect("known gray")
+    }
+
+    /// The fit rows of degree `d` of the readings at gray levels `lo..` (level indices
+    /// counted from `lo`).
+    fn rows(&self, d: usize, lo: usize) -> Vec<Row> {
+        self.readings
             .iter()
+            .filter(|r| self.gidx(r.gray) >= lo)
             .map(|r| {
-                let t = if axis == "x" { r.x_mm } else { r.y_mm };
-                (t * 1e6).round() as i64
+                let (u, v) = self.uv_of(r.x_mm, r.y_mm);
+                Row {
+                    phi: Poly::basis(d, u, v),
+                    e: r.irradiance,
+                    lev: self.gidx(r.gray) - lo,
+                    pos: self.pos[&key(r)],
+                }
             })
-            .collect();
-        if vals.len() < 4 {
-            return Err(bad(format!(
-                "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
-                vals.len()
+            .collect()
+    }
+
+    /// The lowest valid level: the run of levels from the brightest down over which the
+    /// first pass's s keeps falling, at least 3 levels long.
+    fn valid_range(&self, first: &Als) -> Result<usize> {
+        let top = self.grays.len() - 1;
+        let mut lo = top;
+        while lo > 0 && first.s[lo - 1] < first.s[lo] {
+            lo -= 1;
+        }
+        if first.s[top] <= 0.0 || top + 1 - lo < 3 {
+            let shown: Vec<String> = self
+                .grays
+                .iter()
+                .zip(&first.s)
+                .rev()
+                .take(4)
+                .map(|(g, s)| format!("S({g}) = {:.4}", s / first.s[top].max(1e-300)))
+                .collect();
+            return Err(self.bad(format!(
+                "no monotone S fits the data: the response must fall from the brightest gray ({}) over at least 3 measured levels, but {} (255 = mirror fully on; is the gray column inverted?)",
+                self.grays[top],
+                shown.join(", ")
             )));
         }
+        Ok(lo)
     }
 
-    // Calibrated area: bounding box of the zone centres grown by half the zone pitch.
+    /// The model of P on the valid levels `lo..`: the forced degree (polynomial form), or
+    /// among the polynomial (degrees 3..), exponential (degrees 2..) and inverse-square
+    /// candidates the one with the fewest terms whose cross-validated error is within one
+    /// standard error of the best (the polynomial first on ties).
+    fn choose_model(&self, lo: usize, forced: Option<usize>) -> Result<Model> {
+        let top = self.grays.len() - 1;
+        let valid_n = top + 1 - lo;
+        let min_terms = Poly::terms(3);
+        let used_pos: std::collections::BTreeSet<usize> =
+            self.rows(0, lo).iter().map(|r| r.pos).collect();
+        if used_pos.len() < min_terms {
+            return Err(self.bad(format!(
+                "only {} distinct zone positions were measured at the valid gray levels {}..{}; the cubic P(x, y) needs at least {min_terms}",
+                used_pos.len(),
+                self.grays[lo],
+                self.grays[top]
+            )));
+        }
+        let k = used_pos.len().min(10);
+        let mut m = Model {
+            form: Form::Polynomial,
+            degree: 3,
+            cv: Vec::new(),
+            cv_exp: Vec::new(),
+            cv_inv: Vec::new(),
+        };
+        if let Some(d) = forced {
+            m.degree = d;
+            return Ok(m);
+        }
+        let mut cands: Vec<(usize, u8, Form, usize, f64)> = Vec::new();
+        for d in 2..=MAX_DEGREE {
+            if 2 * Poly::terms(d) > used_pos.len() {
+                break;
+            }
+            let rows_d = self.rows(d, lo);
+            if d >= 3 {
+                if let Some(e) = cv_rms(Form::Polynomial, &rows_d, valid_n, k) {
+                    m.cv.push((d as u64, e));
+                    cands.push((Poly::terms(d), 0, Form::Polynomial, d, e));
+                }
+            }
+            if let Some(e) = cv_rms(Form::Exponential, &rows_d, valid_n, k) {
+                m.cv_exp.push((d as u64, e));
+                cands.push((Poly::terms(d), 1, Form::Exponential, d, e));
+            }
+            if d <= MAX_INVERSE_SQUARE_DEGREE {
+                if let Some(e) = cv_rms(Form::InverseSquare, &rows_d, valid_n, k) {
+                    m.cv_inv.push((d as u64, e));
+                    cands.push((Poly::terms(d), 2, Form::InverseSquare, d, e));
+                }
+            }
+        }
+        cands.sort_by_key(|c| (c.0, c.1));
+        // One-standard-error rule: an RMS over n held-out readings is uncertain by about
+        // 1/sqrt(2n) of itself; prefer the simplest model within that of the best.
+        let best = cands.iter().map(|c| c.4).fold(f64::INFINITY, f64::min);
+        let tol = (0.5 / self.rows(0, lo).len() as f64).sqrt().max(0.02);
+        (m.form, m.degree) = cands
+            .iter()
+            .find(|c| c.4 <= best * (1.0 + tol))
+            .map_or((Form::Polynomial, 3), |c| (c.2, c.3));
+        Ok(m)
+    }
+}
+
+/// The span of the zone centres and the calibrated area: their bounding box grown by half
+/// the zone pitch, clipped to the field.
+fn calibrated_area(
+    readings: &[Reading],
+    (fw, fh): (f64, f64),
+    path: &Path,
+) -> Result<([f64; 4], [f64; 4])> {
     let pitch = |vals: Vec<f64>| -> f64 {
         let mut v = vals;
         v.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -468,139 +645,117 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     let (px, py) = (pitch(xs.clone()), pitch(ys.clone()));
     let min = |v: &[f64]| v.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = |v: &[f64]| v.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    let (fw, fh) = opts.field_mm;
+    let span = [min(&xs), min(&ys), max(&xs), max(&ys)];
     let area = [
-        (min(&xs) - px / 2.0).max(0.0),
-        (min(&ys) - py / 2.0).max(0.0),
-        (max(&xs) + px / 2.0).min(fw),
-        (max(&ys) + py / 2.0).min(fh),
+        (span[0] - px / 2.0).max(0.0),
+        (span[1] - py / 2.0).max(0.0),
+        (span[2] + px / 2.0).min(fw),
+        (span[3] + py / 2.0).min(fh),
     ];
     if area[0] >= area[2] || area[1] >= area[3] {
-        return Err(bad(format!(
-            "the zone centres span x {:.3}..{:.3}, y {:.3}..{:.3} mm: no area inside the {fw} x {fh} mm field",
-            min(&xs),
-            max(&xs),
-            min(&ys),
-            max(&ys)
-        )));
+        return Err(Error::input(
+            path,
+            format!(
+                "the zone centres span x {:.3}..{:.3}, y {:.3}..{:.3} mm: no area inside the {fw} x {fh} mm field",
+                span[0], span[2], span[1], span[3]
+            ),
+        ));
     }
-    let origin = [(area[0] + area[2]) / 2.0, (area[1] + area[3]) / 2.0];
-    let unit = ((area[2] - area[0]).max(area[3] - area[1]) / 2.0).max(1e-3);
-    let uv = |r: &Reading| ((r.x_mm - origin[0]) / unit, (r.y_mm - origin[1]) / unit);
+    Ok((span, area))
+}
 
-    let glist: Vec<u8> = grays.iter().copied().collect();
-    let gidx = |g: u8| glist.binary_search(&g).expect("known gray");
-    let rows_of = |d: usize, lo: usize| -> Vec<Row> {
-        readings
-            .iter()
-            .filter(|r| gidx(r.gray) >= lo)
-            .map(|r| {
-                let (u, v) = uv(r);
-                Row {
-                    phi: Poly::basis(d, u, v),
-                    e: r.irradiance,
-                    lev: gidx(r.gray) - lo,
-                    pos: pos[&key(r)],
-                }
-            })
-            .collect()
-    };
-    let ill = |cond: f64| {
-        bad(format!(
-            "ill-conditioned fit (condition number {cond:.2e}): the {npos} zone positions do not determine a cubic P(x, y); measure zones spread over the field in both x and y"
-        ))
-    };
+/// The chosen model of P and the cross-validated errors of the candidates.
+struct Model {
+    form: Form,
+    degree: usize,
+    cv: Vec<(u64, f64)>,
+    cv_exp: Vec<(u64, f64)>,
+    cv_inv: Vec<(u64, f64)>,
+}
 
-    // First pass (cubic, all levels): the valid range is the run of levels from the
-    // brightest down over which s keeps falling.
-    let rows3 = rows_of(3, 0);
+/// RMS and largest relative residual (with its line) of the model P·S over `used`.
+fn residuals(used: &[&Reading], p_s: impl Fn(&Reading) -> f64) -> (f64, f64, u64) {
+    let (mut ss, mut worst, mut worst_line) = (0.0, 0.0f64, 0u64);
+    for r in used {
+        let rel = p_s(r) / r.irradiance - 1.0;
+        ss += rel * rel;
+        if rel.abs() > worst.abs() {
+            worst = rel;
+            worst_line = r.line;
+        }
+    }
+    ((ss / used.len() as f64).sqrt() * 100.0, worst, worst_line)
+}
+
+/// Per zone: the measured P from its own readings (`s_at`: S at a reading's gray) and the
+/// fitted P (`p_xy`) at its centre.
+fn zone_fits(
+    used: &[&Reading],
+    s_at: impl Fn(&Reading) -> f64,
+    p_xy: impl Fn(f64, f64) -> f64,
+) -> Vec<ZoneFit> {
+    let mut zacc: BTreeMap<(i64, i64), (f64, f64, f64, f64)> = BTreeMap::new();
+    for r in used {
+        let q = s_at(r) / r.irradiance;
+        let e = zacc.entry(key(r)).or_insert((r.x_mm, r.y_mm, 0.0, 0.0));
+        e.2 += q;
+        e.3 += q * q;
+    }
+    zacc.values()
+        .map(|&(x, y, a, b)| ZoneFit {
+            x_mm: x,
+            y_mm: y,
+            measured_p: a / b,
+            fitted_p: p_xy(x, y),
+        })
+        .collect()
+}
+
+/// S through the valid levels (`grays` with values `s`), also interpolated to pixel value
+/// 0 (mirror off, no light) when `to_zero`: the not-a-knot spline when it is increasing on
+/// every gray, else PCHIP.
+fn response_through(grays: &[u8], s: &[f64], to_zero: bool) -> Response {
+    let mut points: Vec<[f64; 2]> = Vec::with_capacity(grays.len() + 1);
+    if to_zero {
+        points.push([0.0, 0.0]);
+    }
+    points.extend(grays.iter().zip(s).map(|(&g, &v)| [g as f64, v]));
+    let spline = Response::Table {
+        interpolation: Interpolation::Spline,
+        points: points.clone(),
+    };
+    if spline.validate().is_ok() {
+        spline
+    } else {
+        Response::Table {
+            interpolation: Interpolation::Pchip,
+            points,
+        }
+    }
+}
+
+/// Fits a calibration to `readings` (from `path`, named in errors).
+pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitResult> {
+    let setup = Setup::new(readings, path, opts)?;
+    let glist = &setup.grays;
+    let top = glist.len() - 1;
+    // First pass (cubic, all levels): the valid range of gray levels.
+    let rows3 = setup.rows(3, 0);
     let first = als(
         Form::Polynomial,
         &rows3.iter().collect::<Vec<_>>(),
         glist.len(),
     )
-    .map_err(ill)?;
-    let top = glist.len() - 1;
-    let mut lo = top;
-    while lo > 0 && first.s[lo - 1] < first.s[lo] {
-        lo -= 1;
-    }
+    .map_err(|c| setup.ill(c))?;
+    let lo = setup.valid_range(&first)?;
     let valid_n = top + 1 - lo;
-    if first.s[top] <= 0.0 || valid_n < 3 {
-        let shown: Vec<String> = glist
-            .iter()
-            .zip(&first.s)
-            .rev()
-            .take(4)
-            .map(|(g, s)| format!("S({g}) = {:.4}", s / first.s[top].max(1e-300)))
-            .collect();
-        return Err(bad(format!(
-            "no monotone S fits the data: the response must fall from the brightest gray ({}) over at least 3 measured levels, but {} (255 = mirror fully on; is the gray column inverted?)",
-            glist[top],
-            shown.join(", ")
-        )));
-    }
-    let excluded: Vec<u8> = glist[..lo].to_vec();
-    let used_pos: std::collections::BTreeSet<usize> =
-        rows_of(0, lo).iter().map(|r| r.pos).collect();
-    if used_pos.len() < min_terms {
-        return Err(bad(format!(
-            "only {} distinct zone positions were measured at the valid gray levels {}..{}; the cubic P(x, y) needs at least {min_terms}",
-            used_pos.len(),
-            glist[lo],
-            glist[top]
-        )));
-    }
+    let model = setup.choose_model(lo, opts.degree)?;
+    let (form, degree) = (model.form, model.degree);
 
-    // Model: forced degree (polynomial form), or among the polynomial (degrees 3..) and
-    // exponential (degrees 2..) candidates the one with the fewest terms whose
-    // cross-validated error is within one standard error of the best (the polynomial
-    // first on ties).
-    let k = used_pos.len().min(10);
-    let mut cv: Vec<(u64, f64)> = Vec::new();
-    let mut cv_exp: Vec<(u64, f64)> = Vec::new();
-    let mut cv_inv: Vec<(u64, f64)> = Vec::new();
-    let (form, degree) = match opts.degree {
-        Some(d) => (Form::Polynomial, d),
-        None => {
-            let mut cands: Vec<(usize, u8, Form, usize, f64)> = Vec::new();
-            for d in 2..=MAX_DEGREE {
-                if 2 * Poly::terms(d) > used_pos.len() {
-                    break;
-                }
-                let rows_d = rows_of(d, lo);
-                if d >= 3 {
-                    if let Some(e) = cv_rms(Form::Polynomial, &rows_d, valid_n, k) {
-                        cv.push((d as u64, e));
-                        cands.push((Poly::terms(d), 0, Form::Polynomial, d, e));
-                    }
-                }
-                if let Some(e) = cv_rms(Form::Exponential, &rows_d, valid_n, k) {
-                    cv_exp.push((d as u64, e));
-                    cands.push((Poly::terms(d), 1, Form::Exponential, d, e));
-                }
-                if d <= MAX_INVERSE_SQUARE_DEGREE {
-                    if let Some(e) = cv_rms(Form::InverseSquare, &rows_d, valid_n, k) {
-                        cv_inv.push((d as u64, e));
-                        cands.push((Poly::terms(d), 2, Form::InverseSquare, d, e));
-                    }
-                }
-            }
-            cands.sort_by_key(|c| (c.0, c.1));
-            // One-standard-error rule: an RMS over n held-out readings is uncertain by
-            // about 1/sqrt(2n) of itself; prefer the simplest model within that of the best.
-            let best = cands.iter().map(|c| c.4).fold(f64::INFINITY, f64::min);
-            let tol = (0.5 / rows_of(0, lo).len() as f64).sqrt().max(0.02);
-            cands
-                .iter()
-                .find(|c| c.4 <= best * (1.0 + tol))
-                .map_or((Form::Polynomial, 3), |c| (c.2, c.3))
-        }
-    };
-
-    // Final fit on the valid levels.
-    let rows = rows_of(degree, lo);
-    let second = fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n).map_err(ill)?;
+    // Final fit on the valid levels, normalized so that S = 1 at the brightest level.
+    let rows = setup.rows(degree, lo);
+    let second =
+        fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n).map_err(|c| setup.ill(c))?;
     let s_top = second.s[valid_n - 1];
     let mut coef: Vec<f64> = second.coef.clone();
     match form {
@@ -610,30 +765,21 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     }
     let s: Vec<f64> = second.s.iter().map(|v| v / s_top).collect();
     if s.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(bad(
+        return Err(setup.bad(
             "no monotone S fits the data: the refitted response is not increasing over the valid gray levels"
                 .to_string(),
         ));
     }
     let poly = Poly::from_terms(degree, &coef);
-    let pval = |q: f64| form.apply(1.0, q);
-    let p_at = |r: &Reading| -> f64 {
-        let (u, v) = uv(r);
-        pval(poly.eval(u, v))
+    let p_xy = |x: f64, y: f64| {
+        let (u, v) = setup.uv_of(x, y);
+        form.apply(1.0, poly.eval(u, v))
     };
+    let p_at = |r: &Reading| p_xy(r.x_mm, r.y_mm);
+    let s_at = |r: &Reading| s[setup.gidx(r.gray) - lo];
 
-    // Residuals over the valid levels.
     let used: Vec<&Reading> = readings.iter().filter(|r| r.gray >= glist[lo]).collect();
-    let (mut ss, mut worst, mut worst_line) = (0.0, 0.0f64, 0u64);
-    for r in &used {
-        let rel = p_at(r) * s[gidx(r.gray) - lo] / r.irradiance - 1.0;
-        ss += rel * rel;
-        if rel.abs() > worst.abs() {
-            worst = rel;
-            worst_line = r.line;
-        }
-    }
-    let rms = (ss / used.len() as f64).sqrt() * 100.0;
+    let (rms, worst, worst_line) = residuals(&used, |r| p_at(r) * s_at(r));
     let mut warnings = Vec::new();
     if rms > 3.0 {
         warnings.push(format!(
@@ -642,23 +788,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         ));
     }
 
-    // Per zone: measured P from its own readings, fitted P at the centre.
-    let mut zacc: BTreeMap<(i64, i64), (f64, f64, f64, f64)> = BTreeMap::new();
-    for r in &used {
-        let q = s[gidx(r.gray) - lo] / r.irradiance;
-        let e = zacc.entry(key(r)).or_insert((r.x_mm, r.y_mm, 0.0, 0.0));
-        e.2 += q;
-        e.3 += q * q;
-    }
-    let zones: Vec<ZoneFit> = zacc
-        .values()
-        .map(|&(x, y, a, b)| ZoneFit {
-            x_mm: x,
-            y_mm: y,
-            measured_p: a / b,
-            fitted_p: pval(poly.eval((x - origin[0]) / unit, (y - origin[1]) / unit)),
-        })
-        .collect();
+    let zones = zone_fits(&used, s_at, p_xy);
     let levels: Vec<LevelFit> = glist
         .iter()
         .enumerate()
@@ -677,28 +807,9 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
                 .collect(),
         })
         .collect();
-
     // S: the measured levels; when S falls all the way down the measured levels, it is
     // also interpolated to pixel value 0 (mirror off, no light).
-    let mut points: Vec<[f64; 2]> = Vec::with_capacity(valid_n + 1);
-    if lo == 0 && glist[0] > 0 {
-        points.push([0.0, 0.0]);
-    }
-    points.extend(glist[lo..].iter().zip(&s).map(|(&g, &v)| [g as f64, v]));
-
-    // Spline through the levels when it is increasing on every gray, else PCHIP.
-    let spline = Response::Table {
-        interpolation: Interpolation::Spline,
-        points: points.clone(),
-    };
-    let response = if spline.validate().is_ok() {
-        spline
-    } else {
-        Response::Table {
-            interpolation: Interpolation::Pchip,
-            points,
-        }
-    };
+    let response = response_through(&glist[lo..], &s, lo == 0 && glist[0] > 0);
 
     let name = path
         .file_name()
@@ -706,8 +817,9 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         .unwrap_or_default();
     let calibration = Calibration {
         source: format!(
-            "dmdsl calibrate {name} ({} readings, {npos} zones, {} gray levels, degree-{degree} {} P)",
+            "dmdsl calibrate {name} ({} readings, {} zones, {} gray levels, degree-{degree} {} P)",
             readings.len(),
+            setup.pos.len(),
             glist.len(),
             form_name(form)
         ),
@@ -715,15 +827,15 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         zone_mm: Positive::new(opts.zone_mm)
             .ok_or_else(|| Error::Usage(format!("zone size must be > 0, got {}", opts.zone_mm)))?,
         field: FieldModel {
-            origin_mm: origin,
-            length_unit_mm: Positive::new(unit).expect("unit > 0"),
+            origin_mm: setup.origin,
+            length_unit_mm: Positive::new(setup.unit).expect("unit > 0"),
             scale: Positive::new(1.0).expect("1 > 0"),
             form,
             coefficients: poly,
-            area_mm: area,
+            area_mm: setup.area,
             // Degree ≤ 3 extrapolates reliably (Xu et al. 2010 use their cubic on the whole
             // grid); higher degrees continue linearly beyond the measured zone centres.
-            polynomial_area_mm: (degree > 3).then(|| [min(&xs), min(&ys), max(&xs), max(&ys)]),
+            polynomial_area_mm: (degree > 3).then_some(setup.span),
             extrapolate_mm: NonNegative::new(opts.extrapolate_mm).ok_or_else(|| {
                 Error::Usage(format!(
                     "extrapolation distance must be >= 0, got {}",
@@ -736,21 +848,21 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
             measurements: name,
             form,
             degree: degree as u64,
-            cv_rms_pct: cv,
-            cv_exp_rms_pct: cv_exp,
-            cv_inv_rms_pct: cv_inv,
+            cv_rms_pct: model.cv,
+            cv_exp_rms_pct: model.cv_exp,
+            cv_inv_rms_pct: model.cv_inv,
             measured_gray: [glist[lo], glist[top]],
             readings: used.len() as u64,
-            zones: npos as u64,
+            zones: setup.pos.len() as u64,
             gray_levels: glist.len() as u64,
-            excluded_grays: excluded,
+            excluded_grays: glist[..lo].to_vec(),
             residual_rms_pct: rms,
             residual_max_pct: worst * 100.0,
             residual_max_line: worst_line,
         }),
     };
     calibration.validate().map_err(|m| {
-        bad(format!(
+        setup.bad(format!(
             "the fitted model is unusable ({m}); the measurements do not describe a smooth field"
         ))
     })?;
