@@ -4,7 +4,8 @@
 //! plane is modelled as E(x, y, g) = P(x, y)·S(g): a field factor P (a bivariate
 //! polynomial, [`field::FieldModel`]) times a gray response S (monotone on its valid gray
 //! range, [`response::Response`]). The model a projector carries ([`Calibration`]) is part
-//! of the machine description (`profile::calibration`); this stage fits and applies it:
+//! of the machine description ([`crate::profile::calibration`]); this stage fits and
+//! applies it:
 //!
 //! * [`calib`]: reads a measurement table (CSV) and fits P and S ([`calib::fit`]);
 //!   `dmdsl calibrate` writes the result as a calibration file (TOML).

@@ -5,6 +5,12 @@
 //! `--profile NAME|FILE` picks one. Every key is required and unknown keys are errors, so a
 //! typo never silently falls back to a default. The fully resolved profile is copied into
 //! every job manifest, which is how the executor learns the machine it simulates.
+//!
+//! This module is the whole machine description and uses only leaf modules: the profile
+//! itself (here), the process sections (`[recoat]`, `[peel]`, `[hybrid]`: [`Recoat`],
+//! [`Peel`], [`Hybrid`]), the lens correction table ([`DistortionConfig`]), the overlap
+//! ramp ([`BlendCurve`]) and the light calibration a projector carries ([`calibration`]).
+//! The algorithms that use them (`plan`, `geometry`, `optics`) sit above it.
 
 mod blend;
 pub mod calibration;
