@@ -1,0 +1,118 @@
+//! `dmdsl calibrate`: fit the light calibration E = P(x, y)·S(g) to measurements.
+
+use clap::Args;
+use dmdsl::profile::{self, Profile};
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub(crate) struct CalibrateArgs {
+    /// Measurements: CSV with header x_mm,y_mm,gray,irradiance_mw_cm2 (zone centre from the
+    /// field's bottom-left corner, pixel value shown there (255 = fully on), irradiance).
+    input: PathBuf,
+    /// Calibration file to write (TOML); PNG plots are written next to it.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// The irradiance column is in arbitrary units (exposure then comes from the profile).
+    #[arg(long)]
+    relative: bool,
+    /// Compensation zone edge, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    zone_mm: f64,
+    /// How far P is extrapolated beyond the measured area before it is held constant, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    extrapolate_mm: f64,
+    /// Degree of the polynomial P(x, y), 3..6 [default: 3 (the paper's cubic) unless
+    /// cross-validation on held-out zones shows a higher degree predicts better].
+    #[arg(long, value_name = "N")]
+    degree: Option<usize>,
+    /// Machine profile whose field the predictions are made for.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Do not write PNG plots.
+    #[arg(long)]
+    no_plots: bool,
+    /// Print a machine-readable report on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `dmdsl calibrate`.
+pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
+    use dmdsl::optics::report::{self, CalibrateOptions};
+    let field = Profile::resolve(&a.profile)?.field();
+    let r = report::calibrate(&CalibrateOptions {
+        input: a.input,
+        output: a.output,
+        units: if a.relative {
+            dmdsl::optics::Units::Relative
+        } else {
+            dmdsl::optics::Units::MwCm2
+        },
+        zone_mm: a.zone_mm,
+        extrapolate_mm: a.extrapolate_mm,
+        field,
+        degree: a.degree,
+        plots: !a.no_plots,
+    })?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(0);
+    }
+    if quiet {
+        return Ok(0);
+    }
+    for w in &r.warnings {
+        eprintln!("dmdsl: warning: {w}");
+    }
+    let u = if r.units == "relative" {
+        ""
+    } else {
+        " mW/cm²"
+    };
+    println!(
+        "{}: {} zones x {} gray levels ({} readings); residual RMS {:.2} %, max {:.2} % (line {})",
+        r.calibration.display(),
+        r.zones,
+        r.gray_levels,
+        r.readings,
+        r.residual_rms_pct,
+        r.residual_max_pct,
+        r.residual_max_line
+    );
+    let excluded = if r.excluded_grays.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; S stops falling below it, excluded levels {:?}",
+            r.excluded_grays
+        )
+    };
+    let interp = if r.valid_gray[0] < r.measured_gray[0] {
+        format!(
+            ", measured {}..{} (below: interpolated to S(0) = 0)",
+            r.measured_gray[0], r.measured_gray[1]
+        )
+    } else {
+        String::new()
+    };
+    println!(
+        "valid gray {}..{}{interp}{excluded}",
+        r.valid_gray[0], r.valid_gray[1]
+    );
+    for (name, m) in [("zone", &r.zone), ("pixel", &r.pixel)] {
+        println!(
+            "{name} mode: target {:.4}{u} = {:.1} % of the mean; spread zone means {:.1} % -> {:.2} %, pixels {:.1} % -> {:.2} %",
+            m.target_irradiance,
+            m.throughput * 100.0,
+            m.spreads.before_zone_pct,
+            m.spreads.after_zone_pct,
+            m.spreads.before_pixel_pct,
+            m.spreads.after_pixel_pct
+        );
+    }
+    for p in &r.plots {
+        println!("plot: {}", p.display());
+    }
+    Ok(0)
+}
+

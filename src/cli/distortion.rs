@@ -1,0 +1,48 @@
+//! `dmdsl distortion`: fit a lens distortion table and report its quality.
+
+use clap::Args;
+use dmdsl::geometry::distortion::DistortionChoice;
+use dmdsl::profile::{self, Profile};
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub(crate) struct DistortionArgs {
+    /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm (docs/GEOMETRY.md).
+    table: PathBuf,
+    /// Machine profile whose projector field the table describes.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Write a heatmap of the correction over the field (gray: unreachable) to this PNG.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Print the fit report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `dmdsl distortion`.
+pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
+    let mut profile = Profile::resolve(&a.profile)?;
+    let c = dmdsl::geometry::distortion::for_job(&DistortionChoice::Table(a.table), &mut profile)?
+        .expect("a table was given");
+    let report = c.report();
+    let (_, _, map) = c.field_map(1.0);
+    let reachable = map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64;
+    if let Some(p) = &a.plot {
+        std::fs::write(p, c.plot_png()).map_err(|e| dmdsl::Error::io(p, e))?;
+    }
+    if a.json {
+        let v = serde_json::json!({ "report": report, "reachable_fraction": reachable });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else if !quiet {
+        println!("{}", report.summary());
+        println!(
+            "reachable: {:.1} % of the {:.2} x {:.2} mm field (1 mm cells)",
+            reachable * 100.0,
+            profile.field().width_mm(),
+            profile.field().height_mm()
+        );
+    }
+    Ok(0)
+}
+

@@ -1,0 +1,55 @@
+//! `dmdsl run`: the dry-run executor.
+
+use clap::Args;
+use std::path::PathBuf;
+
+pub(crate) const RUN_EXIT_HELP: &str = "Exit codes:
+  0    the bundle verified and replayed without violations
+  1    violations, bad masks or an injected fault
+  2    unreadable bundle or usage error
+
+Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
+
+#[derive(Args)]
+pub(crate) struct RunArgs {
+    /// The job bundle (directory with job.json and masks/).
+    bundle: PathBuf,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
+    /// Write a PNG of stage position and light over time.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    #[arg(long, value_name = "A..B")]
+    layers: Option<String>,
+    /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
+    /// (repeatable).
+    #[arg(long, value_name = "KIND@LAYER")]
+    fault: Vec<String>,
+}
+
+/// Runs `dmdsl run`.
+pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
+    let faults = a
+        .fault
+        .iter()
+        .map(|f| f.parse().map_err(dmdsl::Error::Usage))
+        .collect::<Result<Vec<_>, _>>()?;
+    let opts = dmdsl::exec::RunOptions {
+        faults,
+        trace: a.trace,
+        plot: a.plot,
+        layers: a.layers,
+    };
+    let report = dmdsl::exec::run(&a.bundle, &opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else if !quiet {
+        print!("{}", dmdsl::exec::report::render_human(&report));
+    }
+    Ok(if report.ok { 0 } else { 1 })
+}

@@ -1,0 +1,190 @@
+//! `dmdsl slice`: a part into a job bundle.
+
+use clap::Args;
+use dmdsl::exec::report::hms;
+use dmdsl::geometry::distortion::DistortionChoice;
+use dmdsl::job::{self, PlacementMode, SliceOptions};
+use dmdsl::profile::{self, Profile};
+use dmdsl::units::Positive;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Dithering of compensated grays.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum DitherArg {
+    /// Zone mode mixes two grays only where one gray misses the target by > 0.75 %.
+    Auto,
+    /// Every zone mixes two grays; pixel mode diffuses the error.
+    On,
+    /// One gray per zone or pixel.
+    Off,
+}
+
+/// Light compensation mode.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CompensationArg {
+    /// One gray per zone (Xu et al. 2010, Chinese J. Lasers 37(7)).
+    Zone,
+    /// One gray per pixel from the smooth fit.
+    Pixel,
+    /// No compensation: pixel value = coverage.
+    Off,
+}
+
+#[derive(Args)]
+pub(crate) struct SliceArgs {
+    /// The part: binary or ASCII STL, or OBJ.
+    input: PathBuf,
+    /// Bundle to write (default: <input stem>.dmdjob in the current directory).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Machine profile: a built-in name or a TOML file.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Layer height in mm (default: the profile's).
+    #[arg(long, value_name = "MM")]
+    layer_height: Option<f64>,
+    /// Binary masks: a pixel is lit when at least half of it is inside the section.
+    #[arg(long)]
+    binary: bool,
+    /// Use the file's coordinates as build-plane coordinates instead of centring the part.
+    #[arg(long)]
+    keep_position: bool,
+    /// Exit with code 1 if the mesh has defects (the bundle is still written).
+    #[arg(long)]
+    strict: bool,
+    /// Light calibration file from `dmdsl calibrate`, replacing the profile's (repeatable:
+    /// PROJECTOR=FILE for a named projector).
+    #[arg(long, value_name = "[PROJECTOR=]FILE")]
+    calibration: Vec<String>,
+    /// Light compensation [default: zone when the profile or --calibration has a
+    /// calibration, else off].
+    #[arg(long, value_enum)]
+    compensation: Option<CompensationArg>,
+    /// Dithering of compensated grays, to beat 8-bit gray steps. auto: a zone whose
+    /// nearest gray misses the target by > 0.75 % mixes the two grays around it (ordered
+    /// pattern), pixel mode does not dither; on: every zone mixes, pixel mode diffuses
+    /// the error (Floyd-Steinberg); off: one gray per zone/pixel.
+    #[arg(long, value_enum, default_value = "auto")]
+    dither: DitherArg,
+    /// Print a machine-readable summary on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Lens distortion correction table (CSV x_mm,y_mm,seen_x_mm,seen_y_mm), or `off` to
+    /// ignore the profile's [distortion] (default: the profile's, if any).
+    #[arg(long, value_name = "TABLE.csv|off")]
+    distortion: Option<PathBuf>,
+}
+
+/// Runs `dmdsl slice`.
+pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
+    let mut profile = Profile::resolve(&a.profile)?;
+    dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    let optics = dmdsl::optics::OpticsOptions {
+        mode: a.compensation.map(|c| match c {
+            CompensationArg::Zone => dmdsl::optics::Mode::Zone,
+            CompensationArg::Pixel => dmdsl::optics::Mode::Pixel,
+            CompensationArg::Off => dmdsl::optics::Mode::Off,
+        }),
+        dither: match a.dither {
+            DitherArg::Auto => dmdsl::optics::Dither::Auto,
+            DitherArg::On => dmdsl::optics::Dither::On,
+            DitherArg::Off => dmdsl::optics::Dither::Off,
+        },
+    };
+    let layer_height_mm = match a.layer_height {
+        None => None,
+        Some(v) => Some(Positive::new(v).ok_or_else(|| {
+            dmdsl::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
+        })?),
+    };
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let c = cancel.clone();
+        // A second handler registration fails only if one exists; ignore that.
+        let _ = ctrlc::set_handler(move || c.store(true, Ordering::Relaxed));
+    }
+    let show_progress = !quiet && !a.json && std::io::stderr().is_terminal();
+    let progress = |done: usize, total: usize| {
+        if done == total || done % 16 == 0 {
+            let mut e = std::io::stderr().lock();
+            let _ = write!(e, "\rslicing: layer {done}/{total}");
+            if done == total {
+                let _ = writeln!(e);
+            }
+        }
+    };
+    let opts = SliceOptions {
+        input: a.input.clone(),
+        output: a.output.clone(),
+        profile,
+        layer_height_mm,
+        binary: a.binary.then_some(true),
+        placement: if a.keep_position {
+            PlacementMode::Keep
+        } else {
+            PlacementMode::Center
+        },
+        optics,
+        progress: if show_progress { Some(&progress) } else { None },
+        cancel: Some(&cancel),
+        distortion: match &a.distortion {
+            None => DistortionChoice::Profile,
+            Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
+            Some(p) => DistortionChoice::Table(p.clone()),
+        },
+    };
+    let summary = job::slice_to_bundle(&opts)?;
+    let defects = !summary.mesh.closed_manifold;
+    let failed = a.strict && defects;
+    if a.json {
+        let v = serde_json::json!({
+            "bundle": summary.bundle,
+            "layers": summary.layers,
+            "warnings": summary.warnings,
+            "mesh": summary.mesh,
+            "totals": summary.totals,
+            "timings": summary.timings,
+            "distortion": summary.distortion,
+            "checks_failed": failed,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else if !quiet {
+        for w in &summary.warnings {
+            eprintln!("dmdsl: warning: {w}");
+        }
+        if let Some(d) = &summary.distortion {
+            println!("{}", d.summary());
+        }
+        println!(
+            "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
+            summary.bundle.display(),
+            summary.layers,
+            summary.totals.height_mm,
+            hms(summary.totals.print_time_s),
+            summary.totals.resin_volume_ml,
+            summary.timings.total_s
+        );
+        if let (Some(all), Some(c)) = (
+            summary.totals.all_layered_time_s,
+            summary.totals.continuous_layers,
+        ) {
+            println!(
+                "hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
+                summary.layers,
+                hms(all),
+                100.0 * (1.0 - summary.totals.print_time_s / all)
+            );
+        }
+    }
+    if failed {
+        if !quiet {
+            eprintln!("dmdsl: --strict: mesh has defects (see warnings); exit code 1");
+        }
+        return Ok(1);
+    }
+    Ok(0)
+}
+
