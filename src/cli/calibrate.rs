@@ -115,4 +115,3 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     }
     Ok(0)
 }
-

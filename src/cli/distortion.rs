@@ -45,4 +45,3 @@ pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
     }
     Ok(0)
 }
-

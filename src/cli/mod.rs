@@ -46,6 +46,7 @@ pub(crate) enum Cmd {
     Distortion(distortion::DistortionArgs),
 }
 
+/// Runs the command `cli` names; returns its exit code.
 pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
         Cmd::Slice(a) => slice::slice(a, cli.quiet),

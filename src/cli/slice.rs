@@ -187,4 +187,3 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     }
     Ok(0)
 }
-

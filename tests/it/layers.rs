@@ -182,6 +182,20 @@ fn test_modules(code: &str) -> Vec<String> {
     names
 }
 
+/// The modules `text` (a crate root, comments stripped) declares: `mod name;`, with any
+/// visibility or attributes before it.
+fn declared_modules(text: &str) -> Vec<String> {
+    text.split(|c| c == ';' || c == '{' || c == '}')
+        .filter_map(|stmt| {
+            let words: Vec<&str> = stmt.split_whitespace().collect();
+            match words.as_slice() {
+                [.., "mod", name] => Some(first_ident(name)),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
 /// The module path of a file under `src/` (`optics/calib.rs` → [optics, calib]); empty for
 /// the crate root and the binary.
 fn module_path(rel: &str) -> Vec<String> {
@@ -277,9 +291,12 @@ fn graph(files: &[(String, String)]) -> Result<Graph, String> {
         .iter()
         .map(|(rel, text)| (rel.clone(), module_path(rel), strip(text)))
         .collect();
+    // The library's top-level modules are the ones `lib.rs` declares; files of other
+    // modules (the binary's, under `main.rs`) are not part of the library's layers.
     let tops: BTreeSet<String> = code
         .iter()
-        .filter_map(|(_, p, _)| p.first().cloned())
+        .filter(|(rel, _, _)| rel == "lib.rs")
+        .flat_map(|(_, _, text)| declared_modules(text))
         .collect();
     let mut reexport: BTreeMap<String, String> = BTreeMap::new();
     let mut test_only: Vec<Vec<String>> = Vec::new();
@@ -303,7 +320,9 @@ fn graph(files: &[(String, String)]) -> Result<Graph, String> {
     }
     let mut g = Graph::new();
     for (rel, path, text) in &code {
-        let Some(top) = path.first() else { continue };
+        let Some(top) = path.first().filter(|t| tops.contains(*t)) else {
+            continue;
+        };
         if test_only.iter().any(|t| path.starts_with(t)) {
             continue;
         }
@@ -503,10 +522,20 @@ fn top_level_modules_form_layers_without_cycles() {
     assert!(v.is_empty(), "{}", v.join("\n"));
 }
 
+/// The files `list`, with a `lib.rs` declaring every top-level module when `list` has none.
 fn files(list: &[(&str, &str)]) -> Vec<(String, String)> {
-    list.iter()
+    let mut out: Vec<(String, String)> = list
+        .iter()
         .map(|(p, t)| (p.to_string(), t.to_string()))
-        .collect()
+        .collect();
+    if !out.iter().any(|(p, _)| p == "lib.rs") {
+        let decls: BTreeSet<String> = out
+            .iter()
+            .filter_map(|(p, _)| module_path(p).first().map(|m| format!("pub mod {m};")))
+            .collect();
+        out.push(("lib.rs".into(), decls.into_iter().collect()));
+    }
+    out
 }
 
 fn names(g: &Graph, m: &str) -> Vec<String> {
@@ -554,11 +583,12 @@ const T: [u8; 1] = [crate::t::ONE];
         ("i.rs", ""),
         ("t.rs", ""),
         ("main.rs", "use crate::a;"),
+        ("cli/mod.rs", "use crate::a;"),
     ]);
     let g = graph(&fs).unwrap();
     assert_eq!(names(&g, "a"), ["b", "c", "d", "e", "f", "h", "i"]);
     assert!(g["t"].is_empty() && g["b"].is_empty());
-    assert!(!g.contains_key("main"));
+    assert!(!g.contains_key("main") && !g.contains_key("cli"));
     let e = graph(&files(&[("a.rs", "use crate::nowhere::X;")])).unwrap_err();
     assert_eq!(e, "src/a.rs: crate::nowhere is not a module of the crate");
 }
