@@ -185,7 +185,7 @@ fn test_modules(code: &str) -> Vec<String> {
 /// The modules `text` (a crate root, comments stripped) declares: `mod name;`, with any
 /// visibility or attributes before it.
 fn declared_modules(text: &str) -> Vec<String> {
-    text.split(|c| c == ';' || c == '{' || c == '}')
+    text.split([';', '{', '}'])
         .filter_map(|stmt| {
             let words: Vec<&str> = stmt.split_whitespace().collect();
             match words.as_slice() {
