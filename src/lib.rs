@@ -25,5 +25,6 @@ pub mod raster;
 pub mod slice;
 pub mod table;
 pub mod units;
+pub mod warning;
 
 pub use error::{Error, Result};
