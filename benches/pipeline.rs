@@ -3,6 +3,8 @@
 //! `cargo bench --bench pipeline -- [MODEL.stl] [LAYER_HEIGHT]`
 //! (default: fixtures/bunny00.stl at 0.05 mm). Prints the median of 5 runs per stage,
 //! per layer, single-threaded, so the numbers compare across machines and commits.
+//! For reference it also encodes the same masks with the `image` crate's PNG encoder
+//! (fast compression, no filter: its quickest setting), which dmdsl's own encoder replaces.
 
 #[path = "../examples/common/mod.rs"]
 mod common;
@@ -11,6 +13,8 @@ use common::median;
 use dmdsl::job::encode_png;
 use dmdsl::profile::Profile;
 use dmdsl::raster::{Rasterizer, Scratch};
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder};
 use std::time::Instant;
 
 fn main() {
@@ -34,10 +38,11 @@ fn main() {
     let raster = Rasterizer::new(field);
     let mut scratch = Scratch::default();
     let (mut cov_t, mut png_t, mut sha_t) = (Vec::new(), Vec::new(), Vec::new());
-    let mut png_bytes = 0usize;
+    let mut crate_t = Vec::new();
+    let (mut png_bytes, mut crate_bytes) = (0usize, 0usize);
     for _ in 0..5 {
-        let (mut c, mut p, mut s) = (0.0, 0.0, 0.0);
-        png_bytes = 0;
+        let (mut c, mut p, mut s, mut k) = (0.0, 0.0, 0.0, 0.0);
+        (png_bytes, crate_bytes) = (0, 0);
         for sec in &sections {
             let t = Instant::now();
             let m = raster.coverage(&sec.contours, &mut scratch);
@@ -49,10 +54,18 @@ fn main() {
             std::hint::black_box(dmdsl::bundle::sha256_hex(&png));
             s += t.elapsed().as_secs_f64();
             png_bytes += png.len();
+            let t = Instant::now();
+            let mut out = Vec::with_capacity(png.len());
+            PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::NoFilter)
+                .write_image(&m.data, m.width, m.height, ExtendedColorType::L8)
+                .expect("image encodes");
+            k += t.elapsed().as_secs_f64();
+            crate_bytes += out.len();
         }
         cov_t.push(c);
         png_t.push(p);
         sha_t.push(s);
+        crate_t.push(k);
     }
     let per = |v: Vec<f64>| median(v) / n as f64 * 1e3;
     println!(
@@ -67,6 +80,11 @@ fn main() {
         "png encode          {:8.3} ms/layer ({} bytes/layer)",
         per(png_t),
         png_bytes / n
+    );
+    println!(
+        "png encode, image   {:8.3} ms/layer ({} bytes/layer; fast, no filter)",
+        per(crate_t),
+        crate_bytes / n
     );
     println!("sha256              {:8.3} ms/layer", per(sha_t));
 }
