@@ -1,5 +1,6 @@
 //! Process planning as a user sees it: `dmdsl slice --profile …` on generated parts, checked
-//! layer by layer from the written `job.json` (seeds/001's cases for the hybrid profile).
+//! layer by layer from the written `job.json` (for the hybrid profile: the cases Li, Wu, Cui,
+//! Yang and Zhao printed in their model-guided hybrid layered/continuous DLP printing paper).
 
 use crate::common::*;
 use serde_json::Value;
@@ -119,7 +120,7 @@ fn hybrid_ramp(job: &Value) -> (usize, usize) {
     (b + e["transition_layers"].as_u64().unwrap() as usize, b)
 }
 
-/// What a layered slice after the ramp must lift, by seeds/001's table.
+/// What a layered slice after the ramp must lift, by the hybrid printing paper's table.
 fn olh(fill: f64) -> f64 {
     if fill <= 5.02 {
         2.0
