@@ -31,13 +31,19 @@
 pub use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
-use serde::{Deserialize, Serialize};
+use crate::warning::Warning;
+use serde::{Deserialize, Deserializer, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Value of the manifest's `format` field.
 pub const FORMAT: &str = "dmdsl-job";
-/// Manifest version written by this build; readers accept this version only.
-pub const VERSION: u32 = 1;
+/// Manifest version written by this build. Version 2 stores `warnings` as objects
+/// ([`Warning`]: code, severity, message, fields); version 1 stored them as text. Readers
+/// accept [`OLDEST_READ`]..=[`VERSION`]; a version 1 warning is read as code
+/// `bundle.uncoded` with its text as the message.
+pub const VERSION: u32 = 2;
+/// Oldest manifest version this build reads.
+pub const OLDEST_READ: u32 = 1;
 /// File name of the manifest inside a bundle.
 pub const MANIFEST: &str = "job.json";
 
@@ -58,8 +64,10 @@ pub struct Manifest {
     pub machine: Profile,
     /// Totals over all layers.
     pub totals: Totals,
-    /// Warnings raised while compiling the job (mesh defects, repairs, plan notes).
-    pub warnings: Vec<String>,
+    /// Warnings raised while compiling the job (mesh defects, repairs, plan notes), each
+    /// with its stable code (`docs/WARNINGS.md`).
+    #[serde(deserialize_with = "warnings_any_version")]
+    pub warnings: Vec<Warning>,
     /// One record per layer, bottom first.
     pub layers: Vec<Layer>,
     /// Light compensation applied to the masks (absent when compensation is off).
@@ -387,12 +395,12 @@ impl Manifest {
             }
         }
         match v.get("version").and_then(|f| f.as_u64()) {
-            Some(n) if n == VERSION as u64 => {}
+            Some(n) if (OLDEST_READ as u64..=VERSION as u64).contains(&n) => {}
             other => {
                 return Err(Error::Bundle {
                     path,
                     msg: format!(
-                        "unsupported version {other:?}; this dmdsl reads version {VERSION}"
+                        "unsupported version {other:?}; this dmdsl reads versions {OLDEST_READ} to {VERSION}"
                     ),
                 })
             }
@@ -402,6 +410,23 @@ impl Manifest {
             msg: format!("invalid manifest: {e}"),
         })
     }
+}
+
+/// Reads `warnings` as objects (version 2) or as text (version 1, code `bundle.uncoded`).
+fn warnings_any_version<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Warning>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Any {
+        Coded(Warning),
+        Text(String),
+    }
+    Ok(Vec::<Any>::deserialize(d)?
+        .into_iter()
+        .map(|w| match w {
+            Any::Coded(w) => w,
+            Any::Text(t) => Warning::new("bundle.uncoded", t),
+        })
+        .collect())
 }
 
 /// True if `dir` looks like a dmdsl bundle (has a `job.json` whose format is ours).
@@ -546,6 +571,23 @@ mod tests {
         );
         let e: Step = serde_json::from_str(r#"{"kind":"expose","s":8.0}"#).unwrap();
         assert_eq!(e, Step::Expose { s: 8.0 });
+    }
+
+    #[test]
+    fn warnings_read_as_objects_or_version_1_text() {
+        #[derive(Deserialize)]
+        struct W {
+            #[serde(deserialize_with = "warnings_any_version")]
+            warnings: Vec<Warning>,
+        }
+        let w: W = serde_json::from_str(
+            r#"{"warnings": ["old text", {"code": "plan.travel-clamped", "severity": "warning", "message": "m", "fields": {"moves": 2}}]}"#,
+        )
+        .unwrap();
+        assert_eq!(w.warnings[0].code, "bundle.uncoded");
+        assert_eq!(w.warnings[0].message, "old text");
+        assert_eq!(w.warnings[1].code, "plan.travel-clamped");
+        assert_eq!(w.warnings[1].fields["moves"], 2);
     }
 
     #[test]

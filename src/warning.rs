@@ -3,7 +3,10 @@
 //!
 //! Codes are `area.kebab-name` (e.g. `mesh.degenerate-facets`, `plan.wait-capped`) and never
 //! change meaning once released; the message may be reworded. The figures a message quotes
-//! are also in `fields`, so a script never parses the message.
+//! are also in `fields`, so a script never parses the message. Every code this build can
+//! raise is listed in [`CODES`] with its severity and meaning (the table of
+//! `docs/WARNINGS.md`); making a warning with a code not listed there is a bug, caught by a
+//! debug assertion.
 
 use serde::{Deserialize, Serialize};
 
@@ -34,18 +37,188 @@ pub struct Warning {
     pub fields: serde_json::Map<String, serde_json::Value>,
 }
 
+/// A code this build can raise.
+#[derive(Debug, Clone, Copy)]
+pub struct Code {
+    /// The code, `area.kebab-name`.
+    pub code: &'static str,
+    /// Its severity.
+    pub severity: Severity,
+    /// What it means.
+    pub meaning: &'static str,
+    /// Its figures (`fields`), comma-separated.
+    pub fields: &'static str,
+}
+
+const fn code(
+    code: &'static str,
+    severity: Severity,
+    meaning: &'static str,
+    fields: &'static str,
+) -> Code {
+    Code {
+        code,
+        severity,
+        meaning,
+        fields,
+    }
+}
+
+use Severity::{Note, Warning as Warn};
+
+/// Every code this build can raise (documented in `docs/WARNINGS.md`, in this order).
+pub const CODES: &[Code] = &[
+    code(
+        "mesh.open-edges",
+        Warn,
+        "the mesh has edges with one facet (holes); open section contours are closed or dropped by the repair rule",
+        "open_edges",
+    ),
+    code(
+        "mesh.nonmanifold-edges",
+        Warn,
+        "the mesh has edges shared by more than two facets",
+        "nonmanifold_edges",
+    ),
+    code(
+        "mesh.backwards-edges",
+        Warn,
+        "facets are inconsistently oriented; each contour takes the orientation most of its segments agree with",
+        "backwards_edges",
+    ),
+    code(
+        "mesh.degenerate-facets",
+        Note,
+        "facets with a repeated corner (removed) or zero area (kept); the solid is unchanged",
+        "degenerate_facets",
+    ),
+    code(
+        "mesh.inverted-normals",
+        Note,
+        "the normals point inwards (negative volume); the slicer flips the orientation",
+        "volume_mm3",
+    ),
+    code(
+        "slice.contours-repaired",
+        Warn,
+        "layers had open contours: chains were joined or closed, or dropped",
+        "layers, closed, dropped",
+    ),
+    code(
+        "distortion.extrapolated",
+        Warn,
+        "warped points lie outside the area the distortion table measured; their correction is extrapolated",
+        "points, table",
+    ),
+    code(
+        "plan.wait-capped",
+        Note,
+        "the thin-film leveling model asks a longer wait than the profile's recoat.wait_max_s on some layers; they wait the cap",
+        "layers, layers_total, wait_max_s, model_max_s, model_max_layer, flat_patch_mm",
+    ),
+    code(
+        "plan.travel-clamped",
+        Warn,
+        "lifts or dips were shortened to end at the top of the stage travel",
+        "moves, travel_max_mm",
+    ),
+    code(
+        "plan.beyond-lift-table",
+        Warn,
+        "slices have a max fill distance beyond the hybrid lift table; they use its last row's lift",
+        "slices, max_fill_distance_mm, table_max_mm, lift_mm",
+    ),
+    code(
+        "plan.unsupported-islands",
+        Warn,
+        "regions of a layer rest on nothing in the layer below and need supports",
+        "islands, layers, first_layer",
+    ),
+    code(
+        "exposure.implausible-dose",
+        Warn,
+        "the working curve asks more than 100 Ec to cure the layer and its overcure",
+        "thickness_mm, overcure_mm, depth_dp, dose_mj_cm2, resin",
+    ),
+    code(
+        "exposure.too-long",
+        Warn,
+        "the working-curve exposure is over 600 s per layer: check the calibration's units and the resin",
+        "exposure_s, target_irradiance_mw_cm2, ec_mj_cm2, resin",
+    ),
+    code(
+        "exposure.too-short",
+        Warn,
+        "the working-curve exposure is under 0.2 s per layer, shorter than the shutter can control",
+        "exposure_s, target_irradiance_mw_cm2, resin",
+    ),
+    code(
+        "exposure.not-positive",
+        Warn,
+        "the working-curve exposure is not a positive number; the profile's exposure is kept",
+        "exposure_s, kept_s",
+    ),
+    code(
+        "optics.outside-calibrated-area",
+        Warn,
+        "layers reach outside the calibrated area: compensation there extrapolates the calibration",
+        "layers, area_mm",
+    ),
+    code(
+        "optics.unreachable",
+        Warn,
+        "zones or pixels outside the calibrated area cannot reach the target irradiance even fully on",
+        "count, unit",
+    ),
+    code(
+        "calibrate.poor-fit",
+        Warn,
+        "the model P(x, y)·S(g) does not describe the measurements well (residual RMS over 3 %)",
+        "residual_rms_pct, degree, form",
+    ),
+    code(
+        "calibrate.low-grays-unmeasured",
+        Warn,
+        "zone compensation needs grays below the lowest measured one, where S is interpolated",
+        "lowest_gray, lowest_measured_gray",
+    ),
+    code(
+        "calibrate.spread-remains",
+        Warn,
+        "a compensation mode leaves a large predicted spread: the valid gray range cannot flatten the field",
+        "mode, after_zone_pct, after_pixel_pct",
+    ),
+    code(
+        "bundle.uncoded",
+        Warn,
+        "a warning read from a version 1 bundle, which stored warnings as text without a code",
+        "",
+    ),
+];
+
+/// The registered code `code`, if any.
+pub fn lookup(code: &str) -> Option<&'static Code> {
+    CODES.iter().find(|c| c.code == code)
+}
+
 impl Warning {
-    /// A warning of severity [`Severity::Warning`].
+    /// A warning of code `code` with the severity [`CODES`] gives it.
     pub fn new(code: &str, message: impl Into<String>) -> Warning {
+        let registered = lookup(code);
+        debug_assert!(
+            registered.is_some(),
+            "warning code {code} is not in warning::CODES"
+        );
         Warning {
             code: code.into(),
-            severity: Severity::Warning,
+            severity: registered.map_or(Severity::Warning, |c| c.severity),
             message: message.into(),
             fields: serde_json::Map::new(),
         }
     }
 
-    /// A warning of severity [`Severity::Note`].
+    /// A warning of code `code` with severity [`Severity::Note`] (for codes registered as
+    /// notes, the same as [`new`](Self::new)).
     pub fn note(code: &str, message: impl Into<String>) -> Warning {
         Warning {
             severity: Severity::Note,
@@ -57,6 +230,15 @@ impl Warning {
     pub fn with(mut self, name: &str, value: impl Into<serde_json::Value>) -> Warning {
         self.fields.insert(name.into(), value.into());
         self
+    }
+}
+
+/// `one` when `n` is 1, else `many` ("1 layer", "3 layers").
+pub fn plural<'a>(n: u64, one: &'a str, many: &'a str) -> &'a str {
+    if n == 1 {
+        one
+    } else {
+        many
     }
 }
 
@@ -72,23 +254,39 @@ mod tests {
 
     #[test]
     fn json_shape_keeps_code_severity_and_fields() {
-        let w = Warning::new("plan.wait-capped", "leveling wait capped on 3 layers")
+        let w = Warning::new("plan.travel-clamped", "3 lifts shortened")
             .with("layers", 3)
             .with("wait_max_s", 60.0);
         let v = serde_json::to_value(&w).unwrap();
-        assert_eq!(v["code"], "plan.wait-capped");
+        assert_eq!(v["code"], "plan.travel-clamped");
         assert_eq!(v["severity"], "warning");
         assert_eq!(v["fields"]["layers"], 3);
         assert_eq!(v["fields"]["wait_max_s"], 60.0);
         let back: Warning = serde_json::from_value(v).unwrap();
         assert_eq!(back, w);
-        let n = serde_json::to_value(Warning::note("mesh.repaired", "x")).unwrap();
+        let n = serde_json::to_value(Warning::new("mesh.degenerate-facets", "x")).unwrap();
         assert_eq!(n["severity"], "note");
         assert!(n.get("fields").is_none());
         assert_eq!(
-            Warning::new("a.b", "m").to_string(),
-            "m [a.b]",
+            Warning::new("plan.travel-clamped", "m").to_string(),
+            "m [plan.travel-clamped]",
             "people see the code to allow or deny it"
         );
+    }
+
+    #[test]
+    fn codes_are_unique_and_well_formed() {
+        let mut seen = std::collections::HashSet::new();
+        for c in CODES {
+            assert!(seen.insert(c.code), "{} twice", c.code);
+            let (area, name) = c.code.split_once('.').expect("area.name");
+            let kebab = |s: &str| {
+                !s.is_empty()
+                    && s.chars()
+                        .all(|ch| ch.is_ascii_lowercase() || ch.is_ascii_digit() || ch == '-')
+            };
+            assert!(kebab(area) && kebab(name), "{}", c.code);
+            assert!(c.severity != Severity::Error, "{}", c.code);
+        }
     }
 }

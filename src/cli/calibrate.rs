@@ -61,9 +61,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     if quiet {
         return Ok(0);
     }
-    for w in &r.warnings {
-        eprintln!("dmdsl: warning: {w}");
-    }
+    super::print_warnings(&r.warnings);
     let u = if r.units == "relative" {
         ""
     } else {

@@ -46,6 +46,19 @@ pub(crate) enum Cmd {
     Distortion(distortion::DistortionArgs),
 }
 
+/// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`).
+pub(crate) fn print_warnings(warnings: &[dmdsl::warning::Warning]) {
+    use dmdsl::warning::Severity;
+    for w in warnings {
+        let label = match w.severity {
+            Severity::Note => "note",
+            Severity::Warning => "warning",
+            Severity::Error => "error",
+        };
+        eprintln!("dmdsl: {label}: {w}");
+    }
+}
+
 /// Runs the command `cli` names; returns its exit code.
 pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {

@@ -152,9 +152,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else if !quiet {
-        for w in &summary.warnings {
-            eprintln!("dmdsl: warning: {w}");
-        }
+        super::print_warnings(&summary.warnings);
         if let Some(d) = &summary.distortion {
             println!("{}", d.summary());
         }

@@ -23,6 +23,7 @@ use crate::error::{Error, Result};
 use crate::optics::{Compensator, Dither, GrayMap, JobOptics, Mode, OpticsOptions};
 use crate::profile::{BlendCurve, Field, Profile, Projector};
 use crate::raster::Mask;
+use crate::warning::Warning;
 
 /// What the tiling stage of a compensated job hands back after the last layer.
 #[derive(Debug, Default)]
@@ -32,7 +33,7 @@ pub struct TiledOptics {
     /// Each projector's manifest record (`projector_optics`).
     pub records: Vec<Optics>,
     /// Warnings for the job.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Fixed-point factor of a full share (f = 1).
@@ -246,11 +247,12 @@ impl Tiler {
             let (r, w) = o.finish_with((map.file.clone(), sha));
             out.gray_maps.push(map);
             out.records.push(r);
-            for w in w {
+            for mut w in w {
                 // The exposure warnings are the same for every projector.
                 if k == 0 || !o.exposure.warnings.contains(&w) {
-                    out.warnings
-                        .push(format!("projector {}: {w}", profile.projector[k].name));
+                    let name = &profile.projector[k].name;
+                    w.message = format!("projector {name}: {}", w.message);
+                    out.warnings.push(w.with("projector", name.clone()));
                 }
             }
         }

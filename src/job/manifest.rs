@@ -11,6 +11,7 @@ use crate::mesh::Mesh;
 use crate::plan::{self, LayerAnalysis, LayerInfo};
 use crate::profile::{Process, Profile};
 use crate::slice;
+use crate::warning::Warning;
 use std::path::Path;
 
 /// The part as read and placed.
@@ -38,7 +39,7 @@ pub(super) struct PlannedLayers {
     /// Their totals.
     pub totals: Totals,
     /// The planner's warnings.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Completes the layers' analyses, plans the layers (`plan`) and builds their records; a
@@ -130,7 +131,7 @@ pub(super) fn manifest(
     planned: PlannedLayers,
     optics: OpticsRecords,
     distortion: Option<FitReport>,
-    warnings: Vec<String>,
+    warnings: Vec<Warning>,
 ) -> Manifest {
     Manifest {
         format: bundle::FORMAT.into(),

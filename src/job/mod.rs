@@ -39,6 +39,7 @@ use crate::optics::JobOptics;
 use crate::profile::Profile;
 use crate::raster::{Mask, Rasterizer};
 use crate::slice::{SliceStats, Slicer};
+use crate::warning::{plural, Warning};
 use layer::LayerContext;
 use manifest::PlacedPart;
 use mask_reuse::RecentPrismMasks;
@@ -202,19 +203,40 @@ fn make_layers(
 }
 
 /// Warnings about the slicing: contours repaired, distortion corrections extrapolated.
-fn slicing_warnings(stats: &SliceStats, distortion: Option<&FitReport>) -> Vec<String> {
+fn slicing_warnings(stats: &SliceStats, distortion: Option<&FitReport>) -> Vec<Warning> {
     let mut warnings = Vec::new();
     if stats.repaired_layers > 0 {
-        warnings.push(format!(
-            "{} layers had open contours: {} closed, {} dropped (repair rule in README)",
-            stats.repaired_layers, stats.joined_chains, stats.dropped_chains
-        ));
+        let n = stats.repaired_layers as u64;
+        warnings.push(
+            Warning::new(
+                "slice.contours-repaired",
+                format!(
+                    "{n} {} open contours: {} closed, {} dropped",
+                    plural(n, "layer had", "layers had"),
+                    stats.joined_chains,
+                    stats.dropped_chains
+                ),
+            )
+            .with("layers", n)
+            .with("closed", stats.joined_chains as u64)
+            .with("dropped", stats.dropped_chains as u64),
+        );
     }
     if let Some(r) = distortion.filter(|r| r.extrapolated_points > 0) {
-        warnings.push(format!(
-            "distortion: {} warped points lie outside the area the table ({}) measured; their correction is extrapolated",
-            r.extrapolated_points, r.source
-        ));
+        warnings.push(
+            Warning::new(
+                "distortion.extrapolated",
+                format!(
+                    "distortion: {} warped {} outside the area the table ({}) measured; {} extrapolated",
+                    r.extrapolated_points,
+                    plural(r.extrapolated_points, "point lies", "points lie"),
+                    r.source,
+                    plural(r.extrapolated_points, "its correction is", "their correction is")
+                ),
+            )
+            .with("points", r.extrapolated_points)
+            .with("table", r.source.clone()),
+        );
     }
     warnings
 }

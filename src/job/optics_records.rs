@@ -8,6 +8,7 @@ use crate::error::Result;
 use crate::geometry::tile::Tiler;
 use crate::optics::{GrayMap, JobOptics};
 use crate::profile::Profile;
+use crate::warning::Warning;
 use std::path::Path;
 
 /// The single projector's gray map as written: its file and SHA-256.
@@ -40,7 +41,7 @@ pub(super) struct OpticsRecords {
     /// The compensation mode (`settings.compensation`).
     pub compensation: String,
     /// Warnings about the compensation.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// The records once the masks are made: the single projector's from `gray_map` (what

@@ -7,6 +7,7 @@ use crate::geometry::distortion::DistortionChoice;
 use crate::mesh::MeshReport;
 use crate::profile::Profile;
 use crate::units::Positive;
+use crate::warning::Warning;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -76,8 +77,8 @@ pub struct SliceSummary {
     pub bundle: PathBuf,
     /// Number of layers.
     pub layers: usize,
-    /// Warnings (mesh defects, repairs).
-    pub warnings: Vec<String>,
+    /// Warnings (mesh defects, repairs, plan, compensation), as in the manifest.
+    pub warnings: Vec<Warning>,
     /// Mesh validation report.
     pub mesh: MeshReport,
     /// Totals as in the manifest.

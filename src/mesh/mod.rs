@@ -13,6 +13,7 @@ mod stl;
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
+use crate::warning::{plural, Warning};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -63,37 +64,68 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// Human-readable warnings for the defects found (empty for a clean mesh).
-    pub fn warnings(&self) -> Vec<String> {
+    /// The warnings for the defects found (empty for a clean mesh).
+    pub fn warnings(&self) -> Vec<Warning> {
         let mut w = Vec::new();
         if self.open_edges > 0 {
-            w.push(format!(
-                "mesh has {} open edges (holes); open section contours are closed or dropped (see README)",
-                self.open_edges
-            ));
+            w.push(
+                Warning::new(
+                    "mesh.open-edges",
+                    format!(
+                        "mesh has {} open {} (holes); open section contours are closed or dropped",
+                        self.open_edges,
+                        plural(self.open_edges, "edge", "edges")
+                    ),
+                )
+                .with("open_edges", self.open_edges),
+            );
         }
         if self.nonmanifold_edges > 0 {
-            w.push(format!(
-                "mesh has {} non-manifold edges",
-                self.nonmanifold_edges
-            ));
+            w.push(
+                Warning::new(
+                    "mesh.nonmanifold-edges",
+                    format!(
+                        "mesh has {} non-manifold {}",
+                        self.nonmanifold_edges,
+                        plural(self.nonmanifold_edges, "edge", "edges")
+                    ),
+                )
+                .with("nonmanifold_edges", self.nonmanifold_edges),
+            );
         }
         if self.backwards_edges > 0 {
-            w.push(format!(
-                "mesh has {} backwards edges (inconsistently oriented facets); contours are oriented by majority",
-                self.backwards_edges
-            ));
+            w.push(
+                Warning::new(
+                    "mesh.backwards-edges",
+                    format!(
+                        "mesh has {} backwards {} (inconsistently oriented facets); contours are oriented by majority",
+                        self.backwards_edges,
+                        plural(self.backwards_edges, "edge", "edges")
+                    ),
+                )
+                .with("backwards_edges", self.backwards_edges),
+            );
         }
         if self.degenerate_triangles > 0 {
-            w.push(format!(
-                "mesh has {} degenerate triangles",
-                self.degenerate_triangles
-            ));
+            w.push(
+                Warning::new(
+                    "mesh.degenerate-facets",
+                    format!(
+                        "mesh has {} degenerate {}",
+                        self.degenerate_triangles,
+                        plural(self.degenerate_triangles, "triangle", "triangles")
+                    ),
+                )
+                .with("degenerate_facets", self.degenerate_triangles),
+            );
         }
         if self.volume_mm3 < 0.0 {
             w.push(
-                "mesh normals point inwards (negative volume); orientation is flipped for slicing"
-                    .into(),
+                Warning::new(
+                    "mesh.inverted-normals",
+                    "mesh normals point inwards (negative volume); orientation is flipped for slicing",
+                )
+                .with("volume_mm3", self.volume_mm3),
             );
         }
         w

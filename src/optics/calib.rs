@@ -22,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::polyfit::LeastSquares;
 use crate::table::{self, cell_error, Columns};
 use crate::units::{NonNegative, Positive};
+use crate::warning::Warning;
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -170,7 +171,7 @@ pub struct FitResult {
     /// Condition number of the scaled design matrix.
     pub condition: f64,
     /// Warnings (poor model fit, …).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// A reading prepared for the fit: basis row, level index, position index.
@@ -782,10 +783,18 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     let (rms, worst, worst_line) = residuals(&used, |r| p_at(r) * s_at(r));
     let mut warnings = Vec::new();
     if rms > 3.0 {
-        warnings.push(format!(
-            "residual RMS {rms:.2} %: the model P(x, y)·S(g) with a degree-{degree} {} P does not describe these measurements well",
-            form_name(form)
-        ));
+        warnings.push(
+            Warning::new(
+                "calibrate.poor-fit",
+                format!(
+                    "residual RMS {rms:.2} %: the model P(x, y)·S(g) with a degree-{degree} {} P does not describe these measurements well",
+                    form_name(form)
+                ),
+            )
+            .with("residual_rms_pct", rms)
+            .with("degree", degree as u64)
+            .with("form", form_name(form)),
+        );
     }
 
     let zones = zone_fits(&used, s_at, p_xy);

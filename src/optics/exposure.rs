@@ -5,7 +5,7 @@
 //!   t = (Ec / E*)·exp((Δz + overcure) / Dp). It replaces the profile's `exposure.layer_s`;
 //!   `bottom_s` keeps its ratio to `layer_s` (the bottom-layer factor), and the transition
 //!   layers ramp between them as before ([`crate::profile::Exposure::layer_exposure_s`]).
-//! * Relative calibration (the published seeds/000 fit): irradiance is known only up to a
+//! * Relative calibration (such as Xu et al. 2010's published fit): irradiance is known only up to a
 //!   factor, so the profile's fixed exposure is taken as the exposure at E*; the profile is
 //!   left unchanged and no dose can be stated.
 //!
@@ -15,6 +15,7 @@
 use super::Units;
 use crate::profile::{Profile, Resin};
 use crate::units::Positive;
+use crate::warning::Warning;
 
 /// How a job's exposure was derived.
 #[derive(Debug, Clone, PartialEq)]
@@ -24,7 +25,7 @@ pub struct Resolved {
     /// Dose of a normal layer at E*, mJ/cm² (absolute calibrations).
     pub dose_mj_cm2: Option<f64>,
     /// Plausibility warnings.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Working-curve exposure, s: time at irradiance `e_mw_cm2` to cure `thickness_mm` plus the
@@ -61,31 +62,65 @@ pub fn resolve(profile: &mut Profile, units: Units, target: f64, thickness_mm: f
             let mut warnings = Vec::new();
             let depth = (thickness_mm + resin.overcure_mm.get()) / resin.dp_mm.get();
             if depth > 100f64.ln() {
-                warnings.push(format!(
-                    "layer {thickness_mm} mm + overcure {} mm is {depth:.1} Dp deep: the working curve asks {dose:.0} mJ/cm² (> 100 Ec), implausible for resin {:?}",
-                    resin.overcure_mm, resin.name
-                ));
+                warnings.push(
+                    Warning::new(
+                        "exposure.implausible-dose",
+                        format!(
+                            "layer {thickness_mm} mm + overcure {} mm is {depth:.1} Dp deep: the working curve asks {dose:.0} mJ/cm² (> 100 Ec), implausible for resin {:?}",
+                            resin.overcure_mm, resin.name
+                        ),
+                    )
+                    .with("thickness_mm", thickness_mm)
+                    .with("overcure_mm", resin.overcure_mm.get())
+                    .with("depth_dp", depth)
+                    .with("dose_mj_cm2", dose)
+                    .with("resin", resin.name.clone()),
+                );
             }
             if t > 600.0 {
-                warnings.push(format!(
-                    "at E* = {target:.4} mW/cm² resin {:?} (Ec {} mJ/cm²) needs {t:.0} s per layer: implausible; check the calibration's units (µW vs mW) and the resin",
-                    resin.name, resin.ec_mj_cm2
-                ));
+                warnings.push(
+                    Warning::new(
+                        "exposure.too-long",
+                        format!(
+                            "at E* = {target:.4} mW/cm² resin {:?} (Ec {} mJ/cm²) needs {t:.0} s per layer: implausible; check the calibration's units (µW vs mW) and the resin",
+                            resin.name, resin.ec_mj_cm2
+                        ),
+                    )
+                    .with("exposure_s", t)
+                    .with("target_irradiance_mw_cm2", target)
+                    .with("ec_mj_cm2", resin.ec_mj_cm2.get())
+                    .with("resin", resin.name.clone()),
+                );
             } else if t < 0.2 {
-                warnings.push(format!(
-                    "at E* = {target:.4} mW/cm² resin {:?} needs only {t:.3} s per layer, shorter than shutter timing allows to control; check the calibration's units",
-                    resin.name
-                ));
+                warnings.push(
+                    Warning::new(
+                        "exposure.too-short",
+                        format!(
+                            "at E* = {target:.4} mW/cm² resin {:?} needs only {t:.3} s per layer, shorter than shutter timing allows to control; check the calibration's units",
+                            resin.name
+                        ),
+                    )
+                    .with("exposure_s", t)
+                    .with("target_irradiance_mw_cm2", target)
+                    .with("resin", resin.name.clone()),
+                );
             }
             match (Positive::new(t), Positive::new(t * ratio)) {
                 (Some(l), Some(b)) => {
                     e.layer_s = l;
                     e.bottom_s = b;
                 }
-                _ => warnings.push(format!(
-                    "working-curve exposure {t} s is not a positive number; kept the profile's {} s",
-                    e.layer_s
-                )),
+                _ => warnings.push(
+                    Warning::new(
+                        "exposure.not-positive",
+                        format!(
+                            "working-curve exposure {t} s is not a positive number; kept the profile's {} s",
+                            e.layer_s
+                        ),
+                    )
+                    .with("exposure_s", if t.is_finite() { t.into() } else { serde_json::Value::Null })
+                    .with("kept_s", e.layer_s.get()),
+                ),
             }
             Resolved {
                 rule: format!(
@@ -131,7 +166,9 @@ mod tests {
         let mut p = Profile::default_profile();
         let r = resolve(&mut p, Units::MwCm2, 0.0028, 0.05);
         assert!(
-            r.warnings.iter().any(|w| w.contains("implausible")),
+            r.warnings
+                .iter()
+                .any(|w| w.code == "exposure.too-long" && w.message.contains("implausible")),
             "{:?}",
             r.warnings
         );

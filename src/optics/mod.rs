@@ -39,6 +39,7 @@ use crate::bundle::Optics;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
 use crate::raster::Mask;
+use crate::warning::{plural, Warning};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -233,7 +234,7 @@ impl JobOptics {
 
     /// After all layers, with the gray map ([`gray_map`](Self::gray_map)) written as `file`
     /// with SHA-256 `gray_map_sha256`: the manifest record and the warnings for the job.
-    pub fn finish_with(&self, (file, gray_map_sha256): (String, String)) -> (Optics, Vec<String>) {
+    pub fn finish_with(&self, (file, gray_map_sha256): (String, String)) -> (Optics, Vec<Warning>) {
         let c = &self.compensator;
         let pr = &c.prediction;
         let (zc, zr) = pr.zone_grid;
@@ -248,16 +249,35 @@ impl JobOptics {
         let [x0, y0, x1, y1] = self.calibration.field.area_mm;
         let layers_outside = c.layers_outside();
         if layers_outside > 0 {
-            warnings.push(format!(
-                "{layers_outside} layers reach outside the calibrated area x {x0}..{x1}, y {y0}..{y1} mm: compensation there extrapolates the calibration (docs/CALIBRATION.md)"
-            ));
+            warnings.push(
+                Warning::new(
+                    "optics.outside-calibrated-area",
+                    format!(
+                        "{layers_outside} {} outside the calibrated area x {x0}..{x1}, y {y0}..{y1} mm: compensation there extrapolates the calibration",
+                        plural(layers_outside, "layer reaches", "layers reach")
+                    ),
+                )
+                .with("layers", layers_outside)
+                .with("area_mm", vec![x0, y0, x1, y1]),
+            );
         }
         if pr.unreachable > 0 && layers_outside > 0 {
-            warnings.push(format!(
-                "{} {} outside the calibrated area cannot reach the target irradiance even fully on",
-                pr.unreachable,
-                if c.mode() == Mode::Zone { "zones" } else { "pixels" }
-            ));
+            let (unit, units) = match c.mode() {
+                Mode::Zone => ("zone", "zones"),
+                _ => ("pixel", "pixels"),
+            };
+            warnings.push(
+                Warning::new(
+                    "optics.unreachable",
+                    format!(
+                        "{} {} outside the calibrated area cannot reach the target irradiance even fully on",
+                        pr.unreachable,
+                        plural(pr.unreachable, unit, units)
+                    ),
+                )
+                .with("count", pr.unreachable)
+                .with("unit", unit),
+            );
         }
         let record = Optics {
             mode: c.mode().as_str().into(),

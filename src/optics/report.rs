@@ -5,6 +5,7 @@ use super::{Calibration, Compensator, Dither, Mode, Units};
 use crate::bundle::Spreads;
 use crate::error::{Error, Result};
 use crate::profile::Field;
+use crate::warning::Warning;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -85,7 +86,7 @@ pub struct CalibrateReport {
     /// Pixel-mode prediction.
     pub pixel: ModeReport,
     /// Warnings.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 fn mode_report(c: &Compensator) -> ModeReport {
@@ -218,18 +219,33 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
         .min()
         .unwrap_or(255);
     if lowest < f.measured_gray[0] {
-        warnings.push(format!(
-            "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0; measure lower grays",
-            f.measured_gray[0]
-        ));
+        warnings.push(
+            Warning::new(
+                "calibrate.low-grays-unmeasured",
+                format!(
+                    "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0; measure lower grays",
+                    f.measured_gray[0]
+                ),
+            )
+            .with("lowest_gray", lowest)
+            .with("lowest_measured_gray", f.measured_gray[0]),
+        );
     }
     for (name, c) in [("zone", &zone), ("pixel", &pixel)] {
         let p = &c.prediction;
         if p.spreads.after_zone_pct > 2.0 || p.spreads.after_pixel_pct > 5.0 && name == "pixel" {
-            warnings.push(format!(
-                "{name} mode leaves a predicted spread of {:.2} % (zone means) / {:.2} % (pixels): the gray range cannot flatten this field",
-                p.spreads.after_zone_pct, p.spreads.after_pixel_pct
-            ));
+            warnings.push(
+                Warning::new(
+                    "calibrate.spread-remains",
+                    format!(
+                        "{name} mode leaves a predicted spread of {:.2} % (zone means) / {:.2} % (pixels): the gray range cannot flatten this field",
+                        p.spreads.after_zone_pct, p.spreads.after_pixel_pct
+                    ),
+                )
+                .with("mode", name)
+                .with("after_zone_pct", p.spreads.after_zone_pct)
+                .with("after_pixel_pct", p.spreads.after_pixel_pct),
+            );
         }
     }
 

@@ -20,6 +20,7 @@ pub use analysis::LayerAnalysis;
 
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
+use crate::warning::{plural, Warning};
 
 /// What the planner needs to know about one layer.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,8 +63,8 @@ pub struct Plan {
     pub all_layered_time_s: Option<f64>,
     /// Layers printed continuously.
     pub continuous_layers: usize,
-    /// Notes for the manifest's warnings.
-    pub warnings: Vec<String>,
+    /// The plan's warnings for the manifest.
+    pub warnings: Vec<Warning>,
 }
 
 /// Counters the step builders fill; turned into warnings.
@@ -72,6 +73,8 @@ pub(crate) struct Notes {
     travel_clamped: usize,
     wait_capped: usize,
     wait_model_max_s: f64,
+    wait_model_max_layer: usize,
+    wait_model_max_patch_mm: f64,
     beyond_table: usize,
     beyond_table_max_mm: f64,
 }
@@ -136,41 +139,7 @@ pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
             .map(|p| p.time_s)
             .sum()
     });
-    let n = layers.len();
-    let mut warnings = Vec::new();
-    if notes.wait_capped > 0 {
-        warnings.push(format!(
-            "leveling wait capped at recoat.wait_max_s = {} s on {} of {n} layers (the leveling model asks up to {:.0} s): natural leveling of thin films over wide flat tops is slow; consider thicker layers or a larger cap",
-            profile.recoat.as_ref().map_or(0.0, |r| r.wait_max_s.get()),
-            notes.wait_capped,
-            notes.wait_model_max_s
-        ));
-    }
-    if notes.travel_clamped > 0 {
-        warnings.push(format!(
-            "{} lifts or dips were shortened to end at stage.travel_max_mm = {} mm",
-            notes.travel_clamped, st.travel_max_mm
-        ));
-    }
-    if notes.beyond_table > 0 {
-        let h = profile.hybrid.as_ref().expect("hybrid");
-        warnings.push(format!(
-            "{} slices have a max fill distance beyond the lift table (up to {:.2} mm > {} mm): they use the last row's lift, {} mm",
-            notes.beyond_table,
-            notes.beyond_table_max_mm,
-            h.olh.last().map_or(0.0, |r| r.up_to_mm.get()),
-            h.olh.last().map_or(0.0, |r| r.lift_mm.get())
-        ));
-    }
-    let with_islands: Vec<&LayerInfo> = layers.iter().filter(|l| l.islands > 0).collect();
-    if let Some(first) = with_islands.first() {
-        warnings.push(format!(
-            "{} unsupported islands on {} layers (first at layer {}): regions that do not rest on the layer below need supports",
-            with_islands.iter().map(|l| l.islands as u64).sum::<u64>(),
-            with_islands.len(),
-            first.index
-        ));
-    }
+    let warnings = warnings(profile, layers, &notes);
     Ok(Plan {
         print_time_s: layers_plan.iter().map(|p| p.time_s).sum(),
         continuous_layers: layers_plan
@@ -181,6 +150,91 @@ pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
         all_layered_time_s,
         warnings,
     })
+}
+
+/// The plan's warnings from the step builders' `notes` and the layers' islands.
+fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warning> {
+    let n = layers.len() as u64;
+    let st = &profile.stage;
+    let mut warnings = Vec::new();
+    if notes.wait_capped > 0 {
+        let cap = profile.recoat.as_ref().map_or(0.0, |r| r.wait_max_s.get());
+        let capped = notes.wait_capped as u64;
+        warnings.push(
+            Warning::new(
+                "plan.wait-capped",
+                format!(
+                    "leveling wait capped at recoat.wait_max_s = {cap} s on {capped} of {n} {}: the thin-film model asks up to {:.0} s (layer {}, a {:.1} mm wide flat patch)",
+                    plural(n, "layer", "layers"),
+                    notes.wait_model_max_s,
+                    notes.wait_model_max_layer,
+                    notes.wait_model_max_patch_mm
+                ),
+            )
+            .with("layers", capped)
+            .with("layers_total", n)
+            .with("wait_max_s", cap)
+            .with("model_max_s", notes.wait_model_max_s)
+            .with("model_max_layer", notes.wait_model_max_layer as u64)
+            .with("flat_patch_mm", notes.wait_model_max_patch_mm),
+        );
+    }
+    if notes.travel_clamped > 0 {
+        let k = notes.travel_clamped as u64;
+        warnings.push(
+            Warning::new(
+                "plan.travel-clamped",
+                format!(
+                    "{k} {} shortened to end at stage.travel_max_mm = {} mm",
+                    plural(k, "lift or dip was", "lifts or dips were"),
+                    st.travel_max_mm
+                ),
+            )
+            .with("moves", k)
+            .with("travel_max_mm", st.travel_max_mm),
+        );
+    }
+    if notes.beyond_table > 0 {
+        let h = profile.hybrid.as_ref().expect("hybrid");
+        let k = notes.beyond_table as u64;
+        let table_max = h.olh.last().map_or(0.0, |r| r.up_to_mm.get());
+        let lift = h.olh.last().map_or(0.0, |r| r.lift_mm.get());
+        warnings.push(
+            Warning::new(
+                "plan.beyond-lift-table",
+                format!(
+                    "{k} {} a max fill distance beyond the lift table (up to {:.2} mm > {table_max} mm): {} the last row's lift, {lift} mm",
+                    plural(k, "slice has", "slices have"),
+                    notes.beyond_table_max_mm,
+                    plural(k, "it uses", "they use"),
+                ),
+            )
+            .with("slices", k)
+            .with("max_fill_distance_mm", notes.beyond_table_max_mm)
+            .with("table_max_mm", table_max)
+            .with("lift_mm", lift),
+        );
+    }
+    let with_islands: Vec<&LayerInfo> = layers.iter().filter(|l| l.islands > 0).collect();
+    if let Some(first) = with_islands.first() {
+        let islands = with_islands.iter().map(|l| l.islands as u64).sum::<u64>();
+        let k = with_islands.len() as u64;
+        warnings.push(
+            Warning::new(
+                "plan.unsupported-islands",
+                format!(
+                    "{islands} unsupported {} on {k} {} (first at layer {}): regions that do not rest on the layer below need supports",
+                    plural(islands, "island", "islands"),
+                    plural(k, "layer", "layers"),
+                    first.index
+                ),
+            )
+            .with("islands", islands)
+            .with("layers", k)
+            .with("first_layer", first.index as u64),
+        );
+    }
+    warnings
 }
 
 #[cfg(test)]

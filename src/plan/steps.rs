@@ -81,7 +81,11 @@ pub(super) fn top_down(
             let (w, raw) = r.wait_for(l.max_fill_distance_mm, l.thickness_mm, mu);
             if raw > w && r.wait_model == WaitModel::Leveling {
                 notes.wait_capped += 1;
-                notes.wait_model_max_s = notes.wait_model_max_s.max(raw);
+                if raw > notes.wait_model_max_s {
+                    notes.wait_model_max_s = raw;
+                    notes.wait_model_max_layer = l.index;
+                    notes.wait_model_max_patch_mm = 2.0 * l.max_fill_distance_mm;
+                }
             }
             push_wait(&mut steps, w);
             let e = p.exposure.layer_exposure_s(l.index);

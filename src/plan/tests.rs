@@ -63,10 +63,13 @@ fn top_down_dips_returns_waits_exposes() {
     assert_eq!(waits[0], r.wait_s.get());
     assert!(waits.windows(2).all(|w| w[1] >= w[0]));
     assert_eq!(waits[3], r.wait_max_s.get());
-    assert!(plan
+    let capped = plan
         .warnings
         .iter()
-        .any(|w| w.contains("leveling wait capped")));
+        .find(|w| w.code == "plan.wait-capped")
+        .expect("capped");
+    assert_eq!(capped.fields["wait_max_s"], r.wait_max_s.get());
+    assert!(capped.fields["model_max_s"].as_f64().unwrap() > r.wait_max_s.get());
     assert_eq!(plan.all_layered_time_s, None);
     let sum: f64 = plan.layers.iter().map(|l| l.time_s).sum();
     assert!((plan.print_time_s - sum).abs() < 1e-9);
@@ -180,10 +183,12 @@ fn hybrid_modes_lifts_and_sweeps() {
         .map(|i| (lift(&plan.layers[i], &layers[i]) * 1e6).round() / 1e6)
         .collect();
     assert_eq!(lifts, vec![2.0, 4.0, 8.0, 8.0]);
-    assert!(plan
-        .warnings
-        .iter()
-        .any(|w| w.contains("beyond the lift table")));
+    assert!(
+        plan.warnings
+            .iter()
+            .any(|w| w.code == "plan.beyond-lift-table"
+                && w.message.contains("beyond the lift table"))
+    );
     // The all-layered comparison plan is slower.
     let all = plan.all_layered_time_s.unwrap();
     assert!(all > plan.print_time_s, "{all} vs {}", plan.print_time_s);
@@ -196,7 +201,10 @@ fn out_of_travel_is_an_error_and_long_lifts_are_clamped() {
     let layers: Vec<LayerInfo> = (0..10).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
     let plan = plan(&p, &layers).unwrap();
     assert!(plan.layers.iter().all(|l| top(&l.steps) <= 1.5));
-    assert!(plan.warnings.iter().any(|w| w.contains("shortened")));
+    assert!(plan
+        .warnings
+        .iter()
+        .any(|w| w.code == "plan.travel-clamped" && w.message.contains("shortened")));
     let layers: Vec<LayerInfo> = (0..20).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
     let e = super::plan(&p, &layers).unwrap_err();
     assert!(

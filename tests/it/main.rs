@@ -9,3 +9,4 @@ mod layers;
 mod plan;
 mod run;
 mod slice;
+mod warnings;

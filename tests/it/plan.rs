@@ -405,10 +405,21 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
     let b = layers(&job)[12]["bbox_mm"].as_array().unwrap().clone();
     let w = f(&b[1][0]) - f(&b[0][0]);
     assert!((w - 7.0).abs() < 1e-6, "{b:?}");
-    assert!(summary["warnings"].as_array().unwrap().iter().any(|w| w
-        .as_str()
+    let islands = summary["warnings"]
+        .as_array()
         .unwrap()
-        .contains("1 unsupported islands on 1 layers (first at layer 5)")));
+        .iter()
+        .find(|w| w["code"] == "plan.unsupported-islands")
+        .expect("islands warned");
+    assert_eq!(islands["severity"], "warning");
+    assert_eq!(
+        islands["fields"],
+        serde_json::json!({"islands": 1, "layers": 1, "first_layer": 5})
+    );
+    assert_eq!(
+        islands["message"],
+        "1 unsupported island on 1 layer (first at layer 5): regions that do not rest on the layer below need supports"
+    );
 }
 
 #[test]
@@ -558,16 +569,16 @@ fn prism_reaching_outside_the_calibrated_area_counts_every_layer() {
         &tris,
         &["--keep-position", "--layer-height", "0.1"],
     );
-    let warnings: Vec<&str> = summary["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|w| w.as_str().unwrap())
-        .collect();
+    let warnings = summary["warnings"].as_array().unwrap();
     assert!(
         warnings
             .iter()
-            .any(|w| w.starts_with("20 layers reach outside the calibrated area")),
+            .any(|w| w["code"] == "optics.outside-calibrated-area"
+                && w["fields"]["layers"] == 20
+                && w["message"]
+                    .as_str()
+                    .unwrap()
+                    .starts_with("20 layers reach outside the calibrated area")),
         "{warnings:?}"
     );
 }

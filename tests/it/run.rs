@@ -316,3 +316,27 @@ fn unreadable_bundles_and_bad_options_exit_2() {
     );
     assert!(!dir.join("no").exists());
 }
+
+#[test]
+fn version_1_bundle_with_text_warnings_still_runs() {
+    // Version 1 manifests stored warnings as text; `run` reads them (as code
+    // `bundle.uncoded`) and replays the job as before.
+    let (dir, b) = sliced("v1");
+    let mut j = job(&b);
+    assert_eq!(j["version"], 2);
+    j["version"] = 1.into();
+    j["warnings"] = serde_json::json!(["mesh has 3 open edges (holes)"]);
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 0, "{r}");
+    assert_eq!(r["violations"].as_array().unwrap().len(), 0);
+    j["version"] = 3.into();
+    set_job(&b, &j);
+    let o = run_in(&dir, &["run", "box.dmdjob"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("unsupported version Some(3); this dmdsl reads versions 1 to 2"),
+        "{}",
+        stderr(&o)
+    );
+}
