@@ -373,6 +373,10 @@ pub enum Step {
 impl Manifest {
     /// Reads and checks `job.json` of the bundle at `dir`.
     pub fn read(dir: &Path) -> Result<Manifest> {
+        if !dir.exists() {
+            let e = std::io::Error::new(std::io::ErrorKind::NotFound, "does not exist");
+            return Err(Error::io(dir, e));
+        }
         if !dir.is_dir() {
             return Err(Error::Bundle {
                 path: dir.into(),

@@ -78,6 +78,37 @@ impl Error {
         }
     }
 
+    /// Stable code of this kind of error, for scripts (the `error.code` of `--json`
+    /// output): `io.not-found`, `io.permission-denied`, `io.other`, `input.malformed`,
+    /// `profile.invalid`, `job.infeasible`, `bundle.invalid`, `usage`, `interrupted`.
+    pub fn code(&self) -> &'static str {
+        match self {
+            Error::Io { source, .. } => match source.kind() {
+                std::io::ErrorKind::NotFound => "io.not-found",
+                std::io::ErrorKind::PermissionDenied => "io.permission-denied",
+                _ => "io.other",
+            },
+            Error::Input { .. } => "input.malformed",
+            Error::Profile { .. } => "profile.invalid",
+            Error::Job { .. } => "job.infeasible",
+            Error::Bundle { .. } => "bundle.invalid",
+            Error::Usage(_) => "usage",
+            Error::Interrupted => "interrupted",
+        }
+    }
+
+    /// The file (or profile, or bundle) the error is about, if any.
+    pub fn file(&self) -> Option<String> {
+        match self {
+            Error::Io { path, .. }
+            | Error::Input { path, .. }
+            | Error::Job { path, .. }
+            | Error::Bundle { path, .. } => Some(path.display().to_string()),
+            Error::Profile { origin, .. } => Some(origin.clone()),
+            Error::Usage(_) | Error::Interrupted => None,
+        }
+    }
+
     /// Process exit code for this error: 130 for an interrupt, 2 for everything else
     /// (usage and input errors; see README "Exit codes").
     pub fn exit_code(&self) -> i32 {

@@ -29,22 +29,59 @@ fn default_sigpipe() {
 fn main() -> ExitCode {
     #[cfg(unix)]
     default_sigpipe();
-    let cli = cli::Cli::parse();
+    let cli = match cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
+    let json = cli.json();
     match cli::run(cli) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            match e.downcast_ref::<dmdsl::Error>() {
-                // The library's errors are complete one-line messages (their sources are
-                // already in the text), so print them without the cause chain.
-                Some(d) => {
-                    eprintln!("dmdsl: error: {d}");
-                    ExitCode::from(d.exit_code() as u8)
-                }
-                None => {
-                    eprintln!("dmdsl: error: {e:#}");
-                    ExitCode::from(2)
-                }
+            let (code, file, exit) = match e.downcast_ref::<dmdsl::Error>() {
+                Some(d) => (d.code(), d.file(), d.exit_code() as u8),
+                None => ("internal", None, 2),
+            };
+            // The library's errors are complete one-line messages (their sources are
+            // already in the text), so print them without the cause chain.
+            let message = match e.downcast_ref::<dmdsl::Error>() {
+                Some(d) => d.to_string(),
+                None => format!("{e:#}"),
+            };
+            eprintln!("dmdsl: error: {message}");
+            if json {
+                println!("{}", cli::error_json(code, file, &message));
             }
+            ExitCode::from(exit)
         }
     }
+}
+
+/// A command line clap cannot parse: its message (and with `--json` the JSON error object)
+/// and exit code 2; `--help` and `--version` print and exit 0.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let json = std::env::args_os()
+        .skip(1)
+        .take_while(|a| a != "--")
+        .any(|a| a == "--json");
+    let _ = e.print();
+    if json {
+        let text = e.to_string();
+        let first = text
+            .lines()
+            .next()
+            .unwrap_or("")
+            .trim_start_matches("error: ")
+            .to_string();
+        println!("{}", cli::error_json("usage", None, &first));
+    }
+    ExitCode::from(2)
 }

@@ -233,6 +233,144 @@ impl Warning {
     }
 }
 
+/// What the command line does with warnings of a code: `-W CODE=error|warn|allow`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Silence: the warning is not reported.
+    Allow,
+    /// Report it as a warning (a note named by its code becomes a warning).
+    Warn,
+    /// Report it as an error: the command exits with code 1.
+    Error,
+}
+
+/// Which warnings a rule names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Pattern {
+    /// Every code (`all`).
+    All,
+    /// Every code of an area (`mesh`, or `mesh.*`).
+    Area(String),
+    /// One code.
+    Code(String),
+}
+
+impl Pattern {
+    /// More specific patterns win: a code over an area over `all`.
+    fn specificity(&self) -> u8 {
+        match self {
+            Pattern::All => 0,
+            Pattern::Area(_) => 1,
+            Pattern::Code(_) => 2,
+        }
+    }
+
+    fn matches(&self, code: &str) -> bool {
+        match self {
+            Pattern::All => true,
+            Pattern::Area(a) => code.split_once('.').is_some_and(|(area, _)| area == a),
+            Pattern::Code(c) => c == code,
+        }
+    }
+}
+
+/// The command line's rules for warnings (`--deny-warnings`, `--strict`, `-W CODE=ACTION`).
+///
+/// For each warning the most specific matching rule applies (a code over an area over
+/// `all`; among equally specific rules the last one). A rule naming an area or `all`
+/// turns warnings into errors but leaves notes alone (notes are information): only a rule
+/// naming the code makes a note an error or a warning. `allow` silences notes too.
+#[derive(Debug, Clone, Default)]
+pub struct Policy {
+    rules: Vec<(Pattern, Action)>,
+}
+
+impl Policy {
+    /// `--deny-warnings`: every warning of severity warning becomes an error (`all=error`).
+    pub fn deny_warnings(&mut self) {
+        self.rules.push((Pattern::All, Action::Error));
+    }
+
+    /// Adds a rule `CODE=ACTION`: CODE a code of [`CODES`], an area (`mesh` or `mesh.*`) or
+    /// `all`; ACTION `error` (or `deny`), `warn` or `allow`. The error is one line.
+    pub fn add(&mut self, rule: &str) -> Result<(), String> {
+        let (name, action) = rule.split_once('=').ok_or_else(|| {
+            format!(
+                "-W {rule}: expected CODE=error|warn|allow, e.g. -W plan.unsupported-islands=error"
+            )
+        })?;
+        let action = match action {
+            "error" | "deny" => Action::Error,
+            "warn" | "warning" => Action::Warn,
+            "allow" => Action::Allow,
+            other => {
+                return Err(format!(
+                    "-W {rule}: unknown action {other:?}; use error, warn or allow"
+                ))
+            }
+        };
+        let area = |a: &str| {
+            CODES
+                .iter()
+                .any(|c| c.code.split_once('.').map(|p| p.0) == Some(a))
+        };
+        let pattern = match name.strip_suffix(".*").unwrap_or(name) {
+            "all" | "*" => Pattern::All,
+            c if lookup(c).is_some() => Pattern::Code(c.into()),
+            a if area(a) => Pattern::Area(a.into()),
+            _ => {
+                let codes: Vec<&str> = CODES.iter().map(|c| c.code).collect();
+                return Err(format!(
+                    "-W {rule}: unknown warning code {name:?}; known codes: {}",
+                    codes.join(", ")
+                ));
+            }
+        };
+        self.rules.push((pattern, action));
+        Ok(())
+    }
+
+    /// The action for `w`, if a rule applies to it.
+    fn action(&self, w: &Warning) -> Option<Action> {
+        let mut best: Option<&(Pattern, Action)> = None;
+        for r in &self.rules {
+            let applies = r.0.matches(&w.code)
+                && (matches!(r.0, Pattern::Code(_))
+                    || r.1 == Action::Allow
+                    || w.severity >= Severity::Warning);
+            if applies && best.is_none_or(|b| r.0.specificity() >= b.0.specificity()) {
+                best = Some(r);
+            }
+        }
+        best.map(|r| r.1)
+    }
+
+    /// The warnings as reported under these rules: allowed ones left out, the others with
+    /// their severity as the rules set it ([`Severity::Error`] for denied ones).
+    pub fn apply(&self, warnings: &[Warning]) -> Vec<Warning> {
+        warnings
+            .iter()
+            .filter_map(|w| {
+                let severity = match self.action(w) {
+                    None => w.severity,
+                    Some(Action::Allow) => return None,
+                    Some(Action::Warn) => Severity::Warning,
+                    Some(Action::Error) => Severity::Error,
+                };
+                Some(Warning {
+                    severity,
+                    ..w.clone()
+                })
+            })
+            .collect()
+    }
+}
+
+/// True when any of `warnings` has severity [`Severity::Error`].
+pub fn any_error(warnings: &[Warning]) -> bool {
+    warnings.iter().any(|w| w.severity == Severity::Error)
+}
+
 /// `one` when `n` is 1, else `many` ("1 layer", "3 layers").
 pub fn plural<'a>(n: u64, one: &'a str, many: &'a str) -> &'a str {
     if n == 1 {
@@ -272,6 +410,83 @@ mod tests {
             "m [plan.travel-clamped]",
             "people see the code to allow or deny it"
         );
+    }
+
+    #[test]
+    fn policy_most_specific_rule_wins_and_notes_need_their_code() {
+        let ws = vec![
+            Warning::new("mesh.open-edges", "a"),
+            Warning::new("mesh.degenerate-facets", "b"),
+            Warning::new("plan.unsupported-islands", "c"),
+            Warning::new("plan.wait-capped", "d"),
+        ];
+        let sev = |p: &Policy| -> Vec<(String, Severity)> {
+            p.apply(&ws)
+                .into_iter()
+                .map(|w| (w.code, w.severity))
+                .collect()
+        };
+        let s = |c: &str, v: Severity| (c.to_string(), v);
+        // No rules: as raised.
+        assert_eq!(
+            sev(&Policy::default()),
+            vec![
+                s("mesh.open-edges", Severity::Warning),
+                s("mesh.degenerate-facets", Severity::Note),
+                s("plan.unsupported-islands", Severity::Warning),
+                s("plan.wait-capped", Severity::Note)
+            ]
+        );
+        // --deny-warnings: warnings fail, notes stay notes.
+        let mut p = Policy::default();
+        p.deny_warnings();
+        assert_eq!(
+            sev(&p),
+            vec![
+                s("mesh.open-edges", Severity::Error),
+                s("mesh.degenerate-facets", Severity::Note),
+                s("plan.unsupported-islands", Severity::Error),
+                s("plan.wait-capped", Severity::Note)
+            ]
+        );
+        // A code beats an area beats all, whatever the order; allow silences.
+        p.add("plan.unsupported-islands=allow").unwrap();
+        p.add("mesh=warn").unwrap();
+        p.add("plan.wait-capped=error").unwrap();
+        assert_eq!(
+            sev(&p),
+            vec![
+                s("mesh.open-edges", Severity::Warning),
+                s("mesh.degenerate-facets", Severity::Note),
+                s("plan.wait-capped", Severity::Error)
+            ]
+        );
+        assert!(any_error(&p.apply(&ws)));
+        // Equally specific: the last rule wins; `mesh.*` is the area.
+        let mut p = Policy::default();
+        p.add("mesh.*=error").unwrap();
+        p.add("mesh=allow").unwrap();
+        assert_eq!(
+            sev(&p),
+            vec![
+                s("plan.unsupported-islands", Severity::Warning),
+                s("plan.wait-capped", Severity::Note)
+            ]
+        );
+        // Bad rules are one-line errors naming the rule.
+        let mut p = Policy::default();
+        assert!(p
+            .add("mesh.open-edge=error")
+            .unwrap_err()
+            .contains("unknown warning code \"mesh.open-edge\""));
+        assert!(p
+            .add("mesh.open-edges=fatal")
+            .unwrap_err()
+            .contains("unknown action"));
+        assert!(p
+            .add("mesh.open-edges")
+            .unwrap_err()
+            .contains("expected CODE="));
     }
 
     #[test]

@@ -4,6 +4,12 @@ use clap::Args;
 use dmdsl::profile::{self, Profile};
 use std::path::PathBuf;
 
+pub(crate) const CALIBRATE_EXIT_HELP: &str = "Exit codes:
+  0    the calibration (and its plots) were written
+  1    written, but a warning was denied (--deny-warnings, -W CODE=error)
+  2    usage or input error (unreadable or malformed measurements, a set-up the model
+       cannot fit, bad profile); nothing was written";
+
 #[derive(Args)]
 pub(crate) struct CalibrateArgs {
     /// Measurements: CSV with header x_mm,y_mm,gray,irradiance_mw_cm2 (zone centre from the
@@ -34,13 +40,23 @@ pub(crate) struct CalibrateArgs {
     /// Print a machine-readable report on stdout.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    warnings: super::WarningArgs,
+}
+
+impl CalibrateArgs {
+    /// True when `--json` was given.
+    pub(crate) fn json(&self) -> bool {
+        self.json
+    }
 }
 
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     use dmdsl::optics::report::{self, CalibrateOptions};
+    let policy = a.warnings.policy(&[])?;
     let field = Profile::resolve(&a.profile)?.field();
-    let r = report::calibrate(&CalibrateOptions {
+    let mut r = report::calibrate(&CalibrateOptions {
         input: a.input,
         output: a.output,
         units: if a.relative {
@@ -54,14 +70,29 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         degree: a.degree,
         plots: !a.no_plots,
     })?;
+    r.warnings = policy.apply(&r.warnings);
+    let exit = if dmdsl::warning::any_error(&r.warnings) {
+        1
+    } else {
+        0
+    };
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
-        return Ok(0);
+        #[derive(serde::Serialize)]
+        struct Out<'a> {
+            ok: bool,
+            #[serde(flatten)]
+            report: &'a dmdsl::optics::report::CalibrateReport,
+        }
+        super::print_json(&Out {
+            ok: exit == 0,
+            report: &r,
+        })?;
+        return Ok(exit);
     }
     if quiet {
-        return Ok(0);
+        return Ok(exit);
     }
-    super::print_warnings(&r.warnings);
+    super::print_warnings(&r.warnings, "");
     let u = if r.units == "relative" {
         ""
     } else {
@@ -111,5 +142,5 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     for p in &r.plots {
         println!("plot: {}", p.display());
     }
-    Ok(0)
+    Ok(exit)
 }

@@ -5,6 +5,10 @@ use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::profile::{self, Profile};
 use std::path::PathBuf;
 
+pub(crate) const DISTORTION_EXIT_HELP: &str = "Exit codes:
+  0    the table was fitted (and the plot written)
+  2    usage or input error (unreadable or malformed table, bad profile)";
+
 #[derive(Args)]
 pub(crate) struct DistortionArgs {
     /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm (docs/GEOMETRY.md).
@@ -20,6 +24,13 @@ pub(crate) struct DistortionArgs {
     json: bool,
 }
 
+impl DistortionArgs {
+    /// True when `--json` was given.
+    pub(crate) fn json(&self) -> bool {
+        self.json
+    }
+}
+
 /// Runs `dmdsl distortion`.
 pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
     let mut profile = Profile::resolve(&a.profile)?;
@@ -32,8 +43,9 @@ pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
         std::fs::write(p, c.plot_png()).map_err(|e| dmdsl::Error::io(p, e))?;
     }
     if a.json {
-        let v = serde_json::json!({ "report": report, "reachable_fraction": reachable });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        let v =
+            serde_json::json!({ "ok": true, "report": report, "reachable_fraction": reachable });
+        super::print_json(&v)?;
     } else if !quiet {
         println!("{}", report.summary());
         println!(

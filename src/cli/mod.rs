@@ -7,13 +7,96 @@ mod profile;
 mod run;
 mod slice;
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
+use dmdsl::warning::{Policy, Warning};
+use serde::Serialize;
 
-pub(crate) const EXIT_HELP: &str = "Exit codes:
+/// Version of the `--json` outputs' schemas (`docs/JSON.md`); every `--json` object carries
+/// it as `schema_version`.
+pub(crate) const SCHEMA_VERSION: u32 = 1;
+
+/// A `--json` object: `schema_version` first, then the command's fields.
+#[derive(Serialize)]
+struct Versioned<'a, T: Serialize> {
+    schema_version: u32,
+    #[serde(flatten)]
+    body: &'a T,
+}
+
+/// Prints `body` as one pretty-printed JSON object on stdout, with `schema_version`.
+pub(crate) fn print_json<T: Serialize>(body: &T) -> anyhow::Result<()> {
+    let v = Versioned {
+        schema_version: SCHEMA_VERSION,
+        body,
+    };
+    println!("{}", serde_json::to_string_pretty(&v)?);
+    Ok(())
+}
+
+/// The JSON object of a failure: `{schema_version, ok: false, error: {code, file,
+/// message}}` (one line).
+pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> String {
+    #[derive(Serialize)]
+    struct Failure<'a> {
+        code: &'a str,
+        file: Option<String>,
+        message: &'a str,
+    }
+    #[derive(Serialize)]
+    struct Out<'a> {
+        schema_version: u32,
+        ok: bool,
+        error: Failure<'a>,
+    }
+    serde_json::to_string(&Out {
+        schema_version: SCHEMA_VERSION,
+        ok: false,
+        error: Failure {
+            code,
+            file,
+            message,
+        },
+    })
+    .expect("serializes")
+}
+
+/// The options that decide which warnings fail a command or are silenced.
+#[derive(Args, Clone, Default)]
+pub(crate) struct WarningArgs {
+    /// Exit with code 1 when a warning (severity warning, not a note) is raised; the
+    /// output is still written. Same as -W all=error.
+    #[arg(long)]
+    deny_warnings: bool,
+    /// What to do with warnings of CODE (a code such as plan.unsupported-islands, an area
+    /// such as mesh, or all): error (exit 1), warn, or allow (silence). Repeatable; a code
+    /// beats an area beats all. Codes: docs/WARNINGS.md, or any unknown CODE lists them.
+    #[arg(short = 'W', value_name = "CODE=error|warn|allow")]
+    warn: Vec<String>,
+}
+
+impl WarningArgs {
+    /// The policy these options give, after `extra` rules (e.g. `--strict`'s).
+    pub(crate) fn policy(&self, extra: &[&str]) -> Result<Policy, dmdsl::Error> {
+        let mut p = Policy::default();
+        if self.deny_warnings {
+            p.deny_warnings();
+        }
+        for r in extra
+            .iter()
+            .copied()
+            .chain(self.warn.iter().map(String::as_str))
+        {
+            p.add(r).map_err(dmdsl::Error::Usage)?;
+        }
+        Ok(p)
+    }
+}
+
+pub(crate) const EXIT_HELP: &str = "Exit codes (each command's --help says what they mean for it):
   0    success
-  1    finished, but checks failed (slice --strict with mesh defects)
-  2    usage or input error (bad file, bad profile, part does not fit)
-  130  interrupted (Ctrl-C); nothing was written";
+  1    finished, but checks failed (denied warnings, run violations)
+  2    usage or input error
+  130  interrupted (Ctrl-C)";
 
 /// Build-job compiler for DMD mask-projection stereolithography.
 #[derive(Parser)]
@@ -29,7 +112,7 @@ pub(crate) struct Cli {
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
     /// Slice a part (STL or OBJ) into a job bundle of mask PNGs and a manifest.
-    #[command(after_help = EXIT_HELP)]
+    #[command(after_help = slice::SLICE_EXIT_HELP)]
     Slice(slice::SliceArgs),
     /// Show or list machine profiles.
     #[command(subcommand)]
@@ -39,15 +122,16 @@ pub(crate) enum Cmd {
     #[command(after_help = run::RUN_EXIT_HELP)]
     Run(run::RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
-    #[command(after_help = EXIT_HELP)]
+    #[command(after_help = calibrate::CALIBRATE_EXIT_HELP)]
     Calibrate(calibrate::CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
-    #[command(after_help = EXIT_HELP)]
+    #[command(after_help = distortion::DISTORTION_EXIT_HELP)]
     Distortion(distortion::DistortionArgs),
 }
 
-/// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`).
-pub(crate) fn print_warnings(warnings: &[dmdsl::warning::Warning]) {
+/// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`,
+/// `error:`), after `prefix` (e.g. the part's name when several are sliced).
+pub(crate) fn print_warnings(warnings: &[Warning], prefix: &str) {
     use dmdsl::warning::Severity;
     for w in warnings {
         let label = match w.severity {
@@ -55,7 +139,20 @@ pub(crate) fn print_warnings(warnings: &[dmdsl::warning::Warning]) {
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
-        eprintln!("dmdsl: {label}: {w}");
+        eprintln!("dmdsl: {label}: {prefix}{w}");
+    }
+}
+
+impl Cli {
+    /// True when the command was asked for `--json` output.
+    pub(crate) fn json(&self) -> bool {
+        match &self.cmd {
+            Cmd::Slice(a) => a.json(),
+            Cmd::Run(a) => a.json(),
+            Cmd::Calibrate(a) => a.json(),
+            Cmd::Distortion(a) => a.json(),
+            Cmd::Profile(_) => false,
+        }
     }
 }
 

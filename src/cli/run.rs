@@ -32,6 +32,13 @@ pub(crate) struct RunArgs {
     fault: Vec<String>,
 }
 
+impl RunArgs {
+    /// True when `--json` was given.
+    pub(crate) fn json(&self) -> bool {
+        self.json
+    }
+}
+
 /// Runs `dmdsl run`.
 pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
     let faults = a
@@ -47,7 +54,7 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
     };
     let report = dmdsl::exec::run(&a.bundle, &opts)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        super::print_json(&report)?;
     } else if !quiet {
         print!("{}", dmdsl::exec::report::render_human(&report));
     }

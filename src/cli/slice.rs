@@ -11,6 +11,14 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+pub(crate) const SLICE_EXIT_HELP: &str = "Exit codes:
+  0    the bundle was written (warnings and notes do not change this)
+  1    the bundle was written, but a warning was denied (--strict, --deny-warnings,
+       -W CODE=error)
+  2    usage or input error (unreadable or malformed part, bad profile, part does not fit
+       the field or the stage travel); nothing was written
+  130  interrupted (Ctrl-C); nothing was written";
+
 /// Dithering of compensated grays.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum DitherArg {
@@ -52,7 +60,9 @@ pub(crate) struct SliceArgs {
     /// Use the file's coordinates as build-plane coordinates instead of centring the part.
     #[arg(long)]
     keep_position: bool,
-    /// Exit with code 1 if the mesh has defects (the bundle is still written).
+    /// Exit with code 1 if the mesh has defects (the bundle is still written). Same as
+    /// -W mesh=error: open, non-manifold or backwards edges (notes such as degenerate
+    /// facets do not count).
     #[arg(long)]
     strict: bool,
     /// Light calibration file from `dmdsl calibrate`, replacing the profile's (repeatable:
@@ -76,10 +86,22 @@ pub(crate) struct SliceArgs {
     /// ignore the profile's [distortion] (default: the profile's, if any).
     #[arg(long, value_name = "TABLE.csv|off")]
     distortion: Option<PathBuf>,
+    #[command(flatten)]
+    warnings: super::WarningArgs,
+}
+
+impl SliceArgs {
+    /// True when `--json` was given.
+    pub(crate) fn json(&self) -> bool {
+        self.json
+    }
 }
 
 /// Runs `dmdsl slice`.
 pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
+    let policy = a
+        .warnings
+        .policy(if a.strict { &["mesh=error"] } else { &[] })?;
     let mut profile = Profile::resolve(&a.profile)?;
     dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
     let optics = dmdsl::optics::OpticsOptions {
@@ -136,11 +158,12 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) => DistortionChoice::Table(p.clone()),
         },
     };
-    let summary = job::slice_to_bundle(&opts)?;
-    let defects = !summary.mesh.closed_manifold;
-    let failed = a.strict && defects;
+    let mut summary = job::slice_to_bundle(&opts)?;
+    summary.warnings = policy.apply(&summary.warnings);
+    let failed = dmdsl::warning::any_error(&summary.warnings);
     if a.json {
         let v = serde_json::json!({
+            "ok": !failed,
             "bundle": summary.bundle,
             "layers": summary.layers,
             "warnings": summary.warnings,
@@ -148,11 +171,10 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             "totals": summary.totals,
             "timings": summary.timings,
             "distortion": summary.distortion,
-            "checks_failed": failed,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        super::print_json(&v)?;
     } else if !quiet {
-        super::print_warnings(&summary.warnings);
+        super::print_warnings(&summary.warnings, "");
         if let Some(d) = &summary.distortion {
             println!("{}", d.summary());
         }
@@ -178,8 +200,8 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         }
     }
     if failed {
-        if !quiet {
-            eprintln!("dmdsl: --strict: mesh has defects (see warnings); exit code 1");
+        if !quiet && !a.json {
+            eprintln!("dmdsl: warnings denied (see the error lines above); exit code 1");
         }
         return Ok(1);
     }

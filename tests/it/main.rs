@@ -5,6 +5,7 @@
 mod calibrate;
 mod common;
 mod geometry;
+mod json;
 mod layers;
 mod plan;
 mod run;
