@@ -25,7 +25,7 @@ fn main() {
     let h = 0.05;
     let profile = Profile::default_profile();
     let field = profile.field();
-    let (mesh, n) = common::placed(&model, &field, h);
+    let (mesh, n) = common::placed(&model, &profile, h);
     let sections = dmdsl::slice::slice(&mesh, h, n).0;
 
     let t = Instant::now();
@@ -94,7 +94,7 @@ fn main() {
     };
     let tiled = Profile::resolve("tiled-2x1").unwrap();
     let tfield = tiled.field();
-    let (mesh, _) = common::placed(&model, &tfield, h);
+    let (mesh, _) = common::placed(&model, &tiled, h);
     let tsections = dmdsl::slice::slice(&mesh, h, n).0;
     let t = Instant::now();
     let tiler = Tiler::new(

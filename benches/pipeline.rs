@@ -25,7 +25,7 @@ fn main() {
     let field = profile.field();
 
     let t = Instant::now();
-    let (mesh, n) = common::placed(&model, &field, h);
+    let (mesh, n) = common::placed(&model, &profile, h);
     let load_s = t.elapsed().as_secs_f64();
 
     let mut slice_t = Vec::new();

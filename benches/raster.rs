@@ -51,7 +51,7 @@ fn main() {
     println!("| model | method | area error | pixels across 50 % vs exact (% of lit) | ms/layer |");
     println!("|---|---|---:|---:|---:|");
     for model in models {
-        let (mesh, n) = common::placed(&model, &field, 0.05);
+        let (mesh, n) = common::placed(&model, &profile, 0.05);
         let sections = dmdsl::slice::slice(&mesh, 0.05, n).0;
         let exact_area: f64 = sections
             .iter()

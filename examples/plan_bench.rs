@@ -42,7 +42,7 @@ fn main() {
         .map(|s| s.parse().expect("repeats"))
         .unwrap_or(5);
     let field = p.field();
-    let (mesh, n) = common::placed(&path, &field, h);
+    let (mesh, n) = common::placed(&path, &p, h);
     let (t_slice, (sections, _)) = best_of(reps, || dmdsl::slice::slice(&mesh, h, n));
     let r = Rasterizer::new(field);
     let mut sc = Scratch::default();

@@ -66,12 +66,20 @@ pub fn plane_z(i: usize, h: f64) -> f64 {
     (i as f64 + 0.5) * h
 }
 
-/// Number of layers of a part whose top is at `z_max` (partial top layer dropped).
-pub fn layer_count(z_max: f64, h: f64) -> usize {
+/// Number of layers of a part whose top is at `z_max` (partial top layer dropped), or
+/// `None` when that count is beyond what an `f64` division can give exactly (a far-off
+/// vertex, a vanishing layer height).
+pub fn layer_count(z_max: f64, h: f64) -> Option<usize> {
     if z_max <= 0.0 {
-        return 0;
+        return Some(0);
     }
-    let mut n = (z_max / h).floor() as usize;
+    let q = (z_max / h).floor();
+    // Counts beyond 2^52 have no exact f64 neighbours to step between (and no machine
+    // prints them): say so instead of saturating or wrapping.
+    if q.is_nan() || q >= (1u64 << 52) as f64 {
+        return None;
+    }
+    let mut n = q as usize;
     // Guard against floating error in the division.
     while n > 0 && (n as f64) * h > z_max + 1e-12 {
         n -= 1;
@@ -79,7 +87,7 @@ pub fn layer_count(z_max: f64, h: f64) -> usize {
     while ((n + 1) as f64) * h <= z_max {
         n += 1;
     }
-    n
+    Some(n)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -473,10 +481,14 @@ mod tests {
 
     #[test]
     fn layer_count_rule() {
-        assert_eq!(layer_count(25.0, 0.05), 500);
-        assert_eq!(layer_count(0.049, 0.05), 0);
-        assert_eq!(layer_count(0.1, 0.05), 2);
-        assert_eq!(layer_count(0.12, 0.05), 2);
+        assert_eq!(layer_count(25.0, 0.05), Some(500));
+        assert_eq!(layer_count(0.049, 0.05), Some(0));
+        assert_eq!(layer_count(0.1, 0.05), Some(2));
+        assert_eq!(layer_count(0.12, 0.05), Some(2));
+        // Counts no f64 can step through are refused, never saturated or wrapped.
+        assert_eq!(layer_count(1e20, 1.0), None);
+        assert_eq!(layer_count(10.0, 1e-300), None);
+        assert_eq!(layer_count(f64::INFINITY, 1.0), None);
     }
 
     #[test]

@@ -9,10 +9,11 @@ use dmdsl::profile::{Field, Profile};
 use dmdsl::slice::Section;
 use std::path::{Path, PathBuf};
 
-/// The mesh at `path`, centred on `field`, and its number of layers of height `h` mm.
-pub fn placed(path: &Path, field: &Field, h: f64) -> (Mesh, usize) {
+/// The mesh at `path`, centred on `profile`'s field, and its number of layers of height `h` mm.
+pub fn placed(path: &Path, profile: &Profile, h: f64) -> (Mesh, usize) {
     let mut mesh = dmdsl::mesh::load(path).expect("model loads");
-    let (_, n) = place_mesh(path, &mut mesh, field, PlacementMode::Center, h).expect("model fits");
+    let (_, n) =
+        place_mesh(path, &mut mesh, profile, PlacementMode::Center, h).expect("model fits");
     (mesh, n)
 }
 
@@ -22,7 +23,7 @@ pub fn default_sections(path: &Path) -> (Vec<Section>, Field) {
     let p = Profile::default_profile();
     let h = p.slicing.layer_height_mm.get();
     let field = p.field();
-    let (mesh, n) = placed(path, &field, h);
+    let (mesh, n) = placed(path, &p, h);
     (dmdsl::slice::slice(&mesh, h, n).0, field)
 }
 

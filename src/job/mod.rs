@@ -135,7 +135,7 @@ fn load_and_place<'a>(
     let (sha256, mut mesh) = loaded?;
     let h = profile.slicing.layer_height_mm.get();
     let bbox_in_file = mesh.bbox();
-    let (translate_mm, layers) = place_mesh(path, &mut mesh, &profile.field(), opts.placement, h)?;
+    let (translate_mm, layers) = place_mesh(path, &mut mesh, profile, opts.placement, h)?;
     let part = PlacedPart {
         path,
         sha256,

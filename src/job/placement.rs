@@ -2,7 +2,7 @@
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::profile::Field;
+use crate::profile::Profile;
 use crate::slice;
 use std::path::Path;
 
@@ -76,31 +76,77 @@ pub fn placement(
     Ok(t)
 }
 
-/// Places a loaded mesh on `field` by `mode` (translating it) and returns the translation
-/// and the number of layers of height `h`; a part that does not fit or is thinner than one
-/// layer is an error naming `path`. `slice_to_bundle`, the benchmarks and tools that drive
-/// the stages themselves share this.
+/// The most layers a job may have. At 1 µm layers that is a part 1 m tall; a larger count
+/// comes from a far-off vertex or a mistyped layer height, and would write a mask per layer.
+pub const MAX_LAYERS: usize = 1_000_000;
+
+/// Places a loaded mesh on the profile's field by `mode` (translating it) and returns the
+/// translation and the number of layers of height `h`. A part that does not fit the field,
+/// is thinner than one layer, is taller than the stage travels, or needs more than
+/// [`MAX_LAYERS`] layers is an error naming `path`, found before anything is sliced.
+/// `slice_to_bundle`, the benchmarks and tools that drive the stages themselves share this.
 pub fn place_mesh(
     path: &Path,
     mesh: &mut Mesh,
-    field: &Field,
+    profile: &Profile,
     mode: PlacementMode,
     h: f64,
 ) -> Result<([f64; 3], usize)> {
+    let field = profile.field();
     let bbox = mesh.bbox();
     let t = placement(path, bbox, field.width_mm(), field.height_mm(), mode)?;
     mesh.translate(t);
-    let n = slice::layer_count(bbox[1][2] + t[2], h);
+    let top = bbox[1][2] + t[2];
+    let tall = bbox[1][2] - bbox[0][2];
+    let job_error = |msg: String| Error::Job {
+        path: path.into(),
+        msg,
+    };
+    // The last layer is exposed at its top, n·h ≤ top: a part whose top lies beyond the
+    // stage travel cannot be printed, whatever the process.
+    let travel_max = profile.stage.travel_max_mm;
+    if top.is_nan() || top > travel_max {
+        return Err(job_error(format!(
+            "part is {} mm tall, its top at {} mm, but the stage travels only to stage.travel_max_mm = {} mm",
+            mm(tall),
+            mm(top),
+            mm(travel_max)
+        )));
+    }
+    let n = match slice::layer_count(top, h) {
+        Some(n) if n <= MAX_LAYERS => n,
+        _ => {
+            return Err(job_error(format!(
+                "a part {} mm tall at {} mm layers needs more than {MAX_LAYERS} layers",
+                mm(tall),
+                mm(h)
+            )))
+        }
+    };
     if n == 0 {
-        return Err(Error::Job {
-            path: path.into(),
-            msg: format!(
-                "part is {:.4} mm tall, less than one layer ({h} mm): nothing to print",
-                bbox[1][2] - bbox[0][2]
-            ),
-        });
+        return Err(job_error(format!(
+            "part is {} mm tall, less than one layer ({} mm): nothing to print",
+            mm(tall),
+            mm(h)
+        )));
     }
     Ok((t, n))
+}
+
+/// A length for a message: 4 significant decimals, or scientific notation where that
+/// would print a long run of digits.
+fn mm(v: f64) -> String {
+    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-3) {
+        format!("{v:.3e}")
+    } else {
+        let s = format!("{v:.4}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        if s == "-0" {
+            "0".into()
+        } else {
+            s.into()
+        }
+    }
 }
 
 #[cfg(test)]

@@ -366,11 +366,18 @@ fn replaces_only_bundles_atomically() {
 /// Runs `slice` on a bad input: exit code 2, one line on stderr naming the file and the
 /// problem, nothing written.
 fn bad_input(name: &str, bytes: Option<&[u8]>, expect: &str) {
+    bad_input_with(name, bytes, &[], expect)
+}
+
+/// [`bad_input`] with more `slice` arguments.
+fn bad_input_with(name: &str, bytes: Option<&[u8]>, args: &[&str], expect: &str) {
     let dir = tempdir(&format!("bad-{name}"));
     if let Some(b) = bytes {
         std::fs::write(dir.join(name), b).unwrap();
     }
-    let o = run_in(&dir, &["slice", name, "-o", "out.dmdjob"]);
+    let mut all = vec!["slice", name, "-o", "out.dmdjob"];
+    all.extend_from_slice(args);
+    let o = run_in(&dir, &all);
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{name}: {e}");
     assert_eq!(
@@ -469,6 +476,42 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
         "{}",
         stderr(&o)
     );
+}
+
+#[test]
+fn far_vertices_and_tiny_layers_are_refused_before_slicing() {
+    // One vertex of a 10 mm box moved far up: the part is taller than the stage travels
+    // (before, the layer count saturated and wrapped, or tried to allocate terabytes).
+    let d = tempdir("far-src");
+    for (i, z) in [1e20f32, 1e12, 1e6].into_iter().enumerate() {
+        let mut tris = box_tris([0.0; 3], [10.0, 10.0, 10.0]);
+        for t in tris.iter_mut() {
+            for v in t.iter_mut() {
+                if *v == [10.0, 10.0, 10.0] {
+                    v[2] = z;
+                }
+            }
+        }
+        let name = format!("far{i}.stl");
+        write_stl(&d.join(&name), &tris);
+        bad_input_with(
+            &name,
+            Some(&std::fs::read(d.join(&name)).unwrap()),
+            &["--layer-height", "1"],
+            "but the stage travels only to stage.travel_max_mm",
+        );
+    }
+    let name = "box.stl";
+    write_stl(&d.join(name), &box_tris([0.0; 3], [10.0, 10.0, 10.0]));
+    let bytes = std::fs::read(d.join(name)).unwrap();
+    for h in ["1e-300", "1e-12", "1e-6"] {
+        bad_input_with(
+            name,
+            Some(&bytes),
+            &["--layer-height", h],
+            "layers needs more than 1000000 layers",
+        );
+    }
 }
 
 #[test]
