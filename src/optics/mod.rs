@@ -129,7 +129,11 @@ pub fn apply_calibration_args(profile: &mut Profile, args: &[String]) -> Result<
                 )))
             }
         };
-        profile.projector[k].calibration = Some(Calibration::read(Path::new(file))?);
+        let c = Calibration::read(Path::new(file))?;
+        profile.projector[k]
+            .check_calibration(&c)
+            .map_err(|m| Error::input(Path::new(file), m))?;
+        profile.projector[k].calibration = Some(c);
     }
     Ok(())
 }

@@ -121,6 +121,32 @@ pub struct Projector {
     pub calibration: Option<Calibration>,
 }
 
+/// The smallest pixel on the build plane a profile may give, mm (1 µm).
+pub const PIXEL_MM_MIN: f64 = 0.001;
+/// The largest pixel on the build plane a profile may give, mm.
+pub const PIXEL_MM_MAX: f64 = 1.0;
+/// The largest field, in pixels each way, that projectors and their offsets may span.
+pub const FIELD_PX_MAX: u32 = 65536;
+
+impl Projector {
+    /// Checks that calibration `c` can be applied to this projector: valid in itself, and
+    /// zones no smaller than a pixel (a zone grid finer than the pixels means nothing and
+    /// would take memory without bound).
+    pub fn check_calibration(&self, c: &Calibration) -> std::result::Result<(), String> {
+        c.validate()
+            .map_err(|m| format!("projector {} calibration: {m}", self.name))?;
+        if c.zone_mm.get() < self.pixel_mm.get() {
+            return Err(format!(
+                "projector {} calibration: zone_mm = {:?} is smaller than a pixel ({:?} mm)",
+                self.name,
+                c.zone_mm.get(),
+                self.pixel_mm.get()
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Slicing settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -304,12 +330,29 @@ impl Profile {
             if p.width_px > 16384 || p.height_px > 16384 {
                 return Err(format!("projector {}: resolution above 16384 px", p.name));
             }
+            if !(PIXEL_MM_MIN..=PIXEL_MM_MAX).contains(&p.pixel_mm.get()) {
+                return Err(format!(
+                    "projector {}: pixel_mm = {:?} is not a pixel size on the build plane ({PIXEL_MM_MIN} to {PIXEL_MM_MAX} mm; was it given in µm?)",
+                    p.name,
+                    p.pixel_mm.get()
+                ));
+            }
+            for (k, (off, size)) in [(p.offset_px[0], p.width_px), (p.offset_px[1], p.height_px)]
+                .into_iter()
+                .enumerate()
+            {
+                if u64::from(off) + u64::from(size) > u64::from(FIELD_PX_MAX) {
+                    return Err(format!(
+                        "projector {}: offset_px[{k}] = {off} puts its pixels beyond the largest field ({FIELD_PX_MAX} px each way)",
+                        p.name
+                    ));
+                }
+            }
             if (p.pixel_mm.get() - px).abs() > 1e-12 {
                 return Err("all projectors must have the same pixel_mm".into());
             }
             if let Some(c) = &p.calibration {
-                c.validate()
-                    .map_err(|m| format!("projector {} calibration: {m}", p.name))?;
+                p.check_calibration(c)?;
             }
         }
         let s = &self.stage;

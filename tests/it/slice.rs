@@ -592,6 +592,62 @@ fn profile_show_round_trips_and_bad_profile_is_clear() {
 }
 
 #[test]
+fn implausible_machine_values_are_refused_naming_the_key() {
+    let dir = tempdir("profile-ranges");
+    let f = fixture("cube10.stl");
+    let show = |name: &str| stdout(&run_in(&dir, &["profile", "show", name]));
+    let (one, tiled) = (show("xu2010-topdown"), show("tiled-2x1"));
+    let cases = [
+        // µm typed for mm.
+        (
+            &one,
+            "pixel_mm = 0.0634765625",
+            "pixel_mm = 63.4765625",
+            "pixel_mm = 63.4765625 is not a pixel size",
+        ),
+        (
+            &one,
+            "offset_px = [0, 0]",
+            "offset_px = [4294967295, 0]",
+            "offset_px[0] = 4294967295",
+        ),
+        (
+            &tiled,
+            "offset_px = [992, 0]",
+            "offset_px = [4000000000, 0]",
+            "offset_px[0] = 4000000000",
+        ),
+        (
+            &one,
+            "zone_mm = 5.0",
+            "zone_mm = 1e-308",
+            "zone_mm = 1e-308 is smaller than a pixel",
+        ),
+        (
+            &one,
+            "zone_mm = 5.0",
+            "zone_mm = 0.0005",
+            "zone_mm = 0.0005 is smaller than a pixel",
+        ),
+    ];
+    for (i, (text, from, to, expect)) in cases.into_iter().enumerate() {
+        assert!(text.contains(from), "{from}");
+        let name = format!("p{i}.toml");
+        std::fs::write(dir.join(&name), text.replacen(from, to, 1)).unwrap();
+        let out = format!("o{i}.dmdjob");
+        let o = run_in(
+            &dir,
+            &["slice", f.to_str().unwrap(), "-p", &name, "-o", &out],
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{to}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{to}: {e}");
+        assert!(e.contains(&name) && e.contains(expect), "{to}: {e}");
+        assert!(!dir.join(&out).exists());
+    }
+}
+
+#[test]
 fn mirror_flags_flip_the_image() {
     let dir = tempdir("mirror");
     let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
