@@ -251,6 +251,21 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     })
 }
 
+/// Simulates a manifest's steps without reading any mask: the invariants and timing checks
+/// of [`run`] (a broken step, a move outside the travel or faster than the stage, light
+/// while moving, an estimate off by more than 1 %, …), for a job before it is written.
+/// Empty when the job replays clean.
+pub fn replay(manifest: &Manifest) -> Vec<Violation> {
+    let mut checker = check::Checker::new(manifest);
+    let outcome = {
+        let mut sinks: Vec<&mut dyn Sink> = vec![&mut checker];
+        sim::simulate(manifest, &[], &mut sinks)
+    };
+    let mut violations = checker.finish(outcome.total_s, outcome.fault.is_none());
+    violations.extend(outcome.invalid_steps.iter().cloned());
+    violations
+}
+
 /// The temporary sibling (`.NAME.tmp-PID`) a file is written to before it is renamed into
 /// place, or `None` when `path` has no file name.
 fn temp_sibling(path: &Path) -> Option<PathBuf> {

@@ -68,6 +68,11 @@ struct SetUp {
 pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let t0 = Instant::now();
     let mut profile = opts.job_profile();
+    // The command line's layer height and flags must fit the machine too.
+    profile.validate().map_err(|msg| Error::Profile {
+        origin: profile.name.clone(),
+        msg,
+    })?;
     let (setup, part) = load_and_place(opts, &mut profile)?;
     let load_s = t0.elapsed().as_secs_f64();
     let writer = open_bundle(opts, &profile, &setup)?;
@@ -100,6 +105,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion_report.clone(),
         warnings,
     );
+    replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);
     }
@@ -121,6 +127,28 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         },
         distortion: distortion_report,
     })
+}
+
+/// A job dmdsl writes replays clean in `dmdsl run`: the planned steps are simulated
+/// ([`crate::exec::replay`]) before the bundle is moved into place, and any violation
+/// (a move outside the travel, a step the stage cannot make, times that overflow, …) is an
+/// error naming the model, so nothing is written.
+fn replays_clean(manifest: &bundle::Manifest, path: &Path) -> Result<()> {
+    let violations = crate::exec::replay(manifest);
+    match violations.first() {
+        None => Ok(()),
+        Some(v) => Err(Error::Job {
+            path: path.into(),
+            msg: format!(
+                "the planned job does not replay clean on its machine: {}{}",
+                v.message,
+                match violations.len() {
+                    1 => String::new(),
+                    k => format!(" (and {} more)", k - 1),
+                }
+            ),
+        }),
+    }
 }
 
 /// Sets the machine up for the job (completing `profile`) and reads and places the model.
@@ -273,4 +301,33 @@ fn read_model(path: &Path) -> Result<(String, Mesh)> {
         || mesh::load_bytes(path, &bytes),
     );
     Ok((sha, mesh?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundle::Step;
+    use crate::exec::testutil;
+
+    #[test]
+    fn a_job_that_would_not_replay_clean_is_refused() {
+        let good = testutil::two_layer_topdown();
+        assert!(replays_clean(&good, Path::new("part.stl")).is_ok());
+        // Dip beyond the travel (0..120 mm) and expose longer than planned.
+        let mut bad = good.clone();
+        bad.layers[1].steps[0] = Step::Move {
+            to_mm: 500.0,
+            speed_mm_s: 2.0,
+            accel_mm_s2: 50.0,
+        };
+        let e = replays_clean(&bad, Path::new("part.stl"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("part.stl: the planned job does not replay clean"),
+            "{e}"
+        );
+        assert!(e.contains("leaves the stage travel"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
 }

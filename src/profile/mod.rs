@@ -355,7 +355,17 @@ impl Profile {
                 p.check_calibration(c)?;
             }
         }
+        check_unit_ranges(&serde_json::to_value(self).map_err(|e| e.to_string())?, "")?;
         let s = &self.stage;
+        let step_mm = 1.0 / s.steps_per_mm.get();
+        if step_mm > self.slicing.layer_height_mm.get() {
+            return Err(format!(
+                "stage.steps_per_mm = {:?} gives steps of {} mm, coarser than the layer height ({:?} mm)",
+                s.steps_per_mm.get(),
+                short(step_mm),
+                self.slicing.layer_height_mm.get()
+            ));
+        }
         if !(s.travel_min_mm.is_finite() && s.travel_max_mm.is_finite() && s.home_mm.is_finite()) {
             return Err("stage travel and home must be finite numbers".into());
         }
@@ -393,6 +403,65 @@ impl Profile {
             height_px: h,
             pixel_mm: self.projector[0].pixel_mm.get(),
         }
+    }
+}
+
+/// Physical ranges of the quantities a profile holds, by the unit its key ends with (every
+/// key carries its unit): durations, speeds, accelerations and lengths. A value outside is
+/// a typo or a unit mix-up (µm for mm, ms for s), and would plan a job that overflows.
+const UNIT_RANGES: [(&str, &str, f64, f64); 6] = [
+    // (key suffix, what, smallest magnitude when not 0, largest magnitude)
+    ("_pa_s", "a viscosity", 1e-6, 1e6),
+    ("_mm_s2", "an acceleration", 1e-6, 1e6),
+    ("_mm_s", "a speed", 1e-6, 1e4),
+    ("steps_per_mm", "a stage resolution", 1e-3, 1e7),
+    ("_s", "a duration", 0.0, 1e6),
+    ("_mm", "a length", 0.0, 1e4),
+];
+
+/// Checks every number of `v` (a profile as JSON) whose key names a unit in
+/// [`UNIT_RANGES`]; `path` is the dotted key of `v`.
+fn check_unit_ranges(v: &serde_json::Value, path: &str) -> std::result::Result<(), String> {
+    use serde_json::Value;
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                if let (Some(f), Some((_, what, lo, hi))) = (
+                    x.as_f64(),
+                    UNIT_RANGES.iter().find(|(suffix, ..)| k.ends_with(suffix)),
+                ) {
+                    let a = f.abs();
+                    if a > *hi || (a != 0.0 && a < *lo) {
+                        return Err(format!(
+                            "{p} = {f:?} is not {what} a machine has ({lo:?} to {hi:?}; check its unit)"
+                        ));
+                    }
+                }
+                check_unit_ranges(x, &p)?;
+            }
+            Ok(())
+        }
+        Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                check_unit_ranges(x, &format!("{path}[{i}]"))?;
+            }
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
+/// A number for a message: 4 significant digits, never a long run of digits.
+fn short(v: f64) -> String {
+    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-3) {
+        format!("{v:.3e}")
+    } else {
+        format!("{}", (v * 1e4).round() / 1e4)
     }
 }
 

@@ -480,7 +480,8 @@ fn part_taller_than_the_stage_travel_is_a_one_line_error() {
     let e = stderr(&o);
     assert_eq!(e.trim_end().lines().count(), 1, "{e}");
     assert!(
-        e.contains("tall.stl") && e.contains("layer 5") && e.contains("stage travel"),
+        e.contains("tall.stl: part is 10 mm tall")
+            && e.contains("the stage travels only to stage.travel_max_mm = 5 mm"),
         "{e}"
     );
     assert!(!dir.join("tall.dmdjob").exists());

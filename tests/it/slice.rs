@@ -505,13 +505,29 @@ fn far_vertices_and_tiny_layers_are_refused_before_slicing() {
     write_stl(&d.join(name), &box_tris([0.0; 3], [10.0, 10.0, 10.0]));
     let bytes = std::fs::read(d.join(name)).unwrap();
     for h in ["1e-300", "1e-12", "1e-6"] {
-        bad_input_with(
-            name,
-            Some(&bytes),
-            &["--layer-height", h],
-            "layers needs more than 1000000 layers",
+        // The stage cannot make such steps: the error names the profile.
+        let o = run_in(&d, &["slice", name, "--layer-height", h, "-o", "t.dmdjob"]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{h}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{h}: {e}");
+        assert!(
+            e.contains("profile xu2010-topdown") && e.contains("coarser than the layer height"),
+            "{h}: {e}"
         );
+        assert!(!d.join("t.dmdjob").exists());
     }
+    // On a stage with the finest resolution a profile may give, the layer count is the
+    // limit.
+    let o = run_in(&d, &["profile", "show", "xu2010-topdown"]);
+    let fine = stdout(&o).replace("steps_per_mm = 800.0", "steps_per_mm = 10000000.0");
+    std::fs::write(d.join("fine.toml"), fine).unwrap();
+    let p = d.join("fine.toml");
+    bad_input_with(
+        name,
+        Some(&bytes),
+        &["--layer-height", "1e-7", "-p", p.to_str().unwrap()],
+        "layers needs more than 1000000 layers",
+    );
 }
 
 #[test]
@@ -644,6 +660,50 @@ fn implausible_machine_values_are_refused_naming_the_key() {
         assert_eq!(e.trim_end().lines().count(), 1, "{to}: {e}");
         assert!(e.contains(&name) && e.contains(expect), "{to}: {e}");
         assert!(!dir.join(&out).exists());
+    }
+    // Quantities out of their unit's range, and a stage too coarse for the layers, are
+    // refused before anything is sliced (they planned moves to `inf` mm, times that
+    // serialized as `null`, or a job its own executor rejects).
+    for (from, to, expect) in [
+        (
+            "layer_s = 8.0",
+            "layer_s = 1e308",
+            "exposure.layer_s = 1e308 is not a duration",
+        ),
+        (
+            "return_speed_mm_s = 1.0",
+            "return_speed_mm_s = 1e-308",
+            "recoat.return_speed_mm_s = 1e-308 is not a speed",
+        ),
+        (
+            "steps_per_mm = 800.0",
+            "steps_per_mm = 1e308",
+            "stage.steps_per_mm = 1e308 is not a stage resolution",
+        ),
+        (
+            "steps_per_mm = 800.0",
+            "steps_per_mm = 0.008",
+            "gives steps of 125 mm, coarser than the layer height",
+        ),
+    ] {
+        assert!(one.contains(from), "{from}");
+        std::fs::write(dir.join("u.toml"), one.replacen(from, to, 1)).unwrap();
+        let o = run_in(
+            &dir,
+            &[
+                "slice",
+                f.to_str().unwrap(),
+                "-p",
+                "u.toml",
+                "-o",
+                "u.dmdjob",
+            ],
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{to}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{to}: {e}");
+        assert!(e.contains("u.toml") && e.contains(expect), "{to}: {e}");
+        assert!(!dir.join("u.dmdjob").exists());
     }
 }
 
