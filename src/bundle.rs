@@ -384,7 +384,7 @@ impl Manifest {
             });
         }
         let path = dir.join(MANIFEST);
-        let text = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let text = crate::input::read_file(&path, "manifest", crate::input::TEXT_MAX_BYTES)?;
         let v: serde_json::Value = serde_json::from_slice(&text).map_err(|e| Error::Bundle {
             path: path.clone(),
             msg: format!("invalid JSON: {e}"),

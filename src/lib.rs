@@ -12,6 +12,7 @@ pub mod digest;
 pub mod error;
 pub mod exec;
 pub mod geometry;
+pub mod input;
 pub mod job;
 pub mod mesh;
 pub mod motion;

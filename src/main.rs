@@ -43,10 +43,10 @@ fn main() -> ExitCode {
             };
             // The library's errors are complete one-line messages (their sources are
             // already in the text), so print them without the cause chain.
-            let message = match e.downcast_ref::<dmdsl::Error>() {
+            let message = printable(&match e.downcast_ref::<dmdsl::Error>() {
                 Some(d) => d.to_string(),
                 None => format!("{e:#}"),
-            };
+            });
             eprintln!("dmdsl: error: {message}");
             if json {
                 println!("{}", cli::error_json(code, file, &message));
@@ -54,6 +54,21 @@ fn main() -> ExitCode {
             ExitCode::from(exit)
         }
     }
+}
+
+/// `message` with control characters (terminal escape sequences, newlines, …) that it may
+/// quote from a hostile input file shown as escapes (`\u{1b}`), so an error stays one
+/// harmless line on the terminal.
+fn printable(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    for c in message.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// A command line clap cannot parse: its message (and with `--json` the JSON error object)
@@ -84,4 +99,15 @@ fn usage_error(e: clap::Error) -> ExitCode {
         println!("{}", cli::error_json("usage", None, &first));
     }
     ExitCode::from(2)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn printable_escapes_control_characters_only() {
+        assert_eq!(
+            super::printable("a.stl: found '\u{1b}[2J' in 65 × 48.75 mm\n"),
+            "a.stl: found '\\u{1b}[2J' in 65 × 48.75 mm\\n"
+        );
+    }
 }

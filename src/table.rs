@@ -45,7 +45,7 @@ pub fn cell_error(path: &Path, line: u64, column: &str, msg: impl std::fmt::Disp
 
 /// Reads the table at `path`: the file's bytes (for hashing) and its rows.
 pub fn read<T: DeserializeOwned>(path: &Path, columns: &Columns) -> Result<(Vec<u8>, Vec<Row<T>>)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::input::read_file(path, "table", crate::input::TEXT_MAX_BYTES)?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|_| Error::input(path, "not UTF-8 text (expected a CSV table)"))?;
     let rows = parse(path, text, columns)?;

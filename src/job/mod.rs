@@ -289,13 +289,7 @@ fn set_up(opts: &SliceOptions, profile: &mut Profile) -> Result<SetUp> {
 
 /// Reads the model file: its SHA-256 and its mesh (loaded and validated).
 fn read_model(path: &Path) -> Result<(String, Mesh)> {
-    let bytes = std::fs::read(path).map_err(|e| {
-        if path.is_dir() {
-            Error::input(path, "is a directory, not a mesh file")
-        } else {
-            Error::io(path, e)
-        }
-    })?;
+    let bytes = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
     let (sha, mesh) = rayon::join(
         || bundle::sha256_hex(&bytes),
         || mesh::load_bytes(path, &bytes),

@@ -137,11 +137,7 @@ pub(crate) type Soup = Vec<[[f32; 3]; 3]>;
 
 /// Loads a mesh file (STL binary/ASCII or OBJ), welds and validates it.
 pub fn load(path: &Path) -> Result<Mesh> {
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if meta.is_dir() {
-        return Err(Error::input(path, "is a directory, not a mesh file"));
-    }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
     load_bytes(path, &bytes)
 }
 

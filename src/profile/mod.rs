@@ -272,7 +272,7 @@ impl Profile {
         }
         let p = Path::new(name_or_path);
         if name_or_path.contains('/') || name_or_path.ends_with(".toml") || p.exists() {
-            let src = std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?;
+            let src = crate::input::read_text(p, "profile")?;
             let mut profile = Profile::from_toml(&src, &p.display().to_string())?;
             // A distortion table is named relative to the profile file.
             if let Some(t) = profile.distortion.as_mut().and_then(|d| d.table.as_mut()) {

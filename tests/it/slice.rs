@@ -387,6 +387,10 @@ fn bad_input_with(name: &str, bytes: Option<&[u8]>, args: &[&str], expect: &str)
     );
     assert!(e.contains(name), "{name}: error must name the file: {e}");
     assert!(e.contains(expect), "{name}: expected '{expect}' in: {e}");
+    assert!(
+        !e.contains('\u{1b}'),
+        "{name}: a raw escape character: {e:?}"
+    );
     assert!(!e.contains("panicked"));
     let left: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -466,6 +470,27 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
         "{}",
         stderr(&o)
     );
+    // Terminal escape sequences quoted from the file are shown escaped.
+    let esc = "solid \u{1b}[31mx\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex \u{1b}[2J 0 1\n";
+    bad_input("esc.stl", Some(esc.as_bytes()), "found '\\u{1b}[2J'");
+    // A FIFO is refused instead of blocking until a writer comes.
+    #[cfg(unix)]
+    {
+        let dir = tempdir("bad-fifo");
+        let made = std::process::Command::new("mkfifo")
+            .arg(dir.join("pipe.stl"))
+            .status()
+            .unwrap();
+        assert!(made.success());
+        let o = run_in(&dir, &["slice", "pipe.stl", "-o", "out.dmdjob"]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(
+            stderr(&o).contains("pipe.stl: is not a regular file"),
+            "{}",
+            stderr(&o)
+        );
+        assert!(!dir.join("out.dmdjob").exists());
+    }
     // A directory.
     let dir = tempdir("bad-dir");
     std::fs::create_dir(dir.join("adir.stl")).unwrap();

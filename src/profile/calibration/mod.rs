@@ -124,7 +124,7 @@ impl Calibration {
 
     /// Reads a calibration file (as written by `dmdsl calibrate`).
     pub fn read(path: &Path) -> Result<Calibration> {
-        let src = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let src = crate::input::read_text(path, "calibration file")?;
         Calibration::from_toml(&src, path)
     }
 
