@@ -105,6 +105,15 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion_report.clone(),
         warnings,
     );
+    if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
+        return Err(Error::Job {
+            path: part.path.into(),
+            msg: format!(
+                "nothing to print: none of the {} layers has a closed section (an open surface or a part of zero volume)",
+                manifest.layers.len()
+            ),
+        });
+    }
     replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);

@@ -470,6 +470,18 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
         "{}",
         stderr(&o)
     );
+    // An open surface (one wall of a box): no layer has a closed section.
+    let wall: Vec<_> = box_tris([0.0; 3], [10.0, 10.0, 10.0])
+        .into_iter()
+        .filter(|t| t.iter().all(|v| v[1] == 0.0))
+        .collect();
+    assert_eq!(wall.len(), 2);
+    write_stl(&d.join("w.stl"), &wall);
+    bad_input(
+        "wall.stl",
+        Some(&std::fs::read(d.join("w.stl")).unwrap()),
+        "nothing to print: none of the",
+    );
     // Terminal escape sequences quoted from the file are shown escaped.
     let esc = "solid \u{1b}[31mx\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex \u{1b}[2J 0 1\n";
     bad_input("esc.stl", Some(esc.as_bytes()), "found '\\u{1b}[2J'");
