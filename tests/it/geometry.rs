@@ -436,6 +436,61 @@ fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
     assert!(e.contains("outside its field 0..65 x 0..48.75 mm"), "{e}");
     assert_eq!(e.trim_end().lines().count(), 1, "{e}");
     assert!(!dir.join("x.dmdjob").exists());
+
+    // Tables that fit but cannot be right: a mirror image of the field (the map folds over:
+    // warped sections turn inside out), a 35 mm outlier, a point measured twice far apart.
+    let grid: Vec<[f64; 2]> = (0..=13)
+        .flat_map(|i| (0..=9).map(move |j| [5.0 * i as f64, 5.0 * j as f64 * 0.975]))
+        .collect();
+    let table = |f: &dyn Fn(usize, [f64; 2]) -> [f64; 2]| {
+        let mut t = String::from("x_mm,y_mm,seen_x_mm,seen_y_mm\n");
+        for (i, &p) in grid.iter().enumerate() {
+            let s = f(i, p);
+            t += &format!("{},{},{},{}\n", p[0], p[1], s[0], s[1]);
+        }
+        t
+    };
+    let mirror = table(&|_, p| [W - p[0], p[1]]);
+    let outlier = table(&|i, p| {
+        let off = if i == 40 { [35.3, 0.7] } else { [0.0; 2] };
+        [p[0] + off[0], p[1] + off[1]]
+    });
+    let mut twice = table(&|_, p| p);
+    twice += &format!(
+        "{},{},{},{}\n",
+        grid[50][0],
+        grid[50][1],
+        grid[50][0] + 3.0,
+        grid[50][1] - 2.0
+    );
+    for (name, text, want) in [
+        (
+            "mirror.csv",
+            mirror,
+            "mirror.csv: the correction folds the field over",
+        ),
+        (
+            "outlier.csv",
+            outlier,
+            "from where the rest of the table predicts them, worst line 42 (35.3",
+        ),
+        (
+            "twice.csv",
+            twice,
+            "more than 1 mm from where the rest of the table predicts",
+        ),
+    ] {
+        std::fs::write(dir.join(name), text).unwrap();
+        let o = run_in(
+            &dir,
+            &["slice", "sq.stl", "--distortion", name, "-o", "x.dmdjob"],
+        );
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{name}: {e}");
+        assert!(e.contains(want), "{name}: {e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+        assert!(!dir.join("x.dmdjob").exists());
+    }
 }
 
 /// Slices a 30 × 20 mm plate across the seam of `tiled-2x1` (field columns ~788..1260; the

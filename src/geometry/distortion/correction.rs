@@ -54,14 +54,20 @@ impl Correction {
         }
         let loo_r = residual::leave_one_out(&tri, table)?;
         let kappa = residual::weight(&loo, &loo_r);
-        let report = fit_report(table, &poly, kappa, &resid, &loo, &loo_r);
+        let cv: Vec<f64> = loo
+            .iter()
+            .zip(&loo_r)
+            .map(|(e, r)| (e[0] - kappa * r[0]).hypot(e[1] - kappa * r[1]))
+            .collect();
+        check_agreement(table, &cv)?;
+        let report = fit_report(table, &poly, kappa, &resid, &cv);
         let mut hull = residual::hull(&tri);
         if ring_area(&hull) < 0.0 {
             hull.reverse();
         }
         let curv = poly.curvature_bound(field_mm);
         let lip = residual::steepest_edge(&tri);
-        Ok(Correction {
+        let c = Correction {
             poly,
             tri,
             kappa,
@@ -73,7 +79,46 @@ impl Correction {
             lip: 2.0 * lip,
             extrapolated: AtomicU64::new(0),
             report,
-        })
+        };
+        c.check_no_fold(&table.origin)?;
+        Ok(c)
+    }
+
+    /// Refuses a correction that folds the field over: its Jacobian determinant must be
+    /// positive everywhere on the field (sampled on [`FOLD_CELL_MM`] cells by central
+    /// differences). A fold maps two build-plane points to one aim point, so warped sections
+    /// turn inside out (negative areas); a mirrored table is the usual cause.
+    fn check_no_fold(&self, origin: &Path) -> Result<()> {
+        let [w, h] = self.field_mm;
+        let (cols, rows) = (
+            (w / FOLD_CELL_MM).ceil().max(1.0) as usize,
+            (h / FOLD_CELL_MM).ceil().max(1.0) as usize,
+        );
+        let d = FOLD_STEP_MM;
+        let mut warper = self.warper();
+        let mut worst: Option<(f64, [f64; 2])> = None;
+        for r in 0..rows {
+            for c in 0..cols {
+                let x = ((c as f64 + 0.5) * FOLD_CELL_MM).min(w);
+                let y = ((r as f64 + 0.5) * FOLD_CELL_MM).min(h);
+                let (xp, xm) = (warper.aim([x + d, y]), warper.aim([x - d, y]));
+                let (yp, ym) = (warper.aim([x, y + d]), warper.aim([x, y - d]));
+                let det = ((xp[0] - xm[0]) * (yp[1] - ym[1]) - (yp[0] - ym[0]) * (xp[1] - xm[1]))
+                    / (4.0 * d * d);
+                if det <= 0.0 && worst.is_none_or(|(v, _)| det < v) {
+                    worst = Some((det, [x, y]));
+                }
+            }
+        }
+        match worst {
+            None => Ok(()),
+            Some((det, [x, y])) => Err(Error::input(
+                origin,
+                format!(
+                    "the correction folds the field over (Jacobian determinant {det:.3} at ({x:.1}, {y:.1}) mm, must be > 0): is the table mirrored or are its columns swapped? A mirrored projector is set with mirror_x / mirror_y"
+                ),
+            )),
+        }
     }
 
     /// The fit report (with the count of extrapolated points warped so far).
@@ -158,6 +203,42 @@ fn check_points(table: &Table, field_mm: [f64; 2]) -> Result<()> {
     Ok(())
 }
 
+/// The most a table point may lie from where the rest of the table predicts it (its
+/// leave-one-out error), mm. Measurement noise is hundredths of a millimetre and lens
+/// distortion varies smoothly; a point this far off is mistyped or mis-measured, and fitting
+/// it would bend the correction around it.
+pub const MAX_POINT_ERROR_MM: f64 = 1.0;
+/// Cell size of the fold check, mm.
+const FOLD_CELL_MM: f64 = 1.0;
+/// Half the difference step of the fold check's Jacobian, mm.
+const FOLD_STEP_MM: f64 = 0.05;
+
+/// Refuses a table whose points disagree: any point farther than [`MAX_POINT_ERROR_MM`]
+/// from where the rest of the table predicts it (`cv`, per point), naming the worst three.
+fn check_agreement(table: &Table, cv: &[f64]) -> Result<()> {
+    let mut bad: Vec<usize> = (0..cv.len())
+        .filter(|&i| cv[i].is_nan() || cv[i] > MAX_POINT_ERROR_MM)
+        .collect();
+    if bad.is_empty() {
+        return Ok(());
+    }
+    bad.sort_by(|&a, &b| cv[b].total_cmp(&cv[a]));
+    let worst: Vec<String> = bad
+        .iter()
+        .take(3)
+        .map(|&i| format!("{} {} ({:.3} mm)", table.unit, table.pairs[i].line, cv[i]))
+        .collect();
+    Err(Error::input(
+        &table.origin,
+        format!(
+            "{} more than {MAX_POINT_ERROR_MM} mm from where the rest of the table predicts {}, worst {}: a mistyped, duplicated or mis-measured point",
+            if bad.len() == 1 { "1 point lies".to_string() } else { format!("{} points lie", bad.len()) },
+            if bad.len() == 1 { "it" } else { "them" },
+            worst.join(", ")
+        ),
+    ))
+}
+
 /// RMS, largest value and its index.
 fn rms_max(v: impl Iterator<Item = f64>) -> (f64, f64, usize) {
     let (mut s, mut mx, mut arg, mut k) = (0.0, -1.0, 0, 0);
@@ -173,23 +254,18 @@ fn rms_max(v: impl Iterator<Item = f64>) -> (f64, f64, usize) {
 }
 
 /// The fit report: the polynomial's residuals `resid`, the combined model's leave-one-out
-/// errors (polynomial `loo` less κ × interpolant `loo_r`), the largest correction.
+/// errors `cv` (per point), the largest correction.
 fn fit_report(
     table: &Table,
     poly: &PolyMap,
     kappa: f64,
     resid: &[[f64; 2]],
-    loo: &[[f64; 2]],
-    loo_r: &[[f64; 2]],
+    cv: &[f64],
 ) -> FitReport {
     let pairs: &[Pair] = &table.pairs;
     let at = |i: usize| format!("{} {}", table.unit, pairs[i].line);
     let (poly_rms, poly_max, poly_arg) = rms_max(resid.iter().map(|r| r[0].hypot(r[1])));
-    let (cv_rms, cv_max, cv_arg) = rms_max(
-        loo.iter()
-            .zip(loo_r)
-            .map(|(e, r)| (e[0] - kappa * r[0]).hypot(e[1] - kappa * r[1])),
-    );
+    let (cv_rms, cv_max, cv_arg) = rms_max(cv.iter().copied());
     let max_corr = pairs
         .iter()
         .map(|p| (p.aim[0] - p.seen[0]).hypot(p.aim[1] - p.seen[1]))
