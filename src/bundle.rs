@@ -385,7 +385,14 @@ impl Manifest {
         }
         let path = dir.join(MANIFEST);
         let text = crate::input::read_file(&path, "manifest", crate::input::TEXT_MAX_BYTES)?;
-        let v: serde_json::Value = serde_json::from_slice(&text).map_err(|e| Error::Bundle {
+        Manifest::from_json(&text, &path)
+    }
+
+    /// Parses and checks manifest JSON (format, supported version, structure); `path` names
+    /// the file in errors.
+    pub fn from_json(text: &[u8], path: &Path) -> Result<Manifest> {
+        let path = path.to_path_buf();
+        let v: serde_json::Value = serde_json::from_slice(text).map_err(|e| Error::Bundle {
             path: path.clone(),
             msg: format!("invalid JSON: {e}"),
         })?;

@@ -11,7 +11,8 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Soup> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let mut reader = std::io::BufReader::new(bytes);
+    let faces = positions_only(path, bytes)?;
+    let mut reader = std::io::BufReader::new(&faces[..]);
     let (models, _materials) =
         tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
             .map_err(|e| Error::input(path, format!("invalid OBJ: {e}")))?;
@@ -41,6 +42,51 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Soup> {
     Ok(soup)
 }
 
+/// The OBJ text with every face vertex reduced to its position index (texture and normal
+/// indices dropped: a mesh needs neither), each index checked against the vertices defined
+/// so far (1-based, or negative counting back from the last). tobj resolves indices with
+/// unchecked arithmetic, so an index far out of range would overflow inside it.
+fn positions_only(path: &Path, bytes: &[u8]) -> Result<Vec<u8>> {
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut vertices: i64 = 0;
+    for (n, line) in bytes.split_inclusive(|&b| b == b'\n').enumerate() {
+        let trimmed = line.trim_ascii_start();
+        let mut words = trimmed
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|w| !w.is_empty());
+        match words.next() {
+            Some(b"v") => vertices += 1,
+            Some(b"f") => {
+                out.push(b'f');
+                for w in words {
+                    let pos = w.split(|&b| b == b'/').next().unwrap_or_default();
+                    let i = std::str::from_utf8(pos)
+                        .ok()
+                        .and_then(|t| t.parse::<i64>().ok())
+                        .filter(|&i| i != 0 && i.unsigned_abs() <= vertices as u64);
+                    if i.is_none() {
+                        return Err(Error::input(
+                            path,
+                            format!(
+                                "line {}: face vertex {:?} is not an index of the {vertices} vertices defined before it",
+                                n + 1,
+                                String::from_utf8_lossy(w)
+                            ),
+                        ));
+                    }
+                    out.push(b' ');
+                    out.extend_from_slice(pos);
+                }
+                out.push(b'\n');
+                continue;
+            }
+            _ => {}
+        }
+        out.extend_from_slice(line);
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -53,6 +99,35 @@ mod tests {
         let bad = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n";
         let e = parse(p, bad).unwrap_err().to_string();
         assert!(e.starts_with("q.obj: "), "{e}");
-        assert!(e.contains("out of"), "{e}");
+        assert!(
+            e.contains("line 4: face vertex \"9\" is not an index of the 3 vertices"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn texture_normal_and_relative_indices() {
+        let p = Path::new("q.obj");
+        let src = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nvt 0 0\nf 1/1/1 2//1 -1/1\n";
+        let s = parse(p, src).unwrap();
+        assert_eq!(s, vec![[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]]);
+        for bad in [
+            "f 1//-9223372036854775808 2 3",
+            "f -4 1 2",
+            "f 0 1 2",
+            "f 1 2 x",
+        ] {
+            let src = format!("v 0 0 0\nv 1 0 0\nv 1 1 0\n{bad}\n");
+            let e = parse(p, src.as_bytes());
+            if bad.contains("9223") {
+                // A normal index is dropped, never resolved.
+                assert!(e.is_ok(), "{bad}");
+            } else {
+                assert!(
+                    e.unwrap_err().to_string().contains("is not an index"),
+                    "{bad}"
+                );
+            }
+        }
     }
 }

@@ -4,6 +4,7 @@
 
 mod calibrate;
 mod common;
+mod fuzz;
 mod geometry;
 mod json;
 mod layers;

@@ -451,7 +451,7 @@ fn bad_inputs_are_one_line_errors_with_exit_2() {
     bad_input(
         "bad.obj",
         Some(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"),
-        "out of",
+        "line 4: face vertex \"7\" is not an index of the 3 vertices",
     );
     let mut rnd = Vec::with_capacity(4096);
     let mut x: u64 = 0x9e3779b97f4a7c15;

@@ -291,11 +291,12 @@ impl FieldModel {
         if !self.origin_mm.iter().all(|v| v.is_finite()) || !self.coefficients.is_finite() {
             return Err("field: origin_mm and coefficients must be finite numbers".into());
         }
-        let nx = ((x1 - x0) / 0.5).ceil() as usize;
-        let ny = ((y1 - y0) / 0.5).ceil() as usize;
-        if nx * ny > 4_000_000 {
+        let (fx, fy) = (((x1 - x0) / 0.5).ceil(), ((y1 - y0) / 0.5).ceil());
+        // Compared as f64: the counts of an absurd area do not fit a usize product.
+        if fx * fy > 4e6 {
             return Err("field.area_mm is implausibly large".into());
         }
+        let (nx, ny) = (fx as usize, fy as usize);
         let unit = self.length_unit_mm.get();
         let mut sign = 0.0;
         // P at the samples as `eval` computes it, without its per-point set-up: inside the
