@@ -455,24 +455,19 @@ fn manifest_json(dir: &Path) -> Option<serde_json::Value> {
 /// Read from the JSON loosely, so a manifest of any version this build reads qualifies.
 fn bundle_files(v: &serde_json::Value) -> BTreeSet<String> {
     use serde_json::Value;
-    let list = |v: Option<&Value>, key: &str| -> Vec<Value> {
-        v.and_then(|v| v.get(key))
+    fn list<'a>(v: &'a Value, key: &str) -> &'a [Value] {
+        v.get(key)
             .and_then(Value::as_array)
-            .cloned()
-            .unwrap_or_default()
-    };
+            .map_or(&[], Vec::as_slice)
+    }
     let text = |v: &Value, key: &str| v.get(key).and_then(Value::as_str).map(String::from);
     let mut files = BTreeSet::from([MANIFEST.to_string()]);
-    for layer in list(Some(v), "layers") {
-        files.extend(
-            list(Some(&layer), "masks")
-                .iter()
-                .filter_map(|m| text(m, "file")),
-        );
+    for layer in list(v, "layers") {
+        files.extend(list(layer, "masks").iter().filter_map(|m| text(m, "file")));
     }
     files.extend(v.get("optics").and_then(|o| text(o, "gray_map")));
     files.extend(
-        list(Some(v), "projector_optics")
+        list(v, "projector_optics")
             .iter()
             .filter_map(|o| text(o, "gray_map")),
     );
