@@ -56,7 +56,7 @@ pub enum Error {
     /// Bad command-line usage not caught by the argument parser.
     #[error("{0}")]
     Usage(String),
-    /// The user interrupted the command (Ctrl-C); nothing was written.
+    /// The command was interrupted (Ctrl-C, SIGTERM or SIGHUP); nothing was written.
     #[error("interrupted; nothing was written")]
     Interrupted,
 }

@@ -3,6 +3,7 @@
 
 mod calibrate;
 mod distortion;
+mod interrupt;
 mod profile;
 mod run;
 mod slice;
@@ -96,7 +97,7 @@ pub(crate) const EXIT_HELP: &str = "Exit codes (each command's --help says what 
   0    success
   1    finished, but checks failed (denied warnings, run violations)
   2    usage or input error
-  130  interrupted (Ctrl-C)";
+  130  interrupted (Ctrl-C, SIGTERM or SIGHUP)";
 
 /// Build-job compiler for DMD mask-projection stereolithography.
 #[derive(Parser)]

@@ -8,7 +8,7 @@ use dmdsl::profile::{self, Profile};
 use dmdsl::units::Positive;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 pub(crate) const SLICE_EXIT_HELP: &str = "Exit codes:
@@ -16,8 +16,10 @@ pub(crate) const SLICE_EXIT_HELP: &str = "Exit codes:
   1    the bundle was written, but a warning was denied (--strict, --deny-warnings,
        -W CODE=error)
   2    usage or input error (unreadable or malformed part, bad profile, part does not fit
-       the field or the stage travel); nothing was written
-  130  interrupted (Ctrl-C); nothing was written";
+       the field or the stage travel, the output path holds anything but a dmdsl bundle's
+       own files, or is a symbolic link); nothing was written
+  130  interrupted (Ctrl-C, SIGTERM or SIGHUP); nothing was written: an existing bundle at
+       the path is left as it was";
 
 /// Dithering of compensated grays.
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -99,6 +101,10 @@ impl SliceArgs {
 
 /// Runs `dmdsl slice`.
 pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
+    // First, so that an interrupt at any point (even while the profile and the part load)
+    // ends the command with its message and code 130.
+    let cancel = Arc::new(AtomicBool::new(false));
+    super::interrupt::on_interrupt(cancel.clone());
     let policy = a
         .warnings
         .policy(if a.strict { &["mesh=error"] } else { &[] })?;
@@ -122,12 +128,6 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             dmdsl::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
         })?),
     };
-    let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let c = cancel.clone();
-        // A second handler registration fails only if one exists; ignore that.
-        let _ = ctrlc::set_handler(move || c.store(true, Ordering::Relaxed));
-    }
     let show_progress = !quiet && !a.json && std::io::stderr().is_terminal();
     let progress = |done: usize, total: usize| {
         if done == total || done % 16 == 0 {

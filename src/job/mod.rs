@@ -75,11 +75,15 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     })?;
     let (setup, part) = load_and_place(opts, &mut profile)?;
     let load_s = t0.elapsed().as_secs_f64();
-    let writer = open_bundle(opts, &profile, &setup)?;
     let control = Control {
         progress: opts.progress,
         cancel: opts.cancel,
     };
+    // Interrupted while loading: stop before anything is created.
+    if control.cancelled() {
+        return Err(Error::Interrupted);
+    }
+    let writer = open_bundle(opts, &profile, &setup)?;
     let (sliced, gray_map) = make_layers(&profile, &setup, &part, &writer, &control)?;
 
     let t_finish = Instant::now();

@@ -30,7 +30,8 @@ pub struct SliceOptions<'a> {
     pub optics: crate::optics::OpticsOptions,
     /// Called with (layers done, layers total) as layers are written.
     pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
-    /// Set to abort (Ctrl-C); the pipeline stops and writes nothing.
+    /// Set to abort (an interrupt: Ctrl-C, SIGTERM, SIGHUP); the pipeline stops and writes
+    /// nothing (it is checked once the part is loaded and between windows of layers).
     pub cancel: Option<&'a AtomicBool>,
     /// Lens distortion correction (`--distortion`; default: the profile's).
     pub distortion: DistortionChoice,

@@ -9,6 +9,7 @@ mod geometry;
 mod json;
 mod layers;
 mod plan;
+mod replace;
 mod run;
 mod slice;
 mod warnings;
