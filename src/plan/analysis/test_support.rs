@@ -39,8 +39,7 @@ pub(super) fn ellipse(a: f64, b: f64, ccw: bool) -> Contour {
 /// The lit pixels of a section on the default profile's field, as the slicer's
 /// rasterizer keeps them.
 pub(super) fn lit(c: &[Contour]) -> LitRuns {
-    let raster =
-        crate::raster::Rasterizer::new(crate::profile::Profile::default_profile().field());
+    let raster = crate::raster::Rasterizer::new(crate::profile::Profile::default_profile().field());
     let mut sc = crate::raster::Scratch::default();
     sc.record_runs = true;
     let m = raster.coverage(c, &mut sc);
@@ -170,7 +169,11 @@ pub(super) fn cell_max(e: &Edges, (c, h): ([f64; 2], f64), tol: f64) -> f64 {
 
 /// `c` with points inserted on its edges at fractions drawn from `rnd` (0–3 per edge),
 /// starting at point `start`: the same polygon as the slicer cuts it at another height.
-pub(super) fn with_collinear_points(c: &Contour, start: usize, rnd: &mut impl FnMut() -> f64) -> Contour {
+pub(super) fn with_collinear_points(
+    c: &Contour,
+    start: usize,
+    rnd: &mut impl FnMut() -> f64,
+) -> Contour {
     let n = c.len();
     let mut out = Vec::new();
     for k in 0..n {
