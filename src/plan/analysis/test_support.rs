@@ -129,7 +129,7 @@ pub(super) fn cross_cut_pieces(r: f64, hole: f64, a: f64, k: usize) -> Vec<Conto
 /// Asserts that no point of a `(k + 1)²` grid over the square `(c, h)` (a cell a test
 /// dropped) is deeper than `max` in the section of `e`.
 pub(super) fn assert_no_deeper(e: &Edges, (c, h): ([f64; 2], f64), max: f64, k: usize) {
-    let root = e.nodes.last().unwrap();
+    let root = e.bounds().unwrap();
     for a in 0..=k {
         for b in 0..=k {
             let x = [
@@ -141,7 +141,7 @@ pub(super) fn assert_no_deeper(e: &Edges, (c, h): ([f64; 2], f64), max: f64, k: 
                 d <= max,
                 "cell {c:?} ± {h} dropped at radius {max}, but {x:?} is {d} deep \
                  (root {:?})",
-                (root.lo, root.hi)
+                root
             );
         }
     }
