@@ -19,32 +19,8 @@ const ARC_LINE_R: f64 = 1e6;
 /// Widening of an [`Arc`]'s band for the rounding of the distances to its centre, mm.
 const ARC_MARGIN: f64 = 1e-9;
 
-/// Cells tried by [`Edges::arcs_cover`]: half-size at least this many times the
-/// precision (smaller ones are covered by discs around their walls' points as cheaply),
-/// and below the depth to beat (on logo_hires, 5 % of the tries on larger cells dropped
-/// them, against 50 % below).
-pub(super) const ARC_MIN_H: f64 = 8.0;
-
 /// Arcs kept by a search for the following cells ([`ArcCache`]).
 const ARC_CACHE: usize = 8;
-
-/// A search tries [`Edges::arcs_cover`] on its first `ARC_TRIAL` cells, then only while
-/// at least one try in `ARC_RATE` has dropped its cell: on sections whose walls are not
-/// round (a bunny, a gear) the arcs rarely show anything and a failed try costs about a
-/// cell's own tests (measured on logo_hires, torus_hires, bunny00 and mcad_gear: trial 2
-/// and walks of 64 points cost least over the four).
-pub(super) const ARC_TRIAL: usize = 2;
-
-/// See [`ARC_TRIAL`].
-pub(super) const ARC_RATE: usize = 4;
-
-/// [`Edges::ring_cover`] is tried as [`Edges::arcs_cover`] is ([`ARC_TRIAL`], [`ARC_RATE`]),
-/// and also on every `RING_PROBE`-th cell it could be tried on when that has stopped: a
-/// search's first cells are large and seldom dropped, and without the probes one failed
-/// start would stop the tries for the whole search (logo_hires search instructions: no
-/// probes 643 M before the seeds of [`SEED_AFTER`], with them every 16th 557 M, every 8th
-/// 511 M; every 2nd or every cell save it a little more but cost mcad_gear 3 % and 7 %).
-pub(super) const RING_PROBE: usize = 8;
 
 /// A stretch of a contour, the points `back` to `fwd` (consecutive indexes), seen from a
 /// centre `o`: every point of it (its edges included) lies at a distance in the band

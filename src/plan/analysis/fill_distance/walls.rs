@@ -109,15 +109,6 @@ impl Convex {
     }
 }
 
-/// Cells tried by [`Edges::walls_cover`]: half-size above this many times the depth to
-/// beat (smaller ones are covered by discs around their walls' points as cheaply) and at
-/// most [`SLAB_MAX_H_MM`] (walls curve too much over larger ones). Measured on logo_hires
-/// (1, 1.2, 1.5, 2 and 3: 1.5 is cheapest; its thin rings are where the test pays).
-pub(super) const SLAB_MIN_H: f64 = 1.5;
-
-/// See [`SLAB_MIN_H`], mm (no cell above 1 mm was dropped on logo_hires).
-pub(super) const SLAB_MAX_H_MM: f64 = 1.0;
-
 /// How far a test point must stand from a wall's band to be taken as off it, mm (far
 /// above the rounding of the clipping, far below any precision asked).
 const SLAB_MARGIN: f64 = 1e-9;
