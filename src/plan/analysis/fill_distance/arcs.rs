@@ -2,6 +2,7 @@
 //! when its walls, seen from their centres of curvature as arcs within a thin band,
 //! bound its depth.
 
+use super::edges::Seg;
 use super::plane::{corners, cross, d2, unit};
 use super::walls::SLAB_EDGES;
 use super::Edges;
@@ -173,6 +174,138 @@ fn arc_bound(
     best.min(0.5 * sum)
 }
 
+/// A stretch of a contour being followed each way from an edge: its first and last
+/// points (edge `v` runs from point `v` to the next), the steps taken each way, and where
+/// the contour's indexes wrap around when they do.
+#[derive(Debug, Clone, Copy)]
+struct Walk {
+    back: u32,
+    fwd: u32,
+    steps_back: usize,
+    steps_fwd: usize,
+    wrap: Option<(u32, u32)>,
+}
+
+impl Walk {
+    /// Edge `v` alone.
+    fn new(e: &Edges, v: u32) -> Walk {
+        let fwd = e.next[v as usize];
+        Walk {
+            back: v,
+            fwd,
+            steps_back: 0,
+            steps_fwd: 0,
+            wrap: (fwd < v).then_some((fwd, v)),
+        }
+    }
+
+    /// One point further back.
+    #[inline]
+    fn step_back(&mut self, e: &Edges) {
+        let p = e.prev[self.back as usize];
+        if p > self.back {
+            self.wrap = Some((self.back, p));
+        }
+        self.back = p;
+        self.steps_back += 1;
+    }
+
+    /// One point further forward.
+    #[inline]
+    fn step_fwd(&mut self, e: &Edges) {
+        let n = e.next[self.fwd as usize];
+        if n < self.fwd {
+            self.wrap = Some((n, self.fwd));
+        }
+        self.fwd = n;
+        self.steps_fwd += 1;
+    }
+}
+
+/// The distances from an arc's centre `o` over the edges of its stretch (squared: the
+/// smallest to an edge's line, the largest to an edge's start), and its half-plane
+/// `{y : w·(y − o) > 0}`.
+#[derive(Debug, Clone, Copy)]
+struct Band {
+    o: [f64; 2],
+    w: [f64; 2],
+    lo2: f64,
+    hi2: f64,
+}
+
+impl Band {
+    /// `x` relative to the centre.
+    #[inline]
+    fn rel(&self, x: [f64; 2]) -> [f64; 2] {
+        [x[0] - self.o[0], x[1] - self.o[1]]
+    }
+
+    /// Whether `y` (relative to the centre) lies in the half-plane.
+    #[inline]
+    fn faces(&self, y: [f64; 2]) -> bool {
+        self.w[0] * y[0] + self.w[1] * y[1] > 0.0
+    }
+
+    /// Widens the band over edge `s`; `false` when its start is not in the half-plane.
+    #[inline]
+    fn add(&mut self, s: &Seg) -> bool {
+        let (p, q) = (self.rel([s[0], s[1]]), self.rel([s[2], s[3]]));
+        if !self.faces(p) {
+            return false;
+        }
+        self.hi2 = self.hi2.max(p[0] * p[0] + p[1] * p[1]);
+        // The distance to the edge's line: at most the distance to the edge.
+        let e = [q[0] - p[0], q[1] - p[1]];
+        let cr = cross(p, q);
+        self.lo2 = self.lo2.min(cr * cr / (e[0] * e[0] + e[1] * e[1]));
+        true
+    }
+}
+
+/// The centre an arc through `p0`, `p1` and `p2` is seen from: the centre of their circle,
+/// or, when that circle is larger than [`ARC_LINE_R`] (or there is none), a point
+/// [`ARC_LINE_R`] away from the middle of `p0`–`p2` on the side away from `c`. `None` when
+/// `p0` and `p2` coincide.
+fn arc_centre([p0, p1, p2]: [[f64; 2]; 3], c: [f64; 2]) -> Option<[f64; 2]> {
+    // The circle through the three points, relative to p0.
+    let (b, d) = (
+        [p1[0] - p0[0], p1[1] - p0[1]],
+        [p2[0] - p0[0], p2[1] - p0[1]],
+    );
+    let den = 2.0 * cross(b, d);
+    let (bb, dd) = (b[0] * b[0] + b[1] * b[1], d[0] * d[0] + d[1] * d[1]);
+    let oc = [(d[1] * bb - b[1] * dd) / den, (b[0] * dd - d[0] * bb) / den];
+    if oc[0].is_finite()
+        && oc[1].is_finite()
+        && oc[0] * oc[0] + oc[1] * oc[1] <= ARC_LINE_R * ARC_LINE_R
+    {
+        return Some([p0[0] + oc[0], p0[1] + oc[1]]);
+    }
+    // Straight: seen from far away on the side away from the square.
+    let m = [0.5 * (p0[0] + p2[0]), 0.5 * (p0[1] + p2[1])];
+    let t = unit(d)?;
+    let mut n = [-t[1], t[0]];
+    if n[0] * (c[0] - m[0]) + n[1] * (c[1] - m[1]) > 0.0 {
+        n = [-n[0], -n[1]];
+    }
+    Some([m[0] + ARC_LINE_R * n[0], m[1] + ARC_LINE_R * n[1]])
+}
+
+/// The corners `rc` (relative to an arc's centre) first and last in the way `sigma` the
+/// arc turns around it.
+fn extreme_corners(rc: &[[f64; 2]; 4], sigma: f64) -> ([f64; 2], [f64; 2]) {
+    let (mut x0, mut x1) = (rc[0], rc[0]);
+    for &y in &rc[1..] {
+        if sigma * cross(y, x0) > 0.0 {
+            x0 = y;
+        }
+        if sigma * cross(x1, y) > 0.0 {
+            x1 = y;
+        }
+    }
+    (x0, x1)
+}
+
 impl Edges {
     /// An [`Arc`] through edge `v` for the square `[c ± h]`: the stretch is first followed
     /// each way until its points' projections on `v`'s line cover the square's corners';
@@ -184,6 +317,64 @@ impl Edges {
     /// points (its indexes must be consecutive).
     fn arc(&self, v: u32, c: [f64; 2], h: f64) -> Option<Arc> {
         let cs = corners(c, h);
+        let mut walk = self.walk_across(v, &cs)?;
+        let (p0, p2) = (self.vert(walk.back), self.vert(walk.fwd));
+        let o = arc_centre([p0, self.vert(v), p2], c)?;
+        let mut band = Band {
+            o,
+            w: [0.0; 2],
+            lo2: f64::INFINITY,
+            hi2: 0.0,
+        };
+        // The half-plane: the corners must be in it too.
+        band.w = band.rel(c);
+        let rc = cs.map(|x| band.rel(x));
+        if !rc.iter().all(|y| band.faces(*y)) {
+            return None;
+        }
+        // The way the stretch turns around `o` from `back` to `fwd`, and the corners
+        // first and last that way.
+        let sigma = cross(band.rel(p0), band.rel(p2)).signum();
+        if sigma == 0.0 || sigma.is_nan() {
+            return None;
+        }
+        let rays = extreme_corners(&rc, sigma);
+        // The band over every edge from `back` to `fwd`, following the stretch further
+        // while its ends' rays do not hold the corners.
+        let mut k = walk.back;
+        while k != walk.fwd {
+            if !band.add(&self.segs[k as usize]) {
+                return None;
+            }
+            k = self.next[k as usize];
+        }
+        self.walk_to_rays(&mut walk, &mut band, sigma, rays)?;
+        let (rb, rf) = (
+            band.rel(self.vert(walk.back)),
+            band.rel(self.vert(walk.fwd)),
+        );
+        if !band.faces(rf) {
+            return None;
+        }
+        band.hi2 = band.hi2.max(rf[0] * rf[0] + rf[1] * rf[1]);
+        Some(Arc {
+            o,
+            lo: band.lo2.sqrt() - ARC_MARGIN,
+            hi: band.hi2.sqrt() + ARC_MARGIN,
+            w: band.w,
+            back: walk.back,
+            fwd: walk.fwd,
+            wrap: walk.wrap,
+            rb,
+            rf,
+            sigma,
+        })
+    }
+
+    /// The stretch through edge `v` followed each way until its points' projections on
+    /// `v`'s line cover those of the corners `cs`; `None` when that takes more than
+    /// [`ARC_WALK`] points either way or the stretch closes on itself.
+    fn walk_across(&self, v: u32, cs: &[[f64; 2]; 4]) -> Option<Walk> {
         let a = self.vert(v);
         let u = unit([
             self.segs[v as usize][2] - a[0],
@@ -195,143 +386,53 @@ impl Edges {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(m, n), x| {
                 (m.min(proj(*x)), n.max(proj(*x)))
             });
-        // Points `back` and `fwd` (edge `v` runs from point `v` to the next), the steps
-        // taken each way, and where the contour's indexes wrap around when they do.
-        let (mut back, mut fwd) = (v, self.next[v as usize]);
-        let (mut nb, mut nf) = (0usize, 0usize);
-        let mut wrap = (fwd < v).then_some((fwd, v));
-        let step_back = |back: &mut u32, wrap: &mut Option<(u32, u32)>| {
-            let p = self.prev[*back as usize];
-            if p > *back {
-                *wrap = Some((*back, p));
-            }
-            *back = p;
-        };
-        let step_fwd = |fwd: &mut u32, wrap: &mut Option<(u32, u32)>| {
-            let n = self.next[*fwd as usize];
-            if n < *fwd {
-                *wrap = Some((n, *fwd));
-            }
-            *fwd = n;
-        };
-        while proj(self.vert(back)) > q_lo {
-            step_back(&mut back, &mut wrap);
-            nb += 1;
-            if nb > ARC_WALK || back == fwd {
+        let mut walk = Walk::new(self, v);
+        while proj(self.vert(walk.back)) > q_lo {
+            walk.step_back(self);
+            if walk.steps_back > ARC_WALK || walk.back == walk.fwd {
                 return None;
             }
         }
-        while proj(self.vert(fwd)) < q_hi {
-            step_fwd(&mut fwd, &mut wrap);
-            nf += 1;
-            if nf > ARC_WALK || fwd == back {
+        while proj(self.vert(walk.fwd)) < q_hi {
+            walk.step_fwd(self);
+            if walk.steps_fwd > ARC_WALK || walk.fwd == walk.back {
                 return None;
             }
         }
-        let (p0, p1, p2) = (self.vert(back), a, self.vert(fwd));
-        // The circle through the three points, relative to p0.
-        let (b, d) = (
-            [p1[0] - p0[0], p1[1] - p0[1]],
-            [p2[0] - p0[0], p2[1] - p0[1]],
-        );
-        let den = 2.0 * cross(b, d);
-        let (bb, dd) = (b[0] * b[0] + b[1] * b[1], d[0] * d[0] + d[1] * d[1]);
-        let oc = [(d[1] * bb - b[1] * dd) / den, (b[0] * dd - d[0] * bb) / den];
-        let o = if oc[0].is_finite()
-            && oc[1].is_finite()
-            && oc[0] * oc[0] + oc[1] * oc[1] <= ARC_LINE_R * ARC_LINE_R
-        {
-            [p0[0] + oc[0], p0[1] + oc[1]]
-        } else {
-            // Straight: seen from far away on the side away from the square.
-            let m = [0.5 * (p0[0] + p2[0]), 0.5 * (p0[1] + p2[1])];
-            let t = unit(d)?;
-            let mut n = [-t[1], t[0]];
-            if n[0] * (c[0] - m[0]) + n[1] * (c[1] - m[1]) > 0.0 {
-                n = [-n[0], -n[1]];
-            }
-            [m[0] + ARC_LINE_R * n[0], m[1] + ARC_LINE_R * n[1]]
-        };
-        let rel = |x: [f64; 2]| [x[0] - o[0], x[1] - o[1]];
-        // The half-plane: the corners must be in it too.
-        let w = rel(c);
-        let in_h = |y: [f64; 2]| w[0] * y[0] + w[1] * y[1] > 0.0;
-        let rc = cs.map(rel);
-        if !rc.iter().all(|y| in_h(*y)) {
-            return None;
-        }
-        // The way the stretch turns around `o` from `back` to `fwd`, and the corners
-        // first and last that way.
-        let sigma = cross(rel(p0), rel(p2)).signum();
-        if sigma == 0.0 || sigma.is_nan() {
-            return None;
-        }
-        let (mut x0, mut x1) = (rc[0], rc[0]);
-        for &y in &rc[1..] {
-            if sigma * cross(y, x0) > 0.0 {
-                x0 = y;
-            }
-            if sigma * cross(x1, y) > 0.0 {
-                x1 = y;
-            }
-        }
-        // The band over every edge from `back` to `fwd`, following the stretch further
-        // while its ends' rays do not hold the corners.
-        let (mut lo2, mut hi2) = (f64::INFINITY, 0.0f64);
-        let mut edge = |k: u32| {
-            let s = &self.segs[k as usize];
-            let (p, q) = (rel([s[0], s[1]]), rel([s[2], s[3]]));
-            if !in_h(p) {
-                return false;
-            }
-            hi2 = hi2.max(p[0] * p[0] + p[1] * p[1]);
-            // The distance to the edge's line: at most the distance to the edge.
-            let e = [q[0] - p[0], q[1] - p[1]];
-            let cr = cross(p, q);
-            lo2 = lo2.min(cr * cr / (e[0] * e[0] + e[1] * e[1]));
-            true
-        };
-        let mut k = back;
-        while k != fwd {
-            if !edge(k) {
-                return None;
-            }
-            k = self.next[k as usize];
-        }
-        while sigma * cross(rel(self.vert(back)), x0) < 0.0 {
-            step_back(&mut back, &mut wrap);
-            nb += 1;
-            if nb > 3 * ARC_WALK || back == fwd || !edge(back) {
+        Some(walk)
+    }
+
+    /// Follows `walk` further each way, widening `band` over the edges it adds, until the
+    /// rays from the arc's centre through its ends hold the corners between them (`x0`
+    /// first and `x1` last in the way `sigma` the arc turns). `None` when that takes more
+    /// than three times [`ARC_WALK`] points either way, the stretch closes on itself or
+    /// leaves the half-plane.
+    fn walk_to_rays(
+        &self,
+        walk: &mut Walk,
+        band: &mut Band,
+        sigma: f64,
+        (x0, x1): ([f64; 2], [f64; 2]),
+    ) -> Option<()> {
+        while sigma * cross(band.rel(self.vert(walk.back)), x0) < 0.0 {
+            walk.step_back(self);
+            if walk.steps_back > 3 * ARC_WALK
+                || walk.back == walk.fwd
+                || !band.add(&self.segs[walk.back as usize])
+            {
                 return None;
             }
         }
-        while sigma * cross(x1, rel(self.vert(fwd))) < 0.0 {
-            if nf > 3 * ARC_WALK || !edge(fwd) {
+        while sigma * cross(x1, band.rel(self.vert(walk.fwd))) < 0.0 {
+            if walk.steps_fwd > 3 * ARC_WALK || !band.add(&self.segs[walk.fwd as usize]) {
                 return None;
             }
-            step_fwd(&mut fwd, &mut wrap);
-            nf += 1;
-            if fwd == back {
+            walk.step_fwd(self);
+            if walk.fwd == walk.back {
                 return None;
             }
         }
-        let (rb, rf) = (rel(self.vert(back)), rel(self.vert(fwd)));
-        if !in_h(rf) {
-            return None;
-        }
-        hi2 = hi2.max(rf[0] * rf[0] + rf[1] * rf[1]);
-        Some(Arc {
-            o,
-            lo: lo2.sqrt() - ARC_MARGIN,
-            hi: hi2.sqrt() + ARC_MARGIN,
-            w,
-            back,
-            fwd,
-            wrap,
-            rb,
-            rf,
-            sigma,
-        })
+        Some(())
     }
 
     /// Whether no point of the square `[c ± h]` inside the section is deeper than `t`
