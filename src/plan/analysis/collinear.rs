@@ -13,7 +13,7 @@ pub const COLLINEAR_MM: f64 = 1e-9;
 
 /// At most this many consecutive points are left out (each left-out point is checked
 /// against the final segment, so the cost stays linear).
-const COLLINEAR_RUN: usize = 16;
+const COLLINEAR_MAX_RUN: usize = 16;
 
 /// Whether `b` lies within [`COLLINEAR_MM`] of the segment `a`–`d` (and between its ends).
 #[inline]
@@ -75,13 +75,13 @@ fn leave_out_collinear(c: &[[f64; 2]], s: usize, out: &mut Vec<[f64; 2]>) -> usi
     out.push(anchor);
     let mut min = 0;
     // Points left out since the anchor, as steps from the corner.
-    let mut left = [0usize; COLLINEAR_RUN];
+    let mut left = [0usize; COLLINEAR_MAX_RUN];
     let mut nl = 0;
     let mut d = at(1);
     for k in 1..n {
         let b = d;
         d = at(k + 1);
-        if nl < COLLINEAR_RUN
+        if nl < COLLINEAR_MAX_RUN
             && near_segment(anchor, b, d)
             && left[..nl].iter().all(|&i| near_segment(anchor, at(i), d))
         {

@@ -138,7 +138,7 @@ mod tests {
         }
     }
 
-    /// [`count_islands`] the direct way (the construction before session 7): every run
+    /// [`count_islands`] the direct way (without the shortcut of the unsupported runs): every run
     /// joined into its region (union-find), a region supported when one of its runs
     /// shares a pixel with a run below.
     fn join_and_count(cur: &LitRuns, prev: &LitRuns) -> u32 {

@@ -2,26 +2,26 @@
 //! when its walls, seen from their centres of curvature as arcs within a thin band,
 //! bound its depth.
 
-use super::edges::Seg;
+use super::edges::Segment;
 use super::plane::{corners, cross, d2, unit};
-use super::walls::SLAB_EDGES;
+use super::walls::MAX_CROSSING_EDGES;
 use super::Edges;
 
 /// Most contour points an [`Arc`] is followed each way from its edge to cover the
 /// square's projection on that edge's line (and three times as many to reach the rays of
 /// the square's corners).
-const ARC_WALK: usize = 64;
+const ARC_MAX_WALK: usize = 64;
 
 /// Radius of the circle a straight wall is seen on, mm (far enough that a wall a few
 /// millimetres long stands less than a micrometre off it, near enough that distances to
 /// its centre keep about 1e-10 mm of rounding).
-const ARC_LINE_R: f64 = 1e6;
+const STRAIGHT_WALL_RADIUS_MM: f64 = 1e6;
 
 /// Widening of an [`Arc`]'s band for the rounding of the distances to its centre, mm.
-const ARC_MARGIN: f64 = 1e-9;
+const ARC_BAND_MARGIN_MM: f64 = 1e-9;
 
 /// Arcs kept by a search for the following cells ([`ArcCache`]).
-const ARC_CACHE: usize = 8;
+const ARC_CACHE_SIZE: usize = 8;
 
 /// A stretch of a contour, the points `back` to `fwd` (consecutive indexes), seen from a
 /// centre `o`: every point of it (its edges included) lies at a distance in the band
@@ -32,7 +32,7 @@ const ARC_CACHE: usize = 8;
 /// depth of `x` by `ρ(x) − lo` beyond the band (`ρ` the distance to `o`), `hi − ρ(x)`
 /// before it, `hi − lo` in it. A curved wall (a hole's, a ring's) is seen from its
 /// centre of curvature, so the band is thin however long the stretch; a straight wall
-/// from a point [`ARC_LINE_R`] away.
+/// from a point [`STRAIGHT_WALL_RADIUS_MM`] away.
 #[derive(Debug, Clone, Copy)]
 struct Arc {
     o: [f64; 2],
@@ -96,7 +96,7 @@ impl Arc {
 /// wall are held by the same stretch).
 #[derive(Default)]
 pub(super) struct ArcCache {
-    arcs: [Option<Arc>; ARC_CACHE],
+    arcs: [Option<Arc>; ARC_CACHE_SIZE],
     next: usize,
 }
 
@@ -113,7 +113,7 @@ impl ArcCache {
         }
         let a = e.arc(v, c, h)?;
         self.arcs[self.next] = Some(a);
-        self.next = (self.next + 1) % ARC_CACHE;
+        self.next = (self.next + 1) % ARC_CACHE_SIZE;
         Some(a)
     }
 }
@@ -248,7 +248,7 @@ impl Band {
 
     /// Widens the band over edge `s`; `false` when its start is not in the half-plane.
     #[inline]
-    fn add(&mut self, s: &Seg) -> bool {
+    fn add(&mut self, s: &Segment) -> bool {
         let (p, q) = (self.rel([s[0], s[1]]), self.rel([s[2], s[3]]));
         if !self.faces(p) {
             return false;
@@ -263,9 +263,9 @@ impl Band {
 }
 
 /// The centre an arc through `p0`, `p1` and `p2` is seen from: the centre of their circle,
-/// or, when that circle is larger than [`ARC_LINE_R`] (or there is none), a point
-/// [`ARC_LINE_R`] away from the middle of `p0`–`p2` on the side away from `c`. `None` when
-/// `p0` and `p2` coincide.
+/// or, when that circle is larger than [`STRAIGHT_WALL_RADIUS_MM`] (or there is none), a
+/// point [`STRAIGHT_WALL_RADIUS_MM`] away from the middle of `p0`–`p2` on the side away
+/// from `c`. `None` when `p0` and `p2` coincide.
 fn arc_centre([p0, p1, p2]: [[f64; 2]; 3], c: [f64; 2]) -> Option<[f64; 2]> {
     // The circle through the three points, relative to p0.
     let (b, d) = (
@@ -277,7 +277,7 @@ fn arc_centre([p0, p1, p2]: [[f64; 2]; 3], c: [f64; 2]) -> Option<[f64; 2]> {
     let oc = [(d[1] * bb - b[1] * dd) / den, (b[0] * dd - d[0] * bb) / den];
     if oc[0].is_finite()
         && oc[1].is_finite()
-        && oc[0] * oc[0] + oc[1] * oc[1] <= ARC_LINE_R * ARC_LINE_R
+        && oc[0] * oc[0] + oc[1] * oc[1] <= STRAIGHT_WALL_RADIUS_MM * STRAIGHT_WALL_RADIUS_MM
     {
         return Some([p0[0] + oc[0], p0[1] + oc[1]]);
     }
@@ -288,7 +288,10 @@ fn arc_centre([p0, p1, p2]: [[f64; 2]; 3], c: [f64; 2]) -> Option<[f64; 2]> {
     if n[0] * (c[0] - m[0]) + n[1] * (c[1] - m[1]) > 0.0 {
         n = [-n[0], -n[1]];
     }
-    Some([m[0] + ARC_LINE_R * n[0], m[1] + ARC_LINE_R * n[1]])
+    Some([
+        m[0] + STRAIGHT_WALL_RADIUS_MM * n[0],
+        m[1] + STRAIGHT_WALL_RADIUS_MM * n[1],
+    ])
 }
 
 /// The corners `rc` (relative to an arc's centre) first and last in the way `sigma` the
@@ -310,11 +313,11 @@ impl Edges {
     /// An [`Arc`] through edge `v` for the square `[c ± h]`: the stretch is first followed
     /// each way until its points' projections on `v`'s line cover the square's corners';
     /// its centre `o` is the circle through its ends and `v`'s start (or a point
-    /// [`ARC_LINE_R`] away, on the far side from the square, when that circle is larger);
-    /// its half-plane faces the square's centre. It is followed further until its ends'
-    /// rays hold the square's corners between them. `None` when the stretch cannot be
-    /// followed far enough, leaves the half-plane or runs over the end of its contour's
-    /// points (its indexes must be consecutive).
+    /// [`STRAIGHT_WALL_RADIUS_MM`] away, on the far side from the square, when that circle
+    /// is larger); its half-plane faces the square's centre. It is followed further until
+    /// its ends' rays hold the square's corners between them. `None` when the stretch
+    /// cannot be followed far enough, leaves the half-plane or runs over the end of its
+    /// contour's points (its indexes must be consecutive).
     fn arc(&self, v: u32, c: [f64; 2], h: f64) -> Option<Arc> {
         let cs = corners(c, h);
         let mut walk = self.walk_across(v, &cs)?;
@@ -359,8 +362,8 @@ impl Edges {
         band.hi2 = band.hi2.max(rf[0] * rf[0] + rf[1] * rf[1]);
         Some(Arc {
             o,
-            lo: band.lo2.sqrt() - ARC_MARGIN,
-            hi: band.hi2.sqrt() + ARC_MARGIN,
+            lo: band.lo2.sqrt() - ARC_BAND_MARGIN_MM,
+            hi: band.hi2.sqrt() + ARC_BAND_MARGIN_MM,
             w: band.w,
             back: walk.back,
             fwd: walk.fwd,
@@ -373,7 +376,7 @@ impl Edges {
 
     /// The stretch through edge `v` followed each way until its points' projections on
     /// `v`'s line cover those of the corners `cs`; `None` when that takes more than
-    /// [`ARC_WALK`] points either way or the stretch closes on itself.
+    /// [`ARC_MAX_WALK`] points either way or the stretch closes on itself.
     fn walk_across(&self, v: u32, cs: &[[f64; 2]; 4]) -> Option<Walk> {
         let a = self.vert(v);
         let u = unit([
@@ -389,13 +392,13 @@ impl Edges {
         let mut walk = Walk::new(self, v);
         while proj(self.vert(walk.back)) > q_lo {
             walk.step_back(self);
-            if walk.steps_back > ARC_WALK || walk.back == walk.fwd {
+            if walk.steps_back > ARC_MAX_WALK || walk.back == walk.fwd {
                 return None;
             }
         }
         while proj(self.vert(walk.fwd)) < q_hi {
             walk.step_fwd(self);
-            if walk.steps_fwd > ARC_WALK || walk.fwd == walk.back {
+            if walk.steps_fwd > ARC_MAX_WALK || walk.fwd == walk.back {
                 return None;
             }
         }
@@ -405,7 +408,7 @@ impl Edges {
     /// Follows `walk` further each way, widening `band` over the edges it adds, until the
     /// rays from the arc's centre through its ends hold the corners between them (`x0`
     /// first and `x1` last in the way `sigma` the arc turns). `None` when that takes more
-    /// than three times [`ARC_WALK`] points either way, the stretch closes on itself or
+    /// than three times [`ARC_MAX_WALK`] points either way, the stretch closes on itself or
     /// leaves the half-plane.
     fn walk_to_rays(
         &self,
@@ -416,7 +419,7 @@ impl Edges {
     ) -> Option<()> {
         while sigma * cross(band.rel(self.vert(walk.back)), x0) < 0.0 {
             walk.step_back(self);
-            if walk.steps_back > 3 * ARC_WALK
+            if walk.steps_back > 3 * ARC_MAX_WALK
                 || walk.back == walk.fwd
                 || !band.add(&self.segs[walk.back as usize])
             {
@@ -424,7 +427,7 @@ impl Edges {
             }
         }
         while sigma * cross(x1, band.rel(self.vert(walk.fwd))) < 0.0 {
-            if walk.steps_fwd > 3 * ARC_WALK || !band.add(&self.segs[walk.fwd as usize]) {
+            if walk.steps_fwd > 3 * ARC_MAX_WALK || !band.add(&self.segs[walk.fwd as usize]) {
                 return None;
             }
             walk.step_fwd(self);
@@ -456,7 +459,7 @@ impl Edges {
         hints: [u32; 2],
         cache: &mut ArcCache,
     ) -> bool {
-        let mut es = [0u32; SLAB_EDGES];
+        let mut es = [0u32; MAX_CROSSING_EDGES];
         let Some(m) = self.crossing(c, h, &mut es) else {
             return false;
         };

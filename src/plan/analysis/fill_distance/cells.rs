@@ -29,12 +29,12 @@ pub(super) struct Cell {
 /// queue compares keys only, so it moves 16 bytes per step instead of a whole cell. The
 /// key is kept as the integer [`f64::total_cmp`] orders by (one comparison per step).
 #[derive(Debug, Clone, Copy)]
-struct Queued {
+struct QueuedCell {
     key: i64,
     cell: u32,
 }
 
-impl Queued {
+impl QueuedCell {
     /// `max` as an integer ordered as [`f64::total_cmp`] orders the floats (its own
     /// transform: negative values have their magnitude bits flipped).
     fn key(max: f64) -> i64 {
@@ -43,18 +43,18 @@ impl Queued {
     }
 }
 
-impl PartialEq for Queued {
+impl PartialEq for QueuedCell {
     fn eq(&self, o: &Self) -> bool {
         self.key == o.key
     }
 }
-impl Eq for Queued {}
-impl PartialOrd for Queued {
+impl Eq for QueuedCell {}
+impl PartialOrd for QueuedCell {
     fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
         Some(self.cmp(o))
     }
 }
-impl Ord for Queued {
+impl Ord for QueuedCell {
     fn cmp(&self, o: &Self) -> Ordering {
         self.key.cmp(&o.key)
     }
@@ -63,7 +63,7 @@ impl Ord for Queued {
 /// The search's priority queue of cells (largest bound first).
 #[derive(Default)]
 pub(super) struct Queue {
-    heap: BinaryHeap<Queued>,
+    heap: BinaryHeap<QueuedCell>,
     cells: Vec<Cell>,
 }
 
@@ -75,8 +75,8 @@ impl Queue {
     }
 
     pub(super) fn push(&mut self, c: Cell) {
-        self.heap.push(Queued {
-            key: Queued::key(c.max),
+        self.heap.push(QueuedCell {
+            key: QueuedCell::key(c.max),
             cell: self.cells.len() as u32,
         });
         self.cells.push(c);

@@ -5,12 +5,13 @@ use crate::slice::Contour;
 
 /// Boundary points within this distance of the segment that replaces them are left out of
 /// the contours the max fill distance is searched on, mm (a fine mesh gives a contour point
-/// every few hundredths of a millimetre; most of them go). See [`max_fill_distance`].
+/// every few hundredths of a millimetre; most of them go). See
+/// [`max_fill_distance`](super::max_fill_distance).
 pub const COARSE_MM: f64 = 0.0005;
 
 /// Longest run of consecutive points left out by [`coarsen`] (each one is checked against
 /// the final segment).
-const COARSE_RUN: usize = 16;
+const COARSE_MAX_RUN: usize = 16;
 
 /// `c` without the points within [`COARSE_MM`] of the segment that replaces them (and
 /// between its ends), into `out`; returns the largest squared distance of a left-out point
@@ -38,7 +39,7 @@ fn coarsen(c: &[[f64; 2]], out: &mut Vec<[f64; 2]>) -> f64 {
         let run = &c[s..k];
         // Whether b and the run's points all lie within the tolerance of the segment from
         // the anchor to d (and between its ends).
-        let left_out = run.len() < COARSE_RUN && {
+        let left_out = run.len() < COARSE_MAX_RUN && {
             let (ux, uy) = (d[0] - anchor[0], d[1] - anchor[1]);
             let l2 = ux * ux + uy * uy;
             if l2 == 0.0 {

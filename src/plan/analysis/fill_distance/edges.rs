@@ -6,10 +6,11 @@ use super::plane::{d2, unit};
 use crate::slice::Contour;
 
 /// A directed edge `[ax, ay, bx, by]`.
-pub(super) type Seg = [f64; 4];
+pub(super) type Segment = [f64; 4];
 
+/// A node of the bounding-volume hierarchy over the edges: the box around its edges.
 #[derive(Debug, Clone, Copy, Default)]
-pub(super) struct Node {
+pub(super) struct BvhNode {
     pub(super) lo: [f64; 2],
     pub(super) hi: [f64; 2],
     /// Leaf: first edge; inner node: index of the left child (the right one follows).
@@ -18,17 +19,18 @@ pub(super) struct Node {
     pub(super) count: u32,
 }
 
-const LEAF: usize = 8;
+/// Most edges of a leaf of the hierarchy (a run of consecutive edges of one contour).
+const LEAF_EDGES: usize = 8;
 
 /// The edges of a section with the indexes the distance queries need.
 pub struct Edges {
     /// Edge `v` goes from contour point `v` to point `next[v]` (the points of all contours
     /// one contour after the other, repeated consecutive points left out).
-    pub(super) segs: Vec<Seg>,
+    pub(super) segs: Vec<Segment>,
     /// The next and the previous point (and edge) of the same contour.
     pub(super) next: Vec<u32>,
     pub(super) prev: Vec<u32>,
-    pub(super) nodes: Vec<Node>,
+    pub(super) nodes: Vec<BvhNode>,
     /// The edges under each node: a range of consecutive indexes `[first, end)` (leaves
     /// are runs of consecutive edges, and each level pairs neighbours).
     pub(super) spans: Vec<[u32; 2]>,
@@ -38,7 +40,7 @@ pub struct Edges {
     band_items: Vec<u32>,
 }
 
-pub(super) fn seg_d2(p: [f64; 2], s: &Seg) -> f64 {
+pub(super) fn seg_d2(p: [f64; 2], s: &Segment) -> f64 {
     let (ax, ay, bx, by) = (s[0], s[1], s[2], s[3]);
     let (dx, dy) = (bx - ax, by - ay);
     let (px, py) = (p[0] - ax, p[1] - ay);
@@ -55,7 +57,7 @@ pub(super) fn seg_d2(p: [f64; 2], s: &Seg) -> f64 {
 /// [`seg_d2`] when it is below `best`, else `None`: the distance to the edge's line is
 /// compared before it is divided out.
 #[inline]
-fn seg_d2_below(p: [f64; 2], s: &Seg, best: f64) -> Option<f64> {
+fn seg_d2_below(p: [f64; 2], s: &Segment, best: f64) -> Option<f64> {
     let (ax, ay, bx, by) = (s[0], s[1], s[2], s[3]);
     let (dx, dy) = (bx - ax, by - ay);
     let (px, py) = (p[0] - ax, p[1] - ay);
@@ -77,31 +79,31 @@ fn seg_d2_below(p: [f64; 2], s: &Seg, best: f64) -> Option<f64> {
     (d < best).then_some(d)
 }
 
-fn box_d2(p: [f64; 2], n: &Node) -> f64 {
+fn box_d2(p: [f64; 2], n: &BvhNode) -> f64 {
     let dx = (n.lo[0] - p[0]).max(0.0).max(p[0] - n.hi[0]);
     let dy = (n.lo[1] - p[1]).max(0.0).max(p[1] - n.hi[1]);
     dx * dx + dy * dy
 }
 
-fn union(a: &Node, b: &Node) -> ([f64; 2], [f64; 2]) {
+fn union(a: &BvhNode, b: &BvhNode) -> ([f64; 2], [f64; 2]) {
     (
         [a.lo[0].min(b.lo[0]), a.lo[1].min(b.lo[1])],
         [a.hi[0].max(b.hi[0]), a.hi[1].max(b.hi[1])],
     )
 }
 
-/// Builds the hierarchy bottom-up in contour order: leaves are runs of up to [`LEAF`]
+/// Builds the hierarchy bottom-up in contour order: leaves are runs of up to [`LEAF_EDGES`]
 /// consecutive edges of one contour (a short piece of curve, so a tight box), and each
 /// level pairs neighbours of the level below. Linear time; the root is the last node.
-fn build(segs: &[Seg], contour_ends: &[usize]) -> (Vec<Node>, Vec<[u32; 2]>) {
-    let mut nodes: Vec<Node> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
-    let mut spans: Vec<[u32; 2]> = Vec::with_capacity(2 * segs.len() / LEAF + 4);
+fn build(segs: &[Segment], contour_ends: &[usize]) -> (Vec<BvhNode>, Vec<[u32; 2]>) {
+    let mut nodes: Vec<BvhNode> = Vec::with_capacity(2 * segs.len() / LEAF_EDGES + 4);
+    let mut spans: Vec<[u32; 2]> = Vec::with_capacity(2 * segs.len() / LEAF_EDGES + 4);
     let mut start = 0;
     for &end in contour_ends {
         let mut i = start;
         while i < end {
-            let j = (i + LEAF).min(end);
-            let mut n = Node {
+            let j = (i + LEAF_EDGES).min(end);
+            let mut n = BvhNode {
                 lo: [f64::INFINITY; 2],
                 hi: [f64::NEG_INFINITY; 2],
                 first: i as u32,
@@ -139,7 +141,7 @@ fn build(segs: &[Seg], contour_ends: &[usize]) -> (Vec<Node>, Vec<[u32; 2]>) {
             if k + 1 < hi {
                 let (a, b) = (nodes[k], nodes[k + 1]);
                 let (l, h) = union(&a, &b);
-                nodes.push(Node {
+                nodes.push(BvhNode {
                     lo: l,
                     hi: h,
                     first: k as u32,
@@ -163,7 +165,7 @@ impl Edges {
     /// Indexes the edges of closed `contours` (zero-length edges are skipped).
     pub fn new(contours: &[Contour]) -> Edges {
         let total: usize = contours.iter().map(|c| c.len()).sum();
-        let mut segs: Vec<Seg> = Vec::with_capacity(total);
+        let mut segs: Vec<Segment> = Vec::with_capacity(total);
         let mut ends = Vec::with_capacity(contours.len());
         let mut next: Vec<u32> = Vec::with_capacity(total);
         let mut prev: Vec<u32> = Vec::with_capacity(total);
@@ -219,7 +221,7 @@ impl Edges {
         let nb = (segs.len() / 4).clamp(1, 4096);
         let band_inv = if y1 > y0 { nb as f64 / (y1 - y0) } else { 0.0 };
         // `y ≥ y0` (the lowest point), so the product is not negative and far below 2^63:
-        // truncating through `i64` (one instruction) gives what `as usize` gives.
+        // truncating through `i64` (cheaper than through `usize`) gives what `as usize` gives.
         let top = nb as i64 - 1;
         let band_of = |y: f64| (((y - y0) * band_inv) as i64).min(top) as u32;
         // The band of each contour point (the start of each edge), once; edge `v` spans

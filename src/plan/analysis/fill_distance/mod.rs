@@ -1,5 +1,12 @@
 //! The max fill distance: the radius of the largest circle inside a section, found by a
-//! best-first subdivision of its bounding box (see [`max_fill_distance_with`]).
+//! best-first subdivision of its bounding box (see [`max_fill_distance_with`]). The result
+//! is a true inscribed radius, within [`PRECISION_MM`] of the largest.
+//!
+//! Files: `edges.rs` indexes the edges (nearest edge, inside test), `cells.rs` queues the
+//! cells, `points.rs` tests covers of a cell by discs around boundary points, `coarsen.rs`
+//! makes the coarse contours searched, `walls.rs` and `arcs.rs` drop cells by their walls
+//! (seen as lines, and as arcs of circles and rings), `search.rs` runs the search and
+//! `plane.rs` holds small helpers on points and squares.
 
 use super::PRECISION_MM;
 use crate::slice::Contour;
@@ -31,10 +38,10 @@ use search::search;
 /// finds a centre `c` at depth `r'` on the coarse contours; the result is `max(r' − δ, 0)`.
 /// When `r' > δ` the circle of radius `r' − δ` around `c` lies inside the section (`c` is
 /// farther than `δ` from the coarse boundary, so on the same side of both boundaries), and
-/// `r' − δ ≥ (largest on the coarse contours − precision) − δ ≥ largest − 2δ −
-/// precision = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most `r' +
-/// precision + δ ≤` [`PRECISION_MM`], so 0 is within the guarantee. Contours with nothing to leave out (`δ = 0`) are searched as
-/// they are.
+/// `r' − δ ≥ (largest on the coarse contours − precision) − δ ≥ largest − 2δ − precision
+/// = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most
+/// `r' + precision + δ ≤` [`PRECISION_MM`], so 0 is within the guarantee. Contours with
+/// nothing to leave out (`δ = 0`) are searched as they are.
 pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
     fill_distance(contours, &mut SearchScratch::default())
 }
@@ -60,7 +67,7 @@ pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f6
 /// Best-first search over square cells ordered by an upper bound of the signed distance
 /// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
 /// dropped as soon as it is shown to hold no point deeper than `T`. When the first
-/// `SEED_AFTER` cells have found no centre inside the section (a thin one), the best
+/// `SEED_AFTER_CELLS` cells have found no centre inside the section (a thin one), the best
 /// depth starts from points on a few walls' inward normals (`Edges::ridge_probe`).
 /// Popping a cell of half-size `h`:
 /// 1. its parent's boundary points (below) still cover it at radius `T` (only tried when
@@ -82,15 +89,15 @@ pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f6
 ///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
 /// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
 ///    boundary point behind the centre (the other wall of a ridge; its search starts from
-///    the far wall of step 2) and, on the contours of both, the points about `0.6·h` away on
-///    either side. If discs of radius `T` around them
-///    cover the cell (`points_exceed`) it is dropped. This is what keeps long ridges
-///    (walls of constant thickness, rings) from being subdivided down to the precision.
-///    When they do not, a cell small enough (`COVER_GATE`) gets up to `EXTRA` more
-///    points, each the boundary point nearest to a point the test found uncovered (a
-///    third wall at a peak, a wall point between the samples: `cover_more`), and is
-///    tested again (the walls-only test of step 2 likewise);
-///    otherwise a ridge probe (half-way between the two walls) may raise the best;
+///    the far wall of step 2) and, on the contours of both, the points about `0.6·h` away
+///    on either side. If discs of radius `T` around them cover the cell (`points_exceed`)
+///    it is dropped. This is what keeps long ridges (walls of constant thickness, rings)
+///    from being subdivided down to the precision. When they do not, a cell small enough
+///    (`COVER_MORE_MAX_SIZE`) gets up to `MAX_EXTRA_COVER_POINTS` more points, each the
+///    boundary point nearest to a point the test found uncovered (a third wall at a peak, a
+///    wall point between the samples: `cover_more`), and is tested again (the walls-only
+///    test of step 2 likewise); otherwise a ridge probe (half-way between the two walls)
+///    may raise the best;
 /// 5. a cell of half-size between `1.5·T` and 1 mm whose walls are thin (the edges
 ///    meeting it form at most two runs, each close to a line over the cell) is dropped
 ///    when the walls bound every part of it inside the section by `T`
@@ -100,11 +107,11 @@ pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f6
 ///    section is deeper than `T`) is dropped when its walls, seen as arcs of circles
 ///    around their centres of curvature, show it shallow (`Edges::arcs_cover`): between
 ///    the two walls of a ring the mean of their bounds is the ring's half-width over the
-///    whole cell, however long the ring; tried while it pays (`ARC_TRIAL`);
+///    whole cell, however long the ring; tried while it pays (`COVER_TRIAL_TRIES`);
 /// 7. a cell of half-size at least `8·precision` that is larger than `T` or whose centre
 ///    is outside the section is dropped when it straddles a ring whose two walls, seen as
 ///    arcs, show it shallow (`Edges::ring_cover`): a thin ring's cells stick out of it on
-///    both sides, however large; tried while it pays, and on every `RING_PROBE`-th
+///    both sides, however large; tried while it pays, and on every `RING_PROBE_EVERY`-th
 ///    cell;
 /// 8. the four children are tested against the same points at once, and only those not
 ///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
@@ -123,12 +130,12 @@ pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     search(e, precision, &mut SearchScratch::default())
 }
 
-/// Buffers of the max fill distance search, kept from layer to layer by an [`Analyser`](super::Analyser)
-/// (results never depend on them).
+/// Buffers of the max fill distance search, kept from layer to layer by an
+/// [`Analyser`](super::Analyser) (results never depend on them).
 #[derive(Default)]
 pub(super) struct SearchScratch {
     queue: Queue,
-    /// The contours searched ([`coarsen`]).
+    /// The contours searched ([`coarsen_section`]).
     coarse: Vec<Contour>,
     /// Boundary points of split cells, for their children.
     arena: Vec<([[f64; 2]; 6], u8)>,

@@ -4,17 +4,17 @@
 use super::plane::d2;
 
 /// Most boundary points added to a cell's own cover test when its walls' points do not
-/// cover it ([`cover_more`]): each one the boundary point nearest to a point the test
+/// cover it (`Search::cover_more`): each one the boundary point nearest to a point the test
 /// found uncovered (a third wall near a peak, or a wall point between the samples).
-pub(super) const EXTRA: usize = 3;
+pub(super) const MAX_EXTRA_COVER_POINTS: usize = 3;
 
-/// Most points of a cover test: the six wall points and the [`EXTRA`] ones.
-pub(super) const MAX_PTS: usize = 6 + EXTRA;
+/// Most points of a cover test: the six wall points and the [`MAX_EXTRA_COVER_POINTS`] ones.
+pub(super) const MAX_COVER_POINTS: usize = 6 + MAX_EXTRA_COVER_POINTS;
 
 /// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
-/// of `q` (at most [`MAX_PTS`] points). When it is not, no point of the square is farther than
-/// `sqrt(t2)` from the boundary the points lie on: the square is covered by discs of
-/// radius `sqrt(t2)` around boundary points. Decided by [`exceeds`].
+/// of `q` (at most [`MAX_COVER_POINTS`] points). When it is not, no point of the square is
+/// farther than `sqrt(t2)` from the boundary the points lie on: the square is covered by
+/// discs of radius `sqrt(t2)` around boundary points. Decided by [`exceeds`].
 pub(super) fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
     exceeds(c, h, q, t2).0
 }
@@ -26,14 +26,14 @@ pub(super) fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> boo
 /// [`uncovered`] starts after them.
 pub(super) fn witness(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Option<[f64; 2]> {
     match cover_test(c, h, q, t2) {
-        Cover::Covered => None,
-        Cover::Corner(x) => Some(x),
-        Cover::Edge(_) | Cover::Inside => uncovered(c, h, q, t2, false),
+        CoverOutcome::Covered => None,
+        CoverOutcome::Corner(x) => Some(x),
+        CoverOutcome::Edge(_) | CoverOutcome::Inside => uncovered(c, h, q, t2, false),
     }
 }
 
 /// What [`cover_test`] found.
-enum Cover {
+enum CoverOutcome {
     /// The discs cover the square.
     Covered,
     /// The square's centre (no disc meets the square) or the first of its corners (in
@@ -51,9 +51,9 @@ enum Cover {
 /// point.
 pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
     match cover_test(c, h, q, t2) {
-        Cover::Covered => (false, None),
-        Cover::Corner(x) | Cover::Edge(x) => (true, Some(x)),
-        Cover::Inside => (true, None),
+        CoverOutcome::Covered => (false, None),
+        CoverOutcome::Corner(x) | CoverOutcome::Edge(x) => (true, Some(x)),
+        CoverOutcome::Inside => (true, None),
     }
 }
 
@@ -67,18 +67,18 @@ pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Op
 /// circles (a bounded region outside a disc cannot be bounded by that circle alone),
 /// whose corners are crossings of two circles that no third disc holds. An edge is
 /// covered when the discs' chords on its line cover it (a sweep over at most
-/// [`MAX_PTS`] intervals). Returns what decided it, the tests made in this order:
+/// [`MAX_COVER_POINTS`] intervals). Returns what decided it, the tests made in this order:
 /// a disc holding the square, the centre when no disc meets it, the corners, the edges,
 /// the crossings.
-fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
-    let mut p = [[0.0f64; 2]; MAX_PTS];
+fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> CoverOutcome {
+    let mut p = [[0.0f64; 2]; MAX_COVER_POINTS];
     let mut n = 0;
     for qj in q {
         let v = [qj[0] - c[0], qj[1] - c[1]];
         let (ax, ay) = (v[0].abs(), v[1].abs());
         // As in `uncovered`: one disc holds the square, or a disc misses it.
         if (ax + h).powi(2) + (ay + h).powi(2) <= t2 {
-            return Cover::Covered;
+            return CoverOutcome::Covered;
         }
         if (ax - h).max(0.0).powi(2) + (ay - h).max(0.0).powi(2) > t2 {
             continue;
@@ -88,7 +88,7 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
     }
     let at = |x: [f64; 2]| [c[0] + x[0], c[1] + x[1]];
     if n == 0 {
-        return Cover::Corner(at([0.0, 0.0]));
+        return CoverOutcome::Corner(at([0.0, 0.0]));
     }
     let p = &p[..n];
     // The corners, each with the first point whose disc holds it.
@@ -97,12 +97,12 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
     for (k, &x) in corners.iter().enumerate() {
         match p.iter().position(|pj| d2(x, *pj) <= t2) {
             Some(j) => by[k] = j,
-            None => return Cover::Corner(at(x)),
+            None => return CoverOutcome::Corner(at(x)),
         }
     }
     // The edges: coordinate `b` fixed at `s`, coordinate `a` running over [−h, h], from
     // corner `k0` to corner `k1`.
-    let (mut lo, mut hi) = ([0.0f64; MAX_PTS], [0.0f64; MAX_PTS]);
+    let (mut lo, mut hi) = ([0.0f64; MAX_COVER_POINTS], [0.0f64; MAX_COVER_POINTS]);
     for (a, b, s, k0, k1) in [
         (0, 1, -h, 0, 1),
         (0, 1, h, 2, 3),
@@ -151,7 +151,7 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
                 }
                 let mut x = [0.0; 2];
                 (x[a], x[b]) = (0.5 * (reach + end), s);
-                return Cover::Edge(at(x));
+                return CoverOutcome::Edge(at(x));
             }
             reach = next;
         }
@@ -174,16 +174,16 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
                         .enumerate()
                         .all(|(k, pk)| k == i || k == j || d2(v, *pk) > t2)
                 {
-                    return Cover::Inside;
+                    return CoverOutcome::Inside;
                 }
             }
         }
     }
-    Cover::Covered
+    CoverOutcome::Covered
 }
 
 /// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
-/// `sqrt(t2)` from every point of `q` (at most [`MAX_PTS`] points), or `None` when the
+/// `sqrt(t2)` from every point of `q` (at most [`MAX_COVER_POINTS`] points), or `None` when the
 /// discs of radius `sqrt(t2)` around the points cover the square.
 ///
 /// `x ↦ min_j |x − q_j|²` is convex on each Voronoi cell of the points, so its maximum over
@@ -194,8 +194,8 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> Cover {
 /// The corners are tried only when `corners` (else they must be known to be held by
 /// some disc: the result is the same).
 fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64, corners: bool) -> Option<[f64; 2]> {
-    let mut p = [[0.0f64; 2]; MAX_PTS];
-    let mut r2 = [0.0f64; MAX_PTS];
+    let mut p = [[0.0f64; 2]; MAX_COVER_POINTS];
+    let mut r2 = [0.0f64; MAX_COVER_POINTS];
     let mut n = 0;
     for qj in q {
         let v = [qj[0] - c[0], qj[1] - c[1]];
@@ -270,11 +270,11 @@ fn uncovered(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64, corners: bool) -> Opt
 
 /// Points of a square that its cover test found uncovered, each with the squared radius
 /// it was found at: farther than that from every point tested (the first `n` points and
-/// any [`cover_more`] added), so from the first `n` too. A child square holding one is
+/// any `Search::cover_more` added), so from the first `n` too. A child square holding one is
 /// not covered by those points either: its own test is skipped.
 #[derive(Clone, Copy, Default)]
 pub(super) struct Witnesses {
-    x: [([f64; 2], f64); 1 + EXTRA],
+    x: [([f64; 2], f64); 1 + MAX_EXTRA_COVER_POINTS],
     n: usize,
 }
 
@@ -352,7 +352,7 @@ mod tests {
         let mut rnd = xorshift(0x0e8c_ee45_1234_5678);
         let mut seen = [0, 0, 0];
         for case in 0..20000 {
-            let n = 1 + (rnd() * MAX_PTS as f64) as usize;
+            let n = 1 + (rnd() * MAX_COVER_POINTS as f64) as usize;
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let (q, t): (Vec<[f64; 2]>, f64) = if case % 2 == 0 {
@@ -401,7 +401,7 @@ mod tests {
         let mut rnd = xorshift(0x51a2c3d4e5f60718);
         let mut seen = [0, 0];
         for _ in 0..400 {
-            let n = 1 + (rnd() * MAX_PTS as f64) as usize;
+            let n = 1 + (rnd() * MAX_COVER_POINTS as f64) as usize;
             let q: Vec<[f64; 2]> = (0..n)
                 .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
                 .collect();

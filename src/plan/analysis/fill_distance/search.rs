@@ -6,64 +6,68 @@ use super::arcs::ArcCache;
 use super::cells::{Cell, Queue};
 use super::edges::{seg_d2, Edges};
 use super::plane::d2;
-use super::points::{exceeds, points_exceed, witness, Witnesses, EXTRA, MAX_PTS};
+use super::points::{
+    exceeds, points_exceed, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
+};
 use super::SearchScratch;
 
-/// Most generations of cells split with walls followed from their parent's without a
-/// search (the walls may miss a nearer third wall; measured 1–4, 3 is cheapest).
-const FOLLOWED_MAX: u8 = 3;
+/// Most generations in a row of cells split with the walls followed from their parent's,
+/// without a search: the followed walls may miss a nearer third wall, which loosens the
+/// children's bounds until a search finds it.
+const MAX_FOLLOWED_GENERATIONS: u8 = 3;
 
-/// Spacing of the cover points along the walls, in cell half-sizes.
-const ALONG: f64 = 0.6;
+/// How far along its walls a cell's cover points stand (at least) from the walls' points
+/// nearest to its centre, in cell half-sizes: far enough apart for the discs around them to
+/// cover the cell along the walls.
+const WALL_POINT_SPACING: f64 = 0.6;
 
-/// Cells whose cover test is completed by [`cover_more`]: `(h·√2)² ≤ COVER_GATE · T ·
-/// precision`. Larger cells are rarely covered (their uncovered points are deeper than
-/// `T`) and are split (measured 16, 32, 64: 32 is cheapest on logo_hires and
-/// torus_hires).
-const COVER_GATE: f64 = 32.0;
+/// Cells whose failed cover test is completed by [`Search::cover_more`]:
+/// `(h·√2)² ≤ COVER_MORE_MAX_SIZE · T · precision`. Larger cells are rarely covered (their
+/// uncovered points are deeper than `T`): they are split at once.
+const COVER_MORE_MAX_SIZE: f64 = 32.0;
 
-/// After its first `SEED_AFTER` cells with no centre inside the section, a search takes
-/// the best of [`Edges::ridge_probe`] on `SEEDS` edges spread over the contours as the
-/// depth to beat: a thin section (a ring's first layers) has few cells whose centre is
-/// inside it, and until one is found every cell is split (logo_hires: search 584 → 511 M
-/// instructions; seeding every search costs bunny00 +4 %).
-const SEED_AFTER: usize = 4;
+/// After its first `SEED_AFTER_CELLS` cells with no centre inside the section, a search
+/// takes the best of [`Edges::ridge_probe`] on [`SEED_PROBES`] edges spread over the
+/// contours as the depth to beat: a thin section (a ring's first layers) has few cells
+/// whose centre is inside it, and until one is found every cell is split. Sections that
+/// find a centre inside among their first cells are not seeded (the probes would cost them
+/// more than they save).
+const SEED_AFTER_CELLS: usize = 4;
 
-/// See [`SEED_AFTER`].
-const SEEDS: usize = 2;
+/// Edges whose inward normals seed a search: see [`SEED_AFTER_CELLS`].
+const SEED_PROBES: usize = 2;
 
 /// Cells tried by [`Edges::walls_cover`]: half-size above this many times the depth to
 /// beat (smaller ones are covered by discs around their walls' points as cheaply) and at
-/// most [`SLAB_MAX_H_MM`] (walls curve too much over larger ones). Measured on logo_hires
-/// (1, 1.2, 1.5, 2 and 3: 1.5 is cheapest; its thin rings are where the test pays).
-const SLAB_MIN_H: f64 = 1.5;
+/// most [`WALLS_MAX_HALF_SIZE_MM`]. The test pays on thin walls, such as thin rings.
+const WALLS_MIN_HALF_SIZE: f64 = 1.5;
 
-/// See [`SLAB_MIN_H`], mm (no cell above 1 mm was dropped on logo_hires).
-const SLAB_MAX_H_MM: f64 = 1.0;
+/// Largest half-size of the cells tried by [`Edges::walls_cover`], mm: walls curve too
+/// much over larger cells to be seen as lines (see [`WALLS_MIN_HALF_SIZE`]).
+const WALLS_MAX_HALF_SIZE_MM: f64 = 1.0;
 
-/// Cells tried by [`Edges::arcs_cover`]: half-size at least this many times the
-/// precision (smaller ones are covered by discs around their walls' points as cheaply),
-/// and below the depth to beat (on logo_hires, 5 % of the tries on larger cells dropped
-/// them, against 50 % below).
-const ARC_MIN_H: f64 = 8.0;
+/// Cells tried by [`Edges::arcs_cover`] and [`Edges::ring_cover`]: half-size at least this
+/// many times the precision (smaller ones are covered by discs around their walls' points
+/// as cheaply). The arc cover is tried below the depth to beat only (larger cells are
+/// seldom shown shallow by it), the ring cover on larger cells or cells whose centre is
+/// outside the section.
+const ARCS_MIN_HALF_SIZE: f64 = 8.0;
 
-/// A search tries [`Edges::arcs_cover`] on its first `ARC_TRIAL` cells, then only while
-/// at least one try in `ARC_RATE` has dropped its cell: on sections whose walls are not
-/// round (a bunny, a gear) the arcs rarely show anything and a failed try costs about a
-/// cell's own tests (measured on logo_hires, torus_hires, bunny00 and mcad_gear: trial 2
-/// and walks of 64 points cost least over the four).
-const ARC_TRIAL: usize = 2;
+/// A search tries [`Edges::arcs_cover`] (and [`Edges::ring_cover`]) on its first
+/// `COVER_TRIAL_TRIES` cells, then only while at least one try in [`COVER_TRIES_PER_HIT`]
+/// has dropped its cell: on sections whose walls are not round (a bunny, a gear) the arcs
+/// rarely show anything, and a failed try costs about as much as a cell's own tests.
+const COVER_TRIAL_TRIES: usize = 2;
 
-/// See [`ARC_TRIAL`].
-const ARC_RATE: usize = 4;
+/// A search stops trying a cover once it has made more than this many tries per cell the
+/// cover dropped: see [`COVER_TRIAL_TRIES`].
+const COVER_TRIES_PER_HIT: usize = 4;
 
-/// [`Edges::ring_cover`] is tried as [`Edges::arcs_cover`] is ([`ARC_TRIAL`], [`ARC_RATE`]),
-/// and also on every `RING_PROBE`-th cell it could be tried on when that has stopped: a
-/// search's first cells are large and seldom dropped, and without the probes one failed
-/// start would stop the tries for the whole search (logo_hires search instructions: no
-/// probes 643 M before the seeds of [`SEED_AFTER`], with them every 16th 557 M, every 8th
-/// 511 M; every 2nd or every cell save it a little more but cost mcad_gear 3 % and 7 %).
-const RING_PROBE: usize = 8;
+/// [`Edges::ring_cover`] is tried as [`Edges::arcs_cover`] is ([`COVER_TRIAL_TRIES`],
+/// [`COVER_TRIES_PER_HIT`]), and also on every `RING_PROBE_EVERY`-th cell it could be tried
+/// on once that has stopped: a search's first cells are large and seldom dropped, and
+/// without these probes one failed start would stop the tries for the whole search.
+const RING_PROBE_EVERY: usize = 8;
 
 /// The deepest point found so far: its depth (signed distance to the boundary) and its
 /// nearest edge.
@@ -79,14 +83,14 @@ struct Best {
 /// points after them.
 #[derive(Clone, Copy)]
 struct CoverPoints {
-    p: [[f64; 2]; MAX_PTS],
+    p: [[f64; 2]; MAX_COVER_POINTS],
     n: usize,
 }
 
 impl CoverPoints {
     fn new() -> CoverPoints {
         CoverPoints {
-            p: [[0.0; 2]; MAX_PTS],
+            p: [[0.0; 2]; MAX_COVER_POINTS],
             n: 0,
         }
     }
@@ -149,11 +153,11 @@ struct CoverTries {
 }
 
 impl CoverTries {
-    /// Whether it still pays: on the first [`ARC_TRIAL`] tries, then while at least one try
-    /// in [`ARC_RATE`] has dropped its cell.
+    /// Whether it still pays: on the first [`COVER_TRIAL_TRIES`] tries, then while at least one try
+    /// in [`COVER_TRIES_PER_HIT`] has dropped its cell.
     #[inline]
     fn pay(&self) -> bool {
-        self.tries < ARC_TRIAL || self.hits * ARC_RATE >= self.tries
+        self.tries < COVER_TRIAL_TRIES || self.hits * COVER_TRIES_PER_HIT >= self.tries
     }
 }
 
@@ -259,7 +263,7 @@ impl Search<'_> {
     /// [`max_fill_distance_with`](super::max_fill_distance_with)).
     fn run(&mut self, size: f64) {
         while let Some(c) = self.queue.pop() {
-            if self.pops == SEED_AFTER && self.best.depth <= 0.0 {
+            if self.pops == SEED_AFTER_CELLS && self.best.depth <= 0.0 {
                 self.seed(size);
             }
             self.pops += 1;
@@ -290,8 +294,8 @@ impl Search<'_> {
     /// step along a normal).
     fn seed(&mut self, size: f64) {
         let e = self.e;
-        for k in 0..SEEDS {
-            let v = (k * e.segs.len() / SEEDS) as u32;
+        for k in 0..SEED_PROBES {
+            let v = (k * e.segs.len() / SEED_PROBES) as u32;
             if let Some((p, d, near)) = e.ridge_probe(v, self.precision, size) {
                 if d > self.best.depth {
                     self.best = Best {
@@ -370,7 +374,7 @@ impl Search<'_> {
             let mut pts = CoverPoints::new();
             for (_, i) in std::iter::once(w1).chain(w2) {
                 let q = e.closest_point(i, c.c);
-                let [a, b] = e.along(i, q, ALONG * c.h);
+                let [a, b] = e.along(i, q, WALL_POINT_SPACING * c.h);
                 pts.push(q);
                 pts.push(a);
                 pts.push(b);
@@ -380,7 +384,7 @@ impl Search<'_> {
             }
             // Not covered: split it with these walls (no search: the centre cannot beat
             // the best), unless they have been followed for too long.
-            if c.followed < FOLLOWED_MAX {
+            if c.followed < MAX_FOLLOWED_GENERATIONS {
                 return FromWalls::Split(Tested {
                     pts,
                     lip: u + reach,
@@ -455,8 +459,9 @@ impl Search<'_> {
 
     /// Step 4's boundary points, into `pts`: the nearest one `q` (on edge `near`), the
     /// nearest one behind the centre (the other wall of a ridge; its search starts from
-    /// edge `far_seed`) and, on the contours of both, the points about `ALONG·h` away on
-    /// either side. Returns the point behind the centre and its edge.
+    /// edge `far_seed`) and, on the contours of both, the points about
+    /// `WALL_POINT_SPACING·h` away on either side. Returns the point behind the centre and
+    /// its edge.
     #[inline]
     fn wall_points(
         &self,
@@ -468,7 +473,7 @@ impl Search<'_> {
     ) -> Option<([f64; 2], u32)> {
         let e = self.e;
         pts.push(q);
-        for p in e.along(near, q, ALONG * c.h) {
+        for p in e.along(near, q, WALL_POINT_SPACING * c.h) {
             pts.push(p);
         }
         // Wall points farther than this can neither cover the cell at radius `T` nor bound
@@ -477,7 +482,7 @@ impl Search<'_> {
         let behind = e.nearest_behind(c.c, q, limit, far_seed);
         if let Some((q2, i2)) = behind {
             pts.push(q2);
-            for p in e.along(i2, q2, ALONG * c.h) {
+            for p in e.along(i2, q2, WALL_POINT_SPACING * c.h) {
                 pts.push(p);
             }
         }
@@ -516,8 +521,8 @@ impl Search<'_> {
     }
 
     /// Whether discs of radius `T` = best depth + precision around the boundary points
-    /// `pts` cover the square `sq` = `(centre, half-size)`; a square small enough
-    /// (`(h·√2)² ≤ COVER_GATE · T · precision`) that they do not cover is completed with
+    /// `pts` cover the square `sq` = `(centre, half-size)`; a square small enough (`(h·√2)²
+    /// ≤ COVER_MORE_MAX_SIZE · T · precision`) that they do not cover is completed with
     /// [`Search::cover_more`] (which may raise the best and writes points after `pts`'
     /// own). The uncovered points found go to `wit`.
     fn covered(
@@ -530,7 +535,7 @@ impl Search<'_> {
         let precision = self.precision;
         let t = self.best.depth + precision;
         let reach = sq.1 * std::f64::consts::SQRT_2;
-        if reach * reach > COVER_GATE * t * precision {
+        if reach * reach > COVER_MORE_MAX_SIZE * t * precision {
             // Too large to be completed: whether the points cover it is all that matters.
             let (exceed, w) = exceeds(sq.0, sq.1, pts.kept(), t * t);
             if let Some(w) = w {
@@ -547,13 +552,14 @@ impl Search<'_> {
 
     /// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
     /// `(centre, half-size)`: adds the boundary point nearest to `x` after the points of
-    /// `pts` and tries again, at most [`EXTRA`] times; returns whether the square is now
-    /// covered at radius `T` = best depth + precision. The nearest point is first looked
-    /// for by following the cell's `walls` (edges, `u32::MAX`: none) along their contours
-    /// to `x` ([`Edges::descend`]); only when that point is farther than `T` is the exact
-    /// nearest edge searched. Every point added is a boundary point, so a cover stays a
-    /// proof. If `x` is inside the section and deeper than `T`, it becomes the best centre
-    /// (and the square cannot be covered). The uncovered points found go to `wit`.
+    /// `pts` and tries again, at most [`MAX_EXTRA_COVER_POINTS`] times; returns whether the
+    /// square is now covered at radius `T` = best depth + precision. The nearest point is
+    /// first looked for by following the cell's `walls` (edges, `u32::MAX`: none) along
+    /// their contours to `x` ([`Edges::descend`]); only when that point is farther than `T`
+    /// is the exact nearest edge searched. Every point added is a boundary point, so a
+    /// cover stays a proof. If `x` is inside the section and deeper than `T`, it becomes
+    /// the best centre (and the square cannot be covered). The uncovered points found go to
+    /// `wit`.
     fn cover_more(
         &mut self,
         sq: ([f64; 2], f64),
@@ -564,7 +570,7 @@ impl Search<'_> {
     ) -> bool {
         let e = self.e;
         let mut n = pts.n;
-        let stop = (n + EXTRA).min(MAX_PTS);
+        let stop = (n + MAX_EXTRA_COVER_POINTS).min(MAX_COVER_POINTS);
         while n < stop {
             let t = self.best.depth + self.precision;
             let mut found = (f64::INFINITY, u32::MAX);
@@ -608,8 +614,8 @@ impl Search<'_> {
     #[inline]
     fn walls_cover(&self, c: &Cell, tested: &Tested) -> bool {
         let t = self.best.depth + self.precision;
-        c.h > SLAB_MIN_H * t
-            && c.h <= SLAB_MAX_H_MM
+        c.h > WALLS_MIN_HALF_SIZE * t
+            && c.h <= WALLS_MAX_HALF_SIZE_MM
             && self
                 .e
                 .walls_cover(c.c, c.h, t, [tested.near, tested.far_edge])
@@ -620,7 +626,10 @@ impl Search<'_> {
     #[inline]
     fn arcs_cover(&mut self, c: &Cell, tested: &Tested) -> bool {
         let t = self.best.depth + self.precision;
-        if tested.pts.n > 0 && c.h >= ARC_MIN_H * self.precision && c.h < t && self.arc_tries.pay()
+        if tested.pts.n > 0
+            && c.h >= ARCS_MIN_HALF_SIZE * self.precision
+            && c.h < t
+            && self.arc_tries.pay()
         {
             self.arc_tries.tries += 1;
             let walls = [tested.near, tested.far_edge];
@@ -634,13 +643,13 @@ impl Search<'_> {
 
     /// Step 7: whether the cell (its centre outside the section, or the cell larger than
     /// the depth to beat) straddles a ring whose two walls show it shallow (tried while it
-    /// pays, and on every [`RING_PROBE`]-th cell).
+    /// pays, and on every [`RING_PROBE_EVERY`]-th cell).
     #[inline]
     fn ring_cover(&mut self, c: &Cell, tested: &Tested) -> bool {
         let t = self.best.depth + self.precision;
-        if c.h >= ARC_MIN_H * self.precision && (c.h >= t || tested.pts.n == 0) {
+        if c.h >= ARCS_MIN_HALF_SIZE * self.precision && (c.h >= t || tested.pts.n == 0) {
             self.ring_seen += 1;
-            if self.ring_tries.pay() || self.ring_seen % RING_PROBE == 0 {
+            if self.ring_tries.pay() || self.ring_seen % RING_PROBE_EVERY == 0 {
                 self.ring_tries.tries += 1;
                 if self.e.ring_cover(c.c, c.h, t, tested.near, self.arcs) {
                     self.ring_tries.hits += 1;

@@ -4,11 +4,13 @@
 use super::plane::corners;
 use super::Edges;
 
-/// Most edges crossing a cell that [`Edges::walls_cover`] deals with (more: not tried).
-pub(super) const SLAB_EDGES: usize = 48;
+/// Most edges meeting a cell that [`Edges::crossing`] lists: the wall and arc covers give up
+/// on cells crossed by more.
+pub(super) const MAX_CROSSING_EDGES: usize = 48;
 
-/// Most contour points a wall is followed beyond a cell by [`Edges::walls_cover`].
-const SLAB_WALK: usize = 32;
+/// Most contour points a wall is followed beyond a cell to cover the cell's projection on
+/// its line ([`Edges::wall`]).
+const WALL_MAX_WALK: usize = 32;
 
 /// A stretch of a contour crossing a cell, seen as a line: all its points lie within
 /// `dev` of the line `n·x = off` (`n` a unit normal), and their projections on the line
@@ -25,19 +27,19 @@ struct Wall {
 impl Wall {
     /// Signed distance of `x` to the line.
     #[inline]
-    fn l(&self, x: [f64; 2]) -> f64 {
+    fn signed_distance(&self, x: [f64; 2]) -> f64 {
         self.n[0] * x[0] + self.n[1] * x[1] - self.off
     }
 
     /// An upper bound of the depth of `x` (a point of the cell the wall was made for).
     #[inline]
     fn bound(&self, x: [f64; 2]) -> f64 {
-        self.l(x).abs() + self.dev
+        self.signed_distance(x).abs() + self.dev
     }
 
     /// The point of the line nearest to `x`.
     fn foot(&self, x: [f64; 2]) -> [f64; 2] {
-        let l = self.l(x);
+        let l = self.signed_distance(x);
         [x[0] - l * self.n[0], x[1] - l * self.n[1]]
     }
 
@@ -53,21 +55,21 @@ impl Wall {
 
 /// A convex polygon of at most 8 vertices (a square clipped by at most 4 half-planes).
 #[derive(Debug, Clone, Copy)]
-struct Convex {
+struct ConvexPolygon {
     v: [[f64; 2]; 8],
     n: usize,
 }
 
-impl Convex {
-    fn square(c: [f64; 2], h: f64) -> Convex {
+impl ConvexPolygon {
+    fn square(c: [f64; 2], h: f64) -> ConvexPolygon {
         let mut v = [[0.0; 2]; 8];
         v[..4].copy_from_slice(&corners(c, h));
-        Convex { v, n: 4 }
+        ConvexPolygon { v, n: 4 }
     }
 
     /// The part where `f(x) ≥ 0`, `f` affine (Sutherland–Hodgman against one line).
-    fn clip(&self, f: impl Fn([f64; 2]) -> f64) -> Convex {
-        let mut out = Convex {
+    fn clip(&self, f: impl Fn([f64; 2]) -> f64) -> ConvexPolygon {
+        let mut out = ConvexPolygon {
             v: [[0.0; 2]; 8],
             n: 0,
         };
@@ -111,16 +113,16 @@ impl Convex {
 
 /// How far a test point must stand from a wall's band to be taken as off it, mm (far
 /// above the rounding of the clipping, far below any precision asked).
-const SLAB_MARGIN: f64 = 1e-9;
+const WALL_BAND_MARGIN_MM: f64 = 1e-9;
 
 impl Edges {
     /// Edges whose bounding boxes meet the square `[c ± h]`, into `out`; `None` when there
-    /// are more than [`SLAB_EDGES`].
+    /// are more than [`MAX_CROSSING_EDGES`].
     pub(super) fn crossing(
         &self,
         c: [f64; 2],
         h: f64,
-        out: &mut [u32; SLAB_EDGES],
+        out: &mut [u32; MAX_CROSSING_EDGES],
     ) -> Option<usize> {
         let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
         let meets = |a: [f64; 2], b: [f64; 2]| {
@@ -140,7 +142,7 @@ impl Edges {
                 let f = n.first as usize;
                 for v in f..f + n.count as usize {
                     if self.seg_meets(v as u32, lo, hi) {
-                        if m == SLAB_EDGES {
+                        if m == MAX_CROSSING_EDGES {
                             return None;
                         }
                         out[m] = v as u32;
@@ -184,7 +186,7 @@ impl Edges {
             while grow && self.seg_meets(dir[k as usize], lo, hi) {
                 k = dir[k as usize];
                 len += 1;
-                if len > SLAB_EDGES {
+                if len > MAX_CROSSING_EDGES {
                     return None;
                 }
             }
@@ -193,7 +195,7 @@ impl Edges {
         let first = run_end(&self.prev)?;
         let last = run_end(&self.next)?;
         let end = self.next[last as usize];
-        let corners = Convex::square(c, h);
+        let corners = ConvexPolygon::square(c, h);
         // Projections on the line from `a` along the unit vector `u`: of the corners, and
         // whether the points from `back` to `fwd` cover them.
         let frame = |a: [f64; 2], b: [f64; 2]| {
@@ -231,7 +233,7 @@ impl Edges {
             back = self.prev[back as usize];
             t_lo = t_lo.min(proj(f, self.vert(back)));
             steps += 1;
-            if steps > SLAB_WALK || back == end {
+            if steps > WALL_MAX_WALK || back == end {
                 return None;
             }
         }
@@ -240,7 +242,7 @@ impl Edges {
             fwd = self.next[fwd as usize];
             t_hi = t_hi.max(proj(f, self.vert(fwd)));
             steps += 1;
-            if steps > SLAB_WALK || fwd == back {
+            if steps > WALL_MAX_WALK || fwd == back {
                 return None;
             }
         }
@@ -288,12 +290,12 @@ impl Edges {
     /// This drops cells that straddle a wall thinner than the cell (a thin ring's cells
     /// stick out of it on both sides, so discs around wall points cannot cover them).
     pub(super) fn walls_cover(&self, c: [f64; 2], h: f64, t: f64, hints: [u32; 2]) -> bool {
-        let mut es = [0u32; SLAB_EDGES];
+        let mut es = [0u32; MAX_CROSSING_EDGES];
         let Some(m) = self.crossing(c, h, &mut es) else {
             return false;
         };
         let es = &es[..m];
-        let sq = Convex::square(c, h);
+        let sq = ConvexPolygon::square(c, h);
         let mut walls = [Wall::default(); 2];
         let mut nw = 0;
         if let Some(&v1) = es.first() {
@@ -334,7 +336,7 @@ impl Edges {
                 if let Some((w, _, _)) = self.wall(v, c, h, false) {
                     // Not the wall already found, again.
                     let f = w.foot(c);
-                    if nw == 0 || walls[0].l(f).abs() > walls[0].dev + w.dev {
+                    if nw == 0 || walls[0].signed_distance(f).abs() > walls[0].dev + w.dev {
                         walls[nw] = w;
                         nw += 1;
                     }
@@ -353,7 +355,7 @@ impl Edges {
         if let [a, b] = walls {
             // Normals towards each other (whether the bands meet in the square is checked
             // below, through the parts beyond each wall).
-            let (la, lb) = (a.l(b.foot(c)), b.l(a.foot(c)));
+            let (la, lb) = (a.signed_distance(b.foot(c)), b.signed_distance(a.foot(c)));
             if la.abs() <= a.dev || lb.abs() <= b.dev {
                 return false;
             }
@@ -367,12 +369,12 @@ impl Edges {
         let walls = &*walls;
         // The part beyond each wall (away from the other one).
         for (i, w) in walls.iter().enumerate() {
-            let part = sq.clip(|x| -w.l(x) - w.dev);
+            let part = sq.clip(|x| -w.signed_distance(x) - w.dev);
             if let Some(o) = walls.get(1 - i) {
                 // It must not meet the other wall's band.
                 let v = part.vertices();
-                let above = v.iter().all(|x| o.l(*x) > o.dev);
-                let below = v.iter().all(|x| o.l(*x) < -o.dev);
+                let above = v.iter().all(|x| o.signed_distance(*x) > o.dev);
+                let below = v.iter().all(|x| o.signed_distance(*x) < -o.dev);
                 if !above && !below {
                     return false;
                 }
@@ -384,7 +386,7 @@ impl Edges {
         // The part between them (or on the other side of a single wall).
         let part = walls
             .iter()
-            .fold(sq, |part, w| part.clip(|x| w.l(x) - w.dev));
+            .fold(sq, |part, w| part.clip(|x| w.signed_distance(x) - w.dev));
         self.part_covered(&part, walls, t, None)
     }
 
@@ -393,12 +395,21 @@ impl Edges {
     /// (`beyond`: the part beyond that wall, bounded by it; `None`: the part between the
     /// walls, bounded by either or by their mean). The bounds are convex: their largest
     /// value on the part is at a corner.
-    fn part_covered(&self, part: &Convex, walls: &[Wall], t: f64, beyond: Option<usize>) -> bool {
+    fn part_covered(
+        &self,
+        part: &ConvexPolygon,
+        walls: &[Wall],
+        t: f64,
+        beyond: Option<usize>,
+    ) -> bool {
         let Some(p) = part.interior_point() else {
             return true;
         };
         // Rounding could put a point of a thin part on a band: not shown then.
-        if walls.iter().any(|w| w.l(p).abs() <= w.dev + SLAB_MARGIN) {
+        if walls
+            .iter()
+            .any(|w| w.signed_distance(p).abs() <= w.dev + WALL_BAND_MARGIN_MM)
+        {
             return false;
         }
         if !self.inside(p) {
