@@ -37,6 +37,7 @@ struct QueuedCell {
 impl QueuedCell {
     /// `max` as an integer ordered as [`f64::total_cmp`] orders the floats (its own
     /// transform: negative values have their magnitude bits flipped).
+    #[inline]
     fn key(max: f64) -> i64 {
         let b = max.to_bits() as i64;
         b ^ (((b >> 63) as u64) >> 1) as i64
@@ -74,6 +75,7 @@ impl Queue {
         self.cells.clear();
     }
 
+    #[inline]
     pub(super) fn push(&mut self, c: Cell) {
         self.heap.push(QueuedCell {
             key: QueuedCell::key(c.max),
@@ -82,6 +84,7 @@ impl Queue {
         self.cells.push(c);
     }
 
+    #[inline]
     pub(super) fn pop(&mut self) -> Option<Cell> {
         self.heap.pop().map(|q| self.cells[q.cell as usize])
     }

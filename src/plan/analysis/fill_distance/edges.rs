@@ -40,6 +40,7 @@ pub struct Edges {
     band_items: Vec<u32>,
 }
 
+#[inline]
 pub(super) fn seg_d2(p: [f64; 2], s: &Segment) -> f64 {
     let (ax, ay, bx, by) = (s[0], s[1], s[2], s[3]);
     let (dx, dy) = (bx - ax, by - ay);
@@ -536,12 +537,14 @@ impl Edges {
     }
 
     /// Start point of edge `v`.
+    #[inline]
     pub(super) fn vert(&self, v: u32) -> [f64; 2] {
         let s = &self.segs[v as usize];
         [s[0], s[1]]
     }
 
     /// The point of edge `i` nearest to `p`.
+    #[inline]
     pub(super) fn closest_point(&self, i: u32, p: [f64; 2]) -> [f64; 2] {
         let s = &self.segs[i as usize];
         let (dx, dy) = (s[2] - s[0], s[3] - s[1]);

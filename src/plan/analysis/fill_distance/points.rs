@@ -280,10 +280,12 @@ pub(super) struct Witnesses {
 
 impl Witnesses {
     /// Forgets them all.
+    #[inline]
     pub(super) fn clear(&mut self) {
         self.n = 0;
     }
 
+    #[inline]
     pub(super) fn push(&mut self, x: [f64; 2], t2: f64) {
         if self.n < self.x.len() {
             self.x[self.n] = (x, t2);
@@ -294,6 +296,7 @@ impl Witnesses {
     /// Whether one of them lies in the square `[c ± h]` and is farther than `sqrt(t2)`
     /// from every point of `q` (checked again only when `t2` is larger than the radius it
     /// was found at).
+    #[inline]
     pub(super) fn uncover(&self, c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
         self.x[..self.n].iter().any(|&(w, w2)| {
             (w[0] - c[0]).abs() <= h
