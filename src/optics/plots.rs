@@ -1,6 +1,8 @@
-//! The pictures `dmdsl calibrate` writes next to the calibration file (seeds/000 Fig. 3
-//! and 4 style): measured and fitted irradiance per zone before and after zone
-//! compensation, the zone grays, and S(g) with the data and the valid gray range.
+//! The pictures `dmdsl calibrate` writes next to the calibration file, in the style of
+//! Figs. 3 and 4 of Xu et al. 2010 ("Novel stereolithography system employing digital
+//! micro-mirror device", Chinese J. Lasers 37(7)): measured and fitted irradiance per zone
+//! before and after zone compensation, the zone grays, and S(g) with the data and the valid
+//! gray range.
 
 use super::calib::FitResult;
 use super::Compensator;
