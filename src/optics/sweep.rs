@@ -12,6 +12,16 @@ use crate::optics::Compensator;
 use crate::profile::Field;
 use std::path::Path;
 
+/// A lens-like field that none of the fitted forms matches exactly: cos³-type falloff
+/// about an off-centre axis, a tilt and a faint ripple, about 2.2 : 1 (a check that the
+/// cos⁴ form is not chosen where it does not belong). Only the sweep report uses it.
+fn p_lens(x: f64, y: f64) -> f64 {
+    let r2 = (x - 38.0).powi(2) + (y - 20.0).powi(2);
+    (1.0 + r2 / 3600.0).powf(-1.5)
+        * (1.0 + 0.005 * (x - 32.5))
+        * (1.0 + 0.01 * (x / 9.0).sin() * (y / 13.0).cos())
+}
+
 fn readings(p: Field2, s: Resp, noise: f64, seed: u64) -> Vec<Reading> {
     centre_readings(p, s, noise, seed)
         .into_iter()

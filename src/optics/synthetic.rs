@@ -1,7 +1,8 @@
 //! Known light fields P(x, y) and responses S(g) with a fixed-seed noise generator: the
 //! synthetic calibration sets shared by the library's sweep test (`optics::sweep`) and the
-//! integration tests (`tests/it/calibrate.rs` includes this file by path). Test code only.
-#![allow(dead_code)]
+//! integration tests (`tests/it/calibrate.rs` includes this file by path). Test code only;
+//! both includers use every item here (a field only the sweep uses lives in `sweep.rs`), so
+//! neither compiles dead code.
 
 /// splitmix64 + Box–Muller.
 pub struct Rng(pub u64);
@@ -51,15 +52,6 @@ pub fn p_published(x: f64, y: f64) -> f64 {
 pub fn p_vignette(x: f64, y: f64) -> f64 {
     let r2 = (x - 32.5).powi(2) + (y - 24.375).powi(2);
     (1.0 + r2 / 2500.0).powi(-2)
-}
-/// A lens-like field that none of the fitted forms matches exactly: cos³-type falloff
-/// about an off-centre axis, a tilt and a faint ripple, about 2.2 : 1 (a check that the
-/// cos⁴ form is not chosen where it does not belong).
-pub fn p_lens(x: f64, y: f64) -> f64 {
-    let r2 = (x - 38.0).powi(2) + (y - 20.0).powi(2);
-    (1.0 + r2 / 3600.0).powf(-1.5)
-        * (1.0 + 0.005 * (x - 32.5))
-        * (1.0 + 0.01 * (x / 9.0).sin() * (y / 13.0).cos())
 }
 /// The published S of Xu et al. 2010 with z = 255 − pixel value (steps of 2–3 % near its
 /// operating point).
