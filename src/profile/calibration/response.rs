@@ -422,26 +422,23 @@ fn pchip_slope(pts: &[[f64; 2]], k: usize) -> f64 {
 mod tests {
     use super::*;
 
-    fn published() -> Response {
+    /// The published S of Xu et al. 2010 (in z = 255 − pixel value) on `valid_gray`.
+    fn published(valid_gray: [u8; 2]) -> Response {
         Response::Polynomial {
             variable: GrayVariable::Attenuation,
             coefficients: vec![5.72, -0.101, 5.78e-4, -1e-6],
-            valid_gray: [121, 255],
+            valid_gray,
         }
     }
 
     #[test]
     fn published_cubic_valid_range_is_where_s_falls_in_z() {
-        let r = published();
+        let r = published([121, 255]);
         r.validate().unwrap();
         assert!((r.eval(255.0) - 5.72).abs() < 1e-12);
         // S is lowest at z = 133.9; one level further (z = 135) it rises again in z: the
         // range cannot be extended.
-        let wider = Response::Polynomial {
-            variable: GrayVariable::Attenuation,
-            coefficients: vec![5.72, -0.101, 5.78e-4, -1e-6],
-            valid_gray: [120, 255],
-        };
+        let wider = published([120, 255]);
         let e = wider.validate().unwrap_err();
         assert!(e.contains("not strictly increasing"), "{e}");
     }
@@ -467,7 +464,7 @@ mod tests {
 
     #[test]
     fn levels_nearest_in_irradiance() {
-        let r = published();
+        let r = published([121, 255]);
         let lv = r.levels();
         assert_eq!(lv.gray[0], 0);
         assert_eq!(lv.s[0], 0.0);
@@ -520,10 +517,7 @@ mod tests {
     fn spline_is_exact_for_cubic_responses_and_anchor_is_monotone() {
         // The S of Xu et al. 2010 in pixel values, sampled at 7 levels: the not-a-knot spline
         // reproduces it (PCHIP would be off by ~1 %).
-        let s = |g: f64| {
-            let z = 255.0 - g;
-            -1e-6 * z * z * z + 5.78e-4 * z * z - 0.101 * z + 5.72
-        };
+        let s = crate::optics::synthetic::s_published;
         let pts: Vec<[f64; 2]> = [135.0, 155.0, 175.0, 195.0, 215.0, 235.0, 255.0]
             .iter()
             .map(|&g| [g, s(g)])
