@@ -16,14 +16,67 @@
 //! less than scanning it; masks whose rows never repeat pay for the signature of each row.
 //! The output is a standard PNG that any decoder reads (tests decode it with `image`).
 
-/// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
-pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
-    encode_gray8_in(width, height, data, [0, height as usize, 0, width as usize])
+use std::ops::Range;
+
+/// A rectangle of an image's pixels: rows `r0..r1` (row 0 at the top) and columns
+/// `c0..c1`, both half-open. A mask's lit box is one: the mask is zero outside it, so the
+/// passes after the rasterizer (compensation, lit area, PNG encoding) visit only the box.
+/// The default is [`PixelBox::EMPTY`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PixelBox {
+    /// First row.
+    pub r0: usize,
+    /// One past the last row.
+    pub r1: usize,
+    /// First column.
+    pub c0: usize,
+    /// One past the last column.
+    pub c1: usize,
 }
 
-/// Like [`encode_gray8`] for a mask known to be zero outside `lit_box` = [r0, r1, c0, c1]:
-/// only the box is scanned. The bytes are the same as `encode_gray8`'s.
-pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
+impl PixelBox {
+    /// The box of no pixel.
+    pub const EMPTY: PixelBox = PixelBox {
+        r0: 0,
+        r1: 0,
+        c0: 0,
+        c1: 0,
+    };
+
+    /// Every pixel of a `width × height` image.
+    pub fn whole(width: usize, height: usize) -> PixelBox {
+        PixelBox {
+            r0: 0,
+            r1: height,
+            c0: 0,
+            c1: width,
+        }
+    }
+
+    /// The rows `r0..r1`.
+    pub fn rows(&self) -> Range<usize> {
+        self.r0..self.r1
+    }
+
+    /// The columns `c0..c1`.
+    pub fn cols(&self) -> Range<usize> {
+        self.c0..self.c1
+    }
+}
+
+/// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
+pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
+    encode_gray8_in(
+        width,
+        height,
+        data,
+        PixelBox::whole(width as usize, height as usize),
+    )
+}
+
+/// Like [`encode_gray8`] for a mask known to be zero outside `lit_box`: only the box is
+/// scanned. The bytes are the same as `encode_gray8`'s.
+pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) -> Vec<u8> {
     assert_eq!(data.len(), width as usize * height as usize, "mask size");
     let w = width as usize;
     encode_rows(width, height, |r| &data[r * w..(r + 1) * w], lit_box)
@@ -32,7 +85,12 @@ pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]
 /// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
 /// image in one piece (the same bytes).
 pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
-    encode_rows(width, height, row, [0, height as usize, 0, width as usize])
+    encode_rows(
+        width,
+        height,
+        row,
+        PixelBox::whole(width as usize, height as usize),
+    )
 }
 
 #[inline(always)]
@@ -40,7 +98,7 @@ fn encode_rows<'a>(
     width: u32,
     height: u32,
     row: impl Fn(usize) -> &'a [u8],
-    lit_box: [usize; 4],
+    lit_box: PixelBox,
 ) -> Vec<u8> {
     let idat = zlib_rows(width as usize, height as usize, row, lit_box);
     let mut out = Vec::with_capacity(idat.len() + 64);
@@ -426,9 +484,9 @@ fn zlib_rows<'a>(
     w: usize,
     h: usize,
     row_of: impl Fn(usize) -> &'a [u8],
-    lit_box: [usize; 4],
+    lit_box: PixelBox,
 ) -> Vec<u8> {
-    let [r0, r1, c0, c1] = lit_box;
+    let PixelBox { r0, r1, c0, c1 } = lit_box;
     let (c0, c1) = (c0.min(w), c1.min(w).max(c0.min(w)));
     let mut bits = Bits {
         out: Vec::with_capacity(4096),
@@ -846,7 +904,13 @@ mod tests {
                     };
                     let c0 = (a..=b).map(|r| cols(r).0).min().unwrap();
                     let c1 = (a..=b).map(|r| cols(r).1).max().unwrap();
-                    let boxed = encode_gray8_in(w as u32, h as u32, &d, [a, b + 1, c0, c1]);
+                    let lit_box = PixelBox {
+                        r0: a,
+                        r1: b + 1,
+                        c0,
+                        c1,
+                    };
+                    let boxed = encode_gray8_in(w as u32, h as u32, &d, lit_box);
                     assert!(boxed == png, "{w}x{h} {zones}: boxed");
                 }
             }
@@ -883,12 +947,13 @@ mod tests {
             }
         }
         let full = encode_gray8(w as u32, h as u32, &d);
-        for b in [
+        for [r0, r1, c0, c1] in [
             [50, 120, 40, 260],
             [0, 200, 0, 300],
             [49, 121, 39, 261],
             [50, 120, 0, 300],
         ] {
+            let b = PixelBox { r0, r1, c0, c1 };
             assert_eq!(encode_gray8_in(w as u32, h as u32, &d, b), full, "{b:?}");
         }
     }
