@@ -127,7 +127,7 @@ impl Compensator {
 
     /// S of pixel value `g` on the levels used (0 for values outside the valid range other
     /// than off).
-    pub fn s_of(&self, g: u8) -> f64 {
+    pub fn s_of_gray(&self, g: u8) -> f64 {
         let lv = &self.levels;
         let i = lv.gray.partition_point(|&x| x < g);
         if i < lv.gray.len() && lv.gray[i] == g {

@@ -329,7 +329,7 @@ mod tests {
                     sum += pp[i] as f64;
                     n += 1;
                     before.add(pp[i] as f64 * pr.s_max);
-                    after.add(pp[i] as f64 * c.s_of(c.gray_row(i / w)[i % w]));
+                    after.add(pp[i] as f64 * c.s_of_gray(c.gray_row(i / w)[i % w]));
                 }
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
