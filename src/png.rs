@@ -127,7 +127,8 @@ fn crc32(bytes: &[u8]) -> u32 {
     crc32fast::hash(bytes)
 }
 
-const MOD: u64 = 65521;
+/// The Adler-32 modulus: the largest prime below 2¹⁶.
+const ADLER_MOD: u64 = 65521;
 
 /// Adler-32 state updated by runs of one byte value.
 struct Adler {
@@ -153,23 +154,23 @@ impl Adler {
             self.a += k * v;
             self.pending += k as u32;
             if self.pending >= Self::REDUCE {
-                self.a %= MOD;
-                self.b %= MOD;
+                self.a %= ADLER_MOD;
+                self.b %= ADLER_MOD;
                 self.pending = 0;
             }
             return;
         }
-        self.a %= MOD;
-        self.b %= MOD;
+        self.a %= ADLER_MOD;
+        self.b %= ADLER_MOD;
         self.pending = 0;
-        let k_m = k % MOD;
+        let k_m = k % ADLER_MOD;
         let tri = if k % 2 == 0 {
-            (k / 2 % MOD) * ((k + 1) % MOD)
+            (k / 2 % ADLER_MOD) * ((k + 1) % ADLER_MOD)
         } else {
-            (k % MOD) * (k.div_ceil(2) % MOD)
-        } % MOD;
-        self.b = (self.b + k_m * self.a + v * tri) % MOD;
-        self.a = (self.a + k_m * v) % MOD;
+            (k % ADLER_MOD) * (k.div_ceil(2) % ADLER_MOD)
+        } % ADLER_MOD;
+        self.b = (self.b + k_m * self.a + v * tri) % ADLER_MOD;
+        self.a = (self.a + k_m * v) % ADLER_MOD;
     }
 }
 
@@ -199,8 +200,8 @@ impl AdlerDelta {
         }
         AdlerDelta {
             len,
-            s1: s1 % MOD,
-            s2: s2 % MOD,
+            s1: s1 % ADLER_MOD,
+            s2: s2 % ADLER_MOD,
         }
     }
 }
@@ -208,9 +209,9 @@ impl AdlerDelta {
 impl Adler {
     /// Adds the bytes of a scanline from its [`AdlerDelta`].
     fn add(&mut self, d: AdlerDelta) {
-        let (a, b) = (self.a % MOD, self.b % MOD);
-        self.a = (a + d.s1) % MOD;
-        self.b = (b + d.len % MOD * a + d.s2) % MOD;
+        let (a, b) = (self.a % ADLER_MOD, self.b % ADLER_MOD);
+        self.a = (a + d.s1) % ADLER_MOD;
+        self.b = (b + d.len % ADLER_MOD * a + d.s2) % ADLER_MOD;
         self.pending = 0;
     }
 }
@@ -292,11 +293,15 @@ fn codes() -> &'static Codes {
     })
 }
 
+/// The deflate length code of a copy of `len` bytes (3..=258, RFC 1951 §3.2.5): (symbol,
+/// number of extra bits, value of the extra bits).
 fn length_code(len: usize) -> (u32, u32, u32) {
+    /// The shortest length of each length symbol 257..=285.
     const BASE: [u16; 29] = [
         3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31, 35, 43, 51, 59, 67, 83, 99, 115,
         131, 163, 195, 227, 258,
     ];
+    /// The number of extra bits of each length symbol.
     const EXTRA: [u8; 29] = [
         0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0,
     ];
@@ -612,7 +617,7 @@ fn zlib_rows<'a>(
     } = runs;
     bits.put(0, 7); // end of block (symbol 256: seven zero bits)
     let mut out = bits.finish();
-    let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
+    let ad = (((adler.b % ADLER_MOD) as u32) << 16) | (adler.a % ADLER_MOD) as u32;
     out.extend_from_slice(&ad.to_be_bytes());
     out
 }
@@ -971,8 +976,8 @@ mod tests {
             .collect();
         let (mut a, mut b) = (1u64, 0u64);
         for &x in &data {
-            a = (a + x as u64) % MOD;
-            b = (b + a) % MOD;
+            a = (a + x as u64) % ADLER_MOD;
+            b = (b + a) % ADLER_MOD;
         }
         let mut ad = Adler {
             a: 1,
@@ -985,7 +990,7 @@ mod tests {
             ad.run(data[i], k as u64);
             i += k;
         }
-        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+        assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
         // Random runs, short and long, some past the plain-integer limit, over more bytes
         // than one reduction period.
         let mut state = 0x2545_F491_4F6C_DD1D;
@@ -1007,11 +1012,11 @@ mod tests {
             ad.run(v, k);
             total += k;
             for _ in 0..k {
-                a = (a + v as u64) % MOD;
-                b = (b + a) % MOD;
+                a = (a + v as u64) % ADLER_MOD;
+                b = (b + a) % ADLER_MOD;
             }
         }
-        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+        assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
     }
 
     #[test]

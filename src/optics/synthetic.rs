@@ -64,6 +64,7 @@ pub fn s_gamma(g: f64) -> f64 {
     (g / 255.0).powf(2.2)
 }
 
+/// The gray levels every synthetic set is measured at.
 pub const GRAYS: [u32; 7] = [255, 235, 215, 195, 175, 155, 135];
 
 /// (max − min) / mean of `v`, %.
