@@ -581,7 +581,7 @@ impl<M: CoverageMap> Emit for Mapped<'_, M> {
 
 /// Maps coverage values `data` in place: 0 stays 0, 255 takes `full` (same index), others
 /// `edge(index, value)`. Eight bytes at a time: all-off words are skipped, all-on words
-/// copied from `full`, so the work is a few instructions per eight pixels away from edges.
+/// copied from `full`, so away from edges eight pixels cost one word test (and a copy).
 #[inline(always)]
 pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
     let n = data.len().min(full.len());

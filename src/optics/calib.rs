@@ -35,9 +35,9 @@ pub const COLUMNS: [&str; 4] = ["x_mm", "y_mm", "gray", "irradiance_mw_cm2"];
 pub const MAX_CONDITION: f64 = 1e6;
 
 /// Highest degree of the inverse-square candidates (P = 1/poly²): the quadratic is the
-/// cos⁴ law of vignetting. A cubic was measured to be chosen on fields it does not
-/// describe (fewer terms than exp(quartic), similar cross-validated error) and then to
-/// extrapolate worse into the outer half-zone band, so only the quadratic is offered.
+/// cos⁴ law of vignetting. A cubic would be chosen on fields it does not describe (fewer
+/// terms than exp(quartic), similar cross-validated error) and then extrapolate worse into
+/// the outer half-zone band, so only the quadratic is offered.
 const MAX_INVERSE_SQUARE_DEGREE: usize = 2;
 
 /// One measurement.

@@ -4,7 +4,8 @@
 //!   the layer plus the overcure at the target irradiance E*:
 //!   t = (Ec / E*)·exp((Δz + overcure) / Dp). It replaces the profile's `exposure.layer_s`;
 //!   `bottom_s` keeps its ratio to `layer_s` (the bottom-layer factor), and the transition
-//!   layers ramp between them as before ([`crate::profile::Exposure::layer_exposure_s`]).
+//!   layers ramp between them as without calibration
+//!   ([`crate::profile::Exposure::layer_exposure_s`]).
 //! * Relative calibration (such as Xu et al. 2010's published fit): irradiance is known only up to a
 //!   factor, so the profile's fixed exposure is taken as the exposure at E*; the profile is
 //!   left unchanged and no dose can be stated.

@@ -103,7 +103,7 @@ fn pixel_limit(mask: &[u8], s: Resp) -> f64 {
 #[test]
 fn held_out_sets_are_flattened_within_the_issue_limits() {
     let f = field(4);
-    // Four of the eight field × response pairs (a fit takes ~5 s in a debug build); the
+    // Four of the eight field × response pairs (fits are slow in a debug build); the
     // ignored `sweep_report` runs all eight with three seeds each.
     let cases: [(Field2, Resp); 4] = [
         (p_cubic, s_published),
