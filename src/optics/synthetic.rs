@@ -4,24 +4,29 @@
 //! both includers use every item here (a field only the sweep uses lives in `sweep.rs`), so
 //! neither compiles dead code.
 
-/// splitmix64 + Box–Muller.
+/// A seeded random number generator: splitmix64 for uniform numbers, Box–Muller for
+/// normal ones.
 pub struct Rng(pub u64);
 impl Rng {
-    pub fn u(&mut self) -> f64 {
+    /// A uniform number in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// A standard normal number.
     pub fn normal(&mut self) -> f64 {
-        let (a, b) = (self.u().max(1e-300), self.u());
+        let (a, b) = (self.uniform().max(1e-300), self.uniform());
         (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
     }
 }
 
-pub type Field2 = fn(f64, f64) -> f64;
-pub type Resp = fn(f64) -> f64;
+/// A light field P(x, y), x and y in mm from the field's bottom-left corner.
+pub type FieldFn = fn(f64, f64) -> f64;
+/// A gray response S(g), g the pixel value.
+pub type ResponseFn = fn(f64) -> f64;
 
 /// A smooth cubic field, 1.5 : 1.
 pub fn p_cubic(x: f64, y: f64) -> f64 {
@@ -97,7 +102,12 @@ pub fn zone_and_pixel_spreads(e: impl IntoIterator<Item = (f64, f64, f64)>) -> (
 
 /// Readings `(x_mm, y_mm, gray, irradiance)` at the 13 × 9 zone centres (5 mm zones from
 /// the bottom-left corner) for every gray of [`GRAYS`], with relative normal noise.
-pub fn centre_readings(p: Field2, s: Resp, noise: f64, seed: u64) -> Vec<(f64, f64, u32, f64)> {
+pub fn centre_readings(
+    p: FieldFn,
+    s: ResponseFn,
+    noise: f64,
+    seed: u64,
+) -> Vec<(f64, f64, u32, f64)> {
     let mut rng = Rng(seed);
     let mut out = Vec::new();
     for g in GRAYS {
