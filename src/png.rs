@@ -216,10 +216,15 @@ impl Adler {
     }
 }
 
+/// The deflate bit stream being written.
 struct Bits {
+    /// The bytes written so far.
     out: Vec<u8>,
+    /// Bits not yet in `out`, the first in the lowest bit.
     acc: u64,
+    /// How many bits `acc` holds (fewer than 32 between calls).
     n: u32,
+    /// The fixed-Huffman code tables.
     codes: &'static Codes,
 }
 
