@@ -83,7 +83,9 @@ pub struct Heatmap {
     pub annotate: bool,
 }
 
-const SCALE: f32 = 2.0; // text scale: glyphs are 10×14 px
+/// Scale of the built-in 5×7 font: glyphs are drawn 10×14 px.
+const SCALE: f32 = 2.0;
+/// Advance of one character, px (the glyph and one column of space).
 const GLYPH_W: f32 = 6.0 * SCALE;
 
 fn glyph(c: char) -> [u8; 7] {

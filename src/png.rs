@@ -16,14 +16,67 @@
 //! less than scanning it; masks whose rows never repeat pay for the signature of each row.
 //! The output is a standard PNG that any decoder reads (tests decode it with `image`).
 
-/// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
-pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
-    encode_gray8_in(width, height, data, [0, height as usize, 0, width as usize])
+use std::ops::Range;
+
+/// A rectangle of an image's pixels: rows `r0..r1` (row 0 at the top) and columns
+/// `c0..c1`, both half-open. A mask's lit box is one: the mask is zero outside it, so the
+/// passes after the rasterizer (compensation, lit area, PNG encoding) visit only the box.
+/// The default is [`PixelBox::EMPTY`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PixelBox {
+    /// First row.
+    pub r0: usize,
+    /// One past the last row.
+    pub r1: usize,
+    /// First column.
+    pub c0: usize,
+    /// One past the last column.
+    pub c1: usize,
 }
 
-/// Like [`encode_gray8`] for a mask known to be zero outside `lit_box` = [r0, r1, c0, c1]:
-/// only the box is scanned. The bytes are the same as `encode_gray8`'s.
-pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]) -> Vec<u8> {
+impl PixelBox {
+    /// The box of no pixel.
+    pub const EMPTY: PixelBox = PixelBox {
+        r0: 0,
+        r1: 0,
+        c0: 0,
+        c1: 0,
+    };
+
+    /// Every pixel of a `width × height` image.
+    pub fn whole(width: usize, height: usize) -> PixelBox {
+        PixelBox {
+            r0: 0,
+            r1: height,
+            c0: 0,
+            c1: width,
+        }
+    }
+
+    /// The rows `r0..r1`.
+    pub fn rows(&self) -> Range<usize> {
+        self.r0..self.r1
+    }
+
+    /// The columns `c0..c1`.
+    pub fn cols(&self) -> Range<usize> {
+        self.c0..self.c1
+    }
+}
+
+/// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
+pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
+    encode_gray8_in(
+        width,
+        height,
+        data,
+        PixelBox::whole(width as usize, height as usize),
+    )
+}
+
+/// Like [`encode_gray8`] for a mask known to be zero outside `lit_box`: only the box is
+/// scanned. The bytes are the same as `encode_gray8`'s.
+pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) -> Vec<u8> {
     assert_eq!(data.len(), width as usize * height as usize, "mask size");
     let w = width as usize;
     encode_rows(width, height, |r| &data[r * w..(r + 1) * w], lit_box)
@@ -32,7 +85,12 @@ pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: [usize; 4]
 /// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
 /// image in one piece (the same bytes).
 pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
-    encode_rows(width, height, row, [0, height as usize, 0, width as usize])
+    encode_rows(
+        width,
+        height,
+        row,
+        PixelBox::whole(width as usize, height as usize),
+    )
 }
 
 #[inline(always)]
@@ -40,7 +98,7 @@ fn encode_rows<'a>(
     width: u32,
     height: u32,
     row: impl Fn(usize) -> &'a [u8],
-    lit_box: [usize; 4],
+    lit_box: PixelBox,
 ) -> Vec<u8> {
     let idat = zlib_rows(width as usize, height as usize, row, lit_box);
     let mut out = Vec::with_capacity(idat.len() + 64);
@@ -69,7 +127,8 @@ fn crc32(bytes: &[u8]) -> u32 {
     crc32fast::hash(bytes)
 }
 
-const MOD: u64 = 65521;
+/// The Adler-32 modulus: the largest prime below 2¹⁶.
+const ADLER_MOD: u64 = 65521;
 
 /// Adler-32 state updated by runs of one byte value.
 struct Adler {
@@ -95,23 +154,23 @@ impl Adler {
             self.a += k * v;
             self.pending += k as u32;
             if self.pending >= Self::REDUCE {
-                self.a %= MOD;
-                self.b %= MOD;
+                self.a %= ADLER_MOD;
+                self.b %= ADLER_MOD;
                 self.pending = 0;
             }
             return;
         }
-        self.a %= MOD;
-        self.b %= MOD;
+        self.a %= ADLER_MOD;
+        self.b %= ADLER_MOD;
         self.pending = 0;
-        let k_m = k % MOD;
+        let k_m = k % ADLER_MOD;
         let tri = if k % 2 == 0 {
-            (k / 2 % MOD) * ((k + 1) % MOD)
+            (k / 2 % ADLER_MOD) * ((k + 1) % ADLER_MOD)
         } else {
-            (k % MOD) * (k.div_ceil(2) % MOD)
-        } % MOD;
-        self.b = (self.b + k_m * self.a + v * tri) % MOD;
-        self.a = (self.a + k_m * v) % MOD;
+            (k % ADLER_MOD) * (k.div_ceil(2) % ADLER_MOD)
+        } % ADLER_MOD;
+        self.b = (self.b + k_m * self.a + v * tri) % ADLER_MOD;
+        self.a = (self.a + k_m * v) % ADLER_MOD;
     }
 }
 
@@ -141,8 +200,8 @@ impl AdlerDelta {
         }
         AdlerDelta {
             len,
-            s1: s1 % MOD,
-            s2: s2 % MOD,
+            s1: s1 % ADLER_MOD,
+            s2: s2 % ADLER_MOD,
         }
     }
 }
@@ -150,17 +209,22 @@ impl AdlerDelta {
 impl Adler {
     /// Adds the bytes of a scanline from its [`AdlerDelta`].
     fn add(&mut self, d: AdlerDelta) {
-        let (a, b) = (self.a % MOD, self.b % MOD);
-        self.a = (a + d.s1) % MOD;
-        self.b = (b + d.len % MOD * a + d.s2) % MOD;
+        let (a, b) = (self.a % ADLER_MOD, self.b % ADLER_MOD);
+        self.a = (a + d.s1) % ADLER_MOD;
+        self.b = (b + d.len % ADLER_MOD * a + d.s2) % ADLER_MOD;
         self.pending = 0;
     }
 }
 
+/// The deflate bit stream being written.
 struct Bits {
+    /// The bytes written so far.
     out: Vec<u8>,
+    /// Bits not yet in `out`, the first in the lowest bit.
     acc: u64,
+    /// How many bits `acc` holds (fewer than 32 between calls).
     n: u32,
+    /// The fixed-Huffman code tables.
     codes: &'static Codes,
 }
 
@@ -234,11 +298,15 @@ fn codes() -> &'static Codes {
     })
 }
 
+/// The deflate length code of a copy of `len` bytes (3..=258, RFC 1951 §3.2.5): (symbol,
+/// number of extra bits, value of the extra bits).
 fn length_code(len: usize) -> (u32, u32, u32) {
+    /// The shortest length of each length symbol 257..=285.
     const BASE: [u16; 29] = [
         3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31, 35, 43, 51, 59, 67, 83, 99, 115,
         131, 163, 195, 227, 258,
     ];
+    /// The number of extra bits of each length symbol.
     const EXTRA: [u8; 29] = [
         0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0,
     ];
@@ -426,9 +494,9 @@ fn zlib_rows<'a>(
     w: usize,
     h: usize,
     row_of: impl Fn(usize) -> &'a [u8],
-    lit_box: [usize; 4],
+    lit_box: PixelBox,
 ) -> Vec<u8> {
-    let [r0, r1, c0, c1] = lit_box;
+    let PixelBox { r0, r1, c0, c1 } = lit_box;
     let (c0, c1) = (c0.min(w), c1.min(w).max(c0.min(w)));
     let mut bits = Bits {
         out: Vec::with_capacity(4096),
@@ -554,7 +622,7 @@ fn zlib_rows<'a>(
     } = runs;
     bits.put(0, 7); // end of block (symbol 256: seven zero bits)
     let mut out = bits.finish();
-    let ad = (((adler.b % MOD) as u32) << 16) | (adler.a % MOD) as u32;
+    let ad = (((adler.b % ADLER_MOD) as u32) << 16) | (adler.a % ADLER_MOD) as u32;
     out.extend_from_slice(&ad.to_be_bytes());
     out
 }
@@ -846,7 +914,13 @@ mod tests {
                     };
                     let c0 = (a..=b).map(|r| cols(r).0).min().unwrap();
                     let c1 = (a..=b).map(|r| cols(r).1).max().unwrap();
-                    let boxed = encode_gray8_in(w as u32, h as u32, &d, [a, b + 1, c0, c1]);
+                    let lit_box = PixelBox {
+                        r0: a,
+                        r1: b + 1,
+                        c0,
+                        c1,
+                    };
+                    let boxed = encode_gray8_in(w as u32, h as u32, &d, lit_box);
                     assert!(boxed == png, "{w}x{h} {zones}: boxed");
                 }
             }
@@ -883,12 +957,13 @@ mod tests {
             }
         }
         let full = encode_gray8(w as u32, h as u32, &d);
-        for b in [
+        for [r0, r1, c0, c1] in [
             [50, 120, 40, 260],
             [0, 200, 0, 300],
             [49, 121, 39, 261],
             [50, 120, 0, 300],
         ] {
+            let b = PixelBox { r0, r1, c0, c1 };
             assert_eq!(encode_gray8_in(w as u32, h as u32, &d, b), full, "{b:?}");
         }
     }
@@ -906,8 +981,8 @@ mod tests {
             .collect();
         let (mut a, mut b) = (1u64, 0u64);
         for &x in &data {
-            a = (a + x as u64) % MOD;
-            b = (b + a) % MOD;
+            a = (a + x as u64) % ADLER_MOD;
+            b = (b + a) % ADLER_MOD;
         }
         let mut ad = Adler {
             a: 1,
@@ -920,7 +995,7 @@ mod tests {
             ad.run(data[i], k as u64);
             i += k;
         }
-        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+        assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
         // Random runs, short and long, some past the plain-integer limit, over more bytes
         // than one reduction period.
         let mut state = 0x2545_F491_4F6C_DD1D;
@@ -942,11 +1017,11 @@ mod tests {
             ad.run(v, k);
             total += k;
             for _ in 0..k {
-                a = (a + v as u64) % MOD;
-                b = (b + a) % MOD;
+                a = (a + v as u64) % ADLER_MOD;
+                b = (b + a) % ADLER_MOD;
             }
         }
-        assert_eq!((ad.a % MOD, ad.b % MOD), (a, b));
+        assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
     }
 
     #[test]

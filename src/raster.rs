@@ -16,6 +16,7 @@
 //! than the exact coverage does. tiny-skia draws the plots ([`crate::plot`]) and serves as
 //! the reference renderer in `benches/raster.rs`.
 
+use crate::png::PixelBox;
 use crate::profile::{Field, Projector};
 use crate::slice::Contour;
 
@@ -48,13 +49,13 @@ impl Mask {
 
     /// Sum of values / 255: the lit area in pixels.
     pub fn lit_pixels(&self) -> f64 {
-        self.lit_pixels_in([0, self.height as usize, 0, self.width as usize])
+        self.lit_pixels_in(PixelBox::whole(self.width as usize, self.height as usize))
     }
 
     /// Like [`lit_pixels`](Self::lit_pixels) when the mask is known to be zero outside
-    /// `lit_box` = [r0, r1, c0, c1] (e.g. [`Scratch::lit_box`]): visits only that box.
-    pub fn lit_pixels_in(&self, lit_box: [usize; 4]) -> f64 {
-        let [r0, r1, c0, c1] = lit_box;
+    /// `lit_box` (e.g. [`Scratch::lit_box`]): visits only that box.
+    pub fn lit_pixels_in(&self, lit_box: PixelBox) -> f64 {
+        let PixelBox { r0, r1, c0, c1 } = lit_box;
         let w = self.width as usize;
         let mut sum = 0u64;
         for r in r0..r1 {
@@ -78,14 +79,17 @@ pub struct LitRuns {
 }
 
 impl LitRuns {
-    /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (zero outside).
+    /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (a
+    /// [`PixelBox`]'s rows `r0..r1` and columns `c0..c1`; zero outside).
     pub fn of_mask(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> LitRuns {
         let mut l = LitRuns::default();
-        l.scan_mask(m, [r0, r1, c0, c1]);
+        l.scan_mask(m, PixelBox { r0, r1, c0, c1 });
         l
     }
 
-    fn scan_mask(&mut self, m: &Mask, [r0, r1, c0, c1]: [usize; 4]) {
+    /// Replaces the runs by the lit runs of `m` inside `lit_box` (zero outside).
+    fn scan_mask(&mut self, m: &Mask, lit_box: PixelBox) {
+        let PixelBox { r0, r1, c0, c1 } = lit_box;
         self.runs.clear();
         let w = m.width as usize;
         for r in r0..r1 {
@@ -122,17 +126,18 @@ pub struct Scratch {
     /// visits only those blocks and skips the (zero) cells between them.
     touched: Vec<u64>,
     /// Recycled mask buffers with the box outside which each is known to be zero.
-    spare: Vec<(Vec<u8>, [usize; 4])>,
-    lit: [usize; 4],
+    spare: Vec<(Vec<u8>, PixelBox)>,
+    /// The last [`Rasterizer::coverage`] mask's lit box ([`Scratch::lit_box`]).
+    lit: PixelBox,
     /// Whether the last [`Rasterizer::render`] reported its layer to the map as lit
     /// outside the map's area.
     reported_outside: bool,
 }
 
 impl Scratch {
-    /// [r0, r1, c0, c1]: the last [`Rasterizer::coverage`] mask is zero outside rows r0..r1
-    /// and columns c0..c1 (lets later passes skip the empty part of the field).
-    pub fn lit_box(&self) -> [usize; 4] {
+    /// The last [`Rasterizer::coverage`] mask's lit box: the mask is zero outside it (lets
+    /// later passes skip the empty part of the field).
+    pub fn lit_box(&self) -> PixelBox {
         self.lit
     }
 
@@ -157,12 +162,12 @@ impl Scratch {
     /// (saves a fresh, page-faulting allocation per layer). The mask may have been changed,
     /// but only inside [`lit_box`](Self::lit_box): only that box is cleared for reuse.
     pub fn recycle(&mut self, m: Mask) {
-        let [r0, r1, c0, c1] = self.lit;
+        let lit = self.lit;
         debug_assert!(
             m.data.chunks(m.width as usize).enumerate().all(|(r, row)| {
                 row.iter()
                     .enumerate()
-                    .all(|(c, &v)| v == 0 || ((r0..r1).contains(&r) && (c0..c1).contains(&c)))
+                    .all(|(c, &v)| v == 0 || (lit.rows().contains(&r) && lit.cols().contains(&c)))
             }),
             "recycled mask is lit outside its lit box"
         );
@@ -173,7 +178,7 @@ impl Scratch {
 
     fn zeroed(&mut self, w: usize, h: usize) -> Vec<u8> {
         match self.spare.pop() {
-            Some((mut v, [r0, r1, c0, c1])) if v.len() == w * h => {
+            Some((mut v, PixelBox { r0, r1, c0, c1 })) if v.len() == w * h => {
                 for r in r0..r1 {
                     v[r * w + c0..r * w + c1].fill(0);
                 }
@@ -231,7 +236,7 @@ impl Rasterizer {
             height: h as u32,
             data: scratch.zeroed(w, h),
         };
-        scratch.lit = [0; 4];
+        scratch.lit = PixelBox::EMPTY;
         scratch.lit_sum = Some(0);
         scratch.lit_runs.runs.clear();
         if contours.is_empty() {
@@ -272,7 +277,12 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
-        let lit = [r0, r1, c0, c1.min(w)];
+        let lit = PixelBox {
+            r0,
+            r1,
+            c0,
+            c1: c1.min(w),
+        };
         scratch.lit = lit;
         let fused = map.filter(|m| m.fusable(lit));
         let span = ScanSpan {
@@ -286,8 +296,8 @@ impl Rasterizer {
         let (lit_sum, max_winding) = match (fused, binary) {
             (Some(m), binary) => {
                 // Whether the scan must look for lit pixels outside the map's area.
-                let [ar0, ar1, ac0, ac1] = m.area();
-                let check = r0 < ar0 || r1 > ar1 || c0 < ac0 || c1.min(w) > ac1;
+                let area = m.area();
+                let check = r0 < area.r0 || r1 > area.r1 || c0 < area.c0 || c1.min(w) > area.c1;
                 let data = &mut out.data;
                 let o = &mut outside;
                 match (binary, check) {
@@ -438,9 +448,9 @@ pub fn threshold(m: &mut Mask) {
     }
 }
 
-/// Thresholds the box [r0, r1, c0, c1] of a mask at 50 % in place (the mask is zero
-/// outside it).
-fn threshold_in(m: &mut Mask, [r0, r1, c0, c1]: [usize; 4]) {
+/// Thresholds the box `lit_box` of a mask at 50 % in place (the mask is zero outside it).
+fn threshold_in(m: &mut Mask, lit_box: PixelBox) {
+    let PixelBox { r0, r1, c0, c1 } = lit_box;
     let w = m.width as usize;
     for r in r0..r1 {
         for v in &mut m.data[r * w + c0..r * w + c1] {
@@ -449,8 +459,9 @@ fn threshold_in(m: &mut Mask, [r0, r1, c0, c1]: [usize; 4]) {
     }
 }
 
-/// Sum of a mask's values inside the box [r0, r1, c0, c1].
-fn box_sum(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> u64 {
+/// Sum of a mask's values inside `b`.
+fn box_sum(m: &Mask, b: PixelBox) -> u64 {
+    let PixelBox { r0, r1, c0, c1 } = b;
     let w = m.width as usize;
     (r0..r1)
         .map(|r| {
@@ -467,13 +478,13 @@ fn box_sum(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> u64 {
 /// ([`crate::optics::Compensator`]). Coverage 0 always stays 0.
 pub trait CoverageMap {
     /// Whether the scan may apply the map to a layer whose lit pixels all lie in
-    /// `lit_box` = [r0, r1, c0, c1]; if not, [`apply`](Self::apply) maps the finished mask
-    /// (e.g. when the map must look at the coverage of other pixels first).
-    fn fusable(&self, lit_box: [usize; 4]) -> bool;
-    /// The map's area [r0, r1, c0, c1] (rows r0..r1, columns c0..c1): the scan reports
-    /// through [`lit_outside`](Self::lit_outside) a layer it mapped that has a lit pixel
-    /// (coverage, thresholded when binary, above zero) outside it.
-    fn area(&self) -> [usize; 4];
+    /// `lit_box`; if not, [`apply`](Self::apply) maps the finished mask (e.g. when the map
+    /// must look at the coverage of other pixels first).
+    fn fusable(&self, lit_box: PixelBox) -> bool;
+    /// The map's area: the scan reports through [`lit_outside`](Self::lit_outside) a layer
+    /// it mapped that has a lit pixel (coverage, thresholded when binary, above zero)
+    /// outside it.
+    fn area(&self) -> PixelBox;
     /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area).
     fn lit_outside(&self);
     /// What the map needs for one row (looked up once per row, not per pixel).
@@ -487,17 +498,17 @@ pub trait CoverageMap {
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
     /// Maps a finished coverage mask in place; it is zero outside `lit_box`. Returns
     /// whether the layer is lit outside [`area`](Self::area) (and reported as such).
-    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool;
+    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> bool;
 }
 
 /// No map (the [`Rasterizer::coverage`] and [`Rasterizer::binary`] masks).
 enum NoMap {}
 
 impl CoverageMap for NoMap {
-    fn fusable(&self, _: [usize; 4]) -> bool {
+    fn fusable(&self, _: PixelBox) -> bool {
         match *self {}
     }
-    fn area(&self) -> [usize; 4] {
+    fn area(&self) -> PixelBox {
         match *self {}
     }
     fn lit_outside(&self) {
@@ -508,7 +519,7 @@ impl CoverageMap for NoMap {
         match *self {}
     }
     fn fill(_: (), _: &mut [u8], _: usize, _: usize, _: u8) {}
-    fn apply(&self, _: &mut Mask, _: [usize; 4]) -> bool {
+    fn apply(&self, _: &mut Mask, _: PixelBox) -> bool {
         match *self {}
     }
 }
@@ -520,8 +531,8 @@ trait Emit {
     where
         Self: 'a;
     fn row(&self, r: usize) -> Self::Row<'_>;
-    /// Rows r0..r1 and columns c0..c1 outside which lit pixels are reported.
-    fn area(&self) -> [usize; 4];
+    /// The area outside which lit pixels are reported.
+    fn area(&self) -> PixelBox;
     /// Writes columns a..b of `dst` (zero there) for (thresholded) coverage `v` ≠ 0.
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
 }
@@ -533,8 +544,13 @@ impl Emit for Plain {
     type Row<'a> = ();
     #[inline(always)]
     fn row(&self, _: usize) {}
-    fn area(&self) -> [usize; 4] {
-        [0, usize::MAX, 0, usize::MAX]
+    fn area(&self) -> PixelBox {
+        PixelBox {
+            r0: 0,
+            r1: usize::MAX,
+            c0: 0,
+            c1: usize::MAX,
+        }
     }
     #[inline(always)]
     fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
@@ -554,7 +570,7 @@ impl<M: CoverageMap> Emit for Mapped<'_, M> {
     fn row(&self, r: usize) -> M::Row<'_> {
         self.0.row(r)
     }
-    fn area(&self) -> [usize; 4] {
+    fn area(&self) -> PixelBox {
         self.0.area()
     }
     #[inline(always)]
@@ -565,7 +581,7 @@ impl<M: CoverageMap> Emit for Mapped<'_, M> {
 
 /// Maps coverage values `data` in place: 0 stays 0, 255 takes `full` (same index), others
 /// `edge(index, value)`. Eight bytes at a time: all-off words are skipped, all-on words
-/// copied from `full`, so the work is a few instructions per eight pixels away from edges.
+/// copied from `full`, so away from edges eight pixels cost one word test (and a copy).
 #[inline(always)]
 pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
     let n = data.len().min(full.len());
@@ -633,7 +649,12 @@ fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     outside: &mut bool,
     mut lit: Option<&mut LitRuns>,
 ) -> (u64, f32) {
-    let [ar0, ar1, ac0, ac1] = emit.area();
+    let PixelBox {
+        r0: ar0,
+        r1: ar1,
+        c0: ac0,
+        c1: ac1,
+    } = emit.area();
     let (stride, words) = (acc.stride, acc.words);
     let mut max_winding = 0.0f32;
     let mut lit_sum = 0u64;

@@ -29,8 +29,10 @@ const LIMIT_SLACK: f64 = 1e-9;
 #[derive(Debug)]
 pub struct Checker<'a> {
     manifest: &'a Manifest,
-    m: Machine,
+    machine: Machine,
+    /// The previous layer's top, mm (0 before the first layer).
     prev_z: f64,
+    /// What position quantization changed in the layers' times so far, s.
     quantization_s: f64,
     violations: Vec<Violation>,
 }
@@ -40,7 +42,7 @@ impl<'a> Checker<'a> {
     pub fn new(manifest: &'a Manifest) -> Self {
         Checker {
             manifest,
-            m: Machine::from_profile(&manifest.machine),
+            machine: Machine::from_profile(&manifest.machine),
             prev_z: 0.0,
             quantization_s: 0.0,
             violations: Vec::new(),
@@ -134,7 +136,7 @@ impl Sink for Checker<'_> {
             }
         }
         if moving || s.kind == SegKind::Home {
-            let (lo, hi) = (self.m.travel_min_mm, self.m.travel_max_mm);
+            let (lo, hi) = (self.machine.travel_min_mm, self.machine.travel_max_mm);
             let eps = 1e-9;
             let out = |p: f64| p < lo - eps || p > hi + eps;
             if out(s.from_mm) || out(s.to_mm) {
@@ -161,7 +163,7 @@ impl Sink for Checker<'_> {
             } => (speed_mm_s, accel_mm_s2),
         };
         if moving {
-            let vmax = self.m.max_speed_mm_s;
+            let vmax = self.machine.max_speed_mm_s;
             if speed > vmax * (1.0 + LIMIT_SLACK) {
                 self.push(
                     i,
@@ -173,7 +175,7 @@ impl Sink for Checker<'_> {
                     ),
                 );
             }
-            let amax = self.m.max_accel_mm_s2;
+            let amax = self.machine.max_accel_mm_s2;
             if accel > amax * (1.0 + LIMIT_SLACK) {
                 self.push(
                     i,
@@ -188,7 +190,7 @@ impl Sink for Checker<'_> {
         }
         if s.kind == SegKind::Expose {
             let z = layer.z_mm;
-            if (s.from_mm - z).abs() > self.m.half_step_mm() + 1e-9 {
+            if (s.from_mm - z).abs() > self.machine.half_step_mm() + 1e-9 {
                 self.push(
                     i,
                     s.t0,
@@ -225,7 +227,7 @@ impl Sink for Checker<'_> {
         }
         let end = r.start_s + r.time_s;
         if let Some(e) = r.last_sweep_end_mm {
-            if (e - layer.z_mm).abs() > self.m.half_step_mm() + 1e-9 {
+            if (e - layer.z_mm).abs() > self.machine.half_step_mm() + 1e-9 {
                 self.push(
                     i,
                     end,

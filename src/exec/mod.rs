@@ -104,6 +104,37 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// itself are [`Violation`]s in the report.
 pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
+    let (manifest, range) = read_bundle(dir, opts)?;
+    let read_s = t0.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let verified = verify::verify(dir, &manifest);
+    let verify_s = t1.elapsed().as_secs_f64();
+
+    let t2 = Instant::now();
+    let simulated = simulate_into_sinks(dir, &manifest, opts, range)?;
+    let violations = all_violations(verified.problems, simulated.timeline, &simulated.outcome);
+    let simulate_s = t2.elapsed().as_secs_f64();
+
+    let timings = Timings {
+        read_s,
+        verify_s,
+        simulate_s,
+    };
+    Ok(report(
+        dir,
+        &manifest,
+        verified.masks,
+        simulated.outcome,
+        simulated.stats,
+        violations,
+        timings,
+    ))
+}
+
+/// Reads the manifest, checks its machine profile and the options against it, and
+/// parses the layer range of the trace and the plot.
+fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<(Manifest, Option<RangeInclusive<usize>>)> {
     let manifest = Manifest::read(dir)?;
     manifest.machine.validate().map_err(|msg| Error::Bundle {
         path: dir.join(MANIFEST),
@@ -125,24 +156,36 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         .as_deref()
         .map(|s| parse_layer_range(s, n))
         .transpose()?;
-    let read_s = t0.elapsed().as_secs_f64();
+    Ok((manifest, range))
+}
 
-    let t1 = Instant::now();
-    let verified = verify::verify(dir, &manifest);
-    let verify_s = t1.elapsed().as_secs_f64();
+/// What the simulation and its sinks gave.
+struct Simulated {
+    outcome: sim::Outcome,
+    stats: Stats,
+    /// The checker's violations, the invalid steps and the fault, in time order.
+    timeline: Vec<Violation>,
+}
 
-    let t2 = Instant::now();
-    let m = Machine::from_profile(&manifest.machine);
+/// Simulates the job into the checker, the statistics and, when asked, the trace and the
+/// plot, which are written.
+fn simulate_into_sinks(
+    dir: &Path,
+    manifest: &Manifest,
+    opts: &RunOptions,
+    range: Option<RangeInclusive<usize>>,
+) -> Result<Simulated> {
+    let machine = Machine::from_profile(&manifest.machine);
     let mut trace = opts
         .trace
         .as_deref()
-        .map(|p| trace::TraceWriter::create(p, range.clone(), m))
+        .map(|p| trace::TraceWriter::create(p, range.clone(), machine))
         .transpose()?;
     let mut plot = opts
         .plot
         .as_ref()
         .map(|_| PlotCollector::new(range.clone()));
-    let mut checker = check::Checker::new(&manifest);
+    let mut checker = check::Checker::new(manifest);
     let mut stats = Stats::default();
     let outcome = {
         let mut sinks: Vec<&mut dyn Sink> = vec![&mut checker, &mut stats];
@@ -152,7 +195,7 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         if let Some(p) = plot.as_mut() {
             sinks.push(p);
         }
-        sim::simulate(&manifest, &opts.faults, &mut sinks)
+        sim::simulate(manifest, &opts.faults, &mut sinks)
     };
     let completed = outcome.fault.is_none();
     let mut timeline = checker.finish(outcome.total_s, completed);
@@ -171,14 +214,6 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
             .unwrap_or(f64::INFINITY)
             .total_cmp(&b.time_s.unwrap_or(f64::INFINITY))
     });
-    let mut violations = verified.problems;
-    for v in &mut violations {
-        v.time_s = v
-            .layer
-            .and_then(|l| outcome.layers.get(l))
-            .map(|r| r.start_s);
-    }
-    violations.extend(timeline);
     if let Some(t) = trace.take() {
         t.finish()?;
     }
@@ -195,8 +230,41 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         );
         write_atomic(path, &p.render(&title))?;
     }
-    let simulate_s = t2.elapsed().as_secs_f64();
+    Ok(Simulated {
+        outcome,
+        stats,
+        timeline,
+    })
+}
 
+/// The verification problems (each given the time its layer starts), then the
+/// simulation's `timeline`.
+fn all_violations(
+    problems: Vec<Violation>,
+    timeline: Vec<Violation>,
+    outcome: &sim::Outcome,
+) -> Vec<Violation> {
+    let mut violations = problems;
+    for v in &mut violations {
+        v.time_s = v
+            .layer
+            .and_then(|l| outcome.layers.get(l))
+            .map(|r| r.start_s);
+    }
+    violations.extend(timeline);
+    violations
+}
+
+/// The report of a run.
+fn report(
+    dir: &Path,
+    manifest: &Manifest,
+    masks_verified: usize,
+    outcome: sim::Outcome,
+    stats: Stats,
+    violations: Vec<Violation>,
+    timings: Timings,
+) -> Report {
     let mut counts = BTreeMap::new();
     for v in &violations {
         *counts.entry(v.kind).or_insert(0) += 1;
@@ -217,11 +285,11 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         })
         .collect();
     let estimate_s = manifest.totals.print_time_s;
-    Ok(Report {
+    Report {
         bundle: dir.display().to_string(),
-        layers: n,
+        layers: manifest.layers.len(),
         layers_completed: outcome.layers.iter().filter(|r| r.completed).count(),
-        masks_verified: verified.masks,
+        masks_verified,
         total_s: outcome.total_s,
         estimate_s,
         estimate_diff_pct: check::pct(outcome.total_s, estimate_s),
@@ -243,12 +311,8 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         violations,
         violation_counts: counts,
         per_layer,
-        timings: Timings {
-            read_s,
-            verify_s,
-            simulate_s,
-        },
-    })
+        timings,
+    }
 }
 
 /// Simulates a manifest's steps without reading any mask: the invariants and timing checks

@@ -27,20 +27,33 @@ pub const HEADER: &str = "time_s,stage_mm,velocity_mm_s,shutter,light,mask,layer
 /// Streams the timeline to a CSV file.
 #[derive(Debug)]
 pub struct TraceWriter {
+    /// Where the trace goes.
     path: PathBuf,
+    /// The temporary sibling written first, renamed to `path` at the end.
     tmp: PathBuf,
-    w: Option<BufWriter<File>>,
+    /// The open temporary file (`None` once finished).
+    writer: Option<BufWriter<File>>,
+    /// The first write error; later rows are skipped.
     err: Option<std::io::Error>,
+    /// The layers traced (all if `None`).
     layers: Option<RangeInclusive<usize>>,
-    m: Machine,
+    /// The machine (positions are written quantized to its steps).
+    machine: Machine,
+    /// The last segment traced (its end is the closing row).
     last: Option<Segment>,
+    /// Reused buffer of a segment's row times.
     times: Vec<f64>,
+    /// Rows written.
     rows: u64,
 }
 
 impl TraceWriter {
     /// Starts a trace at `path` for the segments of `layers` (all if `None`).
-    pub fn create(path: &Path, layers: Option<RangeInclusive<usize>>, m: Machine) -> Result<Self> {
+    pub fn create(
+        path: &Path,
+        layers: Option<RangeInclusive<usize>>,
+        machine: Machine,
+    ) -> Result<Self> {
         let tmp = super::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
         let f = File::create(&tmp).map_err(|e| Error::io(path, e))?;
@@ -49,10 +62,10 @@ impl TraceWriter {
         Ok(TraceWriter {
             path: path.to_path_buf(),
             tmp,
-            w: Some(w),
+            writer: Some(w),
             err,
             layers,
-            m,
+            machine,
             last: None,
             times: Vec::with_capacity(4),
             rows: 0,
@@ -63,8 +76,10 @@ impl TraceWriter {
         if self.err.is_some() {
             return;
         }
-        let Some(w) = self.w.as_mut() else { return };
-        let pos = self.m.quantize(seg.position_at(t));
+        let Some(w) = self.writer.as_mut() else {
+            return;
+        };
+        let pos = self.machine.quantize(seg.position_at(t));
         let (vel, shutter, light, event) = if end {
             (0.0, ShutterState::Closed, false, "end")
         } else {
@@ -94,7 +109,7 @@ impl TraceWriter {
         if let Some(last) = self.last {
             self.row(&last, last.t1, true);
         }
-        let mut w = self.w.take().expect("finish once");
+        let mut w = self.writer.take().expect("finish once");
         if self.err.is_none() {
             self.err = w.flush().err();
         }
@@ -109,7 +124,7 @@ impl TraceWriter {
 
 impl Drop for TraceWriter {
     fn drop(&mut self) {
-        if self.w.take().is_some() {
+        if self.writer.take().is_some() {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }

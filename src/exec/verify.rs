@@ -14,7 +14,7 @@ use std::path::{Component, Path};
 
 /// What verification found.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct Verified {
+pub struct Verification {
     /// Mask files checked.
     pub masks: usize,
     /// Bytes read.
@@ -39,7 +39,7 @@ fn problem(
 }
 
 /// Verifies the manifest's structure and every mask of the bundle at `dir`.
-pub fn verify(dir: &Path, manifest: &Manifest) -> Verified {
+pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
     let mut problems = Vec::new();
     let job = dir.join(crate::bundle::MANIFEST);
     let n = manifest.layers.len();
@@ -135,7 +135,7 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verified {
         problems.extend(p);
     }
     problems.sort_by_key(|p| p.layer.map_or(0, |l| l + 1));
-    Verified {
+    Verification {
         masks: refs.len(),
         bytes,
         problems,

@@ -53,7 +53,7 @@ impl LayerContext<'_> {
 }
 
 /// One layer handed to a block's worker.
-pub(super) struct LayerIn<'a> {
+pub(super) struct LayerInput<'a> {
     /// The layer's index.
     pub index: usize,
     /// Its section.
@@ -63,7 +63,7 @@ pub(super) struct LayerIn<'a> {
 }
 
 /// What a worker made of one layer.
-pub(super) struct LayerOut {
+pub(super) struct LayerOutput {
     /// Lit area, mm².
     pub area_mm2: f64,
     /// The layer's analysis, possibly left for the layer below to complete.
@@ -102,8 +102,8 @@ pub(super) fn layer_masks(
     ctx: &LayerContext,
     worker: &mut BlockWorker,
     scratch: &mut Scratch,
-    layer: &LayerIn,
-) -> Result<LayerOut> {
+    layer: &LayerInput,
+) -> Result<LayerOutput> {
     let i = layer.index;
     let below = layer.below.map(|b| b.contours.as_slice());
     let clock = ThreadClock::start();
@@ -141,7 +141,7 @@ pub(super) fn layer_masks(
         .analyse_or_defer(i, &layer.section.contours, lit, below);
     let runs = matches!(analysis, Analysed::NeedsBelow(_)).then(|| scratch.lit_runs.clone());
     analysis_s += clock.elapsed_s();
-    Ok(LayerOut {
+    Ok(LayerOutput {
         area_mm2,
         analysis,
         analysis_s,
@@ -173,7 +173,7 @@ fn draw(
     ctx: &LayerContext,
     worker: &BlockWorker,
     scratch: &mut Scratch,
-    layer: &LayerIn,
+    layer: &LayerInput,
     same: bool,
 ) -> Result<Arc<DrawnMasks>> {
     let i = layer.index;

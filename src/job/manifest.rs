@@ -1,7 +1,7 @@
 //! The manifest: each layer's record and the totals, from the per-layer outputs and the
 //! plan, and the records of the source, the settings and the machine.
 
-use super::layer::LayerOut;
+use super::layer::LayerOutput;
 use super::optics_records::OpticsRecords;
 use super::PlacementMode;
 use crate::bundle::FitReport;
@@ -46,7 +46,7 @@ pub(super) struct PlannedLayers {
 /// plan that cannot be made is an error naming `model`.
 pub(super) fn plan_layers(
     profile: &Profile,
-    outs: Vec<LayerOut>,
+    outs: Vec<LayerOutput>,
     model: &Path,
 ) -> Result<PlannedLayers> {
     let h = profile.slicing.layer_height_mm.get();
@@ -110,7 +110,7 @@ pub(super) fn plan_layers(
 /// The layers' analyses in order. A layer equal to the layer below that its worker could
 /// not copy takes the layer below's analysis here, and a block's first layer counts its
 /// islands over the last layer of the block below.
-fn resolve_analyses(outs: &[LayerOut]) -> Vec<LayerAnalysis> {
+fn resolve_analyses(outs: &[LayerOutput]) -> Vec<LayerAnalysis> {
     let mut analyses: Vec<LayerAnalysis> = Vec::with_capacity(outs.len());
     for (i, o) in outs.iter().enumerate() {
         let a = o.analysis.with_islands(|| {

@@ -213,7 +213,7 @@ fn make_layers(
     part: &PlacedPart,
     writer: &BundleWriter,
     control: &Control,
-) -> Result<(pipeline::Sliced, Option<WrittenGrayMap>)> {
+) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
     let h = profile.slicing.layer_height_mm.get();
     let field = profile.field();
     let n = part.layers;

@@ -16,7 +16,7 @@
 //! every block before its next layer. Each layer's result goes to its own slot, so the
 //! output never depends on which worker made it or when.
 
-use super::layer::{layer_masks, BlockWorker, LayerContext, LayerIn, LayerOut};
+use super::layer::{layer_masks, BlockWorker, LayerContext, LayerInput, LayerOutput};
 use crate::error::{Error, Result};
 use crate::raster::Scratch;
 use crate::slice::{Section, SliceStats, Slicer};
@@ -52,9 +52,9 @@ impl Control<'_> {
 }
 
 /// What the pipeline made of every layer.
-pub(super) struct Sliced {
+pub(super) struct PipelineOutput {
     /// Each layer's output, in layer order.
-    pub layers: Vec<LayerOut>,
+    pub layers: Vec<LayerOutput>,
     /// The slicer's repair counts.
     pub stats: SliceStats,
     /// Time the slicing task spent cutting, s.
@@ -71,7 +71,7 @@ pub(super) fn run<'a>(
     layers: usize,
     control: &'a Control<'a>,
     beside: impl FnOnce() + Send,
-) -> Result<Sliced> {
+) -> Result<PipelineOutput> {
     let start = Instant::now();
     let p = Pipeline {
         ctx,
@@ -104,7 +104,7 @@ struct Pipeline<'a> {
     control: &'a Control<'a>,
     layers: usize,
     /// One slot per layer, filled by whichever worker makes it.
-    slots: Vec<OnceLock<LayerOut>>,
+    slots: Vec<OnceLock<LayerOutput>>,
     scratch: ScratchPool,
     backlog: Backlog<'a>,
     /// Set by the first error: the rest stops.
@@ -132,7 +132,7 @@ impl Pipeline<'_> {
     }
 
     /// Every layer's output once the pool is done, or the first error.
-    fn finish(self, masks_s: f64) -> Result<Sliced> {
+    fn finish(self, masks_s: f64) -> Result<PipelineOutput> {
         if let Some(e) = self.failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
         }
@@ -140,7 +140,7 @@ impl Pipeline<'_> {
             return Err(Error::Interrupted);
         }
         let cursor = self.backlog.into_finished();
-        Ok(Sliced {
+        Ok(PipelineOutput {
             layers: self
                 .slots
                 .into_iter()
@@ -296,7 +296,7 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
             return Err(Error::Interrupted);
         }
         let index = block.start + k;
-        let layer = LayerIn {
+        let layer = LayerInput {
             index,
             section: &sections[k],
             below: match k {

@@ -610,7 +610,7 @@ mod tests {
         let mut s = cube_soup(10.0, [0.0; 3]);
         s.pop(); // hole: 3 open edges
         let t = s[0];
-        s[0] = [t[0], t[2], t[1]]; // flip one facet: 3 backwards edges (one is open now? no)
+        s[0] = [t[0], t[2], t[1]]; // flip a facet away from the hole: 3 backwards edges
         s.push([[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]]); // repeated vertex: removed
         let m = Mesh::from_soup(&s, "test");
         let r = &m.report;

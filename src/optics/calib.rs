@@ -35,9 +35,9 @@ pub const COLUMNS: [&str; 4] = ["x_mm", "y_mm", "gray", "irradiance_mw_cm2"];
 pub const MAX_CONDITION: f64 = 1e6;
 
 /// Highest degree of the inverse-square candidates (P = 1/poly²): the quadratic is the
-/// cos⁴ law of vignetting. A cubic was measured to be chosen on fields it does not
-/// describe (fewer terms than exp(quartic), similar cross-validated error) and then to
-/// extrapolate worse into the outer half-zone band, so only the quadratic is offered.
+/// cos⁴ law of vignetting. A cubic would be chosen on fields it does not describe (fewer
+/// terms than exp(quartic), similar cross-validated error) and then extrapolate worse into
+/// the outer half-zone band, so only the quadratic is offered.
 const MAX_INVERSE_SQUARE_DEGREE: usize = 2;
 
 /// One measurement.
@@ -174,23 +174,32 @@ pub struct FitResult {
     pub warnings: Vec<Warning>,
 }
 
-/// A reading prepared for the fit: basis row, level index, position index.
-struct Row {
+/// A reading prepared for the fit.
+struct FitRow {
+    /// The monomials of P's basis at the reading's (u, v).
     phi: Vec<f64>,
+    /// The measured irradiance E.
     e: f64,
-    lev: usize,
-    pos: usize,
+    /// Index of the reading's gray among the fitted levels.
+    level: usize,
+    /// Index of the reading's zone position (the cross-validation folds split these).
+    position: usize,
 }
 
-struct Als {
+/// A fit of the two factors of E = P·S: P's form and coefficients, S per level.
+struct FactorFit {
     form: Form,
+    /// Coefficients of P's polynomial, in the order of its basis.
     coef: Vec<f64>,
+    /// S of each fitted level.
     s: Vec<f64>,
+    /// Condition number of the scaled design matrix (0 when not checked).
     condition: f64,
 }
 
-impl Als {
-    fn p(&self, phi: &[f64]) -> f64 {
+impl FactorFit {
+    /// P at basis values `phi`.
+    fn p_at(&self, phi: &[f64]) -> f64 {
         let q: f64 = phi.iter().zip(&self.coef).map(|(a, b)| a * b).sum();
         self.form.apply(1.0, q)
     }
@@ -198,16 +207,16 @@ impl Als {
 
 /// Fits `form` to `rows`: alternating least squares for a polynomial or inverse-square P,
 /// one linear least-squares solve in log space for an exponential P.
-fn fit_form(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+fn fit_form(form: Form, rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFit, f64> {
     match form {
-        Form::Polynomial | Form::InverseSquare => als(form, rows, nlev),
-        Form::Exponential => logfit(rows, nlev),
+        Form::Polynomial | Form::InverseSquare => alternating_least_squares(form, rows, nlev),
+        Form::Exponential => log_linear_fit(rows, nlev),
     }
 }
 
 /// ln E = poly(u, v) + ln s_j with ln s of the brightest level fixed at 0: linear least
 /// squares (log residuals ≈ relative residuals).
-fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+fn log_linear_fit(rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFit, f64> {
     let n = rows.len();
     let m = rows.first().map_or(0, |r| r.phi.len());
     let cols = m + nlev - 1;
@@ -217,8 +226,8 @@ fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
         for t in 0..m {
             a[(k, t)] = r.phi[t];
         }
-        if r.lev + 1 < nlev {
-            a[(k, m + r.lev)] = 1.0;
+        if r.level + 1 < nlev {
+            a[(k, m + r.level)] = 1.0;
         }
         b[k] = r.e.ln();
     }
@@ -240,7 +249,7 @@ fn logfit(rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
             }
         })
         .collect();
-    Ok(Als {
+    Ok(FactorFit {
         form: Form::Exponential,
         coef,
         s,
@@ -271,15 +280,19 @@ fn solve_scaled(
 /// Alternating least squares on relative residuals over `rows` (levels 0..nlev), for P =
 /// poly (`form` polynomial) or P = 1/poly² (inverse square).
 /// Err(condition number) if the scaled design matrix of P is ill-conditioned.
-fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> {
+fn alternating_least_squares(
+    form: Form,
+    rows: &[&FitRow],
+    nlev: usize,
+) -> std::result::Result<FactorFit, f64> {
     let n = rows.len();
     let m = rows.first().map_or(0, |r| r.phi.len());
     // Initial s: geometric mean irradiance per level.
     let mut s = vec![0.0; nlev];
     let mut cnt = vec![0usize; nlev];
     for r in rows {
-        s[r.lev] += r.e.ln();
-        cnt[r.lev] += 1;
+        s[r.level] += r.e.ln();
+        cnt[r.level] += 1;
     }
     for j in 0..nlev {
         s[j] = if cnt[j] > 0 {
@@ -301,8 +314,8 @@ fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> 
         // E, so minimise Σ (1 − φ·c / q*)² (the linearised relative residual, halved).
         for (k, r) in rows.iter().enumerate() {
             let f = match form {
-                Form::InverseSquare => (r.e / s[r.lev]).sqrt(),
-                _ => s[r.lev] / r.e,
+                Form::InverseSquare => (r.e / s[r.level]).sqrt(),
+                _ => s[r.level] / r.e,
             };
             for t in 0..m {
                 a[(k, t)] = f * r.phi[t];
@@ -334,8 +347,8 @@ fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> 
             .collect();
         for (r, &p) in rows.iter().zip(&ps) {
             let q = p / r.e;
-            num[r.lev] += q;
-            den[r.lev] += q * q;
+            num[r.level] += q;
+            den[r.level] += q * q;
         }
         for j in 0..nlev {
             if den[j] > 0.0 {
@@ -345,14 +358,14 @@ fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> 
         let obj: f64 = rows
             .iter()
             .zip(&ps)
-            .map(|(r, &p)| (1.0 - s[r.lev] * p / r.e).powi(2))
+            .map(|(r, &p)| (1.0 - s[r.level] * p / r.e).powi(2))
             .sum();
         if (prev - obj).abs() <= 1e-10 * (1.0 + obj) {
             break;
         }
         prev = obj;
     }
-    Ok(Als {
+    Ok(FactorFit {
         form,
         coef,
         s,
@@ -362,19 +375,19 @@ fn als(form: Form, rows: &[&Row], nlev: usize) -> std::result::Result<Als, f64> 
 
 /// Cross-validated RMS relative error (%) of degree-`d` fits: zone positions are split
 /// into `k` interleaved folds; each fold is predicted from a fit to the others.
-fn cv_rms(form: Form, rows_d: &[Row], nlev: usize, k: usize) -> Option<f64> {
+fn cv_rms(form: Form, rows_d: &[FitRow], nlev: usize, k: usize) -> Option<f64> {
     let (mut ss, mut n) = (0.0, 0usize);
     for fold in 0..k {
-        let train: Vec<&Row> = rows_d.iter().filter(|r| r.pos % k != fold).collect();
-        let test: Vec<&Row> = rows_d.iter().filter(|r| r.pos % k == fold).collect();
+        let train: Vec<&FitRow> = rows_d.iter().filter(|r| r.position % k != fold).collect();
+        let test: Vec<&FitRow> = rows_d.iter().filter(|r| r.position % k == fold).collect();
         if test.is_empty() {
             continue;
         }
         let mut seen = vec![false; nlev];
-        train.iter().for_each(|r| seen[r.lev] = true);
+        train.iter().for_each(|r| seen[r.level] = true);
         let fit = fit_form(form, &train, nlev).ok()?;
-        for r in test.iter().filter(|r| seen[r.lev]) {
-            let e = fit.p(&r.phi) * fit.s[r.lev] / r.e - 1.0;
+        for r in test.iter().filter(|r| seen[r.level]) {
+            let e = fit.p_at(&r.phi) * fit.s[r.level] / r.e - 1.0;
             ss += e * e;
             n += 1;
         }
@@ -391,7 +404,7 @@ fn form_name(f: Form) -> &'static str {
 }
 
 /// A zone position's key: its centre in nm.
-fn key(r: &Reading) -> (i64, i64) {
+fn position_key(r: &Reading) -> (i64, i64) {
     ((r.x_mm * 1e6).round() as i64, (r.y_mm * 1e6).round() as i64)
 }
 
@@ -418,10 +431,10 @@ struct Setup<'a> {
 impl<'a> Setup<'a> {
     /// Checks that the readings can determine a model and finds the calibrated area.
     fn new(readings: &'a [Reading], path: &'a Path, opts: &FitOptions) -> Result<Setup<'a>> {
-        let bad = |m: String| Error::input(path, m);
+        let input_error = |m: String| Error::input(path, m);
         let mut pos: BTreeMap<(i64, i64), usize> = BTreeMap::new();
         for r in readings {
-            pos.insert(key(r), 0);
+            pos.insert(position_key(r), 0);
         }
         for (i, v) in pos.values_mut().enumerate() {
             *v = i;
@@ -430,7 +443,7 @@ impl<'a> Setup<'a> {
         let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
         let min_terms = Poly::terms(3);
         if npos < min_terms {
-            return Err(bad(format!(
+            return Err(input_error(format!(
                 "only {npos} distinct zone positions; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
             )));
         }
@@ -441,14 +454,14 @@ impl<'a> Setup<'a> {
                 )));
             }
             if npos < Poly::terms(d) {
-                return Err(bad(format!(
+                return Err(input_error(format!(
                     "only {npos} distinct zone positions; a degree-{d} P(x, y) has {} terms",
                     Poly::terms(d)
                 )));
             }
         }
         if grays.len() < 3 {
-            return Err(bad(format!(
+            return Err(input_error(format!(
                 "only {} distinct gray levels ({}); S(g) needs at least 3",
                 grays.len(),
                 grays
@@ -468,7 +481,7 @@ impl<'a> Setup<'a> {
                 })
                 .collect();
             if vals.len() < 4 {
-                return Err(bad(format!(
+                return Err(input_error(format!(
                     "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
                     vals.len()
                 )));
@@ -488,13 +501,13 @@ impl<'a> Setup<'a> {
     }
 
     /// An input error naming the measurement file.
-    fn bad(&self, m: String) -> Error {
+    fn input_error(&self, m: String) -> Error {
         Error::input(self.path, m)
     }
 
     /// The error of an ill-conditioned design of condition number `cond`.
-    fn ill(&self, cond: f64) -> Error {
-        self.bad(format!(
+    fn ill_conditioned(&self, cond: f64) -> Error {
+        self.input_error(format!(
             "ill-conditioned fit (condition number {cond:.2e}): the {} zone positions do not determine a cubic P(x, y); measure zones spread over the field in both x and y",
             self.pos.len()
         ))
@@ -509,23 +522,23 @@ impl<'a> Setup<'a> {
     }
 
     /// The index of a measured gray level.
-    fn gidx(&self, g: u8) -> usize {
+    fn level_index(&self, g: u8) -> usize {
         self.grays.binary_search(&g).expect("known gray")
     }
 
     /// The fit rows of degree `d` of the readings at gray levels `lo..` (level indices
     /// counted from `lo`).
-    fn rows(&self, d: usize, lo: usize) -> Vec<Row> {
+    fn rows(&self, d: usize, lo: usize) -> Vec<FitRow> {
         self.readings
             .iter()
-            .filter(|r| self.gidx(r.gray) >= lo)
+            .filter(|r| self.level_index(r.gray) >= lo)
             .map(|r| {
                 let (u, v) = self.uv_of(r.x_mm, r.y_mm);
-                Row {
+                FitRow {
                     phi: Poly::basis(d, u, v),
                     e: r.irradiance,
-                    lev: self.gidx(r.gray) - lo,
-                    pos: self.pos[&key(r)],
+                    level: self.level_index(r.gray) - lo,
+                    position: self.pos[&position_key(r)],
                 }
             })
             .collect()
@@ -533,7 +546,7 @@ impl<'a> Setup<'a> {
 
     /// The lowest valid level: the run of levels from the brightest down over which the
     /// first pass's s keeps falling, at least 3 levels long.
-    fn valid_range(&self, first: &Als) -> Result<usize> {
+    fn valid_range(&self, first: &FactorFit) -> Result<usize> {
         let top = self.grays.len() - 1;
         let mut lo = top;
         while lo > 0 && first.s[lo - 1] < first.s[lo] {
@@ -548,7 +561,7 @@ impl<'a> Setup<'a> {
                 .take(4)
                 .map(|(g, s)| format!("S({g}) = {:.4}", s / first.s[top].max(1e-300)))
                 .collect();
-            return Err(self.bad(format!(
+            return Err(self.input_error(format!(
                 "no monotone S fits the data: the response must fall from the brightest gray ({}) over at least 3 measured levels, but {} (255 = mirror fully on; is the gray column inverted?)",
                 self.grays[top],
                 shown.join(", ")
@@ -566,9 +579,9 @@ impl<'a> Setup<'a> {
         let valid_n = top + 1 - lo;
         let min_terms = Poly::terms(3);
         let used_pos: std::collections::BTreeSet<usize> =
-            self.rows(0, lo).iter().map(|r| r.pos).collect();
+            self.rows(0, lo).iter().map(|r| r.position).collect();
         if used_pos.len() < min_terms {
-            return Err(self.bad(format!(
+            return Err(self.input_error(format!(
                 "only {} distinct zone positions were measured at the valid gray levels {}..{}; the cubic P(x, y) needs at least {min_terms}",
                 used_pos.len(),
                 self.grays[lo],
@@ -698,7 +711,9 @@ fn zone_fits(
     let mut zacc: BTreeMap<(i64, i64), (f64, f64, f64, f64)> = BTreeMap::new();
     for r in used {
         let q = s_at(r) / r.irradiance;
-        let e = zacc.entry(key(r)).or_insert((r.x_mm, r.y_mm, 0.0, 0.0));
+        let e = zacc
+            .entry(position_key(r))
+            .or_insert((r.x_mm, r.y_mm, 0.0, 0.0));
         e.2 += q;
         e.3 += q * q;
     }
@@ -742,12 +757,12 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     let top = glist.len() - 1;
     // First pass (cubic, all levels): the valid range of gray levels.
     let rows3 = setup.rows(3, 0);
-    let first = als(
+    let first = alternating_least_squares(
         Form::Polynomial,
         &rows3.iter().collect::<Vec<_>>(),
         glist.len(),
     )
-    .map_err(|c| setup.ill(c))?;
+    .map_err(|c| setup.ill_conditioned(c))?;
     let lo = setup.valid_range(&first)?;
     let valid_n = top + 1 - lo;
     let model = setup.choose_model(lo, opts.degree)?;
@@ -755,8 +770,8 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
 
     // Final fit on the valid levels, normalized so that S = 1 at the brightest level.
     let rows = setup.rows(degree, lo);
-    let second =
-        fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n).map_err(|c| setup.ill(c))?;
+    let second = fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n)
+        .map_err(|c| setup.ill_conditioned(c))?;
     let s_top = second.s[valid_n - 1];
     let mut coef: Vec<f64> = second.coef.clone();
     match form {
@@ -766,7 +781,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     }
     let s: Vec<f64> = second.s.iter().map(|v| v / s_top).collect();
     if s.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(setup.bad(
+        return Err(setup.input_error(
             "no monotone S fits the data: the refitted response is not increasing over the valid gray levels"
                 .to_string(),
         ));
@@ -777,7 +792,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         form.apply(1.0, poly.eval(u, v))
     };
     let p_at = |r: &Reading| p_xy(r.x_mm, r.y_mm);
-    let s_at = |r: &Reading| s[setup.gidx(r.gray) - lo];
+    let s_at = |r: &Reading| s[setup.level_index(r.gray) - lo];
 
     let used: Vec<&Reading> = readings.iter().filter(|r| r.gray >= glist[lo]).collect();
     let (rms, worst, worst_line) = residuals(&used, |r| p_at(r) * s_at(r));
@@ -871,7 +886,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         }),
     };
     calibration.validate().map_err(|m| {
-        setup.bad(format!(
+        setup.input_error(format!(
             "the fitted model is unusable ({m}); the measurements do not describe a smooth field"
         ))
     })?;

@@ -4,7 +4,8 @@
 //!   the layer plus the overcure at the target irradiance E*:
 //!   t = (Ec / E*)·exp((Δz + overcure) / Dp). It replaces the profile's `exposure.layer_s`;
 //!   `bottom_s` keeps its ratio to `layer_s` (the bottom-layer factor), and the transition
-//!   layers ramp between them as before ([`crate::profile::Exposure::layer_exposure_s`]).
+//!   layers ramp between them as without calibration
+//!   ([`crate::profile::Exposure::layer_exposure_s`]).
 //! * Relative calibration (such as Xu et al. 2010's published fit): irradiance is known only up to a
 //!   factor, so the profile's fixed exposure is taken as the exposure at E*; the profile is
 //!   left unchanged and no dose can be stated.
@@ -19,7 +20,7 @@ use crate::warning::Warning;
 
 /// How a job's exposure was derived.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Resolved {
+pub struct ExposureDerivation {
     /// One-line description for the manifest.
     pub rule: String,
     /// Dose of a normal layer at E*, mJ/cm² (absolute calibrations).
@@ -43,11 +44,16 @@ pub fn cure_depth_mm(resin: &Resin, dose_mj_cm2: f64) -> f64 {
 /// Resolves the job's exposure for a calibration in `units` with target irradiance
 /// `target` and layer thickness `thickness_mm`, updating `profile.exposure` for absolute
 /// calibrations (see the module docs).
-pub fn resolve(profile: &mut Profile, units: Units, target: f64, thickness_mm: f64) -> Resolved {
+pub fn resolve(
+    profile: &mut Profile,
+    units: Units,
+    target: f64,
+    thickness_mm: f64,
+) -> ExposureDerivation {
     let resin = profile.resin.clone();
     let e = &mut profile.exposure;
     match units {
-        Units::Relative => Resolved {
+        Units::Relative => ExposureDerivation {
             rule: format!(
                 "relative calibration: the profile's exposure ({} s per layer) is the exposure at E*; dose unknown",
                 e.layer_s
@@ -122,7 +128,7 @@ pub fn resolve(profile: &mut Profile, units: Units, target: f64, thickness_mm: f
                     .with("kept_s", e.layer_s.get()),
                 ),
             }
-            Resolved {
+            ExposureDerivation {
                 rule: format!(
                     "working curve: t = (Ec/E*)·exp((Δz + overcure)/Dp) = ({}/{target:.6})·exp(({thickness_mm} + {})/{}) = {:.3} s; bottom layers × {ratio:.3}",
                     resin.ec_mj_cm2, resin.overcure_mm, resin.dp_mm, e.layer_s

@@ -149,7 +149,7 @@ pub struct JobOptics {
     /// The calibration applied.
     pub calibration: Calibration,
     /// How the exposure was derived.
-    pub exposure: exposure::Resolved,
+    pub exposure: exposure::ExposureDerivation,
 }
 
 /// Prepares the optics stage of a job: picks the mode (default: zone when the projector has

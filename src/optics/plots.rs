@@ -1,14 +1,18 @@
-//! The pictures `dmdsl calibrate` writes next to the calibration file (seeds/000 Fig. 3
-//! and 4 style): measured and fitted irradiance per zone before and after zone
-//! compensation, the zone grays, and S(g) with the data and the valid gray range.
+//! The pictures `dmdsl calibrate` writes next to the calibration file, in the style of
+//! Figs. 3 and 4 of Xu et al. 2010 ("Novel stereolithography system employing digital
+//! micro-mirror device", Chinese J. Lasers 37(7)): measured and fitted irradiance per zone
+//! before and after zone compensation, the zone grays, and S(g) with the data and the valid
+//! gray range.
 
 use super::calib::FitResult;
 use super::Compensator;
 use crate::plot::{heatmap_png, Band, Chart, Heatmap, Series, Style};
 use std::path::{Path, PathBuf};
 
+/// Edge of one zone's cell in the heatmaps, px.
 const CELL_PX: u32 = 80;
 
+/// The plot file `<stem of out>-<suffix>.png` beside the calibration file `out`.
 fn sibling(out: &Path, suffix: &str) -> PathBuf {
     let stem = out
         .file_stem()
@@ -26,7 +30,8 @@ fn zone_of(zone_mm: f64, rows: usize, cols: usize, x: f64, y: f64) -> Option<usi
     (c < cols && rb < rows).then(|| (rows - 1 - rb) * cols + c)
 }
 
-fn heat(
+/// An annotated heatmap PNG of per-zone values (row 0 = top) on the colour scale `lo..hi`.
+fn zone_heatmap(
     title: String,
     unit: &str,
     cols: usize,
@@ -48,6 +53,7 @@ fn heat(
     })
 }
 
+/// (smallest, largest) of the finite values of `v`.
 fn range(v: &[f64]) -> (f64, f64) {
     v.iter()
         .filter(|x| x.is_finite())
@@ -56,6 +62,7 @@ fn range(v: &[f64]) -> (f64, f64) {
         })
 }
 
+/// (max − min) / mean of the finite values of `v`, %; 0 if there are none.
 fn spread_pct(v: &[f64]) -> f64 {
     let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     if f.is_empty() {
@@ -72,126 +79,212 @@ pub fn calibration_plots(
     zone: &Compensator,
     pixel: &Compensator,
 ) -> Vec<(PathBuf, Vec<u8>)> {
-    let cal = &fit.calibration;
-    let unit = cal.units.as_str();
-    let zmm = cal.zone_mm.get();
-    let pr = &zone.prediction;
-    let (cols, rows) = pr.zone_grid;
-    let nz = cols * rows;
-    let s_max = pr.s_max;
-    let target = pr.target;
+    let z = ZoneValues::new(fit, zone);
+    let (lo, hi) = range(
+        &z.measured
+            .iter()
+            .chain(&z.fitted)
+            .copied()
+            .collect::<Vec<_>>(),
+    );
+    vec![
+        (sibling(out, "measured"), measured_heatmap(&z, lo, hi)),
+        (sibling(out, "fitted"), fitted_heatmap(&z, zone, lo, hi)),
+        (
+            sibling(out, "measured-compensated"),
+            measured_compensated_heatmap(&z),
+        ),
+        (
+            sibling(out, "fitted-compensated"),
+            fitted_compensated_heatmap(&z, zone),
+        ),
+        (
+            sibling(out, "zone-grays"),
+            zone_grays_heatmap(&z, fit, zone),
+        ),
+        (
+            sibling(out, "response"),
+            response_chart(
+                fit,
+                zone.prediction.s_max,
+                pixel.prediction.spreads.after_pixel_pct,
+            ),
+        ),
+    ]
+}
 
-    // Measured full-on irradiance per zone (mean of the measured positions in it).
-    let mut msum = vec![0.0; nz];
-    let mut mcnt = vec![0usize; nz];
-    for z in &fit.zones {
-        if let Some(i) = zone_of(zmm, rows, cols, z.x_mm, z.y_mm) {
-            msum[i] += z.measured_p * s_max;
-            mcnt[i] += 1;
+/// The colour scale of the compensated heatmaps, % of target.
+const COMPENSATED_BAND_PCT: (f64, f64) = (97.0, 103.0);
+
+/// Per-zone values of a fit on the compensator's zone grid (row 0 = top): what the
+/// heatmaps show.
+struct ZoneValues<'a> {
+    /// Irradiance units of the calibration.
+    unit: &'a str,
+    /// Zone edge, mm.
+    zone_mm: f64,
+    /// Zone grid columns.
+    cols: usize,
+    /// Zone grid rows.
+    rows: usize,
+    /// Measured full-on irradiance (mean of the measured positions in the zone; NaN where
+    /// none).
+    measured: Vec<f64>,
+    /// Fitted full-on irradiance, the zone mean of P · S at the brightest valid gray.
+    fitted: Vec<f64>,
+    /// Measured irradiance times S of the zone's gray after zone compensation, % of target.
+    measured_after: Vec<f64>,
+    /// Predicted irradiance after zone compensation, % of target.
+    fitted_after: Vec<f64>,
+}
+
+impl<'a> ZoneValues<'a> {
+    fn new(fit: &'a FitResult, zone: &Compensator) -> ZoneValues<'a> {
+        let cal = &fit.calibration;
+        let zmm = cal.zone_mm.get();
+        let pr = &zone.prediction;
+        let (cols, rows) = pr.zone_grid;
+        let nz = cols * rows;
+        let s_max = pr.s_max;
+        let target = pr.target;
+
+        // Measured full-on irradiance per zone (mean of the measured positions in it).
+        let mut msum = vec![0.0; nz];
+        let mut mcnt = vec![0usize; nz];
+        for z in &fit.zones {
+            if let Some(i) = zone_of(zmm, rows, cols, z.x_mm, z.y_mm) {
+                msum[i] += z.measured_p * s_max;
+                mcnt[i] += 1;
+            }
+        }
+        let measured: Vec<f64> = (0..nz)
+            .map(|i| {
+                if mcnt[i] > 0 {
+                    msum[i] / mcnt[i] as f64
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        let fitted: Vec<f64> = (0..nz).map(|i| pr.zone_p[i] * s_max).collect();
+        // After zone compensation: each zone at its gray.
+        // Effective S of each zone (a mixing zone's mean of its two grays).
+        let gray_s: Vec<f64> = (0..nz).map(|i| pr.zone_after[i] / pr.zone_p[i]).collect();
+        let pct = |v: f64| v / target * 100.0;
+        let measured_after: Vec<f64> = (0..nz)
+            .map(|i| pct(measured[i] / s_max * gray_s[i]))
+            .collect();
+        let fitted_after: Vec<f64> = pr.zone_after.iter().map(|&v| pct(v)).collect();
+        ZoneValues {
+            unit: cal.units.as_str(),
+            zone_mm: zmm,
+            cols,
+            rows,
+            measured,
+            fitted,
+            measured_after,
+            fitted_after,
         }
     }
-    let measured: Vec<f64> = (0..nz)
-        .map(|i| {
-            if mcnt[i] > 0 {
-                msum[i] / mcnt[i] as f64
-            } else {
-                f64::NAN
-            }
-        })
-        .collect();
-    let fitted: Vec<f64> = (0..nz).map(|i| pr.zone_p[i] * s_max).collect();
-    // After zone compensation: each zone at its gray.
-    // Effective S of each zone (a mixing zone's mean of its two grays).
-    let gray_s: Vec<f64> = (0..nz).map(|i| pr.zone_after[i] / pr.zone_p[i]).collect();
-    let pct = |v: f64| v / target * 100.0;
-    let measured_after: Vec<f64> = (0..nz)
-        .map(|i| pct(measured[i] / s_max * gray_s[i]))
-        .collect();
-    let fitted_after: Vec<f64> = pr.zone_after.iter().map(|&v| pct(v)).collect();
-    let inside = |v: &[f64]| -> Vec<f64> {
-        v.iter()
-            .zip(&pr.zone_inside)
-            .map(|(&x, &ins)| if ins { x } else { f64::NAN })
-            .collect()
-    };
+}
 
-    let (lo, hi) = range(&measured.iter().chain(&fitted).copied().collect::<Vec<_>>());
-    let mut files = Vec::new();
-    files.push((
-        sibling(out, "measured"),
-        heat(
-            format!(
-                "Measured irradiance, mirrors fully on ({unit}), spread {:.1} %",
-                spread_pct(&measured)
-            ),
-            unit,
-            cols,
-            rows,
-            measured.clone(),
-            lo,
-            hi,
+/// Measured full-on irradiance per zone, on the scale `lo..hi` shared with the fit.
+fn measured_heatmap(z: &ZoneValues, lo: f64, hi: f64) -> Vec<u8> {
+    zone_heatmap(
+        format!(
+            "Measured irradiance, mirrors fully on ({}), spread {:.1} %",
+            z.unit,
+            spread_pct(&z.measured)
         ),
-    ));
-    files.push((
-        sibling(out, "fitted"),
-        heat(
-            format!(
-                "Fitted P(x,y) zone means, fully on ({unit}), spread {:.1} %",
-                pr.spreads.before_zone_pct
-            ),
-            unit,
-            cols,
-            rows,
-            fitted,
-            lo,
-            hi,
-        ),
-    ));
-    let band = (97.0, 103.0);
-    files.push((
-        sibling(out, "measured-compensated"),
-        heat(
-            format!(
-                "Measured x S(zone gray), % of target, spread {:.2} %",
-                spread_pct(&measured_after)
-            ),
-            "% of target",
-            cols,
-            rows,
-            measured_after,
-            band.0,
-            band.1,
-        ),
-    ));
-    files.push((
-        sibling(out, "fitted-compensated"),
-        heat(
-            format!(
-                "Fitted, zone compensation, % of target, spread {:.2} %",
-                spread_pct(&inside(&fitted_after))
-            ),
-            "% of target",
-            cols,
-            rows,
-            fitted_after,
-            band.0,
-            band.1,
-        ),
-    ));
-    files.push((
-        sibling(out, "zone-grays"),
-        heat(
-            format!("Zone grays (pixel value at full coverage), {zmm} mm zones"),
-            "gray",
-            cols,
-            rows,
-            pr.zone_gray.iter().map(|&g| g as f64).collect(),
-            cal.response.valid_gray()[0] as f64,
-            255.0,
-        ),
-    ));
+        z.unit,
+        z.cols,
+        z.rows,
+        z.measured.clone(),
+        lo,
+        hi,
+    )
+}
 
-    // S(g): fitted curve over the valid range, level values, individual readings.
+/// Fitted full-on irradiance per zone, on the scale `lo..hi` shared with the measurements.
+fn fitted_heatmap(z: &ZoneValues, zone: &Compensator, lo: f64, hi: f64) -> Vec<u8> {
+    zone_heatmap(
+        format!(
+            "Fitted P(x,y) zone means, fully on ({}), spread {:.1} %",
+            z.unit, zone.prediction.spreads.before_zone_pct
+        ),
+        z.unit,
+        z.cols,
+        z.rows,
+        z.fitted.clone(),
+        lo,
+        hi,
+    )
+}
+
+/// Measured irradiance after zone compensation, % of target.
+fn measured_compensated_heatmap(z: &ZoneValues) -> Vec<u8> {
+    zone_heatmap(
+        format!(
+            "Measured x S(zone gray), % of target, spread {:.2} %",
+            spread_pct(&z.measured_after)
+        ),
+        "% of target",
+        z.cols,
+        z.rows,
+        z.measured_after.clone(),
+        COMPENSATED_BAND_PCT.0,
+        COMPENSATED_BAND_PCT.1,
+    )
+}
+
+/// Predicted irradiance after zone compensation, % of target; the spread in the title is
+/// over the zones whose centre is inside the calibrated area.
+fn fitted_compensated_heatmap(z: &ZoneValues, zone: &Compensator) -> Vec<u8> {
+    let inside: Vec<f64> = z
+        .fitted_after
+        .iter()
+        .zip(&zone.prediction.zone_inside)
+        .map(|(&x, &ins)| if ins { x } else { f64::NAN })
+        .collect();
+    zone_heatmap(
+        format!(
+            "Fitted, zone compensation, % of target, spread {:.2} %",
+            spread_pct(&inside)
+        ),
+        "% of target",
+        z.cols,
+        z.rows,
+        z.fitted_after.clone(),
+        COMPENSATED_BAND_PCT.0,
+        COMPENSATED_BAND_PCT.1,
+    )
+}
+
+/// The gray of each zone at full coverage, on the valid gray range.
+fn zone_grays_heatmap(z: &ZoneValues, fit: &FitResult, zone: &Compensator) -> Vec<u8> {
+    zone_heatmap(
+        format!(
+            "Zone grays (pixel value at full coverage), {} mm zones",
+            z.zone_mm
+        ),
+        "gray",
+        z.cols,
+        z.rows,
+        zone.prediction
+            .zone_gray
+            .iter()
+            .map(|&g| g as f64)
+            .collect(),
+        fit.calibration.response.valid_gray()[0] as f64,
+        255.0,
+    )
+}
+
+/// S(g): the fitted curve over the valid range, the level values, the individual readings
+/// (divided by `s_max` · the fitted P) and bands for the measured and the interpolated gray
+/// ranges; the title gives the pixel mode's predicted spread.
+fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8> {
+    let cal = &fit.calibration;
     let [glo, ghi] = cal.response.valid_gray();
     let c = cal.response.curve();
     let curve: Vec<(f64, f64)> = (glo..=ghi).map(|g| (g as f64, c.eval(g as f64))).collect();
@@ -254,7 +347,7 @@ pub fn calibration_plots(
     let chart = Chart {
         title: format!(
             "Gray response S(g), valid {glo}..{ghi}, pixel mode spread {:.2} %",
-            pixel.prediction.spreads.after_pixel_pct
+            pixel_spread_pct
         ),
         x_label: "pixel value g (255 = fully on)".into(),
         y_label: "S (1 at the brightest valid gray)".into(),
@@ -263,6 +356,5 @@ pub fn calibration_plots(
         series,
         bands,
     };
-    files.push((sibling(out, "response"), chart.render_png()));
-    files
+    chart.render_png()
 }

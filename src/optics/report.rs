@@ -122,7 +122,8 @@ fn header(cal: &Calibration, input: &Path) -> String {
 # [projector.calibration] section of the projector it was measured on (prefix the
 # table names below with `projector.calibration.`).
 #
-# Model (seeds/000): irradiance E(x, y, g) = P(x, y) * S(g), units: {}.
+# Model of Xu et al. 2010, \"Novel stereolithography system employing digital micro-mirror
+# device\", Chinese J. Lasers 37(7): irradiance E(x, y, g) = P(x, y) * S(g), units: {}.
 #  P = scale * {form}, u = (x_mm - origin_mm[0]) / length_unit_mm,
 #      v = (y_mm - origin_mm[1]) / length_unit_mm; x, y in mm from the field's bottom-left
 #      corner; coefficient xxy multiplies u^2 v. P is the irradiance with mirrors at the

@@ -1,26 +1,32 @@
 //! Known light fields P(x, y) and responses S(g) with a fixed-seed noise generator: the
 //! synthetic calibration sets shared by the library's sweep test (`optics::sweep`) and the
-//! integration tests (`tests/it/calibrate.rs` includes this file by path). Test code only.
-#![allow(dead_code)]
+//! integration tests (`tests/it/calibrate.rs` includes this file by path). Test code only;
+//! both includers use every item here (a field only the sweep uses lives in `sweep.rs`), so
+//! neither compiles dead code.
 
-/// splitmix64 + Box–Muller.
+/// A seeded random number generator: splitmix64 for uniform numbers, Box–Muller for
+/// normal ones.
 pub struct Rng(pub u64);
 impl Rng {
-    pub fn u(&mut self) -> f64 {
+    /// A uniform number in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// A standard normal number.
     pub fn normal(&mut self) -> f64 {
-        let (a, b) = (self.u().max(1e-300), self.u());
+        let (a, b) = (self.uniform().max(1e-300), self.uniform());
         (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
     }
 }
 
-pub type Field2 = fn(f64, f64) -> f64;
-pub type Resp = fn(f64) -> f64;
+/// A light field P(x, y), x and y in mm from the field's bottom-left corner.
+pub type FieldFn = fn(f64, f64) -> f64;
+/// A gray response S(g), g the pixel value.
+pub type ResponseFn = fn(f64) -> f64;
 
 /// A smooth cubic field, 1.5 : 1.
 pub fn p_cubic(x: f64, y: f64) -> f64 {
@@ -52,15 +58,6 @@ pub fn p_vignette(x: f64, y: f64) -> f64 {
     let r2 = (x - 32.5).powi(2) + (y - 24.375).powi(2);
     (1.0 + r2 / 2500.0).powi(-2)
 }
-/// A lens-like field that none of the fitted forms matches exactly: cos³-type falloff
-/// about an off-centre axis, a tilt and a faint ripple, about 2.2 : 1 (a check that the
-/// cos⁴ form is not chosen where it does not belong).
-pub fn p_lens(x: f64, y: f64) -> f64 {
-    let r2 = (x - 38.0).powi(2) + (y - 20.0).powi(2);
-    (1.0 + r2 / 3600.0).powf(-1.5)
-        * (1.0 + 0.005 * (x - 32.5))
-        * (1.0 + 0.01 * (x / 9.0).sin() * (y / 13.0).cos())
-}
 /// The published S of Xu et al. 2010 with z = 255 − pixel value (steps of 2–3 % near its
 /// operating point).
 pub fn s_published(g: f64) -> f64 {
@@ -72,6 +69,7 @@ pub fn s_gamma(g: f64) -> f64 {
     (g / 255.0).powf(2.2)
 }
 
+/// The gray levels every synthetic set is measured at.
 pub const GRAYS: [u32; 7] = [255, 235, 215, 195, 175, 155, 135];
 
 /// (max − min) / mean of `v`, %.
@@ -104,7 +102,12 @@ pub fn zone_and_pixel_spreads(e: impl IntoIterator<Item = (f64, f64, f64)>) -> (
 
 /// Readings `(x_mm, y_mm, gray, irradiance)` at the 13 × 9 zone centres (5 mm zones from
 /// the bottom-left corner) for every gray of [`GRAYS`], with relative normal noise.
-pub fn centre_readings(p: Field2, s: Resp, noise: f64, seed: u64) -> Vec<(f64, f64, u32, f64)> {
+pub fn centre_readings(
+    p: FieldFn,
+    s: ResponseFn,
+    noise: f64,
+    seed: u64,
+) -> Vec<(f64, f64, u32, f64)> {
     let mut rng = Rng(seed);
     let mut out = Vec::new();
     for g in GRAYS {

@@ -14,7 +14,7 @@ const W: usize = 1024;
 const H: usize = 768;
 
 /// Measurements at the 13 × 9 zone centres (5 mm zones from the bottom-left corner).
-fn write_measurements(path: &Path, p: Field2, s: Resp, noise: f64, seed: u64) {
+fn write_measurements(path: &Path, p: FieldFn, s: ResponseFn, noise: f64, seed: u64) {
     let mut csv = String::from("x_mm,y_mm,gray,irradiance_mw_cm2\n");
     for (x, y, g, e) in centre_readings(p, s, noise, seed) {
         csv.push_str(&format!("{x},{y},{g},{e:.6e}\n"));
@@ -35,7 +35,7 @@ fn ok(o: &std::process::Output) {
 }
 
 /// True irradiance of every pixel of a mask: (x, y, E).
-fn true_irradiance(mask: &[u8], p: Field2, s: Resp) -> Vec<(f64, f64, f64)> {
+fn true_irradiance(mask: &[u8], p: FieldFn, s: ResponseFn) -> Vec<(f64, f64, f64)> {
     (0..W * H)
         .map(|i| {
             let (r, c) = (i / W, i % W);
@@ -49,7 +49,7 @@ fn true_irradiance(mask: &[u8], p: Field2, s: Resp) -> Vec<(f64, f64, f64)> {
 
 /// P of `cal` (full-on irradiance) within 1 % of the truth `p · s255` on a 2.5 mm grid
 /// over the calibrated area.
-fn assert_p_recovered(cal: &dmdsl::optics::Calibration, p: Field2, s255: f64) {
+fn assert_p_recovered(cal: &dmdsl::optics::Calibration, p: FieldFn, s255: f64) {
     for i in 0..=26 {
         for j in 0..=18 {
             let (x, y) = (i as f64 * 2.5, j as f64 * 2.5);
@@ -63,7 +63,7 @@ fn assert_p_recovered(cal: &dmdsl::optics::Calibration, p: Field2, s255: f64) {
     }
 }
 
-fn calibrate(dir: &Path, p: Field2, s: Resp, seed: u64) -> (PathBuf, serde_json::Value) {
+fn calibrate(dir: &Path, p: FieldFn, s: ResponseFn, seed: u64) -> (PathBuf, serde_json::Value) {
     let m = dir.join("m.csv");
     write_measurements(&m, p, s, 0.015, seed);
     let o = run_in(
@@ -191,7 +191,7 @@ fn vignetting_is_fitted_with_the_cos4_form() {
 #[test]
 fn zone_mode_flattens_true_zone_means() {
     for (k, (p, s)) in [
-        (p_cubic as Field2, s_published as Resp),
+        (p_cubic as FieldFn, s_published as ResponseFn),
         (p_gauss, s_gamma),
         (p_published, s_published),
     ]
@@ -215,7 +215,7 @@ fn zone_mode_flattens_true_zone_means() {
 #[test]
 fn pixel_mode_flattens_true_pixels() {
     for (k, (p, s)) in [
-        (p_cubic as Field2, s_gamma as Resp),
+        (p_cubic as FieldFn, s_gamma as ResponseFn),
         (p_gauss, s_published),
         (p_published, s_published),
     ]

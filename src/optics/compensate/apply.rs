@@ -4,16 +4,17 @@
 //! the same bytes. Error diffusion lives in [`super::dither`].
 
 use super::{map_words, Compensator, Dither, Mask, Mode};
+use crate::png::PixelBox;
 use std::sync::atomic::Ordering;
 
 impl Compensator {
     /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
     pub fn apply(&self, m: &mut Mask) {
-        self.apply_in(m, [0, self.h, 0, self.w]);
+        self.apply_in(m, PixelBox::whole(self.w, self.h));
     }
 
-    /// [`apply`](Self::apply) for a mask known to be zero outside rows r0..r1 and columns
-    /// c0..c1 (`lit_box` = [r0, r1, c0, c1], e.g. [`crate::raster::Scratch::lit_box`]).
+    /// [`apply`](Self::apply) for a mask known to be zero outside `lit_box` (e.g.
+    /// [`crate::raster::Scratch::lit_box`]).
     ///
     /// One pass over the box, row by row and zone segment by zone segment, eight pixels
     /// at a time: all-off words are skipped, all-on words take the precomputed full gray
@@ -23,19 +24,32 @@ impl Compensator {
     ///
     /// Returns whether the layer reaches outside the calibrated area (it is then counted
     /// in [`layers_outside`](Self::layers_outside)).
-    pub fn apply_in(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool {
+    pub fn apply_in(&self, m: &mut Mask, lit_box: PixelBox) -> bool {
         assert_eq!(
             (m.width as usize, m.height as usize),
             (self.w, self.h),
             "mask size differs from the field"
         );
         let w = self.w;
-        let [br0, br1, bc0, bc1] = lit_box;
+        let PixelBox {
+            r0: br0,
+            r1: br1,
+            c0: bc0,
+            c1: bc1,
+        } = lit_box;
         let (br1, bc1) = (br1.min(self.h), bc1.min(w));
         if br0 >= br1 || bc0 >= bc1 {
             return false;
         }
-        let outside = self.lit_outside(m, [br0, br1, bc0, bc1]);
+        let outside = self.lit_outside(
+            m,
+            PixelBox {
+                r0: br0,
+                r1: br1,
+                c0: bc0,
+                c1: bc1,
+            },
+        );
         if outside {
             self.layers_outside.fetch_add(1, Ordering::Relaxed);
         }
@@ -65,10 +79,15 @@ impl Compensator {
 
     /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
     /// part of the box outside it is scanned; usually there is none).
-    fn lit_outside(&self, m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> bool {
+    fn lit_outside(&self, m: &Mask, lit_box: PixelBox) -> bool {
+        let PixelBox { r0, r1, c0, c1 } = lit_box;
         let w = self.w;
-        let [ir0, ir1] = self.inside_rows;
-        let [ic0, ic1] = self.inside_cols;
+        let PixelBox {
+            r0: ir0,
+            r1: ir1,
+            c0: ic0,
+            c1: ic1,
+        } = self.calibrated;
         let any = |r: usize, a: usize, b: usize| {
             a < b && m.data[r * w + a..r * w + b].iter().any(|&v| v != 0)
         };
@@ -128,13 +147,12 @@ pub struct CompRow<'a> {
 /// [`apply_in`](Compensator::apply_in) on the finished coverage): error diffusion (pixel
 /// mode, `--dither on`), which reads the neighbours' coverage.
 impl crate::raster::CoverageMap for Compensator {
-    fn fusable(&self, _: [usize; 4]) -> bool {
+    fn fusable(&self, _: PixelBox) -> bool {
         !(self.mode == Mode::Pixel && self.dither == Dither::On)
     }
 
-    fn area(&self) -> [usize; 4] {
-        let ([r0, r1], [c0, c1]) = (self.inside_rows, self.inside_cols);
-        [r0, r1, c0, c1]
+    fn area(&self) -> PixelBox {
+        self.calibrated
     }
 
     fn lit_outside(&self) {
@@ -200,7 +218,7 @@ impl crate::raster::CoverageMap for Compensator {
         }
     }
 
-    fn apply(&self, m: &mut Mask, lit_box: [usize; 4]) -> bool {
+    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> bool {
         self.apply_in(m, lit_box)
     }
 }

@@ -7,6 +7,7 @@ use super::field_rows::FieldSource;
 use super::kernels::sum_and_extremes_avx2;
 use super::kernels::{min_max, sum_and_extremes};
 use super::zones::{ZoneGrid, ZoneSegment};
+use crate::png::PixelBox;
 
 /// What the set-up's pass over P gives ([`field_sums`]).
 pub(super) struct FieldSums {
@@ -28,7 +29,7 @@ pub(super) fn field_sums(
     src: &mut FieldSource,
     w: usize,
     zones: &ZoneGrid,
-    inside: [usize; 4],
+    inside: PixelBox,
 ) -> FieldSums {
     #[cfg(target_arch = "x86_64")]
     let avx2 = std::arch::is_x86_feature_detected!("avx2");
@@ -38,7 +39,7 @@ pub(super) fn field_sums(
 }
 
 /// The set-up's pass over P (`w` values per row from `src`): the sum of P over every zone
-/// of `zones` and over the calibrated area `inside` = [r0, r1, c0, c1) (half-open), and
+/// of `zones` and over the calibrated area `inside`, and
 /// per row and zone segment of that area the sum and extremes of P (for the per-pixel
 /// spreads).
 ///
@@ -55,7 +56,7 @@ pub(super) fn field_sums_with(
     src: &mut FieldSource,
     w: usize,
     zones: &ZoneGrid,
-    inside: [usize; 4],
+    inside: PixelBox,
 ) -> FieldSums {
     let (segs, zone_of_row, zcols) = (&zones.segments[..], &zones.of_row[..], zones.cols);
     let nz = zone_of_row
@@ -119,7 +120,7 @@ struct PassGeometry<'a> {
     segs: &'a [ZoneSegment],
     zone_of_row: &'a [u16],
     zcols: usize,
-    inside: [usize; 4],
+    inside: PixelBox,
     nz: usize,
 }
 
@@ -161,7 +162,7 @@ fn sum_rows<const AVX2: bool>(
         segs,
         zone_of_row,
         zcols,
-        inside: [r0, r1, c0, c1],
+        inside: PixelBox { r0, r1, c0, c1 },
         nz,
     } = geo;
     let mut buf = vec![0f32; w];
@@ -287,7 +288,12 @@ mod tests {
             let zones = ZoneGrid::new(&field, 5.0);
             let (zone_of_col, zone_of_row, zcols) = (&zones.of_col, &zones.of_row, zones.cols);
             let segs = &zones.segments;
-            let inside = [3, 55, 5, 71];
+            let inside = PixelBox {
+                r0: 3,
+                r1: 55,
+                c0: 5,
+                c1: 71,
+            };
             let mut results = vec![field_sums_with(
                 false,
                 &mut FieldSource::Rows(FieldRows::new(&fm, &field)),
@@ -309,7 +315,7 @@ mod tests {
                 let z = zone_of_row[r] as usize * zcols + zone_of_col[c] as usize;
                 zs[z] += v as f64;
                 zn[z] += 1;
-                if (inside[0]..inside[1]).contains(&r) && (inside[2]..inside[3]).contains(&c) {
+                if inside.rows().contains(&r) && inside.cols().contains(&c) {
                     ins += v as f64;
                 }
             }
@@ -319,9 +325,9 @@ mod tests {
                 assert_eq!(fs.zone_pixels, zn, "case {case}");
                 assert_eq!(fs.inside_sum.to_bits(), ins.to_bits(), "case {case}");
                 let mut k = 0;
-                for r in inside[0]..inside[1] {
+                for r in inside.rows() {
                     for &(_, a, b) in segs {
-                        let (a, b) = (a.max(inside[2]).min(b), b.min(inside[3]));
+                        let (a, b) = (a.max(inside.c0).min(b), b.min(inside.c1));
                         let vals = &pp[r * w + a..r * w + b.max(a)];
                         let s = vals.iter().fold(0.0, |s, &v| s + v as f64);
                         assert_eq!(fs.seg_sums[k].to_bits(), s.to_bits(), "case {case}");

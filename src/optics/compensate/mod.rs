@@ -45,6 +45,7 @@ use super::field::{FieldModel, Form};
 use super::response::Levels;
 use super::{Calibration, Dither, Mode};
 use crate::bundle::Spreads;
+use crate::png::PixelBox;
 use crate::profile::Field;
 use crate::raster::{map_words, Mask};
 use gray_map::GrayMap;
@@ -68,9 +69,8 @@ pub struct Compensator {
     pixel_tables: PixelTables,
     /// The full-coverage gray of every pixel (both modes).
     gray_map: GrayMap,
-    // Calibrated area in pixels: rows [r0, r1), cols [c0, c1).
-    inside_rows: [usize; 2],
-    inside_cols: [usize; 2],
+    /// The calibrated area in pixels.
+    calibrated: PixelBox,
     layers_outside: AtomicU64,
     /// What the model predicts; see [`Prediction`].
     pub prediction: Prediction,
@@ -127,7 +127,7 @@ impl Compensator {
 
     /// S of pixel value `g` on the levels used (0 for values outside the valid range other
     /// than off).
-    pub fn s_of(&self, g: u8) -> f64 {
+    pub fn s_of_gray(&self, g: u8) -> f64 {
         let lv = &self.levels;
         let i = lv.gray.partition_point(|&x| x < g);
         if i < lv.gray.len() && lv.gray[i] == g {

@@ -5,6 +5,7 @@ use super::gray_map::GrayMap;
 use super::setup::{FieldSurvey, ModePrediction};
 use super::spread::{spread, Spread};
 use super::Levels;
+use crate::png::PixelBox;
 
 /// Pixel mode's per-pixel tables (row-major, top row first).
 #[derive(Debug, Default)]
@@ -55,7 +56,12 @@ impl PixelSetUp {
         let mut zg = vec![0u64; nz];
         let mut after_px = Spread::new();
         let mut ti_row = vec![0f64; w];
-        let [ir0, ir1, ic0, ic1] = survey.inside;
+        let PixelBox {
+            r0: ir0,
+            r1: ir1,
+            c0: ic0,
+            c1: ic1,
+        } = survey.inside;
         for r in 0..h {
             let base = r * w;
             let prow = &pp[base..base + w];

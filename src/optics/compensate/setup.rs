@@ -10,13 +10,12 @@ use super::spread::{pixel_spread, spread};
 use super::zone_mode::{ZoneSetUp, ZoneTables};
 use super::zones::ZoneGrid;
 use super::{Calibration, Compensator, Dither, Field, FieldModel, Mode, Prediction, Spreads};
+use crate::png::PixelBox;
 use std::sync::atomic::AtomicU64;
 
-/// The pixels whose centres lie in the calibrated area: rows `rows[0]..rows[1]`,
-/// columns `cols[0]..cols[1]`.
+/// The pixels whose centres lie in the calibrated area.
 struct CalibratedArea {
-    rows: [usize; 2],
-    cols: [usize; 2],
+    pixels: PixelBox,
 }
 
 impl CalibratedArea {
@@ -48,20 +47,19 @@ impl CalibratedArea {
             ));
         };
         Ok(CalibratedArea {
-            rows: [r0, r1 + 1],
-            cols: [c0, c1 + 1],
+            pixels: PixelBox {
+                r0,
+                r1: r1 + 1,
+                c0,
+                c1: c1 + 1,
+            },
         })
     }
 
-    /// [r0, r1, c0, c1].
-    fn bounds(&self) -> [usize; 4] {
-        let ([r0, r1], [c0, c1]) = (self.rows, self.cols);
-        [r0, r1, c0, c1]
-    }
-
     /// Number of pixels.
-    fn pixels(&self) -> usize {
-        (self.cols[1] - self.cols[0]) * (self.rows[1] - self.rows[0])
+    fn pixel_count(&self) -> usize {
+        let PixelBox { r0, r1, c0, c1 } = self.pixels;
+        (c1 - c0) * (r1 - r0)
     }
 }
 
@@ -73,8 +71,8 @@ pub(super) struct FieldSurvey {
     pub(super) zone_p: Vec<f64>,
     /// Whether each zone has its centre in the calibrated area.
     pub(super) zone_inside: Vec<bool>,
-    /// The calibrated area [r0, r1, c0, c1] in pixels.
-    pub(super) inside: [usize; 4],
+    /// The calibrated area in pixels.
+    pub(super) inside: PixelBox,
 }
 
 impl FieldSurvey {
@@ -85,7 +83,7 @@ impl FieldSurvey {
         field: &Field,
         fm: &FieldModel,
         zone_mm: f64,
-        inside: [usize; 4],
+        inside: PixelBox,
     ) -> FieldSurvey {
         let zones = ZoneGrid::new(field, zone_mm);
         let sums = field_sums(src, field.width_px as usize, &zones, inside);
@@ -171,7 +169,7 @@ impl Compensator {
             FieldSource::Field(&pp)
         };
         debug_assert!(source_matches_model(&mut src, fm, field));
-        let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area.bounds());
+        let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area.pixels);
         let tables = match mode {
             Mode::Zone => {
                 let Some(z) = ZoneSetUp::new(&survey, &levels, dither, forced_target) else {
@@ -210,8 +208,7 @@ impl Compensator {
             zone_tables: tables.zone,
             pixel_tables: tables.pixel,
             gray_map: tables.gray_map,
-            inside_rows: area.rows,
-            inside_cols: area.cols,
+            calibrated: area.pixels,
             layers_outside: AtomicU64::new(0),
             prediction,
         })
@@ -247,7 +244,7 @@ fn predict(
     let before_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |_, _| s_max);
     Prediction {
         target: after.target,
-        mean: survey.sums.inside_sum / area.pixels() as f64 * s_max,
+        mean: survey.sums.inside_sum / area.pixel_count() as f64 * s_max,
         s_max,
         zone_grid: (zones.cols, zones.rows),
         zone_p: zone_p.clone(),
@@ -261,7 +258,7 @@ fn predict(
             after_pixel_pct: after.after_pixel_pct,
         },
         zones_outside: zone_inside.iter().filter(|&&b| !b).count() as u64,
-        pixels_outside: (zones.of_col.len() * zones.of_row.len() - area.pixels()) as u64,
+        pixels_outside: (zones.of_col.len() * zones.of_row.len() - area.pixel_count()) as u64,
         unreachable: after.unreachable,
         mixed_zones: after.mixed_zones,
     }
@@ -332,7 +329,7 @@ mod tests {
                     sum += pp[i] as f64;
                     n += 1;
                     before.add(pp[i] as f64 * pr.s_max);
-                    after.add(pp[i] as f64 * c.s_of(c.gray_row(i / w)[i % w]));
+                    after.add(pp[i] as f64 * c.s_of_gray(c.gray_row(i / w)[i % w]));
                 }
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();

@@ -3,6 +3,7 @@
 
 use super::field_pass::FieldSums;
 use super::zones::ZoneSegment;
+use crate::png::PixelBox;
 
 /// (max − min) / mean of values added one by one, %.
 #[derive(Debug, Clone, Copy)]
@@ -60,15 +61,17 @@ pub(super) fn spread(v: impl Iterator<Item = f64>) -> f64 {
     s.pct()
 }
 
-/// The per-pixel spread over the calibrated area when the pixels of row r of zone column
-/// zc show S = `s_of(r, zc)`: the extremes of P · S from each row segment's extremes
-/// (rounding is monotone), the mean from each row segment's sum of P ([`FieldSums`]).
+/// The per-pixel spread over the calibrated area `inside` when the pixels of image row r
+/// in zone column zc show the relative response S = `shown_s(r, zc)` (the S of their
+/// gray): the extremes of P · S from each row segment's extremes (rounding is monotone),
+/// the mean from each row segment's sum of P ([`FieldSums`]).
 pub(super) fn pixel_spread(
     fs: &FieldSums,
     segs: &[ZoneSegment],
-    [r0, r1, c0, c1]: [usize; 4],
-    s_of: impl Fn(usize, usize) -> f64,
+    inside: PixelBox,
+    shown_s: impl Fn(usize, usize) -> f64,
 ) -> f64 {
+    let PixelBox { r0, r1, c0, c1 } = inside;
     // The segments that reach into the area: (index in the row, zone column, pixels).
     let cut: Vec<(usize, usize, usize)> = segs
         .iter()
@@ -85,7 +88,7 @@ pub(super) fn pixel_spread(
             .zip(fs.seg_extremes.chunks_exact(segs.len())),
     ) {
         for &(j, zc, n) in &cut {
-            let s = s_of(r, zc);
+            let s = shown_s(r, zc);
             let (lo, hi) = extremes[j];
             sp.add_extremes(lo, hi, s);
             sp.sum += sums[j] * s;

@@ -110,9 +110,9 @@ impl ZoneSetUp {
                 .map(|z| zone_after[z]),
         );
         // Per-pixel prediction: each row of a zone shows one gray.
-        let s_of = s_of_gray(lv);
+        let s_by_gray = s_of_gray(lv);
         let after_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |r, zc| {
-            s_of[grays.mix[zones.of_row[r] as usize * zones.cols + zc].on_row(r) as usize]
+            s_by_gray[grays.mix[zones.of_row[r] as usize * zones.cols + zc].on_row(r) as usize]
         });
         let tables = ZoneTables::new(&grays, zones);
         let gray_map = GrayMap::of_zone_tables(&tables, zones);
@@ -216,7 +216,7 @@ fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
 fn zone_grays(zone_p: &[f64], lv: &Levels, target: f64, dither: Dither) -> ZoneGrays {
     let nz = zone_p.len();
     let s_max = lv.s_max();
-    let s_of = s_of_gray(lv);
+    let s_by_gray = s_of_gray(lv);
     let mut mixed = 0u64;
     let mut unreachable = 0;
     let mut luts = vec![[0u8; 256]; nz];
@@ -248,7 +248,7 @@ fn zone_grays(zone_p: &[f64], lv: &Levels, target: f64, dither: Dither) -> ZoneG
             }
         }
         let g = luts[z][255];
-        zone_after[z] = pz * s_of[g as usize];
+        zone_after[z] = pz * s_by_gray[g as usize];
         let mut m = GrayMix {
             lower: g,
             upper: g,

@@ -66,15 +66,21 @@ pub enum Response {
 /// A response ready for evaluation (spline coefficients solved once).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Curve {
-    main: Main,
+    /// S from the first measured point up (everywhere without an anchor).
+    measured: MeasuredCurve,
     /// Segment from (0, 0) to the first measured point: (g1, s1, slope at 0, slope at g1).
     anchor: Option<(f64, f64, f64, f64)>,
 }
 
+/// The part of a [`Curve`] over the measured grays.
 #[derive(Debug, Clone, PartialEq)]
-enum Main {
+enum MeasuredCurve {
+    /// A polynomial in the variable, coefficients from the constant up.
     Poly(GrayVariable, Vec<f64>),
+    /// The cubic spline through the points, with its second derivatives there
+    /// ([`spline_second_derivatives`]).
     Spline(Vec<[f64; 2]>, Vec<f64>),
+    /// The PCHIP interpolant through the points.
     Pchip(Vec<[f64; 2]>),
 }
 
@@ -86,16 +92,16 @@ impl Curve {
                 return hermite(0.0, 0.0, d0, g1, s1, d1, g.max(0.0));
             }
         }
-        match &self.main {
-            Main::Poly(variable, c) => {
+        match &self.measured {
+            MeasuredCurve::Poly(variable, c) => {
                 let v = match variable {
                     GrayVariable::Pixel => g,
                     GrayVariable::Attenuation => 255.0 - g,
                 };
                 c.iter().rev().fold(0.0, |acc, c| acc * v + c)
             }
-            Main::Spline(pts, m) => spline_eval(pts, m, g).0,
-            Main::Pchip(pts) => pchip_eval(pts, g),
+            MeasuredCurve::Spline(pts, m) => spline_eval(pts, m, g).0,
+            MeasuredCurve::Pchip(pts) => pchip_eval(pts, g),
         }
     }
 }
@@ -183,7 +189,7 @@ impl Response {
                 coefficients,
                 ..
             } => Curve {
-                main: Main::Poly(*variable, coefficients.clone()),
+                measured: MeasuredCurve::Poly(*variable, coefficients.clone()),
                 anchor: None,
             },
             Response::Table {
@@ -196,12 +202,12 @@ impl Response {
                 } else {
                     points.clone()
                 };
-                let main = match interpolation {
+                let measured = match interpolation {
                     Interpolation::Spline => {
                         let m = spline_second_derivatives(&pts);
-                        Main::Spline(pts.clone(), m)
+                        MeasuredCurve::Spline(pts.clone(), m)
                     }
-                    Interpolation::Pchip => Main::Pchip(pts.clone()),
+                    Interpolation::Pchip => MeasuredCurve::Pchip(pts.clone()),
                 };
                 // Slope where the anchor segment meets the curve: the three-point
                 // (parabola) end slope of the measured points, less noise-sensitive than
@@ -218,7 +224,7 @@ impl Response {
                     let d0 = (2.0 * sec - d1).clamp(0.0, 3.0 * sec);
                     (g1, s1, d0, d1)
                 });
-                Curve { main, anchor }
+                Curve { measured, anchor }
             }
         }
     }
@@ -422,26 +428,23 @@ fn pchip_slope(pts: &[[f64; 2]], k: usize) -> f64 {
 mod tests {
     use super::*;
 
-    fn published() -> Response {
+    /// The published S of Xu et al. 2010 (in z = 255 − pixel value) on `valid_gray`.
+    fn published(valid_gray: [u8; 2]) -> Response {
         Response::Polynomial {
             variable: GrayVariable::Attenuation,
             coefficients: vec![5.72, -0.101, 5.78e-4, -1e-6],
-            valid_gray: [121, 255],
+            valid_gray,
         }
     }
 
     #[test]
     fn published_cubic_valid_range_is_where_s_falls_in_z() {
-        let r = published();
+        let r = published([121, 255]);
         r.validate().unwrap();
         assert!((r.eval(255.0) - 5.72).abs() < 1e-12);
         // S is lowest at z = 133.9; one level further (z = 135) it rises again in z: the
         // range cannot be extended.
-        let wider = Response::Polynomial {
-            variable: GrayVariable::Attenuation,
-            coefficients: vec![5.72, -0.101, 5.78e-4, -1e-6],
-            valid_gray: [120, 255],
-        };
+        let wider = published([120, 255]);
         let e = wider.validate().unwrap_err();
         assert!(e.contains("not strictly increasing"), "{e}");
     }
@@ -467,7 +470,7 @@ mod tests {
 
     #[test]
     fn levels_nearest_in_irradiance() {
-        let r = published();
+        let r = published([121, 255]);
         let lv = r.levels();
         assert_eq!(lv.gray[0], 0);
         assert_eq!(lv.s[0], 0.0);
@@ -520,10 +523,7 @@ mod tests {
     fn spline_is_exact_for_cubic_responses_and_anchor_is_monotone() {
         // The S of Xu et al. 2010 in pixel values, sampled at 7 levels: the not-a-knot spline
         // reproduces it (PCHIP would be off by ~1 %).
-        let s = |g: f64| {
-            let z = 255.0 - g;
-            -1e-6 * z * z * z + 5.78e-4 * z * z - 0.101 * z + 5.72
-        };
+        let s = crate::optics::synthetic::s_published;
         let pts: Vec<[f64; 2]> = [135.0, 155.0, 175.0, 195.0, 215.0, 235.0, 255.0]
             .iter()
             .map(|&g| [g, s(g)])
