@@ -3,29 +3,57 @@
 //!
 //! The library follows the data (see `docs/ARCHITECTURE.md`):
 //! [`mesh`] (load, weld, validate) → [`slice`](mod@slice) (contours per layer) → [`raster`]
-//! (8-bit masks) → [`plan`] (exposure and stage steps) → [`bundle`] (the job bundle,
-//! written atomically), orchestrated by [`job`]. The executor reads only the bundle.
+//! (8-bit masks, light compensation from [`optics`], pre-warp and tiling from [`geometry`])
+//! → [`plan`] (exposure and stage steps) → [`bundle`] (the job bundle, written atomically),
+//! orchestrated by [`job`]. The executor ([`exec`]) reads only the bundle.
+//!
+//! # Using the library
+//!
+//! The two commands are one call each; the items re-exported here are what they take and
+//! return:
+//!
+//! ```no_run
+//! use dmdsl::{slice_to_bundle, run, Profile, RunOptions, SliceOptions};
+//! # fn main() -> dmdsl::Result<()> {
+//! let opts = SliceOptions::new("part.stl", "part.dmdjob", Profile::default_profile());
+//! let summary = slice_to_bundle(&opts)?;
+//! let report = run(&summary.bundle, &RunOptions::default())?;
+//! assert!(report.ok);
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! The stage modules stay public for programs that drive the stages themselves (the
+//! benchmarks and examples do); the building blocks they share (PNG encoding, hashing,
+//! least squares, tables, plotting, reading input files) are private.
 #![warn(missing_docs)]
 
 pub mod bundle;
-pub mod digest;
+mod digest;
 pub mod error;
 pub mod exec;
 pub mod geometry;
-pub mod input;
+mod input;
 pub mod job;
 pub mod mesh;
 pub mod motion;
 pub mod optics;
 pub mod plan;
-pub mod plot;
-pub mod png;
-pub mod polyfit;
+mod plot;
+mod png;
+mod polyfit;
 pub mod profile;
 pub mod raster;
 pub mod slice;
-pub mod table;
+mod table;
 pub mod units;
 pub mod warning;
 
+pub use bundle::Manifest;
 pub use error::{Error, Result};
+pub use exec::report::Report;
+pub use exec::{run, RunOptions, Violation};
+pub use job::{slice_to_bundle, SliceOptions, SliceSummary};
+pub use mesh::Mesh;
+pub use profile::Profile;
+pub use warning::{Severity, Warning};

@@ -11,8 +11,6 @@ pub enum Style {
     Line,
     /// A marker at each point.
     Points,
-    /// Hold each y until the next x (state over time).
-    Steps,
 }
 
 /// One data series.
@@ -24,7 +22,7 @@ pub struct Series {
     pub color: [u8; 3],
     /// Drawing style.
     pub style: Style,
-    /// (x, y) points, in x order for `Line` and `Steps`.
+    /// (x, y) points, in x order for `Line`.
     pub points: Vec<(f64, f64)>,
 }
 
@@ -383,16 +381,6 @@ impl Chart {
                     let v: Vec<(f32, f32)> = pts.iter().map(|&(x, y)| (px(x), py(y))).collect();
                     stroke_path(&mut pm, &v, s.color, 2.0);
                 }
-                Style::Steps => {
-                    let mut v = Vec::with_capacity(pts.len() * 2);
-                    for (i, &(x, y)) in pts.iter().enumerate() {
-                        if i > 0 {
-                            v.push((px(x), py(pts[i - 1].1)));
-                        }
-                        v.push((px(x), py(y)));
-                    }
-                    stroke_path(&mut pm, &v, s.color, 2.0);
-                }
                 Style::Points => {
                     for &(x, y) in &pts {
                         fill_rect(
@@ -568,7 +556,7 @@ mod tests {
             series: vec![Series {
                 label: "stage".into(),
                 color: [200, 0, 0],
-                style: Style::Steps,
+                style: Style::Line,
                 points: (0..100).map(|i| (i as f64, (i % 10) as f64)).collect(),
             }],
             bands: vec![Band {

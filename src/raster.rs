@@ -13,10 +13,10 @@
 //! Why not tiny-skia for masks: its anti-aliasing supersamples 4× (coverage quantized to
 //! 1/4 px), and its non-anti-aliased fill snaps edges to fixed point; measured against
 //! PrusaSlicer (docs/BENCHMARKS.md, "Mask agreement") both disagree on ~10× more pixels
-//! than the exact coverage does. tiny-skia draws the plots ([`crate::plot`]) and serves as
+//! than the exact coverage does. tiny-skia draws the plots (`plot`) and serves as
 //! the reference renderer in `benches/raster.rs`.
 
-use crate::png::PixelBox;
+pub use crate::png::PixelBox;
 use crate::profile::{Field, Projector};
 use crate::slice::Contour;
 

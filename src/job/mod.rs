@@ -49,7 +49,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
 
-/// Encodes a mask as an 8-bit grayscale PNG ([`crate::png`]; deterministic).
+/// Encodes a mask as an 8-bit grayscale PNG (`png`; deterministic).
 pub fn encode_png(m: &Mask) -> Vec<u8> {
     crate::png::encode_gray8(m.width, m.height, &m.data)
 }

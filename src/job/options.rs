@@ -38,6 +38,28 @@ pub struct SliceOptions<'a> {
 }
 
 impl SliceOptions<'_> {
+    /// A job slicing `input` into the bundle `output` on `profile`, with the profile's own
+    /// settings, the part centred on the field, default light compensation and distortion,
+    /// and no progress reports or interruption.
+    pub fn new(
+        input: impl Into<PathBuf>,
+        output: impl Into<PathBuf>,
+        profile: Profile,
+    ) -> SliceOptions<'static> {
+        SliceOptions {
+            input: input.into(),
+            output: Some(output.into()),
+            profile,
+            layer_height_mm: None,
+            binary: None,
+            placement: PlacementMode::Center,
+            optics: Default::default(),
+            progress: None,
+            cancel: None,
+            distortion: DistortionChoice::default(),
+        }
+    }
+
     /// The profile with this job's overrides (layer height, binary) applied.
     pub(super) fn job_profile(&self) -> Profile {
         let mut profile = self.profile.clone();

@@ -1,7 +1,7 @@
 //! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements.
 //!
 //! Input: a CSV table with the header `x_mm,y_mm,gray,irradiance_mw_cm2` (any column order;
-//! `#` comments and blank lines ignored; read by [`crate::table`]): a zone centre in build-plane mm (origin at
+//! `#` comments and blank lines ignored; read by `table`): a zone centre in build-plane mm (origin at
 //! the field's bottom-left corner), the pixel value shown there (255 = fully on) and the
 //! measured irradiance. Any grid of zones, any set of gray levels, repeated readings.
 //!
@@ -9,7 +9,7 @@
 //! one free value s_j per measured gray level, so it is fitted by alternating least
 //! squares on relative residuals (radiometer noise is proportional to the reading):
 //! with s fixed the coefficients solve a 10-unknown linear least-squares problem (QR of
-//! the column-scaled design matrix, [`crate::polyfit`], whose condition number is checked); with P fixed each
+//! the column-scaled design matrix, `polyfit`, whose condition number is checked); with P fixed each
 //! s_j has a closed form. The valid gray range is the run of levels, from the brightest
 //! down, over which s keeps falling; P is then refitted on those levels only, s is
 //! normalised to 1 at the brightest level (so P is the full-on irradiance) and S(g) is the

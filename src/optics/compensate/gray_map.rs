@@ -99,9 +99,9 @@ impl Compensator {
     }
 
     /// The gray map as projector `p` shows it ([`crate::raster::projector_view`]),
-    /// encoded by `png`, which must give [`crate::png::encode_gray8`]'s bytes (the
+    /// encoded by `png`, which must give `png::encode_gray8`'s bytes (the
     /// bundle's mask encoder): when `p` shows the field as it is, the map is encoded row by
-    /// row with [`crate::png::encode_gray8_rows`] (the same bytes) without making it.
+    /// row with `png::encode_gray8_rows` (the same bytes) without making it.
     pub fn gray_map_png(
         &self,
         p: &crate::profile::Projector,
