@@ -1,0 +1,483 @@
+//! The job bundle: `part.dmdjob/` = `job.json` (the manifest) + `masks/*.png`.
+//!
+//! This module is the only thing the slicer and the executor share. The writer is
+//! atomic: everything goes into a hidden sibling directory that replaces the destination
+//! only when complete, so a reader sees the old bundle or the new one, never a mix, and a
+//! failed or interrupted run leaves nothing behind (a killed one leaves its staging
+//! directory, which the next run for the same destination removes). It replaces only a
+//! bundle holding nothing but its own files ([`BundleWriter`]).
+//!
+//! ## Step semantics and timing contract
+//! The planner estimates and the executor simulates the same machine, so both follow
+//! these rules (the planner's `time_s` is its estimate under them):
+//! * The job starts with the stage homed at `machine.stage.home_mm`, shutter closed.
+//!   Layer 0's steps start there; every later layer's steps start where the previous
+//!   layer's steps left the stage.
+//! * At the start of each layer the DMD loads that layer's mask(s), taking
+//!   `machine.dmd.load_s`, concurrently with the layer's first steps (light is off). An
+//!   `expose` or the first `sweep` of a run waits until the load is done.
+//! * `move {to_mm, speed_mm_s, accel_mm_s2}`: shutter closed, trapezoidal velocity profile
+//!   from rest to rest ([`crate::motion::move_time`]).
+//! * `wait {s}`: nothing happens for `s` seconds.
+//! * `expose {s}`: stage still; the shutter opens (`shutter.open_s`, light not yet on),
+//!   light is on for exactly `s`, the shutter closes (`shutter.close_s`). Duration
+//!   `open_s + s + close_s`; dose time `s`.
+//! * `sweep {to_mm, speed_mm_s}`: the stage moves at constant `speed_mm_s` (the
+//!   acceleration to that speed is taken as instantaneous; sweeps are slow) while the
+//!   layer's mask is shown. Consecutive sweeps (across layers) form one run: the shutter
+//!   opens before the run's first sweep (`open_s`, stage still) and closes after its last
+//!   (`close_s`); the next layer's mask is preloaded, so switching masks inside a run
+//!   takes no time. Duration of a sweep `|to_mm − from| / speed_mm_s`; dose time the same.
+
+/// The hash the manifest records for every file (model, masks, gray maps, tables).
+pub use crate::digest::sha256_hex;
+use crate::error::{Error, Result};
+use crate::profile::Profile;
+use crate::warning::Warning;
+use serde::{Deserialize, Deserializer, Serialize};
+use std::path::Path;
+
+mod writer;
+pub use writer::{is_bundle, BundleWriter};
+
+/// Value of the manifest's `format` field.
+pub const FORMAT: &str = "dmdsl-job";
+/// Manifest version written by this build. Version 2 stores `warnings` as objects
+/// ([`Warning`]: code, severity, message, fields); version 1 stored them as text. Readers
+/// accept [`OLDEST_READ`]..=[`VERSION`]; a version 1 warning is read as code
+/// `bundle.uncoded` with its text as the message.
+pub const VERSION: u32 = 2;
+/// Oldest manifest version this build reads.
+pub const OLDEST_READ: u32 = 1;
+/// File name of the manifest inside a bundle.
+pub const MANIFEST: &str = "job.json";
+
+/// The manifest, `job.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Manifest version, [`VERSION`].
+    pub version: u32,
+    /// The program that wrote the bundle.
+    pub generator: Generator,
+    /// The part the job was compiled from.
+    pub source: Source,
+    /// Job-level settings (what the command line chose on top of the profile).
+    pub settings: Settings,
+    /// The fully resolved machine profile.
+    pub machine: Profile,
+    /// Totals over all layers.
+    pub totals: Totals,
+    /// Warnings raised while compiling the job (mesh defects, repairs, plan notes), each
+    /// with its stable code (`docs/WARNINGS.md`).
+    #[serde(deserialize_with = "warnings_any_version")]
+    pub warnings: Vec<Warning>,
+    /// One record per layer, bottom first.
+    pub layers: Vec<Layer>,
+    /// Light compensation applied to the masks (absent when compensation is off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optics: Option<Optics>,
+    /// Tiled jobs (several projectors): the light compensation of each projector, with one
+    /// common target irradiance (absent when off; `optics` is then absent too).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub projector_optics: Vec<Optics>,
+}
+
+/// Who wrote the bundle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Generator {
+    /// Program name, "dmdsl".
+    pub name: String,
+    /// Program version.
+    pub version: String,
+}
+
+impl Generator {
+    /// This build of dmdsl.
+    pub fn current() -> Self {
+        Generator {
+            name: "dmdsl".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+        }
+    }
+}
+
+/// The source model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Source {
+    /// File name of the model (no directories, so bundles are reproducible across paths).
+    pub file: String,
+    /// SHA-256 of the model file, hex.
+    pub sha256: String,
+    /// Number of triangles loaded.
+    pub triangles: u64,
+    /// Axis-aligned bounding box in the file's coordinates, mm: [min, max].
+    pub bbox_mm: [[f64; 3]; 2],
+    /// How the part was placed on the build plane.
+    pub placement: Placement,
+    /// Mesh validation report.
+    pub mesh: crate::mesh::MeshReport,
+}
+
+/// Placement of the part in build-plane coordinates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    /// "center" (XY box centred on the field, lowest point at z = 0) or "keep" (file coordinates).
+    pub mode: String,
+    /// Translation added to file coordinates, mm.
+    pub translate_mm: [f64; 3],
+}
+
+/// Job-level settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// Layer thickness, mm.
+    pub layer_height_mm: f64,
+    /// Binary (thresholded) masks instead of 8-bit coverage.
+    pub binary: bool,
+    /// Light compensation mode: "off", "zone" or "pixel".
+    pub compensation: String,
+    /// Distortion correction applied to the masks: its table and fit report.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<FitReport>,
+}
+
+/// Quality of the distortion correction fitted to a measured table (filled by
+/// `geometry::distortion`), recorded in the manifest and printed by the CLI.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Table file name, or "profile NAME" for inline points.
+    pub source: String,
+    /// SHA-256 of the table.
+    pub sha256: String,
+    /// Number of measured points.
+    pub points: usize,
+    /// Total degree of the least-squares polynomial (chosen by cross-validation).
+    pub degree: u32,
+    /// Weight κ of the natural-neighbour residual interpolant (0: polynomial only, 1: the
+    /// correction passes through every table point).
+    pub residual_weight: f64,
+    /// RMS distance between the polynomial and the table points, mm.
+    pub poly_rms_mm: f64,
+    /// Largest such distance, mm.
+    pub poly_max_mm: f64,
+    /// Where the largest polynomial residual is ("line 37").
+    pub poly_max_at: String,
+    /// Leave-one-out prediction error of the correction (polynomial + κ·residual), RMS, mm:
+    /// an honest estimate of its accuracy between points (it includes measurement noise).
+    pub cv_rms_mm: f64,
+    /// Largest leave-one-out error, mm.
+    pub cv_max_mm: f64,
+    /// Where the largest leave-one-out error is.
+    pub cv_max_at: String,
+    /// Largest correction in the table, |aim − seen|, mm.
+    pub max_correction_mm: f64,
+    /// Warped points outside the convex hull of the seen points (extrapolated); layers
+    /// that repeat the layer below's masks are not warped again and not counted.
+    pub extrapolated_points: u64,
+}
+
+impl FitReport {
+    /// One-line human summary.
+    pub fn summary(&self) -> String {
+        format!(
+            "distortion {}: {} points, degree-{} polynomial + {:.2} x residual interpolant; fit residual RMS {:.4} mm (max {:.4} mm, {}), cross-validated error RMS {:.4} mm (max {:.4} mm, {}); largest correction {:.3} mm",
+            self.source,
+            self.points,
+            self.degree,
+            self.residual_weight,
+            self.poly_rms_mm,
+            self.poly_max_mm,
+            self.poly_max_at,
+            self.cv_rms_mm,
+            self.cv_max_mm,
+            self.cv_max_at,
+            self.max_correction_mm
+        )
+    }
+}
+
+/// Light compensation of a job (see docs/CALIBRATION.md). Irradiances are in `units`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Optics {
+    /// "zone" or "pixel".
+    pub mode: String,
+    /// Dithering: "auto", "on" or "off" (docs/CALIBRATION.md).
+    pub dither: String,
+    /// Zones that mix two grays to hit the target (zone mode).
+    pub mixed_zones: u64,
+    /// Index of the projector whose calibration was applied.
+    pub projector: u32,
+    /// The calibration's `source` text.
+    pub calibration: String,
+    /// Unit of the irradiances below: "relative" or "mW/cm2".
+    pub units: String,
+    /// Target irradiance E*: the highest irradiance every zone (zone mode) or pixel (pixel
+    /// mode) of the calibrated area can reach; full-coverage pixels aim at it.
+    pub target_irradiance: f64,
+    /// Mean irradiance of the calibrated area with every mirror at the brightest valid gray.
+    pub mean_irradiance: f64,
+    /// target / mean: the fraction of the projector's light a compensated job uses.
+    pub throughput: f64,
+    /// Calibrated area [x0, y0, x1, y1] in build-plane mm.
+    pub calibrated_area_mm: [f64; 4],
+    /// Pixel values the response is valid for [lo, hi]; 0 (mirror off) is always allowed.
+    pub valid_gray: [u8; 2],
+    /// Zone edge, mm (zones start at the field's bottom-left corner).
+    pub zone_mm: f64,
+    /// Full-coverage gray of each zone, row 0 = top of the image (zone mode; empty in pixel
+    /// mode). A mixing zone lists the gray it shows on most of its pixels.
+    pub zone_grays: Vec<Vec<u8>>,
+    /// Bundle file with the full-coverage gray of every pixel (8-bit PNG, mask orientation).
+    pub gray_map: String,
+    /// SHA-256 of `gray_map`.
+    pub gray_map_sha256: String,
+    /// Predicted spreads under the calibration model.
+    pub predicted: Spreads,
+    /// Zones whose centre lies outside the calibrated area (P extrapolated there).
+    pub zones_outside: u64,
+    /// Pixels of the field outside the calibrated area.
+    pub pixels_outside: u64,
+    /// Zones (zone mode) or pixels (pixel mode) that cannot reach the target even fully on.
+    pub unreachable: u64,
+    /// Layers whose section reaches outside the calibrated area.
+    pub layers_outside: u64,
+    /// How exposure times were derived.
+    pub exposure_rule: String,
+    /// Dose of a normal layer at the target irradiance, mJ/cm² (absolute calibrations only).
+    pub dose_mj_cm2: Option<f64>,
+}
+
+/// Spreads (max − min) / mean of irradiance over the calibrated area, %.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Spreads {
+    /// Zone means, uncompensated (every mirror at the brightest valid gray).
+    pub before_zone_pct: f64,
+    /// Pixels, uncompensated.
+    pub before_pixel_pct: f64,
+    /// Zone means, compensated.
+    pub after_zone_pct: f64,
+    /// Pixels, compensated.
+    pub after_pixel_pct: f64,
+}
+
+/// Totals over the job.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Totals {
+    /// Number of layers.
+    pub layers: u64,
+    /// Part height as printed, mm.
+    pub height_mm: f64,
+    /// Estimated print time from the planned steps, s.
+    pub print_time_s: f64,
+    /// Sum of layer exposures, s.
+    pub exposure_s: f64,
+    /// Cured resin volume, ml (sum of area × thickness).
+    pub resin_volume_ml: f64,
+    /// Hybrid process: layers printed continuously.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub continuous_layers: Option<u64>,
+    /// Hybrid process: estimated print time had every slice been printed layered, s (the
+    /// saving of the hybrid plan is `all_layered_time_s − print_time_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub all_layered_time_s: Option<f64>,
+}
+
+/// How a layer is printed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Stop, recoat/peel, expose while stationary.
+    Layered,
+    /// Exposed while the stage sweeps at constant speed.
+    Continuous,
+}
+
+/// One layer record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Layer {
+    /// 0-based layer index.
+    pub index: u64,
+    /// Height of the layer's top above the build plane, mm: (index + 1) × thickness for a
+    /// uniform job. This is also the stage coordinate at which the layer is exposed.
+    pub z_mm: f64,
+    /// Height of the cutting plane that produced the section, mm.
+    pub slice_z_mm: f64,
+    /// Layer thickness, mm.
+    pub thickness_mm: f64,
+    /// Printing mode.
+    pub mode: Mode,
+    /// Exposure the layer receives, s.
+    pub exposure_s: f64,
+    /// Area of the section, mm² (from anti-aliased coverage).
+    pub area_mm2: f64,
+    /// Largest distance from a point of the section to its boundary (DisMax-Min of the
+    /// hybrid continuous/layered method: the radius of the largest inscribed circle), mm.
+    #[serde(default)]
+    pub max_fill_distance_mm: f64,
+    /// Connected regions of the section that do not rest on the layer below.
+    #[serde(default)]
+    pub islands: u32,
+    /// Bounding box of the section in build-plane mm, `[[x_min, y_min], [x_max, y_max]]`;
+    /// `null` for an empty section.
+    #[serde(default)]
+    pub bbox_mm: Option<[[f64; 2]; 2]>,
+    /// Mask image(s) of the layer, one per projector.
+    pub masks: Vec<MaskRef>,
+    /// Ordered machine steps that take the stage from where the previous layer left it to
+    /// this layer's exposure and expose it. The executor replays them literally.
+    pub steps: Vec<Step>,
+    /// Estimated duration of `steps`, s.
+    pub time_s: f64,
+}
+
+/// A mask file of a layer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MaskRef {
+    /// Path relative to the bundle, e.g. "masks/00000.png".
+    pub file: String,
+    /// SHA-256 of the PNG file, hex.
+    pub sha256: String,
+    /// Index of the projector that shows it.
+    pub projector: u32,
+}
+
+/// One machine step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum Step {
+    /// Move the stage (light off) to `to_mm` with a trapezoidal profile.
+    Move {
+        /// Target stage coordinate, mm.
+        to_mm: f64,
+        /// Cruise speed, mm/s.
+        speed_mm_s: f64,
+        /// Acceleration, mm/s².
+        accel_mm_s2: f64,
+    },
+    /// Do nothing for `s` seconds (light off).
+    Wait {
+        /// Duration, s.
+        s: f64,
+    },
+    /// Show the layer's mask with the stage stationary for `s` seconds.
+    Expose {
+        /// Light-on duration, s.
+        s: f64,
+    },
+    /// Show the layer's mask while the stage moves at constant speed to `to_mm`.
+    Sweep {
+        /// Target stage coordinate, mm.
+        to_mm: f64,
+        /// Constant speed, mm/s.
+        speed_mm_s: f64,
+    },
+}
+
+impl Manifest {
+    /// Reads and checks `job.json` of the bundle at `dir`.
+    pub fn read(dir: &Path) -> Result<Manifest> {
+        if !dir.exists() {
+            let e = std::io::Error::new(std::io::ErrorKind::NotFound, "does not exist");
+            return Err(Error::io(dir, e));
+        }
+        if !dir.is_dir() {
+            return Err(Error::Bundle {
+                path: dir.into(),
+                msg: "not a job bundle directory".into(),
+            });
+        }
+        let path = dir.join(MANIFEST);
+        let text = crate::input::read_file(&path, "manifest", crate::input::TEXT_MAX_BYTES)?;
+        Manifest::from_json(&text, &path)
+    }
+
+    /// Parses and checks manifest JSON (format, supported version, structure); `path` names
+    /// the file in errors.
+    pub fn from_json(text: &[u8], path: &Path) -> Result<Manifest> {
+        let path = path.to_path_buf();
+        let v: serde_json::Value = serde_json::from_slice(text).map_err(|e| Error::Bundle {
+            path: path.clone(),
+            msg: format!("invalid JSON: {e}"),
+        })?;
+        match v.get("format").and_then(|f| f.as_str()) {
+            Some(FORMAT) => {}
+            other => {
+                return Err(Error::Bundle {
+                    path,
+                    msg: format!("format is {other:?}, expected \"{FORMAT}\""),
+                })
+            }
+        }
+        match v.get("version").and_then(|f| f.as_u64()) {
+            Some(n) if (OLDEST_READ as u64..=VERSION as u64).contains(&n) => {}
+            other => {
+                return Err(Error::Bundle {
+                    path,
+                    msg: format!(
+                        "unsupported version {other:?}; this dmdsl reads versions {OLDEST_READ} to {VERSION}"
+                    ),
+                })
+            }
+        }
+        serde_json::from_value(v).map_err(|e| Error::Bundle {
+            path,
+            msg: format!("invalid manifest: {e}"),
+        })
+    }
+}
+
+/// Reads `warnings` as objects (version 2) or as text (version 1, code `bundle.uncoded`).
+fn warnings_any_version<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Warning>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Any {
+        Coded(Warning),
+        Text(String),
+    }
+    Ok(Vec::<Any>::deserialize(d)?
+        .into_iter()
+        .map(|w| match w {
+            Any::Coded(w) => w,
+            Any::Text(t) => Warning::new("bundle.uncoded", t),
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_json_shape() {
+        let s = Step::Move {
+            to_mm: 1.5,
+            speed_mm_s: 2.0,
+            accel_mm_s2: 50.0,
+        };
+        assert_eq!(
+            serde_json::to_string(&s).unwrap(),
+            r#"{"kind":"move","to_mm":1.5,"speed_mm_s":2.0,"accel_mm_s2":50.0}"#
+        );
+        let e: Step = serde_json::from_str(r#"{"kind":"expose","s":8.0}"#).unwrap();
+        assert_eq!(e, Step::Expose { s: 8.0 });
+    }
+
+    #[test]
+    fn warnings_read_as_objects_or_version_1_text() {
+        #[derive(Deserialize)]
+        struct W {
+            #[serde(deserialize_with = "warnings_any_version")]
+            warnings: Vec<Warning>,
+        }
+        let w: W = serde_json::from_str(
+            r#"{"warnings": ["old text", {"code": "plan.travel-clamped", "severity": "warning", "message": "m", "fields": {"moves": 2}}]}"#,
+        )
+        .unwrap();
+        assert_eq!(w.warnings[0].code, "bundle.uncoded");
+        assert_eq!(w.warnings[0].message, "old text");
+        assert_eq!(w.warnings[1].code, "plan.travel-clamped");
+        assert_eq!(w.warnings[1].fields["moves"], 2);
+    }
+}
