@@ -140,10 +140,12 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     };
     let opts = SliceOptions {
         input: a.input.clone(),
+        input_bytes: None,
         output: a.output.clone(),
         profile,
         layer_height_mm,
         binary: a.binary.then_some(true),
+        transform: job::Transform::IDENTITY,
         placement: if a.keep_position {
             PlacementMode::Keep
         } else {
