@@ -120,13 +120,26 @@ pub struct Source {
     pub mesh: crate::mesh::MeshReport,
 }
 
-/// Placement of the part in build-plane coordinates.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// Placement of the part in build-plane coordinates: a point p of the file lands at
+/// R·(S·p) + `translate_mm`, S the `scale` and R the `rotate_deg` rotations (identity when
+/// absent).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Placement {
-    /// "center" (XY box centred on the field, lowest point at z = 0) or "keep" (file coordinates).
+    /// "center" (XY box centred on the field, lowest point at z = 0), "keep" (file
+    /// coordinates) or "position" (XY box centred on `position_mm`, lowest point at z = 0).
     pub mode: String,
-    /// Translation added to file coordinates, mm.
+    /// Translation added to the (scaled, rotated) file coordinates, mm.
     pub translate_mm: [f64; 3],
+    /// Scale factors along the file's X, Y and Z axes, applied first (absent: 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<[f64; 3]>,
+    /// Rotations about the X, Y and Z axes, degrees, applied in that order after the
+    /// scale (absent: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotate_deg: Option<[f64; 3]>,
+    /// Where mode "position" put the centre of the part's XY box, mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_mm: Option<[f64; 2]>,
 }
 
 /// Job-level settings.

@@ -112,7 +112,7 @@ pub(crate) struct Cli {
 
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
-    /// Slice a part (STL or OBJ) into a job bundle of mask PNGs and a manifest.
+    /// Slice parts (STL or OBJ) into job bundles of mask PNGs and a manifest, one each.
     #[command(after_help = slice::SLICE_EXIT_HELP)]
     Slice(slice::SliceArgs),
     /// Show or list machine profiles.

@@ -1,25 +1,31 @@
-//! `dmdsl slice`: a part into a job bundle.
+//! `dmdsl slice`: parts into job bundles, one after another.
 
 use clap::Args;
 use dmdsl::exec::report::hms;
 use dmdsl::geometry::distortion::DistortionChoice;
-use dmdsl::job::{self, PlacementMode, SliceOptions};
-use dmdsl::profile::{self, Profile};
+use dmdsl::job::{self, PlacementMode, SliceOptions, SliceSummary, Transform};
+use dmdsl::profile::{self, Override, Profile};
 use dmdsl::units::Positive;
-use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
+use serde::Serialize;
+use std::io::{IsTerminal, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-pub(crate) const SLICE_EXIT_HELP: &str = "Exit codes:
+pub(crate) const SLICE_EXIT_HELP: &str =
+    "Exit codes (with several parts, the worst of them: 2 > 1 > 0):
   0    the bundle was written (warnings and notes do not change this)
   1    the bundle was written, but a warning was denied (--strict, --deny-warnings,
        -W CODE=error)
-  2    usage or input error (unreadable or malformed part, bad profile, part does not fit
-       the field or the stage travel, the output path holds anything but a dmdsl bundle's
-       own files, or is a symbolic link); nothing was written
-  130  interrupted (Ctrl-C, SIGTERM or SIGHUP); nothing was written: an existing bundle at
-       the path is left as it was";
+  2    usage or input error (unreadable or malformed part, bad profile or --set, part does
+       not fit the field or the stage travel, the output path holds anything but a dmdsl
+       bundle's own files, or is a symbolic link); nothing was written for that part
+  130  interrupted (Ctrl-C, SIGTERM or SIGHUP): the part being sliced was not written (an
+       existing bundle at its path is left as it was) and the parts after it were not
+       sliced";
+
+/// The name standard input goes by in messages and in the manifest.
+const STDIN_NAME: &str = "<stdin>";
 
 /// Dithering of compensated grays.
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -45,16 +51,34 @@ enum CompensationArg {
 
 #[derive(Args)]
 pub(crate) struct SliceArgs {
-    /// The part: binary or ASCII STL, or OBJ.
-    input: PathBuf,
-    /// Bundle to write (default: <input stem>.dmdjob in the current directory).
-    #[arg(short, long)]
+    /// The parts: binary or ASCII STL, or OBJ; `-` reads an STL from stdin (then -o is
+    /// required). Several parts are sliced one after another, a bundle each.
+    #[arg(required = true, value_name = "PART")]
+    inputs: Vec<PathBuf>,
+    /// Bundle to write (default: <part stem>.dmdjob in the current directory); one part
+    /// only. Missing parent directories are created.
+    #[arg(short, long, conflicts_with = "output_dir")]
     output: Option<PathBuf>,
+    /// Directory the bundles go in, <part stem>.dmdjob each (created if missing).
+    #[arg(long, value_name = "DIR")]
+    output_dir: Option<PathBuf>,
     /// Machine profile: a built-in name or a TOML file.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
+    /// Change one key of the profile, e.g. --set exposure.layer_s=6 (repeatable; the value
+    /// read as TOML: a number, true/false, a string; a list entry by its index, as in
+    /// projector.0.mirror_x). Checked like a profile file; the manifest's machine records
+    /// the result.
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    set: Vec<String>,
+    /// Layer exposure in s (the same as --set exposure.layer_s=S).
+    #[arg(long, value_name = "S", allow_hyphen_values = true)]
+    exposure: Option<String>,
+    /// Number of bottom layers (the same as --set exposure.bottom_layers=N).
+    #[arg(long, value_name = "N", allow_hyphen_values = true)]
+    bottom_layers: Option<String>,
     /// Layer height in mm (default: the profile's).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     layer_height: Option<f64>,
     /// Binary masks: a pixel is lit when at least half of it is inside the section.
     #[arg(long)]
@@ -62,6 +86,24 @@ pub(crate) struct SliceArgs {
     /// Use the file's coordinates as build-plane coordinates instead of centring the part.
     #[arg(long)]
     keep_position: bool,
+    /// Put the centre of the part's XY bounding box at X,Y mm (build-plane coordinates, from
+    /// the field's bottom-left corner) instead of the field's centre; its lowest point
+    /// still goes to z = 0.
+    #[arg(
+        long,
+        value_name = "X,Y",
+        allow_hyphen_values = true,
+        conflicts_with = "keep_position"
+    )]
+    position: Option<String>,
+    /// Turn the part before placing it: DEG degrees about Z, or X,Y,Z degrees about the
+    /// axes, applied in X, Y, Z order (counter-clockwise seen from the positive axis).
+    #[arg(long, value_name = "DEG|X,Y,Z", allow_hyphen_values = true)]
+    rotate: Option<String>,
+    /// Scale the part before turning and placing it: one factor, or FX,FY,FZ per axis
+    /// (each > 0).
+    #[arg(long, value_name = "F|FX,FY,FZ", allow_hyphen_values = true)]
+    scale: Option<String>,
     /// Exit with code 1 if the mesh has defects (the bundle is still written). Same as
     /// -W mesh=error: open, non-manifold or backwards edges (notes such as degenerate
     /// facets do not count).
@@ -81,7 +123,8 @@ pub(crate) struct SliceArgs {
     /// the error (Floyd-Steinberg); off: one gray per zone/pixel.
     #[arg(long, value_enum, default_value = "auto")]
     dither: DitherArg,
-    /// Print a machine-readable summary on stdout.
+    /// Print a machine-readable summary on stdout: one JSON object for one part; for
+    /// several, one line per part (JSON Lines).
     #[arg(long)]
     json: bool,
     /// Lens distortion correction table (CSV x_mm,y_mm,seen_x_mm,seen_y_mm), or `off` to
@@ -99,6 +142,66 @@ impl SliceArgs {
     }
 }
 
+/// A part to slice and where its bundle goes (`None`: the default, `<stem>.dmdjob` in the
+/// current directory).
+struct Part {
+    input: PathBuf,
+    output: Option<PathBuf>,
+}
+
+/// What every part of one call shares.
+struct Job<'a> {
+    profile: &'a Profile,
+    layer_height_mm: Option<Positive>,
+    binary: Option<bool>,
+    transform: Transform,
+    placement: PlacementMode,
+    optics: dmdsl::optics::OpticsOptions,
+    distortion: DistortionChoice,
+    cancel: &'a AtomicBool,
+    show_progress: bool,
+}
+
+impl Job<'_> {
+    /// Slices one part (`bytes`: its content when read from stdin); `label` names it on
+    /// the progress line.
+    fn slice(
+        &self,
+        part: &Part,
+        bytes: Option<&[u8]>,
+        label: &str,
+    ) -> Result<SliceSummary, dmdsl::Error> {
+        let progress = |done: usize, total: usize| {
+            if done == total || done % 16 == 0 {
+                let mut e = std::io::stderr().lock();
+                let _ = write!(e, "\rslicing{label}: layer {done}/{total}");
+                if done == total {
+                    let _ = writeln!(e);
+                }
+            }
+        };
+        let opts = SliceOptions {
+            input: part.input.clone(),
+            input_bytes: bytes,
+            output: part.output.clone(),
+            profile: self.profile.clone(),
+            layer_height_mm: self.layer_height_mm,
+            binary: self.binary,
+            transform: self.transform,
+            placement: self.placement,
+            optics: self.optics,
+            progress: if self.show_progress {
+                Some(&progress)
+            } else {
+                None
+            },
+            cancel: Some(self.cancel),
+            distortion: self.distortion.clone(),
+        };
+        job::slice_to_bundle(&opts)
+    }
+}
+
 /// Runs `dmdsl slice`.
 pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     // First, so that an interrupt at any point (even while the profile and the part load)
@@ -108,7 +211,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     let policy = a
         .warnings
         .policy(if a.strict { &["mesh=error"] } else { &[] })?;
-    let mut profile = Profile::resolve(&a.profile)?;
+    let parts = parts(&a)?;
+    let overrides = overrides(&a)?;
+    let mut profile = Profile::resolve(&a.profile)?.with_overrides(&overrides)?;
     dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
     let optics = dmdsl::optics::OpticsOptions {
         mode: a.compensation.map(|c| match c {
@@ -128,82 +233,417 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             dmdsl::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
         })?),
     };
-    let show_progress = !quiet && !a.json && std::io::stderr().is_terminal();
-    let progress = |done: usize, total: usize| {
-        if done == total || done % 16 == 0 {
-            let mut e = std::io::stderr().lock();
-            let _ = write!(e, "\rslicing: layer {done}/{total}");
-            if done == total {
-                let _ = writeln!(e);
-            }
-        }
-    };
-    let opts = SliceOptions {
-        input: a.input.clone(),
-        output: a.output.clone(),
-        profile,
+    let job = Job {
+        profile: &profile,
         layer_height_mm,
         binary: a.binary.then_some(true),
-        placement: if a.keep_position {
-            PlacementMode::Keep
-        } else {
-            PlacementMode::Center
+        transform: transform(&a)?,
+        placement: match (&a.position, a.keep_position) {
+            (Some(p), _) => PlacementMode::At(position(p)?),
+            (None, true) => PlacementMode::Keep,
+            (None, false) => PlacementMode::Center,
         },
         optics,
-        progress: if show_progress { Some(&progress) } else { None },
-        cancel: Some(&cancel),
         distortion: match &a.distortion {
             None => DistortionChoice::Profile,
             Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
             Some(p) => DistortionChoice::Table(p.clone()),
         },
+        cancel: &cancel,
+        show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
-    let mut summary = job::slice_to_bundle(&opts)?;
-    summary.warnings = policy.apply(&summary.warnings);
-    let failed = dmdsl::warning::any_error(&summary.warnings);
-    if a.json {
-        let v = serde_json::json!({
-            "ok": !failed,
-            "bundle": summary.bundle,
-            "layers": summary.layers,
-            "warnings": summary.warnings,
-            "mesh": summary.mesh,
-            "totals": summary.totals,
-            "timings": summary.timings,
-            "distortion": summary.distortion,
-        });
-        super::print_json(&v)?;
-    } else if !quiet {
-        super::print_warnings(&summary.warnings, "");
-        if let Some(d) = &summary.distortion {
-            println!("{}", d.summary());
+    if let [part] = &parts[..] {
+        let stdin = match is_stdin(&a.inputs[0]) {
+            true => Some(read_stdin(&cancel)?),
+            false => None,
+        };
+        let mut summary = job.slice(part, stdin.as_deref(), "")?;
+        summary.warnings = policy.apply(&summary.warnings);
+        let failed = dmdsl::warning::any_error(&summary.warnings);
+        if a.json {
+            let v = serde_json::json!({
+                "ok": !failed,
+                "bundle": summary.bundle,
+                "layers": summary.layers,
+                "warnings": summary.warnings,
+                "mesh": summary.mesh,
+                "totals": summary.totals,
+                "timings": summary.timings,
+                "distortion": summary.distortion,
+            });
+            super::print_json(&v)?;
+        } else if !quiet {
+            print_summary(&summary, "");
         }
-        println!(
-            "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
-            summary.bundle.display(),
-            summary.layers,
-            summary.totals.height_mm,
-            hms(summary.totals.print_time_s),
-            summary.totals.resin_volume_ml,
-            summary.timings.total_s
+        if failed {
+            if !quiet && !a.json {
+                eprintln!("dmdsl: warnings denied (see the error lines above); exit code 1");
+            }
+            return Ok(1);
+        }
+        return Ok(0);
+    }
+    slice_each(&job, &parts, &policy, a.json, quiet)
+}
+
+/// Slices several parts one after another (each uses every thread), a line of output per
+/// part; a part that fails does not stop the others, an interrupt stops all. Returns the
+/// worst exit code (2 > 1 > 0, or 130).
+fn slice_each(
+    job: &Job,
+    parts: &[Part],
+    policy: &dmdsl::warning::Policy,
+    json: bool,
+    quiet: bool,
+) -> anyhow::Result<u8> {
+    let (mut failed, mut denied) = (0, 0);
+    for (i, part) in parts.iter().enumerate() {
+        let input = part.input.display().to_string();
+        let result = if job.cancel.load(Ordering::Relaxed) {
+            Err(dmdsl::Error::Interrupted)
+        } else {
+            job.slice(part, None, &format!(" {input}"))
+        };
+        match result {
+            Ok(mut summary) => {
+                summary.warnings = policy.apply(&summary.warnings);
+                let ok = !dmdsl::warning::any_error(&summary.warnings);
+                denied += usize::from(!ok);
+                if json {
+                    print_line(&PartLine {
+                        schema_version: super::SCHEMA_VERSION,
+                        ok,
+                        input,
+                        summary: Some(&summary),
+                        error: None,
+                    })?;
+                } else if !quiet {
+                    print_summary(&summary, &format!("{input}: "));
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                let interrupted = matches!(e, dmdsl::Error::Interrupted);
+                // An error names its file; the few that do not (an interrupt) get the part's.
+                let (file, message) = match e.file() {
+                    Some(f) => (f, e.to_string()),
+                    None => (input.clone(), format!("{input}: {e}")),
+                };
+                let message = crate::printable(&message);
+                eprintln!("dmdsl: error: {message}");
+                if json {
+                    print_line(&PartLine {
+                        schema_version: super::SCHEMA_VERSION,
+                        ok: false,
+                        input,
+                        summary: None,
+                        error: Some(Failure {
+                            code: e.code(),
+                            file,
+                            message,
+                        }),
+                    })?;
+                }
+                if interrupted {
+                    let left = parts.len() - i - 1;
+                    if left > 0 {
+                        eprintln!(
+                            "dmdsl: the {left} {} after it {} not sliced",
+                            if left == 1 { "part" } else { "parts" },
+                            if left == 1 { "was" } else { "were" }
+                        );
+                    }
+                    return Ok(130);
+                }
+            }
+        }
+    }
+    let code = if failed > 0 {
+        2
+    } else if denied > 0 {
+        1
+    } else {
+        0
+    };
+    if code != 0 && !quiet && !json {
+        let mut what = Vec::new();
+        if failed > 0 {
+            what.push(format!("{failed} failed"));
+        }
+        if denied > 0 {
+            what.push(format!(
+                "{denied} {} denied warnings",
+                if failed > 0 { "had" } else { "failed on" }
+            ));
+        }
+        eprintln!(
+            "dmdsl: of {} parts, {} (see the error lines above); exit code {code}",
+            parts.len(),
+            what.join(", ")
         );
-        if let (Some(all), Some(c)) = (
-            summary.totals.all_layered_time_s,
-            summary.totals.continuous_layers,
-        ) {
-            println!(
-                "hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
-                summary.layers,
-                hms(all),
-                100.0 * (1.0 - summary.totals.print_time_s / all)
-            );
+    }
+    Ok(code)
+}
+
+/// One part's line of `--json` output when several parts are sliced.
+#[derive(Serialize)]
+struct PartLine<'a> {
+    schema_version: u32,
+    ok: bool,
+    /// The part as given on the command line.
+    input: String,
+    /// What a success reports (the fields of the one-part object but `ok`).
+    #[serde(flatten)]
+    summary: Option<&'a SliceSummary>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<Failure>,
+}
+
+/// Why a part failed.
+#[derive(Serialize)]
+struct Failure {
+    code: &'static str,
+    file: String,
+    message: String,
+}
+
+/// Prints `line` as one line of JSON on stdout.
+fn print_line(line: &PartLine) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{}", serde_json::to_string(line)?)?;
+    out.flush()?;
+    Ok(())
+}
+
+/// Prints a slicing's warnings (on stderr, after `prefix`) and its summary line.
+fn print_summary(summary: &SliceSummary, prefix: &str) {
+    super::print_warnings(&summary.warnings, prefix);
+    if let Some(d) = &summary.distortion {
+        println!("{prefix}{}", d.summary());
+    }
+    println!(
+        "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
+        summary.bundle.display(),
+        summary.layers,
+        summary.totals.height_mm,
+        hms(summary.totals.print_time_s),
+        summary.totals.resin_volume_ml,
+        summary.timings.total_s
+    );
+    if let (Some(all), Some(c)) = (
+        summary.totals.all_layered_time_s,
+        summary.totals.continuous_layers,
+    ) {
+        println!(
+            "{prefix}hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
+            summary.layers,
+            hms(all),
+            100.0 * (1.0 - summary.totals.print_time_s / all)
+        );
+    }
+}
+
+/// True for the part `-`: standard input.
+fn is_stdin(p: &Path) -> bool {
+    p.as_os_str() == "-"
+}
+
+/// The parts and their bundles' paths; refuses what cannot work before anything is read.
+fn parts(a: &SliceArgs) -> Result<Vec<Part>, dmdsl::Error> {
+    let usage = |m: String| Err(dmdsl::Error::Usage(m));
+    if a.output.as_deref().is_some_and(is_stdin) {
+        return usage(
+            "-o -: writing a bundle to stdout is not supported; give a directory path".into(),
+        );
+    }
+    if a.output_dir.as_deref().is_some_and(is_stdin) {
+        return usage(
+            "--output-dir -: writing bundles to stdout is not supported; give a directory path"
+                .into(),
+        );
+    }
+    let n = a.inputs.len();
+    if a.inputs.iter().any(|p| is_stdin(p)) && (n > 1 || a.output.is_none()) {
+        return usage(format!(
+            "reading a part from stdin (-) needs -o PATH for its bundle{}",
+            if n > 1 {
+                ", and -o takes a single part: slice the others in another call"
+            } else {
+                ""
+            }
+        ));
+    }
+    if n > 1 && a.output.is_some() {
+        return usage(format!(
+            "-o names the bundle of a single part, but {n} parts were given; use --output-dir DIR for several"
+        ));
+    }
+    let parts: Vec<Part> = a
+        .inputs
+        .iter()
+        .map(|input| Part {
+            input: if is_stdin(input) {
+                PathBuf::from(STDIN_NAME)
+            } else {
+                input.clone()
+            },
+            output: a.output.clone().or_else(|| {
+                a.output_dir
+                    .as_ref()
+                    .map(|d| d.join(job::default_output(input)))
+            }),
+        })
+        .collect();
+    for (i, p) in parts.iter().enumerate() {
+        let out = bundle_path(p);
+        if let Some(q) = parts[..i].iter().find(|q| bundle_path(q) == out) {
+            return usage(format!(
+                "{} and {} would both write {}; slice them in separate calls with -o",
+                q.input.display(),
+                p.input.display(),
+                out.display()
+            ));
         }
     }
-    if failed {
-        if !quiet && !a.json {
-            eprintln!("dmdsl: warnings denied (see the error lines above); exit code 1");
-        }
-        return Ok(1);
+    Ok(parts)
+}
+
+/// Where `part`'s bundle goes.
+fn bundle_path(part: &Part) -> PathBuf {
+    part.output
+        .clone()
+        .unwrap_or_else(|| job::default_output(&part.input))
+}
+
+/// The profile changes asked for: every `--set` in order, then `--exposure` and
+/// `--bottom-layers`.
+fn overrides(a: &SliceArgs) -> Result<Vec<Override>, dmdsl::Error> {
+    let mut o = a
+        .set
+        .iter()
+        .map(|s| Override::parse_set(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    if let Some(t) = &a.exposure {
+        let v = t
+            .trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| {
+                dmdsl::Error::Usage(format!(
+                    "--exposure must be a number of seconds > 0, got {t}"
+                ))
+            })?;
+        o.push(Override::new(
+            format!("--exposure {t}"),
+            "exposure.layer_s",
+            toml::Value::Float(v),
+        ));
     }
-    Ok(0)
+    if let Some(t) = &a.bottom_layers {
+        let n = t.trim().parse::<u32>().map_err(|_| {
+            dmdsl::Error::Usage(format!(
+                "--bottom-layers must be a whole number >= 0, got {t}"
+            ))
+        })?;
+        o.push(Override::new(
+            format!("--bottom-layers {t}"),
+            "exposure.bottom_layers",
+            toml::Value::Integer(n.into()),
+        ));
+    }
+    Ok(o)
+}
+
+/// The numbers of a comma-separated option value, if there are `counts` of them (one of)
+/// and each passes `ok`.
+fn numbers(text: &str, counts: &[usize], ok: impl Fn(f64) -> bool) -> Option<Vec<f64>> {
+    let v = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>().ok().filter(|&x| ok(x)))
+        .collect::<Option<Vec<f64>>>()?;
+    counts.contains(&v.len()).then_some(v)
+}
+
+/// The scale and rotation of `--scale` and `--rotate`.
+fn transform(a: &SliceArgs) -> Result<Transform, dmdsl::Error> {
+    let mut t = Transform::IDENTITY;
+    if let Some(s) = &a.scale {
+        let v = numbers(s, &[1, 3], |x| x.is_finite() && x > 0.0).ok_or_else(|| {
+            dmdsl::Error::Usage(format!(
+                "--scale must be a factor > 0 or three, FX,FY,FZ, got {s}"
+            ))
+        })?;
+        t.scale = if v.len() == 1 {
+            [v[0]; 3]
+        } else {
+            [v[0], v[1], v[2]]
+        };
+    }
+    if let Some(r) = &a.rotate {
+        let v = numbers(r, &[1, 3], f64::is_finite).ok_or_else(|| {
+            dmdsl::Error::Usage(format!(
+                "--rotate must be degrees about Z (DEG) or about X, Y and Z (X,Y,Z), got {r}"
+            ))
+        })?;
+        t.rotate_deg = if v.len() == 1 {
+            [0.0, 0.0, v[0]]
+        } else {
+            [v[0], v[1], v[2]]
+        };
+    }
+    Ok(t)
+}
+
+/// The point of `--position X,Y`.
+fn position(text: &str) -> Result<[f64; 2], dmdsl::Error> {
+    let v = numbers(text, &[2], f64::is_finite).ok_or_else(|| {
+        dmdsl::Error::Usage(format!(
+            "--position must be X,Y in mm (where the part's centre goes on the build field), got {text}"
+        ))
+    })?;
+    Ok([v[0], v[1]])
+}
+
+/// Reads an STL from standard input (at most [`dmdsl::mesh::MESH_MAX_BYTES`]). A reader
+/// thread reads it, so that an interrupt stops the command even while no data comes.
+fn read_stdin(cancel: &AtomicBool) -> Result<Vec<u8>, dmdsl::Error> {
+    use std::sync::mpsc::{channel, RecvTimeoutError};
+    let max = dmdsl::mesh::MESH_MAX_BYTES;
+    if std::io::stdin().is_terminal() {
+        return Err(dmdsl::Error::Usage(
+            "part - reads an STL from stdin, but stdin is a terminal: pipe or redirect a file into it (dmdsl slice - -o part.dmdjob < part.stl)".into(),
+        ));
+    }
+    let (tx, rx) = channel();
+    std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        let r = std::io::stdin()
+            .lock()
+            .take(max + 1)
+            .read_to_end(&mut bytes);
+        let _ = tx.send(r.map(|_| bytes));
+    });
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(Ok(bytes)) if bytes.len() as u64 > max => {
+                return Err(dmdsl::Error::input(
+                    STDIN_NAME,
+                    format!("is more than the {max} bytes a mesh file may have"),
+                ))
+            }
+            Ok(Ok(bytes)) => return Ok(bytes),
+            Ok(Err(e)) => return Err(dmdsl::Error::io(STDIN_NAME, e)),
+            Err(RecvTimeoutError::Timeout) if cancel.load(Ordering::Relaxed) => {
+                return Err(dmdsl::Error::Interrupted)
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(dmdsl::Error::io(
+                    STDIN_NAME,
+                    std::io::Error::other("the reader stopped"),
+                ))
+            }
+        }
+    }
 }

@@ -57,6 +57,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             placement: Placement {
                 mode: "keep".into(),
                 translate_mm: [0.0; 3],
+                ..Default::default()
             },
             mesh: Default::default(),
         },

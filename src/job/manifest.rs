@@ -3,7 +3,7 @@
 
 use super::layer::LayerOutput;
 use super::optics_records::OpticsRecords;
-use super::PlacementMode;
+use super::{PlacementMode, Transform};
 use crate::bundle::FitReport;
 use crate::bundle::{self, Generator, Layer, Manifest, Placement, Settings, Source, Totals};
 use crate::error::{Error, Result};
@@ -24,6 +24,8 @@ pub(super) struct PlacedPart<'a> {
     pub mesh: Mesh,
     /// Its bounding box in the file's coordinates, mm.
     pub bbox_in_file: [[f64; 3]; 2],
+    /// The scale and rotation applied before placing it.
+    pub transform: Transform,
     /// The placement rule.
     pub mode: PlacementMode,
     /// The translation that placed it, mm.
@@ -167,6 +169,17 @@ fn source(part: &PlacedPart) -> Source {
         placement: Placement {
             mode: part.mode.as_str().into(),
             translate_mm: part.translate_mm,
+            scale: (part.transform.scale != [1.0; 3]).then_some(part.transform.scale),
+            rotate_deg: part
+                .transform
+                .rotate_deg
+                .iter()
+                .any(|&a| a != 0.0)
+                .then_some(part.transform.rotate_deg),
+            position_mm: match part.mode {
+                PlacementMode::At(p) => Some(p),
+                _ => None,
+            },
         },
         mesh: part.mesh.report.clone(),
     }

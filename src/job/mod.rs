@@ -27,7 +27,7 @@ mod placement;
 
 pub use options::{default_output, SliceOptions, SliceSummary, Timings};
 pub use pipeline::BLOCK;
-pub use placement::{place_mesh, placement, PlacementMode};
+pub use placement::{place_mesh, placement, PlacementMode, Transform};
 
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
@@ -45,7 +45,7 @@ use manifest::PlacedPart;
 use mask_reuse::RecentPrismMasks;
 use optics_records::WrittenGrayMap;
 use pipeline::Control;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -83,7 +83,12 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     if control.cancelled() {
         return Err(Error::Interrupted);
     }
-    let writer = open_bundle(opts, &profile, &setup)?;
+    let out = opts
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&opts.input));
+    let made = MadeDirs::parents_of(&out)?;
+    let writer = open_bundle(&out, &profile, &setup)?;
     let (sliced, gray_map) = make_layers(&profile, &setup, &part, &writer, &control)?;
 
     let t_finish = Instant::now();
@@ -123,6 +128,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         return Err(Error::Interrupted);
     }
     let bundle = writer.finish(&manifest)?;
+    made.keep();
     let finish_s = t_finish.elapsed().as_secs_f64();
     Ok(SliceSummary {
         bundle,
@@ -171,17 +177,26 @@ fn load_and_place<'a>(
     profile: &mut Profile,
 ) -> Result<(SetUp, PlacedPart<'a>)> {
     let path = opts.input.as_path();
-    let (setup, loaded) = rayon::join(|| set_up(opts, profile), || read_model(path));
+    let (setup, loaded) = rayon::join(
+        || set_up(opts, profile),
+        || read_model(path, opts.input_bytes),
+    );
     let setup = setup?;
     let (sha256, mut mesh) = loaded?;
     let h = profile.slicing.layer_height_mm.get();
     let bbox_in_file = mesh.bbox();
+    opts.transform.validate().map_err(|msg| Error::Job {
+        path: path.into(),
+        msg,
+    })?;
+    opts.transform.apply(&mut mesh);
     let (translate_mm, layers) = place_mesh(path, &mut mesh, profile, opts.placement, h)?;
     let part = PlacedPart {
         path,
         sha256,
         mesh,
         bbox_in_file,
+        transform: opts.transform,
         mode: opts.placement,
         translate_mm,
         layers,
@@ -189,13 +204,61 @@ fn load_and_place<'a>(
     Ok((setup, part))
 }
 
-/// Creates the bundle's staging directory, with a mask folder per projector when tiled.
-fn open_bundle(opts: &SliceOptions, profile: &Profile, setup: &SetUp) -> Result<BundleWriter> {
-    let out = opts
-        .output
-        .clone()
-        .unwrap_or_else(|| default_output(&opts.input));
-    let writer = BundleWriter::create(&out)?;
+/// The directories made for a bundle's path: its missing parents, created before the
+/// bundle is opened and removed again (those still empty, deepest first) when the job
+/// fails, unless [`kept`](MadeDirs::keep).
+struct MadeDirs {
+    /// Created, outermost first.
+    dirs: Vec<PathBuf>,
+    keep: bool,
+}
+
+impl MadeDirs {
+    /// Creates the missing parent directories of `out`.
+    fn parents_of(out: &Path) -> Result<MadeDirs> {
+        let mut missing = Vec::new();
+        let mut parent = out.parent();
+        while let Some(d) = parent.filter(|d| !d.as_os_str().is_empty()) {
+            if d.exists() {
+                break;
+            }
+            missing.push(d.to_path_buf());
+            parent = d.parent();
+        }
+        let mut made = MadeDirs {
+            dirs: Vec::new(),
+            keep: false,
+        };
+        for d in missing.into_iter().rev() {
+            match std::fs::create_dir(&d) {
+                Ok(()) => made.dirs.push(d),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => return Err(Error::io(d, e)),
+            }
+        }
+        Ok(made)
+    }
+
+    /// Keeps the directories: the bundle is in place.
+    fn keep(mut self) {
+        self.keep = true;
+    }
+}
+
+impl Drop for MadeDirs {
+    fn drop(&mut self) {
+        if !self.keep {
+            for d in self.dirs.iter().rev() {
+                let _ = std::fs::remove_dir(d);
+            }
+        }
+    }
+}
+
+/// Creates the bundle's staging directory for `out`, with a mask folder per projector
+/// when tiled.
+fn open_bundle(out: &Path, profile: &Profile, setup: &SetUp) -> Result<BundleWriter> {
+    let writer = BundleWriter::create(out)?;
     if setup.tiler.is_some() {
         for k in 0..profile.projector.len() {
             writer.create_dir(&format!("masks/p{k}"))?;
@@ -300,12 +363,20 @@ fn set_up(opts: &SliceOptions, profile: &mut Profile) -> Result<SetUp> {
     })
 }
 
-/// Reads the model file: its SHA-256 and its mesh (loaded and validated).
-fn read_model(path: &Path) -> Result<(String, Mesh)> {
-    let bytes = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
+/// Reads the model file (or takes its `bytes`, already read): its SHA-256 and its mesh
+/// (loaded and validated).
+fn read_model(path: &Path, bytes: Option<&[u8]>) -> Result<(String, Mesh)> {
+    let read;
+    let bytes = match bytes {
+        Some(b) => b,
+        None => {
+            read = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
+            &read[..]
+        }
+    };
     let (sha, mesh) = rayon::join(
-        || bundle::sha256_hex(&bytes),
-        || mesh::load_bytes(path, &bytes),
+        || bundle::sha256_hex(bytes),
+        || mesh::load_bytes(path, bytes),
     );
     Ok((sha, mesh?))
 }

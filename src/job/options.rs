@@ -1,6 +1,6 @@
 //! What a job is asked ([`SliceOptions`]) and what it reports ([`SliceSummary`]).
 
-use super::PlacementMode;
+use super::{PlacementMode, Transform};
 use crate::bundle::FitReport;
 use crate::bundle::Totals;
 use crate::geometry::distortion::DistortionChoice;
@@ -16,6 +16,9 @@ use std::sync::atomic::AtomicBool;
 pub struct SliceOptions<'a> {
     /// The model file.
     pub input: PathBuf,
+    /// The model's bytes when they do not come from the file `input` (standard input): an
+    /// STL, binary or ASCII; `input` then only names the part in messages and the manifest.
+    pub input_bytes: Option<&'a [u8]>,
     /// Bundle path; `None`: `<input stem>.dmdjob` in the current directory.
     pub output: Option<PathBuf>,
     /// Machine profile (already resolved).
@@ -24,6 +27,8 @@ pub struct SliceOptions<'a> {
     pub layer_height_mm: Option<Positive>,
     /// Overrides the profile's binary setting.
     pub binary: Option<bool>,
+    /// Scale and rotation of the part, applied before it is placed.
+    pub transform: Transform,
     /// Placement rule.
     pub placement: PlacementMode,
     /// Light compensation (mode, dithering).
@@ -48,10 +53,12 @@ impl SliceOptions<'_> {
     ) -> SliceOptions<'static> {
         SliceOptions {
             input: input.into(),
+            input_bytes: None,
             output: Some(output.into()),
             profile,
             layer_height_mm: None,
             binary: None,
+            transform: Transform::default(),
             placement: PlacementMode::Center,
             optics: Default::default(),
             progress: None,

@@ -7,12 +7,15 @@ use crate::slice;
 use std::path::Path;
 
 /// Where the part goes on the build plane.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PlacementMode {
     /// XY bounding box centred on the field, lowest point at z = 0.
     Center,
     /// File coordinates are build-plane coordinates.
     Keep,
+    /// XY bounding box centred on this build-plane point (x, y mm from the field's
+    /// bottom-left corner), lowest point at z = 0.
+    At([f64; 2]),
 }
 
 impl PlacementMode {
@@ -21,8 +24,117 @@ impl PlacementMode {
         match self {
             PlacementMode::Center => "center",
             PlacementMode::Keep => "keep",
+            PlacementMode::At(_) => "position",
         }
     }
+}
+
+/// How the part is scaled and turned, about the origin of its file's coordinates, before
+/// it is placed: a point p becomes Rz·Ry·Rx·(S·p).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform {
+    /// Scale factors along X, Y and Z (each finite and > 0).
+    pub scale: [f64; 3],
+    /// Rotations about the X, Y and Z axes, degrees, applied in that order (after the
+    /// scale).
+    pub rotate_deg: [f64; 3],
+}
+
+impl Default for Transform {
+    fn default() -> Self {
+        Transform::IDENTITY
+    }
+}
+
+impl Transform {
+    /// No change.
+    pub const IDENTITY: Transform = Transform {
+        scale: [1.0; 3],
+        rotate_deg: [0.0; 3],
+    };
+
+    /// True when the transform changes nothing (then the mesh is left untouched).
+    pub fn is_identity(&self) -> bool {
+        self.scale == [1.0; 3] && self.rotate_deg.iter().all(|&a| a == 0.0)
+    }
+
+    /// Checks the numbers: scale factors finite and > 0 (a zero would flatten the part, a
+    /// negative one mirror it), angles finite. The error says which.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if let Some(f) = self.scale.iter().find(|f| !(f.is_finite() && **f > 0.0)) {
+            return Err(format!("scale factor {f} is not a finite number > 0"));
+        }
+        if let Some(a) = self.rotate_deg.iter().find(|a| !a.is_finite()) {
+            return Err(format!("rotation {a}° is not a finite angle"));
+        }
+        Ok(())
+    }
+
+    /// The 3×3 matrix R·S, rows first. Quarter turns are exact (cos 90° is 0, not
+    /// 6e-17), so a box turned by 90° keeps its edges on the pixel grid.
+    fn matrix(&self) -> [[f64; 3]; 3] {
+        let mut m = [[0.0; 3]; 3];
+        for (k, row) in m.iter_mut().enumerate() {
+            row[k] = self.scale[k];
+        }
+        for (axis, &deg) in self.rotate_deg.iter().enumerate() {
+            if deg != 0.0 {
+                m = mul(&rotation(axis, deg), &m);
+            }
+        }
+        m
+    }
+
+    /// Applies the transform to every vertex of `mesh`.
+    pub fn apply(&self, mesh: &mut Mesh) {
+        if self.is_identity() {
+            return;
+        }
+        let m = self.matrix();
+        for v in &mut mesh.vertices {
+            let p = *v;
+            for (k, row) in m.iter().enumerate() {
+                v[k] = row[0] * p[0] + row[1] * p[1] + row[2] * p[2];
+            }
+        }
+    }
+}
+
+/// Cosine and sine of `deg` degrees, exact for multiples of 90°.
+fn cos_sin(deg: f64) -> (f64, f64) {
+    let turns = deg / 90.0;
+    if turns == turns.round() && turns.abs() < 1e15 {
+        match (turns as i64).rem_euclid(4) {
+            0 => (1.0, 0.0),
+            1 => (0.0, 1.0),
+            2 => (-1.0, 0.0),
+            _ => (0.0, -1.0),
+        }
+    } else {
+        let (s, c) = deg.to_radians().sin_cos();
+        (c, s)
+    }
+}
+
+/// The rotation by `deg` degrees about axis `axis` (0 = X, 1 = Y, 2 = Z), right-handed.
+fn rotation(axis: usize, deg: f64) -> [[f64; 3]; 3] {
+    let (c, s) = cos_sin(deg);
+    match axis {
+        0 => [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
+        1 => [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
+        _ => [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+    }
+}
+
+/// The matrix product a·b.
+fn mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    m
 }
 
 /// Computes the translation that places `bbox` on the field, or an error if it cannot fit.
@@ -50,6 +162,22 @@ pub fn placement(
             field_h / 2.0 - (lo[1] + hi[1]) / 2.0,
             -lo[2],
         ],
+        PlacementMode::At([x, y]) => {
+            let t = [x - (lo[0] + hi[0]) / 2.0, y - (lo[1] + hi[1]) / 2.0, -lo[2]];
+            let (x0, x1, y0, y1) = (lo[0] + t[0], hi[0] + t[0], lo[1] + t[1], hi[1] + t[1]);
+            let eps = 1e-9;
+            if !(x0 >= -eps && y0 >= -eps && x1 <= field_w + eps && y1 <= field_h + eps) {
+                return Err(Error::Job {
+                    path: path.into(),
+                    msg: format!(
+                        "with --position {},{} the part spans x {x0:.3}..{x1:.3}, y {y0:.3}..{y1:.3} mm, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
+                        mm(x),
+                        mm(y)
+                    ),
+                });
+            }
+            t
+        }
         PlacementMode::Keep => {
             let eps = 1e-9;
             if lo[0] < -eps || lo[1] < -eps || hi[0] > field_w + eps || hi[1] > field_h + eps {
@@ -176,8 +304,69 @@ mod tests {
     }
 
     #[test]
+    fn position_centres_the_box_there_or_refuses_a_part_off_the_field() {
+        let p = Path::new("p.stl");
+        let t = placement(p, BOX, 10.0, 8.0, PlacementMode::At([3.0, 6.5])).unwrap();
+        assert_eq!(t, [0.0, 3.5, -3.0]);
+        let e = placement(p, BOX, 10.0, 8.0, PlacementMode::At([9.0, 4.0]))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "p.stl: with --position 9,4 the part spans x 7.000..11.000, y 3.000..5.000 mm, outside the build field 0..10.000 x 0..8.000 mm"
+        );
+    }
+
+    #[test]
+    fn transforms_scale_then_turn_x_y_z_and_quarter_turns_are_exact() {
+        let turn = |scale: [f64; 3], rotate_deg: [f64; 3], p: [f64; 3]| {
+            let mut mesh =
+                crate::mesh::Mesh::from_soup(&crate::mesh::cube_soup(1.0, [0.0; 3]), "stl-binary");
+            mesh.vertices = vec![p];
+            Transform { scale, rotate_deg }.apply(&mut mesh);
+            mesh.vertices[0]
+        };
+        // 90° about Z: x → y, y → −x, exactly.
+        assert_eq!(
+            turn([1.0; 3], [0.0, 0.0, 90.0], [2.0, 1.0, 3.0]),
+            [-1.0, 2.0, 3.0]
+        );
+        assert_eq!(
+            turn([1.0; 3], [0.0, 0.0, -270.0], [2.0, 1.0, 3.0]),
+            [-1.0, 2.0, 3.0]
+        );
+        // Scale first, then X (y → z), then Z (x → y).
+        assert_eq!(
+            turn([2.0, 3.0, 1.0], [90.0, 0.0, 90.0], [1.0, 1.0, 0.0]),
+            [0.0, 2.0, 3.0]
+        );
+        let r = turn([1.0; 3], [0.0, 0.0, 45.0], [1.0, 0.0, 0.0]);
+        assert!((r[0] - 0.5f64.sqrt()).abs() < 1e-15 && (r[1] - 0.5f64.sqrt()).abs() < 1e-15);
+        assert!(Transform::IDENTITY.is_identity());
+        for bad in [[0.0, 1.0, 1.0], [f64::NAN, 1.0, 1.0], [1.0, -1.0, 1.0]] {
+            let t = Transform {
+                scale: bad,
+                ..Transform::IDENTITY
+            };
+            assert!(t
+                .validate()
+                .unwrap_err()
+                .contains("is not a finite number > 0"));
+        }
+        let t = Transform {
+            rotate_deg: [0.0, f64::INFINITY, 0.0],
+            ..Transform::IDENTITY
+        };
+        assert!(t.validate().is_err());
+    }
+
+    #[test]
     fn a_part_larger_than_the_field_does_not_fit_either_way() {
-        for mode in [PlacementMode::Center, PlacementMode::Keep] {
+        for mode in [
+            PlacementMode::Center,
+            PlacementMode::Keep,
+            PlacementMode::At([5.0, 4.0]),
+        ] {
             let e = placement(Path::new("p.stl"), BOX, 3.0, 8.0, mode).unwrap_err();
             assert!(
                 e.to_string().starts_with("p.stl: part is 4.000 x 2.000 mm"),

@@ -10,6 +10,7 @@
 mod obj;
 mod stl;
 
+pub use crate::input::MESH_MAX_BYTES;
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};

@@ -10,16 +10,19 @@
 //! itself (here), the process sections (`[recoat]`, `[peel]`, `[hybrid]`: [`Recoat`],
 //! [`Peel`], [`Hybrid`]), the lens correction table ([`DistortionConfig`]), the overlap
 //! ramp ([`BlendCurve`]) and the light calibration a projector carries ([`calibration`]).
+//! [`Override`] changes single keys of a resolved profile (`slice --set`).
 //! The algorithms that use them (`plan`, `geometry`, `optics`) sit above it.
 
 mod blend;
 pub mod calibration;
 mod distortion;
+mod overrides;
 mod process;
 
 pub use blend::BlendCurve;
 pub use calibration::Calibration;
 pub use distortion::DistortionConfig;
+pub use overrides::Override;
 pub use process::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
 
 use crate::error::{Error, Result};

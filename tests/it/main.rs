@@ -1,7 +1,8 @@
 //! Integration tests: one test binary that runs `dmdsl` as a user would and checks the
-//! files it writes. Each module covers one command; `layers` checks the source tree's module
+//! files it writes. Each module covers one command (`batch`: `slice` in scripts and CI); `layers` checks the source tree's module
 //! dependencies.
 
+mod batch;
 mod calibrate;
 mod common;
 mod fuzz;
