@@ -71,7 +71,9 @@ impl<'a> Checker<'a> {
                     time_s: Some(total_s),
                     kind: "estimate",
                     message: format!(
-                        "simulated job time {total_s:.3} s differs from the manifest's totals.print_time_s {est:.3} s by {:+.2} % (tolerance 1 %)",
+                        "simulated job time {} s differs from the manifest's totals.print_time_s {} s by {:+.2} % (tolerance 1 %)",
+                        fixed(total_s, 3),
+                        fixed(est, 3),
                         pct(total_s, est)
                     ),
                     file: None,
@@ -79,6 +81,26 @@ impl<'a> Checker<'a> {
             }
         }
         self.violations
+    }
+}
+
+/// A value from the manifest for a message, as written (`25`, `0.9`), in scientific
+/// notation when that would be a long run of digits (a tampered bundle's `1e300`).
+fn num(v: f64) -> String {
+    if v == 0.0 || (v.is_finite() && (1e-4..1e9).contains(&v.abs())) {
+        format!("{v}")
+    } else {
+        format!("{v:.4e}")
+    }
+}
+
+/// `v` with `decimals` decimals, or in scientific notation beyond 10⁹ (never hundreds of
+/// digits).
+fn fixed(v: f64, decimals: usize) -> String {
+    if v.is_finite() && v.abs() >= 1e9 {
+        format!("{v:.4e}")
+    } else {
+        format!("{v:.decimals$}")
     }
 }
 
@@ -118,8 +140,9 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "light-during-move",
                     format!(
-                        "light on while the stage moves from {:.4} to {:.4} mm in layer {i}, which is planned as layered",
-                        s.from_mm, s.to_mm
+                        "light on while the stage moves from {} to {} mm in layer {i}, which is planned as layered",
+                        fixed(s.from_mm, 4),
+                        fixed(s.to_mm, 4)
                     ),
                 );
             }
@@ -129,8 +152,8 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "mask",
                     format!(
-                        "light on at {:.3} s before layer {i}'s mask is on the DMD",
-                        s.t0
+                        "light on at {} s before layer {i}'s mask is on the DMD",
+                        fixed(s.t0, 3)
                     ),
                 );
             }
@@ -145,10 +168,12 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "travel",
                     format!(
-                        "layer {i}: {} from {:.4} to {:.4} mm leaves the stage travel [{lo}, {hi}] mm",
+                        "layer {i}: {} from {} to {} mm leaves the stage travel [{}, {}] mm",
                         s.kind.name(),
-                        s.from_mm,
-                        s.to_mm
+                        fixed(s.from_mm, 4),
+                        fixed(s.to_mm, 4),
+                        num(lo),
+                        num(hi)
                     ),
                 );
             }
@@ -170,8 +195,10 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "speed",
                     format!(
-                        "layer {i}: {} at {speed} mm/s exceeds the stage's max_speed_mm_s {vmax}",
-                        s.kind.name()
+                        "layer {i}: {} at {} mm/s exceeds the stage's max_speed_mm_s {}",
+                        s.kind.name(),
+                        num(speed),
+                        num(vmax)
                     ),
                 );
             }
@@ -182,8 +209,10 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "accel",
                     format!(
-                        "layer {i}: {} at {accel} mm/s² exceeds the stage's max_accel_mm_s2 {amax}",
-                        s.kind.name()
+                        "layer {i}: {} at {} mm/s² exceeds the stage's max_accel_mm_s2 {}",
+                        s.kind.name(),
+                        num(accel),
+                        num(amax)
                     ),
                 );
             }
@@ -196,8 +225,9 @@ impl Sink for Checker<'_> {
                     s.t0,
                     "position",
                     format!(
-                        "layer {i} exposed with the stage at {:.4} mm, its z_mm is {z}",
-                        s.from_mm
+                        "layer {i} exposed with the stage at {} mm, its z_mm is {}",
+                        fixed(s.from_mm, 4),
+                        num(z)
                     ),
                 );
             }
@@ -216,8 +246,9 @@ impl Sink for Checker<'_> {
                 r.start_s,
                 "position",
                 format!(
-                    "layer {i}: z_mm {} but the layers' thicknesses put its top at {expected:.6} mm",
-                    layer.z_mm
+                    "layer {i}: z_mm {} but the layers' thicknesses put its top at {} mm",
+                    num(layer.z_mm),
+                    fixed(expected, 6)
                 ),
             );
         }
@@ -233,8 +264,9 @@ impl Sink for Checker<'_> {
                     end,
                     "position",
                     format!(
-                        "layer {i}'s sweep ends at {e:.4} mm, its z_mm is {}",
-                        layer.z_mm
+                        "layer {i}'s sweep ends at {} mm, its z_mm is {}",
+                        fixed(e, 4),
+                        num(layer.z_mm)
                     ),
                 );
             }
@@ -247,8 +279,9 @@ impl Sink for Checker<'_> {
                 end,
                 "dose",
                 format!(
-                    "layer {i} received {:.6} s of light, its exposure_s is {want}",
-                    r.light_s
+                    "layer {i} received {} s of light, its exposure_s is {}",
+                    fixed(r.light_s, 6),
+                    num(want)
                 ),
             );
         }
@@ -261,8 +294,9 @@ impl Sink for Checker<'_> {
                 end,
                 "estimate",
                 format!(
-                    "layer {i} takes {:.3} s, the manifest's time_s is {est:.3} s ({:+.2} %, tolerance 1 %)",
-                    r.time_s,
+                    "layer {i} takes {} s, the manifest's time_s is {} s ({:+.2} %, tolerance 1 %)",
+                    fixed(r.time_s, 3),
+                    fixed(est, 3),
                     pct(r.time_s, est)
                 ),
             );
@@ -501,5 +535,16 @@ mod tests {
             }],
         );
         assert_eq!(v, vec![]);
+    }
+
+    #[test]
+    fn huge_values_never_print_hundreds_of_digits() {
+        assert_eq!(num(25.0), "25");
+        assert_eq!(num(0.9), "0.9");
+        assert_eq!(num(1e300), "1.0000e300");
+        assert_eq!(num(f64::INFINITY), "inf");
+        assert_eq!(fixed(500.0, 4), "500.0000");
+        assert_eq!(fixed(1e300, 4), "1.0000e300");
+        assert_eq!(fixed(-1e12, 3), "-1.0000e12");
     }
 }
