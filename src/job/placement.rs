@@ -83,7 +83,7 @@ pub const MAX_LAYERS: usize = 1_000_000;
 /// Places a loaded mesh on the profile's field by `mode` (translating it) and returns the
 /// translation and the number of layers of height `h`. A part that does not fit the field,
 /// is thinner than one layer, is taller than the stage travels, or needs more than
-/// [`MAX_LAYERS`] layers is an error naming `path`, found before anything is sliced.
+/// `MAX_LAYERS` (10⁶) layers is an error naming `path`, found before anything is sliced.
 /// `slice_to_bundle`, the benchmarks and tools that drive the stages themselves share this.
 pub fn place_mesh(
     path: &Path,
