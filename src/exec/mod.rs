@@ -7,7 +7,8 @@
 //! pure trapezoid math of [`crate::motion`]. Stages:
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
-//!    the projector's size and bit depth), all problems collected, in parallel.
+//!    the projector's size and bit depth, its own file, lit where the layer's section is
+//!    and enough for its area) and gray map, all problems collected, in parallel.
 //! 2. [`sim`]: event-based simulation of the steps under the bundle's timing contract,
 //!    with optional fault injection, streaming [`sim::Segment`]s to sinks.
 //! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
