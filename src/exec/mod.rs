@@ -2,7 +2,9 @@
 //! lift stage, shutter and DMD.
 //!
 //! The executor reads only the bundle (`job.json` through [`crate::bundle::Manifest`] and
-//! the mask files); the machine comes from the resolved profile embedded in the manifest.
+//! the mask files); the machine comes from the resolved profile embedded in the manifest,
+//! or from the profile given as [`RunOptions::machine`] (`--machine`) to check the job
+//! against the machine it will run on.
 //! It shares nothing with the slicer and the planner except the bundle format and the
 //! pure trapezoid math of [`crate::motion`]. Stages:
 //!
@@ -29,7 +31,8 @@ pub mod testutil;
 
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};
-use report::{LayerTiming, PlotCollector, Report, Stats, Timings};
+use crate::profile::Profile;
+use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
 use serde::Serialize;
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
@@ -64,6 +67,10 @@ pub struct RunOptions {
     pub plot: Option<PathBuf>,
     /// Restrict the trace and the plot to these layers, e.g. "10..20" (inclusive).
     pub layers: Option<String>,
+    /// Check the job against this machine instead of the one the manifest embeds: its
+    /// stage, shutter and DMD are simulated, its projectors' sizes and placement verified
+    /// (`--machine`).
+    pub machine: Option<Profile>,
 }
 
 /// Parses a layer range for a job of `n` layers: `A..B` or `A..=B` (both inclusive),
@@ -98,18 +105,34 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
     Ok(a..=b)
 }
 
-/// Verifies and simulates the bundle at `dir`.
+/// Verifies and simulates the bundle at `dir`, on the machine the manifest embeds or on
+/// [`RunOptions::machine`].
 ///
 /// Errors (exit code 2) are an unreadable bundle or manifest, an invalid machine profile
-/// in it, bad options, or a trace/plot file that cannot be written. Problems with the job
-/// itself are [`Violation`]s in the report.
+/// (the one simulated), bad options, or a trace/plot file that cannot be written.
+/// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let manifest = Manifest::read(dir)?;
-    manifest.machine.validate().map_err(|msg| Error::Bundle {
-        path: dir.join(MANIFEST),
-        msg: format!("machine profile: {msg}"),
-    })?;
+    let mut manifest = Manifest::read(dir)?;
+    let machine_check = match &opts.machine {
+        None => {
+            manifest.machine.validate().map_err(|msg| Error::Bundle {
+                path: dir.join(MANIFEST),
+                msg: format!("machine profile: {msg}"),
+            })?;
+            None
+        }
+        Some(p) => {
+            p.validate().map_err(|msg| Error::Profile {
+                origin: p.name.clone(),
+                msg,
+            })?;
+            Some(MachineCheck {
+                profile: p.name.clone(),
+                differences: machine_differences(&manifest.machine, p),
+            })
+        }
+    };
     let n = manifest.layers.len();
     for f in &opts.faults {
         if f.layer >= n {
@@ -129,8 +152,15 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let read_s = t0.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
-    let verified = verify::verify(dir, &manifest);
+    let verified = match &opts.machine {
+        Some(p) => verify::verify_on(dir, &manifest, p),
+        None => verify::verify(dir, &manifest),
+    };
     let verify_s = t1.elapsed().as_secs_f64();
+    if let Some(p) = &opts.machine {
+        // From here on the job runs on the given machine.
+        manifest.machine = p.clone();
+    }
 
     let t2 = Instant::now();
     let m = Machine::from_profile(&manifest.machine);
@@ -220,6 +250,7 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let estimate_s = manifest.totals.print_time_s;
     Ok(Report {
         bundle: dir.display().to_string(),
+        machine: machine_check,
         layers: n,
         layers_completed: outcome.layers.iter().filter(|r| r.completed).count(),
         masks_verified: verified.masks,
@@ -250,6 +281,96 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
             simulate_s,
         },
     })
+}
+
+/// What differs between the machine a job was compiled for (`job`) and `machine`, in the
+/// keys the executor uses: stage travel, home, limits and steps, shutter and DMD
+/// latencies, and each projector's size, pixel, offset and mirroring.
+pub fn machine_differences(job: &Profile, machine: &Profile) -> Vec<MachineDifference> {
+    let mut out = Vec::new();
+    let mut cmp = |key: String, a: String, b: String| {
+        if a != b {
+            out.push(MachineDifference {
+                key,
+                job: a,
+                machine: b,
+            });
+        }
+    };
+    let num = |v: f64| format!("{v}");
+    let (s, t) = (&job.stage, &machine.stage);
+    for (key, a, b) in [
+        ("stage.travel_min_mm", s.travel_min_mm, t.travel_min_mm),
+        ("stage.travel_max_mm", s.travel_max_mm, t.travel_max_mm),
+        ("stage.home_mm", s.home_mm, t.home_mm),
+        (
+            "stage.max_speed_mm_s",
+            s.max_speed_mm_s.get(),
+            t.max_speed_mm_s.get(),
+        ),
+        (
+            "stage.max_accel_mm_s2",
+            s.max_accel_mm_s2.get(),
+            t.max_accel_mm_s2.get(),
+        ),
+        (
+            "stage.steps_per_mm",
+            s.steps_per_mm.get(),
+            t.steps_per_mm.get(),
+        ),
+        (
+            "shutter.open_s",
+            job.shutter.open_s.get(),
+            machine.shutter.open_s.get(),
+        ),
+        (
+            "shutter.close_s",
+            job.shutter.close_s.get(),
+            machine.shutter.close_s.get(),
+        ),
+        ("dmd.load_s", job.dmd.load_s.get(), machine.dmd.load_s.get()),
+    ] {
+        cmp(key.into(), num(a), num(b));
+    }
+    cmp(
+        "projectors".into(),
+        job.projector.len().to_string(),
+        machine.projector.len().to_string(),
+    );
+    for (k, (a, b)) in job.projector.iter().zip(&machine.projector).enumerate() {
+        let key = |f: &str| format!("projector[{k}].{f}");
+        cmp(
+            key("width_px"),
+            a.width_px.to_string(),
+            b.width_px.to_string(),
+        );
+        cmp(
+            key("height_px"),
+            a.height_px.to_string(),
+            b.height_px.to_string(),
+        );
+        cmp(
+            key("pixel_mm"),
+            num(a.pixel_mm.get()),
+            num(b.pixel_mm.get()),
+        );
+        cmp(
+            key("offset_px"),
+            format!("{:?}", a.offset_px),
+            format!("{:?}", b.offset_px),
+        );
+        cmp(
+            key("mirror_x"),
+            a.mirror_x.to_string(),
+            b.mirror_x.to_string(),
+        );
+        cmp(
+            key("mirror_y"),
+            a.mirror_y.to_string(),
+            b.mirror_y.to_string(),
+        );
+    }
+    out
 }
 
 /// Simulates a manifest's steps without reading any mask: the invariants and timing checks
@@ -307,5 +428,32 @@ mod tests {
             let e = parse_layer_range(bad, 10).unwrap_err().to_string();
             assert!(e.starts_with("--layers"), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn machine_differences_name_key_and_both_values() {
+        let job = Profile::default_profile();
+        assert!(machine_differences(&job, &job).is_empty());
+        let mut real = job.clone();
+        real.stage.max_speed_mm_s = crate::units::Positive::new(2.5).unwrap();
+        real.projector[0].mirror_y = true;
+        real.name = "renamed".into();
+        real.description = "only the keys the executor uses count".into();
+        let d = machine_differences(&job, &real);
+        let got: Vec<(&str, &str, &str)> = d
+            .iter()
+            .map(|d| (d.key.as_str(), d.job.as_str(), d.machine.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            vec![
+                ("stage.max_speed_mm_s", "10", "2.5"),
+                ("projector[0].mirror_y", "false", "true"),
+            ]
+        );
+        let tiled = Profile::resolve("tiled-2x1").unwrap();
+        let d = machine_differences(&job, &tiled);
+        assert_eq!(d[0].key, "projectors");
+        assert_eq!((d[0].job.as_str(), d[0].machine.as_str()), ("1", "2"));
     }
 }

@@ -650,3 +650,123 @@ fn a_job_without_layers_fails() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stdout(&o).trim_end().ends_with("FAILED"), "{}", stdout(&o));
 }
+
+#[test]
+fn machine_option_checks_the_job_on_the_real_machine() {
+    let (dir, b) = sliced("machine");
+    let clean = job(&b);
+    let (code, r) = run_json(&dir, &["--machine", "xu2010-topdown"]);
+    assert_eq!(code, 0, "{r}");
+    assert_eq!(r["machine"]["profile"], "xu2010-topdown");
+    assert_eq!(r["machine"]["differences"], serde_json::json!([]));
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "xu2010-topdown"]);
+    assert!(
+        stdout(&o).contains(
+            "machine xu2010-topdown (--machine): the same stage, shutter, DMD and projectors as the job's"
+        ),
+        "{}",
+        stdout(&o)
+    );
+    let (_, r) = run_json(&dir, &[]);
+    assert_eq!(r["machine"], Value::Null);
+
+    // The bundle's own machine raised to 50 mm/s, and layer 1's return move (5 mm at
+    // 1 mm/s, 50 mm/s²) at 25 mm/s with the estimates to match: clean on the embedded
+    // machine, a violation on the real one.
+    let mut j = job(&b);
+    j["machine"]["stage"]["max_speed_mm_s"] = 50.0.into();
+    let step = &mut j["layers"][1]["steps"][1];
+    assert_eq!(
+        (step["kind"].as_str(), step["speed_mm_s"].as_f64()),
+        (Some("move"), Some(1.0))
+    );
+    step["speed_mm_s"] = 25.0.into();
+    let saved =
+        dmdsl::motion::move_time(5.0, 1.0, 50.0) - dmdsl::motion::move_time(5.0, 25.0, 50.0);
+    for key in ["/layers/1/time_s", "/totals/print_time_s"] {
+        let t = j.pointer_mut(key).unwrap();
+        *t = (t.as_f64().unwrap() - saved).into();
+    }
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 0, "{r}");
+    let (code, r) = run_json(&dir, &["--machine", "xu2010-topdown"]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(
+        r["machine"]["differences"],
+        serde_json::json!([{"key": "stage.max_speed_mm_s", "job": "50", "machine": "10"}])
+    );
+    let v = &r["violations"][0];
+    assert_eq!(
+        (v["kind"].as_str(), v["layer"].as_u64()),
+        (Some("speed"), Some(1))
+    );
+    assert!(v["message"]
+        .as_str()
+        .unwrap()
+        .contains("25 mm/s exceeds the stage's max_speed_mm_s 10"));
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "xu2010-topdown"]);
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        out.contains(
+            "machine xu2010-topdown (--machine) differs from the job's: stage.max_speed_mm_s: job 50, machine 10\n"
+        ),
+        "{out}"
+    );
+    set_job(&b, &clean);
+
+    // A machine file whose projector is narrower: the masks do not fit it.
+    let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    let toml = stdout(&o).replace("width_px = 1024", "width_px = 1000");
+    std::fs::write(dir.join("narrow.toml"), toml).unwrap();
+    let (code, r) = run_json(&dir, &["--machine", "narrow.toml"]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(
+        r["machine"]["differences"],
+        serde_json::json!([{"key": "projector[0].width_px", "job": "1024", "machine": "1000"}])
+    );
+    // The gray map is checked against the machine's projector too.
+    assert_eq!(
+        kinds(&r),
+        vec![
+            "optics-file",
+            "mask-format",
+            "mask-format",
+            "mask-format",
+            "mask-format"
+        ],
+        "{r}"
+    );
+    assert!(r["violations"][1]["message"]
+        .as_str()
+        .unwrap()
+        .contains("PNG is 1024x768, projector p0 is 1000x768"));
+
+    // More differences than the summary lists: the first four, then a count.
+    let o = run_in(&dir, &["profile", "show", "bottom-up"]);
+    let toml = stdout(&o).replace("load_s = 0.02", "load_s = 0.5");
+    std::fs::write(dir.join("other.toml"), toml).unwrap();
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "other.toml"]);
+    let out = stdout(&o);
+    assert!(
+        out.contains(
+            "machine bottom-up (--machine) differs from the job's: stage.travel_max_mm: job 120, machine 150; stage.max_accel_mm_s2: job 50, machine 20; shutter.open_s: job 0.05, machine 0; shutter.close_s: job 0.05, machine 0 (and 1 more, --json lists all)\n"
+        ),
+        "{out}"
+    );
+
+    // Two projectors: every layer lacks the second one's mask.
+    let (code, r) = run_json(&dir, &["--machine", "tiled-2x1"]);
+    assert_eq!(code, 1);
+    assert!(of_kind(&r, "manifest").len() == 4, "{r}");
+    assert!(r["violations"][0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("layer 0 has masks for 1 of the machine's 2 projector(s)"));
+
+    // An unknown machine is a usage error.
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "nope"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
+}
