@@ -16,10 +16,12 @@
 //! shares all keep zero at zero. So per layer, with the lit boxes of its masks mapped into
 //! the field and united (tiled projectors each light their share), `mask-content` is
 //! reported when
-//! * the layer has no section (`bbox_mm` null) and its masks light any pixel;
+//! * the layer has no section (`bbox_mm` null, `area_mm2` 0) and its masks light any
+//!   pixel;
 //! * lit pixels lie outside `bbox_mm` (converted to field pixels) by more than the
 //!   tolerance: 1 px, plus `settings.distortion.max_correction_mm`/p + 1 px when the
-//!   masks were pre-warped;
+//!   masks were pre-warped (a record with an area but no `bbox_mm`, from a bundle written
+//!   before the box was recorded, is checked for its area only);
 //! * the masks light too few pixels for the section. For masks whose values are coverage
 //!   (anti-aliased, light compensation off, linear tiled responses) every pixel the
 //!   section covers by 1/510 or more is lit, so at least 0.5 × `area_mm2`/p² − 4 pixels,
@@ -72,12 +74,16 @@ impl LitPixels {
         if width == 0 {
             return lit;
         }
+        // Masks are mostly dark: a dark row costs one vectorized OR over it, a lit one a
+        // search from either end and a count over its lit span.
         for (r, row) in data.chunks(width as usize).enumerate() {
-            let Some(first) = row.iter().position(|&v| v != 0) else {
+            if !any_nonzero(row) {
                 continue;
-            };
-            let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
-            lit.count += row[first..=last].iter().filter(|&&v| v != 0).count() as u64;
+            }
+            let first = first_nonzero(row).unwrap_or(0);
+            let last = last_nonzero(row).unwrap_or(first);
+            // Whole words from the one holding `first`: the bytes before it are zero.
+            lit.count += count_nonzero(&row[first / 8 * 8..=last]);
             let (r, c0, c1) = (r as u32, first as u32, last as u32 + 1);
             lit.bbox = Some(match lit.bbox {
                 None => [c0, r, c1, r + 1],
@@ -124,6 +130,74 @@ impl LitPixels {
             }),
         }
     }
+}
+
+/// Whether any byte of `bytes` is nonzero (an OR over all of them, which vectorizes).
+fn any_nonzero(bytes: &[u8]) -> bool {
+    bytes.iter().fold(0u8, |a, &v| a | v) != 0
+}
+
+/// Index of the first nonzero byte of `row`: the first 32-byte block with one, then eight
+/// bytes at a time.
+fn first_nonzero(row: &[u8]) -> Option<usize> {
+    let blocks = row.chunks_exact(32);
+    let start = blocks
+        .clone()
+        .position(any_nonzero)
+        .map_or(row.len() - blocks.remainder().len(), |k| k * 32);
+    let rest = &row[start..];
+    let words = rest.chunks_exact(8);
+    let tail = words.remainder();
+    for (k, w) in words.enumerate() {
+        let w = u64::from_le_bytes(w.try_into().expect("8 bytes"));
+        if w != 0 {
+            return Some(start + k * 8 + w.trailing_zeros() as usize / 8);
+        }
+    }
+    let at = row.len() - tail.len();
+    tail.iter().position(|&v| v != 0).map(|i| at + i)
+}
+
+/// Index of the last nonzero byte of `row`: the last 32-byte block with one (counted from
+/// the end), then eight bytes at a time.
+fn last_nonzero(row: &[u8]) -> Option<usize> {
+    let blocks = row.rchunks_exact(32);
+    let end = blocks
+        .clone()
+        .position(any_nonzero)
+        .map_or(blocks.remainder().len(), |k| row.len() - k * 32);
+    let rest = &row[..end];
+    let words = rest.rchunks_exact(8);
+    let head = words.remainder();
+    for (k, w) in words.enumerate() {
+        let w = u64::from_le_bytes(w.try_into().expect("8 bytes"));
+        if w != 0 {
+            return Some(end - k * 8 - 1 - w.leading_zeros() as usize / 8);
+        }
+    }
+    head.iter().rposition(|&v| v != 0)
+}
+
+/// Number of nonzero bytes in `bytes`, eight at a time: each word's nonzero bytes become
+/// 1 in their byte (no carry crosses a byte), summed bytewise over up to 255 words, then
+/// across the word.
+fn count_nonzero(bytes: &[u8]) -> u64 {
+    const LOW7: u64 = 0x7f7f_7f7f_7f7f_7f7f;
+    const PAIRS: u64 = 0x00ff_00ff_00ff_00ff;
+    let mut total = 0;
+    for block in bytes.chunks(8 * 255) {
+        let words = block.chunks_exact(8);
+        let tail = words.remainder();
+        let mut acc = 0u64;
+        for w in words {
+            let w = u64::from_le_bytes(w.try_into().expect("8 bytes"));
+            acc += ((((w & LOW7) + LOW7) | w) & !LOW7) >> 7;
+        }
+        let pairs = (acc & PAIRS) + ((acc >> 8) & PAIRS);
+        total += pairs.wrapping_mul(0x0001_0001_0001_0001) >> 48;
+        total += tail.iter().filter(|&&v| v != 0).count() as u64;
+    }
+    total
 }
 
 fn problem(
@@ -568,6 +642,10 @@ impl ContentRule {
         let p = self.pixel_mm;
         let area_px = layer.area_mm2 / (p * p);
         let mut min: f64 = 0.0;
+        if layer.area_mm2 <= 0.0 {
+            // No section: nothing must be lit.
+            return min;
+        }
         if self.coverage {
             if area_px >= 1.0 {
                 min = 1.0;
@@ -620,16 +698,13 @@ impl ContentRule {
                 b[3] - 1
             )
         };
-        let Some(bb) = layer.bbox_mm else {
-            return match px.bbox {
-                Some(b) => at(format!(
-                    "the layer has no section (bbox_mm null) but its masks light {} pixel(s) ({} of the field)",
-                    px.count,
-                    lit_text(b)
-                )),
-                None => None,
-            };
-        };
+        if let (None, true, Some(b)) = (layer.bbox_mm, layer.area_mm2 <= 0.0, px.bbox) {
+            return at(format!(
+                "the layer has no section (bbox_mm null) but its masks light {} pixel(s) ({} of the field)",
+                px.count,
+                lit_text(b)
+            ));
+        }
         let min = self.min_lit(layer);
         let Some(b) = px.bbox else {
             if min < 1.0 {
@@ -641,28 +716,30 @@ impl ContentRule {
             ));
         };
         let p = self.pixel_mm;
-        // The section's box in field pixel coordinates: columns x/p, rows H − y/p.
-        let want = [
-            bb[0][0] / p,
-            self.field_h_px - bb[1][1] / p,
-            bb[1][0] / p,
-            self.field_h_px - bb[0][1] / p,
-        ];
         let got = b.map(f64::from);
-        let tol = self.tol_px + 1e-3;
-        let outside = got[0] < want[0] - tol
-            || got[1] < want[1] - tol
-            || got[2] > want[2] + tol
-            || got[3] > want[3] + tol;
-        if outside {
-            // The pixels the section's box touches.
-            let touched = [
-                want[0].floor().max(0.0) as u32,
-                want[1].floor().max(0.0) as u32,
-                (want[2].ceil() as u32).max(1),
-                (want[3].ceil() as u32).max(1),
+        // A section's box (bundles written before it was recorded have an area but none).
+        if let Some(bb) = layer.bbox_mm {
+            // The section's box in field pixel coordinates: columns x/p, rows H − y/p.
+            let want = [
+                bb[0][0] / p,
+                self.field_h_px - bb[1][1] / p,
+                bb[1][0] / p,
+                self.field_h_px - bb[0][1] / p,
             ];
-            return at(format!(
+            let tol = self.tol_px + 1e-3;
+            let outside = got[0] < want[0] - tol
+                || got[1] < want[1] - tol
+                || got[2] > want[2] + tol
+                || got[3] > want[3] + tol;
+            if outside {
+                // The pixels the section's box touches.
+                let touched = [
+                    want[0].floor().max(0.0) as u32,
+                    want[1].floor().max(0.0) as u32,
+                    (want[2].ceil() as u32).max(1),
+                    (want[3].ceil() as u32).max(1),
+                ];
+                return at(format!(
                 "its masks light {} of the field, outside the section (bbox_mm [[{}, {}], [{}, {}]] covers {}; tolerance {:.1} px)",
                 lit_text(b),
                 bb[0][0],
@@ -672,6 +749,7 @@ impl ContentRule {
                 lit_text(touched),
                 self.tol_px,
             ));
+            }
         }
         // The pixels wholly inside the largest inscribed circle are lit: the lit box is at
         // least as wide and as high as the circle less a pixel diagonal on each side.
@@ -878,6 +956,32 @@ mod tests {
     }
 
     #[test]
+    fn first_and_last_nonzero_byte_and_their_count() {
+        for n in [0, 1, 7, 8, 9, 16, 17, 31, 32, 33, 40, 64, 65, 100] {
+            for a in 0..n {
+                for b in a..n {
+                    let mut row = vec![0u8; n];
+                    row[a] = 3;
+                    row[b] = 1;
+                    assert_eq!(first_nonzero(&row), Some(a), "{n} {a} {b}");
+                    assert_eq!(last_nonzero(&row), Some(b), "{n} {a} {b}");
+                    assert!(any_nonzero(&row));
+                    assert_eq!(count_nonzero(&row), 1 + (a != b) as u64);
+                }
+            }
+            assert_eq!(first_nonzero(&vec![0; n]), None);
+            assert_eq!(last_nonzero(&vec![0; n]), None);
+            assert!(!any_nonzero(&vec![0; n]));
+        }
+        // Counts past a byte's and a block's capacity.
+        let row: Vec<u8> = (0..5000u32).map(|i| (i % 7) as u8 * 40).collect();
+        let naive = row.iter().filter(|&&v| v != 0).count() as u64;
+        assert_eq!(count_nonzero(&row), naive);
+        assert_eq!(count_nonzero(&[255; 4096]), 4096);
+        assert_eq!(count_nonzero(&[1; 4097]), 4097);
+    }
+
+    #[test]
     fn lit_pixels_and_their_place_in_the_field() {
         let data: Vec<u8> = (0..6 * 4)
             .map(|i| [0, 0, 7, 0, 9, 0][i % 6] * (i / 6 % 2) as u8)
@@ -972,6 +1076,10 @@ mod tests {
                 section,
                 area,
             ),
+            // 9 and 10: an area but no box (bundles from before it was recorded): the
+            // area is checked, the box cannot be.
+            layer_with(&dir, 9, &soft, None, area),
+            layer_with(&dir, 10, &black, None, area),
         ];
         let m = manifest(small_profile(), layers);
         let v = verify(&dir, &m);
@@ -983,6 +1091,7 @@ mod tests {
                 (Some(3), "mask-content"),
                 (Some(5), "mask-content"),
                 (Some(6), "mask-content"),
+                (Some(10), "mask-content"),
             ],
             "{:#?}",
             v.problems
@@ -1046,6 +1155,7 @@ mod tests {
                 (Some(5), "mask-content"),
                 (Some(6), "mask-content"),
                 (Some(7), "mask-content"),
+                (Some(10), "mask-content"),
             ],
             "{:#?}",
             v.problems
