@@ -739,16 +739,14 @@ impl ContentRule {
                     (want[2].ceil() as u32).max(1),
                     (want[3].ceil() as u32).max(1),
                 ];
+                let [[x0, y0], [x1, y1]] = bb;
                 return at(format!(
-                "its masks light {} of the field, outside the section (bbox_mm [[{}, {}], [{}, {}]] covers {}; tolerance {:.1} px)",
-                lit_text(b),
-                bb[0][0],
-                bb[0][1],
-                bb[1][0],
-                bb[1][1],
-                lit_text(touched),
-                self.tol_px,
-            ));
+                    "its masks light {} of the field, outside the section \
+                     (bbox_mm [[{x0}, {y0}], [{x1}, {y1}]] covers {}; tolerance {:.1} px)",
+                    lit_text(b),
+                    lit_text(touched),
+                    self.tol_px,
+                ));
             }
         }
         // The pixels wholly inside the largest inscribed circle are lit: the lit box is at
@@ -774,6 +772,7 @@ impl ContentRule {
         None
     }
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;
