@@ -163,11 +163,13 @@ fn disk_png(r: f64) -> Vec<u8> {
 fn synthetic(path: &Path, n: usize) -> Manifest {
     let profile = Profile::default_profile();
     let h = 0.01;
-    let pngs: Vec<(Vec<u8>, String)> = (0..16)
+    let p = profile.field().pixel_mm;
+    let pngs: Vec<(Vec<u8>, String, f64)> = (0..16)
         .map(|k| {
-            let b = disk_png(60.0 + 20.0 * k as f64);
+            let r = 60.0 + 20.0 * k as f64;
+            let b = disk_png(r);
             let s = sha256_hex(&b);
-            (b, s)
+            (b, s, r)
         })
         .collect();
     let w = BundleWriter::create(path).unwrap();
@@ -205,9 +207,13 @@ fn synthetic(path: &Path, n: usize) -> Manifest {
             + exposure_s
             + c;
         pos = z;
-        let (png, sha) = &pngs[i % pngs.len()];
+        let (png, sha, r) = &pngs[i % pngs.len()];
         let mut layer = testutil::layer(i, z, h, Mode::Layered, exposure_s, steps, time_s);
-        layer.area_mm2 = 100.0;
+        // The disk's section: centre (512.5, 383.5) px from the bottom-left, its pixels lit
+        // up to r + 0.5 px from the centre.
+        let (cx, cy, re) = (512.5 * p, 383.5 * p, (r + 0.5) * p);
+        layer.area_mm2 = std::f64::consts::PI * re * re;
+        layer.bbox_mm = Some([[cx - re, cy - re], [cx + re, cy + re]]);
         layer.masks[0].sha256 = sha.clone();
         w.write_file(&layer.masks[0].file, png).unwrap();
         layers.push(layer);

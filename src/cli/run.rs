@@ -6,7 +6,7 @@ use std::path::PathBuf;
 pub(crate) const RUN_EXIT_HELP: &str = "Exit codes:
   0    the bundle verified and replayed without violations
   1    violations, bad masks or an injected fault
-  2    unreadable bundle or usage error
+  2    unreadable bundle, unknown or invalid --machine profile, or usage error
 
 Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
 
@@ -26,6 +26,12 @@ pub(crate) struct RunArgs {
     /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
     #[arg(long, value_name = "A..B")]
     layers: Option<String>,
+    /// Check the job against this machine instead of the one the bundle embeds: a
+    /// built-in profile name or a TOML file. Its stage, shutter and DMD are simulated and
+    /// its projectors' sizes and placement checked; the report names the keys in which it
+    /// differs from the job's machine.
+    #[arg(long, value_name = "PROFILE")]
+    machine: Option<String>,
     /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
     /// (repeatable).
     #[arg(long, value_name = "KIND@LAYER")]
@@ -46,11 +52,17 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         .iter()
         .map(|f| f.parse().map_err(dmdsl::Error::Usage))
         .collect::<Result<Vec<_>, _>>()?;
+    let machine = a
+        .machine
+        .as_deref()
+        .map(dmdsl::profile::Profile::resolve)
+        .transpose()?;
     let opts = dmdsl::exec::RunOptions {
         faults,
         trace: a.trace,
         plot: a.plot,
         layers: a.layers,
+        machine,
     };
     let report = dmdsl::exec::run(&a.bundle, &opts)?;
     if a.json {

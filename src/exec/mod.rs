@@ -2,12 +2,15 @@
 //! lift stage, shutter and DMD.
 //!
 //! The executor reads only the bundle (`job.json` through [`crate::bundle::Manifest`] and
-//! the mask files); the machine comes from the resolved profile embedded in the manifest.
+//! the mask files); the machine comes from the resolved profile embedded in the manifest,
+//! or from the profile given as [`RunOptions::machine`] (`--machine`) to check the job
+//! against the machine it will run on.
 //! It shares nothing with the slicer and the planner except the bundle format and the
 //! pure trapezoid math of [`crate::motion`]. Stages:
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
-//!    the projector's size and bit depth), all problems collected, in parallel.
+//!    the projector's size and bit depth, its own file, lit where the layer's section is
+//!    and enough for its area) and gray map, all problems collected, in parallel.
 //! 2. [`sim`]: event-based simulation of the steps under the bundle's timing contract,
 //!    with optional fault injection, streaming [`sim::Segment`]s to sinks.
 //! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
@@ -28,7 +31,8 @@ pub mod testutil;
 
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};
-use report::{LayerTiming, PlotCollector, Report, Stats, Timings};
+use crate::profile::Profile;
+use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
 use serde::Serialize;
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
@@ -63,6 +67,10 @@ pub struct RunOptions {
     pub plot: Option<PathBuf>,
     /// Restrict the trace and the plot to these layers, e.g. "10..20" (inclusive).
     pub layers: Option<String>,
+    /// Check the job against this machine instead of the one the manifest embeds: its
+    /// stage, shutter and DMD are simulated, its projectors' sizes and placement verified
+    /// (`--machine`).
+    pub machine: Option<Profile>,
 }
 
 /// Parses a layer range for a job of `n` layers: `A..B` or `A..=B` (both inclusive),
@@ -97,23 +105,32 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
     Ok(a..=b)
 }
 
-/// Verifies and simulates the bundle at `dir`.
+/// Verifies and simulates the bundle at `dir`, on the machine the manifest embeds or on
+/// [`RunOptions::machine`].
 ///
 /// Errors (exit code 2) are an unreadable bundle or manifest, an invalid machine profile
-/// in it, bad options, or a trace/plot file that cannot be written. Problems with the job
-/// itself are [`Violation`]s in the report.
+/// (the one simulated), bad options, or a trace/plot file that cannot be written.
+/// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let (manifest, range) = read_bundle(dir, opts)?;
+    let (mut manifest, range, machine_check) = read_bundle(dir, opts)?;
     let read_s = t0.elapsed().as_secs_f64();
 
     let t1 = Instant::now();
-    let verified = verify::verify(dir, &manifest);
+    let verified = match &opts.machine {
+        Some(p) => verify::verify_on(dir, &manifest, p),
+        None => verify::verify(dir, &manifest),
+    };
     let verify_s = t1.elapsed().as_secs_f64();
+    if let Some(p) = &opts.machine {
+        // From here on the job runs on the given machine.
+        manifest.machine = p.clone();
+    }
 
     let t2 = Instant::now();
-    let simulated = simulate_into_sinks(dir, &manifest, opts, range)?;
-    let violations = all_violations(verified.problems, simulated.timeline, &simulated.outcome);
+    let mut simulated = simulate_into_sinks(dir, &manifest, opts, range)?;
+    let timeline = std::mem::take(&mut simulated.timeline);
+    let violations = all_violations(verified.problems, timeline, &simulated.outcome);
     let simulate_s = t2.elapsed().as_secs_f64();
 
     let timings = Timings {
@@ -124,22 +141,46 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
     Ok(report(
         dir,
         &manifest,
+        machine_check,
         verified.masks,
-        simulated.outcome,
-        simulated.stats,
+        simulated,
         violations,
         timings,
     ))
 }
 
-/// Reads the manifest, checks its machine profile and the options against it, and
-/// parses the layer range of the trace and the plot.
-fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<(Manifest, Option<RangeInclusive<usize>>)> {
+/// The manifest, the layer range of the trace and the plot, and with `--machine` how the
+/// given machine differs from the embedded one.
+type ReadBundle = (
+    Manifest,
+    Option<RangeInclusive<usize>>,
+    Option<MachineCheck>,
+);
+
+/// Reads the manifest, checks the machine profile the job will be simulated on (the
+/// embedded one, or `opts.machine`) and the options against it, and parses the layer range
+/// of the trace and the plot.
+fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<ReadBundle> {
     let manifest = Manifest::read(dir)?;
-    manifest.machine.validate().map_err(|msg| Error::Bundle {
-        path: dir.join(MANIFEST),
-        msg: format!("machine profile: {msg}"),
-    })?;
+    let machine_check = match &opts.machine {
+        None => {
+            manifest.machine.validate().map_err(|msg| Error::Bundle {
+                path: dir.join(MANIFEST),
+                msg: format!("machine profile: {msg}"),
+            })?;
+            None
+        }
+        Some(p) => {
+            p.validate().map_err(|msg| Error::Profile {
+                origin: p.name.clone(),
+                msg,
+            })?;
+            Some(MachineCheck {
+                profile: p.name.clone(),
+                differences: machine_differences(&manifest.machine, p),
+            })
+        }
+    };
     let n = manifest.layers.len();
     for f in &opts.faults {
         if f.layer >= n {
@@ -156,7 +197,7 @@ fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<(Manifest, Option<RangeI
         .as_deref()
         .map(|s| parse_layer_range(s, n))
         .transpose()?;
-    Ok((manifest, range))
+    Ok((manifest, range, machine_check))
 }
 
 /// What the simulation and its sinks gave.
@@ -259,12 +300,13 @@ fn all_violations(
 fn report(
     dir: &Path,
     manifest: &Manifest,
+    machine: Option<MachineCheck>,
     masks_verified: usize,
-    outcome: sim::Outcome,
-    stats: Stats,
+    simulated: Simulated,
     violations: Vec<Violation>,
     timings: Timings,
 ) -> Report {
+    let Simulated { outcome, stats, .. } = simulated;
     let mut counts = BTreeMap::new();
     for v in &violations {
         *counts.entry(v.kind).or_insert(0) += 1;
@@ -287,6 +329,7 @@ fn report(
     let estimate_s = manifest.totals.print_time_s;
     Report {
         bundle: dir.display().to_string(),
+        machine,
         layers: manifest.layers.len(),
         layers_completed: outcome.layers.iter().filter(|r| r.completed).count(),
         masks_verified,
@@ -313,6 +356,96 @@ fn report(
         per_layer,
         timings,
     }
+}
+
+/// What differs between the machine a job was compiled for (`job`) and `machine`, in the
+/// keys the executor uses: stage travel, home, limits and steps, shutter and DMD
+/// latencies, and each projector's size, pixel, offset and mirroring.
+pub fn machine_differences(job: &Profile, machine: &Profile) -> Vec<MachineDifference> {
+    let mut out = Vec::new();
+    let mut cmp = |key: String, a: String, b: String| {
+        if a != b {
+            out.push(MachineDifference {
+                key,
+                job: a,
+                machine: b,
+            });
+        }
+    };
+    let num = |v: f64| format!("{v}");
+    let (s, t) = (&job.stage, &machine.stage);
+    for (key, a, b) in [
+        ("stage.travel_min_mm", s.travel_min_mm, t.travel_min_mm),
+        ("stage.travel_max_mm", s.travel_max_mm, t.travel_max_mm),
+        ("stage.home_mm", s.home_mm, t.home_mm),
+        (
+            "stage.max_speed_mm_s",
+            s.max_speed_mm_s.get(),
+            t.max_speed_mm_s.get(),
+        ),
+        (
+            "stage.max_accel_mm_s2",
+            s.max_accel_mm_s2.get(),
+            t.max_accel_mm_s2.get(),
+        ),
+        (
+            "stage.steps_per_mm",
+            s.steps_per_mm.get(),
+            t.steps_per_mm.get(),
+        ),
+        (
+            "shutter.open_s",
+            job.shutter.open_s.get(),
+            machine.shutter.open_s.get(),
+        ),
+        (
+            "shutter.close_s",
+            job.shutter.close_s.get(),
+            machine.shutter.close_s.get(),
+        ),
+        ("dmd.load_s", job.dmd.load_s.get(), machine.dmd.load_s.get()),
+    ] {
+        cmp(key.into(), num(a), num(b));
+    }
+    cmp(
+        "projectors".into(),
+        job.projector.len().to_string(),
+        machine.projector.len().to_string(),
+    );
+    for (k, (a, b)) in job.projector.iter().zip(&machine.projector).enumerate() {
+        let key = |f: &str| format!("projector[{k}].{f}");
+        cmp(
+            key("width_px"),
+            a.width_px.to_string(),
+            b.width_px.to_string(),
+        );
+        cmp(
+            key("height_px"),
+            a.height_px.to_string(),
+            b.height_px.to_string(),
+        );
+        cmp(
+            key("pixel_mm"),
+            num(a.pixel_mm.get()),
+            num(b.pixel_mm.get()),
+        );
+        cmp(
+            key("offset_px"),
+            format!("{:?}", a.offset_px),
+            format!("{:?}", b.offset_px),
+        );
+        cmp(
+            key("mirror_x"),
+            a.mirror_x.to_string(),
+            b.mirror_x.to_string(),
+        );
+        cmp(
+            key("mirror_y"),
+            a.mirror_y.to_string(),
+            b.mirror_y.to_string(),
+        );
+    }
+    out
 }
 
 /// Simulates a manifest's steps without reading any mask: the invariants and timing checks
@@ -370,5 +503,32 @@ mod tests {
             let e = parse_layer_range(bad, 10).unwrap_err().to_string();
             assert!(e.starts_with("--layers"), "{bad}: {e}");
         }
+    }
+
+    #[test]
+    fn machine_differences_name_key_and_both_values() {
+        let job = Profile::default_profile();
+        assert!(machine_differences(&job, &job).is_empty());
+        let mut real = job.clone();
+        real.stage.max_speed_mm_s = crate::units::Positive::new(2.5).unwrap();
+        real.projector[0].mirror_y = true;
+        real.name = "renamed".into();
+        real.description = "only the keys the executor uses count".into();
+        let d = machine_differences(&job, &real);
+        let got: Vec<(&str, &str, &str)> = d
+            .iter()
+            .map(|d| (d.key.as_str(), d.job.as_str(), d.machine.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            vec![
+                ("stage.max_speed_mm_s", "10", "2.5"),
+                ("projector[0].mirror_y", "false", "true"),
+            ]
+        );
+        let tiled = Profile::resolve("tiled-2x1").unwrap();
+        let d = machine_differences(&job, &tiled);
+        assert_eq!(d[0].key, "projectors");
+        assert_eq!((d[0].job.as_str(), d[0].machine.as_str()), ("1", "2"));
     }
 }

@@ -26,11 +26,37 @@ pub struct LayerTiming {
     pub exposure_s: f64,
 }
 
+/// One key in which the machine given with `--machine` differs from the job's.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct MachineDifference {
+    /// Dotted profile key, e.g. `stage.max_speed_mm_s`, `projector[1].offset_px`.
+    pub key: String,
+    /// Its value in the machine the manifest embeds.
+    pub job: String,
+    /// Its value in the given machine.
+    pub machine: String,
+}
+
+/// The machine a job was checked against with `--machine`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct MachineCheck {
+    /// The given profile's `name`.
+    pub profile: String,
+    /// Where it differs from the job's machine (empty: nowhere that matters).
+    pub differences: Vec<MachineDifference>,
+}
+
+/// Differing keys the human summary names before "and N more".
+pub const DIFFERENCES_SHOWN: usize = 4;
+
 /// The result of `dmdsl run`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
     /// The bundle, as given.
     pub bundle: String,
+    /// The machine given with `--machine` and how it differs from the job's (`None`: the
+    /// job ran on the machine its manifest embeds).
+    pub machine: Option<MachineCheck>,
     /// Layers in the job.
     pub layers: usize,
     /// Layers simulated to the end (fewer than `layers` after a fault).
@@ -253,6 +279,34 @@ pub fn render_human(r: &Report) -> String {
         "{}: {} layers, {} masks checked",
         r.bundle, r.layers, r.masks_verified
     );
+    if let Some(m) = &r.machine {
+        if m.differences.is_empty() {
+            let _ = writeln!(
+                o,
+                "machine {} (--machine): the same stage, shutter, DMD and projectors as the job's",
+                m.profile
+            );
+        } else {
+            let shown: Vec<String> = m
+                .differences
+                .iter()
+                .take(DIFFERENCES_SHOWN)
+                .map(|d| format!("{}: job {}, machine {}", d.key, d.job, d.machine))
+                .collect();
+            let more = m.differences.len().saturating_sub(DIFFERENCES_SHOWN);
+            let _ = writeln!(
+                o,
+                "machine {} (--machine) differs from the job's: {}{}",
+                m.profile,
+                shown.join("; "),
+                if more > 0 {
+                    format!(" (and {more} more, --json lists all)")
+                } else {
+                    String::new()
+                }
+            );
+        }
+    }
     let _ = writeln!(
         o,
         "simulated {} ({:.2} s); manifest estimate {:.2} s ({:+.2} %)",

@@ -340,3 +340,433 @@ fn version_1_bundle_with_text_warnings_still_runs() {
         stderr(&o)
     );
 }
+
+/// Slices `tris` (written as `part.stl`) at 0.5 mm layers with `args` into
+/// `<dir>/box.dmdjob` (the name `run_json` runs).
+fn sliced_part(name: &str, tris: &[[[f32; 3]; 3]], args: &[&str]) -> (TempDir, PathBuf) {
+    let dir = tempdir(&format!("run-{name}"));
+    write_stl(&dir.join("part.stl"), tris);
+    let mut a = vec![
+        "slice",
+        "part.stl",
+        "-o",
+        "box.dmdjob",
+        "--layer-height",
+        "0.5",
+        "-q",
+    ];
+    a.extend_from_slice(args);
+    let o = run_in(&dir, &a);
+    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    let b = dir.join("box.dmdjob");
+    (dir, b)
+}
+
+/// A 10 × 10 × 1 mm slab under a 6 × 6 × 1 mm block: layers 0 and 1 are 10 mm squares,
+/// layers 2 and 3 6 mm squares.
+fn stepped() -> Vec<[[f32; 3]; 3]> {
+    let mut t = box_tris([0.0; 3], [10.0, 10.0, 1.0]);
+    t.extend(box_tris([2.0, 2.0, 1.0], [8.0, 8.0, 2.0]));
+    t
+}
+
+/// Replaces the file of layer `layer`'s first mask with a gray PNG of value `v` (the
+/// projector's size) and records its SHA-256 in the manifest.
+fn uniform_mask(b: &Path, layer: usize, v: u8) {
+    let mut j = job(b);
+    let file = j["layers"][layer]["masks"][0]["file"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    image::GrayImage::from_pixel(1024, 768, image::Luma([v]))
+        .save(b.join(&file))
+        .unwrap();
+    let bytes = std::fs::read(b.join(&file)).unwrap();
+    j["layers"][layer]["masks"][0]["sha256"] = dmdsl::bundle::sha256_hex(&bytes).into();
+    set_job(b, &j);
+}
+
+/// The violations of kind `kind` as (layer, file).
+fn of_kind(r: &Value, kind: &str) -> Vec<(Value, Value)> {
+    r["violations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|v| v["kind"] == kind)
+        .map(|v| (v["layer"].clone(), v["file"].clone()))
+        .collect()
+}
+
+#[test]
+fn masks_that_do_not_show_their_layer_are_named() {
+    for (name, args) in [
+        ("content-zone", vec![]),
+        ("content-binary", vec!["--binary"]),
+        ("content-off", vec!["--compensation", "off"]),
+    ] {
+        let (dir, b) = sliced_part(name, &stepped(), &args);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 0, "{args:?}: {r}");
+        let clean = job(&b);
+        let saved: Vec<Vec<u8>> = (0..4)
+            .map(|i| std::fs::read(b.join(format!("masks/{i:05}.png"))).unwrap())
+            .collect();
+        let restore = || {
+            set_job(&b, &clean);
+            for (i, bytes) in saved.iter().enumerate() {
+                std::fs::write(b.join(format!("masks/{i:05}.png")), bytes).unwrap();
+            }
+        };
+
+        // Layers 1 and 2 swapped, checksums and all: each shows the other's section.
+        let mut j = job(&b);
+        let (s1, s2) = (
+            j["layers"][1]["masks"][0]["sha256"].clone(),
+            j["layers"][2]["masks"][0]["sha256"].clone(),
+        );
+        j["layers"][1]["masks"][0]["sha256"] = s2;
+        j["layers"][2]["masks"][0]["sha256"] = s1;
+        set_job(&b, &j);
+        std::fs::write(b.join("masks/00001.png"), &saved[2]).unwrap();
+        std::fs::write(b.join("masks/00002.png"), &saved[1]).unwrap();
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 1, "{args:?}: {r}");
+        assert_eq!(
+            of_kind(&r, "mask-content"),
+            vec![
+                (1.into(), "masks/00001.png".into()),
+                (2.into(), "masks/00002.png".into())
+            ],
+            "{args:?}: {r}"
+        );
+        assert_eq!(kinds(&r), vec!["mask-content", "mask-content"], "{r}");
+        let o = run_in(&dir, &["run", "box.dmdjob"]);
+        let out = stdout(&o);
+        assert!(
+            out.contains("box.dmdjob/masks/00002.png: layer 2: its masks light columns")
+                && out.contains("outside the section"),
+            "{out}"
+        );
+        restore();
+
+        // An all-white mask: light outside the section.
+        uniform_mask(&b, 0, 255);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 1);
+        assert_eq!(
+            of_kind(&r, "mask-content"),
+            vec![(0.into(), "masks/00000.png".into())],
+            "{args:?}: {r}"
+        );
+        assert!(r["violations"][0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("layer 0: its masks light columns 0..1023, rows 0..767 of the field"));
+        restore();
+
+        // An all-black mask: a section that gets no light.
+        uniform_mask(&b, 3, 0);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 1);
+        assert_eq!(
+            of_kind(&r, "mask-content"),
+            vec![(3.into(), "masks/00003.png".into())],
+            "{args:?}: {r}"
+        );
+        let msg = r["violations"][0]["message"].as_str().unwrap();
+        assert!(
+            msg.contains("layer 3: the section's area is 3")
+                && msg.ends_with(" mm² but its masks light no pixel"),
+            "{msg}"
+        );
+        restore();
+
+        // A layer with no section whose mask lights pixels.
+        let mut j = job(&b);
+        j["layers"][3]["bbox_mm"] = Value::Null;
+        j["layers"][3]["area_mm2"] = 0.0.into();
+        set_job(&b, &j);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 1);
+        assert_eq!(
+            of_kind(&r, "mask-content"),
+            vec![(3.into(), "masks/00003.png".into())]
+        );
+        assert!(r["violations"][0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("layer 3: the layer has no section (bbox_mm null) but its masks light"));
+        restore();
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 0, "{r}");
+    }
+}
+
+#[test]
+fn fresh_bundles_of_every_profile_and_mode_show_their_layers() {
+    let dir = tempdir("run-fresh-modes");
+    // A profile whose projector shows the field mirrored both ways.
+    let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    assert!(o.status.success());
+    let mirrored = stdout(&o)
+        .replace("mirror_x = false", "mirror_x = true")
+        .replace("mirror_y = false", "mirror_y = true");
+    std::fs::write(dir.join("mirrored.toml"), mirrored).unwrap();
+    let part = fixture("cylinder_hole.stl");
+    let lens = fixture("lens_table.csv");
+    let (part, lens) = (part.to_str().unwrap(), lens.to_str().unwrap());
+    for args in [
+        vec!["-p", "xu2010-topdown"],
+        vec!["-p", "bottom-up"],
+        vec!["-p", "hybrid-bottomup"],
+        vec!["-p", "tiled-2x1"],
+        vec!["-p", "tiled-2x1", "--binary"],
+        vec!["--binary"],
+        vec!["--compensation", "off"],
+        vec!["--compensation", "pixel"],
+        vec!["--distortion", lens],
+        vec!["--distortion", lens, "--binary", "--compensation", "off"],
+        vec!["-p", "mirrored.toml"],
+    ] {
+        let mut a = vec![
+            "slice",
+            part,
+            "-o",
+            "part.dmdjob",
+            "--layer-height",
+            "0.5",
+            "-q",
+        ];
+        a.extend_from_slice(&args);
+        let o = run_in(&dir, &a);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        let o = run_in(&dir, &["run", "part.dmdjob", "--json"]);
+        let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {r}");
+        assert!(r["masks_verified"].as_u64().unwrap() >= 10, "{r}");
+    }
+}
+
+#[test]
+fn a_layer_naming_another_layers_mask_is_named() {
+    // Every layer of the box has the same mask bytes, so a layer pointing at another
+    // layer's file passes its checksum and shows the right section.
+    let (dir, b) = sliced("shared");
+    let mut j = job(&b);
+    j["layers"][2]["masks"][0] = j["layers"][1]["masks"][0].clone();
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(kinds(&r), vec!["mask-shared"]);
+    let v = &r["violations"][0];
+    assert_eq!(v["layer"], 2);
+    assert_eq!(v["file"], "masks/00001.png");
+    assert!(
+        v["message"].as_str().unwrap().contains(
+            "box.dmdjob/masks/00001.png: layer 2: the mask of projector 0 is the same file as layer 1's mask"
+        ),
+        "{v}"
+    );
+}
+
+#[test]
+fn corrupted_gray_map_is_named() {
+    let (dir, b) = sliced("gray-map");
+    let j = job(&b);
+    let file = j["optics"]["gray_map"].as_str().unwrap().to_string();
+    assert_eq!(file, "optics/p0-gray-map.png");
+    let path = b.join(&file);
+    let good = std::fs::read(&path).unwrap();
+
+    let mut bytes = good.clone();
+    let n = bytes.len();
+    for x in &mut bytes[n / 2..n / 2 + 16] {
+        *x ^= 0x5a;
+    }
+    std::fs::write(&path, &bytes).unwrap();
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1, "{r}");
+    let v = &r["violations"][0];
+    assert_eq!(v["kind"], "optics-file");
+    assert_eq!(v["file"], file);
+    assert_eq!(v["layer"], Value::Null);
+    assert!(
+        v["message"].as_str().unwrap().contains(
+            "box.dmdjob/optics/p0-gray-map.png: gray map of projector 0: SHA-256 mismatch"
+        ),
+        "{v}"
+    );
+    let o = run_in(&dir, &["run", "box.dmdjob"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stdout(&o).contains("job: optics-file: "), "{}", stdout(&o));
+
+    // A gray map of the wrong size, its checksum updated.
+    image::GrayImage::from_pixel(512, 384, image::Luma([200]))
+        .save(&path)
+        .unwrap();
+    let mut j2 = j.clone();
+    j2["optics"]["gray_map_sha256"] =
+        dmdsl::bundle::sha256_hex(&std::fs::read(&path).unwrap()).into();
+    set_job(&b, &j2);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1);
+    assert_eq!(kinds(&r), vec!["optics-file"]);
+    assert!(r["violations"][0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("PNG is 512x384, projector p0 is 1024x768"));
+
+    set_job(&b, &j);
+    std::fs::remove_file(&path).unwrap();
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1);
+    assert_eq!(kinds(&r), vec!["optics-file"]);
+    assert!(r["violations"][0]["message"]
+        .as_str()
+        .unwrap()
+        .ends_with("gray map of projector 0: gray map file is missing"));
+    std::fs::write(&path, &good).unwrap();
+    let (code, _) = run_json(&dir, &[]);
+    assert_eq!(code, 0);
+}
+
+#[test]
+fn a_job_without_layers_fails() {
+    let (dir, b) = sliced("no-layers");
+    let mut j = job(&b);
+    j["layers"] = serde_json::json!([]);
+    j["totals"]["layers"] = 0.into();
+    j["totals"]["print_time_s"] = 0.0.into();
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(kinds(&r), vec!["manifest"]);
+    assert_eq!(r["violations"][0]["layer"], Value::Null);
+    assert!(r["violations"][0]["message"]
+        .as_str()
+        .unwrap()
+        .ends_with("box.dmdjob/job.json: the job has no layers"));
+    let o = run_in(&dir, &["run", "box.dmdjob"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stdout(&o).trim_end().ends_with("FAILED"), "{}", stdout(&o));
+}
+
+#[test]
+fn machine_option_checks_the_job_on_the_real_machine() {
+    let (dir, b) = sliced("machine");
+    let clean = job(&b);
+    let (code, r) = run_json(&dir, &["--machine", "xu2010-topdown"]);
+    assert_eq!(code, 0, "{r}");
+    assert_eq!(r["machine"]["profile"], "xu2010-topdown");
+    assert_eq!(r["machine"]["differences"], serde_json::json!([]));
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "xu2010-topdown"]);
+    assert!(
+        stdout(&o).contains(
+            "machine xu2010-topdown (--machine): the same stage, shutter, DMD and projectors as the job's"
+        ),
+        "{}",
+        stdout(&o)
+    );
+    let (_, r) = run_json(&dir, &[]);
+    assert_eq!(r["machine"], Value::Null);
+
+    // The bundle's own machine raised to 50 mm/s, and layer 1's return move (5 mm at
+    // 1 mm/s, 50 mm/s²) at 25 mm/s with the estimates to match: clean on the embedded
+    // machine, a violation on the real one.
+    let mut j = job(&b);
+    j["machine"]["stage"]["max_speed_mm_s"] = 50.0.into();
+    let step = &mut j["layers"][1]["steps"][1];
+    assert_eq!(
+        (step["kind"].as_str(), step["speed_mm_s"].as_f64()),
+        (Some("move"), Some(1.0))
+    );
+    step["speed_mm_s"] = 25.0.into();
+    let saved =
+        dmdsl::motion::move_time(5.0, 1.0, 50.0) - dmdsl::motion::move_time(5.0, 25.0, 50.0);
+    for key in ["/layers/1/time_s", "/totals/print_time_s"] {
+        let t = j.pointer_mut(key).unwrap();
+        *t = (t.as_f64().unwrap() - saved).into();
+    }
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 0, "{r}");
+    let (code, r) = run_json(&dir, &["--machine", "xu2010-topdown"]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(
+        r["machine"]["differences"],
+        serde_json::json!([{"key": "stage.max_speed_mm_s", "job": "50", "machine": "10"}])
+    );
+    let v = &r["violations"][0];
+    assert_eq!(
+        (v["kind"].as_str(), v["layer"].as_u64()),
+        (Some("speed"), Some(1))
+    );
+    assert!(v["message"]
+        .as_str()
+        .unwrap()
+        .contains("25 mm/s exceeds the stage's max_speed_mm_s 10"));
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "xu2010-topdown"]);
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        out.contains(
+            "machine xu2010-topdown (--machine) differs from the job's: stage.max_speed_mm_s: job 50, machine 10\n"
+        ),
+        "{out}"
+    );
+    set_job(&b, &clean);
+
+    // A machine file whose projector is narrower: the masks do not fit it.
+    let o = run_in(&dir, &["profile", "show", "xu2010-topdown"]);
+    let toml = stdout(&o).replace("width_px = 1024", "width_px = 1000");
+    std::fs::write(dir.join("narrow.toml"), toml).unwrap();
+    let (code, r) = run_json(&dir, &["--machine", "narrow.toml"]);
+    assert_eq!(code, 1, "{r}");
+    assert_eq!(
+        r["machine"]["differences"],
+        serde_json::json!([{"key": "projector[0].width_px", "job": "1024", "machine": "1000"}])
+    );
+    // The gray map is checked against the machine's projector too.
+    assert_eq!(
+        kinds(&r),
+        vec![
+            "optics-file",
+            "mask-format",
+            "mask-format",
+            "mask-format",
+            "mask-format"
+        ],
+        "{r}"
+    );
+    assert!(r["violations"][1]["message"]
+        .as_str()
+        .unwrap()
+        .contains("PNG is 1024x768, projector p0 is 1000x768"));
+
+    // More differences than the summary lists: the first four, then a count.
+    let o = run_in(&dir, &["profile", "show", "bottom-up"]);
+    let toml = stdout(&o).replace("load_s = 0.02", "load_s = 0.5");
+    std::fs::write(dir.join("other.toml"), toml).unwrap();
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "other.toml"]);
+    let out = stdout(&o);
+    assert!(
+        out.contains(
+            "machine bottom-up (--machine) differs from the job's: stage.travel_max_mm: job 120, machine 150; stage.max_accel_mm_s2: job 50, machine 20; shutter.open_s: job 0.05, machine 0; shutter.close_s: job 0.05, machine 0 (and 1 more, --json lists all)\n"
+        ),
+        "{out}"
+    );
+
+    // Two projectors: every layer lacks the second one's mask.
+    let (code, r) = run_json(&dir, &["--machine", "tiled-2x1"]);
+    assert_eq!(code, 1);
+    assert!(of_kind(&r, "manifest").len() == 4, "{r}");
+    assert!(r["violations"][0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("layer 0 has masks for 1 of the machine's 2 projector(s)"));
+
+    // An unknown machine is a usage error.
+    let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "nope"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
+}
