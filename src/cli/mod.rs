@@ -61,6 +61,12 @@ pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> Str
     .expect("serializes")
 }
 
+/// The format a picture path asks for (`.png`, `.jpg`, `.jpeg`); anything else is a usage
+/// error naming the path and its extension.
+pub(crate) fn picture_format(path: &std::path::Path) -> Result<dmdsl::plot::Format, dmdsl::Error> {
+    dmdsl::plot::Format::from_path(path).map_err(dmdsl::Error::Usage)
+}
+
 /// The options that decide which warnings fail a command or are silenced.
 #[derive(Args, Clone, Default)]
 pub(crate) struct WarningArgs {
