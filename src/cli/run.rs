@@ -24,7 +24,7 @@ pub(crate) struct RunArgs {
     /// extension (.png, .jpg, .jpeg).
     #[arg(long, value_name = "FILE.png|FILE.jpg")]
     plot: Option<PathBuf>,
-    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based); needs one of them.
     #[arg(long, value_name = "A..B")]
     layers: Option<String>,
     /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load

@@ -153,6 +153,11 @@ fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<(Manifest, Option<RangeI
             )));
         }
     }
+    if opts.layers.is_some() && opts.trace.is_none() && opts.plot.is_none() {
+        return Err(Error::Usage(
+            "--layers applies to --trace and --plot; give one of them".into(),
+        ));
+    }
     if let Some(p) = &opts.plot {
         Format::from_path(p).map_err(Error::Usage)?;
     }

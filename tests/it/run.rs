@@ -284,7 +284,18 @@ fn unreadable_bundles_and_bad_options_exit_2() {
             vec!["run", "box.dmdjob", "--fault", "stall@9"],
             "the job has 4 layers",
         ),
-        (vec!["run", "box.dmdjob", "--layers", "3..7"], "--layers"),
+        (
+            vec!["run", "box.dmdjob", "--plot", "p.png", "--layers", "3..7"],
+            "--layers \"3..7\": the job has layers 0..3",
+        ),
+        (
+            vec!["run", "box.dmdjob", "--layers", "1..2"],
+            "--layers applies to --trace and --plot",
+        ),
+        (
+            vec!["run", "box.dmdjob", "--plot", "p.gif"],
+            "p.gif: cannot write pictures as .gif; use .png, .jpg or .jpeg",
+        ),
         (
             vec!["run", "box.dmdjob", "--trace", "no/such/dir/t.csv"],
             "t.csv",
