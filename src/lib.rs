@@ -13,6 +13,7 @@ pub mod error;
 pub mod exec;
 pub mod geometry;
 pub mod input;
+pub mod inspect;
 pub mod job;
 pub mod mesh;
 pub mod motion;
