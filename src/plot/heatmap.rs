@@ -198,8 +198,9 @@ impl Heatmap {
 
         // The colour bar: the gradient, its ticks, its exact ends, the quantity.
         let steps = bar.h.round().max(1.0) as usize;
+        // Top row: the colour of `hi`, bottom row: that of `lo`.
         for i in 0..steps {
-            let t = 1.0 - (i as f64 + 0.5) / steps as f64;
+            let t = 1.0 - i as f64 / (steps - 1).max(1) as f64;
             c.fill_rect(bar.x, bar.y + i as f32, bar.w, 1.0, colormap(t), 255);
         }
         let bs = Scale {
