@@ -9,7 +9,7 @@
 //! - [`axes`]: scales, "nice" ticks and number labels, axis drawing.
 //! - [`chart`]: line charts, one or more panels sharing an x axis, the legend above them.
 //! - [`heatmap`]: a grid of values with x/y axes and a colour bar covering every value.
-//! - [`format`]: PNG or JPEG by the file's extension.
+//! - [`format`](mod@format): PNG or JPEG by the file's extension.
 //!
 //! Every picture carries its own title and axis labels with units, so it reads without the
 //! command that wrote it.
