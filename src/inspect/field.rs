@@ -128,11 +128,20 @@ pub fn layer_cells(
         return Ok(finish(width, height, sum, lit, count));
     };
     for m in &l.masks {
-        let p = &manifest.machine.projector[m.projector as usize];
+        let Some(p) = manifest.machine.projector.get(m.projector as usize) else {
+            return Err(Error::Bundle {
+                path: masks.shown(&m.file),
+                msg: format!(
+                    "layer {layer}: mask for projector {}, the machine has {}",
+                    m.projector,
+                    manifest.machine.projector.len()
+                ),
+            });
+        };
         let img = masks.read_mask(&m.file)?;
         if img.dimensions() != (p.width_px, p.height_px) {
             return Err(Error::Bundle {
-                path: m.file.clone().into(),
+                path: masks.shown(&m.file),
                 msg: format!(
                     "layer {layer}: mask is {}x{}, projector {} is {}x{}",
                     img.width(),

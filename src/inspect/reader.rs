@@ -12,6 +12,9 @@ pub trait MaskReader: Sync {
     /// The mask file `rel` (a path as the manifest names it, e.g. `masks/00012.png`),
     /// decoded to 8-bit gray. Errors name the file.
     fn read_mask(&self, rel: &str) -> Result<GrayImage>;
+
+    /// How mask file `rel` is named in messages (e.g. `part.dmdjob/masks/00012.png`).
+    fn shown(&self, rel: &str) -> PathBuf;
 }
 
 /// The masks of a bundle directory.
@@ -46,6 +49,10 @@ impl MaskReader for DirMasks {
         }
         let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
         decode_mask(&bytes, &path)
+    }
+
+    fn shown(&self, rel: &str) -> PathBuf {
+        self.dir.join(rel)
     }
 }
 

@@ -159,17 +159,28 @@ pub fn x_labels_height() -> f32 {
     TICK_LEN + TICK_GAP + text::line_height(SMALL.size)
 }
 
-/// Vertical grid lines at `t` across `area`, with tick marks and (when `labels`) their
-/// labels below it.
-pub fn x_axis(c: &mut Canvas, area: Area, s: &Scale, t: &Ticks, labels: bool) {
+/// What an axis draws besides its tick marks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Marks {
+    /// Grid lines across the plot area at the ticks.
+    pub grid: bool,
+    /// The ticks' labels.
+    pub labels: bool,
+}
+
+/// Tick marks at `t` below `area`, with grid lines across it and labels below as `marks`
+/// says.
+pub fn x_axis(c: &mut Canvas, area: Area, s: &Scale, t: &Ticks, marks: Marks) {
     for &v in &t.values {
         let x = s.px(v);
         if x < area.x - 0.5 || x > area.right() + 0.5 {
             continue;
         }
-        c.fill_rect(x, area.y, 1.0, area.h, GRID, 255);
+        if marks.grid {
+            c.fill_rect(x, area.y, 1.0, area.h, GRID, 255);
+        }
         c.fill_rect(x, area.bottom(), 1.0, TICK_LEN, FRAME, 255);
-        if labels {
+        if marks.labels {
             c.text(
                 x,
                 area.bottom() + TICK_LEN + TICK_GAP,
@@ -180,22 +191,27 @@ pub fn x_axis(c: &mut Canvas, area: Area, s: &Scale, t: &Ticks, labels: bool) {
     }
 }
 
-/// Horizontal grid lines at `t` across `area`, with tick marks and labels left of it.
-pub fn y_axis(c: &mut Canvas, area: Area, s: &Scale, t: &Ticks) {
+/// Tick marks at `t` left of `area`, with grid lines across it and labels left of it as
+/// `marks` says.
+pub fn y_axis(c: &mut Canvas, area: Area, s: &Scale, t: &Ticks, marks: Marks) {
     let h = text::line_height(SMALL.size);
     for &v in &t.values {
         let y = s.px(v);
         if y < area.y - 0.5 || y > area.bottom() + 0.5 {
             continue;
         }
-        c.fill_rect(area.x, y, area.w, 1.0, GRID, 255);
+        if marks.grid {
+            c.fill_rect(area.x, y, area.w, 1.0, GRID, 255);
+        }
         c.fill_rect(area.x - TICK_LEN, y, TICK_LEN, 1.0, FRAME, 255);
-        c.text(
-            area.x - TICK_LEN - TICK_GAP,
-            y - h / 2.0,
-            &tick_label(v, t.step),
-            SMALL.aligned(Align::Right),
-        );
+        if marks.labels {
+            c.text(
+                area.x - TICK_LEN - TICK_GAP,
+                y - h / 2.0,
+                &tick_label(v, t.step),
+                SMALL.aligned(Align::Right),
+            );
+        }
     }
 }
 

@@ -140,8 +140,9 @@ impl Chart {
             };
             draw_bands(&mut c, area, &xs, &p.bands);
             let last = k + 1 == self.panels.len();
-            axes::x_axis(&mut c, area, &xs, &x_ticks, last);
-            axes::y_axis(&mut c, area, &ys, &y_ticks[k]);
+            let marks = |labels| axes::Marks { grid: true, labels };
+            axes::x_axis(&mut c, area, &xs, &x_ticks, marks(last));
+            axes::y_axis(&mut c, area, &ys, &y_ticks[k], marks(true));
             for s in &p.series {
                 draw_series(&mut c, area, &xs, &ys, s);
             }

@@ -180,8 +180,12 @@ impl Heatmap {
             px1: area.y,
         };
         // Grid lines would cross the cells: only tick marks and labels, then the frame.
-        tick_marks_x(&mut c, area, &xs, &x_ticks);
-        tick_marks_y(&mut c, area, &ys, &y_ticks);
+        let marks = axes::Marks {
+            grid: false,
+            labels: true,
+        };
+        axes::x_axis(&mut c, area, &xs, &x_ticks, marks);
+        axes::y_axis(&mut c, area, &ys, &y_ticks, marks);
         axes::frame(&mut c, area);
         c.text(
             area.x + area.w / 2.0,
@@ -281,41 +285,6 @@ impl Heatmap {
                 }
             }
         }
-    }
-}
-
-/// Tick marks and labels of an x axis below `area`, without grid lines.
-fn tick_marks_x(c: &mut Canvas, area: Area, s: &Scale, t: &axes::Ticks) {
-    for &v in &t.values {
-        let x = s.px(v);
-        if x < area.x - 0.5 || x > area.right() + 0.5 {
-            continue;
-        }
-        c.fill_rect(x, area.bottom(), 1.0, 4.0, INK, 255);
-        c.text(
-            x,
-            area.bottom() + 8.0,
-            &axes::tick_label(v, t.step),
-            SMALL.aligned(Align::Center),
-        );
-    }
-}
-
-/// Tick marks and labels of a y axis left of `area`, without grid lines.
-fn tick_marks_y(c: &mut Canvas, area: Area, s: &Scale, t: &axes::Ticks) {
-    let h = text::line_height(SMALL.size);
-    for &v in &t.values {
-        let y = s.px(v);
-        if y < area.y - 0.5 || y > area.bottom() + 0.5 {
-            continue;
-        }
-        c.fill_rect(area.x - 4.0, y, 4.0, 1.0, INK, 255);
-        c.text(
-            area.x - 8.0,
-            y - h / 2.0,
-            &axes::tick_label(v, t.step),
-            SMALL.aligned(Align::Right),
-        );
     }
 }
 
