@@ -208,7 +208,7 @@ fn measured_heatmap(z: &ZoneValues, lo: f64, hi: f64) -> Vec<u8> {
     zone_heatmap(
         z,
         format!(
-            "Measured irradiance per zone, mirrors fully on: spread {:.1} %",
+            "Measured irradiance per zone at the brightest valid gray: spread {:.1} %",
             spread_pct(&z.measured)
         ),
         irradiance_label(z.units),
@@ -223,7 +223,7 @@ fn fitted_heatmap(z: &ZoneValues, zone: &Compensator, lo: f64, hi: f64) -> Vec<u
     zone_heatmap(
         z,
         format!(
-            "Fitted P(x, y) · S(255), zone means, mirrors fully on: spread {:.1} %",
+            "Fitted irradiance P(x, y) · S at the brightest valid gray, zone means: spread {:.1} %",
             zone.prediction.spreads.before_zone_pct
         ),
         irradiance_label(z.units),

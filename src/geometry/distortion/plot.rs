@@ -38,15 +38,15 @@ impl Correction {
         let cell_mm = 1.0;
         let (cols, rows, values) = self.field_map(cell_mm);
         let report = &self.report;
+        let cells_max = values
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
         Heatmap {
             title: format!(
-                "{}: lens correction, distance from aim to target (largest {:.3} mm)",
-                report.source,
-                values
-                    .iter()
-                    .copied()
-                    .filter(|v| v.is_finite())
-                    .fold(report.max_correction_mm, f64::max)
+                "{}: lens correction, aim to target; largest {:.3} mm on the map, {:.3} mm at the table's points",
+                report.source, cells_max, report.max_correction_mm
             ),
             cols,
             rows,
