@@ -24,8 +24,9 @@
 //! ```
 //!
 //! The stage modules stay public for programs that drive the stages themselves (the
-//! benchmarks and examples do); the building blocks they share (PNG encoding, hashing,
-//! least squares, tables, plotting, reading input files) are private.
+//! benchmarks and examples do), and so does [`plot`], whose pictures several of them return;
+//! the building blocks they share (PNG encoding, hashing, least squares, tables, reading
+//! input files) are private.
 #![warn(missing_docs)]
 
 pub mod bundle;
@@ -34,12 +35,13 @@ pub mod error;
 pub mod exec;
 pub mod geometry;
 mod input;
+pub mod inspect;
 pub mod job;
 pub mod mesh;
 pub mod motion;
 pub mod optics;
 pub mod plan;
-mod plot;
+pub mod plot;
 mod png;
 mod polyfit;
 pub mod profile;

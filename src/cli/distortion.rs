@@ -16,8 +16,9 @@ pub(crate) struct DistortionArgs {
     /// Machine profile whose projector field the table describes.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
-    /// Write a heatmap of the correction over the field (gray: unreachable) to this PNG.
-    #[arg(long, value_name = "FILE.png")]
+    /// Write a heatmap of the correction over the field (gray: unreachable) to this
+    /// picture, PNG or JPEG by its extension (.png, .jpg, .jpeg).
+    #[arg(long, value_name = "FILE.png|FILE.jpg")]
     plot: Option<PathBuf>,
     /// Print the fit report as JSON on stdout.
     #[arg(long)]
@@ -33,14 +34,16 @@ impl DistortionArgs {
 
 /// Runs `dmdsl distortion`.
 pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
+    let plot_format = a.plot.as_deref().map(super::picture_format).transpose()?;
     let mut profile = Profile::resolve(&a.profile)?;
     let c = dmdsl::geometry::distortion::for_job(&DistortionChoice::Table(a.table), &mut profile)?
         .expect("a table was given");
     let report = c.report();
     let (_, _, map) = c.field_map(1.0);
     let reachable = map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64;
-    if let Some(p) = &a.plot {
-        std::fs::write(p, c.plot_png()).map_err(|e| dmdsl::Error::io(p, e))?;
+    if let (Some(p), Some(format)) = (&a.plot, plot_format) {
+        let bytes = c.plot().render().encode(format);
+        std::fs::write(p, bytes).map_err(|e| dmdsl::Error::io(p, e))?;
     }
     if a.json {
         let v =

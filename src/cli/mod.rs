@@ -3,6 +3,7 @@
 
 mod calibrate;
 mod distortion;
+mod inspect;
 mod interrupt;
 mod profile;
 mod run;
@@ -59,6 +60,12 @@ pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> Str
         },
     })
     .expect("serializes")
+}
+
+/// The format a picture path asks for (`.png`, `.jpg`, `.jpeg`); anything else is a usage
+/// error naming the path and its extension.
+pub(crate) fn picture_format(path: &std::path::Path) -> Result<dmdsl::plot::Format, dmdsl::Error> {
+    dmdsl::plot::Format::from_path(path).map_err(dmdsl::Error::Usage)
 }
 
 /// The options that decide which warnings fail a command or are silenced.
@@ -128,6 +135,10 @@ pub(crate) enum Cmd {
     /// Fit a distortion correction table and report its quality (and optionally plot it).
     #[command(after_help = distortion::DISTORTION_EXIT_HELP)]
     Distortion(distortion::DistortionArgs),
+    /// Summarize a job bundle (layers, time, resin, warnings, per-layer extremes) and draw
+    /// it: a contact sheet of layer masks, a per-layer chart, a shaded preview of the part.
+    #[command(after_help = inspect::INSPECT_EXIT_HELP)]
+    Inspect(inspect::InspectArgs),
 }
 
 /// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`,
@@ -152,6 +163,7 @@ impl Cli {
             Cmd::Run(a) => a.json(),
             Cmd::Calibrate(a) => a.json(),
             Cmd::Distortion(a) => a.json(),
+            Cmd::Inspect(a) => a.json(),
             Cmd::Profile(_) => false,
         }
     }
@@ -164,6 +176,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
         Cmd::Distortion(a) => distortion::distortion(a, cli.quiet),
         Cmd::Run(a) => run::run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),
+        Cmd::Inspect(a) => inspect::inspect(a, cli.quiet),
         Cmd::Profile(c) => profile::profile(c),
     }
 }

@@ -20,10 +20,11 @@ pub(crate) struct RunArgs {
     /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
-    /// Write a PNG of stage position and light over time.
-    #[arg(long, value_name = "FILE.png")]
+    /// Write a picture of stage position and light over time: PNG or JPEG by the
+    /// extension (.png, .jpg, .jpeg).
+    #[arg(long, value_name = "FILE.png|FILE.jpg")]
     plot: Option<PathBuf>,
-    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based).
+    /// Restrict --trace and --plot to layers A..B (inclusive, 0-based); needs one of them.
     #[arg(long, value_name = "A..B")]
     layers: Option<String>,
     /// Check the job against this machine instead of the one the bundle embeds: a

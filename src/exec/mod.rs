@@ -31,6 +31,7 @@ pub mod testutil;
 
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};
+use crate::plot::Format;
 use crate::profile::Profile;
 use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
 use serde::Serialize;
@@ -63,7 +64,8 @@ pub struct RunOptions {
     pub faults: Vec<FaultSpec>,
     /// Write the timeline as CSV here.
     pub trace: Option<PathBuf>,
-    /// Write a PNG of stage position and light over time here.
+    /// Write a picture of stage position and light over time here (PNG, or JPEG for a
+    /// `.jpg`/`.jpeg` path).
     pub plot: Option<PathBuf>,
     /// Restrict the trace and the plot to these layers, e.g. "10..20" (inclusive).
     pub layers: Option<String>,
@@ -192,6 +194,14 @@ fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<ReadBundle> {
             )));
         }
     }
+    if opts.layers.is_some() && opts.trace.is_none() && opts.plot.is_none() {
+        return Err(Error::Usage(
+            "--layers applies to --trace and --plot; give one of them".into(),
+        ));
+    }
+    if let Some(p) = &opts.plot {
+        Format::from_path(p).map_err(Error::Usage)?;
+    }
     let range = opts
         .layers
         .as_deref()
@@ -260,16 +270,17 @@ fn simulate_into_sinks(
     }
     if let (Some(p), Some(path)) = (plot, opts.plot.as_deref()) {
         let title = format!(
-            "{}: stage position and light{}",
+            "{}: stage position and light over time{}",
             dir.file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             match &range {
-                Some(r) => format!(", layers {}..{}", r.start(), r.end()),
+                Some(r) => format!(", layers {}–{}", r.start(), r.end()),
                 None => String::new(),
             }
         );
-        write_atomic(path, &p.render(&title))?;
+        let format = Format::from_path(path).map_err(Error::Usage)?;
+        write_atomic(path, &p.render(&title).encode(format))?;
     }
     Ok(Simulated {
         outcome,

@@ -3,7 +3,7 @@
 
 use super::sim::{FaultEvent, Motion, SegKind, Segment, ShutterState, Sink};
 use super::Violation;
-use crate::plot::{Band, Chart, Series, Style};
+use crate::plot::{Band, Canvas, Chart, Panel, Series, Style};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -174,6 +174,8 @@ pub struct PlotCollector {
     layers: Option<RangeInclusive<usize>>,
     points: Vec<(f64, f64)>,
     light: Vec<(f64, f64)>,
+    /// Where the stage stood when each light-on interval began: (time, position).
+    exposures: Vec<(f64, f64)>,
     times: Vec<f64>,
 }
 
@@ -186,8 +188,9 @@ impl PlotCollector {
         }
     }
 
-    /// Renders the chart as PNG bytes.
-    pub fn render(&self, title: &str) -> Vec<u8> {
+    /// The chart: stage position over time with the light-on intervals shaded, under
+    /// `title`. Time is in s, min or h, whichever keeps the numbers short.
+    pub fn render(&self, title: &str) -> Canvas {
         let span = match (self.points.first(), self.points.last()) {
             (Some(a), Some(b)) => b.0 - a.0,
             _ => 0.0,
@@ -203,33 +206,39 @@ impl PlotCollector {
         let bands = self
             .light
             .iter()
-            .enumerate()
-            .map(|(i, &(a, b))| Band {
+            .map(|&(a, b)| Band {
                 x0: a / div,
                 x1: b / div,
-                color: [255, 190, 0],
-                label: if i == 0 {
-                    "light on".into()
-                } else {
-                    String::new()
-                },
+                color: [255, 170, 0],
+                label: "light on (exposing)".into(),
             })
             .collect();
         Chart {
             title: title.to_string(),
-            x_label: format!("time ({unit})"),
-            y_label: "stage (mm)".into(),
+            x_label: format!("time from the start of the job ({unit})"),
             width: 1400,
             height: 600,
-            series: vec![Series {
-                label: "stage position".into(),
-                color: [30, 90, 200],
-                style: Style::Line,
-                points,
+            panels: vec![Panel {
+                y_label: "stage position (mm)".into(),
+                series: vec![
+                    Series {
+                        label: "stage position: platform distance from the exposure plane".into(),
+                        color: [30, 90, 200],
+                        style: Style::Line,
+                        points,
+                    },
+                    Series {
+                        label: "where each exposure starts".into(),
+                        color: [200, 60, 20],
+                        style: Style::Points,
+                        points: self.exposures.iter().map(|&(t, z)| (t / div, z)).collect(),
+                    },
+                ],
+                bands,
+                y_from_zero: false,
             }],
-            bands,
         }
-        .render_png()
+        .render()
     }
 }
 
@@ -256,7 +265,10 @@ impl Sink for PlotCollector {
         if s.light && s.t1 > s.t0 {
             match self.light.last_mut() {
                 Some(last) if s.t0 - last.1 < 1e-9 => last.1 = s.t1,
-                _ => self.light.push((s.t0, s.t1)),
+                _ => {
+                    self.light.push((s.t0, s.t1));
+                    self.exposures.push((s.t0, s.from_mm));
+                }
             }
         }
     }

@@ -6,11 +6,12 @@
 
 use super::calib::FitResult;
 use super::Compensator;
-use crate::plot::{heatmap_png, Band, Chart, Heatmap, Series, Style};
+use super::Units;
+use crate::plot::{Band, Chart, Format, Heatmap, Panel, Series, Style};
 use std::path::{Path, PathBuf};
 
 /// Edge of one zone's cell in the heatmaps, px.
-const CELL_PX: u32 = 80;
+const CELL_PX: f32 = 80.0;
 
 /// The plot file `<stem of out>-<suffix>.png` beside the calibration file `out`.
 fn sibling(out: &Path, suffix: &str) -> PathBuf {
@@ -30,27 +31,41 @@ fn zone_of(zone_mm: f64, rows: usize, cols: usize, x: f64, y: f64) -> Option<usi
     (c < cols && rb < rows).then(|| (rows - 1 - rb) * cols + c)
 }
 
-/// An annotated heatmap PNG of per-zone values (row 0 = top) on the colour scale `lo..hi`.
+/// An annotated heatmap PNG of per-zone values (row 0 = top) over the zone grid, in mm from
+/// the field's bottom-left corner, on a colour scale from `range` widened to the values.
 fn zone_heatmap(
+    z: &ZoneValues,
     title: String,
-    unit: &str,
-    cols: usize,
-    rows: usize,
+    quantity: &str,
     values: Vec<f64>,
-    lo: f64,
-    hi: f64,
+    range: [f64; 2],
+    missing: &str,
 ) -> Vec<u8> {
-    heatmap_png(&Heatmap {
+    Heatmap {
         title,
-        unit: unit.into(),
-        cols,
-        rows,
+        cols: z.cols,
+        rows: z.rows,
         values,
-        vmin: lo,
-        vmax: hi,
+        x_range: [0.0, z.cols as f64 * z.zone_mm],
+        y_range: [0.0, z.rows as f64 * z.zone_mm],
+        x_label: "x (mm)".into(),
+        y_label: "y (mm)".into(),
+        quantity: quantity.into(),
+        range: Some(range),
         cell_px: CELL_PX,
         annotate: true,
-    })
+        missing: missing.into(),
+    }
+    .render()
+    .encode(Format::Png)
+}
+
+/// The colour bar's label for irradiance in `units`.
+fn irradiance_label(units: Units) -> &'static str {
+    match units {
+        Units::MwCm2 => "irradiance (mW/cm²)",
+        Units::Relative => "irradiance (relative units)",
+    }
 }
 
 /// (smallest, largest) of the finite values of `v`.
@@ -114,13 +129,13 @@ pub fn calibration_plots(
 }
 
 /// The colour scale of the compensated heatmaps, % of target.
-const COMPENSATED_BAND_PCT: (f64, f64) = (97.0, 103.0);
+const COMPENSATED_BAND_PCT: [f64; 2] = [97.0, 103.0];
 
 /// Per-zone values of a fit on the compensator's zone grid (row 0 = top): what the
 /// heatmaps show.
-struct ZoneValues<'a> {
+struct ZoneValues {
     /// Irradiance units of the calibration.
-    unit: &'a str,
+    units: Units,
     /// Zone edge, mm.
     zone_mm: f64,
     /// Zone grid columns.
@@ -138,8 +153,8 @@ struct ZoneValues<'a> {
     fitted_after: Vec<f64>,
 }
 
-impl<'a> ZoneValues<'a> {
-    fn new(fit: &'a FitResult, zone: &Compensator) -> ZoneValues<'a> {
+impl ZoneValues {
+    fn new(fit: &FitResult, zone: &Compensator) -> ZoneValues {
         let cal = &fit.calibration;
         let zmm = cal.zone_mm.get();
         let pr = &zone.prediction;
@@ -176,7 +191,7 @@ impl<'a> ZoneValues<'a> {
             .collect();
         let fitted_after: Vec<f64> = pr.zone_after.iter().map(|&v| pct(v)).collect();
         ZoneValues {
-            unit: cal.units.as_str(),
+            units: cal.units,
             zone_mm: zmm,
             cols,
             rows,
@@ -191,49 +206,45 @@ impl<'a> ZoneValues<'a> {
 /// Measured full-on irradiance per zone, on the scale `lo..hi` shared with the fit.
 fn measured_heatmap(z: &ZoneValues, lo: f64, hi: f64) -> Vec<u8> {
     zone_heatmap(
+        z,
         format!(
-            "Measured irradiance, mirrors fully on ({}), spread {:.1} %",
-            z.unit,
+            "Measured irradiance per zone at the brightest valid gray: spread {:.1} %",
             spread_pct(&z.measured)
         ),
-        z.unit,
-        z.cols,
-        z.rows,
+        irradiance_label(z.units),
         z.measured.clone(),
-        lo,
-        hi,
+        [lo, hi],
+        "not measured",
     )
 }
 
 /// Fitted full-on irradiance per zone, on the scale `lo..hi` shared with the measurements.
 fn fitted_heatmap(z: &ZoneValues, zone: &Compensator, lo: f64, hi: f64) -> Vec<u8> {
     zone_heatmap(
+        z,
         format!(
-            "Fitted P(x,y) zone means, fully on ({}), spread {:.1} %",
-            z.unit, zone.prediction.spreads.before_zone_pct
+            "Fitted irradiance P(x, y) · S at the brightest valid gray, zone means: spread {:.1} %",
+            zone.prediction.spreads.before_zone_pct
         ),
-        z.unit,
-        z.cols,
-        z.rows,
+        irradiance_label(z.units),
         z.fitted.clone(),
-        lo,
-        hi,
+        [lo, hi],
+        "",
     )
 }
 
 /// Measured irradiance after zone compensation, % of target.
 fn measured_compensated_heatmap(z: &ZoneValues) -> Vec<u8> {
     zone_heatmap(
+        z,
         format!(
-            "Measured x S(zone gray), % of target, spread {:.2} %",
+            "Measured × S(zone gray): irradiance after zone compensation, spread {:.2} %",
             spread_pct(&z.measured_after)
         ),
-        "% of target",
-        z.cols,
-        z.rows,
+        "irradiance (% of the target E*)",
         z.measured_after.clone(),
-        COMPENSATED_BAND_PCT.0,
-        COMPENSATED_BAND_PCT.1,
+        COMPENSATED_BAND_PCT,
+        "not measured",
     )
 }
 
@@ -247,36 +258,34 @@ fn fitted_compensated_heatmap(z: &ZoneValues, zone: &Compensator) -> Vec<u8> {
         .map(|(&x, &ins)| if ins { x } else { f64::NAN })
         .collect();
     zone_heatmap(
+        z,
         format!(
-            "Fitted, zone compensation, % of target, spread {:.2} %",
+            "Fitted irradiance after zone compensation: spread {:.2} % inside the calibrated area",
             spread_pct(&inside)
         ),
-        "% of target",
-        z.cols,
-        z.rows,
+        "irradiance (% of the target E*)",
         z.fitted_after.clone(),
-        COMPENSATED_BAND_PCT.0,
-        COMPENSATED_BAND_PCT.1,
+        COMPENSATED_BAND_PCT,
+        "",
     )
 }
 
 /// The gray of each zone at full coverage, on the valid gray range.
 fn zone_grays_heatmap(z: &ZoneValues, fit: &FitResult, zone: &Compensator) -> Vec<u8> {
     zone_heatmap(
+        z,
         format!(
-            "Zone grays (pixel value at full coverage), {} mm zones",
+            "Zone grays: the pixel value of a fully covered pixel, {} mm zones",
             z.zone_mm
         ),
-        "gray",
-        z.cols,
-        z.rows,
+        "pixel value (255 = mirror fully on)",
         zone.prediction
             .zone_gray
             .iter()
             .map(|&g| g as f64)
             .collect(),
-        fit.calibration.response.valid_gray()[0] as f64,
-        255.0,
+        [fit.calibration.response.valid_gray()[0] as f64, 255.0],
+        "",
     )
 }
 
@@ -303,13 +312,13 @@ fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8>
     }
     let mut series = vec![
         Series {
-            label: "readings / fitted P".into(),
+            label: "readings ÷ fitted P(x, y)".into(),
             color: [170, 170, 170],
             style: Style::Points,
             points: readings,
         },
         Series {
-            label: "S(g) fit".into(),
+            label: "S(g), fitted".into(),
             color: [31, 119, 180],
             style: Style::Line,
             points: curve,
@@ -334,27 +343,30 @@ fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8>
         x0: mlo as f64,
         x1: mhi as f64,
         color: [44, 160, 44],
-        label: "measured, monotone".into(),
+        label: "measured gray range (S monotone)".into(),
     }];
     if glo < mlo {
         bands.push(Band {
             x0: glo as f64,
             x1: mlo as f64,
             color: [255, 187, 120],
-            label: "interpolated to S(0) = 0".into(),
+            label: "interpolated down to S(0) = 0".into(),
         });
     }
-    let chart = Chart {
+    Chart {
         title: format!(
-            "Gray response S(g), valid {glo}..{ghi}, pixel mode spread {:.2} %",
-            pixel_spread_pct
+            "Gray response S(g): valid {glo}–{ghi}, pixel mode spread {pixel_spread_pct:.2} %"
         ),
-        x_label: "pixel value g (255 = fully on)".into(),
-        y_label: "S (1 at the brightest valid gray)".into(),
+        x_label: "pixel value g (255 = mirror fully on)".into(),
         width: 900,
         height: 600,
-        series,
-        bands,
-    };
-    chart.render_png()
+        panels: vec![Panel {
+            y_label: "S(g), 1 at the brightest valid gray".into(),
+            series,
+            bands,
+            y_from_zero: true,
+        }],
+    }
+    .render()
+    .encode(Format::Png)
 }

@@ -120,6 +120,26 @@ fn fit_recovers_known_p_and_s_and_writes_plots() {
     for p in r["plots"].as_array().unwrap() {
         let bytes = std::fs::read(dir.join(p.as_str().unwrap())).unwrap();
         assert!(bytes.starts_with(b"\x89PNG"), "{p}");
+        // Each picture has its title and, but for the response chart, a colour bar: a
+        // column running through the colour map from yellow (top) to dark violet.
+        let img = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        let title = img
+            .enumerate_pixels()
+            .filter(|(_, y, px)| *y < 40 && px.0.iter().all(|&c| c < 110))
+            .count();
+        assert!(title > 100, "{p}: no title text");
+        if !p.as_str().unwrap().ends_with("response.png") {
+            let (yellow, violet) = (dmdsl::plot::colormap(1.0), dmdsl::plot::colormap(0.0));
+            let bar = (0..img.width()).any(|x| {
+                let col: Vec<[u8; 3]> = (0..img.height()).map(|y| img.get_pixel(x, y).0).collect();
+                let near =
+                    |a: [u8; 3], b: [u8; 3]| a.iter().zip(b).all(|(u, v)| u.abs_diff(v) < 12);
+                let first = col.iter().position(|&c| near(c, yellow));
+                let last = col.iter().rposition(|&c| near(c, violet));
+                matches!((first, last), (Some(f), Some(l)) if l > f + 150)
+            });
+            assert!(bar, "{p}: no colour bar");
+        }
     }
     assert_eq!(r["plots"].as_array().unwrap().len(), 6);
     let cal = dmdsl::optics::Calibration::read(&dir.join("cal.toml")).unwrap();

@@ -616,8 +616,25 @@ fn distortion_command_reports_fit_reach_and_plots() {
     // Barrel pulls the light inwards: the corners are out of reach.
     let reach = v["reachable_fraction"].as_f64().unwrap();
     assert!((0.8..0.99).contains(&reach), "{reach}");
-    let img = image::open(dir.join("b.png")).unwrap();
+    let img = image::open(dir.join("b.png")).unwrap().to_rgb8();
     assert!(img.width() > 520 && img.height() > 392);
+    assert!(title_text_pixels(&img) > 100, "no title text");
+    // Unreachable corners: gray cells, and the swatch saying what they mean.
+    let gray = img.pixels().filter(|p| p.0 == [200, 200, 200]).count();
+    assert!(gray > 500, "{gray} gray pixels");
+    // The same picture as JPEG; another extension is refused before any work.
+    let o = run_in(&dir, &["distortion", "barrel.csv", "--plot", "b.jpg", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let jpg = image::open(dir.join("b.jpg")).unwrap();
+    assert_eq!(jpg.width(), img.width());
+    let o = run_in(&dir, &["distortion", "barrel.csv", "--plot", "b.gif"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("b.gif: cannot write pictures as .gif; use .png, .jpg or .jpeg"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.join("b.gif").exists());
     let o = run_in(&dir, &["distortion", "barrel.csv"]);
     assert!(stdout(&o).contains("reachable: "), "{}", stdout(&o));
     let o = run_in(&dir, &["distortion", "nope.csv"]);
@@ -826,4 +843,48 @@ fn tiled_compensation_per_projector_flattens_across_the_seam() {
         "{}",
         stderr(&o)
     );
+}
+
+/// Dark (text) pixels in the top 40 rows of a picture: its title.
+fn title_text_pixels(img: &image::RgbImage) -> usize {
+    img.enumerate_pixels()
+        .filter(|(_, y, p)| *y < 40 && p.0.iter().all(|&c| c < 110))
+        .count()
+}
+
+#[test]
+fn distortion_colour_bar_covers_the_reported_correction() {
+    // fixtures/lens_table.csv: the 1 mm cells' largest correction (1.79 mm) is below the
+    // table's (2.106 mm, the fit report's); the bar runs to the larger.
+    let mut profile = dmdsl::profile::Profile::resolve(dmdsl::profile::DEFAULT_PROFILE).unwrap();
+    let c = dmdsl::geometry::distortion::for_job(
+        &dmdsl::geometry::distortion::DistortionChoice::Table(fixture("lens_table.csv")),
+        &mut profile,
+    )
+    .unwrap()
+    .unwrap();
+    let report = c.report();
+    let hm = c.plot();
+    let [lo, hi] = hm.scale();
+    let finite: Vec<f64> = hm
+        .values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let cells_max = finite.iter().copied().fold(0.0, f64::max);
+    let cells_min = finite.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(cells_max < report.max_correction_mm, "{cells_max}");
+    assert_eq!(hi, report.max_correction_mm);
+    assert!(lo <= cells_min && lo == 0.0);
+    assert!(hm.quantity.contains("(mm)") && hm.x_label.contains("(mm)"));
+    // In the picture, the colour bar's top is the colour of the largest correction and no
+    // cell reaches it (the cells stop at 1.79 of 2.106 mm).
+    let img = hm.render().to_rgb();
+    let top = dmdsl::plot::colormap(1.0);
+    let cell_of_max = hm.color_of(cells_max);
+    assert!(img.pixels().any(|p| p.0 == top), "no colour bar top");
+    assert!(img.pixels().any(|p| p.0 == cell_of_max));
+    assert_ne!(cell_of_max, top);
+    assert!(title_text_pixels(&img) > 100, "no title text");
 }

@@ -30,6 +30,18 @@ fn failures_print_one_json_error_object() {
             "nope.dmdjob: does not exist",
         ),
         (
+            &["inspect", "nope.dmdjob", "--json"],
+            "io.not-found",
+            Some("nope.dmdjob"),
+            "nope.dmdjob: does not exist",
+        ),
+        (
+            &["inspect", "nope.dmdjob", "--json", "--chart", "c.gif"],
+            "usage",
+            None,
+            "c.gif: cannot write pictures as .gif",
+        ),
+        (
             &["calibrate", "m.csv", "-o", "c.toml", "--json"],
             "io.not-found",
             Some("m.csv"),

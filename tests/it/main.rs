@@ -7,6 +7,7 @@ mod calibrate;
 mod common;
 mod fuzz;
 mod geometry;
+mod inspect;
 mod json;
 mod layers;
 mod plan;

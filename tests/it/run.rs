@@ -119,8 +119,23 @@ fn fresh_bundle_replays_cleanly() {
         (z_max - (2.0 + 5.0)).abs() < 1e-9,
         "dip above the last layer: {z_max}"
     );
-    let img = image::open(dir.join("p.png")).unwrap();
-    assert!(img.width() > 500 && img.height() > 300);
+    let img = image::open(dir.join("p.png")).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (1400, 600));
+    let title = img
+        .enumerate_pixels()
+        .filter(|(_, y, p)| *y < 40 && p.0.iter().all(|&c| c < 110))
+        .count();
+    assert!(title > 100, "no title text");
+    // The stage line (blue), the exposure dots (red) and the light-on shading (orange).
+    let count = |f: &dyn Fn([u8; 3]) -> bool| img.pixels().filter(|p| f(p.0)).count();
+    assert!(count(&|p| p[2] > 150 && p[0] < 80) > 1000);
+    assert!(count(&|p| p[0] > 170 && p[1] < 90 && p[2] < 60) > 40);
+    assert!(count(&|p| p[0] > 240 && p[1] > 200 && p[2] < 200) > 1000);
+    // As JPEG.
+    let o = run_in(&dir, &["run", "box.dmdjob", "-q", "--plot", "p.jpg"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let jpg = image::open(dir.join("p.jpg")).unwrap();
+    assert_eq!((jpg.width(), jpg.height()), (1400, 600));
 
     // --layers limits trace and plot.
     let o = run_in(
@@ -284,7 +299,18 @@ fn unreadable_bundles_and_bad_options_exit_2() {
             vec!["run", "box.dmdjob", "--fault", "stall@9"],
             "the job has 4 layers",
         ),
-        (vec!["run", "box.dmdjob", "--layers", "3..7"], "--layers"),
+        (
+            vec!["run", "box.dmdjob", "--plot", "p.png", "--layers", "3..7"],
+            "--layers \"3..7\": the job has layers 0..3",
+        ),
+        (
+            vec!["run", "box.dmdjob", "--layers", "1..2"],
+            "--layers applies to --trace and --plot",
+        ),
+        (
+            vec!["run", "box.dmdjob", "--plot", "p.gif"],
+            "p.gif: cannot write pictures as .gif; use .png, .jpg or .jpeg",
+        ),
         (
             vec!["run", "box.dmdjob", "--trace", "no/such/dir/t.csv"],
             "t.csv",

@@ -1,7 +1,7 @@
 //! The correction over the field, as numbers and as a heatmap (`dmdsl distortion --plot`).
 
 use super::correction::Correction;
-use crate::plot::{heatmap_png, Heatmap};
+use crate::plot::Heatmap;
 
 impl Correction {
     /// The correction magnitude |aim − target| (mm) over the field on cells of `cell_mm`,
@@ -29,26 +29,37 @@ impl Correction {
         (cols, rows, v)
     }
 
-    /// Heatmap PNG of [`field_map`](Self::field_map) on 1 mm cells.
-    pub fn plot_png(&self) -> Vec<u8> {
-        let (cols, rows, values) = self.field_map(1.0);
-        let vmax = values
+    /// The heatmap of [`field_map`](Self::field_map) on 1 mm cells, in mm from the field's
+    /// bottom-left corner (the cells start at the top-left corner, so the bottom row may
+    /// reach below y = 0). Its colour bar runs from 0 to the largest correction, the larger
+    /// of the cells' and the table points' (the fit report's `max_correction_mm`), so the
+    /// bar covers what the report prints.
+    pub fn plot(&self) -> Heatmap {
+        let cell_mm = 1.0;
+        let (cols, rows, values) = self.field_map(cell_mm);
+        let report = &self.report;
+        let cells_max = values
             .iter()
+            .copied()
             .filter(|v| v.is_finite())
-            .fold(0.0, |a: f64, &b| a.max(b));
-        heatmap_png(&Heatmap {
+            .fold(0.0, f64::max);
+        Heatmap {
             title: format!(
-                "{}: correction distance aim to target, mm (gray: unreachable)",
-                self.report.source
+                "{}: lens correction, aim to target; largest {:.3} mm on the map, {:.3} mm at the table's points",
+                report.source, cells_max, report.max_correction_mm
             ),
-            unit: "mm".into(),
             cols,
             rows,
             values,
-            vmin: 0.0,
-            vmax,
-            cell_px: 8,
+            x_range: [0.0, cols as f64 * cell_mm],
+            y_range: [self.field_mm[1] - rows as f64 * cell_mm, self.field_mm[1]],
+            x_label: "x on the build plane (mm)".into(),
+            y_label: "y on the build plane (mm)".into(),
+            quantity: "correction (mm)".into(),
+            range: Some([0.0, report.max_correction_mm]),
+            cell_px: 9.0,
             annotate: false,
-        })
+            missing: "unreachable: the projector cannot aim there".into(),
+        }
     }
 }

@@ -1,0 +1,204 @@
+//! The numbers of `dmdsl inspect`: the job's totals, its warnings counted by code and the
+//! per-layer extremes, from the manifest alone.
+
+use crate::bundle::{Layer, Manifest};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+/// The largest value of one per-layer figure and the first layer that has it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Extreme {
+    /// The value, in the figure's unit.
+    pub value: f64,
+    /// The (first) layer with it.
+    pub layer: usize,
+}
+
+/// The per-layer extremes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Extremes {
+    /// Largest cured area, mm².
+    pub area_mm2: Extreme,
+    /// Longest exposure, s.
+    pub exposure_s: Extreme,
+    /// Largest fill distance, mm.
+    pub max_fill_distance_mm: Extreme,
+    /// Most islands resting on nothing.
+    pub islands: Extreme,
+    /// Longest layer time, s.
+    pub time_s: Extreme,
+}
+
+/// What `dmdsl inspect` reports (and prints with `--json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    /// True: the bundle was read (failures are errors).
+    pub ok: bool,
+    /// The bundle, as given.
+    pub bundle: String,
+    /// The part's file the job was sliced from.
+    pub source: String,
+    /// The machine profile's name.
+    pub profile: String,
+    /// Projectors (masks per layer).
+    pub projectors: usize,
+    /// Layers.
+    pub layers: usize,
+    /// The job's layer height setting, mm.
+    pub layer_height_mm: f64,
+    /// Height of the part as printed, mm.
+    pub height_mm: f64,
+    /// The manifest's estimated print time, s.
+    pub print_time_s: f64,
+    /// Sum of the exposures, s.
+    pub exposure_s: f64,
+    /// Cured resin volume, ml.
+    pub resin_volume_ml: f64,
+    /// Layers printed continuously (hybrid process), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub continuous_layers: Option<u64>,
+    /// Number of warnings (notes included).
+    pub warnings: usize,
+    /// Warnings counted by code.
+    pub warnings_by_code: BTreeMap<String, usize>,
+    /// The per-layer extremes (none for a job without layers).
+    pub extremes: Option<Extremes>,
+    /// The pictures written.
+    pub pictures: Vec<String>,
+}
+
+/// The largest `f` over `layers` and the first layer reaching it.
+fn extreme(layers: &[Layer], f: impl Fn(&Layer) -> f64) -> Extreme {
+    let mut best = Extreme {
+        value: f64::NEG_INFINITY,
+        layer: 0,
+    };
+    for l in layers {
+        let v = f(l);
+        if v > best.value {
+            best = Extreme {
+                value: v,
+                layer: l.index as usize,
+            };
+        }
+    }
+    best
+}
+
+/// The summary of the bundle at `bundle` (as given) whose manifest is `m`.
+pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
+    let mut by_code = BTreeMap::new();
+    for w in &m.warnings {
+        *by_code.entry(w.code.clone()).or_insert(0) += 1;
+    }
+    let l = &m.layers;
+    let extremes = (!l.is_empty()).then(|| Extremes {
+        area_mm2: extreme(l, |l| l.area_mm2),
+        exposure_s: extreme(l, |l| l.exposure_s),
+        max_fill_distance_mm: extreme(l, |l| l.max_fill_distance_mm),
+        islands: extreme(l, |l| l.islands as f64),
+        time_s: extreme(l, |l| l.time_s),
+    });
+    Summary {
+        ok: true,
+        bundle: bundle.into(),
+        source: m.source.file.clone(),
+        profile: m.machine.name.clone(),
+        projectors: m.machine.projector.len(),
+        layers: l.len(),
+        layer_height_mm: m.settings.layer_height_mm,
+        height_mm: m.totals.height_mm,
+        print_time_s: m.totals.print_time_s,
+        exposure_s: m.totals.exposure_s,
+        resin_volume_ml: m.totals.resin_volume_ml,
+        continuous_layers: m.totals.continuous_layers,
+        warnings: m.warnings.len(),
+        warnings_by_code: by_code,
+        extremes,
+        pictures: Vec::new(),
+    }
+}
+
+/// "1h02m03s".
+fn hms(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
+}
+
+/// The summary for people.
+pub fn render_human(s: &Summary) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
+        s.bundle,
+        s.layers,
+        s.layer_height_mm,
+        s.height_mm,
+        s.source,
+        s.profile,
+        if s.projectors > 1 {
+            format!(" ({} projectors)", s.projectors)
+        } else {
+            String::new()
+        }
+    );
+    let _ = writeln!(
+        o,
+        "estimated print time {} ({:.1} s), exposure {:.1} s, resin {:.2} ml{}",
+        hms(s.print_time_s),
+        s.print_time_s,
+        s.exposure_s,
+        s.resin_volume_ml,
+        s.continuous_layers.map_or(String::new(), |c| format!(
+            ", {c} layers printed continuously"
+        ))
+    );
+    if s.warnings == 0 {
+        let _ = writeln!(o, "warnings: none");
+    } else {
+        let by: Vec<String> = s
+            .warnings_by_code
+            .iter()
+            .map(|(c, n)| format!("{c} {n}"))
+            .collect();
+        let _ = writeln!(o, "warnings: {} ({})", s.warnings, by.join(", "));
+    }
+    if let Some(e) = &s.extremes {
+        let rows = [
+            (
+                "largest area",
+                format!("{:.2} mm²", e.area_mm2.value),
+                e.area_mm2.layer,
+            ),
+            (
+                "longest exposure",
+                format!("{:.2} s", e.exposure_s.value),
+                e.exposure_s.layer,
+            ),
+            (
+                "largest fill distance",
+                format!("{:.3} mm", e.max_fill_distance_mm.value),
+                e.max_fill_distance_mm.layer,
+            ),
+            (
+                "most islands",
+                format!("{}", e.islands.value),
+                e.islands.layer,
+            ),
+            (
+                "longest layer time",
+                format!("{:.2} s", e.time_s.value),
+                e.time_s.layer,
+            ),
+        ];
+        for (what, value, layer) in rows {
+            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {layer}");
+        }
+    }
+    for p in &s.pictures {
+        let _ = writeln!(o, "picture: {p}");
+    }
+    o
+}
