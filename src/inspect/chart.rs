@@ -62,7 +62,7 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         width: 1200,
         height: 1100,
         panels: vec![
-            panel("cured area (mm²)", series(&|l| l.area_mm2)),
+            panel("section area (mm²)", series(&|l| l.area_mm2)),
             panel("exposure (s)", series(&|l| l.exposure_s)),
             panel(
                 "largest fill distance (mm)",

@@ -18,7 +18,7 @@ pub struct Extreme {
 /// The per-layer extremes.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Extremes {
-    /// Largest cured area, mm².
+    /// Largest section area, mm².
     pub area_mm2: Extreme,
     /// Longest exposure, s.
     pub exposure_s: Extreme,
