@@ -23,6 +23,7 @@ pub mod png;
 pub mod polyfit;
 pub mod profile;
 pub mod raster;
+pub mod round;
 pub mod slice;
 pub mod table;
 pub mod units;

@@ -38,7 +38,9 @@ pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
         .expect("a table was given");
     let report = c.report();
     let (_, _, map) = c.field_map(1.0);
-    let reachable = map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64;
+    let reachable = dmdsl::round::derived(
+        map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64,
+    );
     if let Some(p) = &a.plot {
         std::fs::write(p, c.plot_png()).map_err(|e| dmdsl::Error::io(p, e))?;
     }

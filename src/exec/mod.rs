@@ -42,6 +42,7 @@ pub struct Violation {
     /// Layer concerned (`None`: the whole job).
     pub layer: Option<usize>,
     /// Simulated time, s (for verification problems: when the layer starts).
+    #[serde(serialize_with = "report::six_opt")]
     pub time_s: Option<f64>,
     /// Machine-readable kind, e.g. `travel`, `mask-checksum`, `stall` (see docs/EXECUTOR.md).
     pub kind: &'static str,

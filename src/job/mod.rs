@@ -137,7 +137,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             analysis_cpu_s,
             finish_s,
             total_s: t0.elapsed().as_secs_f64(),
-        },
+        }
+        .rounded(),
         distortion: distortion_report,
     })
 }
