@@ -326,7 +326,14 @@ pub fn render_human(r: &Report) -> String {
         );
     }
     for u in &r.untriggered_faults {
-        let _ = writeln!(o, "note: fault {u} never triggered");
+        let why = match &r.fault {
+            Some(f) => format!(
+                " (the run ended at the {} fault in layer {})",
+                f.kind, f.layer
+            ),
+            None => String::new(),
+        };
+        let _ = writeln!(o, "note: fault {u} never triggered{why}");
     }
     if r.violations.is_empty() {
         let _ = writeln!(o, "violations: none");
