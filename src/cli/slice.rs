@@ -6,6 +6,7 @@ use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions};
 use dmdsl::profile::{self, Profile};
 use dmdsl::units::Positive;
+use dmdsl::warning::count;
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -179,9 +180,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             println!("{}", d.summary());
         }
         println!(
-            "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
+            "{}: {}, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
             summary.bundle.display(),
-            summary.layers,
+            count(summary.layers as u64, "layer", "layers"),
             summary.totals.height_mm,
             hms(summary.totals.print_time_s),
             summary.totals.resin_volume_ml,
@@ -192,8 +193,8 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             summary.totals.continuous_layers,
         ) {
             println!(
-                "hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
-                summary.layers,
+                "hybrid: {c} of {} continuous; all layered would take {} ({:.0} % saved)",
+                count(summary.layers as u64, "layer", "layers"),
                 hms(all),
                 100.0 * (1.0 - summary.totals.print_time_s / all)
             );

@@ -145,9 +145,10 @@ fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<(Manifest, Option<RangeI
     for f in &opts.faults {
         if f.layer >= n {
             return Err(Error::Usage(format!(
-                "--fault {}@{}: the job has {n} layers (0..{})",
+                "--fault {}@{}: the job has {n} {} (0..{})",
                 f.kind,
                 f.layer,
+                report::plural(n, "layer", "layers"),
                 n.saturating_sub(1)
             )));
         }

@@ -278,6 +278,15 @@ impl Sink for PlotCollector {
     }
 }
 
+/// `one` for 1, else `many`: "1 layer", "2 layers".
+pub fn plural<'a>(n: usize, one: &'a str, many: &'a str) -> &'a str {
+    if n == 1 {
+        one
+    } else {
+        many
+    }
+}
+
 /// "1h02m03s".
 pub fn hms(s: f64) -> String {
     let s = s.max(0.0).round() as u64;
@@ -292,8 +301,12 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} layers, {} masks checked",
-        r.bundle, r.layers, r.masks_verified
+        "{}: {} {}, {} {} checked",
+        r.bundle,
+        r.layers,
+        plural(r.layers, "layer", "layers"),
+        r.masks_verified,
+        plural(r.masks_verified, "mask", "masks")
     );
     let _ = writeln!(
         o,

@@ -49,9 +49,10 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
             "manifest",
             Some(crate::bundle::MANIFEST),
             format!(
-                "{}: totals.layers is {} but there are {n} layer records",
+                "{}: totals.layers is {} but the manifest has {n} layer record{}",
                 job.display(),
-                manifest.totals.layers
+                manifest.totals.layers,
+                if n == 1 { "" } else { "s" }
             ),
         ));
     }

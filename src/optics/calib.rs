@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::polyfit::LeastSquares;
 use crate::table::{self, cell_error, Columns};
 use crate::units::{NonNegative, Positive};
-use crate::warning::Warning;
+use crate::warning::{count, Warning};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -482,8 +482,9 @@ impl<'a> Setup<'a> {
                 .collect();
             if vals.len() < 4 {
                 return Err(input_error(format!(
-                    "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
-                    vals.len()
+                    "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
+                    vals.len(),
+                    crate::warning::plural(vals.len() as u64, "value", "values")
                 )));
             }
         }
