@@ -483,7 +483,21 @@ fn bad_measurements_are_one_line_errors_with_exit_2() {
             }
         }
     }
-    expect_error(&dir, &two, "only 2 distinct gray levels");
+    expect_error(&dir, &two, "readings at only 2 pixel values (200, 255)");
+    // Only full-on readings: P can be seen, S cannot; the message says how to measure it.
+    let mut full = h.to_string();
+    for i in 0..13 {
+        for j in 0..9 {
+            full.push_str(&format!(
+                "{},{},255,{}\n",
+                2.5 + 5.0 * i as f64,
+                2.5 + 5.0 * j as f64,
+                1.0 + 0.01 * (i + j) as f64
+            ));
+        }
+    }
+    expect_error(&dir, &full, "every reading is at gray 255");
+    expect_error(&dir, &full, "pixel values below 255");
     // All zones on one line: y never varies, the cubic is undetermined.
     let mut line = h.to_string();
     for i in 0..13 {
