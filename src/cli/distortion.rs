@@ -11,7 +11,9 @@ pub(crate) const DISTORTION_EXIT_HELP: &str = "Exit codes:
 
 #[derive(Args)]
 pub(crate) struct DistortionArgs {
-    /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm (docs/GEOMETRY.md).
+    /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm, one row per measured point: the
+    /// uncorrected projector aimed at (x, y) and the light landed at (seen_x, seen_y), mm
+    /// from the field's bottom-left corner.
     table: PathBuf,
     /// Machine profile whose projector field the table describes.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]

@@ -2,8 +2,11 @@
 //! holds the top-level parser and the dispatch.
 
 mod calibrate;
+mod completions;
 mod distortion;
+mod help;
 mod interrupt;
+mod man;
 mod profile;
 mod run;
 mod slice;
@@ -70,7 +73,7 @@ pub(crate) struct WarningArgs {
     deny_warnings: bool,
     /// What to do with warnings of CODE (a code such as plan.unsupported-islands, an area
     /// such as mesh, or all): error (exit 1), warn, or allow (silence). Repeatable; a code
-    /// beats an area beats all. Codes: docs/WARNINGS.md, or any unknown CODE lists them.
+    /// beats an area beats all. Any unknown CODE lists the codes.
     #[arg(short = 'W', value_name = "CODE=error|warn|allow")]
     warn: Vec<String>,
 }
@@ -93,15 +96,9 @@ impl WarningArgs {
     }
 }
 
-pub(crate) const EXIT_HELP: &str = "Exit codes (each command's --help says what they mean for it):
-  0    success
-  1    finished, but checks failed (denied warnings, run violations)
-  2    usage or input error
-  130  interrupted (Ctrl-C, SIGTERM or SIGHUP)";
-
 /// Build-job compiler for DMD mask-projection stereolithography.
 #[derive(Parser)]
-#[command(name = "dmdsl", version, about, after_help = EXIT_HELP)]
+#[command(name = "dmdsl", version, about, after_help = help::for_top())]
 pub(crate) struct Cli {
     /// Print nothing but errors.
     #[arg(short, long, global = true)]
@@ -113,21 +110,27 @@ pub(crate) struct Cli {
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
     /// Slice a part (STL or OBJ) into a job bundle of mask PNGs and a manifest.
-    #[command(after_help = slice::SLICE_EXIT_HELP)]
+    #[command(after_help = help::for_slice())]
     Slice(slice::SliceArgs),
     /// Show or list machine profiles.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = help::PROFILE)]
     Profile(profile::ProfileCmd),
     /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
     /// shutter and DMD, and report the time and every violation.
-    #[command(after_help = run::RUN_EXIT_HELP)]
+    #[command(after_help = help::for_run())]
     Run(run::RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
-    #[command(after_help = calibrate::CALIBRATE_EXIT_HELP)]
+    #[command(after_help = help::for_calibrate())]
     Calibrate(calibrate::CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
-    #[command(after_help = distortion::DISTORTION_EXIT_HELP)]
+    #[command(after_help = help::for_distortion())]
     Distortion(distortion::DistortionArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    #[command(after_help = help::COMPLETIONS)]
+    Completions(completions::CompletionsArgs),
+    /// Print a man page (roff): dmdsl(1), or dmdsl-COMMAND(1) for one command.
+    #[command(after_help = help::MAN)]
+    Man(man::ManArgs),
 }
 
 /// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`,
@@ -152,7 +155,7 @@ impl Cli {
             Cmd::Run(a) => a.json(),
             Cmd::Calibrate(a) => a.json(),
             Cmd::Distortion(a) => a.json(),
-            Cmd::Profile(_) => false,
+            Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) => false,
         }
     }
 }
@@ -165,5 +168,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
         Cmd::Run(a) => run::run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),
         Cmd::Profile(c) => profile::profile(c),
+        Cmd::Completions(a) => completions::completions(a),
+        Cmd::Man(a) => man::man(a),
     }
 }

@@ -57,7 +57,9 @@ pub(crate) struct SliceArgs {
     /// Layer height in mm (default: the profile's).
     #[arg(long, value_name = "MM")]
     layer_height: Option<f64>,
-    /// Binary masks: a pixel is lit when at least half of it is inside the section.
+    /// Binary coverage: a pixel is lit when at least half of it is inside the section (no
+    /// anti-aliased edges). Light compensation still applies, so a lit pixel shows its
+    /// zone's (or its own) gray; add --compensation off for masks of 0 and 255 only.
     #[arg(long)]
     binary: bool,
     /// Use the file's coordinates as build-plane coordinates instead of centring the part.

@@ -6,6 +6,7 @@ mod calibrate;
 mod common;
 mod fuzz;
 mod geometry;
+mod help;
 mod json;
 mod layers;
 mod plan;
