@@ -7,9 +7,11 @@
 //!
 //! * stage positions: a whole number of stage steps ([`StageGrid::position`]);
 //! * times: 1 ms, or 3 significant digits below 0.1 s ([`time_s`]);
-//! * lengths on the build plane (bounding boxes, fill distances): 1 µm ([`plane_mm`]);
-//! * derived quantities (areas, volumes, irradiances, spreads, fit errors): 6 significant
-//!   digits ([`derived`]).
+//! * lengths on the build plane: bounding boxes to 1 µm ([`plane_mm`]), fill distances
+//!   down to 1 µm ([`plane_mm_down`], as they are lower bounds);
+//! * section areas: 9 significant digits ([`area_mm2`]);
+//! * other derived quantities (volumes, irradiances, spreads, fit errors, warning
+//!   figures): 6 significant digits ([`derived`]).
 //!
 //! A value rounded here is the nearest `f64` to a decimal of few digits, so Rust and
 //! `serde_json` print it as that decimal, and parsing the printed text gives the same
@@ -86,6 +88,22 @@ pub fn time_s(x: f64) -> f64 {
 /// A length on the build plane (a bounding box, a fill distance), mm: to 1 µm.
 pub fn plane_mm(x: f64) -> f64 {
     decimals(x, 3)
+}
+
+/// A length on the build plane that is a lower bound (a fill distance, never above the
+/// exact value): down to 1 µm, taking a value within 1e-9 mm below a whole µm as that µm.
+pub fn plane_mm_down(x: f64) -> f64 {
+    let scaled = x * 1000.0;
+    if !scaled.is_finite() || scaled.abs() >= EXACT_INT {
+        return x;
+    }
+    (scaled + 1e-6).floor() / 1000.0 + 0.0
+}
+
+/// A section's area, mm²: to 9 significant digits (the coverage it comes from is exact to
+/// far below a pixel).
+pub fn area_mm2(x: f64) -> f64 {
+    significant(x, 9)
 }
 
 /// A derived quantity (an area, a volume, an irradiance, a spread, a fit error): to 6
@@ -200,6 +218,15 @@ mod tests {
         }
         assert_eq!(significant(0.0, 6), 0.0);
         assert_eq!(significant(999999.7, 6), 1e6);
+    }
+
+    #[test]
+    fn lower_bounds_round_down() {
+        assert_eq!(plane_mm_down(9.994645874763657), 9.994);
+        assert_eq!(plane_mm_down(12.499999999999), 12.5);
+        assert_eq!(plane_mm_down(12.5), 12.5);
+        assert_eq!(plane_mm_down(0.0), 0.0);
+        assert_eq!(area_mm2(103.1494140625), 103.149414);
     }
 
     #[test]

@@ -63,8 +63,8 @@ pub(super) fn plan_layers(
             index: i,
             z_mm: z_of(i + 1),
             thickness_mm: h,
-            area_mm2: round::derived(o.area_mm2),
-            max_fill_distance_mm: round::plane_mm(a.max_fill_distance_mm),
+            area_mm2: round::area_mm2(o.area_mm2),
+            max_fill_distance_mm: round::plane_mm_down(a.max_fill_distance_mm),
             islands: a.islands,
         })
         .collect();

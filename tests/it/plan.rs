@@ -159,7 +159,8 @@ fn check_uniform_hybrid(job: &Value, fill: f64, continuous: bool) {
             assert_eq!(last["kind"], "sweep");
             assert_eq!(f(&last["to_mm"]), f(&l["z_mm"]));
             assert_eq!(f(&last["speed_mm_s"]), 0.06);
-            assert!((f(&l["exposure_s"]) - 0.1 / 0.06).abs() < 1e-12);
+            // The sweep's light time, to 7 significant digits.
+            assert!((f(&l["exposure_s"]) - 0.1 / 0.06).abs() < 1e-6);
             // No lift: the stage never goes above the layer it prints.
             assert!(lift(l) <= 1e-12);
             if i > ramp {
@@ -317,8 +318,9 @@ fn seeds001_tower_alternates_layered_solids_and_continuous_hollows() {
     assert_eq!(t["continuous_layers"], 15);
     let (print, all) = (f(&t["print_time_s"]), f(&t["all_layered_time_s"]));
     assert!(all > print, "{all} vs {print}");
+    // Each layer's time and the total are rounded to 1 ms.
     let sum: f64 = ls.iter().map(|l| f(&l["time_s"])).sum();
-    assert!((sum - print).abs() < 1e-6 * print);
+    assert!((sum - print).abs() <= 0.0005 * (ls.len() + 1) as f64);
 }
 
 #[test]

@@ -263,11 +263,19 @@ fn each_fault_stops_the_job_with_layer_and_time() {
         assert!(kinds(&r).contains(&kind.to_string()));
         assert_eq!(r["ok"], false);
     }
-    // A shutter stuck in layer 2 is found when it should close after the exposure.
+    // A shutter stuck in layer 2 is found when it should close after the exposure
+    // (close_s 0.05 s), then the DMD is blanked (load_s 0.02 s): 0.07 s of extra light.
     let (_, r) = run_json(&dir, &["--fault", "shutter-stuck@2"]);
     let l = &r["per_layer"][2];
     assert!(
-        (l["light_s"].as_f64().unwrap() - l["exposure_s"].as_f64().unwrap() - 0.05).abs() < 1e-9
+        (l["light_s"].as_f64().unwrap() - l["exposure_s"].as_f64().unwrap() - 0.07).abs() < 1e-6
+    );
+    assert!(
+        r["fault"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("layer 2 got 0.070 s of extra light"),
+        "{r}"
     );
 }
 
