@@ -12,5 +12,6 @@ mod layers;
 mod plan;
 mod replace;
 mod run;
+mod schema;
 mod slice;
 mod warnings;
