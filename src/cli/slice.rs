@@ -36,7 +36,8 @@ enum DitherArg {
 /// Light compensation mode.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum CompensationArg {
-    /// One gray per zone (Xu et al. 2010, Chinese J. Lasers 37(7)).
+    /// One gray per zone (Xu et al. 2010, "Novel stereolithography system employing digital
+    /// micro-mirror device").
     Zone,
     /// One gray per pixel from the smooth fit.
     Pixel,

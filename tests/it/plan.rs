@@ -171,7 +171,7 @@ fn check_uniform_hybrid(job: &Value, fill: f64, continuous: bool) {
 }
 
 #[test]
-fn seeds001_square_prism_5mm_prints_continuously() {
+fn li_hybrid_square_prism_5mm_prints_continuously() {
     let dir = tempdir("plan-prism5");
     let (summary, job) = slice_json(
         &dir,
@@ -189,7 +189,7 @@ fn seeds001_square_prism_5mm_prints_continuously() {
 }
 
 #[test]
-fn seeds001_cube_10mm_layered_lift_2mm() {
+fn li_hybrid_cube_10mm_layered_lift_2mm() {
     let dir = tempdir("plan-cube10");
     let (_, job) = slice_json(
         &dir,
@@ -205,7 +205,7 @@ fn seeds001_cube_10mm_layered_lift_2mm() {
 }
 
 #[test]
-fn seeds001_cube_and_cylinder_15mm_lift_4mm() {
+fn li_hybrid_cube_and_cylinder_15mm_lift_4mm() {
     let dir = tempdir("plan-15");
     let (_, job) = slice_json(
         &dir,
@@ -225,7 +225,7 @@ fn seeds001_cube_and_cylinder_15mm_lift_4mm() {
 }
 
 #[test]
-fn seeds001_cylinder_20mm_and_square_30mm_lift_8mm() {
+fn li_hybrid_cylinder_20mm_and_square_30mm_lift_8mm() {
     let dir = tempdir("plan-20-30");
     let (_, job) = slice_json(
         &dir,
@@ -244,7 +244,7 @@ fn seeds001_cylinder_20mm_and_square_30mm_lift_8mm() {
 }
 
 #[test]
-fn seeds001_tower_alternates_layered_solids_and_continuous_hollows() {
+fn li_hybrid_tower_alternates_layered_solids_and_continuous_hollows() {
     // Sections, bottom up; each rests on the one below. The first is tall enough to hold
     // the bottom and transition layers.
     let cos96 = (PI / 96.0).cos();
