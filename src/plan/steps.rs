@@ -157,18 +157,23 @@ pub(super) fn hybrid(
     let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
     let v = h.continuous_speed_mm_s.get();
     let mut out: Vec<LayerPlan> = Vec::with_capacity(layers.len());
-    let mut pos = lim.grid.position(p.stage.home_mm);
+    // Where the previous layer was exposed: as planned, and on the stage's grid.
+    let (mut prev_z, mut pos) = (p.stage.home_mm, lim.grid.position(p.stage.home_mm));
     for (i, l) in layers.iter().enumerate() {
         let cont = !force_layered && l.index >= first_free && h.continuous(l.max_fill_distance_mm);
         let prev_layered = i == 0 || out[i - 1].mode == Mode::Layered;
         let mut steps = Vec::with_capacity(6);
-        let below = lim.grid.position(l.z_mm - l.thickness_mm);
+        let below = l.z_mm - l.thickness_mm;
         let top = lim.grid.position(l.z_mm);
         if cont {
             // Continuous: the stage sweeps from the previous exposure position to this one
             // while the mask is shown. Explicit switch from layered: the stage is still at
-            // the last exposure; wait, then start the run.
-            if (pos - below).abs() > 1e-9 {
+            // the last exposure; wait, then start the run. (Compared as planned, not on the
+            // grid: a layer height of a whole number of steps and a half puts consecutive
+            // tops on either side of a half step.)
+            let mut start = pos;
+            if (prev_z - below).abs() > 1e-9 {
+                start = lim.grid.position(below);
                 steps.push(lim.mv(below, h.retract_speed_mm_s.get()));
             }
             if prev_layered {
@@ -187,7 +192,7 @@ pub(super) fn hybrid(
             // ms, so 7 significant digits (the executor checks the dose to 1e-6).
             out.push(LayerPlan {
                 mode: Mode::Continuous,
-                exposure_s: round::significant((top - below).abs() / v, 7),
+                exposure_s: round::significant((top - start).abs() / v, 7),
                 steps,
                 time_s: 0.0,
             });
@@ -217,7 +222,7 @@ pub(super) fn hybrid(
             steps.push(Step::Expose { s: e });
             out.push(layered(e, steps));
         }
-        pos = top;
+        (prev_z, pos) = (l.z_mm, top);
     }
     out
 }

@@ -322,3 +322,30 @@ fn steps_hold_whole_stage_steps_and_whole_milliseconds() {
         assert!(ms(plan.print_time_s));
     }
 }
+
+#[test]
+fn a_layer_height_of_a_half_step_keeps_sweep_runs_unbroken() {
+    // 0.051875 mm = 41.5 steps of 1/800 mm: every other layer top lies on a half step,
+    // where a top and the next layer's bottom computed apart can round to different steps.
+    let p = Profile::resolve("hybrid-bottomup").unwrap();
+    let h = 0.051875;
+    let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
+    let layers: Vec<LayerInfo> = (0..first_free + 60)
+        .map(|i| info(i, h, 10.0, 1.0))
+        .collect();
+    let plan = plan(&p, &layers).unwrap();
+    let grid = StageGrid::new(800.0);
+    let mut light = 0.0;
+    for (i, lp) in plan.layers.iter().enumerate().skip(first_free + 1) {
+        assert_eq!(lp.mode, Mode::Continuous);
+        assert_eq!(lp.steps.len(), 1, "layer {i}: {:?}", lp.steps);
+        light += lp.exposure_s;
+    }
+    // The sweeps' light times add up to the distance swept, whole steps apart.
+    let swept = grid.position(layers.last().unwrap().z_mm) - grid.position(layers[first_free].z_mm);
+    assert!(
+        (light - swept / 0.06).abs() < 1e-4,
+        "{light} vs {}",
+        swept / 0.06
+    );
+}
