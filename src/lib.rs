@@ -46,6 +46,7 @@ mod png;
 mod polyfit;
 pub mod profile;
 pub mod raster;
+pub mod round;
 pub mod slice;
 mod table;
 pub mod units;

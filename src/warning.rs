@@ -228,7 +228,12 @@ impl Warning {
 
     /// The same warning with the figure `name` = `value`.
     pub fn with(mut self, name: &str, value: impl Into<serde_json::Value>) -> Warning {
-        self.fields.insert(name.into(), value.into());
+        let mut value = value.into();
+        // A figure that is not a whole number: 6 significant digits (crate::round).
+        if let Some(x) = value.as_f64().filter(|_| value.is_f64()) {
+            value = crate::round::derived(x).into();
+        }
+        self.fields.insert(name.into(), value);
         self
     }
 }
@@ -378,6 +383,11 @@ pub fn plural<'a>(n: u64, one: &'a str, many: &'a str) -> &'a str {
     } else {
         many
     }
+}
+
+/// `n` and the noun that goes with it: "1 layer", "2 layers".
+pub fn count(n: u64, one: &str, many: &str) -> String {
+    format!("{n} {}", plural(n, one, many))
 }
 
 impl std::fmt::Display for Warning {

@@ -192,6 +192,23 @@ pub struct FitReport {
 }
 
 impl FitReport {
+    /// The report with its figures rounded as the manifest records them: errors and
+    /// corrections to 6 significant digits (`crate::round::derived`).
+    pub fn rounded(mut self) -> FitReport {
+        use crate::round::derived;
+        for v in [
+            &mut self.residual_weight,
+            &mut self.poly_rms_mm,
+            &mut self.poly_max_mm,
+            &mut self.cv_rms_mm,
+            &mut self.cv_max_mm,
+            &mut self.max_correction_mm,
+        ] {
+            *v = derived(*v);
+        }
+        self
+    }
+
     /// One-line human summary.
     pub fn summary(&self) -> String {
         format!(
@@ -260,6 +277,30 @@ pub struct Optics {
     pub exposure_rule: String,
     /// Dose of a normal layer at the target irradiance, mJ/cm² (absolute calibrations only).
     pub dose_mj_cm2: Option<f64>,
+}
+
+impl Optics {
+    /// The record with its figures rounded as the manifest records them: irradiances,
+    /// throughput, spreads and dose to 6 significant digits, the calibrated area to 1 µm
+    /// (`crate::round`).
+    pub fn rounded(mut self) -> Optics {
+        use crate::round::{derived, plane_mm};
+        let p = &mut self.predicted;
+        for v in [
+            &mut self.target_irradiance,
+            &mut self.mean_irradiance,
+            &mut self.throughput,
+            &mut p.before_zone_pct,
+            &mut p.before_pixel_pct,
+            &mut p.after_zone_pct,
+            &mut p.after_pixel_pct,
+        ] {
+            *v = derived(*v);
+        }
+        self.dose_mj_cm2 = self.dose_mj_cm2.map(derived);
+        self.calibrated_area_mm = self.calibrated_area_mm.map(plane_mm);
+        self
+    }
 }
 
 /// Spreads (max − min) / mean of irradiance over the calibrated area, %.

@@ -11,7 +11,9 @@ pub(crate) const DISTORTION_EXIT_HELP: &str = "Exit codes:
 
 #[derive(Args)]
 pub(crate) struct DistortionArgs {
-    /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm (docs/GEOMETRY.md).
+    /// The table: CSV x_mm,y_mm,seen_x_mm,seen_y_mm, one row per measured point: the
+    /// uncorrected projector aimed at (x, y) and the light landed at (seen_x, seen_y), mm
+    /// from the field's bottom-left corner.
     table: PathBuf,
     /// Machine profile whose projector field the table describes.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
@@ -40,7 +42,9 @@ pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
         .expect("a table was given");
     let report = c.report();
     let (_, _, map) = c.field_map(1.0);
-    let reachable = map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64;
+    let reachable = dmdsl::round::derived(
+        map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64,
+    );
     if let (Some(p), Some(format)) = (&a.plot, plot_format) {
         let bytes = c.plot().render().encode(format);
         std::fs::write(p, bytes).map_err(|e| dmdsl::Error::io(p, e))?;

@@ -2,9 +2,12 @@
 //! holds the top-level parser and the dispatch.
 
 mod calibrate;
+mod completions;
 mod distortion;
+mod help;
 mod inspect;
 mod interrupt;
+mod man;
 mod profile;
 mod run;
 mod slice;
@@ -77,7 +80,7 @@ pub(crate) struct WarningArgs {
     deny_warnings: bool,
     /// What to do with warnings of CODE (a code such as plan.unsupported-islands, an area
     /// such as mesh, or all): error (exit 1), warn, or allow (silence). Repeatable; a code
-    /// beats an area beats all. Codes: docs/WARNINGS.md, or any unknown CODE lists them.
+    /// beats an area beats all. Any unknown CODE lists the codes.
     #[arg(short = 'W', value_name = "CODE=error|warn|allow")]
     warn: Vec<String>,
 }
@@ -100,15 +103,9 @@ impl WarningArgs {
     }
 }
 
-pub(crate) const EXIT_HELP: &str = "Exit codes (each command's --help says what they mean for it):
-  0    success
-  1    finished, but checks failed (denied warnings, run violations)
-  2    usage or input error
-  130  interrupted (Ctrl-C, SIGTERM or SIGHUP)";
-
 /// Build-job compiler for DMD mask-projection stereolithography.
 #[derive(Parser)]
-#[command(name = "dmdsl", version, about, after_help = EXIT_HELP)]
+#[command(name = "dmdsl", version, about, after_help = help::for_top())]
 pub(crate) struct Cli {
     /// Print nothing but errors.
     #[arg(short, long, global = true)]
@@ -120,25 +117,31 @@ pub(crate) struct Cli {
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
     /// Slice parts (STL or OBJ) into job bundles of mask PNGs and a manifest, one each.
-    #[command(after_help = slice::SLICE_EXIT_HELP)]
+    #[command(after_help = help::for_slice())]
     Slice(slice::SliceArgs),
     /// Show or list machine profiles.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = help::PROFILE)]
     Profile(profile::ProfileCmd),
     /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
     /// shutter and DMD, and report the time and every violation.
-    #[command(after_help = run::RUN_EXIT_HELP)]
+    #[command(after_help = help::for_run())]
     Run(run::RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
-    #[command(after_help = calibrate::CALIBRATE_EXIT_HELP)]
+    #[command(after_help = help::for_calibrate())]
     Calibrate(calibrate::CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
-    #[command(after_help = distortion::DISTORTION_EXIT_HELP)]
+    #[command(after_help = help::for_distortion())]
     Distortion(distortion::DistortionArgs),
     /// Summarize a job bundle (layers, time, resin, warnings, per-layer extremes) and draw
     /// it: a contact sheet of layer masks, a per-layer chart, a shaded preview of the part.
     #[command(after_help = inspect::INSPECT_EXIT_HELP)]
     Inspect(inspect::InspectArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    #[command(after_help = help::COMPLETIONS)]
+    Completions(completions::CompletionsArgs),
+    /// Print a man page (roff): dmdsl(1), or dmdsl-COMMAND(1) for one command.
+    #[command(after_help = help::MAN)]
+    Man(man::ManArgs),
 }
 
 /// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`,
@@ -164,7 +167,7 @@ impl Cli {
             Cmd::Calibrate(a) => a.json(),
             Cmd::Distortion(a) => a.json(),
             Cmd::Inspect(a) => a.json(),
-            Cmd::Profile(_) => false,
+            Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) => false,
         }
     }
 }
@@ -178,5 +181,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),
         Cmd::Inspect(a) => inspect::inspect(a, cli.quiet),
         Cmd::Profile(c) => profile::profile(c),
+        Cmd::Completions(a) => completions::completions(a),
+        Cmd::Man(a) => man::man(a),
     }
 }

@@ -6,6 +6,7 @@ use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions, SliceSummary, Transform};
 use dmdsl::profile::{self, Override, Profile};
 use dmdsl::units::Positive;
+use dmdsl::warning::count;
 use serde::Serialize;
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -41,7 +42,8 @@ enum DitherArg {
 /// Light compensation mode.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum CompensationArg {
-    /// One gray per zone (Xu et al. 2010, Chinese J. Lasers 37(7)).
+    /// One gray per zone (Xu et al. 2010, "Novel stereolithography system employing digital
+    /// micro-mirror device").
     Zone,
     /// One gray per pixel from the smooth fit.
     Pixel,
@@ -80,7 +82,9 @@ pub(crate) struct SliceArgs {
     /// Layer height in mm (default: the profile's).
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     layer_height: Option<f64>,
-    /// Binary masks: a pixel is lit when at least half of it is inside the section.
+    /// Binary coverage: a pixel is lit when at least half of it is inside the section (no
+    /// anti-aliased edges). Light compensation still applies, so a lit pixel shows its
+    /// zone's (or its own) gray; add --compensation off for masks of 0 and 255 only.
     #[arg(long)]
     binary: bool,
     /// Use the file's coordinates as build-plane coordinates instead of centring the part.
@@ -422,9 +426,9 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
         println!("{prefix}{}", d.summary());
     }
     println!(
-        "{}: {} layers, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
+        "{}: {}, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
         summary.bundle.display(),
-        summary.layers,
+        count(summary.layers as u64, "layer", "layers"),
         summary.totals.height_mm,
         hms(summary.totals.print_time_s),
         summary.totals.resin_volume_ml,
@@ -435,8 +439,8 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
         summary.totals.continuous_layers,
     ) {
         println!(
-            "{prefix}hybrid: {c} of {} layers continuous; all layered would take {} ({:.0} % saved)",
-            summary.layers,
+            "{prefix}hybrid: {c} of {} continuous; all layered would take {} ({:.0} % saved)",
+            count(summary.layers as u64, "layer", "layers"),
             hms(all),
             100.0 * (1.0 - summary.totals.print_time_s / all)
         );

@@ -47,6 +47,7 @@ pub struct Violation {
     /// Layer concerned (`None`: the whole job).
     pub layer: Option<usize>,
     /// Simulated time, s (for verification problems: when the layer starts).
+    #[serde(serialize_with = "report::six_opt")]
     pub time_s: Option<f64>,
     /// Machine-readable kind, e.g. `travel`, `mask-checksum`, `stall` (see docs/EXECUTOR.md).
     pub kind: &'static str,
@@ -187,9 +188,10 @@ fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<ReadBundle> {
     for f in &opts.faults {
         if f.layer >= n {
             return Err(Error::Usage(format!(
-                "--fault {}@{}: the job has {n} layers (0..{})",
+                "--fault {}@{}: the job has {n} {} (0..{})",
                 f.kind,
                 f.layer,
+                report::plural(n, "layer", "layers"),
                 n.saturating_sub(1)
             )));
         }

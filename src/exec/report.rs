@@ -9,20 +9,48 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::ops::RangeInclusive;
 
+/// Serializes a figure of the report to 6 decimals (1 µs, 1 nm, 1e-6 %): sums over the
+/// simulation carry floating-point noise in their last digits.
+pub fn six<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(crate::round::decimals(*v, 6))
+}
+
+/// [`six`] for an optional figure.
+pub fn six_opt<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match v {
+        Some(v) => six(v, s),
+        None => s.serialize_none(),
+    }
+}
+
+/// [`six`] for a pair of figures.
+fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> Result<S::Ok, S::Error> {
+    [
+        crate::round::decimals(v[0], 6),
+        crate::round::decimals(v[1], 6),
+    ]
+    .serialize(s)
+}
+
 /// Timing of one layer: simulated and estimated.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LayerTiming {
     /// Layer index.
     pub index: usize,
     /// When the layer's steps start, s.
+    #[serde(serialize_with = "six")]
     pub start_s: f64,
     /// Simulated duration, s.
+    #[serde(serialize_with = "six")]
     pub time_s: f64,
     /// The manifest's estimate (`layers[].time_s`), s.
+    #[serde(serialize_with = "six")]
     pub estimate_s: f64,
     /// Light time received, s.
+    #[serde(serialize_with = "six")]
     pub light_s: f64,
     /// The manifest's `exposure_s`.
+    #[serde(serialize_with = "six")]
     pub exposure_s: f64,
 }
 
@@ -64,26 +92,37 @@ pub struct Report {
     /// Mask files verified.
     pub masks_verified: usize,
     /// Simulated duration of the job (to the abort after a fault), s.
+    #[serde(serialize_with = "six")]
     pub total_s: f64,
     /// The manifest's estimate, `totals.print_time_s`, s.
+    #[serde(serialize_with = "six")]
     pub estimate_s: f64,
     /// (total_s − estimate_s) / estimate_s, percent.
+    #[serde(serialize_with = "six")]
     pub estimate_diff_pct: f64,
     /// Sum of the layers' `exposure_s`, s.
+    #[serde(serialize_with = "six")]
     pub exposure_s: f64,
     /// Time light reached the resin, s.
+    #[serde(serialize_with = "six")]
     pub light_on_s: f64,
     /// Time the shutter was not closed (opening, open, closing), s.
+    #[serde(serialize_with = "six")]
     pub shutter_open_s: f64,
     /// Time in `wait` steps, s.
+    #[serde(serialize_with = "six")]
     pub wait_s: f64,
     /// Time waiting for the DMD to load a mask, s.
+    #[serde(serialize_with = "six")]
     pub load_wait_s: f64,
     /// Distance the stage moved, mm.
+    #[serde(serialize_with = "six")]
     pub stage_travel_mm: f64,
     /// Stage position range visited, mm: [min, max].
+    #[serde(serialize_with = "six_pair")]
     pub stage_range_mm: [f64; 2],
     /// Highest stage speed reached, mm/s.
+    #[serde(serialize_with = "six")]
     pub peak_speed_mm_s: f64,
     /// The fault that ended the run, if one was injected and triggered.
     pub fault: Option<FaultEvent>,
@@ -105,10 +144,13 @@ pub struct Report {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct Timings {
     /// Reading and parsing job.json.
+    #[serde(serialize_with = "six")]
     pub read_s: f64,
     /// Hashing and decoding the masks.
+    #[serde(serialize_with = "six")]
     pub verify_s: f64,
     /// Simulation, checks, trace.
+    #[serde(serialize_with = "six")]
     pub simulate_s: f64,
 }
 
@@ -274,6 +316,15 @@ impl Sink for PlotCollector {
     }
 }
 
+/// `one` for 1, else `many`: "1 layer", "2 layers".
+pub fn plural<'a>(n: usize, one: &'a str, many: &'a str) -> &'a str {
+    if n == 1 {
+        one
+    } else {
+        many
+    }
+}
+
 /// "1h02m03s".
 pub fn hms(s: f64) -> String {
     let s = s.max(0.0).round() as u64;
@@ -288,8 +339,12 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} layers, {} masks checked",
-        r.bundle, r.layers, r.masks_verified
+        "{}: {} {}, {} {} checked",
+        r.bundle,
+        r.layers,
+        plural(r.layers, "layer", "layers"),
+        r.masks_verified,
+        plural(r.masks_verified, "mask", "masks")
     );
     if let Some(m) = &r.machine {
         if m.differences.is_empty() {
@@ -350,7 +405,14 @@ pub fn render_human(r: &Report) -> String {
         );
     }
     for u in &r.untriggered_faults {
-        let _ = writeln!(o, "note: fault {u} never triggered");
+        let why = match &r.fault {
+            Some(f) => format!(
+                " (the run ended at the {} fault in layer {})",
+                f.kind, f.layer
+            ),
+            None => String::new(),
+        };
+        let _ = writeln!(o, "note: fault {u} never triggered{why}");
     }
     if r.violations.is_empty() {
         let _ = writeln!(o, "violations: none");

@@ -244,9 +244,10 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
             "manifest",
             Some(MANIFEST),
             format!(
-                "{}: totals.layers is {} but there are {n} layer records",
+                "{}: totals.layers is {} but the manifest has {n} layer record{}",
                 job.display(),
-                manifest.totals.layers
+                manifest.totals.layers,
+                if n == 1 { "" } else { "s" }
             ),
         ));
     }

@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::plan::{self, LayerAnalysis, LayerInfo};
 use crate::profile::{Process, Profile};
+use crate::round::{self, StageGrid};
 use crate::slice;
 use crate::warning::Warning;
 use std::path::Path;
@@ -54,16 +55,18 @@ pub(super) fn plan_layers(
     let h = profile.slicing.layer_height_mm.get();
     let n = outs.len();
     let analyses = resolve_analyses(&outs);
+    let z_of = layer_tops(profile);
+    // What the planner is given is what the manifest records: rounded (crate::round).
     let infos: Vec<LayerInfo> = outs
         .iter()
         .zip(&analyses)
         .enumerate()
         .map(|(i, (o, a))| LayerInfo {
             index: i,
-            z_mm: (i + 1) as f64 * h,
+            z_mm: z_of(i + 1),
             thickness_mm: h,
-            area_mm2: o.area_mm2,
-            max_fill_distance_mm: a.max_fill_distance_mm,
+            area_mm2: round::area_mm2(o.area_mm2),
+            max_fill_distance_mm: round::plane_mm_down(a.max_fill_distance_mm),
             islands: a.islands,
         })
         .collect();
@@ -73,40 +76,60 @@ pub(super) fn plan_layers(
     })?;
     let hybrid = profile.process == Process::Hybrid;
     let mut layers = Vec::with_capacity(n);
-    let mut totals = Totals {
-        layers: n as u64,
-        height_mm: n as f64 * h,
-        print_time_s: 0.0,
-        exposure_s: 0.0,
-        resin_volume_ml: 0.0,
-        continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
-        all_layered_time_s: plan.all_layered_time_s,
-    };
-    for (((info, o), a), p) in infos.iter().zip(outs).zip(&analyses).zip(plan.layers) {
-        totals.print_time_s += p.time_s;
-        totals.exposure_s += p.exposure_s;
-        totals.resin_volume_ml += info.area_mm2 * h / 1000.0;
+    let (mut exposure_s, mut volume_mm3) = (0.0, 0.0);
+    for ((info, o), (a, p)) in infos.iter().zip(outs).zip(analyses.iter().zip(plan.layers)) {
+        exposure_s += p.exposure_s;
+        volume_mm3 += info.area_mm2 * h;
         layers.push(Layer {
             index: info.index as u64,
             z_mm: info.z_mm,
-            slice_z_mm: slice::plane_z(info.index, h),
+            slice_z_mm: round::decimals(slice::plane_z(info.index, h), 9),
             thickness_mm: h,
             mode: p.mode,
             exposure_s: p.exposure_s,
-            area_mm2: o.area_mm2,
-            max_fill_distance_mm: a.max_fill_distance_mm,
+            area_mm2: info.area_mm2,
+            max_fill_distance_mm: info.max_fill_distance_mm,
             islands: a.islands,
-            bbox_mm: a.bbox_mm,
+            bbox_mm: a
+                .bbox_mm
+                .map(|b| b.map(|corner| corner.map(round::plane_mm))),
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
         });
     }
+    let totals = Totals {
+        layers: n as u64,
+        height_mm: z_of(n),
+        print_time_s: plan.print_time_s,
+        exposure_s: round::time_s(exposure_s),
+        resin_volume_ml: round::derived(volume_mm3 / 1000.0),
+        continuous_layers: hybrid.then_some(plan.continuous_layers as u64),
+        all_layered_time_s: plan.all_layered_time_s,
+    };
     Ok(PlannedLayers {
         layers,
         totals,
         warnings: plan.warnings,
     })
+}
+
+/// The top of the first `k` layers, mm: k × the layer height, the stage position at which
+/// layer k − 1 is exposed. When the layer height is a whole number of stage steps so is
+/// every top (written as [`StageGrid::position`] writes it); otherwise the tops are
+/// rounded to 1e-9 mm, and the moves to them go to the nearest whole step.
+fn layer_tops(profile: &Profile) -> impl Fn(usize) -> f64 {
+    let h = profile.slicing.layer_height_mm.get();
+    let grid = StageGrid::new(profile.stage.steps_per_mm.get());
+    let whole = grid.is_whole(h);
+    move |k| {
+        let z = k as f64 * h;
+        if whole {
+            grid.position(z)
+        } else {
+            round::decimals(z, 9)
+        }
+    }
 }
 
 /// The layers' analyses in order. A layer equal to the layer below that its worker could
@@ -165,10 +188,11 @@ fn source(part: &PlacedPart) -> Source {
             .unwrap_or_default(),
         sha256: part.sha256.clone(),
         triangles: part.mesh.report.triangles_in_file,
-        bbox_mm: part.bbox_in_file,
+        bbox_mm: part.bbox_in_file.map(|c| c.map(round::plane_mm)),
         placement: Placement {
             mode: part.mode.as_str().into(),
-            translate_mm: part.translate_mm,
+            // Like the bounding box, to 1 µm.
+            translate_mm: part.translate_mm.map(round::plane_mm),
             scale: (part.transform.scale != [1.0; 3]).then_some(part.transform.scale),
             rotate_deg: part
                 .transform

@@ -117,10 +117,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
         return Err(Error::Job {
             path: part.path.into(),
-            msg: format!(
-                "nothing to print: none of the {} layers has a closed section (an open surface or a part of zero volume)",
-                manifest.layers.len()
-            ),
+            msg: match manifest.layers.len() {
+                1 => "nothing to print: the only layer has no closed section (an open surface or a part of zero volume)".into(),
+                n => format!("nothing to print: none of the {n} layers has a closed section (an open surface or a part of zero volume)"),
+            },
         });
     }
     replays_clean(&manifest, part.path)?;
@@ -143,7 +143,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             analysis_cpu_s,
             finish_s,
             total_s: t0.elapsed().as_secs_f64(),
-        },
+        }
+        .rounded(),
         distortion: distortion_report,
     })
 }

@@ -60,7 +60,7 @@ pub(super) fn optics_records(
             let written = gray_map.expect("written beside the masks")?;
             let (record, w) = o.finish_with(written);
             warnings.extend(w);
-            Some(record)
+            Some(record.rounded())
         }
         None => None,
     };
@@ -71,7 +71,7 @@ pub(super) fn optics_records(
                 write_one(writer, map)?;
             }
             warnings.extend(done.warnings);
-            done.records
+            done.records.into_iter().map(Optics::rounded).collect()
         }
         None => Vec::new(),
     };

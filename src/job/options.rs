@@ -100,6 +100,21 @@ pub struct Timings {
     pub total_s: f64,
 }
 
+impl Timings {
+    /// The timings to 1 µs, as `--json` prints them.
+    pub fn rounded(self) -> Timings {
+        let r = crate::round::elapsed_s;
+        Timings {
+            load_s: r(self.load_s),
+            slice_s: r(self.slice_s),
+            masks_s: r(self.masks_s),
+            analysis_cpu_s: r(self.analysis_cpu_s),
+            finish_s: r(self.finish_s),
+            total_s: r(self.total_s),
+        }
+    }
+}
+
 /// What [`slice_to_bundle`](super::slice_to_bundle) produced.
 #[derive(Debug, Clone, Serialize)]
 pub struct SliceSummary {

@@ -438,7 +438,7 @@ impl Mesh {
             nonmanifold_edges: nonmanifold,
             backwards_edges: backwards,
             degenerate_triangles: degenerate,
-            volume_mm3: volume,
+            volume_mm3: crate::round::derived(volume),
             closed_manifold: open == 0 && nonmanifold == 0 && backwards == 0,
         };
         Mesh {

@@ -2,6 +2,7 @@
 
 use super::Soup;
 use crate::error::{Error, Result};
+use crate::warning::count;
 use std::path::Path;
 
 pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Soup> {
@@ -28,9 +29,10 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Soup> {
                     return Err(Error::input(
                         path,
                         format!(
-                            "object '{}' face {fi}: vertex index {} out of range ({nv} vertices)",
+                            "object '{}' face {fi}: vertex index {} out of range ({})",
                             m.name,
-                            i + 1
+                            i + 1,
+                            count(nv as u64, "vertex", "vertices")
                         ),
                     ));
                 }
@@ -68,9 +70,14 @@ fn positions_only(path: &Path, bytes: &[u8]) -> Result<Vec<u8>> {
                         return Err(Error::input(
                             path,
                             format!(
-                                "line {}: face vertex {:?} is not an index of the {vertices} vertices defined before it",
+                                "line {}: face vertex {:?} is not an index of the {} defined before it",
                                 n + 1,
-                                String::from_utf8_lossy(w)
+                                String::from_utf8_lossy(w),
+                                match vertices {
+                                    0 => "no vertices".to_string(),
+                                    1 => "one vertex".to_string(),
+                                    v => format!("{v} vertices"),
+                                }
                             ),
                         ));
                     }

@@ -2,6 +2,7 @@
 
 use super::Soup;
 use crate::error::{Error, Result};
+use crate::warning::count;
 use std::path::Path;
 
 /// Parses an STL file. Binary when the size matches the header's triangle count
@@ -30,8 +31,9 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
                 Err(Error::input(
                     path,
                     format!(
-                        "truncated or not an STL: binary header declares {n} triangles ({need} bytes) but the file has {} bytes",
-                        b.len()
+                        "truncated or not an STL: binary header declares {} ({need} bytes) but the file has {}",
+                        count(n, "triangle", "triangles"),
+                        count(b.len() as u64, "byte", "bytes")
                     ),
                 ))
             } else {
@@ -41,7 +43,8 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
                     Err(Error::input(
                         path,
                         format!(
-                            "not a valid STL: binary header declares {n} triangles ({need} bytes) but the file has {} bytes",
+                            "not a valid STL: binary header declares {} ({need} bytes) but the file has {} bytes",
+                            count(n, "triangle", "triangles"),
                             b.len()
                         ),
                     ))
@@ -53,8 +56,8 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
         None => Err(Error::input(
             path,
             format!(
-                "not an STL file: {} bytes is too short for binary STL and it is not ASCII STL",
-                b.len()
+                "not an STL file: {} is too short for binary STL and it is not ASCII STL",
+                count(b.len() as u64, "byte", "bytes")
             ),
         )),
     }

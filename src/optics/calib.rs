@@ -22,7 +22,7 @@ use crate::error::{Error, Result};
 use crate::polyfit::LeastSquares;
 use crate::table::{self, cell_error, Columns};
 use crate::units::{NonNegative, Positive};
-use crate::warning::Warning;
+use crate::warning::{count, Warning};
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -441,10 +441,15 @@ impl<'a> Setup<'a> {
         }
         let npos = pos.len();
         let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
+        // Without several grays nothing else can be fitted: say so first.
+        if grays.len() < 3 {
+            return Err(input_error(too_few_grays(&grays)));
+        }
         let min_terms = Poly::terms(3);
         if npos < min_terms {
             return Err(input_error(format!(
-                "only {npos} distinct zone positions; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
+                "only {}; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones",
+                count(npos as u64, "distinct zone position", "distinct zone positions")
             )));
         }
         if let Some(d) = opts.degree {
@@ -455,21 +460,15 @@ impl<'a> Setup<'a> {
             }
             if npos < Poly::terms(d) {
                 return Err(input_error(format!(
-                    "only {npos} distinct zone positions; a degree-{d} P(x, y) has {} terms",
+                    "only {}; a degree-{d} P(x, y) has {} terms",
+                    count(
+                        npos as u64,
+                        "distinct zone position",
+                        "distinct zone positions"
+                    ),
                     Poly::terms(d)
                 )));
             }
-        }
-        if grays.len() < 3 {
-            return Err(input_error(format!(
-                "only {} distinct gray levels ({}); S(g) needs at least 3",
-                grays.len(),
-                grays
-                    .iter()
-                    .map(|g| g.to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
         }
         // A cubic needs at least 4 distinct coordinates along each axis.
         for axis in ["x", "y"] {
@@ -482,8 +481,9 @@ impl<'a> Setup<'a> {
                 .collect();
             if vals.len() < 4 {
                 return Err(input_error(format!(
-                    "ill-conditioned fit: the zone centres take only {} distinct {axis} values; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
-                    vals.len()
+                    "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
+                    vals.len(),
+                    crate::warning::plural(vals.len() as u64, "value", "values")
                 )));
             }
         }
@@ -897,6 +897,24 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
         condition: second.condition,
         warnings,
     })
+}
+
+/// Why readings at the pixel values `grays` (fewer than 3) cannot give S(g), and how to
+/// measure it.
+fn too_few_grays(grays: &std::collections::BTreeSet<u8>) -> String {
+    const HOW: &str = "S(g), the response to the pixel value, needs readings at 3 or more pixel values, including pixel values below 255: show a uniform mask of each gray (e.g. 255, 223, 191, 159, 127), read the meter at the zone centres (all of them, or a few) and add those rows with their gray";
+    let list: Vec<String> = grays.iter().map(|g| g.to_string()).collect();
+    if grays.iter().all(|&g| g == 255) {
+        format!(
+            "every reading is at gray 255 (mirrors fully on): that measures P(x, y) but not {HOW}"
+        )
+    } else {
+        format!(
+            "readings at only {} ({}): {HOW}",
+            count(grays.len() as u64, "pixel value", "pixel values"),
+            list.join(", ")
+        )
+    }
 }
 
 #[cfg(test)]

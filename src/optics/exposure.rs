@@ -62,7 +62,8 @@ pub fn resolve(
             warnings: Vec::new(),
         },
         Units::MwCm2 => {
-            let t = working_curve_s(&resin, target, thickness_mm);
+            // Exposures are commanded to 1 ms (crate::round::time_s).
+            let t = crate::round::time_s(working_curve_s(&resin, target, thickness_mm));
             let ratio = e.bottom_s.get() / e.layer_s.get();
             let dose = target * t;
             let mut warnings = Vec::new();
@@ -111,7 +112,10 @@ pub fn resolve(
                     .with("resin", resin.name.clone()),
                 );
             }
-            match (Positive::new(t), Positive::new(t * ratio)) {
+            match (
+                Positive::new(t),
+                Positive::new(crate::round::time_s(t * ratio)),
+            ) {
                 (Some(l), Some(b)) => {
                     e.layer_s = l;
                     e.bottom_s = b;
@@ -162,10 +166,11 @@ mod tests {
         assert_eq!(p.exposure, before);
         assert!(r.dose_mj_cm2.is_none());
         let r = resolve(&mut p, Units::MwCm2, 5.0, 0.05);
-        let t = working_curve_s(&p.resin, 5.0, 0.05);
-        assert!((p.exposure.layer_s.get() - t).abs() < 1e-12);
+        // Commanded to 1 ms.
+        let t = crate::round::time_s(working_curve_s(&p.resin, 5.0, 0.05));
+        assert_eq!(p.exposure.layer_s.get(), t);
         let ratio = before.bottom_s.get() / before.layer_s.get();
-        assert!((p.exposure.bottom_s.get() - t * ratio).abs() < 1e-9);
+        assert!((p.exposure.bottom_s.get() - t * ratio).abs() <= 0.0005);
         assert!((r.dose_mj_cm2.unwrap() - 5.0 * t).abs() < 1e-9);
         assert!(r.warnings.is_empty(), "{:?}", r.warnings);
         // The published irradiance read as mW/cm² (really µW/cm²) is implausible.

@@ -89,13 +89,21 @@ pub struct CalibrateReport {
     pub warnings: Vec<Warning>,
 }
 
+/// A mode's prediction, its figures to 6 significant digits (`crate::round::derived`).
 fn mode_report(c: &Compensator) -> ModeReport {
+    use crate::round::derived;
     let p = &c.prediction;
+    let s = p.spreads;
     ModeReport {
-        target_irradiance: p.target,
-        mean_irradiance: p.mean,
-        throughput: p.target / p.mean,
-        spreads: p.spreads,
+        target_irradiance: derived(p.target),
+        mean_irradiance: derived(p.mean),
+        throughput: derived(p.target / p.mean),
+        spreads: Spreads {
+            before_zone_pct: derived(s.before_zone_pct),
+            before_pixel_pct: derived(s.before_pixel_pct),
+            after_zone_pct: derived(s.after_zone_pct),
+            after_pixel_pct: derived(s.after_pixel_pct),
+        },
         unreachable: p.unreachable,
     }
 }
@@ -268,11 +276,11 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
         gray_levels: f.gray_levels,
         valid_gray: cal.response.valid_gray(),
         excluded_grays: f.excluded_grays,
-        residual_rms_pct: f.residual_rms_pct,
-        residual_max_pct: f.residual_max_pct,
+        residual_rms_pct: crate::round::derived(f.residual_rms_pct),
+        residual_max_pct: crate::round::derived(f.residual_max_pct),
         residual_max_line: f.residual_max_line,
-        condition: fit.condition,
-        calibrated_area_mm: cal.field.area_mm,
+        condition: crate::round::derived(fit.condition),
+        calibrated_area_mm: cal.field.area_mm.map(crate::round::plane_mm),
         zones_outside: zone.prediction.zones_outside,
         zone: mode_report(&zone),
         pixel: mode_report(&pixel),

@@ -20,6 +20,7 @@ pub use analysis::LayerAnalysis;
 
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
+use crate::round;
 use crate::warning::{plural, Warning};
 
 /// What the planner needs to know about one layer.
@@ -48,7 +49,7 @@ pub struct LayerPlan {
     pub exposure_s: f64,
     /// Steps in order.
     pub steps: Vec<Step>,
-    /// Estimated duration of the steps under the timing contract, s.
+    /// Estimated duration of the steps under the timing contract, s (to 1 ms).
     pub time_s: f64,
 }
 
@@ -57,7 +58,8 @@ pub struct LayerPlan {
 pub struct Plan {
     /// One plan per layer.
     pub layers: Vec<LayerPlan>,
-    /// Sum of the layer times, s.
+    /// The job's time estimate: the sum of the layer times before they were rounded, to
+    /// 1 ms, s.
     pub print_time_s: f64,
     /// Hybrid process: the time the same job would take with every slice layered, s.
     pub all_layered_time_s: Option<f64>,
@@ -79,12 +81,14 @@ pub(crate) struct Notes {
     beyond_table_max_mm: f64,
 }
 
+/// The layers' plans, each with its time estimate (to 1 ms), and the job's estimate (the
+/// sum of the unrounded layer times, to 1 ms).
 fn build(
     profile: &Profile,
     layers: &[LayerInfo],
     force_layered: bool,
     notes: &mut Notes,
-) -> Vec<LayerPlan> {
+) -> (Vec<LayerPlan>, f64) {
     let lim = steps::Limits::of(profile);
     let mut plans = match profile.process {
         Process::TopDown => {
@@ -111,10 +115,11 @@ fn build(
     };
     let lists: Vec<&[Step]> = plans.iter().map(|p| p.steps.as_slice()).collect();
     let times = timing::Timing::of(profile).layer_times(&lists);
+    let total = round::time_s(times.iter().sum());
     for (p, t) in plans.iter_mut().zip(times) {
-        p.time_s = t;
+        p.time_s = round::time_s(t);
     }
-    plans
+    (plans, total)
 }
 
 /// Plans every layer for the profile's process. Fails (with a one-line reason) when a
@@ -131,17 +136,14 @@ pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
         ));
     }
     let mut notes = Notes::default();
-    let layers_plan = build(profile, layers, false, &mut notes);
+    let (layers_plan, print_time_s) = build(profile, layers, false, &mut notes);
     let all_layered_time_s = (profile.process == Process::Hybrid).then(|| {
         let mut scratch = Notes::default();
-        build(profile, layers, true, &mut scratch)
-            .iter()
-            .map(|p| p.time_s)
-            .sum()
+        build(profile, layers, true, &mut scratch).1
     });
     let warnings = warnings(profile, layers, &notes);
     Ok(Plan {
-        print_time_s: layers_plan.iter().map(|p| p.time_s).sum(),
+        print_time_s,
         continuous_layers: layers_plan
             .iter()
             .filter(|p| p.mode == Mode::Continuous)

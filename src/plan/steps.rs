@@ -4,16 +4,23 @@
 //! exposure (layered: `expose`; continuous: a `sweep` to its `z_mm`). Lifts and dips that
 //! prepare a layer belong to that layer; their height is the highest `to_mm` of the layer
 //! minus the layer's exposure position.
+//!
+//! Every number a step holds is rounded as it is made (`crate::round`): targets to a whole
+//! number of stage steps, waits and exposures to 1 ms, speeds derived from an area to 6
+//! significant digits. The time estimate is then computed from the rounded steps, which
+//! are exactly what the manifest records and the executor replays.
 
 use super::{LayerInfo, LayerPlan, Notes};
 use crate::bundle::{Mode, Step};
 use crate::profile::{Hybrid, Peel, Profile, Recoat, WaitModel};
+use crate::round::{self, StageGrid};
 
-/// Stage limits the steps must respect.
+/// Stage limits the steps must respect, and the stage's grid.
 pub(super) struct Limits {
     pub travel_max: f64,
     pub vmax: f64,
     pub accel: f64,
+    pub grid: StageGrid,
 }
 
 impl Limits {
@@ -22,29 +29,34 @@ impl Limits {
             travel_max: p.stage.travel_max_mm,
             vmax: p.stage.max_speed_mm_s.get(),
             accel: p.stage.max_accel_mm_s2.get(),
+            grid: StageGrid::new(p.stage.steps_per_mm.get()),
         }
     }
 
+    /// A move to the whole step nearest `to_mm`, no faster than the stage allows.
     fn mv(&self, to_mm: f64, speed: f64) -> Step {
         Step::Move {
-            to_mm,
+            to_mm: self.grid.position(to_mm),
             speed_mm_s: speed.min(self.vmax),
             accel_mm_s2: self.accel,
         }
     }
 
-    /// `to` clamped to the travel; counts a clamp in `notes`.
+    /// `to` clamped to the travel (to the highest whole step within it); counts a clamp in
+    /// `notes`.
     fn clamp_top(&self, to: f64, notes: &mut Notes) -> f64 {
         if to > self.travel_max {
             notes.travel_clamped += 1;
-            self.travel_max
+            self.grid.position_at_most(self.travel_max)
         } else {
             to
         }
     }
 }
 
+/// Appends a wait of `s` seconds (to 1 ms), unless it is none.
 fn push_wait(steps: &mut Vec<Step>, s: f64) {
+    let s = round::time_s(s);
     if s > 0.0 {
         steps.push(Step::Wait { s });
     }
@@ -88,7 +100,7 @@ pub(super) fn top_down(
                 }
             }
             push_wait(&mut steps, w);
-            let e = p.exposure.layer_exposure_s(l.index);
+            let e = round::time_s(p.exposure.layer_exposure_s(l.index));
             steps.push(Step::Expose { s: e });
             layered(e, steps)
         })
@@ -111,9 +123,12 @@ pub(super) fn bottom_up(
             let prev = &layers[i - 1];
             push_wait(&mut steps, k.wait_after_cure_s.get());
             let (lift, v_slow) = k.lift_for(prev.area_mm2, prev.index < bottom);
-            let top = lim.clamp_top(l.z_mm + lift, notes);
-            let slow_to = (prev.z_mm + k.slow_lift_mm.get()).min(top);
-            if slow_to > prev.z_mm {
+            let v_slow = round::derived(v_slow);
+            let top = lim.grid.position(lim.clamp_top(l.z_mm + lift, notes));
+            let slow_to = lim
+                .grid
+                .position((prev.z_mm + k.slow_lift_mm.get()).min(top));
+            if slow_to > lim.grid.position(prev.z_mm) {
                 steps.push(lim.mv(slow_to, v_slow));
             }
             if top > slow_to {
@@ -123,7 +138,7 @@ pub(super) fn bottom_up(
         }
         steps.push(lim.mv(l.z_mm, k.retract_speed_mm_s.get()));
         push_wait(&mut steps, k.wait_before_cure_s.get());
-        let e = p.exposure.layer_exposure_s(l.index);
+        let e = round::time_s(p.exposure.layer_exposure_s(l.index));
         steps.push(Step::Expose { s: e });
         out.push(layered(e, steps));
     }
@@ -142,17 +157,23 @@ pub(super) fn hybrid(
     let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
     let v = h.continuous_speed_mm_s.get();
     let mut out: Vec<LayerPlan> = Vec::with_capacity(layers.len());
-    let mut pos = p.stage.home_mm;
+    // Where the previous layer was exposed: as planned, and on the stage's grid.
+    let (mut prev_z, mut pos) = (p.stage.home_mm, lim.grid.position(p.stage.home_mm));
     for (i, l) in layers.iter().enumerate() {
         let cont = !force_layered && l.index >= first_free && h.continuous(l.max_fill_distance_mm);
         let prev_layered = i == 0 || out[i - 1].mode == Mode::Layered;
         let mut steps = Vec::with_capacity(6);
         let below = l.z_mm - l.thickness_mm;
+        let top = lim.grid.position(l.z_mm);
         if cont {
             // Continuous: the stage sweeps from the previous exposure position to this one
             // while the mask is shown. Explicit switch from layered: the stage is still at
-            // the last exposure; wait, then start the run.
-            if (pos - below).abs() > 1e-9 {
+            // the last exposure; wait, then start the run. (Compared as planned, not on the
+            // grid: a layer height of a whole number of steps and a half puts consecutive
+            // tops on either side of a half step.)
+            let mut start = pos;
+            if (prev_z - below).abs() > 1e-9 {
+                start = lim.grid.position(below);
                 steps.push(lim.mv(below, h.retract_speed_mm_s.get()));
             }
             if prev_layered {
@@ -164,12 +185,14 @@ pub(super) fn hybrid(
                 push_wait(&mut steps, w);
             }
             steps.push(Step::Sweep {
-                to_mm: l.z_mm,
+                to_mm: top,
                 speed_mm_s: v,
             });
+            // The light time of the sweep between whole steps: rarely a whole number of
+            // ms, so 7 significant digits (the executor checks the dose to 1e-6).
             out.push(LayerPlan {
                 mode: Mode::Continuous,
-                exposure_s: l.thickness_mm / v,
+                exposure_s: round::significant((top - start).abs() / v, 7),
                 steps,
                 time_s: 0.0,
             });
@@ -189,17 +212,17 @@ pub(super) fn hybrid(
                 if layers[i - 1].index < p.exposure.bottom_layers as usize {
                     lift = lift.max(h.bottom_lift_mm.get());
                 }
-                let top = lim.clamp_top(l.z_mm + lift, notes);
-                steps.push(lim.mv(top, h.lift_speed_mm_s.get()));
+                let lifted = lim.clamp_top(l.z_mm + lift, notes);
+                steps.push(lim.mv(lifted, h.lift_speed_mm_s.get()));
                 push_wait(&mut steps, h.wait_after_lift_s.get());
             }
             steps.push(lim.mv(l.z_mm, h.retract_speed_mm_s.get()));
             push_wait(&mut steps, h.wait_before_cure_s.get());
-            let e = p.exposure.layer_exposure_s(l.index);
+            let e = round::time_s(p.exposure.layer_exposure_s(l.index));
             steps.push(Step::Expose { s: e });
             out.push(layered(e, steps));
         }
-        pos = l.z_mm;
+        (prev_z, pos) = (l.z_mm, top);
     }
     out
 }

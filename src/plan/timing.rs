@@ -16,6 +16,7 @@
 use crate::bundle::Step;
 use crate::motion::move_time;
 use crate::profile::Profile;
+use crate::round::StageGrid;
 
 /// The machine constants the estimate needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,10 +32,11 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// The constants of `p`.
+    /// The constants of `p`; the job starts at the whole stage step nearest `home_mm`, where
+    /// the executor homes the stage.
     pub fn of(p: &Profile) -> Timing {
         Timing {
-            home_mm: p.stage.home_mm,
+            home_mm: StageGrid::new(p.stage.steps_per_mm.get()).position(p.stage.home_mm),
             open_s: p.shutter.open_s.get(),
             close_s: p.shutter.close_s.get(),
             load_s: p.dmd.load_s.get(),

@@ -159,7 +159,8 @@ fn check_uniform_hybrid(job: &Value, fill: f64, continuous: bool) {
             assert_eq!(last["kind"], "sweep");
             assert_eq!(f(&last["to_mm"]), f(&l["z_mm"]));
             assert_eq!(f(&last["speed_mm_s"]), 0.06);
-            assert!((f(&l["exposure_s"]) - 0.1 / 0.06).abs() < 1e-12);
+            // The sweep's light time, to 7 significant digits.
+            assert!((f(&l["exposure_s"]) - 0.1 / 0.06).abs() < 1e-6);
             // No lift: the stage never goes above the layer it prints.
             assert!(lift(l) <= 1e-12);
             if i > ramp {
@@ -170,7 +171,7 @@ fn check_uniform_hybrid(job: &Value, fill: f64, continuous: bool) {
 }
 
 #[test]
-fn seeds001_square_prism_5mm_prints_continuously() {
+fn li_hybrid_square_prism_5mm_prints_continuously() {
     let dir = tempdir("plan-prism5");
     let (summary, job) = slice_json(
         &dir,
@@ -188,7 +189,7 @@ fn seeds001_square_prism_5mm_prints_continuously() {
 }
 
 #[test]
-fn seeds001_cube_10mm_layered_lift_2mm() {
+fn li_hybrid_cube_10mm_layered_lift_2mm() {
     let dir = tempdir("plan-cube10");
     let (_, job) = slice_json(
         &dir,
@@ -204,7 +205,7 @@ fn seeds001_cube_10mm_layered_lift_2mm() {
 }
 
 #[test]
-fn seeds001_cube_and_cylinder_15mm_lift_4mm() {
+fn li_hybrid_cube_and_cylinder_15mm_lift_4mm() {
     let dir = tempdir("plan-15");
     let (_, job) = slice_json(
         &dir,
@@ -224,7 +225,7 @@ fn seeds001_cube_and_cylinder_15mm_lift_4mm() {
 }
 
 #[test]
-fn seeds001_cylinder_20mm_and_square_30mm_lift_8mm() {
+fn li_hybrid_cylinder_20mm_and_square_30mm_lift_8mm() {
     let dir = tempdir("plan-20-30");
     let (_, job) = slice_json(
         &dir,
@@ -243,7 +244,7 @@ fn seeds001_cylinder_20mm_and_square_30mm_lift_8mm() {
 }
 
 #[test]
-fn seeds001_tower_alternates_layered_solids_and_continuous_hollows() {
+fn li_hybrid_tower_alternates_layered_solids_and_continuous_hollows() {
     // Sections, bottom up; each rests on the one below. The first is tall enough to hold
     // the bottom and transition layers.
     let cos96 = (PI / 96.0).cos();
@@ -317,8 +318,9 @@ fn seeds001_tower_alternates_layered_solids_and_continuous_hollows() {
     assert_eq!(t["continuous_layers"], 15);
     let (print, all) = (f(&t["print_time_s"]), f(&t["all_layered_time_s"]));
     assert!(all > print, "{all} vs {print}");
+    // Each layer's time and the total are rounded to 1 ms.
     let sum: f64 = ls.iter().map(|l| f(&l["time_s"])).sum();
-    assert!((sum - print).abs() < 1e-6 * print);
+    assert!((sum - print).abs() <= 0.0005 * (ls.len() + 1) as f64);
 }
 
 #[test]

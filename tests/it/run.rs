@@ -278,11 +278,109 @@ fn each_fault_stops_the_job_with_layer_and_time() {
         assert!(kinds(&r).contains(&kind.to_string()));
         assert_eq!(r["ok"], false);
     }
-    // A shutter stuck in layer 2 is found when it should close after the exposure.
+    // A shutter stuck in layer 2 is found when it should close after the exposure
+    // (close_s 0.05 s), then the DMD is blanked (load_s 0.02 s): 0.07 s of extra light.
     let (_, r) = run_json(&dir, &["--fault", "shutter-stuck@2"]);
     let l = &r["per_layer"][2];
     assert!(
-        (l["light_s"].as_f64().unwrap() - l["exposure_s"].as_f64().unwrap() - 0.05).abs() < 1e-9
+        (l["light_s"].as_f64().unwrap() - l["exposure_s"].as_f64().unwrap() - 0.07).abs() < 1e-6
+    );
+    assert!(
+        r["fault"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("layer 2 got 0.070 s of extra light"),
+        "{r}"
+    );
+}
+
+#[test]
+fn a_fault_after_the_one_that_ends_the_run_is_reported_as_never_triggered() {
+    let (dir, _) = sliced("untriggered");
+    let o = run_in(
+        &dir,
+        &[
+            "run",
+            "box.dmdjob",
+            "--fault",
+            "stall@3",
+            "--fault",
+            "limit@1",
+        ],
+    );
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(out.contains("FAULT limit in layer 1"), "{out}");
+    assert!(
+        out.contains(
+            "note: fault stall@3 never triggered (the run ended at the limit fault in layer 1)"
+        ),
+        "{out}"
+    );
+    let (_, r) = run_json(&dir, &["--fault", "stall@3", "--fault", "limit@1"]);
+    assert_eq!(r["untriggered_faults"], serde_json::json!(["stall@3"]));
+}
+
+#[test]
+fn a_stuck_shutter_on_a_machine_without_close_latency_reports_the_extra_light() {
+    // The built-in bottom-up profile's shutter closes at once (close_s 0): the light
+    // stays on until the DMD is blanked, one mask load (load_s 0.02 s).
+    let (dir, _) = sliced("stuck-bottom-up");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "box.stl",
+            "-p",
+            "bottom-up",
+            "-o",
+            "bu.dmdjob",
+            "-q",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run_in(&dir, &["run", "bu.dmdjob", "--fault", "shutter-stuck@2"]);
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    assert!(out.contains("layer 2 got 0.020 s of extra light"), "{out}");
+    assert!(!out.contains("got 0.000 s"), "{out}");
+}
+
+#[test]
+fn a_job_of_one_layer_is_counted_in_the_singular() {
+    let dir = tempdir("run-one-layer");
+    write_stl(
+        &dir.join("tile.stl"),
+        &box_tris([0.0; 3], [10.0, 10.0, 0.5]),
+    );
+    let o = run_in(&dir, &["slice", "tile.stl", "--layer-height", "0.5"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("tile.dmdjob: 1 layer, 0.5 mm"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run_in(&dir, &["run", "tile.dmdjob"]);
+    assert!(
+        stdout(&o).contains("tile.dmdjob: 1 layer, 1 mask checked"),
+        "{}",
+        stdout(&o)
+    );
+    let o = run_in(&dir, &["run", "tile.dmdjob", "--fault", "stall@1"]);
+    assert!(
+        stderr(&o).contains("the job has 1 layer (0..0)"),
+        "{}",
+        stderr(&o)
+    );
+    // An STL whose header declares one triangle it does not hold.
+    let mut stl = vec![0u8; 80];
+    stl.extend(1u32.to_le_bytes());
+    std::fs::write(dir.join("short.stl"), &stl).unwrap();
+    let o = run_in(&dir, &["slice", "short.stl"]);
+    assert!(
+        stderr(&o).contains("declares 1 triangle (134 bytes) but the file has 84 bytes"),
+        "{}",
+        stderr(&o)
     );
 }
 
@@ -290,7 +388,7 @@ fn each_fault_stops_the_job_with_layer_and_time() {
 fn unreadable_bundles_and_bad_options_exit_2() {
     let (dir, b) = sliced("unreadable");
     for (args, needle) in [
-        (vec!["run", "nope.dmdjob"], "nope.dmdjob"),
+        (vec!["run", "nope.dmdjob"], "nope.dmdjob: does not exist"),
         (
             vec!["run", "box.dmdjob", "--fault", "jam@1"],
             "unknown kind",

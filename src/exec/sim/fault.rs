@@ -83,8 +83,10 @@ pub struct FaultEvent {
     /// Layer during which it happened.
     pub layer: usize,
     /// Time the firmware detected it, s.
+    #[serde(serialize_with = "crate::exec::report::six")]
     pub time_s: f64,
     /// Where the stage stopped, mm.
+    #[serde(serialize_with = "crate::exec::report::six")]
     pub stage_mm: f64,
     /// What happened and what the firmware did.
     pub message: String,
@@ -158,15 +160,22 @@ impl Simulation<'_, '_, '_> {
             }
         }
         if self.shutter_stuck && seg.kind == SegKind::Close && hit.is_none() {
+            // The firmware finds the shutter still open when it should have closed
+            // (`close_s`), then blanks the DMD: a dark frame loads like a mask (`load_s`).
+            // The light stays on until then.
+            let (close_s, load_s) = (self.machine.close_s, self.machine.load_s);
             seg.kind = SegKind::StuckOpen;
             seg.shutter = ShutterState::Open;
             seg.light = true;
+            seg.t1 = seg.t0 + close_s + load_s;
             self.send(&seg);
             self.record.light_s += seg.duration();
             self.t = seg.t1;
             let msg = format!(
-                "shutter stuck open: still open {:.3} s after the close command; DMD blanked, stage stopped at {:.4} mm; layer {} got {:.3} s of extra light",
-                self.machine.close_s, self.pos, self.record.index, self.machine.close_s
+                "shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {:.4} mm; layer {} got {:.3} s of extra light",
+                self.pos,
+                self.record.index,
+                seg.duration()
             );
             self.abort(FaultKind::ShutterStuck, seg.t1, msg, false);
             return false;
@@ -349,12 +358,39 @@ mod tests {
         );
         let f = o.fault.unwrap();
         assert_eq!((f.kind, f.layer), ("shutter-stuck", 0));
-        // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, detected 0.05 s later.
-        assert!(close(f.time_s, 33.91));
-        assert!(close(o.layers[0].light_s, 16.05));
+        // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, found stuck 0.05 s
+        // later, DMD dark after its 0.02 s load.
+        assert!(close(f.time_s, 33.93));
+        assert!(close(o.layers[0].light_s, 16.07));
+        assert!(
+            f.message.contains("got 0.070 s of extra light"),
+            "{}",
+            f.message
+        );
         let last = c.segs.last().unwrap();
         assert_eq!(last.kind, SegKind::StuckOpen);
-        assert!(close(o.total_s, 33.91));
+        assert!(close(o.total_s, 33.93));
+    }
+
+    #[test]
+    fn a_stuck_shutter_without_close_latency_still_lights_until_the_dmd_is_dark() {
+        // A machine whose shutter closes at once (like the built-in bottom-up profile).
+        let mut m = layered();
+        m.machine.shutter.close_s = crate::units::NonNegative::new(0.0).unwrap();
+        let (o, _) = run_collecting(
+            &m,
+            &[FaultSpec {
+                kind: FaultKind::ShutterStuck,
+                layer: 0,
+            }],
+        );
+        let f = o.fault.unwrap();
+        assert!(close(o.layers[0].light_s, 16.02));
+        assert!(
+            f.message.contains("got 0.020 s of extra light"),
+            "{}",
+            f.message
+        );
     }
 
     #[test]
@@ -379,6 +415,18 @@ mod tests {
         let (o, _) = run_collecting(&m, &[spec]);
         assert!(o.fault.is_none());
         assert_eq!(o.untriggered, vec![spec]);
+        // A fault whose layer the run never reaches, after the one that ends it.
+        let stall = FaultSpec {
+            kind: FaultKind::Stall,
+            layer: 1,
+        };
+        let limit = FaultSpec {
+            kind: FaultKind::Limit,
+            layer: 0,
+        };
+        let (o, _) = run_collecting(&layered(), &[stall, limit]);
+        assert_eq!(o.fault.unwrap().kind, "limit");
+        assert_eq!(o.untriggered, vec![stall]);
     }
 
     #[test]

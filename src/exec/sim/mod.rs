@@ -94,7 +94,8 @@ pub struct Outcome {
     pub total_s: f64,
     /// The fault that ended the run, if any.
     pub fault: Option<FaultEvent>,
-    /// Injected faults that never triggered (e.g. a stuck shutter with no close after it).
+    /// Injected faults that never triggered: a stuck shutter with no close after it, or any
+    /// fault after the one that ended the run.
     pub untriggered: Vec<FaultSpec>,
     /// Steps that cannot be executed at all (non-positive speed, negative time); skipped.
     pub invalid_steps: Vec<Violation>,
@@ -104,12 +105,17 @@ pub struct Outcome {
 pub fn simulate(manifest: &Manifest, faults: &[FaultSpec], sinks: &mut [&mut dyn Sink]) -> Outcome {
     let mut sim = Simulation::new(manifest, faults, sinks);
     sim.run();
-    // Faults are only armed when their layer is reached; without a fault every layer was.
-    let untriggered = if sim.fault.is_none() {
-        faults.to_vec()
-    } else {
-        Vec::new()
-    };
+    // The run ends at the first fault that triggers: every other one never did (its layer
+    // was not reached, or nothing in the job set it off).
+    let mut untriggered = faults.to_vec();
+    if let Some(f) = &sim.fault {
+        if let Some(i) = untriggered
+            .iter()
+            .position(|s| s.kind.name() == f.kind && s.layer == f.layer)
+        {
+            untriggered.remove(i);
+        }
+    }
     Outcome {
         layers: sim.records,
         total_s: sim.t,

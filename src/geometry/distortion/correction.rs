@@ -125,7 +125,7 @@ impl Correction {
     pub fn report(&self) -> FitReport {
         let mut r = self.report.clone();
         r.extrapolated_points = self.extrapolated.load(Ordering::Relaxed);
-        r
+        r.rounded()
     }
 
     /// A per-thread evaluator (holds the interpolation buffers).
