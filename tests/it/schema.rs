@@ -323,6 +323,7 @@ fn schema_files_use_only_checked_keywords_and_resolve() {
             "calibrate-report.schema.json",
             "distortion-report.schema.json",
             "error.schema.json",
+            "inspect-summary.schema.json",
             "job.schema.json",
             "run-report.schema.json",
             "slice-summary.schema.json"
@@ -437,6 +438,19 @@ fn every_json_output_matches_its_schema() {
             );
         }
     }
+    // inspect's summary, and run on another machine than the embedded one.
+    let (code, summary) = json_of(
+        &dir,
+        &["inspect", "hyb.dmdjob", "--json", "--chart", "c.png"],
+    );
+    assert_eq!(code, 0, "{summary}");
+    s.assert_valid("inspect-summary.schema.json", &summary);
+    let (_, report) = json_of(
+        &dir,
+        &["run", "top.dmdjob", "--json", "--machine", "bottom-up"],
+    );
+    s.assert_valid("run-report.schema.json", &report);
+    assert_eq!(report["machine"]["profile"], "bottom-up");
     // slice and run report success under the same name: ok.
     // A run with a fault, an untriggered fault and a bad mask.
     std::fs::write(dir.join("bu.dmdjob/masks/00003.png"), b"not a png").unwrap();
