@@ -326,6 +326,7 @@ fn schema_files_use_only_checked_keywords_and_resolve() {
             "inspect-summary.schema.json",
             "job.schema.json",
             "run-report.schema.json",
+            "slice-part-line.schema.json",
             "slice-summary.schema.json"
         ]
     );
@@ -360,15 +361,21 @@ fn schema_files_use_only_checked_keywords_and_resolve() {
     }
     for (file, v) in &s.0 {
         walk(&s, file, v);
-        // Every output but job.json carries schema_version.
+        // Every output but job.json carries schema_version (in each of its forms, for a
+        // schema that is one of several).
         if file != "job.schema.json" {
-            assert!(
-                v["required"]
-                    .as_array()
-                    .unwrap()
-                    .contains(&json!("schema_version")),
-                "{file}"
-            );
+            let forms = match v.get("oneOf") {
+                Some(f) => f.as_array().unwrap().iter().collect(),
+                None => vec![v],
+            };
+            for f in forms {
+                assert!(
+                    f["required"]
+                        .as_array()
+                        .is_some_and(|r| r.contains(&json!("schema_version"))),
+                    "{file}"
+                );
+            }
         }
     }
 }
@@ -451,6 +458,33 @@ fn every_json_output_matches_its_schema() {
     );
     s.assert_valid("run-report.schema.json", &report);
     assert_eq!(report["machine"]["profile"], "bottom-up");
+    // Several parts in one call: one line per part, a failure among them.
+    std::fs::write(dir.join("bad.stl"), b"solid x\nfacet normal 0 0 1\n").unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            cube.to_str().unwrap(),
+            island.to_str().unwrap(),
+            "bad.stl",
+            "--output-dir",
+            "many",
+            "--json",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let lines: Vec<Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3);
+    for l in &lines {
+        s.assert_valid("slice-part-line.schema.json", l);
+    }
+    assert_eq!(
+        lines.iter().map(|l| l["ok"] == true).collect::<Vec<_>>(),
+        [true, true, false]
+    );
     // slice and run report success under the same name: ok.
     // A run with a fault, an untriggered fault and a bad mask.
     std::fs::write(dir.join("bu.dmdjob/masks/00003.png"), b"not a png").unwrap();
