@@ -302,9 +302,19 @@ fn parsers_never_panic_or_hang_on_mutated_inputs() {
             }
         });
     }
-    // Parsers print nothing, but a panic's message would: keep the output readable.
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    // A parser's panic is caught and reported below; its message would only flood the
+    // output. Panics of the other tests, which run in parallel threads of this binary,
+    // still print.
+    let fuzzing = std::thread::current().id();
+    let previous = Arc::new(std::panic::take_hook());
+    {
+        let previous = previous.clone();
+        std::panic::set_hook(Box::new(move |info| {
+            if std::thread::current().id() != fuzzing {
+                previous(info);
+            }
+        }));
+    }
     let mut failures = Vec::new();
     for (k, (name, parse, seeds)) in targets().into_iter().enumerate() {
         if only.as_deref().is_some_and(|o| o != name) {
@@ -355,7 +365,7 @@ fn parsers_never_panic_or_hang_on_mutated_inputs() {
             t0.elapsed().as_secs_f64()
         );
     }
-    std::panic::set_hook(hook);
+    std::panic::set_hook(Box::new(move |info| previous(info)));
     *current.lock().unwrap() = None;
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
