@@ -3,6 +3,7 @@
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::profile::Profile;
+use crate::round::for_message;
 use crate::slice;
 use std::path::Path;
 
@@ -171,8 +172,8 @@ pub fn placement(
                     path: path.into(),
                     msg: format!(
                         "with --position {},{} the part spans x {x0:.3}..{x1:.3}, y {y0:.3}..{y1:.3} mm, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
-                        mm(x),
-                        mm(y)
+                        for_message(x),
+                        for_message(y)
                     ),
                 });
             }
@@ -236,9 +237,9 @@ pub fn place_mesh(
     if top.is_nan() || top > travel_max {
         return Err(job_error(format!(
             "part is {} mm tall, its top at {} mm, but the stage travels only to stage.travel_max_mm = {} mm",
-            mm(tall),
-            mm(top),
-            mm(travel_max)
+            for_message(tall),
+            for_message(top),
+            for_message(travel_max)
         )));
     }
     let n = match slice::layer_count(top, h) {
@@ -246,35 +247,19 @@ pub fn place_mesh(
         _ => {
             return Err(job_error(format!(
                 "a part {} mm tall at {} mm layers needs more than {MAX_LAYERS} layers",
-                mm(tall),
-                mm(h)
+                for_message(tall),
+                for_message(h)
             )))
         }
     };
     if n == 0 {
         return Err(job_error(format!(
             "part is {} mm tall, less than one layer ({} mm): nothing to print",
-            mm(tall),
-            mm(h)
+            for_message(tall),
+            for_message(h)
         )));
     }
     Ok((t, n))
-}
-
-/// A length for a message: 4 significant decimals, or scientific notation where that
-/// would print a long run of digits.
-fn mm(v: f64) -> String {
-    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-3) {
-        format!("{v:.3e}")
-    } else {
-        let s = format!("{v:.4}");
-        let s = s.trim_end_matches('0').trim_end_matches('.');
-        if s == "-0" {
-            "0".into()
-        } else {
-            s.into()
-        }
-    }
 }
 
 #[cfg(test)]

@@ -365,7 +365,7 @@ impl Profile {
             return Err(format!(
                 "stage.steps_per_mm = {:?} gives steps of {} mm, coarser than the layer height ({:?} mm)",
                 s.steps_per_mm.get(),
-                short(step_mm),
+                crate::round::for_message(step_mm),
                 self.slicing.layer_height_mm.get()
             ));
         }
@@ -456,15 +456,6 @@ fn check_unit_ranges(v: &serde_json::Value, path: &str) -> std::result::Result<(
             Ok(())
         }
         _ => Ok(()),
-    }
-}
-
-/// A number for a message: 4 significant digits, never a long run of digits.
-fn short(v: f64) -> String {
-    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-3) {
-        format!("{v:.3e}")
-    } else {
-        format!("{}", (v * 1e4).round() / 1e4)
     }
 }
 
