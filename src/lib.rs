@@ -40,6 +40,7 @@ pub mod job;
 pub mod mesh;
 pub mod motion;
 pub mod optics;
+pub mod output;
 pub mod plan;
 pub mod plot;
 mod png;

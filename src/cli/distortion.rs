@@ -47,7 +47,7 @@ pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
     );
     if let (Some(p), Some(format)) = (&a.plot, plot_format) {
         let bytes = c.plot().render().encode(format);
-        std::fs::write(p, bytes).map_err(|e| dmdsl::Error::io(p, e))?;
+        dmdsl::output::write_atomic(p, &bytes)?;
     }
     if a.json {
         let v =

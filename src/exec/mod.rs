@@ -31,6 +31,7 @@ pub mod testutil;
 
 use crate::bundle::{Manifest, MANIFEST};
 use crate::error::{Error, Result};
+use crate::output::write_atomic;
 use crate::plot::Format;
 use crate::profile::Profile;
 use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
@@ -474,31 +475,6 @@ pub fn replay(manifest: &Manifest) -> Vec<Violation> {
     let mut violations = checker.finish(outcome.total_s, outcome.fault.is_none());
     violations.extend(outcome.invalid_steps.iter().cloned());
     violations
-}
-
-/// The temporary sibling (`.NAME.tmp-PID`) a file is written to before it is renamed into
-/// place, or `None` when `path` has no file name.
-fn temp_sibling(path: &Path) -> Option<PathBuf> {
-    let name = path.file_name()?;
-    Some(path.with_file_name(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    )))
-}
-
-/// Writes `bytes` to `path` through a temporary sibling renamed into place.
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = temp_sibling(path)
-        .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
-    std::fs::write(&tmp, bytes).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
 }
 
 #[cfg(test)]

@@ -54,7 +54,7 @@ impl TraceWriter {
         layers: Option<RangeInclusive<usize>>,
         machine: Machine,
     ) -> Result<Self> {
-        let tmp = super::temp_sibling(path)
+        let tmp = crate::output::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
         let f = File::create(&tmp).map_err(|e| Error::io(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 16, f);

@@ -22,7 +22,7 @@ pub use preview::preview;
 pub use reader::{Bundle, DirMasks, MaskReader};
 pub use summary::{summarize, Summary};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::plot::text::{self, SMALL, TITLE};
 use crate::plot::{Canvas, Format};
 use std::path::Path;
@@ -54,18 +54,5 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
 
 /// Writes `canvas` to `path` in `format`, through a temporary sibling renamed into place.
 pub fn write_picture(path: &Path, canvas: &Canvas, format: Format) -> Result<()> {
-    let bytes = canvas.encode(format);
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = std::fs::write(&tmp, &bytes).and_then(|_| std::fs::rename(&tmp, path));
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+    crate::output::write_atomic(path, &canvas.encode(format))
 }

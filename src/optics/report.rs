@@ -157,13 +157,10 @@ fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     let tmp: Vec<PathBuf> = files
         .iter()
         .map(|(p, _)| {
-            let name = p
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            p.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+            crate::output::temp_sibling(p)
+                .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let cleanup = |upto: usize| {
         for t in &tmp[..upto] {
             let _ = std::fs::remove_file(t);
