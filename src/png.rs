@@ -164,7 +164,7 @@ impl Adler {
         self.b %= ADLER_MOD;
         self.pending = 0;
         let k_m = k % ADLER_MOD;
-        let tri = if k % 2 == 0 {
+        let tri = if k.is_multiple_of(2) {
             (k / 2 % ADLER_MOD) * ((k + 1) % ADLER_MOD)
         } else {
             (k % ADLER_MOD) * (k.div_ceil(2) % ADLER_MOD)
@@ -847,9 +847,9 @@ mod tests {
         let mut row = vec![0u8; w];
         for r in 0..h {
             let x = xorshift(seed);
-            if r == 0 || x % 4 == 0 {
+            if r == 0 || x.is_multiple_of(4) {
                 row.fill(0);
-                if zones && x % 3 == 0 {
+                if zones && x.is_multiple_of(3) {
                     // a band of zeros
                 } else {
                     let (a, b) = ((x >> 8) as usize % w, (x >> 24) as usize % w);

@@ -176,7 +176,7 @@ impl Job<'_> {
         label: &str,
     ) -> Result<SliceSummary, dmdsl::Error> {
         let progress = |done: usize, total: usize| {
-            if done == total || done % 16 == 0 {
+            if done == total || done.is_multiple_of(16) {
                 let mut e = std::io::stderr().lock();
                 let _ = write!(e, "\rslicing{label}: layer {done}/{total}");
                 if done == total {

@@ -15,7 +15,7 @@ impl Compensator {
         let mut cur = vec![0f32; w + 2];
         let mut next = vec![0f32; w + 2];
         for r in r0..r1 {
-            let ltr = (r - r0) % 2 == 0;
+            let ltr = (r - r0).is_multiple_of(2);
             let base = r * w;
             for k in 0..w {
                 let c = if ltr { k } else { w - 1 - k };

@@ -649,7 +649,7 @@ impl Search<'_> {
         let t = self.best.depth + self.precision;
         if c.h >= ARCS_MIN_HALF_SIZE * self.precision && (c.h >= t || tested.pts.n == 0) {
             self.ring_seen += 1;
-            if self.ring_tries.pay() || self.ring_seen % RING_PROBE_EVERY == 0 {
+            if self.ring_tries.pay() || self.ring_seen.is_multiple_of(RING_PROBE_EVERY) {
                 self.ring_tries.tries += 1;
                 if self.e.ring_cover(c.c, c.h, t, tested.near, self.arcs) {
                     self.ring_tries.hits += 1;
