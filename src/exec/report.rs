@@ -82,6 +82,13 @@ pub const DIFFERENCES_SHOWN: usize = 4;
 pub struct Report {
     /// The bundle, as given.
     pub bundle: String,
+    /// The form the job came in: `dmdjob` (bundle directory), `dmdjob-zip`, `sl1`, `sl1s`
+    /// or `sla-control`.
+    pub format: &'static str,
+    /// Where `estimate_s` comes from: `planner` (dmdsl's plan, `totals.print_time_s`),
+    /// `PrusaSlicer printTime (config.ini)` for SL1/SL1S files, `import steps` for an
+    /// imported job that carries no estimate (the sum of the steps built for it).
+    pub estimate_source: String,
     /// The machine given with `--machine` and how it differs from the job's (`None`: the
     /// job ran on the machine its manifest embeds).
     pub machine: Option<MachineCheck>,
@@ -339,8 +346,9 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} {}, {} {} checked",
+        "{} ({}): {} {}, {} {} checked",
         r.bundle,
+        r.format,
         r.layers,
         plural(r.layers, "layer", "layers"),
         r.masks_verified,
@@ -376,9 +384,13 @@ pub fn render_human(r: &Report) -> String {
     }
     let _ = writeln!(
         o,
-        "simulated {} ({:.2} s); manifest estimate {:.2} s ({:+.2} %)",
+        "simulated {} ({:.2} s); {} {:.2} s ({:+.2} %)",
         hms(r.total_s),
         r.total_s,
+        match r.estimate_source.as_str() {
+            "planner" => "manifest estimate".to_string(),
+            other => format!("estimate, {other},"),
+        },
         r.estimate_s,
         r.estimate_diff_pct
     );
