@@ -163,8 +163,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         (None, _) => "import steps".into(),
     };
     Ok(report(
-        dir,
-        (format.name(), estimate_source),
+        (dir, format.name(), estimate_source),
         &manifest,
         machine_check,
         verified.masks,
@@ -336,8 +335,7 @@ fn all_violations(
 
 /// The report of a run.
 fn report(
-    dir: &Path,
-    (format, estimate_source): (&'static str, String),
+    (dir, format, estimate_source): (&Path, &'static str, String),
     manifest: &Manifest,
     machine: Option<MachineCheck>,
     masks_verified: usize,

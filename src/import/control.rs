@@ -83,6 +83,9 @@ const TOP_KEYS: &[&str] = &[
     "Layers",
 ];
 
+/// An image's SHA-256 and, when it decodes, its size and figures.
+type ImageFigures = (String, Option<(u32, u32, super::MaskFigures)>);
+
 /// One exposure of a layer.
 #[derive(Debug, Clone)]
 struct Image {
@@ -399,16 +402,15 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     let mut files: Vec<&str> = exposures.iter().map(|e| e.image.file.as_str()).collect();
     files.sort_unstable();
     files.dedup();
-    let figures: std::collections::HashMap<&str, (String, Option<(u32, u32, super::MaskFigures)>)> =
-        files
-            .par_iter()
-            .map(|f| {
-                let fig = archive
-                    .get(f)
-                    .map(|b| (crate::digest::sha256_hex(b), mask_figures(b)));
-                (*f, fig.unwrap_or_default())
-            })
-            .collect();
+    let figures: std::collections::HashMap<&str, ImageFigures> = files
+        .par_iter()
+        .map(|f| {
+            let fig = archive
+                .get(f)
+                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b)));
+            (*f, fig.unwrap_or_default())
+        })
+        .collect();
     let (w_px, h_px) = exposures
         .iter()
         .find_map(|e| figures[e.image.file.as_str()].1.map(|(w, h, _)| (w, h)))

@@ -237,6 +237,19 @@ fn a_zipped_bundle_runs_and_inspects_as_its_directory() {
 }
 
 #[test]
+fn the_zipped_bundle_fixture_runs_clean() {
+    let dir = tempdir("zip-fixture");
+    let p = fixture("zip/cube5.dmdjob.zip");
+    let (code, r) = json_run(&dir, &["run", p.to_str().unwrap()]);
+    assert_eq!(code, 0, "{r}");
+    assert_eq!(
+        (&r["format"], &r["layers"]),
+        (&Value::from("dmdjob-zip"), &Value::from(5))
+    );
+    assert_eq!(r["estimate_source"], "planner");
+}
+
+#[test]
 fn inspect_reads_imported_jobs() {
     let dir = tempdir("inspect-imported");
     for (name, format) in [
