@@ -10,9 +10,11 @@
 //! position setting is its own key, else that of its `Using named position settings`,
 //! else the default; an image's setting is its own key, else its `Using named image
 //! settings`, else the layer's `Using named default image settings`, else the default.
-//! `Design` and `Special print techniques` are information only. `Variables`
-//! (expressions the standard's tools evaluate) are not evaluated: a setting that is not
-//! a number where a number is needed is an error.
+//! Named settings may inherit from other named settings (a circle is an error). `${...}`
+//! expressions over `Variables` are evaluated first, as the standard's validator does
+//! (named layer groups with their call's variables; [`super::expr`]). `Design` and
+//! `Special print techniques` are information only. A setting that is still not a
+//! number where a number is needed is an error naming the entry and the key.
 //!
 //! ## Steps
 //! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
@@ -49,7 +51,8 @@ const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
 const TRAVEL_MAX_MM: f64 = 90.0;
 
 /// The top-level `.json` entry that holds print settings (`Header` and `Default layer
-/// settings`), `print_settings.json` first.
+/// settings`), `print_settings.json` first. (The standard allows one JSON file at the
+/// top; [`import`] refuses an archive with more.)
 pub(crate) fn settings_entry(archive: &Archive) -> Option<String> {
     let mut names: Vec<&String> = archive
         .names()
@@ -130,13 +133,40 @@ impl Reader<'_> {
             .ok_or_else(|| self.bad(format!("{at} is not an object")))
     }
 
-    fn named(&self, table: &str, name: &str, at: &str) -> Result<&Map<String, Value>> {
-        let v = self
-            .root
-            .get(table)
-            .and_then(|t| t.get(name))
-            .ok_or_else(|| self.bad(format!("{at}: `{name}` is not in `{table}`")))?;
-        self.object(v, &format!("{table}.{name}"))
+    /// Named settings `name` of `table`, merged with the named settings it inherits from
+    /// (its own `Using named ...` key, followed to the root; its own keys win).
+    fn named(&self, table: &str, name: &str, at: &str) -> Result<Map<String, Value>> {
+        let parent_key = if table == "Named position settings" {
+            "Using named position settings"
+        } else {
+            "Using named image settings"
+        };
+        let mut out = Map::new();
+        let mut chain: Vec<String> = Vec::new();
+        let mut cur = name.to_string();
+        loop {
+            if chain.contains(&cur) {
+                return Err(self.bad(format!(
+                    "{at}: `{table}` inherit in a circle: {} -> {cur}",
+                    chain.join(" -> ")
+                )));
+            }
+            let v = self
+                .root
+                .get(table)
+                .and_then(|t| t.get(&cur))
+                .ok_or_else(|| self.bad(format!("{at}: `{cur}` is not in `{table}`")))?;
+            let m = self.object(v, &format!("{table}.{cur}"))?;
+            for (k, v) in m {
+                out.entry(k.clone()).or_insert_with(|| v.clone());
+            }
+            chain.push(cur);
+            match m.get(parent_key).and_then(Value::as_str) {
+                Some(p) if !p.is_empty() => cur = p.to_string(),
+                _ => break,
+            }
+        }
+        Ok(out)
     }
 
     /// Setting `key` from the first of `maps` that has it, as a number ≥ 0 (> 0 when
@@ -155,7 +185,7 @@ impl Reader<'_> {
         match v.as_f64() {
             Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => Ok(x),
             _ => Err(self.bad(format!(
-                "{at}: `{key}` is {v}, not a {} number (variables are not evaluated)",
+                "{at}: `{key}` is {v}, not a {} number",
                 if positive { "positive" } else { "non-negative" }
             ))),
         }
@@ -206,18 +236,20 @@ impl Reader<'_> {
             .and_then(Value::as_str)
         {
             Some(n) if !n.is_empty() => self.named("Named position settings", n, at)?,
-            _ => &empty,
+            _ => Map::new(),
         };
-        let pos = [own_pos, named_pos, dpos];
+        let pos = [own_pos, &named_pos, dpos];
         let layer_img = match layer
             .get("Using named default image settings")
             .and_then(Value::as_str)
         {
             Some(n) if !n.is_empty() => self.named("Named image settings", n, at)?,
-            _ => &empty,
+            _ => Map::new(),
         };
+        // No list, or an empty one: one exposure of the default image.
         let list: Vec<&Map<String, Value>> = match layer.get("Image settings list") {
             None => vec![&empty],
+            Some(Value::Array(a)) if a.is_empty() => vec![&empty],
             Some(Value::Array(a)) => a
                 .iter()
                 .enumerate()
@@ -235,14 +267,15 @@ impl Reader<'_> {
         let mut images = Vec::with_capacity(list.len());
         for (k, own) in list.into_iter().enumerate() {
             let at = format!("{at}.Image settings list[{k}]");
+            // An image's own named settings replace the layer's named defaults.
             let named = match own
                 .get("Using named image settings")
                 .and_then(Value::as_str)
             {
                 Some(n) if !n.is_empty() => self.named("Named image settings", n, &at)?,
-                _ => &empty,
+                _ => layer_img.clone(),
             };
-            let maps = [own, named, layer_img, dimg];
+            let maps = [own, &named, dimg];
             let ms = self.num(&maps, "Layer exposure time (ms)", &at, false)?;
             if ms > 10_000.0 {
                 return Err(self.bad(format!(
@@ -279,7 +312,7 @@ impl Reader<'_> {
         })
     }
 
-    /// Every layer of the file in print order (named groups expanded).
+    /// Every layer of the file in print order (named groups were expanded by [`expand`]).
     fn layers(&self) -> Result<Vec<LayerSpec>> {
         let defaults = self.object(
             &self.root["Default layer settings"],
@@ -300,34 +333,72 @@ impl Reader<'_> {
             let at = format!("Layers[{k}]");
             let m = self.object(item, &at)?;
             let copies = self.copies(m, &at)?.unwrap_or(default_copies);
-            if let Some(g) = m.get("Using named layer group") {
-                let name = g.as_str().ok_or_else(|| {
-                    self.bad(format!("{at}: `Using named layer group` is not a string"))
-                })?;
-                let group = self
-                    .root
-                    .get("Named layer groups")
-                    .and_then(|t| t.get(name))
-                    .and_then(Value::as_array)
-                    .ok_or_else(|| {
-                        self.bad(format!(
-                            "{at}: no layer group `{name}` in `Named layer groups`"
-                        ))
-                    })?;
-                for _ in 0..copies {
-                    for (j, l) in group.iter().enumerate() {
-                        let at = format!("Named layer groups.{name}[{j}]");
-                        let lm = self.object(l, &at)?;
-                        let c = self.copies(lm, &at)?.unwrap_or(default_copies);
-                        out.push(self.layer(lm, &at, c)?);
-                    }
-                }
-            } else {
-                out.push(self.layer(m, &at, copies)?);
-            }
+            out.push(self.layer(m, &at, copies)?);
         }
         Ok(out)
     }
+}
+
+/// Expands what the standard's tools expand before validating: calls of named layer
+/// groups (each group's layers repeated `Number of duplications` times, their `${...}`
+/// evaluated over the global `Variables` overridden by the call's), then every `${...}`
+/// left, over the global `Variables`.
+fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
+    let vars = |v: Option<&Value>| -> std::result::Result<Map<String, Value>, String> {
+        match v {
+            None => Ok(Map::new()),
+            Some(Value::Object(m)) => Ok(m.clone()),
+            Some(v) => Err(format!("`Variables` is {v}, not an object")),
+        }
+    };
+    let globals = vars(root.get("Variables"))?;
+    if let Some(Value::Array(items)) = root.get("Layers") {
+        let mut out = Vec::with_capacity(items.len());
+        for (k, item) in items.iter().enumerate() {
+            let Some(name) = item.get("Using named layer group") else {
+                out.push(item.clone());
+                continue;
+            };
+            let at = format!("Layers[{k}]");
+            let name = name
+                .as_str()
+                .ok_or(format!("{at}: `Using named layer group` is not a string"))?;
+            let group = root
+                .get("Named layer groups")
+                .and_then(|g| g.get(name))
+                .and_then(Value::as_array)
+                .ok_or(format!(
+                    "{at}: no layer group `{name}` in `Named layer groups`"
+                ))?;
+            let mut scoped = globals.clone();
+            scoped.extend(vars(item.get("Variables"))?);
+            let scoped = match super::expr::resolve(&Value::Object(scoped.clone()), &scoped) {
+                Ok(Value::Object(m)) => m,
+                Ok(_) => scoped,
+                Err(e) => return Err(format!("{at}: Variables: {e}")),
+            };
+            let copies = match item.get("Number of duplications") {
+                None => 1,
+                Some(v) => v.as_u64().filter(|&n| n >= 1).ok_or(format!(
+                    "{at}: `Number of duplications` is {v}, not a whole number ≥ 1"
+                ))?,
+            };
+            let layers: Vec<Value> = group
+                .iter()
+                .map(|l| super::expr::resolve(l, &scoped))
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|e| format!("Named layer groups.{name}: {e}"))?;
+            for _ in 0..copies {
+                out.extend(layers.iter().cloned());
+            }
+        }
+        root.insert("Layers".into(), Value::Array(out));
+    }
+    let resolved = super::expr::resolve(&Value::Object(std::mem::take(root)), &globals)?;
+    if let Value::Object(m) = resolved {
+        *root = m;
+    }
+    Ok(())
 }
 
 /// Checks the top level and the header: the keys and types this reader relies on.
@@ -362,17 +433,34 @@ fn check_top(r: &Reader) -> Result<()> {
 /// Imports the control-file zip `archive` whose settings are entry `entry`.
 pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job> {
     let path = archive.path().to_path_buf();
+    let jsons: Vec<&str> = archive
+        .names()
+        .iter()
+        .filter(|n| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json"))
+        .map(String::as_str)
+        .collect();
+    if jsons.len() > 1 {
+        return Err(archive.error(
+            None,
+            format!(
+                "{} JSON files at the top ({}); the control-file standard allows one",
+                jsons.len(),
+                jsons.join(", ")
+            ),
+        ));
+    }
     let root = match serde_json::from_slice::<Value>(archive.get(entry).unwrap_or_default()) {
         Ok(Value::Object(m)) => m,
         Ok(_) => return Err(archive.error(Some(entry), "is not a JSON object")),
         Err(e) => return Err(archive.error(Some(entry), format!("invalid JSON: {e}"))),
     };
-    let r = Reader {
+    let mut r = Reader {
         archive: &archive,
         entry,
         root,
     };
     check_top(&r)?;
+    expand(&mut r.root).map_err(|m| r.bad(m))?;
     let specs = r.layers()?;
     // One record per exposure.
     struct Exposure<'a> {

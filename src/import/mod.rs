@@ -2,7 +2,8 @@
 //! [`Manifest`] and a [`BundleSource`] for its files:
 //!
 //! * a bundle directory (`part.dmdjob/`);
-//! * a zipped bundle (`part.dmdjob.zip`: the same files, `job.json` at the top);
+//! * a zipped bundle (`part.dmdjob.zip`: the same files, `job.json` at the top, or all of
+//!   them in one folder `NAME/` holding `NAME/job.json`);
 //! * a PrusaSlicer SL1 / SL1S file ([`sl1`]): `config.ini`, `prusaslicer.ini` and one PNG a
 //!   layer, turned into layers and steps that reproduce PrusaSlicer 2.5's print-time
 //!   model on the machine the file describes;
@@ -21,6 +22,7 @@
 //! that cannot be a job of the format is an error.
 
 pub mod control;
+mod expr;
 pub mod sl1;
 
 use crate::archive::read::{read_zip_bytes, Archive, Limits};
@@ -119,7 +121,10 @@ pub fn open(path: &Path) -> Result<Job> {
     let sha256 = crate::digest::sha256_hex(&bytes);
     drop(bytes);
     if archive.get(MANIFEST).is_some() {
-        return open_zipped_bundle(archive);
+        return open_zipped_bundle(archive, "");
+    }
+    if let Some(dir) = bundle_folder(&archive) {
+        return open_zipped_bundle(archive, &dir);
     }
     if archive.get(sl1::CONFIG).is_some() && archive.get(sl1::PRUSASLICER).is_some() {
         return sl1::import(archive, &sha256);
@@ -137,13 +142,29 @@ pub fn open(path: &Path) -> Result<Job> {
     ))
 }
 
-/// A zipped bundle: its `job.json` read as a bundle directory's.
-fn open_zipped_bundle(archive: Archive) -> Result<Job> {
+/// The folder `NAME/` every entry of `archive` is in, when it holds `NAME/job.json` (a
+/// bundle directory zipped with its folder).
+fn bundle_folder(archive: &Archive) -> Option<String> {
+    let first = archive.names().first()?;
+    let dir = &first[..first.find('/')? + 1];
+    (archive.get(&format!("{dir}{MANIFEST}")).is_some()
+        && archive.names().iter().all(|n| n.starts_with(dir)))
+    .then(|| dir.to_string())
+}
+
+/// A zipped bundle: its `job.json` read as a bundle directory's; `dir` is the folder the
+/// bundle's files are in inside the archive (empty: at the top).
+fn open_zipped_bundle(archive: Archive, dir: &str) -> Result<Job> {
     let path = archive.path().to_path_buf();
-    let text = archive.get(MANIFEST).unwrap_or_default();
-    let manifest = Manifest::from_json(text, &path.join(MANIFEST))?;
+    let text = archive.get(&format!("{dir}{MANIFEST}")).unwrap_or_default();
+    let manifest = Manifest::from_json(text, &path.join(dir).join(MANIFEST))?;
+    let files = archive
+        .into_files()
+        .into_iter()
+        .map(|(k, v)| (k[dir.len()..].to_string(), v))
+        .collect();
     Ok(Job {
-        source: Box::new(MemSource::new(&path, archive.into_files())),
+        source: Box::new(MemSource::new(&path.join(dir), files)),
         path,
         format: Format::DmdjobZip,
         manifest,

@@ -522,6 +522,18 @@ fn hostile_control_file_failing_the_schema() {
         &["print_settings.json", "Layers[0]", "10000"],
     );
     refused(
+        "control-circle",
+        &json(&|v| {
+            v["Named image settings"]["short"]["Using named image settings"] = "edge".into();
+        }),
+        &["print_settings.json", "circle", "edge -> short -> edge"],
+    );
+    refused(
+        "control-variable",
+        &json(&|v| v["Variables"]["base_ms"] = "${nowhere * 2}".into()),
+        &["print_settings.json", "`nowhere` is not a variable"],
+    );
+    refused(
         "control-missing",
         &json(&|v| {
             v["Default layer settings"]["Image settings"]
