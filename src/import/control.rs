@@ -492,10 +492,10 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     files.dedup();
     let figures: std::collections::HashMap<&str, ImageFigures> = files
         .par_iter()
-        .map(|f| {
+        .map_init(Vec::new, |buf, f| {
             let fig = archive
                 .get(f)
-                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b)));
+                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b, buf)));
             (*f, fig.unwrap_or_default())
         })
         .collect();

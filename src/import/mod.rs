@@ -271,20 +271,33 @@ pub(crate) struct MaskFigures {
 }
 
 /// Decodes PNG `bytes` to 8-bit gray and measures it; `None` when it does not decode
-/// (the executor's verification names that problem).
-pub(crate) fn mask_figures(bytes: &[u8]) -> Option<(u32, u32, MaskFigures)> {
-    let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
-        .ok()?
-        .into_luma8();
-    let (w, h) = img.dimensions();
+/// (the executor's verification names that problem). `buf` is reused between calls.
+pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32, MaskFigures)> {
+    use image::ImageDecoder;
+    let dec = image::codecs::png::PngDecoder::new(std::io::Cursor::new(bytes)).ok()?;
+    let (w, h) = dec.dimensions();
+    if dec.color_type() == image::ColorType::L8 {
+        buf.resize(dec.total_bytes() as usize, 0);
+        dec.read_image(buf).ok()?;
+    } else {
+        // Another colour type (a problem the verification reports): measured as gray.
+        *buf = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+            .ok()?
+            .into_luma8()
+            .into_raw();
+    }
     let mut sum: u64 = 0;
     let mut b = [u32::MAX, u32::MAX, 0, 0];
-    for (r, row) in img.as_raw().chunks_exact(w.max(1) as usize).enumerate() {
+    for (r, row) in buf.chunks_exact(w.max(1) as usize).enumerate() {
+        // Most rows are dark: one vectorized OR over the row says so.
+        if row.iter().fold(0u8, |a, &v| a | v) == 0 {
+            continue;
+        }
         let Some(first) = row.iter().position(|&v| v != 0) else {
             continue;
         };
         let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
-        sum += row[first..=last].iter().map(|&v| u64::from(v)).sum::<u64>();
+        sum += u64::from(row[first..=last].iter().map(|&v| u32::from(v)).sum::<u32>());
         b = [
             b[0].min(first as u32),
             b[1].min(r as u32),

@@ -296,10 +296,10 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
         .collect();
     let figures: Vec<(String, Option<super::MaskFigures>)> = names
         .par_iter()
-        .map(|name| match archive.get(name) {
+        .map_init(Vec::new, |buf, name| match archive.get(name) {
             Some(b) => (
                 crate::digest::sha256_hex(b),
-                mask_figures(b).map(|(_, _, f)| f),
+                mask_figures(b, buf).map(|(_, _, f)| f),
             ),
             None => (String::new(), None),
         })
