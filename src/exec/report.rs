@@ -74,6 +74,15 @@ pub struct MachineCheck {
     pub differences: Vec<MachineDifference>,
 }
 
+/// " (FORMAT)" after a job's name in a summary, except for a bundle directory.
+pub fn shown_format(format: &str) -> String {
+    if format == "dmdjob" {
+        String::new()
+    } else {
+        format!(" ({format})")
+    }
+}
+
 /// Differing keys the human summary names before "and N more".
 pub const DIFFERENCES_SHOWN: usize = 4;
 
@@ -346,9 +355,9 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{} ({}): {} {}, {} {} checked",
+        "{}{}: {} {}, {} {} checked",
         r.bundle,
-        r.format,
+        shown_format(r.format),
         r.layers,
         plural(r.layers, "layer", "layers"),
         r.masks_verified,

@@ -98,7 +98,16 @@ impl std::fmt::Debug for Job {
 /// Opens the job at `path`: a bundle directory, or a file whose content says what it is
 /// (see the module docs).
 pub fn open(path: &Path) -> Result<Job> {
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    let meta = std::fs::metadata(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            Error::io(
+                path,
+                std::io::Error::new(std::io::ErrorKind::NotFound, "does not exist"),
+            )
+        } else {
+            Error::io(path, e)
+        }
+    })?;
     if meta.is_dir() {
         let manifest = Manifest::read(path)?;
         return Ok(Job {

@@ -135,9 +135,13 @@ pub fn render_human(s: &Summary) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{} ({}): {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
+        "{}{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
         s.bundle,
-        s.format,
+        if s.format == "dmdjob" {
+            String::new()
+        } else {
+            format!(" ({})", s.format)
+        },
         s.layers,
         s.layer_height_mm,
         s.height_mm,
