@@ -9,10 +9,11 @@
 //! or a `Using named layer group` call, with its `Number of duplications`). A layer's
 //! position setting is its own key, else that of its `Using named position settings`,
 //! else the default; an image's setting is its own key, else its `Using named image
-//! settings`, else the layer's `Using named default image settings`, else the default.
+//! settings` (without one, the layer's `Using named default image settings`), else the
+//! default.
 //! Named settings may inherit from other named settings (a circle is an error). `${...}`
 //! expressions over `Variables` are evaluated first, as the standard's validator does
-//! (named layer groups with their call's variables; [`super::expr`]). `Design` and
+//! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
 //! `Special print techniques` are information only. A setting that is still not a
 //! number where a number is needed is an error naming the entry and the key.
 //!
