@@ -7,9 +7,11 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const INSPECT_EXIT_HELP: &str = "Exit codes:
   0    the bundle was read (and the pictures written)
-  2    unreadable bundle or mask, or usage error
+  2    unreadable bundle, archive or mask, or usage error
 
-Pictures are PNG or JPEG by their extension (.png, .jpg, .jpeg).";
+The job may be a bundle directory, a zipped bundle (.dmdjob.zip), a PrusaSlicer .sl1/.sl1s
+file or an SLA control-file zip. Pictures are PNG or JPEG by their extension (.png, .jpg,
+.jpeg).";
 
 #[derive(Args)]
 pub(crate) struct InspectArgs {
