@@ -61,6 +61,18 @@ fn prusaslicer_files_run_at_prusaslicers_own_print_time() {
             diff.abs() < 1e-6,
             "{name}: simulated {total} s, printTime {print_time} s"
         );
+        // The layer areas measured on the masks (which decide fast or slow tilt) add up to
+        // the resin PrusaSlicer computed from its polygons (usedMaterial, ml).
+        let (code, summary) = json_run(&dir, &["inspect", path.to_str().unwrap()]);
+        assert_eq!(code, 0);
+        let used: f64 = ini_value(&path, "config.ini", "usedMaterial")
+            .parse()
+            .unwrap();
+        let ours = summary["resin_volume_ml"].as_f64().unwrap();
+        assert!(
+            (ours - used).abs() / used < 2e-3,
+            "{name}: {ours} ml, usedMaterial {used} ml"
+        );
     }
     // The content says what a file is, not its extension.
     std::fs::copy(fixture("sl1/cube3mm.sl1"), dir.join("renamed.zip")).unwrap();
