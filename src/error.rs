@@ -53,6 +53,19 @@ pub enum Error {
         /// What is wrong.
         msg: String,
     },
+    /// An archive (a zipped bundle, an SL1 file, a control-file zip) cannot be read safely:
+    /// not a zip, truncated, or an entry that is refused (a path leading outside, a
+    /// duplicate name, a size above the bounds, encryption, an unsupported method, a
+    /// symbolic link).
+    #[error("{}: {}{msg}", path.display(), entry.as_deref().map(|e| format!("entry {e:?}: ")).unwrap_or_default())]
+    Archive {
+        /// The archive file.
+        path: PathBuf,
+        /// The entry concerned, when one is.
+        entry: Option<String>,
+        /// What is wrong.
+        msg: String,
+    },
     /// Bad command-line usage not caught by the argument parser.
     #[error("{0}")]
     Usage(String),
@@ -80,7 +93,8 @@ impl Error {
 
     /// Stable code of this kind of error, for scripts (the `error.code` of `--json`
     /// output): `io.not-found`, `io.permission-denied`, `io.other`, `input.malformed`,
-    /// `profile.invalid`, `job.infeasible`, `bundle.invalid`, `usage`, `interrupted`.
+    /// `profile.invalid`, `job.infeasible`, `bundle.invalid`, `archive.invalid`, `usage`,
+    /// `interrupted`.
     pub fn code(&self) -> &'static str {
         match self {
             Error::Io { source, .. } => match source.kind() {
@@ -92,6 +106,7 @@ impl Error {
             Error::Profile { .. } => "profile.invalid",
             Error::Job { .. } => "job.infeasible",
             Error::Bundle { .. } => "bundle.invalid",
+            Error::Archive { .. } => "archive.invalid",
             Error::Usage(_) => "usage",
             Error::Interrupted => "interrupted",
         }
@@ -103,7 +118,8 @@ impl Error {
             Error::Io { path, .. }
             | Error::Input { path, .. }
             | Error::Job { path, .. }
-            | Error::Bundle { path, .. } => Some(path.display().to_string()),
+            | Error::Bundle { path, .. }
+            | Error::Archive { path, .. } => Some(path.display().to_string()),
             Error::Profile { origin, .. } => Some(origin.clone()),
             Error::Usage(_) | Error::Interrupted => None,
         }

@@ -29,11 +29,13 @@
 //! input files) are private.
 #![warn(missing_docs)]
 
+pub mod archive;
 pub mod bundle;
 mod digest;
 pub mod error;
 pub mod exec;
 pub mod geometry;
+pub mod import;
 mod input;
 pub mod inspect;
 pub mod job;

@@ -37,7 +37,9 @@ use crate::warning::Warning;
 use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
+mod source;
 mod writer;
+pub use source::{is_inside, BundleSource, DirSource, MemSource};
 pub use writer::{is_bundle, BundleWriter};
 
 /// Value of the manifest's `format` field.

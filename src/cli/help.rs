@@ -24,8 +24,8 @@ const SLICE_EXAMPLES: &str = "Examples:
 const RUN_EXAMPLES: &str = "Examples:
   dmdsl run part.dmdjob                                 # summary; exit 1 on any violation
   dmdsl run part.dmdjob --json > report.json
-  dmdsl run part.dmdjob --trace t.csv --plot p.png --layers 10..20
-  dmdsl run part.dmdjob --fault stall@120 --fault shutter-stuck@300";
+  dmdsl run part.dmdjob --trace t.csv --plot p.png --layers 10..20 --fault stall@12
+  dmdsl run part.sl1        # also part.dmdjob.zip, .sl1s, an SLA control-file .zip";
 
 const CALIBRATE_EXAMPLES: &str = "Examples:
   dmdsl calibrate readings.csv -o cal.toml               # fit, plots beside cal.toml

@@ -7,13 +7,16 @@ use std::path::{Path, PathBuf};
 
 pub(crate) const INSPECT_EXIT_HELP: &str = "Exit codes:
   0    the bundle was read (and the pictures written)
-  2    unreadable bundle or mask, or usage error
+  2    unreadable bundle, archive or mask, or usage error
 
-Pictures are PNG or JPEG by their extension (.png, .jpg, .jpeg).";
+The job may be a bundle directory, a zipped bundle (.dmdjob.zip), a PrusaSlicer .sl1/.sl1s
+file or an SLA control-file zip. Pictures are PNG or JPEG by their extension (.png, .jpg,
+.jpeg).";
 
 #[derive(Args)]
 pub(crate) struct InspectArgs {
-    /// The job bundle (directory with job.json and masks/).
+    /// The job: a bundle directory (job.json and masks/), a zipped bundle (.dmdjob.zip), a
+    /// PrusaSlicer .sl1/.sl1s file or an SLA control-file zip (found from the content).
     bundle: PathBuf,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
@@ -73,6 +76,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
         .map(|s| dmdsl::exec::parse_layer_range(s, n))
         .transpose()?;
     let mut summary = inspect::summarize(&a.bundle.display().to_string(), &b.manifest);
+    summary.format = b.format.name().into();
     let mut written = |path: &Path| summary.pictures.push(path.display().to_string());
     if let Some((path, format)) = &sheet_out {
         let layers = sheet::select_layers(n, range.clone(), a.every)?;

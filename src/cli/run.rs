@@ -6,13 +6,15 @@ use std::path::PathBuf;
 pub(crate) const RUN_EXIT_HELP: &str = "Exit codes:
   0    the bundle verified and replayed without violations
   1    violations, bad masks or an injected fault
-  2    unreadable bundle, unknown or invalid --machine profile, or usage error
+  2    unreadable bundle or archive (an unsafe zip entry included), a setting missing from
+       an imported file, unknown or invalid --machine profile, or usage error
 
 Fault kinds: stall, limit (limit switch hit), shutter-stuck (stuck open), mask-load.";
 
 #[derive(Args)]
 pub(crate) struct RunArgs {
-    /// The job bundle (directory with job.json and masks/).
+    /// The job: a bundle directory (job.json and masks/), a zipped bundle (.dmdjob.zip), a
+    /// PrusaSlicer .sl1/.sl1s file or an SLA control-file zip (found from the content).
     bundle: PathBuf,
     /// Print the report as JSON on stdout.
     #[arg(long)]

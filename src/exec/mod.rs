@@ -29,7 +29,7 @@ pub mod verify;
 
 pub mod testutil;
 
-use crate::bundle::{Manifest, MANIFEST};
+use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
 use crate::output::write_atomic;
 use crate::plot::Format;
@@ -109,22 +109,35 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
     Ok(a..=b)
 }
 
-/// Verifies and simulates the bundle at `dir`, on the machine the manifest embeds or on
+/// Verifies and simulates the job at `path` — a bundle directory, a zipped bundle, an
+/// SL1/SL1S file or an SLA control-file zip ([`crate::import::open`]) — on the machine the
+/// manifest embeds (for an imported job, the machine the file implies) or on
 /// [`RunOptions::machine`].
 ///
-/// Errors (exit code 2) are an unreadable bundle or manifest, an invalid machine profile
-/// (the one simulated), bad options, or a trace/plot file that cannot be written.
+/// Errors (exit code 2) are an unreadable bundle, archive or manifest, an invalid machine
+/// profile (the one simulated), bad options, or a trace/plot file that cannot be written.
 /// Problems with the job itself are [`Violation`]s in the report.
-pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
+pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let (mut manifest, range, machine_check) = read_bundle(dir, opts)?;
+    let job = crate::import::open(path)?;
+    let crate::import::Job {
+        format,
+        manifest,
+        source,
+        estimate,
+        ..
+    } = job;
+    let (mut manifest, range, machine_check) = check_options(manifest, &*source, opts)?;
     let read_s = t0.elapsed().as_secs_f64();
+    let dir = path;
 
     let t1 = Instant::now();
-    let verified = match &opts.machine {
-        Some(p) => verify::verify_on(dir, &manifest, p),
-        None => verify::verify(dir, &manifest),
-    };
+    let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
+    let imported = !matches!(
+        format,
+        crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip
+    );
+    let verified = verify::verify_source(&*source, &manifest, machine, imported);
     let verify_s = t1.elapsed().as_secs_f64();
     if let Some(p) = &opts.machine {
         // From here on the job runs on the given machine.
@@ -142,8 +155,15 @@ pub fn run(dir: &Path, opts: &RunOptions) -> Result<Report> {
         verify_s,
         simulate_s,
     };
+    let estimate_source = match (&estimate, format) {
+        (Some(e), _) => e.source.clone(),
+        (None, crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip) => {
+            "planner".into()
+        }
+        (None, _) => "import steps".into(),
+    };
     Ok(report(
-        dir,
+        (dir, format.name(), estimate_source),
         &manifest,
         machine_check,
         verified.masks,
@@ -161,15 +181,18 @@ type ReadBundle = (
     Option<MachineCheck>,
 );
 
-/// Reads the manifest, checks the machine profile the job will be simulated on (the
-/// embedded one, or `opts.machine`) and the options against it, and parses the layer range
-/// of the trace and the plot.
-fn read_bundle(dir: &Path, opts: &RunOptions) -> Result<ReadBundle> {
-    let manifest = Manifest::read(dir)?;
+/// Checks the machine profile the job will be simulated on (the embedded one, or
+/// `opts.machine`) and the options against it, and parses the layer range of the trace
+/// and the plot.
+fn check_options(
+    manifest: Manifest,
+    source: &dyn BundleSource,
+    opts: &RunOptions,
+) -> Result<ReadBundle> {
     let machine_check = match &opts.machine {
         None => {
             manifest.machine.validate().map_err(|msg| Error::Bundle {
-                path: dir.join(MANIFEST),
+                path: source.shown(MANIFEST),
                 msg: format!("machine profile: {msg}"),
             })?;
             None
@@ -312,7 +335,7 @@ fn all_violations(
 
 /// The report of a run.
 fn report(
-    dir: &Path,
+    (dir, format, estimate_source): (&Path, &'static str, String),
     manifest: &Manifest,
     machine: Option<MachineCheck>,
     masks_verified: usize,
@@ -343,6 +366,8 @@ fn report(
     let estimate_s = manifest.totals.print_time_s;
     Report {
         bundle: dir.display().to_string(),
+        format,
+        estimate_source,
         machine,
         layers: manifest.layers.len(),
         layers_completed: outcome.layers.iter().filter(|r| r.completed).count(),

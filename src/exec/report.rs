@@ -74,6 +74,15 @@ pub struct MachineCheck {
     pub differences: Vec<MachineDifference>,
 }
 
+/// " (FORMAT)" after a job's name in a summary, except for a bundle directory.
+pub fn shown_format(format: &str) -> String {
+    if format == "dmdjob" {
+        String::new()
+    } else {
+        format!(" ({format})")
+    }
+}
+
 /// Differing keys the human summary names before "and N more".
 pub const DIFFERENCES_SHOWN: usize = 4;
 
@@ -82,6 +91,13 @@ pub const DIFFERENCES_SHOWN: usize = 4;
 pub struct Report {
     /// The bundle, as given.
     pub bundle: String,
+    /// The form the job came in: `dmdjob` (bundle directory), `dmdjob-zip`, `sl1`, `sl1s`
+    /// or `sla-control`.
+    pub format: &'static str,
+    /// Where `estimate_s` comes from: `planner` (dmdsl's plan, `totals.print_time_s`),
+    /// `PrusaSlicer printTime (config.ini)` for SL1/SL1S files, `import steps` for an
+    /// imported job that carries no estimate (the sum of the steps built for it).
+    pub estimate_source: String,
     /// The machine given with `--machine` and how it differs from the job's (`None`: the
     /// job ran on the machine its manifest embeds).
     pub machine: Option<MachineCheck>,
@@ -339,8 +355,9 @@ pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} {}, {} {} checked",
+        "{}{}: {} {}, {} {} checked",
         r.bundle,
+        shown_format(r.format),
         r.layers,
         plural(r.layers, "layer", "layers"),
         r.masks_verified,
@@ -376,9 +393,13 @@ pub fn render_human(r: &Report) -> String {
     }
     let _ = writeln!(
         o,
-        "simulated {} ({:.2} s); manifest estimate {:.2} s ({:+.2} %)",
+        "simulated {} ({:.2} s); {} {:.2} s ({:+.2} %)",
         hms(r.total_s),
         r.total_s,
+        match r.estimate_source.as_str() {
+            "planner" => "manifest estimate".to_string(),
+            other => format!("estimate, {other},"),
+        },
         r.estimate_s,
         r.estimate_diff_pct
     );

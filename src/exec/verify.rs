@@ -36,7 +36,7 @@
 //! feature's top).
 
 use super::Violation;
-use crate::bundle::{sha256_hex, Layer, Manifest, MaskRef, MANIFEST};
+use crate::bundle::{sha256_hex, BundleSource, DirSource, Layer, Manifest, MaskRef, MANIFEST};
 use crate::profile::{Profile, Projector};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
@@ -221,14 +221,28 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
     verify_on(dir, manifest, &manifest.machine)
 }
 
-/// Verifies the bundle at `dir` for `machine`, which may differ from the one the manifest
+/// [`verify_source`] for the bundle directory `dir`.
+pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verification {
+    verify_source(&DirSource::new(dir), manifest, machine, false)
+}
+
+/// Verifies the bundle whose files `dir` reads for `machine`, which may differ from the one the manifest
 /// embeds (the machine the job will run on): masks must come one per projector of
 /// `machine`, have its projectors' sizes, and show each layer's section where `machine`'s
 /// projectors put it. How the masks were made (binary, compensated, tiled responses) is
 /// read from the manifest (its settings and embedded machine).
-pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verification {
+///
+/// `shared_masks` allows layers to name the same mask file (jobs imported from formats
+/// where layers share images, such as the SLA control file's duplications); a native
+/// bundle gives every layer its own file, so there it is a `mask-shared` problem.
+pub fn verify_source(
+    dir: &dyn BundleSource,
+    manifest: &Manifest,
+    machine: &Profile,
+    shared_masks: bool,
+) -> Verification {
     let mut problems = Vec::new();
-    let job = dir.join(MANIFEST);
+    let job = dir.shown(MANIFEST);
     let n = manifest.layers.len();
     if n == 0 {
         problems.push(problem(
@@ -275,7 +289,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
                     Some(&m.file),
                     format!(
                         "{}: layer {i}: mask for projector {}, but the machine has {} projector(s)",
-                        dir.join(&m.file).display(),
+                        dir.shown(&m.file).display(),
                         m.projector,
                         projectors.len()
                     ),
@@ -290,7 +304,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
                     Some(&m.file),
                     format!(
                         "{}: layer {i}: second mask for projector {}",
-                        dir.join(&m.file).display(),
+                        dir.shown(&m.file).display(),
                         m.projector
                     ),
                 ));
@@ -312,6 +326,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
             }
             let key: PathBuf = Path::new(&m.file).components().collect();
             match owners.get(&key) {
+                Some(_) if shared_masks => {}
                 Some(&(j, k)) => {
                     let other = if j == i {
                         format!("projector {k}'s mask of the same layer")
@@ -324,7 +339,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
                         Some(&m.file),
                         format!(
                             "{}: layer {i}: the mask of projector {} is the same file as {other}: every layer's mask has its own file",
-                            dir.join(&m.file).display(),
+                            dir.shown(&m.file).display(),
                             m.projector,
                         ),
                     ));
@@ -405,7 +420,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
 /// Checks the gray map of every light compensation record (`optics`,
 /// `projector_optics`) like a mask, as `optics-file` problems; returns how many.
 fn check_gray_maps(
-    dir: &Path,
+    dir: &dyn BundleSource,
     manifest: &Manifest,
     machine: &Profile,
     bytes: &mut u64,
@@ -428,7 +443,7 @@ fn check_gray_maps(
                 Some(file),
                 format!(
                     "{}: {what}: the machine has {} projector(s)",
-                    dir.join(file).display(),
+                    dir.shown(file).display(),
                     machine.projector.len()
                 ),
             ));
@@ -441,7 +456,7 @@ fn check_gray_maps(
                 Some(file),
                 format!(
                     "{}: {what}: path {file:?} is not a relative path inside the bundle",
-                    dir.join(MANIFEST).display()
+                    dir.shown(MANIFEST).display()
                 ),
             ));
             continue;
@@ -509,7 +524,7 @@ struct PngCheck {
 /// projector `proj`'s size in 8-bit gray whose pixel data decode to the end. Messages
 /// read "PATH: `what`: ..."; `noun` names the file's role ("mask", "gray map").
 fn check_png(
-    dir: &Path,
+    dir: &dyn BundleSource,
     rel: &str,
     sha256: &str,
     proj: &Projector,
@@ -517,14 +532,14 @@ fn check_png(
     noun: &str,
     buf: &mut Vec<u8>,
 ) -> PngCheck {
-    let path = dir.join(rel);
+    let path = dir.shown(rel);
     let shown = path.display();
     let mut out = PngCheck {
         bytes: 0,
         faults: Vec::new(),
         lit: None,
     };
-    let bytes = match std::fs::read(&path) {
+    let bytes = match dir.read(rel) {
         Ok(b) => b,
         Err(e) => {
             let msg = if e.kind() == std::io::ErrorKind::NotFound {
@@ -673,7 +688,7 @@ impl ContentRule {
     /// Checks layer `i`'s masks, whose lit pixels in field coordinates are `px`.
     fn check(
         &self,
-        dir: &Path,
+        dir: &dyn BundleSource,
         i: usize,
         layer: &Layer,
         px: LitPixels,
@@ -681,7 +696,7 @@ impl ContentRule {
     ) -> Option<Violation> {
         let file = masks.first()?.file.as_str();
         let files: Vec<&str> = masks.iter().map(|m| m.file.as_str()).collect();
-        let shown = format!("{}", dir.join(files.join(", ")).display());
+        let shown = format!("{}", dir.shown(&files.join(", ")).display());
         let at = |msg: String| {
             Some(problem(
                 Some(i),

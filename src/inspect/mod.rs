@@ -19,7 +19,7 @@ pub mod sheet;
 pub mod summary;
 
 pub use preview::preview;
-pub use reader::{Bundle, DirMasks, MaskReader};
+pub use reader::{Bundle, DirMasks, MaskReader, SourceMasks};
 pub use summary::{summarize, Summary};
 
 use crate::error::Result;

@@ -1,11 +1,12 @@
 //! Reading a bundle for inspection: its manifest and its masks through [`MaskReader`], so
-//! the pictures do not care where the files live (a directory today; an archive form of
-//! the bundle can implement the same trait).
+//! the pictures do not care where the files live (a directory, a zipped bundle, a job
+//! imported from another format: any [`BundleSource`]).
 
-use crate::bundle::{Manifest, MANIFEST};
+use crate::bundle::{BundleSource, DirSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
+use crate::import::Format;
 use image::GrayImage;
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 /// Where a bundle's mask files come from.
 pub trait MaskReader: Sync {
@@ -20,39 +21,55 @@ pub trait MaskReader: Sync {
 /// The masks of a bundle directory.
 #[derive(Debug, Clone)]
 pub struct DirMasks {
-    dir: PathBuf,
+    dir: DirSource,
 }
 
 impl DirMasks {
     /// The masks under bundle directory `dir`.
     pub fn new(dir: &Path) -> DirMasks {
-        DirMasks { dir: dir.into() }
+        DirMasks {
+            dir: DirSource::new(dir),
+        }
     }
 }
 
-/// A relative path made only of normal components (nothing outside the bundle).
-fn is_inside(rel: &str) -> bool {
-    !rel.is_empty()
-        && Path::new(rel)
-            .components()
-            .all(|c| matches!(c, Component::Normal(_)))
+/// Reads mask `rel` from `source` and decodes it; errors name the file.
+fn read_from(source: &dyn BundleSource, rel: &str) -> Result<GrayImage> {
+    let path = source.shown(rel);
+    let bytes = source.read(rel).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::InvalidInput {
+            Error::Bundle {
+                path: source.shown(MANIFEST),
+                msg: format!("mask path {rel:?} leads outside the bundle"),
+            }
+        } else {
+            Error::io(&path, e)
+        }
+    })?;
+    decode_mask(&bytes, &path)
 }
 
 impl MaskReader for DirMasks {
     fn read_mask(&self, rel: &str) -> Result<GrayImage> {
-        let path = self.dir.join(rel);
-        if !is_inside(rel) {
-            return Err(Error::Bundle {
-                path: self.dir.join(MANIFEST),
-                msg: format!("mask path {rel:?} leads outside the bundle"),
-            });
-        }
-        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-        decode_mask(&bytes, &path)
+        read_from(&self.dir, rel)
     }
 
     fn shown(&self, rel: &str) -> PathBuf {
-        self.dir.join(rel)
+        self.dir.shown(rel)
+    }
+}
+
+/// The masks of any form of job ([`BundleSource`]: a directory, a zipped bundle, an
+/// imported file).
+pub struct SourceMasks(pub Box<dyn BundleSource>);
+
+impl MaskReader for SourceMasks {
+    fn read_mask(&self, rel: &str) -> Result<GrayImage> {
+        read_from(&*self.0, rel)
+    }
+
+    fn shown(&self, rel: &str) -> PathBuf {
+        self.0.shown(rel)
     }
 }
 
@@ -70,6 +87,8 @@ pub fn decode_mask(bytes: &[u8], path: &Path) -> Result<GrayImage> {
 pub struct Bundle {
     /// The bundle's path, as given.
     pub path: PathBuf,
+    /// The form it came in (a bundle directory, a zipped bundle, an imported file).
+    pub format: Format,
     /// Its manifest, checked.
     pub manifest: Manifest,
     /// Its masks.
@@ -77,12 +96,14 @@ pub struct Bundle {
 }
 
 impl Bundle {
-    /// Opens the bundle at `path` (a bundle directory, the only form so far): reads and
-    /// checks `job.json`, including its machine profile and the projector of every mask.
+    /// Opens the job at `path` in any form [`crate::import::open`] reads (a bundle
+    /// directory, a zipped bundle, an SL1/SL1S file, an SLA control-file zip): reads and
+    /// checks its manifest, including its machine profile and the projector of every mask.
     pub fn open(path: &Path) -> Result<Bundle> {
-        let manifest = Manifest::read(path)?;
+        let job = crate::import::open(path)?;
+        let manifest = job.manifest;
         let bad = |msg: String| Error::Bundle {
-            path: path.join(MANIFEST),
+            path: job.source.shown(MANIFEST),
             msg,
         };
         manifest
@@ -102,8 +123,9 @@ impl Bundle {
         }
         Ok(Bundle {
             path: path.into(),
+            format: job.format,
             manifest,
-            masks: Box::new(DirMasks::new(path)),
+            masks: Box::new(SourceMasks(job.source)),
         })
     }
 
@@ -122,10 +144,6 @@ mod tests {
 
     #[test]
     fn paths_leading_outside_are_refused() {
-        assert!(is_inside("masks/00001.png"));
-        assert!(!is_inside("../x.png"));
-        assert!(!is_inside("/etc/passwd"));
-        assert!(!is_inside(""));
         let r = DirMasks::new(Path::new("/nonexistent-bundle"));
         let e = r.read_mask("../x.png").unwrap_err().to_string();
         assert!(e.contains("leads outside the bundle"), "{e}");

@@ -37,6 +37,9 @@ pub struct Summary {
     pub ok: bool,
     /// The bundle, as given.
     pub bundle: String,
+    /// The form it came in: `dmdjob`, `dmdjob-zip`, `sl1`, `sl1s` or `sla-control` (the
+    /// caller sets it; [`summarize`] says `dmdjob`).
+    pub format: String,
     /// The part's file the job was sliced from.
     pub source: String,
     /// The machine profile's name.
@@ -103,6 +106,7 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
     Summary {
         ok: true,
         bundle: bundle.into(),
+        format: "dmdjob".into(),
         source: m.source.file.clone(),
         profile: m.machine.name.clone(),
         projectors: m.machine.projector.len(),
@@ -131,8 +135,13 @@ pub fn render_human(s: &Summary) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
+        "{}{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
         s.bundle,
+        if s.format == "dmdjob" {
+            String::new()
+        } else {
+            format!(" ({})", s.format)
+        },
         s.layers,
         s.layer_height_mm,
         s.height_mm,

@@ -8,6 +8,7 @@ mod common;
 mod fuzz;
 mod geometry;
 mod help;
+mod import;
 mod inspect;
 mod json;
 mod layers;

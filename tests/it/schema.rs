@@ -445,6 +445,21 @@ fn every_json_output_matches_its_schema() {
             );
         }
     }
+    // Jobs in one file: a zipped bundle, PrusaSlicer SL1/SL1S, an SLA control file.
+    for f in [
+        "zip/cube5.dmdjob.zip",
+        "sl1/cube3mm.sl1",
+        "sl1/cylinder_hole.sl1s",
+        "control/channel.zip",
+    ] {
+        let p = fixture(f);
+        let (code, report) = json_of(&dir, &["run", p.to_str().unwrap(), "--json"]);
+        assert_eq!(code, 0, "{f}: {report}");
+        s.assert_valid("run-report.schema.json", &report);
+        let (code, summary) = json_of(&dir, &["inspect", p.to_str().unwrap(), "--json"]);
+        assert_eq!(code, 0, "{f}: {summary}");
+        s.assert_valid("inspect-summary.schema.json", &summary);
+    }
     // inspect's summary, and run on another machine than the embedded one.
     let (code, summary) = json_of(
         &dir,
@@ -520,12 +535,16 @@ fn every_json_output_matches_its_schema() {
         &["slice", "m.csv", "--json"],
         &["run", "bu.dmdjob", "--json", "--fault", "stall@999"],
         &["slice", "a.stl", "--json", "--dither", "sometimes"],
+        &["run", "truncated.zip", "--json"],
     ];
+    std::fs::write(dir.join("truncated.zip"), b"PK\x03\x04 cut short").unwrap();
     for args in failures {
         let (code, e) = json_of(&dir, args);
         assert_eq!(code, 2, "{args:?}");
         s.assert_valid("error.schema.json", &e);
     }
+    let (_, e) = json_of(&dir, &["run", "truncated.zip", "--json"]);
+    assert_eq!(e["error"]["code"], "archive.invalid", "{e}");
 }
 
 #[test]

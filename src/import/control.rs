@@ -1,0 +1,653 @@
+//! The SLA 3D printer control-file standard, schema v5 (3D-Printing-for-Microfluidics,
+//! `3D_printer_json_print_file`, CC BY 4.0): a zip with one print-settings JSON at the
+//! top (`print_settings.json`) and the images under its `Header."Image directory"`.
+//!
+//! ## What is read
+//! `Header` (`Schema version` 5.x.y, `Image directory`), `Default layer settings`
+//! (`Number of duplications`, `Position settings`, `Image settings`), `Named position
+//! settings`, `Named image settings`, `Named layer groups` and `Layers` (each item a layer
+//! or a `Using named layer group` call, with its `Number of duplications`). A layer's
+//! position setting is its own key, else that of its `Using named position settings`,
+//! else the default; an image's setting is its own key, else its `Using named image
+//! settings` (without one, the layer's `Using named default image settings`), else the
+//! default.
+//! Named settings may inherit from other named settings (a circle is an error). `${...}`
+//! expressions over `Variables` are evaluated first, as the standard's validator does
+//! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
+//! `Special print techniques` are information only. A setting that is still not a
+//! number where a number is needed is an error naming the entry and the key.
+//!
+//! ## Steps
+//! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
+//! at the up speed and acceleration, `Up wait`, a move down to the layer's top (the
+//! previous top + `Layer thickness`) at the down speed and acceleration, then for each
+//! image `Wait before exposure`, the exposure, `Wait after exposure`, and last `Final
+//! wait`. A layer of several images becomes one layer record per image: the first with
+//! the layer's thickness and its position steps, each further image a record of
+//! thickness 0 at the same height (the standard's "0 um layer"), so every exposure keeps
+//! its own mask and time. The light engine's power, wavelength, focus, image offsets and
+//! mirroring and the special techniques are not simulated.
+//!
+//! ## The machine
+//! The standard does not give the pixel size: the projector is the first image's size in
+//! pixels with 7.6 µm pixels (the light engine of the BYU high-resolution printers the
+//! standard was written for); the stage travels 0–90 mm (the standard's build-platform
+//! limit) at up to 800 mm/min (the standard's limit; a faster move is a `speed`
+//! violation), accelerating as fast as the file asks, in 0.1 µm steps.
+
+use super::{bbox_mm, manifest_of, mask_figures, Format, Job, ManifestParts};
+use crate::archive::read::Archive;
+use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
+use crate::error::{Error, Result};
+use crate::profile::Profile;
+use crate::units::{NonNegative, Positive};
+use rayon::prelude::*;
+use serde_json::{Map, Value};
+
+/// Pixel size assumed for the images, mm.
+pub const PIXEL_MM: f64 = 0.0076;
+/// The build platform's speed limit in the standard (800 mm/min), mm/s.
+const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
+/// The build platform's highest position, mm.
+const TRAVEL_MAX_MM: f64 = 90.0;
+
+/// The top-level `.json` entry that holds print settings (`Header` and `Default layer
+/// settings`), `print_settings.json` first. (The standard allows one JSON file at the
+/// top; [`import`] refuses an archive with more.)
+pub(crate) fn settings_entry(archive: &Archive) -> Option<String> {
+    let mut names: Vec<&String> = archive
+        .names()
+        .iter()
+        .filter(|n| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json"))
+        .collect();
+    names.sort_by_key(|n| n.as_str() != "print_settings.json");
+    names
+        .into_iter()
+        .find(|n| {
+            serde_json::from_slice::<Value>(archive.get(n).unwrap_or_default())
+                .ok()
+                .and_then(|v| v.as_object().cloned())
+                .is_some_and(|o| {
+                    o.contains_key("Header") && o.contains_key("Default layer settings")
+                })
+        })
+        .cloned()
+}
+
+/// Settings keys of the top level (the schema's `additionalProperties: false`).
+const TOP_KEYS: &[&str] = &[
+    "Header",
+    "Design",
+    "Default layer settings",
+    "Variables",
+    "Named position settings",
+    "Named image settings",
+    "Named layer groups",
+    "Special print techniques",
+    "Layers",
+];
+
+/// An image's SHA-256 and, when it decodes, its size and figures.
+type ImageFigures = (String, Option<(u32, u32, super::MaskFigures)>);
+
+/// One exposure of a layer.
+#[derive(Debug, Clone)]
+struct Image {
+    file: String,
+    exposure_s: f64,
+    before_s: f64,
+    after_s: f64,
+}
+
+/// One layer as the file describes it (before duplication).
+#[derive(Debug, Clone)]
+struct LayerSpec {
+    thickness_mm: f64,
+    up_mm: f64,
+    initial_s: f64,
+    up_speed: f64,
+    up_accel: f64,
+    up_wait_s: f64,
+    down_speed: f64,
+    down_accel: f64,
+    final_s: f64,
+    images: Vec<Image>,
+    copies: u64,
+    /// Where it is in the file, for messages: "Layers[3]".
+    at: String,
+}
+
+/// Reads the settings JSON with the keys and types this reader relies on checked.
+struct Reader<'a> {
+    archive: &'a Archive,
+    entry: &'a str,
+    root: Map<String, Value>,
+}
+
+impl Reader<'_> {
+    fn bad(&self, msg: String) -> Error {
+        self.archive.error(Some(self.entry), msg)
+    }
+
+    fn object<'v>(&self, v: &'v Value, at: &str) -> Result<&'v Map<String, Value>> {
+        v.as_object()
+            .ok_or_else(|| self.bad(format!("{at} is not an object")))
+    }
+
+    /// Named settings `name` of `table`, merged with the named settings it inherits from
+    /// (its own `Using named ...` key, followed to the root; its own keys win).
+    fn named(&self, table: &str, name: &str, at: &str) -> Result<Map<String, Value>> {
+        let parent_key = if table == "Named position settings" {
+            "Using named position settings"
+        } else {
+            "Using named image settings"
+        };
+        let mut out = Map::new();
+        let mut chain: Vec<String> = Vec::new();
+        let mut cur = name.to_string();
+        loop {
+            if chain.contains(&cur) {
+                return Err(self.bad(format!(
+                    "{at}: `{table}` inherit in a circle: {} -> {cur}",
+                    chain.join(" -> ")
+                )));
+            }
+            let v = self
+                .root
+                .get(table)
+                .and_then(|t| t.get(&cur))
+                .ok_or_else(|| self.bad(format!("{at}: `{cur}` is not in `{table}`")))?;
+            let m = self.object(v, &format!("{table}.{cur}"))?;
+            for (k, v) in m {
+                out.entry(k.clone()).or_insert_with(|| v.clone());
+            }
+            chain.push(cur);
+            match m.get(parent_key).and_then(Value::as_str) {
+                Some(p) if !p.is_empty() => cur = p.to_string(),
+                _ => break,
+            }
+        }
+        Ok(out)
+    }
+
+    /// Setting `key` from the first of `maps` that has it, as a number ≥ 0 (> 0 when
+    /// `positive`).
+    fn num(
+        &self,
+        maps: &[&Map<String, Value>],
+        key: &str,
+        at: &str,
+        positive: bool,
+    ) -> Result<f64> {
+        let v = maps
+            .iter()
+            .find_map(|m| m.get(key))
+            .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
+        match v.as_f64() {
+            Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => Ok(x),
+            _ => Err(self.bad(format!(
+                "{at}: `{key}` is {v}, not a {} number",
+                if positive { "positive" } else { "non-negative" }
+            ))),
+        }
+    }
+
+    fn string<'v>(&self, maps: &[&'v Map<String, Value>], key: &str, at: &str) -> Result<&'v str> {
+        let v = maps
+            .iter()
+            .find_map(|m| m.get(key))
+            .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
+        v.as_str()
+            .ok_or_else(|| self.bad(format!("{at}: `{key}` is {v}, not a string")))
+    }
+
+    fn copies(&self, m: &Map<String, Value>, at: &str) -> Result<Option<u64>> {
+        match m.get("Number of duplications") {
+            None => Ok(None),
+            Some(v) => match v.as_u64() {
+                Some(n) if n >= 1 => Ok(Some(n)),
+                _ => Err(self.bad(format!(
+                    "{at}: `Number of duplications` is {v}, not a whole number ≥ 1"
+                ))),
+            },
+        }
+    }
+
+    /// The layer `layer` (a `LAYER_BASE` object) at `at`, with the defaults.
+    fn layer(&self, layer: &Map<String, Value>, at: &str, copies: u64) -> Result<LayerSpec> {
+        let defaults = self.object(
+            &self.root["Default layer settings"],
+            "`Default layer settings`",
+        )?;
+        let dpos = self.object(
+            defaults.get("Position settings").unwrap_or(&Value::Null),
+            "`Default layer settings.Position settings`",
+        )?;
+        let dimg = self.object(
+            defaults.get("Image settings").unwrap_or(&Value::Null),
+            "`Default layer settings.Image settings`",
+        )?;
+        let empty = Map::new();
+        let own_pos = match layer.get("Position settings") {
+            Some(v) => self.object(v, &format!("{at}.Position settings"))?,
+            None => &empty,
+        };
+        let named_pos = match own_pos
+            .get("Using named position settings")
+            .and_then(Value::as_str)
+        {
+            Some(n) if !n.is_empty() => self.named("Named position settings", n, at)?,
+            _ => Map::new(),
+        };
+        let pos = [own_pos, &named_pos, dpos];
+        let layer_img = match layer
+            .get("Using named default image settings")
+            .and_then(Value::as_str)
+        {
+            Some(n) if !n.is_empty() => self.named("Named image settings", n, at)?,
+            _ => Map::new(),
+        };
+        // No list, or an empty one: one exposure of the default image.
+        let list: Vec<&Map<String, Value>> = match layer.get("Image settings list") {
+            None => vec![&empty],
+            Some(Value::Array(a)) if a.is_empty() => vec![&empty],
+            Some(Value::Array(a)) => a
+                .iter()
+                .enumerate()
+                .map(|(k, v)| self.object(v, &format!("{at}.Image settings list[{k}]")))
+                .collect::<Result<_>>()?,
+            Some(v) => {
+                return Err(self.bad(format!("{at}: `Image settings list` is {v}, not a list")))
+            }
+        };
+        let dir = self.string(
+            &[self.object(&self.root["Header"], "`Header`")?],
+            "Image directory",
+            "Header",
+        )?;
+        let mut images = Vec::with_capacity(list.len());
+        for (k, own) in list.into_iter().enumerate() {
+            let at = format!("{at}.Image settings list[{k}]");
+            // An image's own named settings replace the layer's named defaults.
+            let named = match own
+                .get("Using named image settings")
+                .and_then(Value::as_str)
+            {
+                Some(n) if !n.is_empty() => self.named("Named image settings", n, &at)?,
+                _ => layer_img.clone(),
+            };
+            let maps = [own, &named, dimg];
+            let ms = self.num(&maps, "Layer exposure time (ms)", &at, false)?;
+            if ms > 10_000.0 {
+                return Err(self.bad(format!(
+                    "{at}: `Layer exposure time (ms)` is {ms}, above the schema's 10000"
+                )));
+            }
+            let file = self.string(&maps, "Image file", &at)?;
+            let rel = if dir.is_empty() || dir == "." {
+                file.to_string()
+            } else {
+                format!("{}/{file}", dir.trim_end_matches('/'))
+            };
+            images.push(Image {
+                file: rel,
+                exposure_s: ms / 1000.0,
+                before_s: self.num(&maps, "Wait before exposure (ms)", &at, false)? / 1000.0,
+                after_s: self.num(&maps, "Wait after exposure (ms)", &at, false)? / 1000.0,
+            });
+        }
+        let ms = |key: &str| self.num(&pos, key, at, false).map(|v| v / 1000.0);
+        Ok(LayerSpec {
+            thickness_mm: self.num(&pos, "Layer thickness (um)", at, false)? / 1000.0,
+            up_mm: self.num(&pos, "Distance up (mm)", at, true)?,
+            initial_s: ms("Initial wait (ms)")?,
+            up_speed: self.num(&pos, "BP up speed (mm/sec)", at, true)?,
+            up_accel: self.num(&pos, "BP up acceleration (mm/sec^2)", at, true)?,
+            up_wait_s: ms("Up wait (ms)")?,
+            down_speed: self.num(&pos, "BP down speed (mm/sec)", at, true)?,
+            down_accel: self.num(&pos, "BP down acceleration (mm/sec^2)", at, true)?,
+            final_s: ms("Final wait (ms)")?,
+            images,
+            copies,
+            at: at.to_string(),
+        })
+    }
+
+    /// Every layer of the file in print order (named groups were expanded by [`expand`]).
+    fn layers(&self) -> Result<Vec<LayerSpec>> {
+        let defaults = self.object(
+            &self.root["Default layer settings"],
+            "`Default layer settings`",
+        )?;
+        let default_copies = self
+            .copies(defaults, "Default layer settings")?
+            .ok_or_else(|| {
+                self.bad("`Default layer settings` has no `Number of duplications`".into())
+            })?;
+        let items = match self.root.get("Layers") {
+            None => return Ok(Vec::new()),
+            Some(Value::Array(a)) => a,
+            Some(v) => return Err(self.bad(format!("`Layers` is {v}, not a list"))),
+        };
+        let mut out = Vec::new();
+        for (k, item) in items.iter().enumerate() {
+            let at = format!("Layers[{k}]");
+            let m = self.object(item, &at)?;
+            let copies = self.copies(m, &at)?.unwrap_or(default_copies);
+            out.push(self.layer(m, &at, copies)?);
+        }
+        Ok(out)
+    }
+}
+
+/// Expands what the standard's tools expand before validating: calls of named layer
+/// groups (each group's layers repeated `Number of duplications` times, their `${...}`
+/// evaluated over the global `Variables` overridden by the call's), then every `${...}`
+/// left, over the global `Variables`.
+fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
+    let vars = |v: Option<&Value>| -> std::result::Result<Map<String, Value>, String> {
+        match v {
+            None => Ok(Map::new()),
+            Some(Value::Object(m)) => Ok(m.clone()),
+            Some(v) => Err(format!("`Variables` is {v}, not an object")),
+        }
+    };
+    let globals = vars(root.get("Variables"))?;
+    if let Some(Value::Array(items)) = root.get("Layers") {
+        let mut out = Vec::with_capacity(items.len());
+        for (k, item) in items.iter().enumerate() {
+            let Some(name) = item.get("Using named layer group") else {
+                out.push(item.clone());
+                continue;
+            };
+            let at = format!("Layers[{k}]");
+            let name = name
+                .as_str()
+                .ok_or(format!("{at}: `Using named layer group` is not a string"))?;
+            let group = root
+                .get("Named layer groups")
+                .and_then(|g| g.get(name))
+                .and_then(Value::as_array)
+                .ok_or(format!(
+                    "{at}: no layer group `{name}` in `Named layer groups`"
+                ))?;
+            let mut scoped = globals.clone();
+            scoped.extend(vars(item.get("Variables"))?);
+            let scoped = match super::expr::resolve(&Value::Object(scoped.clone()), &scoped) {
+                Ok(Value::Object(m)) => m,
+                Ok(_) => scoped,
+                Err(e) => return Err(format!("{at}: Variables: {e}")),
+            };
+            let copies = match item.get("Number of duplications") {
+                None => 1,
+                Some(v) => v.as_u64().filter(|&n| n >= 1).ok_or(format!(
+                    "{at}: `Number of duplications` is {v}, not a whole number ≥ 1"
+                ))?,
+            };
+            let layers: Vec<Value> = group
+                .iter()
+                .map(|l| super::expr::resolve(l, &scoped))
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|e| format!("Named layer groups.{name}: {e}"))?;
+            for _ in 0..copies {
+                out.extend(layers.iter().cloned());
+            }
+        }
+        root.insert("Layers".into(), Value::Array(out));
+    }
+    let resolved = super::expr::resolve(&Value::Object(std::mem::take(root)), &globals)?;
+    if let Value::Object(m) = resolved {
+        *root = m;
+    }
+    Ok(())
+}
+
+/// Checks the top level and the header: the keys and types this reader relies on.
+fn check_top(r: &Reader) -> Result<()> {
+    for k in r.root.keys() {
+        if !TOP_KEYS.contains(&k.as_str()) {
+            return Err(r.bad(format!(
+                "unknown top-level key `{k}` (schema v5 allows {})",
+                TOP_KEYS.join(", ")
+            )));
+        }
+    }
+    let header = r.object(&r.root["Header"], "`Header`")?;
+    let version = r.string(&[header], "Schema version", "Header")?;
+    let v5 = version.len() == 5 && {
+        let b = version.as_bytes();
+        b[0] == b'5'
+            && b[1] == b'.'
+            && b[2].is_ascii_digit()
+            && b[3] == b'.'
+            && b[4].is_ascii_digit()
+    };
+    if !v5 {
+        return Err(r.bad(format!(
+            "Header: `Schema version` is {version:?}; this reader reads schema 5.x.y"
+        )));
+    }
+    r.string(&[header], "Image directory", "Header")?;
+    Ok(())
+}
+
+/// Imports the control-file zip `archive` whose settings are entry `entry`.
+pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job> {
+    let path = archive.path().to_path_buf();
+    let jsons: Vec<&str> = archive
+        .names()
+        .iter()
+        .filter(|n| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json"))
+        .map(String::as_str)
+        .collect();
+    if jsons.len() > 1 {
+        return Err(archive.error(
+            None,
+            format!(
+                "{} JSON files at the top ({}); the control-file standard allows one",
+                jsons.len(),
+                jsons.join(", ")
+            ),
+        ));
+    }
+    let root = match serde_json::from_slice::<Value>(archive.get(entry).unwrap_or_default()) {
+        Ok(Value::Object(m)) => m,
+        Ok(_) => return Err(archive.error(Some(entry), "is not a JSON object")),
+        Err(e) => return Err(archive.error(Some(entry), format!("invalid JSON: {e}"))),
+    };
+    let mut r = Reader {
+        archive: &archive,
+        entry,
+        root,
+    };
+    check_top(&r)?;
+    expand(&mut r.root).map_err(|m| r.bad(m))?;
+    let specs = r.layers()?;
+    // One record per exposure.
+    struct Exposure<'a> {
+        spec: &'a LayerSpec,
+        image: &'a Image,
+        first: bool,
+    }
+    let mut exposures = Vec::new();
+    for s in &specs {
+        if s.images.is_empty() {
+            return Err(r.bad(format!("{}: the layer has no image", s.at)));
+        }
+        for _ in 0..s.copies {
+            for (k, image) in s.images.iter().enumerate() {
+                exposures.push(Exposure {
+                    spec: s,
+                    image,
+                    first: k == 0,
+                });
+            }
+        }
+    }
+    if exposures.is_empty() {
+        return Err(r.bad("`Layers` is empty: the job has no layer".into()));
+    }
+    // Decode each distinct image once.
+    let mut files: Vec<&str> = exposures.iter().map(|e| e.image.file.as_str()).collect();
+    files.sort_unstable();
+    files.dedup();
+    let figures: std::collections::HashMap<&str, ImageFigures> = files
+        .par_iter()
+        .map_init(Vec::new, |buf, f| {
+            let fig = archive
+                .get(f)
+                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b, buf)));
+            (*f, fig.unwrap_or_default())
+        })
+        .collect();
+    let (w_px, h_px) = exposures
+        .iter()
+        .find_map(|e| figures[e.image.file.as_str()].1.map(|(w, h, _)| (w, h)))
+        .ok_or_else(|| archive.error(None, "no image of the job is present and decodable"))?;
+    let px_area = PIXEL_MM * PIXEL_MM;
+    let mut layers = Vec::with_capacity(exposures.len());
+    let (mut z, mut max_speed, mut max_accel) = (0.0f64, 1.0f64, 1.0f64);
+    for (i, e) in exposures.iter().enumerate() {
+        let s = e.spec;
+        let mut steps = Vec::new();
+        let mut time_s = 0.0;
+        let wait = |steps: &mut Vec<Step>, t: &mut f64, s: f64| {
+            if s > 0.0 {
+                steps.push(Step::Wait { s });
+                *t += s;
+            }
+        };
+        let thickness = if e.first { s.thickness_mm } else { 0.0 };
+        let top = z + thickness;
+        if e.first {
+            wait(&mut steps, &mut time_s, s.initial_s);
+            let up = z + s.up_mm;
+            steps.push(Step::Move {
+                to_mm: up,
+                speed_mm_s: s.up_speed,
+                accel_mm_s2: s.up_accel,
+            });
+            time_s += crate::motion::move_time(s.up_mm, s.up_speed, s.up_accel);
+            wait(&mut steps, &mut time_s, s.up_wait_s);
+            steps.push(Step::Move {
+                to_mm: top,
+                speed_mm_s: s.down_speed,
+                accel_mm_s2: s.down_accel,
+            });
+            time_s += crate::motion::move_time(up - top, s.down_speed, s.down_accel);
+            max_speed = max_speed.max(s.up_speed).max(s.down_speed);
+            max_accel = max_accel.max(s.up_accel).max(s.down_accel);
+        }
+        wait(&mut steps, &mut time_s, e.image.before_s);
+        steps.push(Step::Expose {
+            s: e.image.exposure_s,
+        });
+        time_s += e.image.exposure_s;
+        wait(&mut steps, &mut time_s, e.image.after_s);
+        let last_of_layer = exposures.get(i + 1).is_none_or(|n| n.first);
+        if last_of_layer {
+            wait(&mut steps, &mut time_s, s.final_s);
+        }
+        let (sha, fig) = figures[e.image.file.as_str()].clone();
+        let fig = fig.map(|(_, _, f)| f);
+        layers.push(Layer {
+            index: i as u64,
+            z_mm: top,
+            slice_z_mm: top - thickness / 2.0,
+            thickness_mm: thickness,
+            mode: Mode::Layered,
+            exposure_s: e.image.exposure_s,
+            area_mm2: fig.map_or(0.0, |f| f.coverage_px * px_area),
+            max_fill_distance_mm: 0.0,
+            islands: 0,
+            bbox_mm: fig
+                .and_then(|f| f.lit_box)
+                .map(|b| bbox_mm(b, h_px, PIXEL_MM)),
+            masks: vec![MaskRef {
+                file: e.image.file.clone(),
+                sha256: sha,
+                projector: 0,
+            }],
+            steps,
+            time_s,
+        });
+        z = top;
+    }
+    let nominal = specs.first().map_or(0.01, |s| s.thickness_mm).max(1e-4);
+    let machine = machine(w_px, h_px, nominal, max_speed, max_accel)
+        .map_err(|m| archive.error(Some(entry), format!("the machine it implies: {m}")))?;
+    let mut generator = "SLA control file v5".to_string();
+    if let Some(s) = r
+        .root
+        .get("Design")
+        .and_then(|d| d.get("Slicer"))
+        .and_then(Value::as_str)
+        .filter(|s| !s.is_empty())
+    {
+        generator = format!("{generator} ({s})");
+    }
+    let manifest = manifest_of(
+        &path,
+        ManifestParts {
+            generator,
+            sha256: sha256.into(),
+            machine,
+            layer_height_mm: nominal,
+            binary: false,
+            layers,
+            print_time_s: None,
+        },
+    );
+    Ok(Job {
+        source: Box::new(MemSource::new(&path, archive.into_files())),
+        path,
+        format: Format::SlaControl,
+        manifest,
+        estimate: None,
+    })
+}
+
+/// The machine a control file implies (module docs).
+fn machine(
+    w_px: u32,
+    h_px: u32,
+    layer_mm: f64,
+    speed: f64,
+    accel: f64,
+) -> std::result::Result<Profile, String> {
+    let pos = |v: f64, what: &str| {
+        Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
+    };
+    let mut m = Profile::resolve("bottom-up").map_err(|e| e.to_string())?;
+    m.name = "sla-control-import".into();
+    m.description = format!(
+        "imported from an SLA control file: {w_px}x{h_px} px images, {PIXEL_MM} mm pixels assumed"
+    );
+    let p = &mut m.projector[0];
+    p.name = "light-engine".into();
+    p.width_px = w_px;
+    p.height_px = h_px;
+    p.pixel_mm = pos(PIXEL_MM, "pixel")?;
+    p.offset_px = [0, 0];
+    p.mirror_x = false;
+    p.mirror_y = false;
+    p.calibration = None;
+    m.projector.truncate(1);
+    m.slicing.layer_height_mm = pos(layer_mm, "layer thickness")?;
+    m.stage.travel_min_mm = 0.0;
+    m.stage.travel_max_mm = TRAVEL_MAX_MM;
+    m.stage.home_mm = 0.0;
+    // The standard's build-platform limit, 800 mm/min; moves the file asks faster than
+    // that are `speed` violations.
+    let _ = speed;
+    m.stage.max_speed_mm_s = pos(BP_MAX_SPEED_MM_S, "speed")?;
+    m.stage.max_accel_mm_s2 = pos(accel.max(m.stage.max_accel_mm_s2.get()), "acceleration")?;
+    m.stage.steps_per_mm = pos(10_000f64.max(1.0 / layer_mm), "steps")?;
+    m.shutter.open_s = NonNegative::new(0.0).ok_or("shutter")?;
+    m.shutter.close_s = NonNegative::new(0.0).ok_or("shutter")?;
+    m.dmd.load_s = NonNegative::new(0.0).ok_or("load")?;
+    m.distortion = None;
+    m.blend = None;
+    m.validate()?;
+    Ok(m)
+}

@@ -1,0 +1,336 @@
+//! Opening a job in any form `dmdsl run` and `dmdsl inspect` accept, as a native
+//! [`Manifest`] and a [`BundleSource`] for its files:
+//!
+//! * a bundle directory (`part.dmdjob/`);
+//! * a zipped bundle (`part.dmdjob.zip`: the same files, `job.json` at the top, or all of
+//!   them in one folder `NAME/` holding `NAME/job.json`);
+//! * a PrusaSlicer SL1 / SL1S file ([`sl1`]): `config.ini`, `prusaslicer.ini` and one PNG a
+//!   layer, turned into layers and steps that reproduce PrusaSlicer 2.5's print-time
+//!   model on the machine the file describes;
+//! * an SLA control-file standard zip, schema v5 ([`control`]): the print-settings JSON
+//!   and `slices/`, turned into layers and steps from its position and image settings.
+//!
+//! The form is found from the content, not the extension: a directory is a bundle; a zip
+//! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
+//! is SL1, one holding a top-level `.json` with `Header` and `Design` objects is a
+//! control file. Zips are read whole into memory by [`crate::archive::read`], which
+//! refuses anything unsafe; nothing is extracted.
+//!
+//! An imported job's layer records come from its masks (lit area and box), so the
+//! executor's verification checks them for what can be wrong with a foreign file (a mask
+//! missing, undecodable, of the wrong size or colour type); a missing setting or a file
+//! that cannot be a job of the format is an error.
+
+pub mod control;
+mod expr;
+pub mod sl1;
+
+use crate::archive::read::{read_zip_bytes, Archive, Limits};
+use crate::bundle::{
+    BundleSource, DirSource, Generator, Layer, Manifest, MemSource, Placement, Settings, Source,
+    Totals, MANIFEST,
+};
+use crate::error::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// The form a job came in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// A bundle directory.
+    Dmdjob,
+    /// A zipped bundle.
+    DmdjobZip,
+    /// PrusaSlicer SL1 (Original Prusa SL1 and compatible).
+    Sl1,
+    /// PrusaSlicer SL1S (the same archive for the SL1S; `printerModel = SL1S` or a `.sl1s`
+    /// file).
+    Sl1s,
+    /// The SLA 3D printer control-file standard, schema v5.
+    SlaControl,
+}
+
+impl Format {
+    /// The name reports use: `dmdjob`, `dmdjob-zip`, `sl1`, `sl1s`, `sla-control`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Dmdjob => "dmdjob",
+            Format::DmdjobZip => "dmdjob-zip",
+            Format::Sl1 => "sl1",
+            Format::Sl1s => "sl1s",
+            Format::SlaControl => "sla-control",
+        }
+    }
+}
+
+/// Where an imported job's total time estimate comes from, when not from dmdsl's planner.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForeignEstimate {
+    /// Who made it and where it is, e.g. "PrusaSlicer printTime (config.ini)".
+    pub source: String,
+    /// The estimate, s (the manifest's `totals.print_time_s`).
+    pub print_time_s: f64,
+}
+
+/// A job opened for the executor or `inspect`.
+pub struct Job {
+    /// The path as given.
+    pub path: PathBuf,
+    /// The form it came in.
+    pub format: Format,
+    /// The manifest (native, or built by the importer).
+    pub manifest: Manifest,
+    /// Its files.
+    pub source: Box<dyn BundleSource>,
+    /// The estimate the file carried, for imported jobs that carry one.
+    pub estimate: Option<ForeignEstimate>,
+}
+
+impl std::fmt::Debug for Job {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Job")
+            .field("path", &self.path)
+            .field("format", &self.format)
+            .field("layers", &self.manifest.layers.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Opens the job at `path`: a bundle directory, or a file whose content says what it is
+/// (see the module docs).
+pub fn open(path: &Path) -> Result<Job> {
+    let meta = std::fs::metadata(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            Error::io(
+                path,
+                std::io::Error::new(std::io::ErrorKind::NotFound, "does not exist"),
+            )
+        } else {
+            Error::io(path, e)
+        }
+    })?;
+    if meta.is_dir() {
+        let manifest = Manifest::read(path)?;
+        return Ok(Job {
+            path: path.into(),
+            format: Format::Dmdjob,
+            manifest,
+            source: Box::new(DirSource::new(path)),
+            estimate: None,
+        });
+    }
+    let limits = Limits::default();
+    let bytes = crate::input::read_file(path, "job", limits.max_archive_bytes)?;
+    if !crate::archive::read::looks_like_zip(&bytes) {
+        return Err(Error::Bundle {
+            path: path.into(),
+            msg: "not a job: neither a bundle directory nor a zip archive (a zipped bundle, an SL1/SL1S file or an SLA control-file zip)".into(),
+        });
+    }
+    let archive = read_zip_bytes(path, &bytes, &limits)?;
+    let sha256 = crate::digest::sha256_hex(&bytes);
+    drop(bytes);
+    if archive.get(MANIFEST).is_some() {
+        return open_zipped_bundle(archive, "");
+    }
+    if let Some(dir) = bundle_folder(&archive) {
+        return open_zipped_bundle(archive, &dir);
+    }
+    if archive.get(sl1::CONFIG).is_some() && archive.get(sl1::PRUSASLICER).is_some() {
+        return sl1::import(archive, &sha256);
+    }
+    if let Some(name) = control::settings_entry(&archive) {
+        return control::import(archive, &name, &sha256);
+    }
+    Err(archive.error(
+        None,
+        format!(
+            "not a job: no `{MANIFEST}` (zipped bundle), no `{}` + `{}` (SL1/SL1S), no print-settings JSON (SLA control file) at the top of the archive",
+            sl1::CONFIG,
+            sl1::PRUSASLICER
+        ),
+    ))
+}
+
+/// The folder `NAME/` every entry of `archive` is in, when it holds `NAME/job.json` (a
+/// bundle directory zipped with its folder).
+fn bundle_folder(archive: &Archive) -> Option<String> {
+    let first = archive.names().first()?;
+    let dir = &first[..first.find('/')? + 1];
+    (archive.get(&format!("{dir}{MANIFEST}")).is_some()
+        && archive.names().iter().all(|n| n.starts_with(dir)))
+    .then(|| dir.to_string())
+}
+
+/// A zipped bundle: its `job.json` read as a bundle directory's; `dir` is the folder the
+/// bundle's files are in inside the archive (empty: at the top).
+fn open_zipped_bundle(archive: Archive, dir: &str) -> Result<Job> {
+    let path = archive.path().to_path_buf();
+    let text = archive.get(&format!("{dir}{MANIFEST}")).unwrap_or_default();
+    let manifest = Manifest::from_json(text, &path.join(dir).join(MANIFEST))?;
+    let files = archive
+        .into_files()
+        .into_iter()
+        .map(|(k, v)| (k[dir.len()..].to_string(), v))
+        .collect();
+    Ok(Job {
+        source: Box::new(MemSource::new(&path.join(dir), files)),
+        path,
+        format: Format::DmdjobZip,
+        manifest,
+        estimate: None,
+    })
+}
+
+/// The parts of a manifest every importer fills the same way.
+pub(crate) struct ManifestParts {
+    /// Who wrote the file, e.g. "PrusaSlicer-2.5.0".
+    pub generator: String,
+    /// The imported file's SHA-256.
+    pub sha256: String,
+    /// The machine the file implies.
+    pub machine: crate::profile::Profile,
+    /// Nominal layer height, mm.
+    pub layer_height_mm: f64,
+    /// Whether the masks are binary.
+    pub binary: bool,
+    /// The layers.
+    pub layers: Vec<Layer>,
+    /// The file's own total time estimate, if it has one; otherwise the sum of the
+    /// layers' `time_s`.
+    pub print_time_s: Option<f64>,
+}
+
+/// A manifest for an imported job at `path`.
+pub(crate) fn manifest_of(path: &Path, p: ManifestParts) -> Manifest {
+    let layers = p.layers;
+    let height_mm = layers.last().map_or(0.0, |l| l.z_mm);
+    let time_sum: f64 = layers.iter().map(|l| l.time_s).sum();
+    let resin_mm3: f64 = layers.iter().map(|l| l.area_mm2 * l.thickness_mm).sum();
+    let mut bbox_lo = [f64::INFINITY; 3];
+    let mut bbox_hi = [f64::NEG_INFINITY; 3];
+    for l in &layers {
+        if let Some([[x0, y0], [x1, y1]]) = l.bbox_mm {
+            bbox_lo = [
+                bbox_lo[0].min(x0),
+                bbox_lo[1].min(y0),
+                bbox_lo[2].min(l.z_mm - l.thickness_mm),
+            ];
+            bbox_hi = [
+                bbox_hi[0].max(x1),
+                bbox_hi[1].max(y1),
+                bbox_hi[2].max(l.z_mm),
+            ];
+        }
+    }
+    if bbox_lo[0] > bbox_hi[0] {
+        bbox_lo = [0.0; 3];
+        bbox_hi = [0.0; 3];
+    }
+    Manifest {
+        format: crate::bundle::FORMAT.into(),
+        version: crate::bundle::VERSION,
+        generator: Generator {
+            name: p.generator,
+            version: String::new(),
+        },
+        source: Source {
+            file: path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            sha256: p.sha256,
+            triangles: 0,
+            bbox_mm: [bbox_lo, bbox_hi],
+            placement: Placement {
+                mode: "keep".into(),
+                ..Placement::default()
+            },
+            mesh: crate::mesh::MeshReport::default(),
+        },
+        settings: Settings {
+            layer_height_mm: p.layer_height_mm,
+            binary: p.binary,
+            compensation: "off".into(),
+            distortion: None,
+        },
+        machine: p.machine,
+        totals: Totals {
+            layers: layers.len() as u64,
+            height_mm,
+            print_time_s: p.print_time_s.unwrap_or(time_sum),
+            exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
+            resin_volume_ml: resin_mm3 / 1000.0,
+            continuous_layers: None,
+            all_layered_time_s: None,
+        },
+        warnings: Vec::new(),
+        layers,
+        optics: None,
+        projector_optics: Vec::new(),
+    }
+}
+
+/// What a decoded mask shows: its size and colour type, and its lit pixels.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct MaskFigures {
+    /// Sum of the pixel values / 255 (the lit area in pixels, coverage counted).
+    pub coverage_px: f64,
+    /// Lit box in pixels: [col0, row0, col1, row1) (None when nothing is lit).
+    pub lit_box: Option<[u32; 4]>,
+}
+
+/// Decodes PNG `bytes` to 8-bit gray and measures it; `None` when it does not decode
+/// (the executor's verification names that problem). `buf` is reused between calls.
+pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32, MaskFigures)> {
+    use image::ImageDecoder;
+    let dec = image::codecs::png::PngDecoder::new(std::io::Cursor::new(bytes)).ok()?;
+    let (w, h) = dec.dimensions();
+    if dec.color_type() == image::ColorType::L8 {
+        buf.resize(dec.total_bytes() as usize, 0);
+        dec.read_image(buf).ok()?;
+    } else {
+        // Another colour type (a problem the verification reports): measured as gray.
+        *buf = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+            .ok()?
+            .into_luma8()
+            .into_raw();
+    }
+    let mut sum: u64 = 0;
+    let mut b = [u32::MAX, u32::MAX, 0, 0];
+    for (r, row) in buf.chunks_exact(w.max(1) as usize).enumerate() {
+        // Most rows are dark: one vectorized OR over the row says so.
+        if row.iter().fold(0u8, |a, &v| a | v) == 0 {
+            continue;
+        }
+        let Some(first) = row.iter().position(|&v| v != 0) else {
+            continue;
+        };
+        let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
+        sum += u64::from(row[first..=last].iter().map(|&v| u32::from(v)).sum::<u32>());
+        b = [
+            b[0].min(first as u32),
+            b[1].min(r as u32),
+            b[2].max(last as u32 + 1),
+            (r as u32 + 1),
+        ];
+    }
+    let lit_box = (b[0] != u32::MAX).then_some(b);
+    Some((
+        w,
+        h,
+        MaskFigures {
+            coverage_px: sum as f64 / 255.0,
+            lit_box,
+        },
+    ))
+}
+
+/// The build-plane box (mm) of lit box `b` in a field `height_px` high with pixels
+/// `pixel_mm` wide: columns x/p, rows H − y/p (the executor's convention).
+pub(crate) fn bbox_mm(b: [u32; 4], height_px: u32, pixel_mm: f64) -> [[f64; 2]; 2] {
+    let h = height_px as f64;
+    [
+        [b[0] as f64 * pixel_mm, (h - b[3] as f64) * pixel_mm],
+        [b[2] as f64 * pixel_mm, (h - b[1] as f64) * pixel_mm],
+    ]
+}
