@@ -29,10 +29,12 @@
 //! input files) are private.
 #![warn(missing_docs)]
 
+mod archive;
 pub mod bundle;
 mod digest;
 pub mod error;
 pub mod exec;
+pub mod export;
 pub mod geometry;
 mod input;
 pub mod inspect;

@@ -1,0 +1,6 @@
+//! Zip archives: the one-file forms of a job (the native bundle as a zip, Prusa SL1/SL1S,
+//! the SLA control-file standard) are zips.
+//!
+//! - [`write`]: writing one, atomically (a temporary sibling renamed into place).
+
+pub mod write;
