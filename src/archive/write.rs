@@ -13,6 +13,7 @@ use crate::error::{Error, Result};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, DateTime, ZipWriter};
 
@@ -20,13 +21,14 @@ use zip::{CompressionMethod, DateTime, ZipWriter};
 const BUFFER_BYTES: usize = 1 << 20;
 
 /// A zip archive being written to a temporary sibling of its destination.
-pub struct ZipOut {
+pub struct ZipOut<'a> {
     dest: PathBuf,
     tmp: PathBuf,
     zip: Option<ZipWriter<BufWriter<File>>>,
+    cancel: Option<&'a AtomicBool>,
 }
 
-impl std::fmt::Debug for ZipOut {
+impl std::fmt::Debug for ZipOut<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ZipOut")
             .field("dest", &self.dest)
@@ -44,38 +46,51 @@ pub enum Method {
     Deflated,
 }
 
-impl ZipOut {
+/// Refuses an archive at `dest` before any work is done: a path without a file name, or a
+/// directory in the way.
+pub fn check_dest(dest: &Path) -> Result<()> {
+    let refuse = |msg: &str| Error::Bundle {
+        path: dest.into(),
+        msg: msg.into(),
+    };
+    if dest.file_name().is_none() {
+        return Err(refuse("output path has no file name"));
+    }
+    if std::fs::symlink_metadata(dest).is_ok_and(|m| m.is_dir()) {
+        return Err(refuse(
+            "is a directory; refusing to replace it with an archive",
+        ));
+    }
+    Ok(())
+}
+
+impl<'a> ZipOut<'a> {
     /// Starts an archive that will replace `dest` when finished. `dest` may be missing or
     /// a file (replaced); a directory or a path without a file name is refused. The
-    /// parent directory must exist.
-    pub fn create(dest: &Path) -> Result<ZipOut> {
-        let refuse = |msg: &str| Error::Bundle {
-            path: dest.into(),
-            msg: msg.into(),
-        };
-        if dest.file_name().is_none() {
-            return Err(refuse("output path has no file name"));
-        }
-        if let Ok(meta) = std::fs::symlink_metadata(dest) {
-            if meta.is_dir() {
-                return Err(refuse(
-                    "is a directory; refusing to replace it with an archive",
-                ));
-            }
-        }
+    /// parent directory must exist. When `cancel` is set (an interrupt), the next entry
+    /// fails with [`Error::Interrupted`] and the archive is dropped.
+    pub fn create(dest: &Path, cancel: Option<&'a AtomicBool>) -> Result<ZipOut<'a>> {
+        check_dest(dest)?;
         remove_stale(dest);
-        let tmp = crate::output::temp_sibling(dest).ok_or_else(|| refuse("not a file name"))?;
+        let tmp = crate::output::temp_sibling(dest).ok_or_else(|| Error::Bundle {
+            path: dest.into(),
+            msg: "not a file name".into(),
+        })?;
         let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
         let zip = ZipWriter::new(BufWriter::with_capacity(BUFFER_BYTES, file));
         Ok(ZipOut {
             dest: dest.to_path_buf(),
             tmp,
             zip: Some(zip),
+            cancel,
         })
     }
 
     /// Adds entry `name` (a relative path with `/`) holding `bytes`.
     pub fn add(&mut self, name: &str, bytes: &[u8], method: Method) -> Result<()> {
+        if self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            return Err(Error::Interrupted);
+        }
         let options = SimpleFileOptions::default()
             .compression_method(match method {
                 Method::Stored => CompressionMethod::Stored,
@@ -155,7 +170,7 @@ fn remove_stale(dest: &Path) {
     }
 }
 
-impl Drop for ZipOut {
+impl Drop for ZipOut<'_> {
     fn drop(&mut self) {
         if self.zip.is_some() {
             self.zip = None;
@@ -188,7 +203,7 @@ mod tests {
     fn writes_entries_in_order_stored_or_deflated() {
         let d = scratch("order");
         let p = d.join("a.zip");
-        let mut z = ZipOut::create(&p).unwrap();
+        let mut z = ZipOut::create(&p, None).unwrap();
         z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
             .unwrap();
         z.add("masks/00000.png", &[7u8; 100], Method::Stored)
@@ -204,7 +219,7 @@ mod tests {
         drop(e);
         // The same entries give the same bytes.
         let first = std::fs::read(&p).unwrap();
-        let mut z = ZipOut::create(&p).unwrap();
+        let mut z = ZipOut::create(&p, None).unwrap();
         z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
             .unwrap();
         z.add("masks/00000.png", &[7u8; 100], Method::Stored)
@@ -220,14 +235,27 @@ mod tests {
         let p = d.join("a.sl1");
         std::fs::write(&p, b"old").unwrap();
         {
-            let mut z = ZipOut::create(&p).unwrap();
+            let mut z = ZipOut::create(&p, None).unwrap();
             z.add("config.ini", b"x", Method::Deflated).unwrap();
         }
         assert_eq!(names(&d), ["a.sl1"]);
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
         std::fs::create_dir(d.join("dir.sl1")).unwrap();
-        let e = ZipOut::create(&d.join("dir.sl1")).unwrap_err().to_string();
+        let e = ZipOut::create(&d.join("dir.sl1"), None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("is a directory"), "{e}");
+        // An interrupt stops the archive at its next entry; nothing is left.
+        let stop = AtomicBool::new(false);
+        let mut z = ZipOut::create(&d.join("b.sl1"), Some(&stop)).unwrap();
+        z.add("config.ini", b"x", Method::Deflated).unwrap();
+        stop.store(true, Ordering::Relaxed);
+        let e = z
+            .add("prusaslicer.ini", b"y", Method::Deflated)
+            .unwrap_err();
+        assert!(matches!(e, Error::Interrupted));
+        drop(z);
+        assert_eq!(names(&d), ["a.sl1", "dir.sl1"]);
         let _ = std::fs::remove_dir_all(&d);
     }
 }

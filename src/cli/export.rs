@@ -74,11 +74,16 @@ impl ExportArgs {
 
 /// Runs `dmdsl export`.
 pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
+    // First, so that an interrupt ends the command with its message and code 130 and
+    // leaves nothing.
+    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    super::interrupt::on_interrupt(cancel.clone());
     let policy = a.warnings.policy(&[])?;
     let format = Format::for_output(a.format.map(Into::into), &a.output)?;
     let (manifest, files) = dmdsl::export::open_bundle(&a.bundle)?;
     dmdsl::export::check_fits(format, &manifest.machine, &a.output)?;
-    let warnings = dmdsl::export::write(format, &manifest, files.as_ref(), &a.output)?;
+    let warnings =
+        dmdsl::export::write(format, &manifest, files.as_ref(), &a.output, Some(&cancel))?;
     let warnings = policy.apply(&warnings);
     let failed = dmdsl::warning::any_error(&warnings);
     if a.json {

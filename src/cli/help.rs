@@ -5,7 +5,6 @@
 pub(crate) const TOP_EXAMPLES: &str = "Examples:
   dmdsl slice part.stl                     # writes part.dmdjob/ (masks + job.json)
   dmdsl run part.dmdjob                    # dry run: verify masks, replay on a simulated machine
-  dmdsl export part.dmdjob -o part.sl1     # the job for PrusaSlicer / UVtools
   dmdsl profile list                       # the built-in machine profiles
   dmdsl completions bash > ~/.local/share/bash-completion/completions/dmdsl";
 
@@ -19,11 +18,8 @@ pub(crate) const TOP_EXIT: &str = "Exit codes (each command's --help says what t
 const SLICE_EXAMPLES: &str = "Examples:
   dmdsl slice part.stl                                  # part.dmdjob, default profile
   dmdsl slice part.stl -p bottom-up --layer-height 0.1 -o job.dmdjob
-  dmdsl slice part.stl --calibration cal.toml --compensation pixel
-  dmdsl slice part.stl --json --deny-warnings > summary.json   # CI: exit 1 on a warning
-  dmdsl slice part.stl -o part.dmdjob.zip               # the same bundle as one file
-  dmdsl slice part.stl -o part.sl1                      # Prusa SL1 (PrusaSlicer, UVtools)
-  dmdsl slice part.stl -o print.zip --format sla-control  # SLA control-file standard";
+  dmdsl slice part.stl -o part.sl1                      # one file: .dmdjob.zip, .sl1, .sl1s
+  dmdsl slice part.stl --json --deny-warnings > summary.json   # CI: exit 1 on a warning";
 
 const RUN_EXAMPLES: &str = "Examples:
   dmdsl run part.dmdjob                                 # summary; exit 1 on any violation

@@ -25,6 +25,7 @@ use crate::error::Result;
 use crate::warning::{plural, Warning};
 use serde_json::{json, Map, Value};
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 /// The schema version written in the header.
 pub const SCHEMA_VERSION: &str = "5.0.0";
@@ -149,7 +150,12 @@ fn image_name(mask: &str) -> &str {
 }
 
 /// Writes the job as a control-file zip at `out`; returns what it lost or assumed.
-pub(super) fn write(m: &Manifest, files: &dyn BundleFiles, out: &Path) -> Result<Vec<Warning>> {
+pub(super) fn write(
+    m: &Manifest,
+    files: &dyn BundleFiles,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<Vec<Warning>> {
     let machine = &m.machine;
     let several = machine.projector.len() > 1;
     let (max_speed, max_accel) = (
@@ -198,8 +204,12 @@ pub(super) fn write(m: &Manifest, files: &dyn BundleFiles, out: &Path) -> Result
         e.insert("Image settings list".into(), Value::Array(list));
         entries.push((key, e, images));
     }
-    // The defaults: the last layer's settings.
-    let (_, last, _) = entries.last().expect("a job has layers").clone();
+    // The defaults: the last run of layers' settings (its image is one the zip holds).
+    let last_run = entries
+        .iter()
+        .rposition(|e| e.0 != entries.last().expect("a job has layers").0)
+        .map_or(0, |i| i + 1);
+    let last = &entries[last_run].1;
     let default_pos = last["Position settings"].clone();
     let first_image = last["Image settings list"][0].clone();
     let default_image = json!({
@@ -290,7 +300,7 @@ pub(super) fn write(m: &Manifest, files: &dyn BundleFiles, out: &Path) -> Result
     }
     let mut text = serde_json::to_vec_pretty(&settings).expect("settings serialize");
     text.push(b'\n');
-    let mut zip = ZipOut::create(out)?;
+    let mut zip = ZipOut::create(out, cancel)?;
     zip.add(SETTINGS, &text, Method::Deflated)?;
     let mut seen = std::collections::HashSet::new();
     for rel in needed {
@@ -323,10 +333,26 @@ mod tests {
 
     #[test]
     fn a_dip_and_return_is_a_move_away_and_back() {
-        let l = crate::exec::testutil::two_layer_topdown().layers[1].clone();
-        let from = 0.05;
-        let (pos, fits) = position(&l, from, 10.0, 50.0);
+        // From 0.5 mm: dip to 6 mm at 2 mm/s, back to 1 mm at 1 mm/s, wait 10 s, expose.
+        let mut l = crate::exec::testutil::two_layer_topdown().layers[1].clone();
+        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
         assert!(fits, "{l:?}");
+        let want = json!({
+            "Layer thickness (um)": 500, "Distance up (mm)": 5.5, "Initial wait (ms)": 0,
+            "BP up speed (mm/sec)": 2, "BP up acceleration (mm/sec^2)": 50, "Up wait (ms)": 0,
+            "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 50,
+            "Final wait (ms)": 10000
+        });
+        assert_eq!(pos, want);
+        // A layer that does not come back onto its thickness, or sweeps, does not fit.
+        assert!(!position(&l, 0.4, 10.0, 50.0).1);
+        l.steps = vec![Step::Sweep {
+            to_mm: 1.0,
+            speed_mm_s: 0.1,
+        }];
+        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
+        assert!(!fits);
         assert!(pos["Distance up (mm)"].as_f64().unwrap() > 0.0);
+        assert_eq!(light_ms(&l, 0.5), 5000);
     }
 }

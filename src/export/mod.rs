@@ -26,6 +26,7 @@ use crate::error::{Error, Result};
 use crate::warning::Warning;
 use std::borrow::Cow;
 use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 /// The forms a job can be written in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -214,24 +215,30 @@ pub fn bundle_files(m: &Manifest) -> Vec<&str> {
 }
 
 /// Writes the job (`manifest` and its `files`) at `out` in `format`, atomically; returns
-/// what the format could not carry. Nothing is left at `out` (nor beside it) on failure.
+/// what the format could not carry. Nothing is left at `out` (nor beside it) on failure,
+/// nor when `cancel` is set while it is written ([`Error::Interrupted`]).
 pub fn write(
     format: Format,
     manifest: &Manifest,
     files: &dyn BundleFiles,
     out: &Path,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Vec<Warning>> {
     match format {
-        Format::Dmdjob => native::write_dir(manifest, files, out).map(|()| Vec::new()),
-        Format::DmdjobZip => native::write_zip(manifest, files, out).map(|()| Vec::new()),
-        Format::Sl1 | Format::Sl1s => sl1::write(format, manifest, files, out),
-        Format::SlaControl => control::write(manifest, files, out),
+        Format::Dmdjob => native::write_dir(manifest, files, out, cancel).map(|()| Vec::new()),
+        Format::DmdjobZip => native::write_zip(manifest, files, out, cancel).map(|()| Vec::new()),
+        Format::Sl1 | Format::Sl1s => sl1::write(format, manifest, files, out, cancel),
+        Format::SlaControl => control::write(manifest, files, out, cancel),
     }
 }
 
 /// Checks, before anything is written, that `format` can hold the job of `profile`:
 /// SL1/SL1S hold one projector's masks. `out` names the output in the error.
+/// A directory in the way of a one-file format is refused here too.
 pub fn check_fits(format: Format, profile: &crate::profile::Profile, out: &Path) -> Result<()> {
+    if format.is_one_file() {
+        crate::archive::write::check_dest(out)?;
+    }
     match format {
         Format::Sl1 | Format::Sl1s => sl1::check_projectors(profile.projector.len(), out),
         _ => Ok(()),

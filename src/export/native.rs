@@ -6,11 +6,20 @@ use crate::archive::write::{Method, ZipOut};
 use crate::bundle::{BundleWriter, Manifest, MANIFEST};
 use crate::error::Result;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Writes the bundle directory `out`.
-pub(super) fn write_dir(manifest: &Manifest, files: &dyn BundleFiles, out: &Path) -> Result<()> {
+pub(super) fn write_dir(
+    manifest: &Manifest,
+    files: &dyn BundleFiles,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<()> {
     let writer = BundleWriter::create(out)?;
     for rel in bundle_files(manifest) {
+        if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+            return Err(crate::error::Error::Interrupted);
+        }
         if let Some(dir) = Path::new(rel).parent().filter(|d| d != &Path::new("")) {
             writer.create_dir(&dir.to_string_lossy())?;
         }
@@ -22,8 +31,13 @@ pub(super) fn write_dir(manifest: &Manifest, files: &dyn BundleFiles, out: &Path
 
 /// Writes the bundle as the zip `out`: `job.json` (deflated) first, then every file the
 /// manifest names (stored), in layer order.
-pub(super) fn write_zip(manifest: &Manifest, files: &dyn BundleFiles, out: &Path) -> Result<()> {
-    let mut zip = ZipOut::create(out)?;
+pub(super) fn write_zip(
+    manifest: &Manifest,
+    files: &dyn BundleFiles,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<()> {
+    let mut zip = ZipOut::create(out, cancel)?;
     zip.add(MANIFEST, &manifest.to_json(), Method::Deflated)?;
     for rel in bundle_files(manifest) {
         zip.add(rel, &files.read(rel)?, Method::Stored)?;

@@ -23,6 +23,7 @@ use crate::bundle::{Manifest, Mode};
 use crate::error::{Error, Result};
 use crate::warning::{plural, Warning};
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 /// Layers PrusaSlicer's model exposes for `expTimeFirst`.
 const FIRST_LAYERS: usize = 3;
@@ -181,6 +182,7 @@ pub(super) fn write(
     m: &Manifest,
     files: &dyn BundleFiles,
     out: &Path,
+    cancel: Option<&AtomicBool>,
 ) -> Result<Vec<Warning>> {
     let machine = &m.machine;
     check_projectors(machine.projector.len(), out)?;
@@ -381,7 +383,7 @@ pub(super) fn write(
         })
         .collect();
 
-    let mut zip = ZipOut::create(out)?;
+    let mut zip = ZipOut::create(out, cancel)?;
     zip.add("config.ini", config.as_bytes(), Method::Deflated)?;
     zip.add("prusaslicer.ini", ini(&slicer).as_bytes(), Method::Deflated)?;
     for (i, l) in m.layers.iter().enumerate() {

@@ -139,7 +139,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
                 out: out.clone(),
                 files: files.into_inner().unwrap_or_else(|e| e.into_inner()),
             };
-            let w = crate::export::write(format, &manifest, &files, &out)?;
+            let w = crate::export::write(format, &manifest, &files, &out, opts.cancel)?;
             (out, w)
         }
     };

@@ -308,3 +308,73 @@ fn a_stale_temporary_file_of_a_killed_run_is_removed() {
     slice(&d, "island.stl", &["-o", "p.sl1"]);
     assert_eq!(names(&d), [".p.sl1.tmp-x", "p.sl1"]);
 }
+
+#[test]
+fn the_control_file_expands_to_the_bundles_masks_layer_by_layer() {
+    let d = tempdir("export-control");
+    for (profile, dir, out) in [
+        ("xu2010-topdown", "one.dmdjob", "one.zip"),
+        ("tiled-2x1", "two.dmdjob", "two.zip"),
+    ] {
+        slice(&d, "island.stl", &["-p", profile, "-o", dir]);
+        let o = run_in(
+            &d,
+            &["export", dir, "-o", out, "--format", "sla-control", "-q"],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let zip: BTreeMap<String, Vec<u8>> = entries(&d.join(out)).into_iter().collect();
+        let v: serde_json::Value = serde_json::from_slice(&zip["print_settings.json"]).unwrap();
+        let manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(d.join(dir).join("job.json")).unwrap()).unwrap();
+        let layers = manifest["layers"].as_array().unwrap();
+        let image = |name: &str| {
+            let bytes = zip
+                .get(&format!("slices/{name}"))
+                .unwrap_or_else(|| panic!("{out}: no slices/{name}"));
+            let img = image::load_from_memory(bytes).unwrap();
+            assert_eq!(img.color(), image::ColorType::L8, "{name}");
+            img.into_luma8().into_raw()
+        };
+        let default = &v["Default layer settings"];
+        image(default["Image settings"]["Image file"].as_str().unwrap());
+        // Expand "Number of duplications" and compare each layer with the bundle's.
+        let mut i = 0;
+        for e in v["Layers"].as_array().unwrap() {
+            let n = e["Number of duplications"].as_u64().unwrap_or(1) as usize;
+            let list = e["Image settings list"].as_array().unwrap();
+            let thickness = e["Position settings"]["Layer thickness (um)"]
+                .as_f64()
+                .or(default["Position settings"]["Layer thickness (um)"].as_f64())
+                .unwrap();
+            for _ in 0..n {
+                let l = &layers[i];
+                let masks = l["masks"].as_array().unwrap();
+                let per_mask = list.len() / masks.len();
+                assert_eq!(per_mask * masks.len(), list.len());
+                let mut light_ms = 0.0;
+                for (k, m) in masks.iter().enumerate() {
+                    let (_, _, px) = read_gray(&d.join(dir).join(m["file"].as_str().unwrap()));
+                    for img in &list[k * per_mask..(k + 1) * per_mask] {
+                        assert!(
+                            image(img["Image file"].as_str().unwrap()) == px,
+                            "{out}: layer {i}, mask {k} differs"
+                        );
+                        if k == 0 {
+                            light_ms += img["Layer exposure time (ms)"].as_f64().unwrap();
+                        }
+                    }
+                }
+                assert_eq!(
+                    light_ms,
+                    (l["exposure_s"].as_f64().unwrap() * 1000.0).round()
+                );
+                assert_eq!(
+                    thickness,
+                    (l["thickness_mm"].as_f64().unwrap() * 1000.0).round()
+                );
+                i += 1;
+            }
+        }
+        assert_eq!(i, layers.len(), "{out}: every layer once");
+    }
+}
