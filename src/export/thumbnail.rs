@@ -6,7 +6,7 @@ use super::BundleFiles;
 use crate::bundle::Manifest;
 use crate::error::Result;
 use crate::inspect::reader::{decode_mask, MaskReader};
-use image::{GrayImage, ImageEncoder};
+use image::{GrayImage, ImageEncoder, RgbImage};
 use std::path::PathBuf;
 
 /// The sizes PrusaSlicer writes for the SL1, px.
@@ -66,26 +66,39 @@ impl MaskReader for Masks<'_> {
     }
 }
 
-/// The thumbnails, `(entry name, PNG bytes)`, one per size of [`SIZES`].
+/// The thumbnails, `(entry name, PNG bytes)`, one per size of [`SIZES`]: the preview is
+/// drawn once, at the larger size, and the square one is that picture padded to a square
+/// with its background and shrunk (the drawing is most of the cost of an SL1).
 pub(super) fn thumbnails(
     manifest: &Manifest,
     files: &dyn BundleFiles,
 ) -> Result<Vec<(String, Vec<u8>)>> {
     let masks = Masks(files);
     let thin = slabs(manifest);
-    use rayon::prelude::*;
-    SIZES
-        .par_iter()
-        .map(|&(w, h)| {
-            let rgb = crate::inspect::preview(&thin, &masks, w, h)?;
+    let (w, h) = SIZES[1];
+    let wide = crate::inspect::preview(&thin, &masks, w, h)?;
+    let background = *wide.get_pixel(0, 0);
+    let side = w.max(h);
+    let mut square = RgbImage::from_pixel(side, side, background);
+    image::imageops::replace(
+        &mut square,
+        &wide,
+        ((side - w) / 2) as i64,
+        ((side - h) / 2) as i64,
+    );
+    let (sw, sh) = SIZES[0];
+    let small = image::imageops::resize(&square, sw, sh, image::imageops::FilterType::Triangle);
+    Ok([(sw, sh, &small), (w, h, &wide)]
+        .into_iter()
+        .map(|(w, h, rgb)| {
             let rgba: Vec<u8> = rgb.pixels().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
             let mut png = Vec::new();
             image::codecs::png::PngEncoder::new(&mut png)
                 .write_image(&rgba, w, h, image::ExtendedColorType::Rgba8)
                 .expect("PNG encodes into memory");
-            Ok((format!("thumbnail/thumbnail{w}x{h}.png"), png))
+            (format!("thumbnail/thumbnail{w}x{h}.png"), png)
         })
-        .collect()
+        .collect())
 }
 
 #[cfg(test)]

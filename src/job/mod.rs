@@ -134,11 +134,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     }
     let (bundle, export_warnings) = match writer {
         Sink::Dir(w) => (w.finish(&manifest)?, Vec::new()),
-        Sink::Memory { out, files } => {
-            let files = MemoryFiles {
-                out: out.clone(),
-                files: files.into_inner().unwrap_or_else(|e| e.into_inner()),
-            };
+        Sink::Memory { out, kept } => {
+            let files = MemoryFiles::new(&out, kept);
             let w = crate::export::write(format, &manifest, &files, &out, opts.cancel)?;
             (out, w)
         }
