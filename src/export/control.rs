@@ -263,7 +263,7 @@ pub(super) fn write(
         "Layers": layers,
     });
     let mut warnings = vec![Warning::new(
-        "export.sla-control.assumed",
+        "export.control-assumed",
         format!(
             "the profile gives no light engine power setting or wavelength: the control file has the schema's defaults ({POWER_SETTING}, {WAVELENGTH_NM} nm)"
         ),
@@ -274,7 +274,7 @@ pub(super) fn write(
         let k = misfits.len() as u64;
         warnings.push(
             Warning::new(
-                "export.sla-control.steps",
+                "export.control-steps",
                 format!(
                     "{k} {} steps the control file's move-away, move-back sequence cannot say (first: layer {first}); {} the nearest such sequence",
                     plural(k, "layer has", "layers have"),
@@ -288,7 +288,7 @@ pub(super) fn write(
     if splits > 0 {
         warnings.push(
             Warning::new(
-                "export.sla-control.split-exposure",
+                "export.control-split-exposure",
                 format!(
                     "{splits} {} exposed longer than the schema's {EXPOSURE_MAX_MS} ms per image: each is exposed as several equal exposures of its image",
                     plural(splits, "layer is", "layers are")

@@ -3,7 +3,7 @@
 //!
 //! A job is a [`Manifest`] and its files, read through [`BundleFiles`] (the files of a
 //! bundle directory: [`DirFiles`]; the slicer hands over the files it made in memory).
-//! [`write`] writes one [`Format`] at a path, atomically (a temporary sibling renamed into
+//! [`write()`] writes one [`Format`] at a path, atomically (a temporary sibling renamed into
 //! place, or the bundle writer's staging directory), and returns what the format could not
 //! carry as [`Warning`]s (codes `export.*`, `docs/WARNINGS.md`): never silently.
 //!

@@ -202,7 +202,7 @@ pub(super) fn write(
         let worst = misses.iter().map(|x| (x.1 - x.2).abs()).fold(0.0, f64::max);
         warnings.push(
             Warning::new(
-                "export.sl1.exposure",
+                "export.sl1-exposure",
                 format!(
                     "SL1 exposes layers 0-2 for expTimeFirst ({} s), fades over numFade ({}) layers to expTime ({} s); {n} {} a different exposure in the job (first layer {first}: {} s in the job, {} s in the SL1; largest difference {} s)",
                     num(scheme.first_s),
@@ -230,7 +230,7 @@ pub(super) fn write(
     if uneven > 0 {
         warnings.push(
             Warning::new(
-                "export.sl1.layer-thickness",
+                "export.sl1-layer-thickness",
                 format!(
                     "SL1 has one layer height ({} mm); {uneven} {} another thickness in the job",
                     num(h),
@@ -249,7 +249,7 @@ pub(super) fn write(
     if continuous > 0 {
         warnings.push(
             Warning::new(
-                "export.sl1.continuous",
+                "export.sl1-continuous",
                 format!(
                     "SL1 prints every layer stopped and tilted; {continuous} continuous (swept) {} of the job become layered exposures of the same length",
                     plural(continuous, "layer", "layers")
@@ -260,7 +260,7 @@ pub(super) fn write(
     }
     warnings.push(
         Warning::new(
-            "export.sl1.steps",
+            "export.sl1-steps",
             format!(
                 "SL1 carries no stage steps: the printer tilts its vat between layers instead of the job's {} process ({} planned steps, est. print time {} s in the job; the SL1's estimate with PrusaSlicer's tilt times)",
                 serde_json::to_value(machine.process)
@@ -287,7 +287,7 @@ pub(super) fn write(
     if !matches_printer {
         warnings.push(
             Warning::new(
-                "export.sl1.display",
+                "export.sl1-display",
                 format!(
                     "the masks are {}x{} px ({} x {} mm), a Prusa {model} shows {}x{} px: PrusaSlicer and UVtools open the file, the printer itself refuses it",
                     p.width_px,

@@ -127,9 +127,9 @@ fn sl1_has_prusaslicers_entries_and_keys_and_the_bundles_masks() {
     // dmdsl's default: 2 bottom layers, which SL1's 3 first layers cannot say; its steps;
     // its 1024 x 768 display.
     for c in [
-        "export.sl1.exposure",
-        "export.sl1.steps",
-        "export.sl1.display",
+        "export.sl1-exposure",
+        "export.sl1-steps",
+        "export.sl1-display",
     ] {
         assert!(codes.contains(&c), "{codes:?}");
     }
