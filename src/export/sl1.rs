@@ -38,6 +38,27 @@ const SAME_S: f64 = 0.0005;
 const AREA_FILL_PCT: f64 = 50.0;
 const FAST_TILT_S: f64 = 5.0;
 const SLOW_TILT_S: f64 = 8.0;
+/// What PrusaSlicer 2.5.0's `printTime` adds per fast and per slow layer to exposure plus
+/// tilt, s: measured, not in the source this was read from (its files of 20 fast layers at
+/// 8 s with `fast_tilt_time` 5 and 3 say 265 and 225 s, of 900 slow layers with
+/// `slow_tilt_time` 8 and 12 say 15525 and 19125 s; docs/FORMATS.md).
+const FAST_EXTRA_S: f64 = 0.25;
+const SLOW_EXTRA_S: f64 = 1.25;
+
+/// `printTime` of layers with the scheme's exposures, each fast (`true`) or slow, as
+/// PrusaSlicer 2.5 computes it.
+fn print_time(scheme: &Scheme, fast: impl Iterator<Item = bool>) -> f64 {
+    fast.enumerate()
+        .map(|(i, f)| {
+            scheme.exposure(i)
+                + if f {
+                    FAST_TILT_S + FAST_EXTRA_S
+                } else {
+                    SLOW_TILT_S + SLOW_EXTRA_S
+                }
+        })
+        .sum()
+}
 /// The display of the printers the formats are named after: (pixels x, pixels y, width
 /// mm, height mm), portrait.
 const SL1_DISPLAY: (u32, u32, f64, f64) = (1440, 2560, 68.04, 120.96);
@@ -308,12 +329,7 @@ pub(super) fn write(
     let display_area = dw * dh;
     let fast = |l: &crate::bundle::Layer| l.area_mm2 <= display_area * AREA_FILL_PCT / 100.0;
     let num_fast = m.layers.iter().filter(|l| fast(l)).count();
-    let print_time: f64 = m
-        .layers
-        .iter()
-        .enumerate()
-        .map(|(i, l)| scheme.exposure(i) + if fast(l) { FAST_TILT_S } else { SLOW_TILT_S })
-        .sum();
+    let print_time = print_time(&scheme, m.layers.iter().map(fast));
     let job_dir = out
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -524,6 +540,26 @@ mod tests {
         assert_eq!(m[0], (2, 8.0, 16.0));
         assert_eq!(m.len(), 1 + s.fade);
         assert_eq!(s.fade, 3);
+    }
+
+    #[test]
+    fn print_time_is_what_prusaslicer_writes() {
+        // fixtures/prusaslicer/cube1.sl1: 20 fast layers at 8 s, printTime 265.
+        let s = Scheme {
+            first_s: 8.0,
+            exp_s: 8.0,
+            fade: 10,
+        };
+        assert_eq!(print_time(&s, std::iter::repeat_n(true, 20)), 265.0);
+        // A 45.7 mm cube, 900 slow layers: printTime 15525.000003.
+        assert!((print_time(&s, std::iter::repeat_n(false, 900)) - 15525.0).abs() < 1e-6);
+        // First 20 s, fade 4 (the scheme test above): 325.
+        let f = Scheme {
+            first_s: 20.0,
+            exp_s: 8.0,
+            fade: 4,
+        };
+        assert!((print_time(&f, std::iter::repeat_n(true, 20)) - 325.0).abs() < 1e-9);
     }
 
     #[test]
