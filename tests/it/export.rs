@@ -378,3 +378,50 @@ fn the_control_file_expands_to_the_bundles_masks_layer_by_layer() {
         assert_eq!(i, layers.len(), "{out}: every layer once");
     }
 }
+
+#[test]
+fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
+    // fixtures/prusaslicer/cube1.sl1: cube10.stl scaled to 1 mm, 0.05 mm layers, 8 s each.
+    let d = tempdir("export-sl1-same");
+    slice(
+        &d,
+        "cube10.stl",
+        &["--scale", "0.1", "--bottom-layers", "0", "-o", "cube1.sl1"],
+    );
+    let ini = |p: &Path| -> BTreeMap<String, String> {
+        let e = entries(p);
+        String::from_utf8(e[0].1.clone())
+            .unwrap()
+            .lines()
+            .filter_map(|l| l.split_once(" = "))
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    };
+    let ours = ini(&d.join("cube1.sl1"));
+    let theirs = ini(&fixture("prusaslicer/cube1.sl1"));
+    for key in [
+        "action",
+        "expTime",
+        "expTimeFirst",
+        "jobDir",
+        "layerHeight",
+        "numFade",
+        "numFast",
+        "numSlow",
+        "printTime",
+        "usedMaterial",
+    ] {
+        assert_eq!(ours[key], theirs[key], "{key}");
+    }
+    // And the same number of masks, of the same size.
+    let count = |p: &Path| {
+        entries(p)
+            .iter()
+            .filter(|e| e.0.starts_with("cube1"))
+            .count()
+    };
+    assert_eq!(
+        count(&d.join("cube1.sl1")),
+        count(&fixture("prusaslicer/cube1.sl1"))
+    );
+}
