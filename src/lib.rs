@@ -34,6 +34,7 @@ pub mod bundle;
 mod digest;
 pub mod error;
 pub mod exec;
+pub mod export;
 pub mod geometry;
 pub mod import;
 mod input;

@@ -1,6 +1,8 @@
-//! Zip archives: the one-file forms of a job (a zipped bundle, an SL1 file, an SLA
-//! control-file zip).
+//! Zip archives: the one-file forms of a job (the native bundle as a zip, Prusa SL1/SL1S,
+//! the SLA control-file standard) are zips.
 //!
-//! [`read`] reads an archive from elsewhere into memory, refusing anything unsafe.
+//! - [`read`]: reading one from elsewhere into memory, refusing anything unsafe.
+//! - [`write`]: writing one, atomically (a temporary sibling renamed into place).
 
 pub mod read;
+pub mod write;

@@ -432,6 +432,14 @@ pub enum Step {
 }
 
 impl Manifest {
+    /// The manifest as `job.json` holds it: pretty-printed JSON and a final newline (the
+    /// same bytes in every form of the bundle).
+    pub fn to_json(&self) -> Vec<u8> {
+        let mut json = serde_json::to_vec_pretty(self).expect("manifest serializes");
+        json.push(b'\n');
+        json
+    }
+
     /// Reads and checks `job.json` of the bundle at `dir`.
     pub fn read(dir: &Path) -> Result<Manifest> {
         if !dir.exists() {

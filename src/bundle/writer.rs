@@ -371,9 +371,7 @@ impl BundleWriter {
     /// Writes the manifest and moves the bundle into place, replacing an older bundle (if
     /// it may still be replaced: see [`BundleWriter`]).
     pub fn finish(self, manifest: &Manifest) -> Result<PathBuf> {
-        let mut json = serde_json::to_vec_pretty(manifest).expect("manifest serializes");
-        json.push(b'\n');
-        self.commit(&json)
+        self.commit(&manifest.to_json())
     }
 
     /// Writes `json` as the manifest and moves the bundle into place.

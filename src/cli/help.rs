@@ -18,7 +18,7 @@ pub(crate) const TOP_EXIT: &str = "Exit codes (each command's --help says what t
 const SLICE_EXAMPLES: &str = "Examples:
   dmdsl slice part.stl                                  # part.dmdjob, default profile
   dmdsl slice part.stl -p bottom-up --layer-height 0.1 -o job.dmdjob
-  dmdsl slice part.stl --calibration cal.toml --compensation pixel
+  dmdsl slice part.stl -o part.sl1                      # one file: .dmdjob.zip, .sl1, .sl1s
   dmdsl slice part.stl --json --deny-warnings > summary.json   # CI: exit 1 on a warning";
 
 const RUN_EXAMPLES: &str = "Examples:

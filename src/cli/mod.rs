@@ -4,6 +4,7 @@
 mod calibrate;
 mod completions;
 mod distortion;
+mod export;
 mod help;
 mod inspect;
 mod interrupt;
@@ -132,6 +133,10 @@ pub(crate) enum Cmd {
     /// Fit a distortion correction table and report its quality (and optionally plot it).
     #[command(after_help = help::for_distortion())]
     Distortion(distortion::DistortionArgs),
+    /// Write a job bundle in another form: one zip, Prusa SL1/SL1S, or the SLA
+    /// control-file standard.
+    #[command(after_help = export::EXPORT_HELP)]
+    Export(export::ExportArgs),
     /// Summarize a job bundle (layers, time, resin, warnings, per-layer extremes) and draw
     /// it: a contact sheet of layer masks, a per-layer chart, a shaded preview of the part.
     #[command(after_help = inspect::INSPECT_EXIT_HELP)]
@@ -167,6 +172,7 @@ impl Cli {
             Cmd::Calibrate(a) => a.json(),
             Cmd::Distortion(a) => a.json(),
             Cmd::Inspect(a) => a.json(),
+            Cmd::Export(a) => a.json(),
             Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) => false,
         }
     }
@@ -180,6 +186,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
         Cmd::Run(a) => run::run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),
         Cmd::Inspect(a) => inspect::inspect(a, cli.quiet),
+        Cmd::Export(a) => export::export(a, cli.quiet),
         Cmd::Profile(c) => profile::profile(c),
         Cmd::Completions(a) => completions::completions(a),
         Cmd::Man(a) => man::man(a),

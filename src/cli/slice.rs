@@ -57,13 +57,22 @@ pub(crate) struct SliceArgs {
     /// required). Several parts are sliced one after another, a bundle each.
     #[arg(required = true, value_name = "PART")]
     inputs: Vec<PathBuf>,
-    /// Bundle to write (default: <part stem>.dmdjob in the current directory); one part
-    /// only. Missing parent directories are created.
+    /// Bundle to write (default: <part stem>.dmdjob in the current directory, or the
+    /// --format's ending); one part only. Its name picks the format: NAME.dmdjob (a
+    /// directory), NAME.dmdjob.zip, NAME.sl1, NAME.sl1s; a plain .zip needs --format.
+    /// Missing parent directories are created.
     #[arg(short, long, conflicts_with = "output_dir")]
     output: Option<PathBuf>,
-    /// Directory the bundles go in, <part stem>.dmdjob each (created if missing).
+    /// Directory the bundles go in, <part stem>.dmdjob each (or the --format's ending;
+    /// created if missing).
     #[arg(long, value_name = "DIR")]
     output_dir: Option<PathBuf>,
+    /// Form of the output [default: what the -o name says; a directory bundle]:
+    /// dmdjob (directory), dmdjob-zip (the same files in one zip), sl1 / sl1s (Prusa
+    /// SL1/SL1S, opened by PrusaSlicer and UVtools), sla-control (the SLA control-file
+    /// standard, schema v5). See README "Formats" for what each carries.
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    format: Option<super::export::FormatArg>,
     /// Machine profile: a built-in name or a TOML file.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
@@ -164,6 +173,7 @@ struct Job<'a> {
     distortion: DistortionChoice,
     cancel: &'a AtomicBool,
     show_progress: bool,
+    format: Option<dmdsl::export::Format>,
 }
 
 impl Job<'_> {
@@ -201,6 +211,7 @@ impl Job<'_> {
             },
             cancel: Some(self.cancel),
             distortion: self.distortion.clone(),
+            format: self.format,
         };
         job::slice_to_bundle(&opts)
     }
@@ -254,6 +265,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) => DistortionChoice::Table(p.clone()),
         },
         cancel: &cancel,
+        format: a.format.map(Into::into),
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -268,6 +280,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             let v = serde_json::json!({
                 "ok": !failed,
                 "bundle": summary.bundle,
+                "format": summary.format.name(),
                 "layers": summary.layers,
                 "warnings": summary.warnings,
                 "mesh": summary.mesh,
@@ -494,13 +507,13 @@ fn parts(a: &SliceArgs) -> Result<Vec<Part>, dmdsl::Error> {
             output: a.output.clone().or_else(|| {
                 a.output_dir
                     .as_ref()
-                    .map(|d| d.join(job::default_output(input)))
+                    .map(|d| d.join(default_output(input, a)))
             }),
         })
         .collect();
     for (i, p) in parts.iter().enumerate() {
-        let out = bundle_path(p);
-        if let Some(q) = parts[..i].iter().find(|q| bundle_path(q) == out) {
+        let out = bundle_path(p, a);
+        if let Some(q) = parts[..i].iter().find(|q| bundle_path(q, a) == out) {
             return usage(format!(
                 "{} and {} would both write {}; slice them in separate calls with -o",
                 q.input.display(),
@@ -513,10 +526,17 @@ fn parts(a: &SliceArgs) -> Result<Vec<Part>, dmdsl::Error> {
 }
 
 /// Where `part`'s bundle goes.
-fn bundle_path(part: &Part) -> PathBuf {
+fn bundle_path(part: &Part, a: &SliceArgs) -> PathBuf {
     part.output
         .clone()
-        .unwrap_or_else(|| job::default_output(&part.input))
+        .unwrap_or_else(|| default_output(&part.input, a))
+}
+
+/// The default output of part `input`: `<stem>` and the ending of `--format` (`.dmdjob`
+/// without it), in the current directory.
+fn default_output(input: &Path, a: &SliceArgs) -> PathBuf {
+    let format = a.format.map_or(dmdsl::export::Format::Dmdjob, Into::into);
+    job::default_output_as(input, format)
 }
 
 /// The profile changes asked for: every `--set` in order, then `--exposure` and

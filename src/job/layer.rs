@@ -3,7 +3,8 @@
 
 use super::clock::ThreadClock;
 use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
-use crate::bundle::{self, BundleWriter, MaskRef};
+use super::sink::Sink;
+use crate::bundle::{self, MaskRef};
 use crate::error::Result;
 use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
@@ -19,7 +20,7 @@ use std::sync::Arc;
 /// What every layer of a job is made with.
 pub(super) struct LayerContext<'a> {
     /// Where the mask files go.
-    pub writer: &'a BundleWriter,
+    pub writer: &'a Sink,
     /// The machine (its projectors).
     pub profile: &'a Profile,
     /// The field's rasterizer.

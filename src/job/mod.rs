@@ -24,14 +24,16 @@ mod optics_records;
 mod options;
 mod pipeline;
 mod placement;
+mod sink;
 
-pub use options::{default_output, SliceOptions, SliceSummary, Timings};
+pub use options::{default_output, default_output_as, SliceOptions, SliceSummary, Timings};
 pub use pipeline::BLOCK;
 pub use placement::{place_mesh, placement, PlacementMode, Transform};
 
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
 use crate::error::{Error, Result};
+use crate::export::Format;
 use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh};
@@ -45,6 +47,7 @@ use manifest::PlacedPart;
 use mask_reuse::RecentPrismMasks;
 use optics_records::WrittenGrayMap;
 use pipeline::Control;
+use sink::{MemoryFiles, Sink};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -86,9 +89,11 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let out = opts
         .output
         .clone()
-        .unwrap_or_else(|| default_output(&opts.input));
+        .unwrap_or_else(|| default_output_as(&opts.input, opts.format.unwrap_or(Format::Dmdjob)));
+    let format = Format::for_output(opts.format, &out)?;
+    crate::export::check_fits(format, &profile, &out)?;
     let made = MadeDirs::parents_of(&out)?;
-    let writer = open_bundle(&out, &profile, &setup)?;
+    let writer = open_bundle(&out, format, &profile, &setup)?;
     let (sliced, gray_map) = make_layers(&profile, &setup, &part, &writer, &control)?;
 
     let t_finish = Instant::now();
@@ -127,13 +132,23 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     if control.cancelled() {
         return Err(Error::Interrupted);
     }
-    let bundle = writer.finish(&manifest)?;
+    let (bundle, export_warnings) = match writer {
+        Sink::Dir(w) => (w.finish(&manifest)?, Vec::new()),
+        Sink::Memory { out, kept } => {
+            let files = MemoryFiles::new(&out, kept);
+            let w = crate::export::write(format, &manifest, &files, &out, opts.cancel)?;
+            (out, w)
+        }
+    };
     made.keep();
+    let mut warnings = manifest.warnings;
+    warnings.extend(export_warnings);
     let finish_s = t_finish.elapsed().as_secs_f64();
     Ok(SliceSummary {
         bundle,
         layers: part.layers,
-        warnings: manifest.warnings,
+        warnings,
+        format,
         mesh: part.mesh.report,
         totals: manifest.totals,
         timings: Timings {
@@ -257,9 +272,14 @@ impl Drop for MadeDirs {
 }
 
 /// Creates the bundle's staging directory for `out`, with a mask folder per projector
-/// when tiled.
-fn open_bundle(out: &Path, profile: &Profile, setup: &SetUp) -> Result<BundleWriter> {
-    let writer = BundleWriter::create(out)?;
+/// when tiled; or, for a one-file `format`, the place in memory its files go until it is
+/// written.
+fn open_bundle(out: &Path, format: Format, profile: &Profile, setup: &SetUp) -> Result<Sink> {
+    let writer = if format.is_one_file() {
+        Sink::memory(out)
+    } else {
+        Sink::Dir(BundleWriter::create(out)?)
+    };
     if setup.tiler.is_some() {
         for k in 0..profile.projector.len() {
             writer.create_dir(&format!("masks/p{k}"))?;
@@ -275,7 +295,7 @@ fn make_layers(
     profile: &Profile,
     setup: &SetUp,
     part: &PlacedPart,
-    writer: &BundleWriter,
+    writer: &Sink,
     control: &Control,
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
     let h = profile.slicing.layer_height_mm.get();

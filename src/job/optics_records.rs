@@ -3,7 +3,8 @@
 //! for several projectors, each projector's gray map and record from the tiler.
 
 use super::encode_png;
-use crate::bundle::{self, BundleWriter, Optics};
+use super::sink::Sink;
+use crate::bundle::{self, Optics};
 use crate::error::Result;
 use crate::geometry::tile::Tiler;
 use crate::optics::{GrayMap, JobOptics};
@@ -17,14 +18,14 @@ pub(super) type WrittenGrayMap = Result<(String, String)>;
 /// Writes the single projector's gray map.
 pub(super) fn write_gray_map(
     optics: &JobOptics,
-    writer: &BundleWriter,
+    writer: &Sink,
     profile: &Profile,
 ) -> WrittenGrayMap {
     write_one(writer, &optics.gray_map(profile, encode_png))
 }
 
 /// Writes a gray map into the bundle; returns its file and SHA-256.
-fn write_one(writer: &BundleWriter, map: &GrayMap) -> Result<(String, String)> {
+fn write_one(writer: &Sink, map: &GrayMap) -> Result<(String, String)> {
     if let Some(dir) = Path::new(&map.file).parent() {
         writer.create_dir(&dir.to_string_lossy())?;
     }
@@ -51,7 +52,7 @@ pub(super) fn optics_records(
     optics: Option<&JobOptics>,
     gray_map: Option<WrittenGrayMap>,
     tiler: Option<&Tiler>,
-    writer: &BundleWriter,
+    writer: &Sink,
     profile: &Profile,
 ) -> Result<OpticsRecords> {
     let mut warnings = Vec::new();

@@ -3,6 +3,7 @@
 use super::{PlacementMode, Transform};
 use crate::bundle::FitReport;
 use crate::bundle::Totals;
+use crate::export::Format;
 use crate::geometry::distortion::DistortionChoice;
 use crate::mesh::MeshReport;
 use crate::profile::Profile;
@@ -40,6 +41,9 @@ pub struct SliceOptions<'a> {
     pub cancel: Option<&'a AtomicBool>,
     /// Lens distortion correction (`--distortion`; default: the profile's).
     pub distortion: DistortionChoice,
+    /// The form of the output (`--format`); `None`: what the output's name says
+    /// ([`Format::for_output`]).
+    pub format: Option<Format>,
 }
 
 impl SliceOptions<'_> {
@@ -64,6 +68,7 @@ impl SliceOptions<'_> {
             progress: None,
             cancel: None,
             distortion: DistortionChoice::default(),
+            format: None,
         }
     }
 
@@ -118,11 +123,15 @@ impl Timings {
 /// What [`slice_to_bundle`](super::slice_to_bundle) produced.
 #[derive(Debug, Clone, Serialize)]
 pub struct SliceSummary {
-    /// The bundle written.
+    /// The bundle written (a directory, or one file in another [`format`](Self::format)).
     pub bundle: PathBuf,
+    /// The form it was written in.
+    #[serde(serialize_with = "format_name")]
+    pub format: Format,
     /// Number of layers.
     pub layers: usize,
-    /// Warnings (mesh defects, repairs, plan, compensation), as in the manifest.
+    /// Warnings (mesh defects, repairs, plan, compensation) as in the manifest, then what
+    /// the output format could not carry (`export.*`).
     pub warnings: Vec<Warning>,
     /// Mesh validation report.
     pub mesh: MeshReport,
@@ -135,11 +144,26 @@ pub struct SliceSummary {
     pub distortion: Option<FitReport>,
 }
 
-/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
-pub fn default_output(input: &Path) -> PathBuf {
-    let stem = input
+/// Serializes a format by its name.
+fn format_name<S: serde::Serializer>(f: &Format, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_str(f.name())
+}
+
+/// Default output path for an input in `format`: `<stem>` and the format's ending
+/// (`.dmdjob`, `.sl1`, …) in the current directory.
+pub fn default_output_as(input: &Path, format: Format) -> PathBuf {
+    PathBuf::from(format!("{}{}", stem(input), format.extension()))
+}
+
+/// The file stem of a part, `part` when it has none.
+fn stem(input: &Path) -> String {
+    input
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "part".into());
-    PathBuf::from(format!("{stem}.dmdjob"))
+        .unwrap_or_else(|| "part".into())
+}
+
+/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
+pub fn default_output(input: &Path) -> PathBuf {
+    default_output_as(input, Format::Dmdjob)
 }

@@ -27,6 +27,7 @@ fn every_command_shows_examples_and_its_own_exit_codes() {
         (&[], "interrupted"),
         (&["slice"], "the bundle was written"),
         (&["run"], "violations, bad masks or an injected fault"),
+        (&["export"], "a plain .zip without --format"),
         (
             &["calibrate"],
             "the calibration (and its plots) were written",
@@ -82,7 +83,14 @@ fn completions_for_each_shell() {
         assert_eq!(o.status.code(), Some(0), "{shell}: {}", stderr(&o));
         let s = stdout(&o);
         assert!(s.contains(marker), "{shell}: {}", &s[..s.len().min(300)]);
-        for cmd in ["slice", "run", "calibrate", "distortion", "profile"] {
+        for cmd in [
+            "slice",
+            "run",
+            "calibrate",
+            "distortion",
+            "profile",
+            "export",
+        ] {
             assert!(s.contains(cmd), "{shell} completion lacks {cmd}");
         }
         assert!(s.contains("layer-height"), "{shell}");

@@ -5,6 +5,7 @@
 mod batch;
 mod calibrate;
 mod common;
+mod export;
 mod fuzz;
 mod geometry;
 mod help;

@@ -28,6 +28,12 @@ const KEYWORDS: &[&str] = &[
     "minItems",
     "maxItems",
     "oneOf",
+    // For the vendored control-file schema (fixtures/sla_control/schema_v5.json):
+    "id",
+    "default",
+    "pattern",
+    "allOf",
+    "exclusiveMinimum",
 ];
 
 /// Every schema of `docs/schemas/`, by file name.
@@ -125,6 +131,11 @@ impl Schemas {
             }
         }
         if let Some(x) = v.as_f64() {
+            if let Some(m) = s.get("exclusiveMinimum").and_then(Value::as_f64) {
+                if x <= m {
+                    errors.push(format!("{at}: {x} is not above the exclusive minimum {m}"));
+                }
+            }
             if let Some(m) = s.get("minimum").and_then(Value::as_f64) {
                 if x < m {
                     errors.push(format!("{at}: {x} is below the minimum {m}"));
@@ -134,6 +145,16 @@ impl Schemas {
                 if x > m {
                     errors.push(format!("{at}: {x} is above the maximum {m}"));
                 }
+            }
+        }
+        if let (Some(text), Some(p)) = (v.as_str(), s.get("pattern").and_then(Value::as_str)) {
+            if !pattern_matches(p, text) {
+                errors.push(format!("{at}: {} does not match {p}", short(v)));
+            }
+        }
+        if let Some(all) = s.get("allOf") {
+            for sub in all.as_array().unwrap() {
+                self.check(file, sub, v, at, errors);
             }
         }
         if let Some(items) = v.as_array() {
@@ -158,8 +179,9 @@ impl Schemas {
             if let Some(req) = s.get("required") {
                 for k in req.as_array().unwrap() {
                     let k = k.as_str().unwrap();
+                    // (A `required`-only subschema of an `allOf` describes nothing itself.)
                     assert!(
-                        props.is_some_and(|p| p.contains_key(k)),
+                        props.is_none_or(|p| p.contains_key(k)),
                         "{file}: {at} requires {k}, which it does not describe"
                     );
                     if !o.contains_key(k) {
@@ -200,6 +222,36 @@ impl Schemas {
             }
         }
     }
+}
+
+/// Whether `text` matches `pattern`, a regular expression of the small kind schemas here
+/// use: `^` and `$` anchors, literal characters, `\\.` and `\\d` (anything else panics).
+fn pattern_matches(pattern: &str, text: &str) -> bool {
+    let p = pattern
+        .strip_prefix('^')
+        .and_then(|p| p.strip_suffix('$'))
+        .unwrap_or_else(|| panic!("pattern {pattern}: only anchored patterns are supported"));
+    let mut atoms: Vec<Option<char>> = Vec::new(); // None: a digit
+    let mut chars = p.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '\\' => match chars.next() {
+                Some('d') => atoms.push(None),
+                Some('.') => atoms.push(Some('.')),
+                other => panic!("pattern {pattern}: escape {other:?} not supported"),
+            },
+            '.' | '*' | '+' | '?' | '[' | '(' | '{' | '|' => {
+                panic!("pattern {pattern}: {c} not supported")
+            }
+            c => atoms.push(Some(c)),
+        }
+    }
+    let t: Vec<char> = text.chars().collect();
+    t.len() == atoms.len()
+        && t.iter().zip(&atoms).all(|(c, a)| match a {
+            None => c.is_ascii_digit(),
+            Some(x) => c == x,
+        })
 }
 
 fn is_type(v: &Value, t: &str) -> bool {
@@ -323,6 +375,7 @@ fn schema_files_use_only_checked_keywords_and_resolve() {
             "calibrate-report.schema.json",
             "distortion-report.schema.json",
             "error.schema.json",
+            "export-summary.schema.json",
             "inspect-summary.schema.json",
             "job.schema.json",
             "run-report.schema.json",
@@ -346,7 +399,7 @@ fn schema_files_use_only_checked_keywords_and_resolve() {
                 }
                 "items" => walk(s, file, x),
                 "additionalProperties" if x.is_object() => walk(s, file, x),
-                "oneOf" => x.as_array().unwrap().iter().for_each(|a| walk(s, file, a)),
+                "oneOf" | "allOf" => x.as_array().unwrap().iter().for_each(|a| walk(s, file, a)),
                 _ => {}
             }
         }
@@ -473,6 +526,28 @@ fn every_json_output_matches_its_schema() {
     );
     s.assert_valid("run-report.schema.json", &report);
     assert_eq!(report["machine"]["profile"], "bottom-up");
+    // export, into each one-file form.
+    for (out, format) in [
+        ("top.dmdjob.zip", "dmdjob-zip"),
+        ("top.sl1", "sl1"),
+        ("top-control.zip", "sla-control"),
+    ] {
+        let (code, summary) = json_of(
+            &dir,
+            &[
+                "export",
+                "top.dmdjob",
+                "-o",
+                out,
+                "--format",
+                format,
+                "--json",
+            ],
+        );
+        assert_eq!(code, 0, "{summary}");
+        s.assert_valid("export-summary.schema.json", &summary);
+        assert_eq!(summary["format"], format);
+    }
     // Several parts in one call: one line per part, a failure among them.
     std::fs::write(dir.join("bad.stl"), b"solid x\nfacet normal 0 0 1\n").unwrap();
     let o = run_in(
@@ -650,5 +725,108 @@ fn outputs_made_wrong_on_purpose_are_rejected() {
             e.iter().any(|e| e.contains(want)),
             "{name}: want {want:?} in {e:?}"
         );
+    }
+}
+
+/// The vendored control-file schema (`fixtures/sla_control/schema_v5.json`) loaded beside
+/// the project's own.
+fn with_control_schema() -> Schemas {
+    let mut s = Schemas::load();
+    let v: Value =
+        serde_json::from_slice(&std::fs::read(fixture("sla_control/schema_v5.json")).unwrap())
+            .unwrap();
+    s.0.insert("schema_v5.json".into(), v);
+    s
+}
+
+/// `print_settings.json` of the control-file zip at `p`.
+fn control_settings(p: &Path) -> Value {
+    let mut z = zip::ZipArchive::new(std::fs::File::open(p).unwrap()).unwrap();
+    assert_eq!(z.name_for_index(0).unwrap().unwrap(), "print_settings.json");
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut z.by_index(0).unwrap(), &mut text).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn the_validator_checks_the_control_schemas_keywords() {
+    assert!(pattern_matches("^5\\.\\d\\.\\d$", "5.0.0"));
+    assert!(!pattern_matches("^5\\.\\d\\.\\d$", "5.0.10"));
+    assert!(!pattern_matches("^5\\.\\d\\.\\d$", "4.0.0"));
+    let s = with_control_schema();
+    let base = json!({
+        "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
+        "Default layer settings": {
+            "Number of duplications": 1,
+            "Position settings": {
+                "Layer thickness (um)": 50, "Distance up (mm)": 5, "Initial wait (ms)": 0,
+                "BP up speed (mm/sec)": 2, "BP up acceleration (mm/sec^2)": 50,
+                "Up wait (ms)": 0, "BP down speed (mm/sec)": 1,
+                "BP down acceleration (mm/sec^2)": 50, "Final wait (ms)": 0
+            },
+            "Image settings": {
+                "Image file": "00000.png", "Layer exposure time (ms)": 8000,
+                "Light engine": "p0", "Light engine power setting": 100,
+                "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
+                "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
+            }
+        },
+        "Layers": [{"Image settings list": [{"Image file": "00000.png"}]}]
+    });
+    s.assert_valid("schema_v5.json", &base);
+    let bad: &[(&str, Value, &str)] = &[
+        ("/Header/Schema version", json!("0.1"), "does not match"),
+        (
+            "/Default layer settings/Position settings/Distance up (mm)",
+            json!(0),
+            "exclusive minimum",
+        ),
+        (
+            "/Default layer settings/Image settings/Layer exposure time (ms)",
+            json!(16000),
+            "above the maximum",
+        ),
+    ];
+    for (pointer, value, want) in bad {
+        let mut doc = base.clone();
+        *doc.pointer_mut(pointer).unwrap() = value.clone();
+        let e = s.errors("schema_v5.json", &doc);
+        assert!(e.iter().any(|e| e.contains(want)), "{pointer}: {e:?}");
+    }
+    let mut doc = base.clone();
+    doc["Default layer settings"]["Position settings"]
+        .as_object_mut()
+        .unwrap()
+        .remove("Up wait (ms)");
+    let e = s.errors("schema_v5.json", &doc);
+    assert!(
+        e.iter().any(|e| e.contains("required Up wait (ms)")),
+        "{e:?}"
+    );
+}
+
+#[test]
+fn exported_control_files_are_valid_against_the_standards_schema() {
+    let s = with_control_schema();
+    let d = tempdir("schema-control");
+    // One projector (with a 16 s bottom exposure, split), and two tiled projectors.
+    for (profile, name) in [("xu2010-topdown", "one.zip"), ("tiled-2x1", "two.zip")] {
+        let o = run_in(
+            &d,
+            &[
+                "slice",
+                fixture("island.stl").to_str().unwrap(),
+                "-p",
+                profile,
+                "-o",
+                name,
+                "--format",
+                "sla-control",
+                "-q",
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v = control_settings(&d.join(name));
+        s.assert_valid("schema_v5.json", &v);
     }
 }

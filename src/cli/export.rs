@@ -1,0 +1,109 @@
+//! `dmdsl export`: a job bundle into another form (one zip, Prusa SL1/SL1S, the SLA
+//! control-file standard); also the `--format` values `slice` shares.
+
+use clap::Args;
+use dmdsl::export::Format;
+use std::path::PathBuf;
+
+pub(crate) const EXPORT_HELP: &str = "Examples:
+  dmdsl export part.dmdjob -o part.sl1                  # for PrusaSlicer / UVtools
+  dmdsl export part.dmdjob -o part.dmdjob.zip           # the bundle as one file
+  dmdsl export part.dmdjob -o print.zip --format sla-control
+  dmdsl slice part.stl -o part.sl1                      # or write the form directly
+
+Exit codes:
+  0    the file was written (what the format cannot carry is reported as warnings)
+  1    the file was written, but a warning was denied (--deny-warnings, -W CODE=error)
+  2    unreadable bundle, a format that cannot hold the job (SL1 with several
+       projectors), a name and --format that disagree, a plain .zip without --format;
+       nothing was written
+  130  interrupted: nothing was written";
+
+/// The `--format` values.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum FormatArg {
+    /// The bundle directory: job.json and masks/*.png.
+    Dmdjob,
+    /// The bundle's files in one zip (job.json first, images stored).
+    DmdjobZip,
+    /// Prusa SL1 (PrusaSlicer 2.5's zip).
+    Sl1,
+    /// Prusa SL1S.
+    Sl1s,
+    /// The SLA 3D printer control-file standard, schema v5 (print_settings.json +
+    /// slices/).
+    SlaControl,
+}
+
+impl From<FormatArg> for Format {
+    fn from(f: FormatArg) -> Format {
+        match f {
+            FormatArg::Dmdjob => Format::Dmdjob,
+            FormatArg::DmdjobZip => Format::DmdjobZip,
+            FormatArg::Sl1 => Format::Sl1,
+            FormatArg::Sl1s => Format::Sl1s,
+            FormatArg::SlaControl => Format::SlaControl,
+        }
+    }
+}
+
+#[derive(Args)]
+pub(crate) struct ExportArgs {
+    /// The job bundle (a directory with job.json and masks/).
+    bundle: PathBuf,
+    /// The file to write; its name picks the format (NAME.dmdjob, NAME.dmdjob.zip,
+    /// NAME.sl1, NAME.sl1s; a plain .zip needs --format). Replaced if it exists.
+    #[arg(short, long, value_name = "FILE")]
+    output: PathBuf,
+    /// Form of the output [default: what the -o name says].
+    #[arg(long, value_enum, value_name = "FORMAT")]
+    format: Option<FormatArg>,
+    /// Print a machine-readable summary on stdout (one JSON object).
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    warnings: super::WarningArgs,
+}
+
+impl ExportArgs {
+    /// True when `--json` was given.
+    pub(crate) fn json(&self) -> bool {
+        self.json
+    }
+}
+
+/// Runs `dmdsl export`.
+pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
+    // First, so that an interrupt ends the command with its message and code 130 and
+    // leaves nothing.
+    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    super::interrupt::on_interrupt(cancel.clone());
+    let policy = a.warnings.policy(&[])?;
+    let format = Format::for_output(a.format.map(Into::into), &a.output)?;
+    let (manifest, files) = dmdsl::export::open_bundle(&a.bundle)?;
+    dmdsl::export::check_fits(format, &manifest.machine, &a.output)?;
+    let warnings =
+        dmdsl::export::write(format, &manifest, files.as_ref(), &a.output, Some(&cancel))?;
+    let warnings = policy.apply(&warnings);
+    let failed = dmdsl::warning::any_error(&warnings);
+    if a.json {
+        super::print_json(&serde_json::json!({
+            "ok": !failed,
+            "bundle": a.bundle,
+            "output": a.output,
+            "format": format.name(),
+            "layers": manifest.layers.len(),
+            "warnings": warnings,
+        }))?;
+    } else if !quiet {
+        super::print_warnings(&warnings, "");
+        println!(
+            "{}: {} of {} layers from {}",
+            a.output.display(),
+            format.name(),
+            manifest.layers.len(),
+            a.bundle.display()
+        );
+    }
+    Ok(if failed { 1 } else { 0 })
+}

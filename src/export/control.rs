@@ -1,0 +1,358 @@
+//! The open SLA 3D printer control-file standard, schema v5 (public repository
+//! `3D-Printing-for-Microfluidics/3D_printer_json_print_file`; the schema is vendored as
+//! `fixtures/sla_control/schema_v5.json`): a zip of `print_settings.json` and the images
+//! under `slices/`.
+//!
+//! The mapping (docs/FORMATS.md has it in full):
+//! - one `Layers` entry per run of identical consecutive layers ("Number of duplications":
+//!   same images, exposures, thickness and position settings); only the images an entry
+//!   names are in the zip;
+//! - "Position settings" from the layer's planned steps, which take the stage from where
+//!   the layer below left it to this layer's exposure: waits before the first move →
+//!   "Initial wait (ms)", the move away → "Distance up (mm)" (from the previous position),
+//!   "BP up speed/acceleration", waits between → "Up wait (ms)", the move back onto the
+//!   layer (up − thickness, as the standard's printer does it) → "BP down
+//!   speed/acceleration", waits after → "Final wait (ms)"; "Layer thickness (um)";
+//! - "Image settings list": one image per projector (its mask; with several projectors,
+//!   "Light engine" names it and "Image x/y offset (um)" place it), each exposed for the
+//!   layer's exposure; an exposure over the schema's 10 000 ms is split into equal
+//!   exposures of the same image.
+
+use super::BundleFiles;
+use crate::archive::write::{Method, ZipOut};
+use crate::bundle::{Layer, Manifest, Step};
+use crate::error::Result;
+use crate::warning::{plural, Warning};
+use serde_json::{json, Map, Value};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+/// The schema version written in the header.
+pub const SCHEMA_VERSION: &str = "5.0.0";
+/// The settings file's name in the zip.
+pub const SETTINGS: &str = "print_settings.json";
+/// The image directory in the zip.
+pub const IMAGES: &str = "slices";
+/// The longest exposure of one image the schema allows, ms.
+const EXPOSURE_MAX_MS: i64 = 10_000;
+/// The schema's defaults for what a dmdsl profile does not say.
+const POWER_SETTING: i64 = 100;
+const WAVELENGTH_NM: i64 = 365;
+
+/// A number as JSON: a whole number without a fraction.
+fn n(v: f64) -> Value {
+    let v = crate::round::derived(v);
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        json!(v as i64)
+    } else {
+        json!(v)
+    }
+}
+
+/// Milliseconds of `s` seconds (manifest times are whole milliseconds).
+fn ms(s: f64) -> f64 {
+    (s * 1000.0).round()
+}
+
+/// The "Position settings" of one layer and whether its steps fit the standard's
+/// sequence exactly.
+fn position(layer: &Layer, from_mm: f64, max_speed: f64, max_accel: f64) -> (Value, bool) {
+    let mut initial = 0.0;
+    let mut up_wait = 0.0;
+    let mut final_wait = 0.0;
+    let mut up: Option<(f64, f64, f64)> = None;
+    let mut down: Option<(f64, f64)> = None;
+    let mut fits = true;
+    let mut exposed = false;
+    let mut at = from_mm;
+    for s in &layer.steps {
+        if exposed {
+            fits = false;
+        }
+        match *s {
+            Step::Wait { s } => match (up, down) {
+                (None, _) => initial += s,
+                (Some(_), None) => up_wait += s,
+                (Some(_), Some(_)) => final_wait += s,
+            },
+            Step::Move {
+                to_mm,
+                speed_mm_s,
+                accel_mm_s2,
+            } => {
+                match (up, down) {
+                    (None, _) if to_mm > at => {
+                        up = Some((to_mm - from_mm, speed_mm_s, accel_mm_s2))
+                    }
+                    (Some(_), None) if to_mm < at => down = Some((speed_mm_s, accel_mm_s2)),
+                    _ => fits = false,
+                }
+                at = to_mm;
+            }
+            Step::Expose { .. } => exposed = true,
+            Step::Sweep { to_mm, .. } => {
+                fits = false;
+                at = to_mm;
+            }
+        }
+    }
+    // The standard's printer comes back to the previous position plus the thickness.
+    let thickness = layer.thickness_mm;
+    if (at - (from_mm + thickness)).abs() > 1e-6 || up.is_none() || down.is_none() || !exposed {
+        fits = false;
+    }
+    let (up_mm, up_speed, up_accel) = up.unwrap_or((thickness, max_speed, max_accel));
+    let (down_speed, down_accel) = down.unwrap_or((up_speed, up_accel));
+    let v = json!({
+        "Layer thickness (um)": n(thickness * 1000.0),
+        "Distance up (mm)": n(up_mm.max(thickness)),
+        "Initial wait (ms)": n(ms(initial)),
+        "BP up speed (mm/sec)": n(up_speed),
+        "BP up acceleration (mm/sec^2)": n(up_accel),
+        "Up wait (ms)": n(ms(up_wait)),
+        "BP down speed (mm/sec)": n(down_speed),
+        "BP down acceleration (mm/sec^2)": n(down_accel),
+        "Final wait (ms)": n(ms(final_wait)),
+    });
+    (v, fits)
+}
+
+/// The light time of a layer, ms: its exposure, or the time its sweeps show the mask.
+fn light_ms(layer: &Layer, from_mm: f64) -> i64 {
+    let mut at = from_mm;
+    let mut swept = 0.0;
+    for s in &layer.steps {
+        match *s {
+            Step::Move { to_mm, .. } => at = to_mm,
+            Step::Sweep { to_mm, speed_mm_s } => {
+                swept += (to_mm - at).abs() / speed_mm_s;
+                at = to_mm;
+            }
+            _ => {}
+        }
+    }
+    let s = if swept > 0.0 { swept } else { layer.exposure_s };
+    ms(s) as i64
+}
+
+/// `total` ms as the fewest equal exposures of at most [`EXPOSURE_MAX_MS`] (whole ms, the
+/// remainder on the first ones).
+fn split(total: i64) -> Vec<i64> {
+    let k = ((total + EXPOSURE_MAX_MS - 1) / EXPOSURE_MAX_MS).max(1);
+    (0..k)
+        .map(|i| total / k + i64::from(i < total % k))
+        .collect()
+}
+
+/// The image name of a mask in `slices/` (its path under `masks/`).
+fn image_name(mask: &str) -> &str {
+    mask.strip_prefix("masks/").unwrap_or(mask)
+}
+
+/// Writes the job as a control-file zip at `out`; returns what it lost or assumed.
+pub(super) fn write(
+    m: &Manifest,
+    files: &dyn BundleFiles,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<Vec<Warning>> {
+    let machine = &m.machine;
+    let several = machine.projector.len() > 1;
+    let (max_speed, max_accel) = (
+        machine.stage.max_speed_mm_s.get(),
+        machine.stage.max_accel_mm_s2.get(),
+    );
+    let mut at = machine.stage.home_mm;
+    let mut misfits = Vec::new();
+    let mut splits = 0u64;
+    // One entry per layer first: (key for duplicates, entry, images it needs).
+    let mut entries: Vec<(String, Map<String, Value>, Vec<&str>)> = Vec::new();
+    for l in &m.layers {
+        let (pos, fits) = position(l, at, max_speed, max_accel);
+        if !fits {
+            misfits.push(l.index);
+        }
+        at = l.z_mm;
+        let parts = split(light_ms(l, at));
+        if parts.len() > 1 {
+            splits += 1;
+        }
+        let mut images = Vec::new();
+        let mut list = Vec::new();
+        let mut key = format!("{pos}");
+        for mask in &l.masks {
+            let p = &machine.projector[mask.projector as usize];
+            for &t in &parts {
+                let mut img = json!({
+                    "Image file": image_name(&mask.file),
+                    "Layer exposure time (ms)": t,
+                });
+                if several {
+                    let o = img.as_object_mut().expect("object");
+                    o.insert("Light engine".into(), json!(p.name));
+                    let px = p.pixel_mm.get() * 1000.0;
+                    o.insert("Image x offset (um)".into(), n(p.offset_px[0] as f64 * px));
+                    o.insert("Image y offset (um)".into(), n(p.offset_px[1] as f64 * px));
+                }
+                list.push(img);
+            }
+            key.push_str(&format!("|{}:{}:{parts:?}", mask.sha256, mask.projector));
+            images.push(mask.file.as_str());
+        }
+        let mut e = Map::new();
+        e.insert("Position settings".into(), pos);
+        e.insert("Image settings list".into(), Value::Array(list));
+        entries.push((key, e, images));
+    }
+    // The defaults: the last run of layers' settings (its image is one the zip holds).
+    let last_run = entries
+        .iter()
+        .rposition(|e| e.0 != entries.last().expect("a job has layers").0)
+        .map_or(0, |i| i + 1);
+    let last = &entries[last_run].1;
+    let default_pos = last["Position settings"].clone();
+    let first_image = last["Image settings list"][0].clone();
+    let default_image = json!({
+        "Image file": first_image["Image file"],
+        "Layer exposure time (ms)": first_image["Layer exposure time (ms)"],
+        "Light engine": machine.projector[0].name,
+        "Light engine power setting": POWER_SETTING,
+        "Light engine wavelength (nm)": WAVELENGTH_NM,
+        "Relative focus position (um)": 0,
+        "Wait before exposure (ms)": 0,
+        "Wait after exposure (ms)": 0,
+    });
+    // Runs of identical layers become one entry.
+    let mut layers: Vec<Value> = Vec::new();
+    let mut needed: Vec<&str> = Vec::new();
+    let mut i = 0;
+    while i < entries.len() {
+        let mut j = i + 1;
+        while j < entries.len() && entries[j].0 == entries[i].0 {
+            j += 1;
+        }
+        let (_, e, images) = &entries[i];
+        let mut e = e.clone();
+        if e["Position settings"] == default_pos {
+            e.remove("Position settings");
+        }
+        if j - i > 1 {
+            e.insert("Number of duplications".into(), json!(j - i));
+        }
+        layers.push(Value::Object(e));
+        needed.extend(images.iter().copied());
+        i = j;
+    }
+    let settings = json!({
+        "Header": {
+            "Schema version": SCHEMA_VERSION,
+            "Image directory": IMAGES,
+            "Comment": format!("Written by dmdsl {} from the job's manifest (job.json).", env!("CARGO_PKG_VERSION")),
+        },
+        "Design": {
+            "STL file": m.source.file,
+            "Resin": machine.resin.name,
+            "3D printer": machine.name,
+            "Slicer": format!("dmdsl {}", env!("CARGO_PKG_VERSION")),
+        },
+        "Default layer settings": {
+            "Number of duplications": 1,
+            "Position settings": default_pos,
+            "Image settings": default_image,
+        },
+        "Layers": layers,
+    });
+    let mut warnings = vec![Warning::new(
+        "export.control-assumed",
+        format!(
+            "the profile gives no light engine power setting or wavelength: the control file has the schema's defaults ({POWER_SETTING}, {WAVELENGTH_NM} nm)"
+        ),
+    )
+    .with("power_setting", POWER_SETTING)
+    .with("wavelength_nm", WAVELENGTH_NM)];
+    if let Some(&first) = misfits.first() {
+        let k = misfits.len() as u64;
+        warnings.push(
+            Warning::new(
+                "export.control-steps",
+                format!(
+                    "{k} {} steps the control file's move-away, move-back sequence cannot say (first: layer {first}); {} the nearest such sequence",
+                    plural(k, "layer has", "layers have"),
+                    plural(k, "it gets", "they get")
+                ),
+            )
+            .with("layers", k)
+            .with("first_layer", first),
+        );
+    }
+    if splits > 0 {
+        warnings.push(
+            Warning::new(
+                "export.control-split-exposure",
+                format!(
+                    "{splits} {} exposed longer than the schema's {EXPOSURE_MAX_MS} ms per image: each is exposed as several equal exposures of its image",
+                    plural(splits, "layer is", "layers are")
+                ),
+            )
+            .with("layers", splits)
+            .with("max_ms", EXPOSURE_MAX_MS),
+        );
+    }
+    let mut text = serde_json::to_vec_pretty(&settings).expect("settings serialize");
+    text.push(b'\n');
+    let mut zip = ZipOut::create(out, cancel)?;
+    zip.add(SETTINGS, &text, Method::Deflated)?;
+    let mut seen = std::collections::HashSet::new();
+    for rel in needed {
+        if seen.insert(rel) {
+            let name = format!("{IMAGES}/{}", image_name(rel));
+            zip.add(&name, &files.read(rel)?, Method::Stored)?;
+        }
+    }
+    zip.finish()?;
+    Ok(warnings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_exposures_split_into_equal_whole_ms() {
+        assert_eq!(split(8000), [8000]);
+        assert_eq!(split(10000), [10000]);
+        assert_eq!(split(16000), [8000, 8000]);
+        assert_eq!(split(20001), [6667, 6667, 6667]);
+        assert_eq!(split(0), [0]);
+        for t in [1, 9999, 10001, 123_457] {
+            let s = split(t);
+            assert_eq!(s.iter().sum::<i64>(), t);
+            assert!(s.iter().all(|&x| x <= EXPOSURE_MAX_MS));
+        }
+    }
+
+    #[test]
+    fn a_dip_and_return_is_a_move_away_and_back() {
+        // From 0.5 mm: dip to 6 mm at 2 mm/s, back to 1 mm at 1 mm/s, wait 10 s, expose.
+        let mut l = crate::exec::testutil::two_layer_topdown().layers[1].clone();
+        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
+        assert!(fits, "{l:?}");
+        let want = json!({
+            "Layer thickness (um)": 500, "Distance up (mm)": 5.5, "Initial wait (ms)": 0,
+            "BP up speed (mm/sec)": 2, "BP up acceleration (mm/sec^2)": 50, "Up wait (ms)": 0,
+            "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 50,
+            "Final wait (ms)": 10000
+        });
+        assert_eq!(pos, want);
+        // A layer that does not come back onto its thickness, or sweeps, does not fit.
+        assert!(!position(&l, 0.4, 10.0, 50.0).1);
+        l.steps = vec![Step::Sweep {
+            to_mm: 1.0,
+            speed_mm_s: 0.1,
+        }];
+        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
+        assert!(!fits);
+        assert!(pos["Distance up (mm)"].as_f64().unwrap() > 0.0);
+        assert_eq!(light_ms(&l, 0.5), 5000);
+    }
+}
