@@ -37,8 +37,10 @@ use crate::warning::Warning;
 use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
+mod format;
 mod source;
 mod writer;
+pub use format::Format;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
 pub use writer::{is_bundle, BundleWriter};
 

@@ -17,6 +17,12 @@ pub trait BundleSource: Sync + Send {
     /// How file `rel` is named in messages (`part.dmdjob/masks/00012.png`,
     /// `part.sl1/part00012.png`).
     fn shown(&self, rel: &str) -> PathBuf;
+
+    /// [`BundleSource::read`] with an error naming the file ([`shown`](Self::shown)).
+    fn file(&self, rel: &str) -> crate::error::Result<Cow<'_, [u8]>> {
+        self.read(rel)
+            .map_err(|e| crate::error::Error::io(self.shown(rel), e))
+    }
 }
 
 /// A relative path made only of plain components (nothing outside the bundle).

@@ -18,8 +18,8 @@
 //!   layer's exposure; an exposure over the schema's 10 000 ms is split into equal
 //!   exposures of the same image.
 
-use super::BundleFiles;
 use crate::archive::write::{Method, ZipOut};
+use crate::bundle::BundleSource;
 use crate::bundle::{Layer, Manifest, Step};
 use crate::error::Result;
 use crate::warning::{plural, Warning};
@@ -152,7 +152,7 @@ fn image_name(mask: &str) -> &str {
 /// Writes the job as a control-file zip at `out`; returns what it lost or assumed.
 pub(super) fn write(
     m: &Manifest,
-    files: &dyn BundleFiles,
+    files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<Vec<Warning>> {
@@ -306,7 +306,7 @@ pub(super) fn write(
     for rel in needed {
         if seen.insert(rel) {
             let name = format!("{IMAGES}/{}", image_name(rel));
-            zip.add(&name, &files.read(rel)?, Method::Stored)?;
+            zip.add(&name, &files.file(rel)?, Method::Stored)?;
         }
     }
     zip.finish()?;

@@ -1,8 +1,9 @@
 //! The native bundle, as a directory (through [`BundleWriter`]) or as one zip: the same
 //! files with the same bytes, `job.json` first, images stored.
 
-use super::{bundle_files, BundleFiles};
+use super::bundle_files;
 use crate::archive::write::{Method, ZipOut};
+use crate::bundle::BundleSource;
 use crate::bundle::{BundleWriter, Manifest, MANIFEST};
 use crate::error::Result;
 use std::path::Path;
@@ -11,7 +12,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// Writes the bundle directory `out`.
 pub(super) fn write_dir(
     manifest: &Manifest,
-    files: &dyn BundleFiles,
+    files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
@@ -23,7 +24,7 @@ pub(super) fn write_dir(
         if let Some(dir) = Path::new(rel).parent().filter(|d| d != &Path::new("")) {
             writer.create_dir(&dir.to_string_lossy())?;
         }
-        writer.write_file(rel, &files.read(rel)?)?;
+        writer.write_file(rel, &files.file(rel)?)?;
     }
     writer.finish(manifest)?;
     Ok(())
@@ -33,14 +34,14 @@ pub(super) fn write_dir(
 /// manifest names (stored), in layer order.
 pub(super) fn write_zip(
     manifest: &Manifest,
-    files: &dyn BundleFiles,
+    files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
     let mut zip = ZipOut::create(out, cancel)?;
     zip.add(MANIFEST, &manifest.to_json(), Method::Deflated)?;
     for rel in bundle_files(manifest) {
-        zip.add(rel, &files.read(rel)?, Method::Stored)?;
+        zip.add(rel, &files.file(rel)?, Method::Stored)?;
     }
     zip.finish()?;
     Ok(())

@@ -17,8 +17,9 @@
 //! own stage steps, several projectors, the light-compensation records cannot be said at
 //! all (warnings, or a refusal for several projectors).
 
-use super::{BundleFiles, Format};
+use super::Format;
 use crate::archive::write::{Method, ZipOut};
+use crate::bundle::BundleSource;
 use crate::bundle::{Manifest, Mode};
 use crate::error::{Error, Result};
 use crate::warning::{plural, Warning};
@@ -33,31 +34,29 @@ const FADE_RANGE: std::ops::RangeInclusive<usize> = 3..=20;
 const FADE_DEFAULT: usize = 10;
 /// Two exposures closer than this are equal (manifest times are rounded to 1 ms), s.
 const SAME_S: f64 = 0.0005;
-/// PrusaSlicer's defaults for the tilt: `area_fill` (%), `fast_tilt_time` and
-/// `slow_tilt_time` (s).
+/// PrusaSlicer's defaults for the tilt, written to `prusaslicer.ini` and used for the
+/// `printTime` estimate: `area_fill` (%), `fast_tilt_time`, `slow_tilt_time` and
+/// `high_viscosity_tilt_time` (s).
 const AREA_FILL_PCT: f64 = 50.0;
 const FAST_TILT_S: f64 = 5.0;
 const SLOW_TILT_S: f64 = 8.0;
-/// What PrusaSlicer 2.5.0's `printTime` adds per fast and per slow layer to exposure plus
-/// tilt, s: measured, not in the source this was read from (its files of 20 fast layers at
-/// 8 s with `fast_tilt_time` 5 and 3 say 265 and 225 s, of 900 slow layers with
-/// `slow_tilt_time` 8 and 12 say 15525 and 19125 s; docs/FORMATS.md).
-const FAST_EXTRA_S: f64 = 0.25;
-const SLOW_EXTRA_S: f64 = 1.25;
+const HV_TILT_S: f64 = 10.0;
 
-/// `printTime` of layers with the scheme's exposures, each fast (`true`) or slow, as
-/// PrusaSlicer 2.5 computes it.
-fn print_time(scheme: &Scheme, fast: impl Iterator<Item = bool>) -> f64 {
-    fast.enumerate()
-        .map(|(i, f)| {
-            scheme.exposure(i)
-                + if f {
-                    FAST_TILT_S + FAST_EXTRA_S
-                } else {
-                    SLOW_TILT_S + SLOW_EXTRA_S
-                }
-        })
-        .sum()
+/// `printTime` of the job's layers with the scheme's exposures, as PrusaSlicer 2.5
+/// estimates it (`import::sl1`'s model, the one `dmdsl run` replays an SL1 with).
+fn print_time(scheme: &Scheme, layer_mm: f64, display_area_mm2: f64, areas_mm2: &[f64]) -> f64 {
+    let model = crate::import::sl1::Model {
+        exp_s: scheme.exp_s,
+        first_s: scheme.first_s,
+        fade: scheme.fade,
+        layer_mm,
+        fast_tilt_s: FAST_TILT_S,
+        slow_tilt_s: SLOW_TILT_S,
+        hv_tilt_s: HV_TILT_S,
+        fast_max_mm2: display_area_mm2 * AREA_FILL_PCT / 100.0,
+        speed: crate::import::sl1::PrintSpeed::Fast,
+    };
+    model.print_time_s(areas_mm2)
 }
 /// The display of the printers the formats are named after: (pixels x, pixels y, width
 /// mm, height mm), portrait.
@@ -201,7 +200,7 @@ fn ini(pairs: &[(&str, String)]) -> String {
 pub(super) fn write(
     format: Format,
     m: &Manifest,
-    files: &dyn BundleFiles,
+    files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<Vec<Warning>> {
@@ -329,7 +328,8 @@ pub(super) fn write(
     let display_area = dw * dh;
     let fast = |l: &crate::bundle::Layer| l.area_mm2 <= display_area * AREA_FILL_PCT / 100.0;
     let num_fast = m.layers.iter().filter(|l| fast(l)).count();
-    let print_time = print_time(&scheme, m.layers.iter().map(fast));
+    let areas: Vec<f64> = m.layers.iter().map(|l| l.area_mm2).collect();
+    let print_time = print_time(&scheme, h, display_area, &areas);
     let job_dir = out
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -406,7 +406,7 @@ pub(super) fn write(
         let mask = &l.masks[0].file;
         zip.add(
             &format!("{job_dir}{i:05}.png"),
-            &files.read(mask)?,
+            &files.file(mask)?,
             Method::Stored,
         )?;
     }
@@ -550,16 +550,19 @@ mod tests {
             exp_s: 8.0,
             fade: 10,
         };
-        assert_eq!(print_time(&s, std::iter::repeat_n(true, 20)), 265.0);
+        // Layers of 0.05 mm on the SL1's display (8230 mm²): 1 mm² is fast, 8000 mm² slow.
+        let display = 68.04 * 120.96;
+        let time = |s: &Scheme, area: f64, n: usize| print_time(s, 0.05, display, &vec![area; n]);
+        assert!((time(&s, 1.0, 20) - 265.0).abs() < 1e-9);
         // A 45.7 mm cube, 900 slow layers: printTime 15525.000003.
-        assert!((print_time(&s, std::iter::repeat_n(false, 900)) - 15525.0).abs() < 1e-6);
+        assert!((time(&s, 8000.0, 900) - 15525.0).abs() < 1e-6);
         // First 20 s, fade 4 (the scheme test above): 325.
         let f = Scheme {
             first_s: 20.0,
             exp_s: 8.0,
             fade: 4,
         };
-        assert!((print_time(&f, std::iter::repeat_n(true, 20)) - 325.0).abs() < 1e-9);
+        assert!((time(&f, 1.0, 20) - 325.0).abs() < 1e-9);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! `thumbnail/thumbnail800x480.png`): the shaded picture of the part its masks build
 //! ([`crate::inspect::preview()`]), as RGBA PNGs like PrusaSlicer's.
 
-use super::BundleFiles;
+use crate::bundle::BundleSource;
 use crate::bundle::Manifest;
 use crate::error::Result;
 use crate::inspect::reader::{decode_mask, MaskReader};
@@ -54,11 +54,11 @@ fn slabs(m: &Manifest) -> Manifest {
 }
 
 /// The masks of a job, decoded from its files.
-struct Masks<'a>(&'a dyn BundleFiles);
+struct Masks<'a>(&'a dyn BundleSource);
 
 impl MaskReader for Masks<'_> {
     fn read_mask(&self, rel: &str) -> Result<GrayImage> {
-        decode_mask(&self.0.read(rel)?, &self.0.shown(rel))
+        decode_mask(&self.0.file(rel)?, &self.0.shown(rel))
     }
 
     fn shown(&self, rel: &str) -> PathBuf {
@@ -71,7 +71,7 @@ impl MaskReader for Masks<'_> {
 /// with its background and shrunk (the drawing is most of the cost of an SL1).
 pub(super) fn thumbnails(
     manifest: &Manifest,
-    files: &dyn BundleFiles,
+    files: &dyn BundleSource,
 ) -> Result<Vec<(String, Vec<u8>)>> {
     let masks = Masks(files);
     let thin = slabs(manifest);

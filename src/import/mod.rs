@@ -34,33 +34,7 @@ use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The form a job came in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Format {
-    /// A bundle directory.
-    Dmdjob,
-    /// A zipped bundle.
-    DmdjobZip,
-    /// PrusaSlicer SL1 (Original Prusa SL1 and compatible).
-    Sl1,
-    /// PrusaSlicer SL1S (the same archive for the SL1S; `printerModel = SL1S` or a `.sl1s`
-    /// file).
-    Sl1s,
-    /// The SLA 3D printer control-file standard, schema v5.
-    SlaControl,
-}
-
-impl Format {
-    /// The name reports use: `dmdjob`, `dmdjob-zip`, `sl1`, `sl1s`, `sla-control`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Format::Dmdjob => "dmdjob",
-            Format::DmdjobZip => "dmdjob-zip",
-            Format::Sl1 => "sl1",
-            Format::Sl1s => "sl1s",
-            Format::SlaControl => "sla-control",
-        }
-    }
-}
+pub use crate::bundle::Format;
 
 /// Where an imported job's total time estimate comes from, when not from dmdsl's planner.
 #[derive(Debug, Clone, PartialEq)]

@@ -143,25 +143,38 @@ impl<'a> Ini<'a> {
 
 /// How the material prints (`material_print_speed`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum PrintSpeed {
+pub(crate) enum PrintSpeed {
+    /// `fast`: fast or slow tilt by the layer's area.
     Fast,
+    /// `slow`: every layer tilts slowly.
     Slow,
+    /// `high_viscosity`: every layer tilts with `high_viscosity_tilt_time`.
     HighViscosity,
 }
 
-/// The settings PrusaSlicer's estimate uses.
+/// The settings PrusaSlicer 2.5's print-time estimate uses (module docs): the importer
+/// builds its steps from them, and the SL1 writer computes the `printTime` it writes with
+/// them, so both agree with PrusaSlicer and with each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Model {
-    exp_s: f64,
-    first_s: f64,
-    fade: usize,
-    layer_mm: f64,
-    fast_tilt_s: f64,
-    slow_tilt_s: f64,
-    hv_tilt_s: f64,
+pub(crate) struct Model {
+    /// `expTime`, s.
+    pub(crate) exp_s: f64,
+    /// `expTimeFirst`, s.
+    pub(crate) first_s: f64,
+    /// `numFade`.
+    pub(crate) fade: usize,
+    /// `layerHeight`, mm.
+    pub(crate) layer_mm: f64,
+    /// `fast_tilt_time`, s.
+    pub(crate) fast_tilt_s: f64,
+    /// `slow_tilt_time`, s.
+    pub(crate) slow_tilt_s: f64,
+    /// `high_viscosity_tilt_time`, s.
+    pub(crate) hv_tilt_s: f64,
     /// `area_fill` % × the display's area, mm².
-    fast_max_mm2: f64,
-    speed: PrintSpeed,
+    pub(crate) fast_max_mm2: f64,
+    /// `material_print_speed`.
+    pub(crate) speed: PrintSpeed,
 }
 
 impl Model {
@@ -181,6 +194,18 @@ impl Model {
                 }
             })
             .collect()
+    }
+
+    /// PrusaSlicer's `printTime` of layers of the given areas (mm²), s: every layer's
+    /// exposure (negative ones included, as PrusaSlicer sums them) plus its tilt, delay
+    /// and tower time.
+    pub(crate) fn print_time_s(&self, areas_mm2: &[f64]) -> f64 {
+        let exposures = self.exposures(areas_mm2.len());
+        areas_mm2
+            .iter()
+            .zip(exposures)
+            .map(|(&a, e)| e + self.overhead_s(a).0)
+            .sum()
     }
 
     /// What a layer of `area_mm2` takes besides its exposure: tilt, delay, tower, s.

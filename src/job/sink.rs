@@ -4,9 +4,9 @@
 //! however many layers), from where `export` writes the file whole, in layer order, once
 //! the job is planned and replays clean.
 
+use crate::bundle::BundleSource;
 use crate::bundle::BundleWriter;
 use crate::error::{Error, Result};
-use crate::export::BundleFiles;
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::fs::File;
@@ -141,8 +141,8 @@ impl MemoryFiles {
     }
 }
 
-impl BundleFiles for MemoryFiles {
-    fn read(&self, rel: &str) -> Result<Cow<'_, [u8]>> {
+impl BundleSource for MemoryFiles {
+    fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
         match self.files.get(rel) {
             Some(Stored::Memory(b)) => Ok(Cow::Borrowed(b.as_slice())),
             Some(&Stored::Spilled(at, n)) => {
@@ -153,14 +153,13 @@ impl BundleFiles for MemoryFiles {
                 let mut f = spill.lock().unwrap_or_else(|e| e.into_inner());
                 let mut buf = vec![0; n as usize];
                 f.seek(SeekFrom::Start(at))
-                    .and_then(|_| f.read_exact(&mut buf))
-                    .map_err(|e| Error::io(&self.out, e))?;
+                    .and_then(|_| f.read_exact(&mut buf))?;
                 Ok(Cow::Owned(buf))
             }
-            None => Err(Error::Bundle {
-                path: self.out.clone(),
-                msg: format!("{rel} was not made"),
-            }),
+            None => Err(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("{rel} was not made"),
+            )),
         }
     }
 
