@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod bundle;
+pub mod cure;
 mod digest;
 pub mod error;
 pub mod exec;

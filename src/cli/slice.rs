@@ -39,6 +39,18 @@ enum DitherArg {
     Off,
 }
 
+/// Correction of the masks for the projector's blur (docs/CURE.md).
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CureCorrectionArg {
+    /// Move the drawn edges so the predicted cured edge at mid-layer lands on the section.
+    Xy,
+    /// XY, and hold back downward-facing surfaces by the print-through (not implemented
+    /// yet: refused).
+    Xyz,
+    /// Draw the exact sections.
+    Off,
+}
+
 /// Light compensation mode.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum CompensationArg {
@@ -135,6 +147,14 @@ pub(crate) struct SliceArgs {
     /// ignore the profile's [distortion] (default: the profile's, if any).
     #[arg(long, value_name = "TABLE.csv|off")]
     distortion: Option<PathBuf>,
+    /// Predict what cures: each layer's cured edge against its section (edge error,
+    /// features that vanish or merge) in the summary, `--json` and job.json (docs/CURE.md).
+    #[arg(long)]
+    predict: bool,
+    /// Correct the masks for the projector's blur [default: xy when the profile has
+    /// psf_sigma_px, else off].
+    #[arg(long, value_enum)]
+    cure_correction: Option<CureCorrectionArg>,
     #[command(flatten)]
     warnings: super::WarningArgs,
 }
@@ -162,6 +182,7 @@ struct Job<'a> {
     placement: PlacementMode,
     optics: dmdsl::optics::OpticsOptions,
     distortion: DistortionChoice,
+    cure: dmdsl::job::CureOptions,
     cancel: &'a AtomicBool,
     show_progress: bool,
 }
@@ -201,6 +222,7 @@ impl Job<'_> {
             },
             cancel: Some(self.cancel),
             distortion: self.distortion.clone(),
+            cure: self.cure,
         };
         job::slice_to_bundle(&opts)
     }
@@ -253,6 +275,14 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
             Some(p) => DistortionChoice::Table(p.clone()),
         },
+        cure: dmdsl::job::CureOptions {
+            predict: a.predict,
+            correction: a.cure_correction.map(|c| match c {
+                CureCorrectionArg::Xy => dmdsl::cure::Correction::Xy,
+                CureCorrectionArg::Xyz => dmdsl::cure::Correction::Xyz,
+                CureCorrectionArg::Off => dmdsl::cure::Correction::Off,
+            }),
+        },
         cancel: &cancel,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
@@ -274,6 +304,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
                 "totals": summary.totals,
                 "timings": summary.timings,
                 "distortion": summary.distortion,
+                "cure": summary.cure,
             });
             super::print_json(&v)?;
         } else if !quiet {
@@ -434,6 +465,20 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
         summary.totals.resin_volume_ml,
         summary.timings.total_s
     );
+    if let Some(p) = summary.cure.as_ref().and_then(|c| c.predicted.as_ref()) {
+        let e = &p.edge_error_px;
+        println!(
+            "{prefix}cure ({} correction): edge error {:.2} px mean, {:.2} px p95, {:.2} px max ({:.3} mm mean); {} vanished, {} merged; print-through {:.3} mm",
+            summary.cure.as_ref().map_or("off", |c| c.correction.as_str()),
+            e.mean,
+            e.p95,
+            e.max,
+            p.edge_error_mm.mean,
+            p.vanished,
+            p.merged,
+            summary.cure.as_ref().map_or(0.0, |c| c.print_through_mm)
+        );
+    }
     if let (Some(all), Some(c)) = (
         summary.totals.all_layered_time_s,
         summary.totals.continuous_layers,

@@ -40,6 +40,8 @@ pub struct SliceOptions<'a> {
     pub cancel: Option<&'a AtomicBool>,
     /// Lens distortion correction (`--distortion`; default: the profile's).
     pub distortion: DistortionChoice,
+    /// Cure prediction and correction (`--predict`, `--cure-correction`; docs/CURE.md).
+    pub cure: super::CureOptions,
 }
 
 impl SliceOptions<'_> {
@@ -64,6 +66,7 @@ impl SliceOptions<'_> {
             progress: None,
             cancel: None,
             distortion: DistortionChoice::default(),
+            cure: Default::default(),
         }
     }
 
@@ -133,6 +136,9 @@ pub struct SliceSummary {
     /// Distortion fit report, when a correction was applied.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub distortion: Option<FitReport>,
+    /// The cure model, correction and prediction, when the machine has a PSF.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cure: Option<crate::bundle::Cure>,
 }
 
 /// Default bundle path for an input: `<stem>.dmdjob` in the current directory.

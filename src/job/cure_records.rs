@@ -1,0 +1,250 @@
+//! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
+//! edge errors of all layers, and the manifest's record and warnings.
+
+use crate::bundle::{self, CurePrediction, EdgeError, Layer, LayerCure};
+use crate::cure::predict::Histogram;
+use crate::cure::{self, Correction, CureModel};
+use crate::error::{Error, Result};
+use crate::optics::Compensator;
+use crate::profile::Profile;
+use crate::raster::{Mask, Rasterizer, Scratch};
+use crate::slice::Contour;
+use crate::warning::{plural, Warning};
+use std::sync::Mutex;
+
+/// What a job asks of the cure model.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CureOptions {
+    /// Predict each layer's cure (`slice --predict`).
+    pub predict: bool,
+    /// The masks' correction (`--cure-correction`); `None`: `xy` when the machine has a
+    /// PSF, else off.
+    pub correction: Option<Correction>,
+}
+
+/// The cure model of one job.
+pub(super) struct CureJob {
+    model: CureModel,
+    correction: Correction,
+    shift_px: f64,
+    predict: bool,
+    /// Absolute edge errors of every layer (sums: the same in any order).
+    hist: Mutex<Histogram>,
+}
+
+/// What drawing a layer through the cure model gave besides its mask.
+pub(super) struct CureDrawn {
+    /// Lit area of the corrected coverage, pixels.
+    pub lit_pixels: f64,
+    /// Whether the compensation found the layer lit outside its calibrated area.
+    pub outside: bool,
+    /// The prediction (`--predict`).
+    pub cure: Option<LayerCure>,
+    /// Its absolute edge errors.
+    pub hist: Histogram,
+}
+
+impl CureJob {
+    /// The cure model of a job on `profile` (already completed for the job); `None` when
+    /// the machine has no PSF and nothing is asked. Asking a prediction or a correction of
+    /// a machine without a PSF is an error.
+    pub fn new(profile: &Profile, opts: &CureOptions) -> Result<Option<CureJob>> {
+        let model = CureModel::from_profile(profile);
+        let wants =
+            opts.predict || matches!(opts.correction, Some(Correction::Xy | Correction::Xyz));
+        let Some(model) = model else {
+            if wants {
+                return Err(Error::Profile {
+                    origin: profile.name.clone(),
+                    msg: "--predict and --cure-correction need the projector's point-spread function (psf_sigma_px in each [[projector]]; docs/CURE.md)".into(),
+                });
+            }
+            return Ok(None);
+        };
+        if opts.correction == Some(Correction::Xyz) {
+            return Err(Error::Usage(
+                "--cure-correction xyz: the Z correction is not implemented yet; use xy or off"
+                    .into(),
+            ));
+        }
+        let correction = opts.correction.unwrap_or(Correction::Xy);
+        let shift_px = match correction {
+            Correction::Off => 0.0,
+            _ => cure::edge_shift_px(&model),
+        };
+        Ok(Some(CureJob {
+            model,
+            correction,
+            shift_px,
+            predict: opts.predict,
+            hist: Mutex::new(Histogram::default()),
+        }))
+    }
+
+    /// Whether layers are drawn through [`CureJob::draw`].
+    pub fn active(&self) -> bool {
+        self.shift_px != 0.0 || self.predict
+    }
+
+    /// Draws `section`'s coverage, corrects it, predicts its cure (`--predict`), then
+    /// thresholds (`binary`) and compensates (`comp`) it in place.
+    pub fn draw(
+        &self,
+        raster: &Rasterizer,
+        section: &[Contour],
+        scratch: &mut Scratch,
+        binary: bool,
+        comp: Option<&Compensator>,
+    ) -> (Mask, CureDrawn) {
+        let mut m = raster.render::<Compensator>(section, scratch, false, None);
+        let lit = scratch.lit_box();
+        if self.shift_px != 0.0 {
+            cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
+        }
+        let lit_pixels = m.lit_pixels_in(lit);
+        if binary {
+            crate::raster::threshold(&mut m);
+        }
+        let (cure, hist) = if self.predict {
+            let (c, h) = cure::predict_layer(&self.model, &m, section);
+            let r = crate::round::derived;
+            let c = LayerCure {
+                mean_px: r(c.mean_px),
+                abs_mean_px: r(c.abs_mean_px),
+                p95_px: r(c.p95_px),
+                max_px: r(c.max_px),
+                ..c
+            };
+            (Some(c), h)
+        } else {
+            (None, Histogram::default())
+        };
+        let outside = comp.is_some_and(|c| c.apply_in(&mut m, lit));
+        (
+            m,
+            CureDrawn {
+                lit_pixels,
+                outside,
+                cure,
+                hist,
+            },
+        )
+    }
+
+    /// Counts a layer's edge errors into the job's.
+    pub fn count(&self, hist: &Histogram) {
+        self.hist
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .merge(hist);
+    }
+
+    /// The manifest's record, from the layers' predictions.
+    pub fn record(&self, layers: &[Layer]) -> bundle::Cure {
+        let m = &self.model;
+        let r = crate::round::derived;
+        let predicted = self.predict.then(|| {
+            let hist = self.hist.lock().unwrap_or_else(|p| p.into_inner());
+            let cures: Vec<(u64, &LayerCure)> = layers
+                .iter()
+                .filter_map(|l| l.cure.as_ref().map(|c| (l.index, c)))
+                .collect();
+            let n: u64 = cures.iter().map(|(_, c)| c.samples).sum();
+            let w = |f: fn(&LayerCure) -> f64| {
+                if n == 0 {
+                    0.0
+                } else {
+                    cures
+                        .iter()
+                        .map(|(_, c)| f(c) * c.samples as f64)
+                        .sum::<f64>()
+                        / n as f64
+                }
+            };
+            let px = EdgeError {
+                mean: r(w(|c| c.abs_mean_px)),
+                p95: r(hist.quantile(0.95)),
+                max: r(cures.iter().map(|(_, c)| c.max_px).fold(0.0, f64::max)),
+            };
+            let mm = EdgeError {
+                mean: r(px.mean * m.pixel_mm),
+                p95: r(px.p95 * m.pixel_mm),
+                max: r(px.max * m.pixel_mm),
+            };
+            let mut worst: Vec<(u64, f64)> = cures
+                .iter()
+                .filter(|(_, c)| c.samples > 0)
+                .map(|(i, c)| (*i, c.abs_mean_px))
+                .collect();
+            worst.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            CurePrediction {
+                samples: n,
+                edge_error_px: px,
+                edge_error_mm: mm,
+                signed_mean_px: r(w(|c| c.mean_px)),
+                vanished: cures.iter().map(|(_, c)| c.vanished as u64).sum(),
+                merged: cures.iter().map(|(_, c)| c.merged as u64).sum(),
+                worst_layers: worst.iter().take(5).map(|w| w.0).collect(),
+            }
+        });
+        bundle::Cure {
+            psf_sigma_px: m.sigma_px,
+            pixel_mm: m.pixel_mm,
+            dp_mm: m.dp_mm,
+            ec_mj_cm2: m.ec_mj_cm2,
+            overcure_mm: m.overcure_mm,
+            layer_mm: m.layer_mm,
+            edge_threshold: r(m.edge_threshold()),
+            correction: self.correction.as_str().into(),
+            shift_px: r(self.shift_px),
+            print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
+            held_back_layers: 0,
+            predicted,
+        }
+    }
+}
+
+/// The warnings of the layers' predictions: features that vanish, gaps that close.
+pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
+    let mut out = Vec::new();
+    let count = |f: fn(&LayerCure) -> u32| {
+        let hit: Vec<(u64, u32)> = layers
+            .iter()
+            .filter_map(|l| l.cure.as_ref().map(|c| (l.index, f(c))))
+            .filter(|(_, k)| *k > 0)
+            .collect();
+        let total: u64 = hit.iter().map(|h| h.1 as u64).sum();
+        (total, hit.len() as u64, hit.first().map(|h| h.0))
+    };
+    if let (k, n, Some(first)) = count(|c| c.vanished) {
+        out.push(
+            Warning::new(
+                "cure.features-vanish",
+                format!(
+                    "cure: {k} {} cure nowhere in {n} {} (first: layer {first}); widen them or raise the exposure",
+                    plural(k, "feature", "features"),
+                    plural(n, "layer", "layers")
+                ),
+            )
+            .with("features", k)
+            .with("layers", n)
+            .with("first_layer", first),
+        );
+    }
+    if let (k, n, Some(first)) = count(|c| c.merged) {
+        out.push(
+            Warning::new(
+                "cure.features-merge",
+                format!(
+                    "cure: {k} {} cure across a gap in {n} {} (first: layer {first}): neighbouring features join",
+                    plural(k, "contour", "contours"),
+                    plural(n, "layer", "layers")
+                ),
+            )
+            .with("contours", k)
+            .with("layers", n)
+            .with("first_layer", first),
+        );
+    }
+    out
+}
