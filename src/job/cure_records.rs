@@ -34,7 +34,7 @@ pub(super) struct CureJob {
 
 /// What drawing a layer through the cure model gave besides its mask.
 pub(super) struct CureDrawn {
-    /// Lit area of the corrected coverage, pixels.
+    /// Lit area of the section's coverage (before the correction), pixels.
     pub lit_pixels: f64,
     /// Whether the compensation found the layer lit outside its calibrated area.
     pub outside: bool,
@@ -98,10 +98,11 @@ impl CureJob {
     ) -> (Mask, CureDrawn) {
         let mut m = raster.render::<Compensator>(section, scratch, false, None);
         let lit = scratch.lit_box();
+        // The record's area is the section's, as drawn before the correction.
+        let lit_pixels = scratch.lit_pixels(&m);
         if self.shift_px != 0.0 {
             cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
         }
-        let lit_pixels = m.lit_pixels_in(lit);
         if binary {
             crate::raster::threshold(&mut m);
         }
