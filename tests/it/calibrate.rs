@@ -581,7 +581,15 @@ fn compensation_flags_are_checked() {
     // Off: plain coverage, no optics record.
     let o = run_in(
         &dir,
-        &["slice", "b.stl", "-q", "--compensation", "off", "--cure-correction", "off"],
+        &[
+            "slice",
+            "b.stl",
+            "-q",
+            "--compensation",
+            "off",
+            "--cure-correction",
+            "off",
+        ],
     );
     ok(&o);
     let job: serde_json::Value =

@@ -5,6 +5,7 @@
 mod batch;
 mod calibrate;
 mod common;
+mod cure;
 mod fuzz;
 mod geometry;
 mod help;
