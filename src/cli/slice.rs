@@ -155,6 +155,10 @@ pub(crate) struct SliceArgs {
     /// psf_sigma_px, else off].
     #[arg(long, value_enum)]
     cure_correction: Option<CureCorrectionArg>,
+    /// With --predict: write the per-layer error chart and the worst layer's predicted
+    /// outline over its section into DIR (PNG).
+    #[arg(long, value_name = "DIR", requires = "predict")]
+    cure_plots: Option<PathBuf>,
     #[command(flatten)]
     warnings: super::WarningArgs,
 }
@@ -222,7 +226,7 @@ impl Job<'_> {
             },
             cancel: Some(self.cancel),
             distortion: self.distortion.clone(),
-            cure: self.cure,
+            cure: self.cure.clone(),
         };
         job::slice_to_bundle(&opts)
     }
@@ -282,6 +286,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
                 CureCorrectionArg::Xyz => dmdsl::cure::Correction::Xyz,
                 CureCorrectionArg::Off => dmdsl::cure::Correction::Off,
             }),
+            plots: a.cure_plots.clone(),
         },
         cancel: &cancel,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),

@@ -10,6 +10,7 @@
 
 pub mod correct;
 pub mod dose;
+pub mod plots;
 pub mod predict;
 pub mod psf;
 pub mod segments;

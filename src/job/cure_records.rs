@@ -13,13 +13,16 @@ use crate::warning::{plural, Warning};
 use std::sync::Mutex;
 
 /// What a job asks of the cure model.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct CureOptions {
     /// Predict each layer's cure (`slice --predict`).
     pub predict: bool,
     /// The masks' correction (`--cure-correction`); `None`: `xy` when the machine has a
     /// PSF, else off.
     pub correction: Option<Correction>,
+    /// Directory for the prediction's pictures (`--cure-plots`): the per-layer error chart
+    /// and the worst layer's cured outline over its section.
+    pub plots: Option<std::path::PathBuf>,
 }
 
 /// The cure model of one job.
@@ -130,6 +133,47 @@ impl CureJob {
                 hist,
             },
         )
+    }
+
+    /// Writes the prediction's pictures into `dir`: `<stem>-cure-errors.png` (per-layer
+    /// chart) and `<stem>-cure-layer-<N>.png`, layer N (the worst by mean absolute error)
+    /// drawn again (without the distortion pre-warp) with its predicted cured outline.
+    /// Returns the files written.
+    pub fn write_plots(
+        &self,
+        dir: &std::path::Path,
+        stem: &str,
+        manifest: &bundle::Manifest,
+        mesh: &crate::mesh::Mesh,
+        raster: &Rasterizer,
+    ) -> Result<Vec<std::path::PathBuf>> {
+        use crate::plot::Format;
+        let mut out = Vec::new();
+        let chart = cure::plots::error_chart(stem, &manifest.layers).render();
+        let p = dir.join(format!("{stem}-cure-errors.png"));
+        crate::output::write_atomic(&p, &chart.encode(Format::Png))?;
+        out.push(p);
+        let worst = manifest
+            .cure
+            .as_ref()
+            .and_then(|c| c.predicted.as_ref())
+            .and_then(|p| p.worst_layers.first().copied());
+        if let Some(i) = worst.map(|i| i as usize) {
+            let n = manifest.layers.len();
+            let section = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
+                .window(i..i + 1)
+                .pop()
+                .unwrap_or_default();
+            let mut scratch = Scratch::default();
+            let (mask, _) = self.draw(raster, &section.contours, &mut scratch, false, None);
+            let samples = cure::predict::edge_samples(&self.model, &mask, &section.contours);
+            let pic =
+                cure::plots::outline_picture(&self.model, i, &mask, &section.contours, &samples);
+            let p = dir.join(format!("{stem}-cure-layer-{i:05}.png"));
+            crate::output::write_atomic(&p, &pic.encode(Format::Png))?;
+            out.push(p);
+        }
+        Ok(out)
     }
 
     /// Counts a layer's edge errors into the job's.

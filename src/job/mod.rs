@@ -135,6 +135,19 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     }
     let bundle = writer.finish(&manifest)?;
     made.keep();
+    if let (Some(c), Some(dir)) = (cure.as_ref(), opts.cure.plots.as_deref()) {
+        let stem = opts
+            .input
+            .file_stem()
+            .map_or("part".into(), |s| s.to_string_lossy());
+        c.write_plots(
+            dir,
+            &stem,
+            &manifest,
+            &part.mesh,
+            &Rasterizer::new(profile.field()),
+        )?;
+    }
     let finish_s = t_finish.elapsed().as_secs_f64();
     Ok(SliceSummary {
         bundle,

@@ -249,6 +249,27 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
         serde_json::from_slice(&std::fs::read(dir.join("c.dmdjob/job.json")).unwrap()).unwrap();
     assert_eq!(job["cure"]["correction"], "xy");
     assert!(job["cure"].get("predicted").is_none());
+    // The pictures: the per-layer chart and the worst layer's outline.
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "-q",
+            "--layer-height",
+            "1",
+            "--predict",
+            "--cure-plots",
+            ".",
+            "-o",
+            "p.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for name in ["cube10-cure-errors.png", "cube10-cure-layer-00000.png"] {
+        let (w, h, _) = read_rgb_size(&dir.join(name));
+        assert!(w >= 900 && h >= 600, "{name}: {w} x {h}");
+    }
     // A profile without psf_sigma_px (written before the key existed) loads, and its jobs
     // are not corrected; asking a prediction of it is an error naming the key.
     let o = run_in(&dir, &["profile", "show", "bottom-up"]);
@@ -289,4 +310,10 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
     );
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("psf_sigma_px"), "{}", stderr(&o));
+}
+
+/// Size of a PNG picture.
+fn read_rgb_size(p: &Path) -> (u32, u32, ()) {
+    let img = image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    (img.width(), img.height(), ())
 }
