@@ -14,7 +14,7 @@
 
 use super::dose::CureModel;
 use super::psf::{phi_inv, Psf};
-use super::segments::{point_segment_distance, Segments};
+use super::segments::Segments;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
 use crate::slice::Contour;
@@ -70,51 +70,111 @@ pub fn correct_coverage(
     if shift_px == 0.0 || lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
         return 0;
     }
-    let segs = Segments::new(contours, pixel_mm, mask.height as f64);
+    let segs = Segments::edges(contours, pixel_mm, mask.height as f64);
     let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.abs();
-    let (bw, bh) = (lit.c1 - lit.c0, lit.r1 - lit.r0);
-    // Nearest edge of each pixel of the box within reach: distance and edge.
-    let mut best = vec![(f32::INFINITY, u32::MAX); bw * bh];
-    for (i, s) in segs.segs.iter().enumerate() {
-        let lo = |k: usize| (s.a[k].min(s.b[k]) - reach - 0.5).floor().max(0.0) as usize;
-        let hi = |k: usize| (s.a[k].max(s.b[k]) + reach + 0.5).ceil().max(0.0) as usize;
-        let (c0, c1) = (lo(0).max(lit.c0), hi(0).min(lit.c1));
-        let (r0, r1) = (lo(1).max(lit.r0), hi(1).min(lit.r1));
-        for r in r0..r1 {
-            for c in c0..c1 {
-                let p = [c as f64 + 0.5, r as f64 + 0.5];
-                let d = point_segment_distance(p, s.a, s.b) as f32;
-                let slot = &mut best[(r - lit.r0) * bw + (c - lit.c0)];
-                if d < slot.0 {
-                    *slot = (d, i as u32);
+    let bw = lit.c1 - lit.c0;
+    BAND.with(|band| {
+        let band = &mut *band.borrow_mut();
+        band.prepare(bw * (lit.r1 - lit.r0));
+        // Nearest edge of each pixel of the box within reach: distance and edge. Only
+        // the pixels some edge comes near are visited, and only they are reset after.
+        let r2 = reach * reach;
+        for (i, s) in segs.segs.iter().enumerate() {
+            let (a, b) = (s.a, s.b);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l2 = dx * dx + dy * dy;
+            let rows = (a[1].min(b[1]) - reach - 0.5).floor().max(lit.r0 as f64) as usize
+                ..((a[1].max(b[1]) + reach + 0.5).ceil().max(0.0) as usize).min(lit.r1);
+            for r in rows {
+                let v = r as f64 + 0.5;
+                // The part of the edge within `reach` of the row, then its columns.
+                let (t0, t1) = if dy.abs() > 1e-12 {
+                    let (p, q) = ((v - reach - a[1]) / dy, (v + reach - a[1]) / dy);
+                    (p.min(q).max(0.0), p.max(q).min(1.0))
+                } else {
+                    (0.0, 1.0)
+                };
+                if t0 > t1 {
+                    continue;
+                }
+                let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
+                let c0 = ((x0.min(x1) - reach - 0.5).floor().max(lit.c0 as f64)) as usize;
+                let c1 = ((x0.max(x1) + reach + 0.5).ceil().max(0.0) as usize).min(lit.c1);
+                for c in c0..c1 {
+                    let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
+                    let t = if l2 > 0.0 {
+                        ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    let (ex, ey) = (wx - t * dx, wy - t * dy);
+                    let d2 = ex * ex + ey * ey;
+                    if d2 < r2 {
+                        band.offer((r - lit.r0) * bw + (c - lit.c0), d2 as f32, i as u32);
+                    }
                 }
             }
         }
-    }
-    let w = mask.width as usize;
-    let mut changed = 0;
-    for r in 0..bh {
-        for c in 0..bw {
-            let (d, i) = best[r * bw + c];
-            if (d as f64) >= reach {
-                continue;
-            }
+        let w = mask.width as usize;
+        let mut changed = 0;
+        for &k in &band.touched {
+            let (_, i) = band.best[k as usize];
+            let (r, c) = (k as usize / bw, k as usize % bw);
             let s = &segs.segs[i as usize];
             let p = [(c + lit.c0) as f64 + 0.5, (r + lit.r0) as f64 + 0.5];
             // Signed distance of the centre outside the edge's line.
             let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
             let delta = halfplane_coverage(s.n, -(sd + shift_px)) - halfplane_coverage(s.n, -sd);
-            let k = (r + lit.r0) * w + c + lit.c0;
-            let v = (mask.data[k] as f64 + 255.0 * delta)
+            let m = (r + lit.r0) * w + c + lit.c0;
+            let v = (mask.data[m] as f64 + 255.0 * delta)
                 .round()
                 .clamp(0.0, 255.0) as u8;
-            if v != mask.data[k] {
-                mask.data[k] = v;
+            if v != mask.data[m] {
+                mask.data[m] = v;
                 changed += 1;
             }
         }
+        band.reset();
+        changed
+    })
+}
+
+/// The nearest edge of the pixels near the section's edges, kept per thread from layer
+/// to layer (sized to the largest lit box seen; only the entries written are reset).
+#[derive(Default)]
+struct Band {
+    best: Vec<(f32, u32)>,
+    touched: Vec<u32>,
+}
+
+impl Band {
+    fn prepare(&mut self, n: usize) {
+        if self.best.len() < n {
+            self.best.resize(n, (f32::INFINITY, u32::MAX));
+        }
+        self.touched.clear();
     }
-    changed
+
+    fn offer(&mut self, k: usize, d: f32, i: u32) {
+        let slot = &mut self.best[k];
+        if slot.1 == u32::MAX {
+            self.touched.push(k as u32);
+        }
+        if d < slot.0 {
+            *slot = (d, i);
+        }
+    }
+
+    fn reset(&mut self) {
+        for &k in &self.touched {
+            self.best[k as usize] = (f32::INFINITY, u32::MAX);
+        }
+        self.touched.clear();
+    }
+}
+
+thread_local! {
+    static BAND: std::cell::RefCell<Band> = std::cell::RefCell::new(Band::default());
 }
 
 #[cfg(test)]
@@ -142,5 +202,47 @@ mod tests {
                 assert!((got - want).abs() < 3e-3, "n {n:?} u {u}: {got} vs {want}");
             }
         }
+    }
+
+    /// A rectangle's corrected coverage equals the exact coverage of the rectangle moved
+    /// inward by the shift (drawn by the rasterizer), but for the pixels at its corners.
+    #[test]
+    fn a_straight_edge_moves_by_the_shift() {
+        use crate::profile::Profile;
+        use crate::raster::{Rasterizer, Scratch};
+        let field = Profile::default_profile().field();
+        let p = field.pixel_mm;
+        let raster = Rasterizer::new(field);
+        let rect =
+            |x0: f64, y0: f64, x1: f64, y1: f64| vec![vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]];
+        // Edges at fractions of a pixel; the shift 0.37 px.
+        let (x0, y0, x1, y1) = (100.3 * p, 200.6 * p, 160.85 * p, 230.1 * p);
+        let d = 0.37;
+        let mut scratch = Scratch::default();
+        let mut m = raster.coverage(&rect(x0, y0, x1, y1), &mut scratch);
+        let lit = scratch.lit_box();
+        let changed = correct_coverage(&mut m, lit, &rect(x0, y0, x1, y1), p, d);
+        assert!(changed > 100, "{changed}");
+        let mut s2 = Scratch::default();
+        let want = raster.coverage(
+            &rect(x0 + d * p, y0 + d * p, x1 - d * p, y1 - d * p),
+            &mut s2,
+        );
+        let (c0, c1) = ((x0 / p) as usize, (x1 / p) as usize + 1);
+        let r0 = field.height_px as usize - (y1 / p) as usize - 1;
+        let r1 = field.height_px as usize - (y0 / p) as usize + 1;
+        let mut worst = 0i32;
+        for r in r0..r1 {
+            for c in c0..c1 {
+                let corner = (c <= c0 + 1 || c + 2 >= c1) && (r <= r0 + 1 || r + 2 >= r1);
+                if !corner {
+                    worst = worst.max(
+                        (m.get(c as u32, r as u32) as i32 - want.get(c as u32, r as u32) as i32)
+                            .abs(),
+                    );
+                }
+            }
+        }
+        assert!(worst <= 1, "{worst}");
     }
 }

@@ -10,7 +10,7 @@
 //! the section's edge (positive: the part grows) is the sample's edge error.
 
 use super::dose::CureModel;
-use super::psf::Psf;
+use super::psf::{AxisTable, Psf};
 use super::segments::Segments;
 pub use crate::bundle::LayerCure;
 use crate::raster::Mask;
@@ -103,8 +103,8 @@ impl Histogram {
 }
 
 /// Light (relative irradiance) of `mask` at field pixel coordinates `p`, the pixels
-/// within the PSF's reach summed.
-pub fn light(mask: &Mask, psf: &Psf, p: [f64; 2]) -> f64 {
+/// within the PSF's reach summed, through the tabulated axis weights of `table`.
+pub fn light(mask: &Mask, psf: &Psf, table: &AxisTable, p: [f64; 2]) -> f64 {
     let reach = psf.reach_px();
     let (w, h) = (mask.width as i64, mask.height as i64);
     let c0 = ((p[0] - reach - 1.0).floor() as i64).max(0);
@@ -117,21 +117,16 @@ pub fn light(mask: &Mask, psf: &Psf, p: [f64; 2]) -> f64 {
     let mut wx = [0.0f64; 64];
     let nc = ((c1 - c0 + 1) as usize).min(64);
     for (k, x) in wx.iter_mut().take(nc).enumerate() {
-        *x = psf.axis_weight(p[0] - (c0 + k as i64) as f64);
+        *x = table.weight(p[0] - (c0 + k as i64) as f64);
     }
     let mut sum = 0.0;
     for r in r0..=r1 {
-        let row = &mask.data[(r as usize) * w as usize..][..w as usize];
-        let mut s = 0u64;
-        let mut acc = 0.0;
-        for k in 0..nc {
-            let v = row[c0 as usize + k];
-            s |= v as u64;
-            acc += v as f64 * wx[k];
+        let row = &mask.data[(r as usize) * w as usize + c0 as usize..][..nc];
+        if row.iter().all(|&v| v == 0) {
+            continue;
         }
-        if s != 0 {
-            sum += acc * psf.axis_weight(p[1] - r as f64);
-        }
+        let acc: f64 = row.iter().zip(&wx).map(|(&v, &x)| v as f64 * x).sum();
+        sum += acc * table.weight(p[1] - r as f64);
     }
     sum / 255.0
 }
@@ -142,6 +137,7 @@ pub fn edge_samples(model: &CureModel, mask: &Mask, contours: &[Contour]) -> Vec
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
+    let table = AxisTable::new(&psf);
     let segs = Segments::new(contours, model.pixel_mm, mask.height as f64);
     let t = model.edge_threshold();
     // Far enough for the cured edge of any sensible model (the light falls from 1 to 0
@@ -178,39 +174,48 @@ pub fn edge_samples(model: &CureModel, mask: &Mask, contours: &[Contour]) -> Vec
                 d.min(total - d) < guard
             })
         };
-        for (i, sg) in ss.iter().enumerate() {
-            let len = arc[i + 1] - arc[i];
-            let k = (len / SPACING_PX).ceil().max(1.0) as usize;
-            for j in 0..k {
-                let f = (j as f64 + 0.5) / k as f64;
-                let p = [
-                    sg.a[0] + f * (sg.b[0] - sg.a[0]),
-                    sg.a[1] + f * (sg.b[1] - sg.a[1]),
-                ];
-                let nrm = sg.n;
-                let idx = range.start + i;
-                let w_in = segs
-                    .ray(p, [-nrm[0], -nrm[1]], 2.0 * search, idx)
-                    .unwrap_or(f64::INFINITY);
-                let w_out = segs.ray(p, nrm, 2.0 * search, idx).unwrap_or(f64::INFINITY);
-                let a = (0.5 * w_in).min(search);
-                let b = (0.5 * w_out).min(search);
-                let at = |s: f64| light(mask, &psf, [p[0] + s * nrm[0], p[1] + s * nrm[1]]) - t;
-                let (fa, fb) = (at(-a), at(b));
-                let vanishes = fa < 0.0;
-                let merges = fb >= 0.0;
-                let error_px = (!vanishes && !merges).then(|| root(&at, -a, b, fa, fb));
-                out.push(EdgeSample {
-                    at: p,
-                    normal: nrm,
-                    error_px,
-                    widths_px: [w_in, w_out],
-                    near_corner: near_corner(arc[i] + f * len),
-                    vanishes,
-                    merges,
-                    contour: c as u32,
-                });
+        // Samples at equal steps of at most SPACING_PX along the contour.
+        let k = (total / SPACING_PX).ceil().max(1.0) as usize;
+        let mut i = 0;
+        for j in 0..k {
+            let at_arc = (j as f64 + 0.5) / k as f64 * total;
+            while i + 1 < n && arc[i + 1] <= at_arc {
+                i += 1;
             }
+            let sg = &ss[i];
+            let len = arc[i + 1] - arc[i];
+            let f = if len > 0.0 {
+                ((at_arc - arc[i]) / len).clamp(0.0, 1.0)
+            } else {
+                0.5
+            };
+            let p = [
+                sg.a[0] + f * (sg.b[0] - sg.a[0]),
+                sg.a[1] + f * (sg.b[1] - sg.a[1]),
+            ];
+            let nrm = sg.n;
+            let idx = range.start + i;
+            let w_in = segs
+                .ray(p, [-nrm[0], -nrm[1]], 2.0 * search, idx)
+                .unwrap_or(f64::INFINITY);
+            let w_out = segs.ray(p, nrm, 2.0 * search, idx).unwrap_or(f64::INFINITY);
+            let a = (0.5 * w_in).min(search);
+            let b = (0.5 * w_out).min(search);
+            let at = |s: f64| light(mask, &psf, &table, [p[0] + s * nrm[0], p[1] + s * nrm[1]]) - t;
+            let (fa, fb) = (at(-a), at(b));
+            let vanishes = fa < 0.0;
+            let merges = fb >= 0.0;
+            let error_px = (!vanishes && !merges).then(|| root(&at, -a, b, fa, fb));
+            out.push(EdgeSample {
+                at: p,
+                normal: nrm,
+                error_px,
+                widths_px: [w_in, w_out],
+                near_corner: near_corner(at_arc),
+                vanishes,
+                merges,
+                contour: c as u32,
+            });
         }
     }
     out

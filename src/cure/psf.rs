@@ -75,8 +75,64 @@ impl Psf {
     }
 }
 
+/// Steps of [`AxisTable`] per pixel.
+const TABLE_STEPS: f64 = 1024.0;
+
+/// [`Psf::axis_weight`] tabulated at 1/1024 px steps over the PSF's reach, read with
+/// linear interpolation (within 3·10⁻⁷ of the function; 0 beyond the reach).
+#[derive(Debug, Clone)]
+pub struct AxisTable {
+    lo: f64,
+    values: Vec<f64>,
+}
+
+impl AxisTable {
+    /// The table of `psf`.
+    pub fn new(psf: &Psf) -> AxisTable {
+        let lo = -psf.reach_px();
+        let hi = 1.0 + psf.reach_px();
+        let n = ((hi - lo) * TABLE_STEPS).ceil() as usize + 2;
+        let values = (0..n)
+            .map(|k| psf.axis_weight(lo + k as f64 / TABLE_STEPS))
+            .collect();
+        AxisTable { lo, values }
+    }
+
+    /// The weight at offset `x` (see [`Psf::axis_weight`]).
+    #[inline]
+    pub fn weight(&self, x: f64) -> f64 {
+        let f = (x - self.lo) * TABLE_STEPS;
+        if f < 0.0 {
+            return 0.0;
+        }
+        let k = f as usize;
+        if k + 1 >= self.values.len() {
+            return 0.0;
+        }
+        let t = f - k as f64;
+        self.values[k] + t * (self.values[k + 1] - self.values[k])
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_table_follows_the_function() {
+        let psf = Psf { sigma_px: 0.5 };
+        let t = AxisTable::new(&psf);
+        let mut worst = 0.0f64;
+        for k in -3000..4000 {
+            let x = k as f64 / 997.0;
+            let want = if x < -psf.reach_px() || x > 1.0 + psf.reach_px() - 0.01 {
+                continue;
+            } else {
+                psf.axis_weight(x)
+            };
+            worst = worst.max((t.weight(x) - want).abs());
+        }
+        assert!(worst < 3e-7, "{worst}");
+    }
+
     use super::*;
 
     #[test]
