@@ -84,7 +84,7 @@ pub fn correct_coverage(
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let l2 = dx * dx + dy * dy;
             let rows = (a[1].min(b[1]) - reach - 0.5).floor().max(lit.r0 as f64) as usize
-                ..((a[1].max(b[1]) + reach + 0.5).ceil().max(0.0) as usize).min(lit.r1);
+                ..((a[1].max(b[1]) + reach - 0.5).ceil().max(0.0) as usize).min(lit.r1);
             for r in rows {
                 let v = r as f64 + 0.5;
                 // The part of the edge within `reach` of the row, then its columns.
@@ -99,7 +99,7 @@ pub fn correct_coverage(
                 }
                 let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
                 let c0 = ((x0.min(x1) - reach - 0.5).floor().max(lit.c0 as f64)) as usize;
-                let c1 = ((x0.max(x1) + reach + 0.5).ceil().max(0.0) as usize).min(lit.c1);
+                let c1 = ((x0.max(x1) + reach - 0.5).ceil().max(0.0) as usize).min(lit.c1);
                 for c in c0..c1 {
                     let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
                     let t = if l2 > 0.0 {
