@@ -45,6 +45,18 @@ impl Segments {
 
     /// The edges only, without the grid index.
     pub fn edges(contours: &[Contour], pixel_mm: f64, height_px: f64) -> Segments {
+        Segments::simplified(contours, pixel_mm, height_px, 0.0)
+    }
+
+    /// The edges without the grid index, runs of points that stay within `tol_px` of the
+    /// chord joining their ends replaced by the chord (at most 16 points a run; fine
+    /// meshes give many nearly collinear short edges).
+    pub fn simplified(
+        contours: &[Contour],
+        pixel_mm: f64,
+        height_px: f64,
+        tol_px: f64,
+    ) -> Segments {
         let s = 1.0 / pixel_mm;
         let px = |p: [f64; 2]| [p[0] * s, height_px - p[1] * s];
         let mut segs = Vec::new();
@@ -54,6 +66,11 @@ impl Segments {
         for (ci, c) in contours.iter().enumerate() {
             starts.push(segs.len());
             outer.push(crate::slice::signed_area(c) > 0.0);
+            let kept = keep_points(c, tol_px * pixel_mm);
+            let c: Vec<[f64; 2]> = match &kept {
+                Some(k) => k.iter().map(|&i| c[i]).collect(),
+                None => c.clone(),
+            };
             for i in 0..c.len() {
                 let (p, q) = (c[i], c[(i + 1) % c.len()]);
                 let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
@@ -209,6 +226,36 @@ impl Segments {
         let u = (w[0] * dir[1] - w[1] * dir[0]) / den;
         (t > 1e-9 && (-1e-12..=1.0 + 1e-12).contains(&u)).then_some(t)
     }
+}
+
+/// The indices of the points of closed contour `c` kept when runs within `tol` (mm) of
+/// their chord are replaced by it (`None`: all, when `tol` is 0).
+fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
+    if tol <= 0.0 || c.len() < 4 {
+        return None;
+    }
+    let n = c.len();
+    let mut keep = vec![0usize];
+    let mut start = 0;
+    while start < n {
+        // Extend the run from `start` while every point between stays near the chord.
+        let mut end = start + 1;
+        while end < n && end - start < 16 {
+            let next = end + 1;
+            let (a, b) = (c[start], c[next % n]);
+            if (start + 1..next).all(|k| point_segment_distance(c[k], a, b) <= tol) {
+                end = next;
+            } else {
+                break;
+            }
+        }
+        if end >= n {
+            break;
+        }
+        keep.push(end);
+        start = end;
+    }
+    Some(keep)
 }
 
 /// Distance from `p` to the segment `a`–`b`.
