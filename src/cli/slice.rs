@@ -44,11 +44,27 @@ enum DitherArg {
 enum CureCorrectionArg {
     /// Move the drawn edges so the predicted cured edge at mid-layer lands on the section.
     Xy,
-    /// XY, and hold back downward-facing surfaces by the print-through (not implemented
-    /// yet: refused).
+    /// XY, and hold back downward-facing surfaces by the print-through (whole layers).
     Xyz,
     /// Draw the exact sections.
     Off,
+}
+
+/// The cure model's options (boxed: they would make every command's arguments larger).
+#[derive(clap::Args)]
+struct CureArgs {
+    /// Predict what cures: each layer's cured edge against its section (edge error,
+    /// features that vanish or merge) in the summary, `--json` and job.json (docs/CURE.md).
+    #[arg(long)]
+    predict: bool,
+    /// Correct the masks for the projector's blur (xy) and the light reaching through
+    /// later layers (xyz) [default: xy when the profile has psf_sigma_px, else off].
+    #[arg(long, value_enum)]
+    cure_correction: Option<CureCorrectionArg>,
+    /// With --predict: write the per-layer error chart and the worst layer's predicted
+    /// outline over its section into DIR (PNG).
+    #[arg(long, value_name = "DIR", requires = "predict")]
+    cure_plots: Option<PathBuf>,
 }
 
 /// Light compensation mode.
@@ -147,18 +163,8 @@ pub(crate) struct SliceArgs {
     /// ignore the profile's [distortion] (default: the profile's, if any).
     #[arg(long, value_name = "TABLE.csv|off")]
     distortion: Option<PathBuf>,
-    /// Predict what cures: each layer's cured edge against its section (edge error,
-    /// features that vanish or merge) in the summary, `--json` and job.json (docs/CURE.md).
-    #[arg(long)]
-    predict: bool,
-    /// Correct the masks for the projector's blur [default: xy when the profile has
-    /// psf_sigma_px, else off].
-    #[arg(long, value_enum)]
-    cure_correction: Option<CureCorrectionArg>,
-    /// With --predict: write the per-layer error chart and the worst layer's predicted
-    /// outline over its section into DIR (PNG).
-    #[arg(long, value_name = "DIR", requires = "predict")]
-    cure_plots: Option<PathBuf>,
+    #[command(flatten)]
+    cure: Box<CureArgs>,
     #[command(flatten)]
     warnings: super::WarningArgs,
 }
@@ -280,13 +286,13 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) => DistortionChoice::Table(p.clone()),
         },
         cure: dmdsl::job::CureOptions {
-            predict: a.predict,
-            correction: a.cure_correction.map(|c| match c {
+            predict: a.cure.predict,
+            correction: a.cure.cure_correction.map(|c| match c {
                 CureCorrectionArg::Xy => dmdsl::cure::Correction::Xy,
                 CureCorrectionArg::Xyz => dmdsl::cure::Correction::Xyz,
                 CureCorrectionArg::Off => dmdsl::cure::Correction::Off,
             }),
-            plots: a.cure_plots.clone(),
+            plots: a.cure.cure_plots.clone(),
         },
         cancel: &cancel,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),

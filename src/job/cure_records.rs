@@ -30,6 +30,8 @@ pub(super) struct CureJob {
     model: CureModel,
     correction: Correction,
     shift_px: f64,
+    /// Layers a downward-facing surface is held back by (`xyz`).
+    held_back: usize,
     predict: bool,
     /// Absolute edge errors of every layer (sums: the same in any order).
     hist: Mutex<Histogram>,
@@ -64,21 +66,24 @@ impl CureJob {
             }
             return Ok(None);
         };
-        if opts.correction == Some(Correction::Xyz) {
-            return Err(Error::Usage(
-                "--cure-correction xyz: the Z correction is not implemented yet; use xy or off"
-                    .into(),
-            ));
-        }
         let correction = opts.correction.unwrap_or(Correction::Xy);
         let shift_px = match correction {
             Correction::Off => 0.0,
             _ => cure::edge_shift_px(&model),
         };
+        // The print-through under a flat surface with many layers above, in whole layers.
+        let held_back = match correction {
+            // At most a window of layers below is at hand (job::pipeline).
+            Correction::Xyz => {
+                ((model.print_through_mm(None) / model.layer_mm).round() as usize).min(32)
+            }
+            _ => 0,
+        };
         Ok(Some(CureJob {
             model,
             correction,
             shift_px,
+            held_back,
             predict: opts.predict,
             hist: Mutex::new(Histogram::default()),
         }))
@@ -86,15 +91,23 @@ impl CureJob {
 
     /// Whether layers are drawn through [`CureJob::draw`].
     pub fn active(&self) -> bool {
-        self.shift_px != 0.0 || self.predict
+        self.shift_px != 0.0 || self.predict || self.held_back > 0
     }
 
-    /// Draws `section`'s coverage, corrects it, predicts its cure (`--predict`), then
-    /// thresholds (`binary`) and compensates (`comp`) it in place.
+    /// Layers a downward-facing surface is held back by (0 unless `xyz`).
+    pub fn held_back(&self) -> usize {
+        self.held_back
+    }
+
+    /// Draws `section`'s coverage, corrects it (XY; with `xyz` each pixel also takes at
+    /// most the coverage of the `lower` sections, the layers below: a downward-facing
+    /// surface is drawn only from its held-back layers on), predicts its cure
+    /// (`--predict`), then thresholds (`binary`) and compensates (`comp`) it in place.
     pub fn draw(
         &self,
         raster: &Rasterizer,
         section: &[Contour],
+        lower: &[&[Contour]],
         scratch: &mut Scratch,
         binary: bool,
         comp: Option<&Compensator>,
@@ -105,6 +118,22 @@ impl CureJob {
         let lit_pixels = scratch.lit_pixels(&m);
         if self.shift_px != 0.0 {
             cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
+        }
+        if !lower.is_empty() {
+            LOWER.with(|s| {
+                let s = &mut *s.borrow_mut();
+                for below in lower {
+                    let b = raster.coverage(below, s);
+                    for r in lit.rows() {
+                        let row = r * m.width as usize;
+                        for c in lit.cols() {
+                            let v = &mut m.data[row + c];
+                            *v = (*v).min(b.data[row + c]);
+                        }
+                    }
+                    s.recycle(b);
+                }
+            });
         }
         if binary {
             crate::raster::threshold(&mut m);
@@ -165,7 +194,10 @@ impl CureJob {
                 .pop()
                 .unwrap_or_default();
             let mut scratch = Scratch::default();
-            let (mask, _) = self.draw(raster, &section.contours, &mut scratch, false, None);
+            let window = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
+                .window(i.saturating_sub(self.held_back)..i);
+            let lower: Vec<&[Contour]> = window.iter().rev().map(|s| &s.contours[..]).collect();
+            let (mask, _) = self.draw(raster, &section.contours, &lower, &mut scratch, false, None);
             let samples = cure::predict::edge_samples(&self.model, &mask, &section.contours);
             let pic =
                 cure::plots::outline_picture(&self.model, i, &mask, &section.contours, &samples);
@@ -243,10 +275,15 @@ impl CureJob {
             correction: self.correction.as_str().into(),
             shift_px: r(self.shift_px),
             print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
-            held_back_layers: 0,
+            held_back_layers: self.held_back as u32,
             predicted,
         }
     }
+}
+
+thread_local! {
+    /// Scratch of the layers below's coverage (`xyz`), one per worker thread.
+    static LOWER: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// The warnings of the layers' predictions: features that vanish, gaps that close.

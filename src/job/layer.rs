@@ -62,6 +62,9 @@ pub(super) struct LayerInput<'a> {
     pub section: &'a Section,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
     pub below: Option<&'a Section>,
+    /// The sections of the layers below, nearest first, as many as the cure correction
+    /// holds downward-facing surfaces back by (`--cure-correction xyz`; else empty).
+    pub lower: Vec<&'a Section>,
 }
 
 /// What a worker made of one layer.
@@ -117,7 +120,9 @@ pub(super) fn layer_masks(
         .analyser
         .equals_below(i, &layer.section.contours, below);
     let mut analysis_s = clock.elapsed_s();
-    let (drawn, origin) = match reusable(ctx, worker, i, same) {
+    // Held back surfaces depend on the layers below: equal sections may not share masks.
+    let reuse = ctx.cure.is_none_or(|c| c.held_back() == 0);
+    let (drawn, origin) = match reusable(ctx, worker, i, same && reuse) {
         Some(reused) => reused,
         None => (draw(ctx, worker, scratch, layer, same)?, Origin::Drawn),
     };
@@ -137,7 +142,7 @@ pub(super) fn layer_masks(
     });
     worker.previous = Some(PreviousLayerMasks {
         index: i,
-        simplified: same,
+        simplified: same && reuse,
         masks: drawn,
     });
     let clock = ThreadClock::start();
@@ -211,7 +216,8 @@ fn draw(
         // the compensation then delivers): drawn, corrected and predicted, then thresholded
         // and compensated.
         Some(job) => {
-            let (m, c) = job.draw(ctx.raster, drawn_section, scratch, ctx.binary, comp);
+            let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+            let (m, c) = job.draw(ctx.raster, drawn_section, &lower, scratch, ctx.binary, comp);
             (m, c.lit_pixels, c.outside, c.cure.map(|p| (p, c.hist)))
         }
         None => {
@@ -238,7 +244,9 @@ fn draw(
         pngs.push((png, sha, k as u32));
     }
     scratch.recycle(field_mask);
-    let recent = ctx.recent.filter(|_| same);
+    let recent = ctx
+        .recent
+        .filter(|_| same && ctx.cure.is_none_or(|c| c.held_back() == 0));
     let masks = Arc::new(DrawnMasks {
         outside,
         area_mm2,

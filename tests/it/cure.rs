@@ -317,3 +317,79 @@ fn read_rgb_size(p: &Path) -> (u32, u32, ()) {
     let img = image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     (img.width(), img.height(), ())
 }
+
+/// Lowest height (mm) the model cures at pixel (`col`, `row`) of the bundle `b`'s masks:
+/// every layer's dose at that pixel (D₀ × value/255 at its top, Beer–Lambert below it)
+/// summed directly on a 1 µm grid of heights.
+fn cured_bottom(b: &Path, layers: usize, col: usize, row: usize) -> f64 {
+    let (ec, d0) = (10.0, 10.0 * ((H + OVERCURE) / DP).exp());
+    let lit: Vec<(f64, f64)> = (0..layers)
+        .filter_map(|j| {
+            let (w, _, px) = read_gray(&b.join(format!("masks/{j:05}.png")));
+            let v = px[row * w as usize + col] as f64 / 255.0;
+            (v > 0.0).then(|| ((j + 1) as f64 * H, v))
+        })
+        .collect();
+    let first_top = lit.first().expect("the pixel is lit in some layer").0;
+    let mut z = first_top;
+    loop {
+        let dose: f64 = lit
+            .iter()
+            .filter(|(top, _)| *top >= z)
+            .map(|(top, v)| v * d0 * (-(top - z) / DP).exp())
+            .sum();
+        if dose < ec {
+            return z;
+        }
+        z -= 1e-3;
+    }
+}
+
+#[test]
+fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
+    let dir = tempdir("cure-z");
+    let f = fixture("island.stl");
+    // The upper block of island.stl (z 3 to 5 mm) hangs over nothing at pixel (375, 467).
+    let slice = |out: &str, c: &str| {
+        let o = run_in(
+            &dir,
+            &[
+                "slice",
+                f.to_str().unwrap(),
+                "--keep-position",
+                "-q",
+                "--compensation",
+                "off",
+                "--cure-correction",
+                c,
+                "--json",
+                "-o",
+                out,
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice::<Value>(&o.stdout).unwrap()
+    };
+    let xyz = slice("xyz.dmdjob", "xyz");
+    let held = xyz["cure"]["held_back_layers"].as_u64().unwrap();
+    let pt = xyz["cure"]["print_through_mm"].as_f64().unwrap();
+    assert_eq!(held, (pt / H).round() as u64);
+    assert!(held >= 2, "{held}");
+    slice("xy.dmdjob", "xy");
+    let layers = 100;
+    let cad = 3.0;
+    let without = cured_bottom(&dir.join("xy.dmdjob"), layers, 375, 467);
+    let with = cured_bottom(&dir.join("xyz.dmdjob"), layers, 375, 467);
+    // Without the Z correction the print-through cures it more than a layer deep.
+    assert!(cad - without > H, "{without}");
+    assert!((cad - without - pt).abs() < 0.01, "{without} vs {pt}");
+    assert!(
+        (with - cad).abs() <= H,
+        "cured bottom {with} mm, CAD {cad} mm"
+    );
+    // The block's top and the layers of the lower block are not held back.
+    let (w, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00099.png"));
+    assert_eq!(px[467 * w as usize + 375], 255);
+    let (_, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00000.png"));
+    assert!(px.iter().filter(|&&v| v == 255).count() > 90 * 90);
+}
