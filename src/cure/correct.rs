@@ -84,8 +84,9 @@ pub fn correct_coverage(
             let (a, b) = (s.a, s.b);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let l2 = dx * dx + dy * dy;
-            let rows = (a[1].min(b[1]) - reach - 0.5).floor().max(lit.r0 as f64) as usize
-                ..((a[1].max(b[1]) + reach - 0.5).ceil().max(0.0) as usize).min(lit.r1);
+            // (Truncation floors the non-negative values: `floor` is a libm call.)
+            let rows = (a[1].min(b[1]) - reach - 0.5).max(lit.r0 as f64) as usize
+                ..ceil(a[1].max(b[1]) + reach - 0.5).min(lit.r1);
             for r in rows {
                 let v = r as f64 + 0.5;
                 // The part of the edge within `reach` of the row, then its columns.
@@ -99,8 +100,8 @@ pub fn correct_coverage(
                     continue;
                 }
                 let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
-                let c0 = ((x0.min(x1) - reach - 0.5).floor().max(lit.c0 as f64)) as usize;
-                let c1 = ((x0.max(x1) + reach - 0.5).ceil().max(0.0) as usize).min(lit.c1);
+                let c0 = (x0.min(x1) - reach - 0.5).max(lit.c0 as f64) as usize;
+                let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
                 for c in c0..c1 {
                     let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
                     let t = if l2 > 0.0 {
@@ -140,7 +141,14 @@ pub fn correct_coverage(
     })
 }
 
-/// The nearest edge of the pixels near the section's edges, kept per thread from layer
+/// ⌈x⌉ for x ≥ 0 (0 below).
+#[inline]
+fn ceil(x: f64) -> usize {
+    let t = x.max(0.0) as usize;
+    t + ((t as f64) < x) as usize
+}
+
+/// The nearest edge (squared distance, edge) of the pixels near the section's edges, kept per thread from layer
 /// to layer (sized to the largest lit box seen; only the entries written are reset).
 #[derive(Default)]
 struct Band {

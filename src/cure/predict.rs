@@ -107,10 +107,15 @@ impl Histogram {
 pub fn light(mask: &Mask, psf: &Psf, table: &AxisTable, p: [f64; 2]) -> f64 {
     let reach = psf.reach_px();
     let (w, h) = (mask.width as i64, mask.height as i64);
-    let c0 = ((p[0] - reach - 1.0).floor() as i64).max(0);
-    let c1 = ((p[0] + reach).floor() as i64).min(w - 1);
-    let r0 = ((p[1] - reach - 1.0).floor() as i64).max(0);
-    let r1 = ((p[1] + reach).floor() as i64).min(h - 1);
+    // ⌊x⌋ without libm's `floor`.
+    let floor = |x: f64| {
+        let t = x as i64;
+        t - ((t as f64) > x) as i64
+    };
+    let c0 = floor(p[0] - reach - 1.0).max(0);
+    let c1 = floor(p[0] + reach).min(w - 1);
+    let r0 = floor(p[1] - reach - 1.0).max(0);
+    let r1 = floor(p[1] + reach).min(h - 1);
     if c0 > c1 || r0 > r1 {
         return 0.0;
     }

@@ -243,7 +243,15 @@ fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
         while end < n && end - start < 16 {
             let next = end + 1;
             let (a, b) = (c[start], c[next % n]);
-            if (start + 1..next).all(|k| point_segment_distance(c[k], a, b) <= tol) {
+            // Distance to the chord's line, squared and scaled by the chord's length.
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let lim = tol * tol * (dx * dx + dy * dy);
+            let near = |k: usize| {
+                let cross = (c[k][0] - a[0]) * dy - (c[k][1] - a[1]) * dx;
+                let along = (c[k][0] - a[0]) * dx + (c[k][1] - a[1]) * dy;
+                cross * cross <= lim && along >= 0.0 && along <= dx * dx + dy * dy
+            };
+            if (start + 1..next).all(near) {
                 end = next;
             } else {
                 break;
