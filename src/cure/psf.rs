@@ -116,6 +116,8 @@ impl AxisTable {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn the_table_follows_the_function() {
         let psf = Psf { sigma_px: 0.5 };
@@ -132,8 +134,6 @@ mod tests {
         }
         assert!(worst < 3e-7, "{worst}");
     }
-
-    use super::*;
 
     #[test]
     fn phi_known_values_and_inverse() {

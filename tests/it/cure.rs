@@ -387,6 +387,27 @@ fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
         (with - cad).abs() <= H,
         "cured bottom {with} mm, CAD {cad} mm"
     );
+    // The held-back masks do not depend on the thread count.
+    let again = dir.join("t3");
+    std::fs::create_dir_all(&again).unwrap();
+    let o = run_threads(
+        &again,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "--compensation",
+            "off",
+            "--cure-correction",
+            "xyz",
+            "-o",
+            "xyz.dmdjob",
+        ],
+        "3",
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(tree(&again.join("xyz.dmdjob")) == tree(&dir.join("xyz.dmdjob")));
     // The block's top and the layers of the lower block are not held back.
     let (w, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00099.png"));
     assert_eq!(px[467 * w as usize + 375], 255);
