@@ -31,6 +31,7 @@
 
 pub mod archive;
 pub mod bundle;
+pub mod cure;
 mod digest;
 pub mod error;
 pub mod exec;

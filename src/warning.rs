@@ -159,6 +159,18 @@ pub const CODES: &[Code] = &[
         "exposure_s, kept_s",
     ),
     code(
+        "cure.features-vanish",
+        Warn,
+        "the cure model predicts that features of these layers cure nowhere (too narrow for the blur and dose); they will be missing from the part",
+        "features, layers, first_layer",
+    ),
+    code(
+        "cure.features-merge",
+        Warn,
+        "the cure model predicts that cure reaches across gaps of these layers (slots or holes narrower than the blur): neighbouring features join",
+        "contours, layers, first_layer",
+    ),
+    code(
         "optics.outside-calibrated-area",
         Warn,
         "layers reach outside the calibrated area: compensation there extrapolates the calibration",

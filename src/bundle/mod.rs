@@ -86,6 +86,93 @@ pub struct Manifest {
     /// common target irradiance (absent when off; `optics` is then absent too).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub projector_optics: Vec<Optics>,
+    /// The cure model's inputs, the correction applied to the masks and, with
+    /// `slice --predict`, the predicted cure (docs/CURE.md); absent when the machine has no
+    /// point-spread function.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cure: Option<Cure>,
+}
+
+/// A job's cure model, correction and prediction (docs/CURE.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Cure {
+    /// Point-spread function's standard deviation, pixels.
+    pub psf_sigma_px: f64,
+    /// Pixel edge on the build plane, mm.
+    pub pixel_mm: f64,
+    /// Penetration depth Dp, mm.
+    pub dp_mm: f64,
+    /// Critical energy Ec, mJ/cm².
+    pub ec_mj_cm2: f64,
+    /// Cure depth beyond the layer, mm.
+    pub overcure_mm: f64,
+    /// Layer thickness, mm.
+    pub layer_mm: f64,
+    /// Relative irradiance (of a fully lit interior pixel) at which the cured edge lies at
+    /// mid-layer, the following layers lighting it alike.
+    pub edge_threshold: f64,
+    /// Correction applied to the masks: "off", "xy" or "xyz".
+    pub correction: String,
+    /// Inward move of the drawn edges, px (0 when the correction is off).
+    pub shift_px: f64,
+    /// Closed-form print-through under a flat downward-facing surface with many lit layers
+    /// above it, mm.
+    pub print_through_mm: f64,
+    /// Layers of downward-facing surfaces held back (`xyz`).
+    #[serde(default)]
+    pub held_back_layers: u32,
+    /// The predicted cure (`slice --predict`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted: Option<CurePrediction>,
+}
+
+/// A job's predicted cure against its sections.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CurePrediction {
+    /// Edge samples counted (features and gaps at least 4σ wide, away from corners).
+    pub samples: u64,
+    /// Absolute edge error, px.
+    pub edge_error_px: EdgeError,
+    /// Absolute edge error, mm.
+    pub edge_error_mm: EdgeError,
+    /// Mean signed edge error, px (positive: the cured part is larger).
+    pub signed_mean_px: f64,
+    /// Outer contours nothing of which cures, over all layers.
+    pub vanished: u64,
+    /// Contours whose cure reaches across a gap, over all layers.
+    pub merged: u64,
+    /// The layers with the largest mean absolute edge error, worst first (at most 5).
+    pub worst_layers: Vec<u64>,
+}
+
+/// Statistics of the absolute edge error.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct EdgeError {
+    /// Mean.
+    pub mean: f64,
+    /// 95th percentile (to 0.01 px).
+    pub p95: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+/// A layer's predicted cure against its section (`slice --predict`; docs/CURE.md).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct LayerCure {
+    /// Edge samples counted (features and gaps at least 4σ wide, away from corners).
+    pub samples: u64,
+    /// Mean signed edge error, px (positive: the cured part is larger).
+    pub mean_px: f64,
+    /// Mean absolute edge error, px.
+    pub abs_mean_px: f64,
+    /// 95th percentile of the absolute edge error, px (to 0.01 px).
+    pub p95_px: f64,
+    /// Largest absolute edge error, px.
+    pub max_px: f64,
+    /// Outer contours nothing of which cures.
+    pub vanished: u32,
+    /// Contours whose cure reaches across a gap to the next edge.
+    pub merged: u32,
 }
 
 /// Who wrote the bundle.
@@ -388,6 +475,9 @@ pub struct Layer {
     pub steps: Vec<Step>,
     /// Estimated duration of `steps`, s.
     pub time_s: f64,
+    /// Predicted cure against the section (`slice --predict`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cure: Option<LayerCure>,
 }
 
 /// A mask file of a layer.

@@ -39,6 +39,34 @@ enum DitherArg {
     Off,
 }
 
+/// Correction of the masks for the projector's blur (docs/CURE.md).
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CureCorrectionArg {
+    /// Move the drawn edges so the predicted cured edge at mid-layer lands on the section.
+    Xy,
+    /// XY, and hold back downward-facing surfaces by the print-through (whole layers).
+    Xyz,
+    /// Draw the exact sections.
+    Off,
+}
+
+/// The cure model's options (boxed: they would make every command's arguments larger).
+#[derive(clap::Args)]
+struct CureArgs {
+    /// Predict what cures: each layer's cured edge against its section (edge error,
+    /// features that vanish or merge) in the summary, `--json` and job.json (docs/CURE.md).
+    #[arg(long)]
+    predict: bool,
+    /// Correct the masks for the projector's blur (xy) and the light reaching through
+    /// later layers (xyz) [default: xy when the profile has psf_sigma_px, else off].
+    #[arg(long, value_enum)]
+    cure_correction: Option<CureCorrectionArg>,
+    /// With --predict: write the per-layer error chart and the worst layer's predicted
+    /// outline over its section into DIR (PNG).
+    #[arg(long, value_name = "DIR", requires = "predict")]
+    cure_plots: Option<PathBuf>,
+}
+
 /// Light compensation mode.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum CompensationArg {
@@ -145,6 +173,8 @@ pub(crate) struct SliceArgs {
     #[arg(long, value_name = "TABLE.csv|off")]
     distortion: Option<PathBuf>,
     #[command(flatten)]
+    cure: Box<CureArgs>,
+    #[command(flatten)]
     warnings: super::WarningArgs,
 }
 
@@ -171,6 +201,7 @@ struct Job<'a> {
     placement: PlacementMode,
     optics: dmdsl::optics::OpticsOptions,
     distortion: DistortionChoice,
+    cure: dmdsl::job::CureOptions,
     cancel: &'a AtomicBool,
     show_progress: bool,
     format: Option<dmdsl::export::Format>,
@@ -212,6 +243,7 @@ impl Job<'_> {
             cancel: Some(self.cancel),
             distortion: self.distortion.clone(),
             format: self.format,
+            cure: self.cure.clone(),
         };
         job::slice_to_bundle(&opts)
     }
@@ -264,6 +296,15 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
             Some(p) => DistortionChoice::Table(p.clone()),
         },
+        cure: dmdsl::job::CureOptions {
+            predict: a.cure.predict,
+            correction: a.cure.cure_correction.map(|c| match c {
+                CureCorrectionArg::Xy => dmdsl::cure::Correction::Xy,
+                CureCorrectionArg::Xyz => dmdsl::cure::Correction::Xyz,
+                CureCorrectionArg::Off => dmdsl::cure::Correction::Off,
+            }),
+            plots: a.cure.cure_plots.clone(),
+        },
         cancel: &cancel,
         format: a.format.map(Into::into),
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
@@ -287,6 +328,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
                 "totals": summary.totals,
                 "timings": summary.timings,
                 "distortion": summary.distortion,
+                "cure": summary.cure,
             });
             super::print_json(&v)?;
         } else if !quiet {
@@ -447,6 +489,20 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
         summary.totals.resin_volume_ml,
         summary.timings.total_s
     );
+    if let Some(p) = summary.cure.as_ref().and_then(|c| c.predicted.as_ref()) {
+        let e = &p.edge_error_px;
+        println!(
+            "{prefix}cure ({} correction): edge error {:.2} px mean, {:.2} px p95, {:.2} px max ({:.3} mm mean); {} vanished, {} merged; print-through {:.3} mm",
+            summary.cure.as_ref().map_or("off", |c| c.correction.as_str()),
+            e.mean,
+            e.p95,
+            e.max,
+            p.edge_error_mm.mean,
+            p.vanished,
+            p.merged,
+            summary.cure.as_ref().map_or(0.0, |c| c.print_through_mm)
+        );
+    }
     if let (Some(all), Some(c)) = (
         summary.totals.all_layered_time_s,
         summary.totals.continuous_layers,

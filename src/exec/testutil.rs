@@ -39,6 +39,7 @@ pub fn layer(
         max_fill_distance_mm: 0.0,
         islands: 0,
         bbox_mm: None,
+        cure: None,
     }
 }
 
@@ -77,6 +78,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             continuous_layers: None,
             all_layered_time_s: None,
         },
+        cure: None,
         warnings: vec![],
         layers,
         optics: None,

@@ -39,6 +39,7 @@ fn slabs(m: &Manifest) -> Manifest {
         })
         .collect();
     Manifest {
+        cure: None,
         layers,
         format: m.format.clone(),
         version: m.version,

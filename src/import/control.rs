@@ -551,6 +551,7 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         let (sha, fig) = figures[e.image.file.as_str()].clone();
         let fig = fig.map(|(_, _, f)| f);
         layers.push(Layer {
+            cure: None,
             index: i as u64,
             z_mm: top,
             slice_z_mm: top - thickness / 2.0,

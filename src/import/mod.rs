@@ -201,6 +201,7 @@ pub(crate) fn manifest_of(path: &Path, p: ManifestParts) -> Manifest {
         bbox_hi = [0.0; 3];
     }
     Manifest {
+        cure: None,
         format: crate::bundle::FORMAT.into(),
         version: crate::bundle::VERSION,
         generator: Generator {

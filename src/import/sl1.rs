@@ -344,6 +344,7 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
         let exposure_s = exp.max(0.0);
         let wait_s = (overhead + exp.min(0.0) - move_s).max(0.0);
         layers.push(Layer {
+            cure: None,
             index: i as u64,
             z_mm: z,
             slice_z_mm: (i as f64 + 0.5) * layer_mm,

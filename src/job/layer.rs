@@ -40,6 +40,8 @@ pub(super) struct LayerContext<'a> {
     pub binary: bool,
     /// Area of one field pixel, mm².
     pub px_area_mm2: f64,
+    /// The cure model's correction and prediction, if the machine has a PSF.
+    pub cure: Option<&'a super::cure_records::CureJob>,
 }
 
 impl LayerContext<'_> {
@@ -61,6 +63,9 @@ pub(super) struct LayerInput<'a> {
     pub section: &'a Section,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
     pub below: Option<&'a Section>,
+    /// The sections of the layers below, nearest first, as many as the cure correction
+    /// holds downward-facing surfaces back by (`--cure-correction xyz`; else empty).
+    pub lower: Vec<&'a Section>,
 }
 
 /// What a worker made of one layer.
@@ -76,6 +81,8 @@ pub(super) struct LayerOutput {
     /// The layer's lit pixels, kept where another block needs them: for its own islands
     /// ([`Analysed::NeedsBelow`]) or those of the next layer (the last layer of a block).
     pub runs: Option<LitRuns>,
+    /// The predicted cure (`--predict`).
+    pub cure: Option<bundle::LayerCure>,
 }
 
 /// What a block's worker carries from one layer to the next.
@@ -114,7 +121,9 @@ pub(super) fn layer_masks(
         .analyser
         .equals_below(i, &layer.section.contours, below);
     let mut analysis_s = clock.elapsed_s();
-    let (drawn, origin) = match reusable(ctx, worker, i, same) {
+    // Held back surfaces depend on the layers below: equal sections may not share masks.
+    let reuse = ctx.cure.is_none_or(|c| c.held_back() == 0);
+    let (drawn, origin) = match reusable(ctx, worker, i, same && reuse) {
         Some(reused) => reused,
         None => (draw(ctx, worker, scratch, layer, same)?, Origin::Drawn),
     };
@@ -126,9 +135,15 @@ pub(super) fn layer_masks(
     }
     let masks = write_masks(ctx, &drawn, i)?;
     let area_mm2 = drawn.area_mm2;
+    let cure = drawn.cure.as_ref().map(|(c, hist)| {
+        if let Some(job) = ctx.cure {
+            job.count(hist);
+        }
+        c.clone()
+    });
     worker.previous = Some(PreviousLayerMasks {
         index: i,
-        simplified: same,
+        simplified: same && reuse,
         masks: drawn,
     });
     let clock = ThreadClock::start();
@@ -148,6 +163,7 @@ pub(super) fn layer_masks(
         analysis_s,
         masks,
         runs,
+        cure,
     })
 }
 
@@ -196,9 +212,22 @@ fn draw(
     // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
     let comp = ctx.optics.map(|o| &o.compensator);
     let drawn_section = warped.as_deref().unwrap_or(section);
-    let field_mask = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
-    let area_mm2 = scratch.lit_pixels(&field_mask) * ctx.px_area_mm2 * area_scale;
-    let outside = comp.is_some() && scratch.reported_outside();
+    let (field_mask, lit_pixels, outside, cure) = match ctx.cure.filter(|c| c.active()) {
+        // The cure correction and prediction work on the coverage (the relative irradiance
+        // the compensation then delivers): drawn, corrected and predicted, then thresholded
+        // and compensated.
+        Some(job) => {
+            let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+            let (m, c) = job.draw(ctx.raster, drawn_section, &lower, scratch, ctx.binary, comp);
+            (m, c.lit_pixels, c.outside, c.cure.map(|p| (p, c.hist)))
+        }
+        None => {
+            let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
+            let lit = scratch.lit_pixels(&m);
+            (m, lit, comp.is_some() && scratch.reported_outside(), None)
+        }
+    };
+    let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {
         let view = match ctx.tiler {
@@ -216,10 +245,13 @@ fn draw(
         pngs.push((png, sha, k as u32));
     }
     scratch.recycle(field_mask);
-    let recent = ctx.recent.filter(|_| same);
+    let recent = ctx
+        .recent
+        .filter(|_| same && ctx.cure.is_none_or(|c| c.held_back() == 0));
     let masks = Arc::new(DrawnMasks {
         outside,
         area_mm2,
+        cure,
         pngs,
         runs: if recent.is_some() {
             scratch.lit_runs.clone()

@@ -96,6 +96,7 @@ pub(super) fn plan_layers(
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
+            cure: o.cure,
         });
     }
     let totals = Totals {
@@ -175,6 +176,7 @@ pub(super) fn manifest(
         layers: planned.layers,
         optics: optics.optics,
         projector_optics: optics.projector_optics,
+        cure: None,
     }
 }
 

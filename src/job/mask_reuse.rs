@@ -21,6 +21,8 @@ pub(super) struct DrawnMasks {
     pub outside: bool,
     /// Lit area, mm².
     pub area_mm2: f64,
+    /// The predicted cure and its edge errors (`--predict`).
+    pub cure: Option<(crate::bundle::LayerCure, crate::cure::predict::Histogram)>,
     /// PNG bytes, SHA-256 and projector of each mask.
     pub pngs: Vec<(Vec<u8>, String, u32)>,
     /// The lit pixels (for the islands) when drawn from a simplified section, which
@@ -102,6 +104,7 @@ mod tests {
         Arc::new(DrawnMasks {
             outside: tag % 2 == 1,
             area_mm2: tag as f64,
+            cure: None,
             pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0)],
             runs: Default::default(),
         })

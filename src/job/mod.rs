@@ -17,6 +17,7 @@
 //! records) and `manifest.rs` (layer records, totals and the rest of the manifest).
 
 mod clock;
+mod cure_records;
 mod layer;
 mod manifest;
 mod mask_reuse;
@@ -26,6 +27,7 @@ mod pipeline;
 mod placement;
 mod sink;
 
+pub use cure_records::CureOptions;
 pub use options::{default_output, default_output_as, SliceOptions, SliceSummary, Timings};
 pub use pipeline::BLOCK;
 pub use placement::{place_mesh, placement, PlacementMode, Transform};
@@ -76,6 +78,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         origin: profile.name.clone(),
         msg,
     })?;
+    let cure = cure_records::CureJob::new(&profile, &opts.cure)?;
     let (setup, part) = load_and_place(opts, &mut profile)?;
     let load_s = t0.elapsed().as_secs_f64();
     let control = Control {
@@ -94,7 +97,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     crate::export::check_fits(format, &profile, &out)?;
     let made = MadeDirs::parents_of(&out)?;
     let writer = open_bundle(&out, format, &profile, &setup)?;
-    let (sliced, gray_map) = make_layers(&profile, &setup, &part, &writer, &control)?;
+    let (sliced, gray_map) =
+        make_layers(&profile, &setup, &part, &writer, &control, cure.as_ref())?;
 
     let t_finish = Instant::now();
     let distortion_report = setup.correction.as_ref().map(Correction::report);
@@ -111,7 +115,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         &profile,
     )?;
     warnings.append(&mut optics.warnings);
-    let manifest = manifest::manifest(
+    warnings.extend(cure_records::warnings(&planned.layers));
+    let mut manifest = manifest::manifest(
         &part,
         &profile,
         planned,
@@ -119,6 +124,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion_report.clone(),
         warnings,
     );
+    manifest.cure = cure.as_ref().map(|c| c.record(&manifest.layers));
     if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
         return Err(Error::Job {
             path: part.path.into(),
@@ -141,6 +147,19 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
     };
     made.keep();
+    if let (Some(c), Some(dir)) = (cure.as_ref(), opts.cure.plots.as_deref()) {
+        let stem = opts
+            .input
+            .file_stem()
+            .map_or("part".into(), |s| s.to_string_lossy());
+        c.write_plots(
+            dir,
+            &stem,
+            &manifest,
+            &part.mesh,
+            &Rasterizer::new(profile.field()),
+        )?;
+    }
     let mut warnings = manifest.warnings;
     warnings.extend(export_warnings);
     let finish_s = t_finish.elapsed().as_secs_f64();
@@ -161,6 +180,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
         .rounded(),
         distortion: distortion_report,
+        cure: manifest.cure,
     })
 }
 
@@ -297,6 +317,7 @@ fn make_layers(
     part: &PlacedPart,
     writer: &Sink,
     control: &Control,
+    cure: Option<&cure_records::CureJob>,
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
     let h = profile.slicing.layer_height_mm.get();
     let field = profile.field();
@@ -315,6 +336,7 @@ fn make_layers(
         recent: (setup.tiler.is_none() && setup.correction.is_none()).then_some(&recent),
         binary: profile.slicing.binary,
         px_area_mm2: field.pixel_mm * field.pixel_mm,
+        cure,
     };
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {

@@ -44,6 +44,8 @@ pub struct SliceOptions<'a> {
     /// The form of the output (`--format`); `None`: what the output's name says
     /// ([`Format::for_output`]).
     pub format: Option<Format>,
+    /// Cure prediction and correction (`--predict`, `--cure-correction`; docs/CURE.md).
+    pub cure: super::CureOptions,
 }
 
 impl SliceOptions<'_> {
@@ -69,6 +71,7 @@ impl SliceOptions<'_> {
             cancel: None,
             distortion: DistortionChoice::default(),
             format: None,
+            cure: Default::default(),
         }
     }
 
@@ -142,6 +145,9 @@ pub struct SliceSummary {
     /// Distortion fit report, when a correction was applied.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub distortion: Option<FitReport>,
+    /// The cure model, correction and prediction, when the machine has a PSF.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cure: Option<crate::bundle::Cure>,
 }
 
 /// Serializes a format by its name.

@@ -303,6 +303,7 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
                 0 => block.prev.as_ref().and_then(|w| w.last()),
                 _ => Some(&sections[k - 1]),
             },
+            lower: lower_sections(block, k, p.ctx.cure.map_or(0, |c| c.held_back())),
         };
         let mut out = layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?;
         // The next block's first layer counts its islands over these.
@@ -316,6 +317,20 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The sections of the `m` layers below layer `k` of `block`'s window (nearest first;
+/// fewer near the platform), from the window and the window below.
+fn lower_sections(block: &Block, k: usize, m: usize) -> Vec<&Section> {
+    (1..=m)
+        .map_while(|d| match k.checked_sub(d) {
+            Some(j) => Some(&block.sections[j]),
+            None => block
+                .prev
+                .as_ref()
+                .and_then(|w| w.len().checked_sub(d - k).map(|j| &w[j])),
+        })
+        .collect()
 }
 
 /// Counts a block's layers off when it ends, resuming the slicing task when that makes

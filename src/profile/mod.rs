@@ -122,6 +122,11 @@ pub struct Projector {
     /// docs/CALIBRATION.md). Without one the projector's masks are not compensated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+    /// Standard deviation of the projector's point-spread function on the build plane,
+    /// pixels (a Gaussian; docs/CURE.md). Without it the job predicts and corrects no cure
+    /// (profiles and bundles written before the key existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psf_sigma_px: Option<Positive>,
 }
 
 /// The smallest pixel on the build plane a profile may give, mm (1 µm).
@@ -356,6 +361,16 @@ impl Profile {
             }
             if let Some(c) = &p.calibration {
                 p.check_calibration(c)?;
+            }
+            if let Some(s) = p
+                .psf_sigma_px
+                .map(|s| s.get())
+                .filter(|s| !(0.05..=5.0).contains(s))
+            {
+                return Err(format!(
+                    "projector {}: psf_sigma_px = {s:?} is not a point-spread width in pixels (0.05 to 5)",
+                    p.name
+                ));
             }
         }
         check_unit_ranges(&serde_json::to_value(self).map_err(|e| e.to_string())?, "")?;

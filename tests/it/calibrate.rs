@@ -93,6 +93,9 @@ fn slice_plate(dir: &Path, extra: &[&str]) -> (Vec<u8>, serde_json::Value) {
         "p.dmdjob",
         "--keep-position",
         "-q",
+        // The compensation of the exact coverage (the cure correction: tests/it/cure.rs).
+        "--cure-correction",
+        "off",
     ];
     args.extend_from_slice(extra);
     let o = run_in(dir, &args);
@@ -321,6 +324,8 @@ fn edge_pixels_get_the_inverse_response_of_their_coverage() {
             "--keep-position",
             "-q",
             "--dither",
+            "off",
+            "--cure-correction",
             "off",
         ],
     );
@@ -574,7 +579,18 @@ fn compensation_flags_are_checked() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("c.toml"), "{}", stderr(&o));
     // Off: plain coverage, no optics record.
-    let o = run_in(&dir, &["slice", "b.stl", "-q", "--compensation", "off"]);
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "b.stl",
+            "-q",
+            "--compensation",
+            "off",
+            "--cure-correction",
+            "off",
+        ],
+    );
     ok(&o);
     let job: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();

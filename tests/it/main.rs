@@ -5,6 +5,7 @@
 mod batch;
 mod calibrate;
 mod common;
+mod cure;
 mod export;
 mod fuzz;
 mod geometry;

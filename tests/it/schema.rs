@@ -478,7 +478,7 @@ fn every_json_output_matches_its_schema() {
             &["--calibration", "cal.toml", "--compensation", "pixel"],
         ),
         (&island, "hyb.dmdjob", &["-p", "hybrid-bottomup"]),
-        (&cube, "bu.dmdjob", &["-p", "bottom-up"]),
+        (&cube, "bu.dmdjob", &["-p", "bottom-up", "--predict"]),
         (&cube, "tiled.dmdjob", &["-p", "tiled-2x1"]),
     ];
     for (part, out, args) in jobs {

@@ -7,11 +7,12 @@ use std::path::Path;
 const P: f64 = 65.0 / 1024.0;
 
 fn slice_ok(dir: &Path, args: &[&str]) -> Value {
-    // These tests check geometry (coverage masks); light compensation, on by default with
-    // the built-in profile, is tested in tests/it/calibrate.rs.
+    // These tests check geometry (coverage masks: the exact sections); light
+    // compensation and the cure correction, on by default with the built-in profile, are
+    // tested in tests/it/calibrate.rs and tests/it/cure.rs.
     let mut args = args.to_vec();
     if args.first() == Some(&"slice") {
-        args.extend(["--compensation", "off"]);
+        args.extend(["--compensation", "off", "--cure-correction", "off"]);
     }
     let args = &args[..];
     let o = run_in(dir, args);

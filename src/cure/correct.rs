@@ -1,0 +1,257 @@
+//! XY correction: move every edge of the drawn section by the offset that puts the
+//! predicted cured edge at mid-layer on the section's edge.
+//!
+//! Across a straight anti-aliased edge the light is close to Φ(−s/σₑ) at signed distance
+//! s outside it, σₑ = √(σ² + 1/12) ([`Psf::sigma_edge_px`]), so the cured edge lies at
+//! s* = −σₑ·Φ⁻¹(T) for the mid-layer threshold T ([`CureModel::edge_threshold`]). The
+//! correction draws the section moved inward by s* (outward where s* < 0): a pixel within
+//! reach of an edge gets its exact coverage changed by the difference between the
+//! coverages of the pixel by the edge's half-plane moved and not moved
+//! ([`halfplane_coverage`]). Straight edges are then drawn exactly moved; pixels farther
+//! than the move from every edge keep their exact coverage, so interiors stay flat. The
+//! light compensation maps the corrected coverage to grays as it maps any coverage: one
+//! target dose for both.
+
+use super::dose::CureModel;
+use super::psf::{phi_inv, Psf};
+use super::segments::Segments;
+use crate::raster::Mask;
+use crate::raster::PixelBox;
+use crate::slice::Contour;
+
+/// The inward move of the edges that puts the cured edge on the section, px (negative:
+/// outward).
+pub fn edge_shift_px(model: &CureModel) -> f64 {
+    let psf = Psf {
+        sigma_px: model.sigma_px,
+    };
+    let t = model.edge_threshold().clamp(1e-9, 1.0 - 1e-9);
+    -psf.sigma_edge_px() * phi_inv(t)
+}
+
+/// Area of the unit pixel centred at the origin on the side `n·p ≤ u` of a line with
+/// unit normal `n`.
+pub fn halfplane_coverage(n: [f64; 2], u: f64) -> f64 {
+    let (a, b) = {
+        let (x, y) = (n[0].abs(), n[1].abs());
+        if x >= y {
+            (x, y)
+        } else {
+            (y, x)
+        }
+    };
+    let h1 = 0.5 * (a - b);
+    let h2 = 0.5 * (a + b);
+    if u <= -h2 {
+        0.0
+    } else if u >= h2 {
+        1.0
+    } else if b < 1e-12 {
+        (u + 0.5).clamp(0.0, 1.0)
+    } else if u <= -h1 {
+        (u + h2) * (u + h2) / (2.0 * a * b)
+    } else if u <= h1 {
+        b / (2.0 * a) + (u + h1) / a
+    } else {
+        1.0 - (h2 - u) * (h2 - u) / (2.0 * a * b)
+    }
+}
+
+/// Moves the edges of the coverage mask `mask` (values = coverage × 255, zero outside
+/// `lit`) of the section `contours` (build-plane mm) inward by `shift_px`; only pixels
+/// inside `lit` change. Returns the number of pixels changed.
+pub fn correct_coverage(
+    mask: &mut Mask,
+    lit: PixelBox,
+    contours: &[Contour],
+    pixel_mm: f64,
+    shift_px: f64,
+) -> usize {
+    if shift_px == 0.0 || lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
+        return 0;
+    }
+    // Edges of fine meshes simplified within 0.01 px: the same correction, fewer edges.
+    let segs = Segments::simplified(contours, pixel_mm, mask.height as f64, 0.01);
+    let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.abs();
+    let bw = lit.c1 - lit.c0;
+    BAND.with(|band| {
+        let band = &mut *band.borrow_mut();
+        band.prepare(bw * (lit.r1 - lit.r0));
+        // Nearest edge of each pixel of the box within reach: distance and edge. Only
+        // the pixels some edge comes near are visited, and only they are reset after.
+        let r2 = reach * reach;
+        for (i, s) in segs.segs.iter().enumerate() {
+            let (a, b) = (s.a, s.b);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l2 = dx * dx + dy * dy;
+            // (Truncation floors the non-negative values: `floor` is a libm call.)
+            let rows = (a[1].min(b[1]) - reach - 0.5).max(lit.r0 as f64) as usize
+                ..ceil(a[1].max(b[1]) + reach - 0.5).min(lit.r1);
+            for r in rows {
+                let v = r as f64 + 0.5;
+                // The part of the edge within `reach` of the row, then its columns.
+                let (t0, t1) = if dy.abs() > 1e-12 {
+                    let (p, q) = ((v - reach - a[1]) / dy, (v + reach - a[1]) / dy);
+                    (p.min(q).max(0.0), p.max(q).min(1.0))
+                } else {
+                    (0.0, 1.0)
+                };
+                if t0 > t1 {
+                    continue;
+                }
+                let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
+                let c0 = (x0.min(x1) - reach - 0.5).max(lit.c0 as f64) as usize;
+                let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
+                for c in c0..c1 {
+                    let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
+                    let t = if l2 > 0.0 {
+                        ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    let (ex, ey) = (wx - t * dx, wy - t * dy);
+                    let d2 = ex * ex + ey * ey;
+                    if d2 < r2 {
+                        band.offer((r - lit.r0) * bw + (c - lit.c0), d2 as f32, i as u32);
+                    }
+                }
+            }
+        }
+        let w = mask.width as usize;
+        let mut changed = 0;
+        for &k in &band.touched {
+            let (_, i) = band.best[k as usize];
+            let (r, c) = (k as usize / bw, k as usize % bw);
+            let s = &segs.segs[i as usize];
+            let p = [(c + lit.c0) as f64 + 0.5, (r + lit.r0) as f64 + 0.5];
+            // Signed distance of the centre outside the edge's line.
+            let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
+            let delta = halfplane_coverage(s.n, -(sd + shift_px)) - halfplane_coverage(s.n, -sd);
+            let m = (r + lit.r0) * w + c + lit.c0;
+            let v = (mask.data[m] as f64 + 255.0 * delta)
+                .round()
+                .clamp(0.0, 255.0) as u8;
+            if v != mask.data[m] {
+                mask.data[m] = v;
+                changed += 1;
+            }
+        }
+        band.reset();
+        changed
+    })
+}
+
+/// ⌈x⌉ for x ≥ 0 (0 below).
+#[inline]
+fn ceil(x: f64) -> usize {
+    let t = x.max(0.0) as usize;
+    t + ((t as f64) < x) as usize
+}
+
+/// The nearest edge (squared distance, edge) of the pixels near the section's edges, kept per thread from layer
+/// to layer (sized to the largest lit box seen; only the entries written are reset).
+#[derive(Default)]
+struct Band {
+    best: Vec<(f32, u32)>,
+    touched: Vec<u32>,
+}
+
+impl Band {
+    fn prepare(&mut self, n: usize) {
+        if self.best.len() < n {
+            self.best.resize(n, (f32::INFINITY, u32::MAX));
+        }
+        self.touched.clear();
+    }
+
+    fn offer(&mut self, k: usize, d: f32, i: u32) {
+        let slot = &mut self.best[k];
+        if slot.1 == u32::MAX {
+            self.touched.push(k as u32);
+        }
+        if d < slot.0 {
+            *slot = (d, i);
+        }
+    }
+
+    fn reset(&mut self) {
+        for &k in &self.touched {
+            self.best[k as usize] = (f32::INFINITY, u32::MAX);
+        }
+        self.touched.clear();
+    }
+}
+
+thread_local! {
+    static BAND: std::cell::RefCell<Band> = std::cell::RefCell::new(Band::default());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn halfplane_coverage_is_the_area() {
+        // Brute force: count sub-points of the pixel on the side n·p ≤ u.
+        let k = 400;
+        for &(nx, ny) in &[(1.0, 0.0), (0.6, 0.8), (-0.28, 0.96), (1.0, -1.0)] {
+            let l = f64::hypot(nx, ny);
+            let n = [nx / l, ny / l];
+            for &u in &[-0.8, -0.5, -0.3, -0.05, 0.0, 0.2, 0.45, 0.9] {
+                let mut inside = 0;
+                for i in 0..k {
+                    for j in 0..k {
+                        let x = (i as f64 + 0.5) / k as f64 - 0.5;
+                        let y = (j as f64 + 0.5) / k as f64 - 0.5;
+                        inside += (n[0] * x + n[1] * y <= u) as usize;
+                    }
+                }
+                let want = inside as f64 / (k * k) as f64;
+                let got = halfplane_coverage(n, u);
+                assert!((got - want).abs() < 3e-3, "n {n:?} u {u}: {got} vs {want}");
+            }
+        }
+    }
+
+    /// A rectangle's corrected coverage equals the exact coverage of the rectangle moved
+    /// inward by the shift (drawn by the rasterizer), but for the pixels at its corners.
+    #[test]
+    fn a_straight_edge_moves_by_the_shift() {
+        use crate::profile::Profile;
+        use crate::raster::{Rasterizer, Scratch};
+        let field = Profile::default_profile().field();
+        let p = field.pixel_mm;
+        let raster = Rasterizer::new(field);
+        let rect =
+            |x0: f64, y0: f64, x1: f64, y1: f64| vec![vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]];
+        // Edges at fractions of a pixel; the shift 0.37 px.
+        let (x0, y0, x1, y1) = (100.3 * p, 200.6 * p, 160.85 * p, 230.1 * p);
+        let d = 0.37;
+        let mut scratch = Scratch::default();
+        let mut m = raster.coverage(&rect(x0, y0, x1, y1), &mut scratch);
+        let lit = scratch.lit_box();
+        let changed = correct_coverage(&mut m, lit, &rect(x0, y0, x1, y1), p, d);
+        assert!(changed > 100, "{changed}");
+        let mut s2 = Scratch::default();
+        let want = raster.coverage(
+            &rect(x0 + d * p, y0 + d * p, x1 - d * p, y1 - d * p),
+            &mut s2,
+        );
+        let (c0, c1) = ((x0 / p) as usize, (x1 / p) as usize + 1);
+        let r0 = field.height_px as usize - (y1 / p) as usize - 1;
+        let r1 = field.height_px as usize - (y0 / p) as usize + 1;
+        let mut worst = 0i32;
+        for r in r0..r1 {
+            for c in c0..c1 {
+                let corner = (c <= c0 + 1 || c + 2 >= c1) && (r <= r0 + 1 || r + 2 >= r1);
+                if !corner {
+                    worst = worst.max(
+                        (m.get(c as u32, r as u32) as i32 - want.get(c as u32, r as u32) as i32)
+                            .abs(),
+                    );
+                }
+            }
+        }
+        assert!(worst <= 1, "{worst}");
+    }
+}

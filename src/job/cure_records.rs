@@ -1,0 +1,332 @@
+//! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
+//! edge errors of all layers, and the manifest's record and warnings.
+
+use crate::bundle::{self, CurePrediction, EdgeError, Layer, LayerCure};
+use crate::cure::predict::Histogram;
+use crate::cure::{self, Correction, CureModel};
+use crate::error::{Error, Result};
+use crate::optics::Compensator;
+use crate::profile::Profile;
+use crate::raster::{Mask, Rasterizer, Scratch};
+use crate::slice::Contour;
+use crate::warning::{plural, Warning};
+use std::sync::Mutex;
+
+/// What a job asks of the cure model.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CureOptions {
+    /// Predict each layer's cure (`slice --predict`).
+    pub predict: bool,
+    /// The masks' correction (`--cure-correction`); `None`: `xy` when the machine has a
+    /// PSF, else off.
+    pub correction: Option<Correction>,
+    /// Directory for the prediction's pictures (`--cure-plots`): the per-layer error chart
+    /// and the worst layer's cured outline over its section.
+    pub plots: Option<std::path::PathBuf>,
+}
+
+/// The cure model of one job.
+pub(super) struct CureJob {
+    model: CureModel,
+    correction: Correction,
+    shift_px: f64,
+    /// Layers a downward-facing surface is held back by (`xyz`).
+    held_back: usize,
+    predict: bool,
+    /// Absolute edge errors of every layer (sums: the same in any order).
+    hist: Mutex<Histogram>,
+}
+
+/// What drawing a layer through the cure model gave besides its mask.
+pub(super) struct CureDrawn {
+    /// Lit area of the section's coverage (before the correction), pixels.
+    pub lit_pixels: f64,
+    /// Whether the compensation found the layer lit outside its calibrated area.
+    pub outside: bool,
+    /// The prediction (`--predict`).
+    pub cure: Option<LayerCure>,
+    /// Its absolute edge errors.
+    pub hist: Histogram,
+}
+
+impl CureJob {
+    /// The cure model of a job on `profile` (already completed for the job); `None` when
+    /// the machine has no PSF and nothing is asked. Asking a prediction or a correction of
+    /// a machine without a PSF is an error.
+    pub fn new(profile: &Profile, opts: &CureOptions) -> Result<Option<CureJob>> {
+        let model = CureModel::from_profile(profile);
+        let wants =
+            opts.predict || matches!(opts.correction, Some(Correction::Xy | Correction::Xyz));
+        let Some(model) = model else {
+            if wants {
+                return Err(Error::Profile {
+                    origin: profile.name.clone(),
+                    msg: "--predict and --cure-correction need the projector's point-spread function (psf_sigma_px in each [[projector]]; docs/CURE.md)".into(),
+                });
+            }
+            return Ok(None);
+        };
+        let correction = opts.correction.unwrap_or(Correction::Xy);
+        let shift_px = match correction {
+            Correction::Off => 0.0,
+            _ => cure::edge_shift_px(&model),
+        };
+        // The print-through under a flat surface with many layers above, in whole layers.
+        let held_back = match correction {
+            // At most a window of layers below is at hand (job::pipeline).
+            Correction::Xyz => {
+                ((model.print_through_mm(None) / model.layer_mm).round() as usize).min(32)
+            }
+            _ => 0,
+        };
+        Ok(Some(CureJob {
+            model,
+            correction,
+            shift_px,
+            held_back,
+            predict: opts.predict,
+            hist: Mutex::new(Histogram::default()),
+        }))
+    }
+
+    /// Whether layers are drawn through [`CureJob::draw`].
+    pub fn active(&self) -> bool {
+        self.shift_px != 0.0 || self.predict || self.held_back > 0
+    }
+
+    /// Layers a downward-facing surface is held back by (0 unless `xyz`).
+    pub fn held_back(&self) -> usize {
+        self.held_back
+    }
+
+    /// Draws `section`'s coverage, corrects it (XY; with `xyz` each pixel also takes at
+    /// most the coverage of the `lower` sections, the layers below: a downward-facing
+    /// surface is drawn only from its held-back layers on), predicts its cure
+    /// (`--predict`), then thresholds (`binary`) and compensates (`comp`) it in place.
+    pub fn draw(
+        &self,
+        raster: &Rasterizer,
+        section: &[Contour],
+        lower: &[&[Contour]],
+        scratch: &mut Scratch,
+        binary: bool,
+        comp: Option<&Compensator>,
+    ) -> (Mask, CureDrawn) {
+        let mut m = raster.render::<Compensator>(section, scratch, false, None);
+        let lit = scratch.lit_box();
+        // The record's area is the section's, as drawn before the correction.
+        let lit_pixels = scratch.lit_pixels(&m);
+        if self.shift_px != 0.0 {
+            cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
+        }
+        if !lower.is_empty() {
+            LOWER.with(|s| {
+                let s = &mut *s.borrow_mut();
+                for below in lower {
+                    let b = raster.coverage(below, s);
+                    for r in lit.rows() {
+                        let row = r * m.width as usize;
+                        for c in lit.cols() {
+                            let v = &mut m.data[row + c];
+                            *v = (*v).min(b.data[row + c]);
+                        }
+                    }
+                    s.recycle(b);
+                }
+            });
+        }
+        if binary {
+            crate::raster::threshold(&mut m);
+        }
+        let (cure, hist) = if self.predict {
+            let (c, h) = cure::predict_layer(&self.model, &m, section);
+            let r = crate::round::derived;
+            let c = LayerCure {
+                mean_px: r(c.mean_px),
+                abs_mean_px: r(c.abs_mean_px),
+                p95_px: r(c.p95_px),
+                max_px: r(c.max_px),
+                ..c
+            };
+            (Some(c), h)
+        } else {
+            (None, Histogram::default())
+        };
+        let outside = comp.is_some_and(|c| c.apply_in(&mut m, lit));
+        (
+            m,
+            CureDrawn {
+                lit_pixels,
+                outside,
+                cure,
+                hist,
+            },
+        )
+    }
+
+    /// Writes the prediction's pictures into `dir`: `<stem>-cure-errors.png` (per-layer
+    /// chart) and `<stem>-cure-layer-<N>.png`, layer N (the worst by mean absolute error)
+    /// drawn again (without the distortion pre-warp) with its predicted cured outline.
+    /// Returns the files written.
+    pub fn write_plots(
+        &self,
+        dir: &std::path::Path,
+        stem: &str,
+        manifest: &bundle::Manifest,
+        mesh: &crate::mesh::Mesh,
+        raster: &Rasterizer,
+    ) -> Result<Vec<std::path::PathBuf>> {
+        use crate::plot::Format;
+        let mut out = Vec::new();
+        let chart = cure::plots::error_chart(stem, &manifest.layers).render();
+        let p = dir.join(format!("{stem}-cure-errors.png"));
+        crate::output::write_atomic(&p, &chart.encode(Format::Png))?;
+        out.push(p);
+        let worst = manifest
+            .cure
+            .as_ref()
+            .and_then(|c| c.predicted.as_ref())
+            .and_then(|p| p.worst_layers.first().copied());
+        if let Some(i) = worst.map(|i| i as usize) {
+            let n = manifest.layers.len();
+            let section = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
+                .window(i..i + 1)
+                .pop()
+                .unwrap_or_default();
+            let mut scratch = Scratch::default();
+            let window = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
+                .window(i.saturating_sub(self.held_back)..i);
+            let lower: Vec<&[Contour]> = window.iter().rev().map(|s| &s.contours[..]).collect();
+            let (mask, _) = self.draw(raster, &section.contours, &lower, &mut scratch, false, None);
+            let samples = cure::predict::edge_samples(&self.model, &mask, &section.contours);
+            let pic =
+                cure::plots::outline_picture(&self.model, i, &mask, &section.contours, &samples);
+            let p = dir.join(format!("{stem}-cure-layer-{i:05}.png"));
+            crate::output::write_atomic(&p, &pic.encode(Format::Png))?;
+            out.push(p);
+        }
+        Ok(out)
+    }
+
+    /// Counts a layer's edge errors into the job's.
+    pub fn count(&self, hist: &Histogram) {
+        self.hist
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .merge(hist);
+    }
+
+    /// The manifest's record, from the layers' predictions.
+    pub fn record(&self, layers: &[Layer]) -> bundle::Cure {
+        let m = &self.model;
+        let r = crate::round::derived;
+        let predicted = self.predict.then(|| {
+            let hist = self.hist.lock().unwrap_or_else(|p| p.into_inner());
+            let cures: Vec<(u64, &LayerCure)> = layers
+                .iter()
+                .filter_map(|l| l.cure.as_ref().map(|c| (l.index, c)))
+                .collect();
+            let n: u64 = cures.iter().map(|(_, c)| c.samples).sum();
+            let w = |f: fn(&LayerCure) -> f64| {
+                if n == 0 {
+                    0.0
+                } else {
+                    cures
+                        .iter()
+                        .map(|(_, c)| f(c) * c.samples as f64)
+                        .sum::<f64>()
+                        / n as f64
+                }
+            };
+            let px = EdgeError {
+                mean: r(w(|c| c.abs_mean_px)),
+                p95: r(hist.quantile(0.95)),
+                max: r(cures.iter().map(|(_, c)| c.max_px).fold(0.0, f64::max)),
+            };
+            let mm = EdgeError {
+                mean: r(px.mean * m.pixel_mm),
+                p95: r(px.p95 * m.pixel_mm),
+                max: r(px.max * m.pixel_mm),
+            };
+            let mut worst: Vec<(u64, f64)> = cures
+                .iter()
+                .filter(|(_, c)| c.samples > 0)
+                .map(|(i, c)| (*i, c.abs_mean_px))
+                .collect();
+            worst.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+            CurePrediction {
+                samples: n,
+                edge_error_px: px,
+                edge_error_mm: mm,
+                signed_mean_px: r(w(|c| c.mean_px)),
+                vanished: cures.iter().map(|(_, c)| c.vanished as u64).sum(),
+                merged: cures.iter().map(|(_, c)| c.merged as u64).sum(),
+                worst_layers: worst.iter().take(5).map(|w| w.0).collect(),
+            }
+        });
+        bundle::Cure {
+            psf_sigma_px: m.sigma_px,
+            pixel_mm: m.pixel_mm,
+            dp_mm: m.dp_mm,
+            ec_mj_cm2: m.ec_mj_cm2,
+            overcure_mm: m.overcure_mm,
+            layer_mm: m.layer_mm,
+            edge_threshold: r(m.edge_threshold()),
+            correction: self.correction.as_str().into(),
+            shift_px: r(self.shift_px),
+            print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
+            held_back_layers: self.held_back as u32,
+            predicted,
+        }
+    }
+}
+
+thread_local! {
+    /// Scratch of the layers below's coverage (`xyz`), one per worker thread.
+    static LOWER: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// The warnings of the layers' predictions: features that vanish, gaps that close.
+pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
+    let mut out = Vec::new();
+    let count = |f: fn(&LayerCure) -> u32| {
+        let hit: Vec<(u64, u32)> = layers
+            .iter()
+            .filter_map(|l| l.cure.as_ref().map(|c| (l.index, f(c))))
+            .filter(|(_, k)| *k > 0)
+            .collect();
+        let total: u64 = hit.iter().map(|h| h.1 as u64).sum();
+        (total, hit.len() as u64, hit.first().map(|h| h.0))
+    };
+    if let (k, n, Some(first)) = count(|c| c.vanished) {
+        out.push(
+            Warning::new(
+                "cure.features-vanish",
+                format!(
+                    "cure: {k} {} cure nowhere in {n} {} (first: layer {first}); widen them or raise the exposure",
+                    plural(k, "feature", "features"),
+                    plural(n, "layer", "layers")
+                ),
+            )
+            .with("features", k)
+            .with("layers", n)
+            .with("first_layer", first),
+        );
+    }
+    if let (k, n, Some(first)) = count(|c| c.merged) {
+        out.push(
+            Warning::new(
+                "cure.features-merge",
+                format!(
+                    "cure: {k} {} cure across a gap in {n} {} (first: layer {first}): neighbouring features join",
+                    plural(k, "contour", "contours"),
+                    plural(n, "layer", "layers")
+                ),
+            )
+            .with("contours", k)
+            .with("layers", n)
+            .with("first_layer", first),
+        );
+    }
+    out
+}

@@ -1,0 +1,416 @@
+//! `slice --predict` and `--cure-correction` against an independent brute-force evaluation
+//! of the same model (docs/CURE.md): the light of every lit pixel of the written mask,
+//! each pixel split into 4 × 4 point sources, summed as Gaussians (no separable weights,
+//! no error functions, nothing of `src/cure/`), at steps along lines across the exact
+//! edges of the feature test part (`fixtures/features.json`, made by
+//! `fixtures/make_features.py`).
+
+use crate::common::*;
+use serde_json::Value;
+use std::path::Path;
+
+/// Pixel edge and rows of the default profile.
+const P: f64 = 0.0634765625;
+const ROWS: f64 = 768.0;
+/// The default profile's PSF, resin and layer.
+const SIGMA: f64 = 0.5;
+const DP: f64 = 0.15;
+const OVERCURE: f64 = 0.03;
+const H: f64 = 0.05;
+
+/// The mid-layer threshold of the model, written out: a wall's own layer and every layer
+/// above light it alike; D₀ = Ec·exp((h + overcure)/Dp) at a full pixel.
+fn threshold() -> f64 {
+    (-(H / 2.0 + OVERCURE) / DP).exp() * (1.0 - (-H / DP).exp())
+}
+
+struct Oracle {
+    data: Vec<u8>,
+    w: i64,
+    h: i64,
+}
+
+impl Oracle {
+    /// Relative light at field pixel coordinates (u, v): every lit pixel within 12σ (the
+    /// rest is below e⁻⁷² of a pixel's light), 4 × 4 point sources each.
+    fn light(&self, u: f64, v: f64) -> f64 {
+        let r = (12.0 * SIGMA).ceil() as i64 + 1;
+        let (cu, cv) = (u.floor() as i64, v.floor() as i64);
+        let mut sum = 0.0;
+        let k = 4;
+        let norm = 1.0 / (2.0 * std::f64::consts::PI * SIGMA * SIGMA) / (k * k) as f64;
+        for row in (cv - r).max(0)..=(cv + r).min(self.h - 1) {
+            for col in (cu - r).max(0)..=(cu + r).min(self.w - 1) {
+                let val = self.data[(row * self.w + col) as usize];
+                if val == 0 {
+                    continue;
+                }
+                let mut s = 0.0;
+                for i in 0..k {
+                    for j in 0..k {
+                        let x = col as f64 + (i as f64 + 0.5) / k as f64 - u;
+                        let y = row as f64 + (j as f64 + 0.5) / k as f64 - v;
+                        s += (-(x * x + y * y) / (2.0 * SIGMA * SIGMA)).exp();
+                    }
+                }
+                sum += s * norm * val as f64 / 255.0;
+            }
+        }
+        sum
+    }
+
+    /// Signed distance (px, along the outward normal `n`) from the exact edge point `p`
+    /// (build-plane mm) to the cured edge: the light's crossing of the threshold nearest
+    /// the edge, on a 0.05 px grid from −2 to 2 px, refined by bisection.
+    fn cured_edge(&self, p: [f64; 2], n: [f64; 2]) -> Option<f64> {
+        let (u, v) = (p[0] / P, ROWS - p[1] / P);
+        let (nu, nv) = (n[0], -n[1]);
+        let t = threshold();
+        let f = |s: f64| self.light(u + s * nu, v + s * nv) - t;
+        let steps: Vec<f64> = (0..=80).map(|i| -2.0 + 0.05 * i as f64).collect();
+        let vals: Vec<f64> = steps.iter().map(|&s| f(s)).collect();
+        let mut best: Option<(f64, f64)> = None;
+        for i in 0..80 {
+            if vals[i] >= 0.0 && vals[i + 1] < 0.0 {
+                let (mut a, mut b) = (steps[i], steps[i + 1]);
+                for _ in 0..20 {
+                    let m = 0.5 * (a + b);
+                    if f(m) >= 0.0 {
+                        a = m;
+                    } else {
+                        b = m;
+                    }
+                }
+                let c = 0.5 * (a + b);
+                if best.is_none_or(|(d, _)| c.abs() < d) {
+                    best = Some((c.abs(), c));
+                }
+            }
+        }
+        best.map(|b| b.1)
+    }
+}
+
+/// Points on the exact edges of the feature part with their outward normals, away from
+/// corners.
+fn edge_points() -> Vec<([f64; 2], [f64; 2])> {
+    let spec: Value =
+        serde_json::from_slice(&std::fs::read(fixture("features.json")).unwrap()).unwrap();
+    let mut out = Vec::new();
+    for s in spec["solids"].as_array().unwrap() {
+        let g = |k: &str| s[k].as_f64().unwrap();
+        match s["kind"].as_str().unwrap() {
+            "box" => {
+                let (x0, y0, x1, y1) = (g("x0"), g("y0"), g("x1"), g("y1"));
+                for f in [1.0 / 3.0, 2.0 / 3.0] {
+                    let y = y0 + f * (y1 - y0);
+                    out.push(([x0, y], [-1.0, 0.0]));
+                    out.push(([x1, y], [1.0, 0.0]));
+                }
+                if x1 - x0 >= 1.0 {
+                    let x = 0.5 * (x0 + x1);
+                    out.push(([x, y0], [0.0, -1.0]));
+                    out.push(([x, y1], [0.0, 1.0]));
+                }
+            }
+            kind @ ("pin" | "hole") => {
+                let n = g("n");
+                let (cx, cy, r) = (g("cx"), g("cy"), g("r"));
+                // Mid-edges of the polygon: at r·cos(π/n) from the centre.
+                for k in [0.5, 4.5, 8.5, 12.5] {
+                    let a = 2.0 * std::f64::consts::PI * k / n;
+                    let d = [a.cos(), a.sin()];
+                    let rr = r * (std::f64::consts::PI / n).cos();
+                    let p = [cx + rr * d[0], cy + rr * d[1]];
+                    let sign = if kind == "pin" { 1.0 } else { -1.0 };
+                    out.push((p, [sign * d[0], sign * d[1]]));
+                    if kind == "hole" {
+                        let ro = g("ro") * (std::f64::consts::PI / n).cos();
+                        out.push(([cx + ro * d[0], cy + ro * d[1]], d));
+                    }
+                }
+            }
+            k => panic!("unknown solid {k}"),
+        }
+    }
+    out
+}
+
+/// Slices the feature part (compensation off: the mask's values are the relative
+/// irradiance) and returns the summary and the oracle's errors on its middle layer.
+fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>) {
+    let f = fixture("features.stl");
+    let o = run_in(
+        dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "--compensation",
+            "off",
+            "--predict",
+            "--cure-correction",
+            correction,
+            "--json",
+            "-o",
+            out,
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (w, h, data) = read_gray(&dir.join(out).join("masks/00003.png"));
+    let oracle = Oracle {
+        data,
+        w: w as i64,
+        h: h as i64,
+    };
+    let errors = edge_points()
+        .into_iter()
+        .map(|(p, n)| {
+            oracle
+                .cured_edge(p, n)
+                .unwrap_or_else(|| panic!("{out}: no cured edge near {p:?}"))
+        })
+        .collect();
+    (summary, errors)
+}
+
+fn stats(e: &[f64]) -> (f64, f64, f64) {
+    let mut a: Vec<f64> = e.iter().map(|x| x.abs()).collect();
+    a.sort_by(f64::total_cmp);
+    let mean = a.iter().sum::<f64>() / a.len() as f64;
+    let p95 = a[((0.95 * a.len() as f64).ceil() as usize).max(1) - 1];
+    let signed = e.iter().sum::<f64>() / e.len() as f64;
+    (mean, p95, signed)
+}
+
+#[test]
+fn correction_puts_the_cured_edge_on_the_section_and_the_report_shows_the_error() {
+    let dir = tempdir("cure-features");
+    // Without correction: the blurred edge cures where a wall's accumulated dose reaches
+    // Ec, outside the section (threshold below one half).
+    let (off, e_off) = sliced(&dir, "off.dmdjob", "off");
+    let (mean, p95, signed) = stats(&e_off);
+    assert!(threshold() < 0.5);
+    assert!(
+        mean > 0.4 && signed > 0.4,
+        "oracle without correction: {mean} {signed}"
+    );
+    let rep = &off["cure"]["predicted"];
+    assert_eq!(off["cure"]["correction"], "off");
+    let rmean = rep["edge_error_px"]["mean"].as_f64().unwrap();
+    let rp95 = rep["edge_error_px"]["p95"].as_f64().unwrap();
+    // The report shows the error the correction removes, as the oracle finds it.
+    assert!(
+        (rmean - mean).abs() < 0.05,
+        "report {rmean} vs oracle {mean}"
+    );
+    assert!(
+        (rp95 - p95).abs() < 0.15,
+        "report p95 {rp95} vs oracle {p95}"
+    );
+    assert_eq!(rep["vanished"], 0);
+    assert_eq!(rep["merged"], 0);
+
+    // With the default correction (xy): within 0.25 px mean and 0.5 px p95, by the
+    // oracle and by the report.
+    let (xy, e_xy) = sliced(&dir, "xy.dmdjob", "xy");
+    let (mean, p95, _) = stats(&e_xy);
+    assert!(
+        mean <= 0.25 && p95 <= 0.5,
+        "oracle with correction: {mean} {p95}"
+    );
+    let rep = &xy["cure"]["predicted"];
+    assert_eq!(xy["cure"]["correction"], "xy");
+    let rmean = rep["edge_error_px"]["mean"].as_f64().unwrap();
+    let rp95 = rep["edge_error_px"]["p95"].as_f64().unwrap();
+    assert!(
+        rmean <= 0.25 && rp95 <= 0.5,
+        "report with correction: {rmean} {rp95}"
+    );
+    assert!(
+        (rmean - mean).abs() < 0.05,
+        "report {rmean} vs oracle {mean}"
+    );
+    let shift = xy["cure"]["shift_px"].as_f64().unwrap();
+    assert!(shift > 0.3 && shift < 0.7, "{shift}");
+}
+
+#[test]
+fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
+    let dir = tempdir("cure-default");
+    let f = fixture("cube10.stl");
+    let o = run_in(
+        &dir,
+        &["slice", f.to_str().unwrap(), "-q", "-o", "c.dmdjob"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("c.dmdjob/job.json")).unwrap()).unwrap();
+    assert_eq!(job["cure"]["correction"], "xy");
+    assert!(job["cure"].get("predicted").is_none());
+    // The pictures: the per-layer chart and the worst layer's outline.
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "-q",
+            "--layer-height",
+            "1",
+            "--predict",
+            "--cure-plots",
+            ".",
+            "-o",
+            "p.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for name in ["cube10-cure-errors.png", "cube10-cure-layer-00000.png"] {
+        let (w, h, _) = read_rgb_size(&dir.join(name));
+        assert!(w >= 900 && h >= 600, "{name}: {w} x {h}");
+    }
+    // A profile without psf_sigma_px (written before the key existed) loads, and its jobs
+    // are not corrected; asking a prediction of it is an error naming the key.
+    let o = run_in(&dir, &["profile", "show", "bottom-up"]);
+    let toml: String = stdout(&o)
+        .lines()
+        .filter(|l| !l.starts_with("psf_sigma_px"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(dir.join("old.toml"), toml).unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "-q",
+            "-p",
+            "old.toml",
+            "-o",
+            "o.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("o.dmdjob/job.json")).unwrap()).unwrap();
+    assert!(job.get("cure").is_none());
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "-q",
+            "-p",
+            "old.toml",
+            "--predict",
+            "-o",
+            "p.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("psf_sigma_px"), "{}", stderr(&o));
+}
+
+/// Size of a PNG picture.
+fn read_rgb_size(p: &Path) -> (u32, u32, ()) {
+    let img = image::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    (img.width(), img.height(), ())
+}
+
+/// Lowest height (mm) the model cures at pixel (`col`, `row`) of the bundle `b`'s masks:
+/// every layer's dose at that pixel (D₀ × value/255 at its top, Beer–Lambert below it)
+/// summed directly on a 1 µm grid of heights.
+fn cured_bottom(b: &Path, layers: usize, col: usize, row: usize) -> f64 {
+    let (ec, d0) = (10.0, 10.0 * ((H + OVERCURE) / DP).exp());
+    let lit: Vec<(f64, f64)> = (0..layers)
+        .filter_map(|j| {
+            let (w, _, px) = read_gray(&b.join(format!("masks/{j:05}.png")));
+            let v = px[row * w as usize + col] as f64 / 255.0;
+            (v > 0.0).then(|| ((j + 1) as f64 * H, v))
+        })
+        .collect();
+    let first_top = lit.first().expect("the pixel is lit in some layer").0;
+    let mut z = first_top;
+    loop {
+        let dose: f64 = lit
+            .iter()
+            .filter(|(top, _)| *top >= z)
+            .map(|(top, v)| v * d0 * (-(top - z) / DP).exp())
+            .sum();
+        if dose < ec {
+            return z;
+        }
+        z -= 1e-3;
+    }
+}
+
+#[test]
+fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
+    let dir = tempdir("cure-z");
+    let f = fixture("island.stl");
+    // The upper block of island.stl (z 3 to 5 mm) hangs over nothing at pixel (375, 467).
+    let slice = |out: &str, c: &str| {
+        let o = run_in(
+            &dir,
+            &[
+                "slice",
+                f.to_str().unwrap(),
+                "--keep-position",
+                "-q",
+                "--compensation",
+                "off",
+                "--cure-correction",
+                c,
+                "--json",
+                "-o",
+                out,
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice::<Value>(&o.stdout).unwrap()
+    };
+    let xyz = slice("xyz.dmdjob", "xyz");
+    let held = xyz["cure"]["held_back_layers"].as_u64().unwrap();
+    let pt = xyz["cure"]["print_through_mm"].as_f64().unwrap();
+    assert_eq!(held, (pt / H).round() as u64);
+    assert!(held >= 2, "{held}");
+    slice("xy.dmdjob", "xy");
+    let layers = 100;
+    let cad = 3.0;
+    let without = cured_bottom(&dir.join("xy.dmdjob"), layers, 375, 467);
+    let with = cured_bottom(&dir.join("xyz.dmdjob"), layers, 375, 467);
+    // Without the Z correction the print-through cures it more than a layer deep.
+    assert!(cad - without > H, "{without}");
+    assert!((cad - without - pt).abs() < 0.01, "{without} vs {pt}");
+    assert!(
+        (with - cad).abs() <= H,
+        "cured bottom {with} mm, CAD {cad} mm"
+    );
+    // The held-back masks do not depend on the thread count.
+    let again = dir.join("t3");
+    std::fs::create_dir_all(&again).unwrap();
+    let o = run_threads(
+        &again,
+        &[
+            "slice",
+            f.to_str().unwrap(),
+            "--keep-position",
+            "-q",
+            "--compensation",
+            "off",
+            "--cure-correction",
+            "xyz",
+            "-o",
+            "xyz.dmdjob",
+        ],
+        "3",
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(tree(&again.join("xyz.dmdjob")) == tree(&dir.join("xyz.dmdjob")));
+    // The block's top and the layers of the lower block are not held back.
+    let (w, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00099.png"));
+    assert_eq!(px[467 * w as usize + 375], 255);
+    let (_, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00000.png"));
+    assert!(px.iter().filter(|&&v| v == 255).count() > 90 * 90);
+}
