@@ -16,6 +16,7 @@ mod json;
 mod layers;
 mod plan;
 mod replace;
+mod roundtrip;
 mod run;
 mod schema;
 mod slice;
