@@ -1,4 +1,4 @@
-//! `dmdsl export`: a job bundle into another form (one zip, Prusa SL1/SL1S, the SLA
+//! `dmdsl export`: a job (any form `run` reads) into another form (one zip, Prusa SL1/SL1S, the SLA
 //! control-file standard); also the `--format` values `slice` shares.
 
 use clap::Args;
@@ -9,6 +9,7 @@ pub(crate) const EXPORT_HELP: &str = "Examples:
   dmdsl export part.dmdjob -o part.sl1                  # for PrusaSlicer / UVtools
   dmdsl export part.dmdjob -o part.dmdjob.zip           # the bundle as one file
   dmdsl export part.dmdjob -o print.zip --format sla-control
+  dmdsl export part.dmdjob.zip -o part.dmdjob           # back to a directory
   dmdsl slice part.stl -o part.sl1                      # or write the form directly
 
 Exit codes:
@@ -49,7 +50,8 @@ impl From<FormatArg> for Format {
 
 #[derive(Args)]
 pub(crate) struct ExportArgs {
-    /// The job bundle (a directory with job.json and masks/).
+    /// The job: a bundle directory, a zipped bundle, an SL1/SL1S file or a control-file
+    /// zip (any form `dmdsl run` reads).
     bundle: PathBuf,
     /// The file to write; its name picks the format (NAME.dmdjob, NAME.dmdjob.zip,
     /// NAME.sl1, NAME.sl1s; a plain .zip needs --format). Replaced if it exists.
