@@ -54,6 +54,8 @@ pub mod raster;
 pub mod round;
 pub mod slice;
 mod table;
+#[cfg(test)]
+mod test_support;
 pub mod units;
 pub mod warning;
 

@@ -441,23 +441,11 @@ mod tests {
         let _ = std::fs::remove_dir_all(&tmp);
     }
 
-    /// A fresh scratch directory for one test.
     fn scratch(tag: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("dmdsl-bw-{}-{tag}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+        crate::test_support::scratch("bw", tag)
     }
 
-    /// Names in `dir`, sorted.
-    fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
+    use crate::test_support::names;
 
     /// The PID of a process that has ended.
     fn dead_pid() -> u32 {

@@ -54,16 +54,6 @@ fn keys(text: &[u8]) -> BTreeSet<String> {
         .collect()
 }
 
-/// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
 /// Slices `fixture` in `dir` with `args` after it; panics unless it succeeds.
 fn slice(dir: &Path, model: &str, args: &[&str]) {
     let m = fixture(model);

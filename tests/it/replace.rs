@@ -7,16 +7,6 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
-}
-
 /// Slices the small cube into `out` (in `dir`), quickly; returns the run.
 fn slice_cube(dir: &Path, out: &str) -> std::process::Output {
     let f = fixture("cube10.stl");
