@@ -52,7 +52,7 @@ pub fn bundle_files(m: &Manifest) -> Vec<&str> {
 
 /// Writes the job (`manifest` and its `files`) at `out` in `format`, atomically; returns
 /// what the format could not carry. Nothing is left at `out` (nor beside it) on failure,
-/// nor when `cancel` is set while it is written ([`Error::Interrupted`]).
+/// nor when `cancel` is set while it is written ([`crate::error::Error::Interrupted`]).
 pub fn write(
     format: Format,
     manifest: &Manifest,
