@@ -544,7 +544,7 @@ mod tests {
 
     #[test]
     fn print_time_is_what_prusaslicer_writes() {
-        // fixtures/prusaslicer/cube1.sl1: 20 fast layers at 8 s, printTime 265.
+        // fixtures/sl1/cube1.sl1: 20 fast layers at 8 s, printTime 265.
         let s = Scheme {
             first_s: 8.0,
             exp_s: 8.0,

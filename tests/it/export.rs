@@ -1,7 +1,7 @@
 //! One-file outputs and `dmdsl export`: the native bundle as a zip, Prusa SL1/SL1S and the
 //! SLA control-file standard, written by `slice -o` and by `export`; their files against
 //! the directory bundle's, their entries and keys against a PrusaSlicer-made `.sl1`
-//! (`fixtures/prusaslicer/cube1.sl1`), bad names and formats, and failures that must leave
+//! (`fixtures/sl1/cube1.sl1`), bad names and formats, and failures that must leave
 //! nothing.
 
 use crate::common::*;
@@ -124,7 +124,7 @@ fn sl1_has_prusaslicers_entries_and_keys_and_the_bundles_masks() {
         assert!(codes.contains(&c), "{codes:?}");
     }
     let ours = entries(&d.join("part.sl1"));
-    let theirs = entries(&fixture("prusaslicer/cube1.sl1"));
+    let theirs = entries(&fixture("sl1/cube1.sl1"));
     let get = |e: &[(String, Vec<u8>)], n: &str| {
         e.iter()
             .find(|x| x.0 == n)
@@ -371,7 +371,7 @@ fn the_control_file_expands_to_the_bundles_masks_layer_by_layer() {
 
 #[test]
 fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
-    // fixtures/prusaslicer/cube1.sl1: cube10.stl scaled to 1 mm, 0.05 mm layers, 8 s each.
+    // fixtures/sl1/cube1.sl1: cube10.stl scaled to 1 mm, 0.05 mm layers, 8 s each.
     let d = tempdir("export-sl1-same");
     slice(
         &d,
@@ -388,7 +388,7 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
             .collect()
     };
     let ours = ini(&d.join("cube1.sl1"));
-    let theirs = ini(&fixture("prusaslicer/cube1.sl1"));
+    let theirs = ini(&fixture("sl1/cube1.sl1"));
     for key in [
         "action",
         "expTime",
@@ -412,6 +412,6 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
     };
     assert_eq!(
         count(&d.join("cube1.sl1")),
-        count(&fixture("prusaslicer/cube1.sl1"))
+        count(&fixture("sl1/cube1.sl1"))
     );
 }
