@@ -96,6 +96,12 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let format = Format::for_output(opts.format, &out)?;
     crate::export::check_fits(format, &profile, &out)?;
     let made = MadeDirs::parents_of(&out)?;
+    // The cure plots' directory (and its missing parents), made before slicing like the
+    // bundle's parents, so that a path that cannot be a directory fails first.
+    let made_plots = match opts.cure.plots.as_deref() {
+        Some(dir) => Some(MadeDirs::parents_of(&dir.join("plot"))?),
+        None => None,
+    };
     let writer = open_bundle(&out, format, &profile, &setup)?;
     let (sliced, gray_map) =
         make_layers(&profile, &setup, &part, &writer, &control, cure.as_ref())?;
@@ -159,6 +165,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             &part.mesh,
             &Rasterizer::new(profile.field()),
         )?;
+    }
+    if let Some(m) = made_plots {
+        m.keep();
     }
     let mut warnings = manifest.warnings;
     warnings.extend(export_warnings);

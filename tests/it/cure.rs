@@ -260,14 +260,15 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
             "1",
             "--predict",
             "--cure-plots",
-            ".",
+            "plots/cure",
             "-o",
             "p.dmdjob",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
+    // The plot directory and its parents are made, as an output's are.
     for name in ["cube10-cure-errors.png", "cube10-cure-layer-00000.png"] {
-        let (w, h, _) = read_rgb_size(&dir.join(name));
+        let (w, h, _) = read_rgb_size(&dir.join("plots/cure").join(name));
         assert!(w >= 900 && h >= 600, "{name}: {w} x {h}");
     }
     // A profile without psf_sigma_px (written before the key existed) loads, and its jobs
