@@ -10,7 +10,6 @@ pub(crate) const EXPORT_HELP: &str = "Examples:
   dmdsl export part.dmdjob -o part.dmdjob.zip           # the bundle as one file
   dmdsl export part.dmdjob -o print.zip --format sla-control
   dmdsl export part.dmdjob.zip -o part.dmdjob           # back to a directory
-  dmdsl slice part.stl -o part.sl1                      # or write the form directly
 
 Exit codes:
   0    the file was written (what the format cannot carry is reported as warnings)
