@@ -528,6 +528,20 @@ mod tests {
     }
 
     #[test]
+    fn a_psf_outside_its_range_is_refused_by_name() {
+        let src = builtin_source(DEFAULT_PROFILE).unwrap();
+        for bad in ["9.0", "0.01"] {
+            let wide = src.replace("psf_sigma_px = 0.5", &format!("psf_sigma_px = {bad}"));
+            assert_ne!(wide, src);
+            let e = Profile::from_toml(&wide, "x.toml").unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("psf_sigma_px = {bad} is not a point-spread width")),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
     fn exposure_ramp() {
         let mut e = Profile::default_profile().exposure;
         e.bottom_layers = 2;

@@ -652,11 +652,7 @@ fn an_interrupt_stops_every_part_at_once() {
         assert!(t.elapsed().as_secs() < 60, "no staging directory appeared");
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let st = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(st.success());
+    signal(&child, "INT");
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     let err = stderr(&out);

@@ -149,3 +149,12 @@ pub fn names(dir: &Path) -> Vec<String> {
     v.sort();
     v
 }
+
+/// Sends `signal` (e.g. "INT", "TERM") to `child`.
+pub fn signal(child: &std::process::Child, signal: &str) {
+    let st = std::process::Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+}

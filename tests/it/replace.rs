@@ -50,15 +50,6 @@ fn start_long_slice(dir: &Path, out: &str) -> Child {
     child
 }
 
-/// Sends `signal` (e.g. "TERM") to `child`.
-fn signal(child: &Child, signal: &str) {
-    let st = Command::new("kill")
-        .args([&format!("-{signal}"), &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(st.success());
-}
-
 #[test]
 fn sigterm_and_sighup_stop_a_slice_like_ctrl_c_and_keep_the_old_bundle() {
     let dir = tempdir("replace-term");

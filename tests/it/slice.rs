@@ -800,11 +800,7 @@ fn ctrl_c_leaves_nothing_behind() {
         assert!(t.elapsed().as_secs() < 60, "no staging directory appeared");
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let st = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(st.success());
+    signal(&child, "INT");
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(130), "{}", stderr(&out));
     assert!(stderr(&out).contains("interrupted; nothing was written"));
