@@ -158,3 +158,19 @@ pub fn signal(child: &std::process::Child, signal: &str) {
         .unwrap();
     assert!(st.success());
 }
+
+/// The entries of the zip at `p`, in archive order, with their bytes (read with the zip
+/// crate: an oracle independent of dmdsl's reader).
+pub fn zip_entries(p: &Path) -> Vec<(String, Vec<u8>)> {
+    use std::io::Read;
+    let mut z = zip::ZipArchive::new(std::fs::File::open(p).unwrap())
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    (0..z.len())
+        .map(|i| {
+            let mut e = z.by_index(i).unwrap();
+            let mut b = Vec::new();
+            e.read_to_end(&mut b).unwrap();
+            (String::from_utf8_lossy(e.name_raw()).into_owned(), b)
+        })
+        .collect()
+}

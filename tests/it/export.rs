@@ -6,23 +6,8 @@
 
 use crate::common::*;
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Stdio};
-
-/// The entries of the zip at `p`, in order, with their bytes.
-fn entries(p: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut z = zip::ZipArchive::new(std::fs::File::open(p).unwrap())
-        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    (0..z.len())
-        .map(|i| {
-            let mut e = z.by_index(i).unwrap();
-            let mut b = Vec::new();
-            e.read_to_end(&mut b).unwrap();
-            (String::from_utf8_lossy(e.name_raw()).into_owned(), b)
-        })
-        .collect()
-}
 
 /// Every file under `dir`, by relative path with `/`.
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
@@ -74,7 +59,7 @@ fn the_zip_bundle_holds_the_directory_bundles_files_byte_for_byte() {
         &["-o", "b.zip", "--format", "dmdjob-zip"],
     );
     let dir = files(&d.join("a.dmdjob"));
-    let zip = entries(&d.join("a.dmdjob.zip"));
+    let zip = zip_entries(&d.join("a.dmdjob.zip"));
     assert_eq!(zip[0].0, "job.json", "job.json comes first");
     let zipped: BTreeMap<String, Vec<u8>> = zip.into_iter().collect();
     assert_eq!(
@@ -123,8 +108,8 @@ fn sl1_has_prusaslicers_entries_and_keys_and_the_bundles_masks() {
     ] {
         assert!(codes.contains(&c), "{codes:?}");
     }
-    let ours = entries(&d.join("part.sl1"));
-    let theirs = entries(&fixture("sl1/cube1.sl1"));
+    let ours = zip_entries(&d.join("part.sl1"));
+    let theirs = zip_entries(&fixture("sl1/cube1.sl1"));
     let get = |e: &[(String, Vec<u8>)], n: &str| {
         e.iter()
             .find(|x| x.0 == n)
@@ -191,7 +176,7 @@ fn sl1_has_prusaslicers_entries_and_keys_and_the_bundles_masks() {
     // An SL1S is the same layout for the other printer.
     let o = run_in(&d, &["export", "part.dmdjob", "-o", "part.sl1s", "-q"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let s = entries(&d.join("part.sl1s"));
+    let s = zip_entries(&d.join("part.sl1s"));
     assert!(String::from_utf8_lossy(&s[0].1).contains("printerModel = SL1S\n"));
 }
 
@@ -308,7 +293,7 @@ fn the_control_file_expands_to_the_bundles_masks_layer_by_layer() {
             &["export", dir, "-o", out, "--format", "sla-control", "-q"],
         );
         assert!(o.status.success(), "{}", stderr(&o));
-        let zip: BTreeMap<String, Vec<u8>> = entries(&d.join(out)).into_iter().collect();
+        let zip: BTreeMap<String, Vec<u8>> = zip_entries(&d.join(out)).into_iter().collect();
         let v: serde_json::Value = serde_json::from_slice(&zip["print_settings.json"]).unwrap();
         let manifest: serde_json::Value =
             serde_json::from_slice(&std::fs::read(d.join(dir).join("job.json")).unwrap()).unwrap();
@@ -375,7 +360,7 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
         &["--scale", "0.1", "--bottom-layers", "0", "-o", "cube1.sl1"],
     );
     let ini = |p: &Path| -> BTreeMap<String, String> {
-        let e = entries(p);
+        let e = zip_entries(p);
         String::from_utf8(e[0].1.clone())
             .unwrap()
             .lines()
@@ -401,7 +386,7 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
     }
     // And the same number of masks, of the same size.
     let count = |p: &Path| {
-        entries(p)
+        zip_entries(p)
             .iter()
             .filter(|e| e.0.starts_with("cube1"))
             .count()

@@ -3,7 +3,7 @@
 //! (`fixtures/control/`), and hostile archives built here, each refused with one line
 //! naming the archive and the entry, exit code 2, nothing extracted.
 
-use crate::common::{fixture, run_in, stderr, stdout, tempdir};
+use crate::common::{fixture, run_in, stderr, stdout, tempdir, zip_entries};
 use serde_json::Value;
 use std::io::{Read, Write};
 use std::path::Path;
@@ -457,24 +457,17 @@ fn hostile_symbolic_link() {
 
 #[test]
 fn hostile_sl1_without_a_key() {
-    let src = std::fs::read(fixture("sl1/cube3mm.sl1")).unwrap();
-    let mut files = Vec::new();
-    let mut z = zip::ZipArchive::new(std::io::Cursor::new(src)).unwrap();
-    for i in 0..z.len() {
-        let mut f = z.by_index(i).unwrap();
-        let mut b = Vec::new();
-        f.read_to_end(&mut b).unwrap();
-        let name = f.name().unwrap().to_string();
+    let mut files = zip_entries(&fixture("sl1/cube3mm.sl1"));
+    for (name, b) in &mut files {
         if name == "config.ini" {
-            let t = String::from_utf8(b).unwrap();
-            b = t
+            let t = String::from_utf8(std::mem::take(b)).unwrap();
+            *b = t
                 .lines()
                 .filter(|l| !l.starts_with("expTime "))
                 .collect::<Vec<_>>()
                 .join("\n")
                 .into_bytes();
         }
-        files.push((name, b));
     }
     let entries: Vec<(&str, &[u8], bool)> = files
         .iter()
@@ -489,15 +482,7 @@ fn hostile_sl1_without_a_key() {
 
 #[test]
 fn hostile_control_file_failing_the_schema() {
-    let src = std::fs::read(fixture("control/channel.zip")).unwrap();
-    let mut z = zip::ZipArchive::new(std::io::Cursor::new(src)).unwrap();
-    let mut files = Vec::new();
-    for i in 0..z.len() {
-        let mut f = z.by_index(i).unwrap();
-        let mut b = Vec::new();
-        f.read_to_end(&mut b).unwrap();
-        files.push((f.name().unwrap().to_string(), b));
-    }
+    let files = zip_entries(&fixture("control/channel.zip"));
     let json = |f: &dyn Fn(&mut Value)| {
         let mut out = files.clone();
         let mut v: Value = serde_json::from_slice(&out[0].1).unwrap();
@@ -560,15 +545,7 @@ fn hostile_control_file_failing_the_schema() {
 #[test]
 fn problems_of_an_imported_job_are_violations() {
     // An SL1 whose layer 4 mask is missing and layer 7 mask is the wrong size.
-    let src = std::fs::read(fixture("sl1/cube3mm.sl1")).unwrap();
-    let mut z = zip::ZipArchive::new(std::io::Cursor::new(src)).unwrap();
-    let mut files = Vec::new();
-    for i in 0..z.len() {
-        let mut f = z.by_index(i).unwrap();
-        let mut b = Vec::new();
-        f.read_to_end(&mut b).unwrap();
-        files.push((f.name().unwrap().to_string(), b));
-    }
+    let mut files = zip_entries(&fixture("sl1/cube3mm.sl1"));
     let small = {
         let mut out = Vec::new();
         image::GrayImage::new(16, 8)
