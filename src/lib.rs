@@ -51,6 +51,7 @@ mod png;
 mod polyfit;
 pub mod profile;
 pub mod raster;
+pub mod resin;
 pub mod round;
 pub mod slice;
 mod table;

@@ -12,11 +12,11 @@
 //! light compensation maps the corrected coverage to grays as it maps any coverage: one
 //! target dose for both.
 
-use super::dose::CureModel;
-use super::psf::{phi_inv, Psf};
 use super::segments::Segments;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
+use crate::resin::dose::CureModel;
+use crate::resin::psf::{phi_inv, Psf};
 use crate::slice::Contour;
 
 /// The inward move of the edges that puts the cured edge on the section, px (negative:

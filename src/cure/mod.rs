@@ -2,23 +2,21 @@
 //! each layer's cured edge against its exact section, and the correction of the masks
 //! for the projector's blur and the light that reaches through later layers.
 //!
-//! Files: `psf.rs` (the Gaussian point-spread function), `dose.rs` (the dose convention,
-//! Beer–Lambert in depth and the print-through's closed form), `segments.rs` (a section's
+//! The model itself (the Gaussian point-spread function, the dose convention, Beer–Lambert
+//! in depth) is [`crate::resin`], which the executor shares. Files: `segments.rs` (a section's
 //! edges in pixels, with a grid index), `predict.rs` (cured edges and their errors),
 //! `correct.rs` (the XY correction of the coverage). Like every algorithm stage it takes
 //! inputs and returns values; `job` records them.
 
 pub mod correct;
-pub mod dose;
 pub mod plots;
 pub mod predict;
-pub mod psf;
 pub mod segments;
 
+pub use crate::resin::CureModel;
+pub use crate::resin::Psf;
 pub use correct::{correct_coverage, edge_shift_px};
-pub use dose::CureModel;
 pub use predict::{predict_layer, LayerCure};
-pub use psf::Psf;
 
 use serde::{Deserialize, Serialize};
 

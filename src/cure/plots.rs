@@ -1,12 +1,12 @@
 //! Pictures of the prediction: each layer's edge error as a chart, and one layer's cured
 //! outline over its section and mask.
 
-use super::dose::CureModel;
 use super::predict::EdgeSample;
 use crate::bundle::Layer;
 use crate::plot::text::{TextStyle, LABEL, SMALL, TITLE};
 use crate::plot::{Canvas, Chart, Panel, Series, Style};
 use crate::raster::Mask;
+use crate::resin::dose::CureModel;
 use crate::slice::Contour;
 
 /// The per-layer chart of the predicted edge error (layers with a prediction).

@@ -9,11 +9,11 @@
 //! model's mid-layer threshold ([`CureModel::edge_threshold`]); its signed distance from
 //! the section's edge (positive: the part grows) is the sample's edge error.
 
-use super::dose::CureModel;
-use super::psf::{AxisTable, Psf};
 use super::segments::Segments;
 pub use crate::bundle::LayerCure;
 use crate::raster::Mask;
+use crate::resin::dose::CureModel;
+use crate::resin::psf::{AxisTable, Psf};
 use crate::slice::Contour;
 
 /// Largest spacing of edge samples, pixels.
