@@ -10,30 +10,35 @@ use serde_json::Value;
 use std::path::Path;
 
 /// Pixel edge and rows of the default profile.
-const P: f64 = 0.0634765625;
-const ROWS: f64 = 768.0;
+pub(crate) const P: f64 = 0.0634765625;
+pub(crate) const ROWS: f64 = 768.0;
+/// Columns of the default profile's field.
+pub(crate) const COLS: f64 = 1024.0;
 /// The default profile's PSF, resin and layer.
-const SIGMA: f64 = 0.5;
+pub(crate) const SIGMA: f64 = 0.5;
 const DP: f64 = 0.15;
 const OVERCURE: f64 = 0.03;
-const H: f64 = 0.05;
+pub(crate) const H: f64 = 0.05;
 
 /// The mid-layer threshold of the model, written out: a wall's own layer and every layer
 /// above light it alike; D₀ = Ec·exp((h + overcure)/Dp) at a full pixel.
-fn threshold() -> f64 {
+pub(crate) fn threshold() -> f64 {
     (-(H / 2.0 + OVERCURE) / DP).exp() * (1.0 - (-H / DP).exp())
 }
 
-struct Oracle {
-    data: Vec<u8>,
-    w: i64,
-    h: i64,
+/// The brute-force evaluation of the model on one written mask (compensation off: the
+/// mask's values are the relative irradiance).
+pub(crate) struct Oracle {
+    pub(crate) data: Vec<u8>,
+    pub(crate) w: i64,
+    pub(crate) h: i64,
 }
 
 impl Oracle {
     /// Relative light at field pixel coordinates (u, v): every lit pixel within 12σ (the
     /// rest is below e⁻⁷² of a pixel's light), 4 × 4 point sources each.
-    fn light(&self, u: f64, v: f64) -> f64 {
+    #[inline]
+    pub(crate) fn light(&self, u: f64, v: f64) -> f64 {
         let r = (12.0 * SIGMA).ceil() as i64 + 1;
         let (cu, cv) = (u.floor() as i64, v.floor() as i64);
         let mut sum = 0.0;
@@ -62,7 +67,7 @@ impl Oracle {
     /// Signed distance (px, along the outward normal `n`) from the exact edge point `p`
     /// (build-plane mm) to the cured edge: the light's crossing of the threshold nearest
     /// the edge, on a 0.05 px grid from −2 to 2 px, refined by bisection.
-    fn cured_edge(&self, p: [f64; 2], n: [f64; 2]) -> Option<f64> {
+    pub(crate) fn cured_edge(&self, p: [f64; 2], n: [f64; 2]) -> Option<f64> {
         let (u, v) = (p[0] / P, ROWS - p[1] / P);
         let (nu, nv) = (n[0], -n[1]);
         let t = threshold();
@@ -175,7 +180,8 @@ fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>) {
     (summary, errors)
 }
 
-fn stats(e: &[f64]) -> (f64, f64, f64) {
+/// Mean and 95th percentile of the absolute errors, and their signed mean.
+pub(crate) fn stats(e: &[f64]) -> (f64, f64, f64) {
     let mut a: Vec<f64> = e.iter().map(|x| x.abs()).collect();
     a.sort_by(f64::total_cmp);
     let mean = a.iter().sum::<f64>() / a.len() as f64;
