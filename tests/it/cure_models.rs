@@ -388,7 +388,8 @@ fn measure(
 }
 
 /// The acceptance criterion on one model: with `xy` the oracle's error is within 0.25 px
-/// mean and 0.5 px p95; without correction it shows the blur's growth (> 0.4 px mean);
+/// mean and 0.5 px p95; without correction it shows the blur's growth (> 0.4 px mean and
+/// signed mean, outward);
 /// the report's mean over the same layers is the oracle's within 0.1 px, both ways.
 fn check(name: &str, model: &str, scale: &str, count: usize, spacing: f64, min_samples: usize) {
     let dir = tempdir(name);
