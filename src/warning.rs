@@ -162,7 +162,13 @@ pub const CODES: &[Code] = &[
         "cure.features-vanish",
         Warn,
         "the cure model predicts that features of these layers cure nowhere (too narrow for the blur and dose); they will be missing from the part",
-        "features, layers, first_layer",
+        "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
+    ),
+    code(
+        "cure.features-dropped",
+        Warn,
+        "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part",
+        "features, pixels, layers, first_layer, x_mm, y_mm, width_mm, height_mm, held_back_layers",
     ),
     code(
         "cure.features-merge",

@@ -124,6 +124,40 @@ pub struct Cure {
     /// The predicted cure (`slice --predict`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted: Option<CurePrediction>,
+    /// The flat features over nothing the Z correction drops whole (`xyz` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dropped: Option<DroppedFeatures>,
+}
+
+/// Flat features over nothing thinner than the held-back layers, which the Z correction
+/// (`--cure-correction xyz`) leaves out of every mask (docs/CURE.md).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct DroppedFeatures {
+    /// Features (4-connected pixels whose runs of lit layers end in one layer), over all
+    /// layers.
+    pub features: u64,
+    /// Their pixels.
+    pub pixels: u64,
+    /// Layers in which such runs end.
+    pub layers: u64,
+    /// The first of those layers.
+    pub first_layer: Option<u64>,
+    /// The first layer's first feature (the one holding its first dropped pixel in
+    /// row-major order, i.e. the highest y, then the lowest x).
+    pub first: Option<FeatureBox>,
+}
+
+/// Where a feature lies on the build plane: the centre and size of its bounding box, mm.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct FeatureBox {
+    /// Centre, x, mm.
+    pub x_mm: f64,
+    /// Centre, y, mm.
+    pub y_mm: f64,
+    /// Width along x, mm.
+    pub width_mm: f64,
+    /// Height along y, mm.
+    pub height_mm: f64,
 }
 
 /// A job's predicted cure against its sections.
@@ -173,6 +207,10 @@ pub struct LayerCure {
     pub vanished: u32,
     /// Contours whose cure reaches across a gap to the next edge.
     pub merged: u32,
+    /// The first vanished feature's bounding box (the layer's section, in build-plane mm
+    /// of the drawn section; absent when nothing vanishes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vanished_at: Option<FeatureBox>,
 }
 
 /// Who wrote the bundle.

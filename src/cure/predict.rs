@@ -10,7 +10,7 @@
 //! the section's edge (positive: the part grows) is the sample's edge error.
 
 use super::segments::Segments;
-pub use crate::bundle::LayerCure;
+pub use crate::bundle::{FeatureBox, LayerCure};
 use crate::raster::Mask;
 use crate::resin::dose::CureModel;
 use crate::resin::psf::{AxisTable, Psf};
@@ -271,19 +271,11 @@ pub fn summarize(
         max = max.max(e.abs());
         hist.add(e.abs());
     }
-    let contours = outer.len();
-    let mut all_vanish = vec![true; contours];
-    let mut any = vec![false; contours];
-    let mut merged = vec![false; contours];
+    let vanished = vanished_contours(samples, outer).len() as u32;
+    let mut merged = vec![false; outer.len()];
     for s in samples {
-        let c = s.contour as usize;
-        any[c] = true;
-        all_vanish[c] &= s.vanishes;
-        merged[c] |= s.merges;
+        merged[s.contour as usize] |= s.merges;
     }
-    let vanished = (0..contours)
-        .filter(|&c| outer[c] && any[c] && all_vanish[c])
-        .count() as u32;
     let cure = LayerCure {
         samples: n,
         mean_px: if n > 0 { sum / n as f64 } else { 0.0 },
@@ -292,11 +284,46 @@ pub fn summarize(
         max_px: max,
         vanished,
         merged: merged.iter().filter(|&&m| m).count() as u32,
+        vanished_at: None,
     };
     (cure, hist)
 }
 
-/// Predicts a layer's cure: [`edge_samples`] summarized.
+/// The vanished features among the contours (`outer[c]`: contour c is an outer
+/// boundary): outer contours with samples, every one of which vanishes; in contour order.
+pub fn vanished_contours(samples: &[EdgeSample], outer: &[bool]) -> Vec<usize> {
+    let mut all_vanish = vec![true; outer.len()];
+    let mut any = vec![false; outer.len()];
+    for s in samples {
+        let c = s.contour as usize;
+        any[c] = true;
+        all_vanish[c] &= s.vanishes;
+    }
+    (0..outer.len())
+        .filter(|&c| outer[c] && any[c] && all_vanish[c])
+        .collect()
+}
+
+/// The bounding box of a contour (build-plane mm), its centre and size rounded to 1 µm.
+pub fn contour_box(contour: &Contour) -> FeatureBox {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in contour {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let r = crate::round::plane_mm;
+    FeatureBox {
+        x_mm: r(0.5 * (lo[0] + hi[0])),
+        y_mm: r(0.5 * (lo[1] + hi[1])),
+        width_mm: r(hi[0] - lo[0]),
+        height_mm: r(hi[1] - lo[1]),
+    }
+}
+
+/// Predicts a layer's cure: [`edge_samples`] summarized, with the first vanished feature's
+/// bounding box.
 pub fn predict_layer(
     model: &CureModel,
     mask: &Mask,
@@ -307,5 +334,9 @@ pub fn predict_layer(
         .iter()
         .map(|c| crate::slice::signed_area(c) > 0.0)
         .collect();
-    summarize(model, &samples, &outer)
+    let (mut cure, hist) = summarize(model, &samples, &outer);
+    cure.vanished_at = vanished_contours(&samples, &outer)
+        .first()
+        .map(|&c| contour_box(&contours[c]));
+    (cure, hist)
 }

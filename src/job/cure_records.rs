@@ -1,7 +1,10 @@
 //! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
 //! edge errors of all layers, and the manifest's record and warnings.
 
-use crate::bundle::{self, CurePrediction, EdgeError, Layer, LayerCure};
+use crate::bundle::{
+    self, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
+};
+use crate::cure::held_back::{Dropped, DroppedScan};
 use crate::cure::predict::Histogram;
 use crate::cure::{self, Correction, CureModel};
 use crate::error::{Error, Result};
@@ -35,6 +38,9 @@ pub(super) struct CureJob {
     predict: bool,
     /// Absolute edge errors of every layer (sums: the same in any order).
     hist: Mutex<Histogram>,
+    /// The flat features the Z correction drops, over the layers drawn so far (sums and
+    /// the lowest layer's first feature: the same in any order).
+    dropped: Mutex<DroppedFeatures>,
 }
 
 /// What drawing a layer through the cure model gave besides its mask.
@@ -47,6 +53,39 @@ pub(super) struct CureDrawn {
     pub cure: Option<LayerCure>,
     /// Its absolute edge errors.
     pub hist: Histogram,
+    /// The flat features the Z correction drops whose runs of lit layers end in the layer
+    /// below (`(1, …)`) or, for the job's top layer, in this one (`(0, …)`); only those
+    /// with pixels.
+    pub dropped: Vec<(usize, LayerDropped)>,
+}
+
+/// The dropped features of one layer (the last layer of their runs), build-plane mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct LayerDropped {
+    /// Dropped pixels.
+    pub pixels: u64,
+    /// Features (4-connected dropped pixels).
+    pub features: u32,
+    /// The first feature's bounding box.
+    pub first: Option<FeatureBox>,
+}
+
+impl LayerDropped {
+    /// `d` in build-plane mm on a field `height` rows high of `pixel_mm` pixels (`None`
+    /// when nothing is dropped).
+    fn of(d: Dropped, pixel_mm: f64, height: u32) -> Option<LayerDropped> {
+        let r = crate::round::plane_mm;
+        (d.pixels > 0).then(|| LayerDropped {
+            pixels: d.pixels,
+            features: d.features,
+            first: d.first.map(|b| FeatureBox {
+                x_mm: r(0.5 * (b.c0 + b.c1) as f64 * pixel_mm),
+                y_mm: r((height as f64 - 0.5 * (b.r0 + b.r1) as f64) * pixel_mm),
+                width_mm: r((b.c1 - b.c0) as f64 * pixel_mm),
+                height_mm: r((b.r1 - b.r0) as f64 * pixel_mm),
+            }),
+        })
+    }
 }
 
 impl CureJob {
@@ -73,9 +112,10 @@ impl CureJob {
         };
         // The print-through under a flat surface with many layers above, in whole layers.
         let held_back = match correction {
-            // At most a window of layers below is at hand (job::pipeline).
+            // At most a window of layers below is at hand (job::pipeline), and the
+            // detection of dropped features needs one more than are held back.
             Correction::Xyz => {
-                ((model.print_through_mm(None) / model.layer_mm).round() as usize).min(32)
+                ((model.print_through_mm(None) / model.layer_mm).round() as usize).min(31)
             }
             _ => 0,
         };
@@ -86,6 +126,7 @@ impl CureJob {
             held_back,
             predict: opts.predict,
             hist: Mutex::new(Histogram::default()),
+            dropped: Mutex::new(DroppedFeatures::default()),
         }))
     }
 
@@ -99,15 +140,30 @@ impl CureJob {
         self.held_back
     }
 
+    /// Sections below a layer that [`CureJob::draw`] takes: the held-back layers and one
+    /// more, for the features the Z correction drops (0 unless `xyz`).
+    pub fn lower_layers(&self) -> usize {
+        match self.held_back {
+            0 => 0,
+            m => m + 1,
+        }
+    }
+
     /// Draws `section`'s coverage, corrects it (XY; with `xyz` each pixel also takes at
-    /// most the coverage of the `lower` sections, the layers below: a downward-facing
-    /// surface is drawn only from its held-back layers on), predicts its cure
-    /// (`--predict`), then thresholds (`binary`) and compensates (`comp`) it in place.
+    /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
+    /// the layers below, nearest first: a downward-facing surface is drawn only from its
+    /// held-back layers on), predicts its cure (`--predict`), then thresholds (`binary`)
+    /// and compensates (`comp`) it in place. With `xyz` it also finds the flat features
+    /// the correction drops whose runs of lit layers end in the layer below (from
+    /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
+    /// this one.
+    #[allow(clippy::too_many_arguments)]
     pub fn draw(
         &self,
         raster: &Rasterizer,
         section: &[Contour],
         lower: &[&[Contour]],
+        top: bool,
         scratch: &mut Scratch,
         binary: bool,
         comp: Option<&Compensator>,
@@ -116,25 +172,60 @@ impl CureJob {
         let lit = scratch.lit_box();
         // The record's area is the section's, as drawn before the correction.
         let lit_pixels = scratch.lit_pixels(&m);
+        let held = self.held_back;
+        // The runs of lit layers ending in this layer (the top) or the one below end where
+        // this layer's exact coverage is unlit: taken before the correction changes it.
+        let mut ends_here = (held > 0 && top).then(|| DroppedScan::new(&m, lit, |_, _| false));
+        let here: Vec<bool> = if held > 0 && !lower.is_empty() {
+            let w = m.width as usize;
+            lit.rows()
+                .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let lit_here = |c: usize, r: usize| {
+            lit.rows().contains(&r)
+                && lit.cols().contains(&c)
+                && here[(r - lit.r0) * lit.cols().len() + (c - lit.c0)]
+        };
         if self.shift_px != 0.0 {
             cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
         }
+        let mut ends_below: Option<DroppedScan> = None;
         if !lower.is_empty() {
             LOWER.with(|s| {
                 let s = &mut *s.borrow_mut();
-                for below in lower {
+                for (j, below) in lower.iter().enumerate() {
                     let b = raster.coverage(below, s);
-                    for r in lit.rows() {
-                        let row = r * m.width as usize;
-                        for c in lit.cols() {
-                            let v = &mut m.data[row + c];
-                            *v = (*v).min(b.data[row + c]);
+                    if j < held {
+                        for r in lit.rows() {
+                            let row = r * m.width as usize;
+                            for c in lit.cols() {
+                                let v = &mut m.data[row + c];
+                                *v = (*v).min(b.data[row + c]);
+                            }
+                        }
+                        if let Some(t) = ends_here.as_mut() {
+                            t.below(&b);
+                        }
+                    }
+                    if held > 0 {
+                        // lower[0] is the layer below; lower[1..=held] the layers below it.
+                        match ends_below.as_mut() {
+                            None => ends_below = Some(DroppedScan::new(&b, s.lit_box(), lit_here)),
+                            Some(e) => e.below(&b),
                         }
                     }
                     s.recycle(b);
                 }
             });
         }
+        let (p, h) = (self.model.pixel_mm, m.height);
+        let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
+            .into_iter()
+            .filter_map(|(k, d)| Some((k, LayerDropped::of(d?.finish(), p, h)?)))
+            .collect();
         if binary {
             crate::raster::threshold(&mut m);
         }
@@ -160,7 +251,57 @@ impl CureJob {
                 outside,
                 cure,
                 hist,
+                dropped,
             },
+        )
+    }
+
+    /// Counts the features dropped at layer `index` ([`CureDrawn::dropped`]) into the
+    /// job's.
+    pub fn count_dropped(&self, index: usize, dropped: &[(usize, LayerDropped)]) {
+        let mut t = self.dropped.lock().unwrap_or_else(|p| p.into_inner());
+        for (k, d) in dropped {
+            let layer = (index - k) as u64;
+            t.features += d.features as u64;
+            t.pixels += d.pixels;
+            t.layers += 1;
+            if t.first_layer.is_none_or(|f| layer < f) {
+                t.first_layer = Some(layer);
+                t.first = d.first;
+            }
+        }
+    }
+
+    /// The warning naming the flat features the Z correction drops, if any.
+    pub fn dropped_warning(&self) -> Option<Warning> {
+        let t = self.dropped.lock().unwrap_or_else(|p| p.into_inner());
+        let (first, at) = (t.first_layer?, t.first?);
+        let (k, n, m) = (t.features, t.layers, self.held_back as u64);
+        let thick = crate::round::plane_mm((m + 1) as f64 * self.model.layer_mm);
+        Some(
+            Warning::new(
+                "cure.features-dropped",
+                format!(
+                    "cure: the xyz correction leaves out {k} flat {} over nothing thinner than {} layers ({} {} in {n} {}; first: layer {first}, at {}); use --cure-correction xy, or make {} at least {} layers ({thick} mm) thick",
+                    plural(k, "feature", "features"),
+                    m + 1,
+                    t.pixels,
+                    plural(t.pixels, "pixel", "pixels"),
+                    plural(n, "layer", "layers"),
+                    where_is(&at),
+                    plural(k, "it", "them"),
+                    m + 1,
+                ),
+            )
+            .with("features", k)
+            .with("pixels", t.pixels)
+            .with("layers", n)
+            .with("first_layer", first)
+            .with("x_mm", at.x_mm)
+            .with("y_mm", at.y_mm)
+            .with("width_mm", at.width_mm)
+            .with("height_mm", at.height_mm)
+            .with("held_back_layers", m),
         )
     }
 
@@ -195,9 +336,17 @@ impl CureJob {
                 .unwrap_or_default();
             let mut scratch = Scratch::default();
             let window = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
-                .window(i.saturating_sub(self.held_back)..i);
+                .window(i.saturating_sub(self.lower_layers())..i);
             let lower: Vec<&[Contour]> = window.iter().rev().map(|s| &s.contours[..]).collect();
-            let (mask, _) = self.draw(raster, &section.contours, &lower, &mut scratch, false, None);
+            let (mask, _) = self.draw(
+                raster,
+                &section.contours,
+                &lower,
+                false,
+                &mut scratch,
+                false,
+                None,
+            );
             let samples = cure::predict::edge_samples(&self.model, &mask, &section.contours);
             let pic =
                 cure::plots::outline_picture(&self.model, i, &mask, &section.contours, &samples);
@@ -277,8 +426,22 @@ impl CureJob {
             print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
             held_back_layers: self.held_back as u32,
             predicted,
+            dropped: (self.held_back > 0).then(|| {
+                self.dropped
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .clone()
+            }),
         }
     }
+}
+
+/// "x 12.3 mm, y 4.5 mm, 0.1 × 0.2 mm": a feature's centre and size.
+fn where_is(b: &FeatureBox) -> String {
+    format!(
+        "x {} mm, y {} mm, {} × {} mm",
+        b.x_mm, b.y_mm, b.width_mm, b.height_mm
+    )
 }
 
 thread_local! {
@@ -299,19 +462,30 @@ pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
         (total, hit.len() as u64, hit.first().map(|h| h.0))
     };
     if let (k, n, Some(first)) = count(|c| c.vanished) {
-        out.push(
-            Warning::new(
-                "cure.features-vanish",
-                format!(
-                    "cure: {k} {} cure nowhere in {n} {} (first: layer {first}); widen them or raise the exposure",
-                    plural(k, "feature", "features"),
-                    plural(n, "layer", "layers")
-                ),
-            )
-            .with("features", k)
-            .with("layers", n)
-            .with("first_layer", first),
-        );
+        let at = layers
+            .iter()
+            .find(|l| l.index == first)
+            .and_then(|l| l.cure.as_ref()?.vanished_at);
+        let mut w = Warning::new(
+            "cure.features-vanish",
+            format!(
+                "cure: {k} {} cure nowhere in {n} {} (first: layer {first}{}); widen them or raise the exposure",
+                plural(k, "feature", "features"),
+                plural(n, "layer", "layers"),
+                at.map_or(String::new(), |a| format!(", at {}", where_is(&a))),
+            ),
+        )
+        .with("features", k)
+        .with("layers", n)
+        .with("first_layer", first);
+        if let Some(a) = at {
+            w = w
+                .with("x_mm", a.x_mm)
+                .with("y_mm", a.y_mm)
+                .with("width_mm", a.width_mm)
+                .with("height_mm", a.height_mm);
+        }
+        out.push(w);
     }
     if let (k, n, Some(first)) = count(|c| c.merged) {
         out.push(

@@ -63,9 +63,12 @@ pub(super) struct LayerInput<'a> {
     pub section: &'a Section,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
     pub below: Option<&'a Section>,
-    /// The sections of the layers below, nearest first, as many as the cure correction
-    /// holds downward-facing surfaces back by (`--cure-correction xyz`; else empty).
+    /// The sections of the layers below, nearest first, one more than the cure correction
+    /// holds downward-facing surfaces back by (`--cure-correction xyz`, see
+    /// `CureJob::lower_layers`; else empty).
     pub lower: Vec<&'a Section>,
+    /// Whether it is the job's last layer.
+    pub top: bool,
 }
 
 /// What a worker made of one layer.
@@ -141,6 +144,9 @@ pub(super) fn layer_masks(
         }
         c.clone()
     });
+    if let Some(job) = ctx.cure {
+        job.count_dropped(i, &drawn.dropped);
+    }
     worker.previous = Some(PreviousLayerMasks {
         index: i,
         simplified: same && reuse,
@@ -212,19 +218,29 @@ fn draw(
     // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
     let comp = ctx.optics.map(|o| &o.compensator);
     let drawn_section = warped.as_deref().unwrap_or(section);
-    let (field_mask, lit_pixels, outside, cure) = match ctx.cure.filter(|c| c.active()) {
+    let (field_mask, lit_pixels, outside, cure, dropped) = match ctx.cure.filter(|c| c.active()) {
         // The cure correction and prediction work on the coverage (the relative irradiance
         // the compensation then delivers): drawn, corrected and predicted, then thresholded
         // and compensated.
         Some(job) => {
             let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
-            let (m, c) = job.draw(ctx.raster, drawn_section, &lower, scratch, ctx.binary, comp);
-            (m, c.lit_pixels, c.outside, c.cure.map(|p| (p, c.hist)))
+            let (m, c) = job.draw(
+                ctx.raster,
+                drawn_section,
+                &lower,
+                layer.top,
+                scratch,
+                ctx.binary,
+                comp,
+            );
+            let cure = c.cure.map(|p| (p, c.hist));
+            (m, c.lit_pixels, c.outside, cure, c.dropped)
         }
         None => {
             let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
             let lit = scratch.lit_pixels(&m);
-            (m, lit, comp.is_some() && scratch.reported_outside(), None)
+            let outside = comp.is_some() && scratch.reported_outside();
+            (m, lit, outside, None, Vec::new())
         }
     };
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
@@ -252,6 +268,7 @@ fn draw(
         outside,
         area_mm2,
         cure,
+        dropped,
         pngs,
         runs: if recent.is_some() {
             scratch.lit_runs.clone()

@@ -23,6 +23,9 @@ pub(super) struct DrawnMasks {
     pub area_mm2: f64,
     /// The predicted cure and its edge errors (`--predict`).
     pub cure: Option<(crate::bundle::LayerCure, crate::cure::predict::Histogram)>,
+    /// The flat features the Z correction drops, found while drawing them (empty unless
+    /// `xyz`, where masks are not reused).
+    pub dropped: Vec<(usize, super::cure_records::LayerDropped)>,
     /// PNG bytes, SHA-256 and projector of each mask.
     pub pngs: Vec<(Vec<u8>, String, u32)>,
     /// The lit pixels (for the islands) when drawn from a simplified section, which
@@ -105,6 +108,7 @@ mod tests {
             outside: tag % 2 == 1,
             area_mm2: tag as f64,
             cure: None,
+            dropped: Vec::new(),
             pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0)],
             runs: Default::default(),
         })

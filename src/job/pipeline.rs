@@ -303,7 +303,8 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
                 0 => block.prev.as_ref().and_then(|w| w.last()),
                 _ => Some(&sections[k - 1]),
             },
-            lower: lower_sections(block, k, p.ctx.cure.map_or(0, |c| c.held_back())),
+            lower: lower_sections(block, k, p.ctx.cure.map_or(0, |c| c.lower_layers())),
+            top: index + 1 == p.layers,
         };
         let mut out = layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?;
         // The next block's first layer counts its islands over these.
@@ -320,7 +321,7 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
 }
 
 /// The sections of the `m` layers below layer `k` of `block`'s window (nearest first;
-/// fewer near the platform), from the window and the window below.
+/// fewer near the platform), from the window and the window below (so `m` ≤ [`WINDOW`]).
 fn lower_sections(block: &Block, k: usize, m: usize) -> Vec<&Section> {
     (1..=m)
         .map_while(|d| match k.checked_sub(d) {

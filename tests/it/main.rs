@@ -6,6 +6,7 @@ mod batch;
 mod calibrate;
 mod common;
 mod cure;
+mod cure_dropped;
 mod cure_models;
 mod export;
 mod fuzz;
