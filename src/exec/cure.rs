@@ -19,7 +19,8 @@
 //!    (Σ|∇| of the relative irradiance by central differences: exact for a monotone
 //!    anti-aliased edge at any angle) and so the mean edge offset; the islands (4-connected
 //!    pixels of relative irradiance ≥ 0.5) that do not cure ("vanished") or that one cured
-//!    region joins ("merged"); the print-through below downward-facing pixels.
+//!    region joins ("merged"); the print-through below downward-facing pixels (lit, over
+//!    a pixel that is dark in the layer below, as are its 4 neighbours).
 
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
@@ -395,28 +396,32 @@ impl Engine {
         let [x0, y0, x1, y1] = sbox;
         let (sw, sh) = (self.sw, self.acc.len() / self.sw);
         let t = self.mid;
-        let acc = &self.acc;
-        let at = |x: isize, y: isize| -> f32 {
-            if x < 0 || y < 0 || x as usize >= sw || y as usize >= sh {
-                0.0
-            } else {
-                acc[y as usize * sw + x as usize]
-            }
-        };
+        let zero = vec![0.0f32; sw];
         let mut sum = 0.0f64;
         for y in y0..y1 {
+            let row = &self.acc[y * sw..(y + 1) * sw];
+            let up = if y > 0 {
+                &self.acc[(y - 1) * sw..y * sw]
+            } else {
+                &zero[..]
+            };
+            let down = if y + 1 < sh {
+                &self.acc[(y + 1) * sw..(y + 2) * sw]
+            } else {
+                &zero[..]
+            };
             for x in x0..x1 {
-                let a = acc[y * sw + x];
-                let (xi, yi) = (x as isize, y as isize);
-                let (l, r, u, d) = (
-                    at(xi - 1, yi),
-                    at(xi + 1, yi),
-                    at(xi, yi - 1),
-                    at(xi, yi + 1),
-                );
+                let a = row[x];
+                let l = if x > 0 { row[x - 1] } else { 0.0 };
+                let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
+                let (u, d) = (up[x], down[x]);
                 let side = a >= t;
-                if (l >= t) == side && (r >= t) == side && (u >= t) == side && (d >= t) == side {
-                    sum += side as u8 as f64;
+                if side {
+                    if l >= t && r >= t && u >= t && d >= t {
+                        sum += 1.0;
+                        continue;
+                    }
+                } else if l < t && r < t && u < t && d < t {
                     continue;
                 }
                 let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
@@ -436,39 +441,56 @@ impl Engine {
         let [c0, r0, c1, r1] = cur.bbox;
         let [x0, y0, x1, y1] = sbox;
         let bw = x1 - x0;
-        let reach = self.reach as isize;
+        let reach = self.reach;
         let cw = c1 - c0;
         self.hbuf.clear();
         self.hbuf.resize(bw * (r1 - r0), 0.0);
-        // Along rows: the light of each lit row at every sample column.
+        // Along rows: the light of each lit row at the sample columns its lit pixels
+        // reach (`extent`, relative to x0; empty for a dark row).
+        let mut extent = vec![(0usize, 0usize); r1 - r0];
         for r in r0..r1 {
             let row = &cur.data[(r - r0) * cw..(r - r0 + 1) * cw];
+            let Some(first) = row.iter().position(|&v| v != 0.0) else {
+                continue;
+            };
+            let last = row.iter().rposition(|&v| v != 0.0).unwrap_or(first);
+            let (a, b) = (
+                ((c0 + first).saturating_sub(reach) * SUB).max(x0),
+                ((c0 + last + 1 + reach).min(self.w) * SUB).min(x1),
+            );
+            extent[r - r0] = (a - x0, b - x0);
             let out = &mut self.hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
-            for (j, o) in out.iter_mut().enumerate() {
-                let x = x0 + j;
-                let (base, k) = ((x / SUB) as isize, x % SUB);
+            for x in a..b {
+                let (base, k) = (x / SUB, x % SUB);
                 let wk = &self.weights[k];
+                let lo = (base + reach).saturating_sub(reach * 2).max(c0 + first);
+                let hi = (base + reach).min(c0 + last);
                 let mut s = 0.0f32;
-                let lo = (base - reach).max(c0 as isize);
-                let hi = (base + reach).min(c1 as isize - 1);
                 for c in lo..=hi {
-                    s += wk[(c - base + reach) as usize] * row[c as usize - c0];
+                    s += wk[c + reach - base] * row[c - c0];
                 }
-                *o = s;
+                out[x - x0] = s;
             }
         }
         // Down columns, into the accumulation.
         for y in y0..y1 {
-            let (base, k) = ((y / SUB) as isize, y % SUB);
+            let (base, k) = (y / SUB, y % SUB);
             let wk = &self.weights[k];
-            let lo = (base - reach).max(r0 as isize);
-            let hi = (base + reach).min(r1 as isize - 1);
+            let lo = (base + reach).saturating_sub(reach * 2).max(r0);
+            let hi = (base + reach).min(r1 - 1);
+            if lo > hi {
+                continue;
+            }
             let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
             for r in lo..=hi {
-                let wgt = ratio * wk[(r - base + reach) as usize];
-                let src = &self.hbuf[(r as usize - r0) * bw..(r as usize - r0 + 1) * bw];
-                for (a, s) in acc.iter_mut().zip(src) {
-                    *a += wgt * s;
+                let (a, b) = extent[r - r0];
+                if a == b {
+                    continue;
+                }
+                let wgt = ratio * wk[r + reach - base];
+                let src = &self.hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
+                for (acc, s) in acc[a..b].iter_mut().zip(src) {
+                    *acc += wgt * s;
                 }
             }
         }
@@ -571,13 +593,15 @@ impl Engine {
         m
     }
 
-    /// Deepest cure below the layer's bottom at pixels lit in `cur` and not in `below`.
+    /// Deepest cure below the layer's bottom at its downward-facing pixels: lit in `cur`,
+    /// and neither they nor their 4 neighbours lit in `below` (an anti-aliased wall whose
+    /// edge pixel crosses one half from one layer to the next is not an overhang).
     fn print_through(&self, cur: &Irradiance, below: &Irradiance) -> Option<f64> {
         let [c0, r0, c1, r1] = cur.bbox;
         let mut best: Option<f32> = None;
         for r in r0..r1 {
             for c in c0..c1 {
-                if cur.data[(r - r0) * (c1 - c0) + c - c0] >= LIT && below.at(c, r) < LIT {
+                if cur.data[(r - r0) * (c1 - c0) + c - c0] >= LIT && dark_around(below, c, r) {
                     let a = self.pixel_max(c, r);
                     if a > self.bottom && best.is_none_or(|b| a > b) {
                         best = Some(a);
@@ -589,22 +613,38 @@ impl Engine {
     }
 }
 
+/// Whether pixel (c, r) and its 4 neighbours are below [`LIT`] in `layer`.
+fn dark_around(layer: &Irradiance, c: usize, r: usize) -> bool {
+    layer.at(c, r) < LIT
+        && layer.at(c + 1, r) < LIT
+        && layer.at(c, r + 1) < LIT
+        && (c == 0 || layer.at(c - 1, r) < LIT)
+        && (r == 0 || layer.at(c, r - 1) < LIT)
+}
+
 /// Σ|∇I| by central differences over the box grown by one pixel: the drawn perimeter, px.
 fn perimeter(cur: &Irradiance) -> f64 {
     let [c0, r0, c1, r1] = cur.bbox;
-    let at = |c: isize, r: isize| -> f32 {
-        if c < 0 || r < 0 {
-            0.0
-        } else {
-            cur.at(c as usize, r as usize)
-        }
-    };
+    let (w, h) = (c1 - c0, r1 - r0);
+    // The box with two pixels of zeros around it.
+    let pw = w + 4;
+    let mut pad = vec![0.0f32; pw * (h + 4)];
+    for r in 0..h {
+        pad[(r + 2) * pw + 2..(r + 2) * pw + 2 + w].copy_from_slice(&cur.data[r * w..(r + 1) * w]);
+    }
     let mut s = 0.0f64;
-    for r in r0 as isize - 1..=r1 as isize {
-        for c in c0 as isize - 1..=c1 as isize {
-            let gx = 0.5 * (at(c + 1, r) - at(c - 1, r));
-            let gy = 0.5 * (at(c, r + 1) - at(c, r - 1));
-            s += ((gx * gx + gy * gy) as f64).sqrt();
+    for r in 1..h + 3 {
+        let (up, row, down) = (
+            &pad[(r - 1) * pw..r * pw],
+            &pad[r * pw..(r + 1) * pw],
+            &pad[(r + 1) * pw..(r + 2) * pw],
+        );
+        for c in 1..w + 3 {
+            let gx = 0.5 * (row[c + 1] - row[c - 1]);
+            let gy = 0.5 * (down[c] - up[c]);
+            if gx != 0.0 || gy != 0.0 {
+                s += ((gx * gx + gy * gy) as f64).sqrt();
+            }
         }
     }
     s
