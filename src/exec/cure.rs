@@ -1134,9 +1134,9 @@ mod tests {
                     .enumerate()
                     .map(|(k, (img, r))| {
                         let mut l = 0.0;
-                        for p in 0..w * h {
+                        for (p, &val) in img.iter().enumerate() {
                             let (c, rr) = ((p % w) as f64, (p / w) as f64);
-                            l += img[p] as f64 * psf.axis_weight(u - c) * psf.axis_weight(v - rr);
+                            l += val as f64 * psf.axis_weight(u - c) * psf.axis_weight(v - rr);
                         }
                         q.powi(k as i32) * *r as f64 * l
                     })
