@@ -41,7 +41,8 @@ pub(crate) struct RunArgs {
     fault: Vec<String>,
     /// Predict what cures from the masks alone (the job's cure model: PSF, dose, depth)
     /// and report the edge offset, vanishing and merging islands and the print-through.
-    /// Needs a job sliced with a profile that has psf_sigma_px, one projector.
+    /// Needs a job sliced with a profile that has psf_sigma_px, one projector. Findings
+    /// do not change the exit code.
     #[arg(long)]
     cure: bool,
 }

@@ -15,7 +15,9 @@
 //!    reaches layer i's top from its own exposure and every following one. Layer i's
 //!    mid-plane cures where A_i·D₀·exp(−h/(2Dp)) ≥ Ec. One accumulation buffer the size of
 //!    the field, whatever the layer count.
-//! 5. Per layer: the cured area against the section's (`area_mm2`), the drawn perimeter
+//! 5. Per layer: the cured area (where the layer's own light is at least [`NEAR`]: farther
+//!    out it is the print-through of the layers above) against the section's
+//!    (`area_mm2`), the drawn perimeter
 //!    (Σ|∇| of the relative irradiance by central differences: exact for a monotone
 //!    anti-aliased edge at any angle) and so the mean edge offset; the islands (4-connected
 //!    pixels of relative irradiance ≥ 0.5) that do not cure ("vanished") or that one cured
@@ -38,6 +40,10 @@ pub const SUB: usize = 2;
 pub const WORST_LAYERS: usize = 5;
 /// Relative irradiance at which a pixel counts as lit (islands, downward-facing pixels).
 pub const LIT: f32 = 0.5;
+/// The layer's own light (of a full pixel) below which a sample does not count in its
+/// cured area: about 1.3 px outside a straight edge with σ = 0.5 px, well beyond the
+/// cured edge; resin cured farther out is the layers above's print-through.
+pub const NEAR: f32 = 0.01;
 /// Layers decoded together, ahead of the sequential recurrence.
 const CHUNK: usize = 8;
 
@@ -88,7 +94,8 @@ pub struct LayerCureCheck {
     /// The section's area the bundle records, mm².
     #[serde(serialize_with = "six")]
     pub section_mm2: f64,
-    /// Cured area at mid-layer, mm² (samples within the lit box plus the PSF's reach).
+    /// Cured area at mid-layer, mm² (samples where the layer's own light is at least
+    /// [`NEAR`] of a full pixel's).
     #[serde(serialize_with = "six")]
     pub cured_mm2: f64,
     /// The drawn perimeter, mm (Σ|∇| of the relative irradiance).
@@ -295,6 +302,10 @@ pub struct Engine {
     /// The sample box where `acc` may be nonzero.
     acc_box: Option<[usize; 4]>,
     hbuf: Vec<f32>,
+    /// The layer's own light over its sample box (before the exposure ratio).
+    own: Vec<f32>,
+    pad: Vec<f32>,
+    conv: Vec<f32>,
     labels: Vec<u32>,
     parent: Vec<u32>,
 }
@@ -328,6 +339,9 @@ impl Engine {
             acc: vec![0.0; w * h * SUB * SUB],
             acc_box: None,
             hbuf: Vec::new(),
+            own: Vec::new(),
+            pad: Vec::new(),
+            conv: Vec::new(),
             labels: Vec::new(),
             parent: Vec::new(),
         }
@@ -386,12 +400,13 @@ impl Engine {
         out
     }
 
-    /// The cured samples of `sbox`, each counted by the fraction of its cell on the cured
-    /// side: a sample whose four neighbours lie on its side of the threshold counts 0 or 1;
+    /// The cured samples of `sbox` where the layer's own light is at least [`NEAR`], each
+    /// counted by the fraction of its cell on the cured side: a sample whose four neighbours lie on its side of the threshold counts 0 or 1;
     /// one next to the cured edge clamp(½ + (A − T)/|∇A|), its signed distance from the
     /// edge in sample steps (A linear across the cell). Summed over an edge the fractions
     /// give the area behind it without the grid's quantization (exactly for an edge along
     /// the grid, whatever its position).
+    #[inline(never)]
     fn cured_samples(&self, sbox: [usize; 4]) -> f64 {
         let [x0, y0, x1, y1] = sbox;
         let (sw, sh) = (self.sw, self.acc.len() / self.sw);
@@ -410,7 +425,11 @@ impl Engine {
             } else {
                 &zero[..]
             };
+            let own = &self.own[(y - y0) * (x1 - x0)..(y - y0 + 1) * (x1 - x0)];
             for x in x0..x1 {
+                if own[x - x0] < NEAR {
+                    continue;
+                }
                 let a = row[x];
                 let l = if x > 0 { row[x - 1] } else { 0.0 };
                 let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
@@ -437,6 +456,7 @@ impl Engine {
     }
 
     /// acc += ratio · (the blurred light of `cur`) over the sample box `sbox`.
+    #[inline(never)]
     fn blur_into_acc(&mut self, cur: &Irradiance, sbox: [usize; 4], ratio: f32) {
         let [c0, r0, c1, r1] = cur.bbox;
         let [x0, y0, x1, y1] = sbox;
@@ -446,33 +466,59 @@ impl Engine {
         self.hbuf.clear();
         self.hbuf.resize(bw * (r1 - r0), 0.0);
         // Along rows: the light of each lit row at the sample columns its lit pixels
-        // reach (`extent`, relative to x0; empty for a dark row).
+        // reach (`extent`, relative to x0; empty for a dark row). Per sub-sample k, a 1-D
+        // convolution of the row (padded with `reach` zeros each side) over the pixels'
+        // bases, tap by tap (vectorizes), then interleaved into the samples.
         let mut extent = vec![(0usize, 0usize); r1 - r0];
+        let taps = 2 * reach + 1;
+        let mut pad = std::mem::take(&mut self.pad);
+        let mut conv = std::mem::take(&mut self.conv);
         for r in r0..r1 {
             let row = &cur.data[(r - r0) * cw..(r - r0 + 1) * cw];
             let Some(first) = row.iter().position(|&v| v != 0.0) else {
                 continue;
             };
             let last = row.iter().rposition(|&v| v != 0.0).unwrap_or(first);
-            let (a, b) = (
-                ((c0 + first).saturating_sub(reach) * SUB).max(x0),
-                ((c0 + last + 1 + reach).min(self.w) * SUB).min(x1),
+            // Pixel bases whose samples the lit pixels reach, inside the sample box.
+            let (pa, pb) = (
+                (c0 + first).saturating_sub(reach).max(x0 / SUB),
+                (c0 + last + 1 + reach).min(self.w).min(x1 / SUB),
             );
-            extent[r - r0] = (a - x0, b - x0);
-            let out = &mut self.hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
-            for x in a..b {
-                let (base, k) = (x / SUB, x % SUB);
-                let wk = &self.weights[k];
-                let lo = (base + reach).saturating_sub(reach * 2).max(c0 + first);
-                let hi = (base + reach).min(c0 + last);
-                let mut s = 0.0f32;
-                for c in lo..=hi {
-                    s += wk[c + reach - base] * row[c - c0];
+            // pad[j] = pixel pa − reach + j.
+            let n = pb - pa;
+            pad.clear();
+            pad.resize(n + 2 * reach, 0.0);
+            for (j, p) in pad.iter_mut().enumerate() {
+                let c = (pa + j) as isize - reach as isize;
+                if c >= (c0 + first) as isize && c <= (c0 + last) as isize {
+                    *p = row[c as usize - c0];
                 }
-                out[x - x0] = s;
             }
+            let out = &mut self.hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
+            for k in 0..SUB {
+                // Sample k of base b: Σ_d weights[k][d]·pixel(b + d − reach).
+                conv.clear();
+                conv.resize(n, 0.0);
+                let wk = &self.weights[k];
+                for d in 0..taps {
+                    let wgt = wk[d];
+                    for (o, v) in conv.iter_mut().zip(&pad[d..d + n]) {
+                        *o += wgt * v;
+                    }
+                }
+                for (j, v) in conv.iter().enumerate() {
+                    out[(pa + j) * SUB + k - x0] = *v;
+                }
+            }
+            extent[r - r0] = (pa * SUB - x0, pb * SUB - x0);
         }
-        // Down columns, into the accumulation.
+        self.pad = pad;
+        self.conv = conv;
+        // Down columns: the layer's own light at every sample (`own`), added to the
+        // accumulation.
+        let sbw = x1 - x0;
+        self.own.clear();
+        self.own.resize(sbw * (y1 - y0), 0.0);
         for y in y0..y1 {
             let (base, k) = (y / SUB, y % SUB);
             let wk = &self.weights[k];
@@ -481,23 +527,28 @@ impl Engine {
             if lo > hi {
                 continue;
             }
-            let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
+            let own = &mut self.own[(y - y0) * sbw..(y - y0 + 1) * sbw];
             for r in lo..=hi {
                 let (a, b) = extent[r - r0];
                 if a == b {
                     continue;
                 }
-                let wgt = ratio * wk[r + reach - base];
+                let wgt = wk[r + reach - base];
                 let src = &self.hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
-                for (acc, s) in acc[a..b].iter_mut().zip(src) {
-                    *acc += wgt * s;
+                for (o, s) in own[a..b].iter_mut().zip(src) {
+                    *o += wgt * s;
                 }
+            }
+            let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
+            for (a, o) in acc.iter_mut().zip(own.iter()) {
+                *a += ratio * o;
             }
         }
     }
 
     /// Islands of `cur` (4-connected lit pixels): which cure nowhere, which one cured
     /// region joins.
+    #[inline(never)]
     fn islands(&mut self, cur: &Irradiance, sbox: [usize; 4], out: &mut LayerOut) {
         let [c0, r0, c1, r1] = cur.bbox;
         let (bw, bh) = (c1 - c0, r1 - r0);
@@ -596,6 +647,7 @@ impl Engine {
     /// Deepest cure below the layer's bottom at its downward-facing pixels: lit in `cur`,
     /// and neither they nor their 4 neighbours lit in `below` (an anti-aliased wall whose
     /// edge pixel crosses one half from one layer to the next is not an overhang).
+    #[inline(never)]
     fn print_through(&self, cur: &Irradiance, below: &Irradiance) -> Option<f64> {
         let [c0, r0, c1, r1] = cur.bbox;
         let mut best: Option<f32> = None;
@@ -623,6 +675,7 @@ fn dark_around(layer: &Irradiance, c: usize, r: usize) -> bool {
 }
 
 /// Σ|∇I| by central differences over the box grown by one pixel: the drawn perimeter, px.
+#[inline(never)]
 fn perimeter(cur: &Irradiance) -> f64 {
     let [c0, r0, c1, r1] = cur.bbox;
     let (w, h) = (c1 - c0, r1 - r0);
@@ -652,6 +705,7 @@ fn perimeter(cur: &Irradiance) -> f64 {
 
 /// 4-connected components of the cells of a `w`×`h` grid where `on` holds: `labels`
 /// (row-major, 0 off, else 1..=count), returns the count. Union-find over runs.
+#[inline(never)]
 fn label(
     w: usize,
     h: usize,
