@@ -1305,6 +1305,43 @@ mod tests {
         assert!(out[0].merged.is_empty());
     }
 
+    /// `--cure` needs the `cure` record and one projector; each refusal names the bundle.
+    #[test]
+    fn jobs_without_the_record_or_with_several_projectors_are_refused() {
+        use crate::bundle::DirSource;
+        let src = DirSource::new(std::path::Path::new("some.dmdjob"));
+        let mut man = crate::exec::testutil::two_layer_topdown();
+        man.cure = None;
+        let e = model_of(&man, &src).unwrap_err().to_string();
+        assert!(
+            e.contains("some.dmdjob") && e.contains("`cure` record"),
+            "{e}"
+        );
+        let m = model();
+        man.cure = Some(crate::bundle::Cure {
+            psf_sigma_px: m.sigma_px,
+            pixel_mm: m.pixel_mm,
+            dp_mm: m.dp_mm,
+            ec_mj_cm2: m.ec_mj_cm2,
+            overcure_mm: m.overcure_mm,
+            layer_mm: m.layer_mm,
+            edge_threshold: m.edge_threshold(),
+            correction: "xy".into(),
+            shift_px: 0.49,
+            print_through_mm: m.print_through_mm(None),
+            held_back_layers: 0,
+            predicted: None,
+        });
+        assert_eq!(model_of(&man, &src).unwrap(), m);
+        man.machine = crate::profile::Profile::resolve("tiled-2x1").unwrap();
+        let e = model_of(&man, &src).unwrap_err().to_string();
+        assert!(
+            e.contains("some.dmdjob") && e.contains("2 projectors"),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1);
+    }
+
     /// Print-through under an overhang: the closed form with the layers above it.
     #[test]
     fn print_through_under_an_overhang_follows_the_closed_form() {
