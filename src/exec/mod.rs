@@ -5,8 +5,9 @@
 //! the mask files); the machine comes from the resolved profile embedded in the manifest,
 //! or from the profile given as [`RunOptions::machine`] (`--machine`) to check the job
 //! against the machine it will run on.
-//! It shares nothing with the slicer and the planner except the bundle format and the
-//! pure trapezoid math of [`crate::motion`]. Stages:
+//! It shares nothing with the slicer and the planner except the bundle format, the cure
+//! model's math of [`crate::resin`] and the pure trapezoid math of [`crate::motion`].
+//! Stages:
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
 //!    the projector's size and bit depth, its own file, lit where the layer's section is
@@ -15,7 +16,9 @@
 //!    with optional fault injection, streaming [`sim::Segment`]s to sinks.
 //! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
 //!    [`trace::TraceWriter`] (`--trace`), [`report::PlotCollector`] (`--plot`).
-//! 4. [`report::Report`]: the summary, `--json`, exit status.
+//! 4. With `--cure`, [`cure`]: what cures, predicted from the masks alone (the model of
+//!    [`crate::resin`]), once the masks verified; information, never a violation.
+//! 5. [`report::Report`]: the summary, `--json`, exit status.
 //!
 //! [`testutil`] builds manifests by hand for the executor's tests and benchmarks.
 //!
