@@ -39,6 +39,12 @@ pub(crate) struct RunArgs {
     /// (repeatable).
     #[arg(long, value_name = "KIND@LAYER")]
     fault: Vec<String>,
+    /// Predict what cures from the masks alone (the job's cure model: PSF, dose, depth)
+    /// and report the edge offset, vanishing and merging islands and the print-through.
+    /// Needs a job sliced with a profile that has psf_sigma_px, one projector. Findings
+    /// do not change the exit code.
+    #[arg(long)]
+    cure: bool,
 }
 
 impl RunArgs {
@@ -66,6 +72,7 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         plot: a.plot,
         layers: a.layers,
         machine,
+        cure: a.cure,
     };
     let report = dmdsl::exec::run(&a.bundle, &opts)?;
     if a.json {

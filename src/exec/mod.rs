@@ -5,8 +5,9 @@
 //! the mask files); the machine comes from the resolved profile embedded in the manifest,
 //! or from the profile given as [`RunOptions::machine`] (`--machine`) to check the job
 //! against the machine it will run on.
-//! It shares nothing with the slicer and the planner except the bundle format and the
-//! pure trapezoid math of [`crate::motion`]. Stages:
+//! It shares nothing with the slicer and the planner except the bundle format, the cure
+//! model's math of [`crate::resin`] and the pure trapezoid math of [`crate::motion`].
+//! Stages:
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
 //!    the projector's size and bit depth, its own file, lit where the layer's section is
@@ -15,13 +16,16 @@
 //!    with optional fault injection, streaming [`sim::Segment`]s to sinks.
 //! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
 //!    [`trace::TraceWriter`] (`--trace`), [`report::PlotCollector`] (`--plot`).
-//! 4. [`report::Report`]: the summary, `--json`, exit status.
+//! 4. With `--cure`, [`cure`]: what cures, predicted from the masks alone (the model of
+//!    [`crate::resin`]), once the masks verified; information, never a violation.
+//! 5. [`report::Report`]: the summary, `--json`, exit status.
 //!
 //! [`testutil`] builds manifests by hand for the executor's tests and benchmarks.
 //!
 //! See `docs/EXECUTOR.md` for the model and every check.
 
 pub mod check;
+pub mod cure;
 pub mod report;
 pub mod sim;
 pub mod trace;
@@ -75,6 +79,9 @@ pub struct RunOptions {
     /// stage, shutter and DMD are simulated, its projectors' sizes and placement verified
     /// (`--machine`).
     pub machine: Option<Profile>,
+    /// Predict what cures from the masks (`--cure`, [`cure`]): needs the manifest's `cure`
+    /// record and one projector.
+    pub cure: bool,
 }
 
 /// Parses a layer range for a job of `n` layers: `A..B` or `A..=B` (both inclusive),
@@ -128,6 +135,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         ..
     } = job;
     let (mut manifest, range, machine_check) = check_options(manifest, &*source, opts)?;
+    let cure_model = opts
+        .cure
+        .then(|| cure::model_of(&manifest, &*source))
+        .transpose()?;
     let read_s = t0.elapsed().as_secs_f64();
     let dir = path;
 
@@ -139,6 +150,20 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     );
     let verified = verify::verify_source(&*source, &manifest, machine, imported);
     let verify_s = t1.elapsed().as_secs_f64();
+    let t3 = Instant::now();
+    // The cure from the masks, once every mask and gray map read as recorded (a
+    // `mask-content` problem does not stop it), under the job's own machine (its
+    // exposure, calibration and projector).
+    let unreadable = verified.problems.iter().any(|p| p.kind != "mask-content");
+    let (cure, cure_skipped) = match &cure_model {
+        Some(model) if !unreadable => (Some(cure::check(&manifest, &*source, model)?), None),
+        Some(_) => (
+            None,
+            Some("masks, gray maps or the manifest failed verification".to_string()),
+        ),
+        None => (None, None),
+    };
+    let cure_s = t3.elapsed().as_secs_f64();
     if let Some(p) = &opts.machine {
         // From here on the job runs on the given machine.
         manifest.machine = p.clone();
@@ -154,6 +179,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         read_s,
         verify_s,
         simulate_s,
+        cure_s,
     };
     let estimate_source = match (&estimate, format) {
         (Some(e), _) => e.source.clone(),
@@ -162,7 +188,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         }
         (None, _) => "import steps".into(),
     };
-    Ok(report(
+    let mut report = report(
         (dir, format.name(), estimate_source),
         &manifest,
         machine_check,
@@ -170,7 +196,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         simulated,
         violations,
         timings,
-    ))
+    );
+    report.cure = cure;
+    report.cure_skipped = cure_skipped;
+    Ok(report)
 }
 
 /// The manifest, the layer range of the trace and the plot, and with `--machine` how the
@@ -394,6 +423,8 @@ fn report(
         violation_counts: counts,
         per_layer,
         timings,
+        cure: None,
+        cure_skipped: None,
     }
 }
 

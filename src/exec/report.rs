@@ -150,8 +150,14 @@ pub struct Report {
     pub violation_counts: BTreeMap<&'static str, usize>,
     /// Per-layer timing.
     pub per_layer: Vec<LayerTiming>,
-    /// Wall-clock seconds spent: read, verify, simulate.
+    /// Wall-clock seconds spent: read, verify, simulate, cure.
     pub timings: Timings,
+    /// What cures, predicted from the masks (`--cure`; docs/EXECUTOR.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cure: Option<super::cure::CureCheck>,
+    /// Why `--cure` was not evaluated (the bundle failed verification).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cure_skipped: Option<String>,
     /// True when the bundle verified, replayed without violations and no fault triggered.
     pub ok: bool,
 }
@@ -168,6 +174,9 @@ pub struct Timings {
     /// Simulation, checks, trace.
     #[serde(serialize_with = "six")]
     pub simulate_s: f64,
+    /// The cure check (`--cure`; 0 without).
+    #[serde(serialize_with = "six")]
+    pub cure_s: f64,
 }
 
 /// Statistics gathered from the timeline.
@@ -462,6 +471,70 @@ pub fn render_human(r: &Report) -> String {
             );
         }
     }
+    if let Some(c) = &r.cure {
+        render_cure(&mut o, c);
+    }
+    if let Some(why) = &r.cure_skipped {
+        let _ = writeln!(o, "cure: not evaluated: {why}");
+    }
     let _ = writeln!(o, "{}", if r.ok { "OK" } else { "FAILED" });
     o
+}
+
+/// Findings (vanished, merged) the human summary lists before "and N more".
+pub const FINDINGS_SHOWN: usize = 5;
+
+/// The cure check's lines of the human summary.
+fn render_cure(o: &mut String, c: &super::cure::CureCheck) {
+    let pt = c
+        .print_through_mm
+        .map_or("none".to_string(), |t| format!("{t:.3} mm"));
+    let z = c.z_error_mm.map_or(String::new(), |z| {
+        format!(
+            " (Z error {z:+.3} mm, {} layers held back)",
+            c.held_back_layers
+        )
+    });
+    let _ = writeln!(
+        o,
+        "cure: edge offset {:+.2} px mean ({:.3} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
+        c.signed_mean_px, c.signed_mean_mm, c.edge_offset_px.p95, c.vanished, c.merged
+    );
+    if let Some(s) = &c.slicer {
+        if let Some(l) = s.max_diff_layer {
+            let _ = writeln!(
+                o,
+                "cure: against the slicer's prediction: largest difference {:.2} px (layer {l}) over {} layers{}",
+                s.max_diff_px,
+                s.layers,
+                if s.vanish_disagreements.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        "; vanishing islands differ in {} layers",
+                        s.vanish_disagreements.len()
+                    )
+                }
+            );
+        }
+    }
+    for f in c.findings.iter().take(FINDINGS_SHOWN) {
+        let what = if f.kind == "vanished" {
+            format!("an island of {} px does not cure", f.pixels)
+        } else {
+            format!("cured resin joins {} islands", f.islands)
+        };
+        let _ = writeln!(
+            o,
+            "  layer {}: {what} at ({:.2}, {:.2}) mm",
+            f.layer, f.at_mm[0], f.at_mm[1]
+        );
+    }
+    if c.findings.len() > FINDINGS_SHOWN {
+        let _ = writeln!(
+            o,
+            "  ... and {} more (--json lists all)",
+            c.findings.len() - FINDINGS_SHOWN
+        );
+    }
 }

@@ -20,6 +20,7 @@ mod plan;
 mod replace;
 mod roundtrip;
 mod run;
+mod run_cure;
 mod schema;
 mod slice;
 mod warnings;

@@ -526,6 +526,11 @@ fn every_json_output_matches_its_schema() {
     );
     s.assert_valid("run-report.schema.json", &report);
     assert_eq!(report["machine"]["profile"], "bottom-up");
+    // The cure from the masks (--cure), against the slicer's records.
+    let (code, report) = json_of(&dir, &["run", "bu.dmdjob", "--json", "--cure"]);
+    assert_eq!(code, 0, "{report}");
+    s.assert_valid("run-report.schema.json", &report);
+    assert!(report["cure"]["per_layer"][0]["slicer_diff_px"].is_number());
     // export, into each one-file form.
     for (out, format) in [
         ("top.dmdjob.zip", "dmdjob-zip"),

@@ -1,0 +1,1376 @@
+//! `dmdsl run --cure`: what cures, predicted from a bundle's masks alone (docs/CURE.md's
+//! model through [`crate::resin`], docs/EXECUTOR.md "Cure check").
+//!
+//! In the projector's pixels, for one projector:
+//!
+//! 1. Each mask pixel's **relative irradiance**: with light compensation S(g)/S(G(px)) (g
+//!    the mask's gray, G the pixel's full-coverage gray from the bundle's gray map, S the
+//!    projector's response), else g/255.
+//! 2. Each layer's light scaled by r = `exposure_s` / the profile's normal `layer_s`
+//!    (bottom layers and a continuous layer's sweep time count as they are).
+//! 3. The light blurred by the Gaussian PSF (separable pixel-box weights,
+//!    [`Psf::axis_weight`]) at [`SUB`]×[`SUB`] samples per pixel, over the lit box plus the
+//!    PSF's reach.
+//! 4. From the top layer down, A_i = r_i·L_i + q·A_{i+1} (q = exp(−h/Dp)): the light that
+//!    reaches layer i's top from its own exposure and every following one. Layer i's
+//!    mid-plane cures where A_i·D₀·exp(−h/(2Dp)) ≥ Ec. One accumulation buffer the size of
+//!    the field, whatever the layer count.
+//! 5. Per layer: the cured area (where the layer's own light is at least [`NEAR`]: farther
+//!    out it is the print-through of the layers above) against the section's
+//!    (`area_mm2`), the drawn perimeter
+//!    (Σ|∇| of the relative irradiance by central differences: exact for a monotone
+//!    anti-aliased edge at any angle) and so the mean edge offset; the islands (4-connected
+//!    pixels of relative irradiance ≥ 0.5) that do not cure ("vanished") or that one cured
+//!    region joins ("merged"); the print-through below downward-facing pixels (lit, over
+//!    a pixel that is dark in the layer below, as are its 4 neighbours).
+
+use crate::bundle::{BundleSource, Manifest, MANIFEST};
+use crate::error::{Error, Result};
+use crate::resin::{CureModel, Psf};
+use image::codecs::png::PngDecoder;
+use image::ImageDecoder;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::report::{six, six_opt};
+
+/// Samples per pixel along each axis at which the cure is evaluated.
+pub const SUB: usize = 2;
+/// The worst layers the check names.
+pub const WORST_LAYERS: usize = 5;
+/// Relative irradiance at which a pixel counts as lit (islands, downward-facing pixels).
+pub const LIT: f32 = 0.5;
+/// The layer's own light (of a full pixel) below which a sample does not count in its
+/// cured area: about 1.3 px outside a straight edge with σ = 0.5 px, well beyond the
+/// cured edge; resin cured farther out is the layers above's print-through.
+pub const NEAR: f32 = 0.01;
+/// The accumulation's pending decay factor below which it is applied to the buffer.
+const RENORMALIZE: f32 = 1e-20;
+/// Layers decoded together, ahead of the sequential recurrence.
+const CHUNK: usize = 8;
+
+/// Statistics of the absolute edge offset over layers, px.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct OffsetStats {
+    /// Perimeter-weighted mean.
+    #[serde(serialize_with = "six")]
+    pub mean: f64,
+    /// Perimeter-weighted 95th percentile.
+    #[serde(serialize_with = "six")]
+    pub p95: f64,
+    /// Largest.
+    #[serde(serialize_with = "six")]
+    pub max: f64,
+}
+
+/// Something a process engineer must see: an island that does not cure, or cured resin
+/// joining islands.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Finding {
+    /// Layer index.
+    pub layer: usize,
+    /// `vanished` or `merged`.
+    pub kind: &'static str,
+    /// Islands concerned (1 for `vanished`).
+    pub islands: usize,
+    /// Lit pixels of the islands.
+    pub pixels: u64,
+    /// Their centroid on the build plane, mm from the field's bottom-left corner.
+    #[serde(serialize_with = "six_pair")]
+    pub at_mm: [f64; 2],
+}
+
+fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> std::result::Result<S::Ok, S::Error> {
+    [
+        crate::round::decimals(v[0], 6),
+        crate::round::decimals(v[1], 6),
+    ]
+    .serialize(s)
+}
+
+/// One layer's cure, from its masks.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct LayerCureCheck {
+    /// Layer index.
+    pub index: usize,
+    /// The section's area the bundle records, mm².
+    #[serde(serialize_with = "six")]
+    pub section_mm2: f64,
+    /// Cured area at mid-layer, mm² (samples where the layer's own light is at least
+    /// [`NEAR`] of a full pixel's).
+    #[serde(serialize_with = "six")]
+    pub cured_mm2: f64,
+    /// The drawn perimeter, mm (Σ|∇| of the relative irradiance).
+    #[serde(serialize_with = "six")]
+    pub perimeter_mm: f64,
+    /// Mean edge offset (cured − section area) / perimeter, px (positive: grows).
+    #[serde(serialize_with = "six")]
+    pub offset_px: f64,
+    /// The same, mm.
+    #[serde(serialize_with = "six")]
+    pub offset_mm: f64,
+    /// Islands of lit pixels.
+    pub islands: usize,
+    /// Islands no sample of which cures.
+    pub vanished: usize,
+    /// Cured regions joining two or more islands.
+    pub merged: usize,
+    /// Deepest cure below the layer's bottom at its downward-facing pixels, mm.
+    #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
+    pub print_through_mm: Option<f64>,
+    /// The slicer's signed mean edge error of the layer (`layers[].cure.mean_px`).
+    #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
+    pub slicer_mean_px: Option<f64>,
+    /// `offset_px` − `slicer_mean_px`.
+    #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
+    pub slicer_diff_px: Option<f64>,
+}
+
+/// How the check agrees with the slicer's records (`slice --predict`): information.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct SlicerAgreement {
+    /// Layers with both figures.
+    pub layers: usize,
+    /// Largest |offset − slicer's mean|, px.
+    #[serde(serialize_with = "six")]
+    pub max_diff_px: f64,
+    /// The layer where it is.
+    pub max_diff_layer: Option<usize>,
+    /// Layers where one finds a vanishing island and the other none.
+    pub vanish_disagreements: Vec<usize>,
+}
+
+/// The cure predicted from the masks (`dmdsl run --cure`).
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct CureCheck {
+    /// The job's correction: "off", "xy" or "xyz".
+    pub correction: String,
+    /// Layers of downward-facing surfaces held back (`xyz`).
+    pub held_back_layers: u32,
+    /// Samples per pixel along each axis.
+    pub samples_per_px: usize,
+    /// Layers with a drawn perimeter (the offset statistics are over them).
+    pub layers_checked: usize,
+    /// |edge offset| over layers, weighted by perimeter, px.
+    pub edge_offset_px: OffsetStats,
+    /// Signed mean edge offset, px (weighted by perimeter).
+    #[serde(serialize_with = "six")]
+    pub signed_mean_px: f64,
+    /// The same, mm.
+    #[serde(serialize_with = "six")]
+    pub signed_mean_mm: f64,
+    /// Islands that do not cure, over all layers.
+    pub vanished: usize,
+    /// Cured regions joining islands, over all layers.
+    pub merged: usize,
+    /// Deepest print-through below a downward-facing pixel, mm (`None`: none).
+    #[serde(serialize_with = "six_opt")]
+    pub print_through_mm: Option<f64>,
+    /// With held-back layers: `print_through_mm` − held_back_layers·h, mm.
+    #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
+    pub z_error_mm: Option<f64>,
+    /// Against the slicer's per-layer records, when the bundle has them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub slicer: Option<SlicerAgreement>,
+    /// Layers with the largest |offset|, worst first.
+    pub worst_layers: Vec<usize>,
+    /// Vanished and merged islands, by layer.
+    pub findings: Vec<Finding>,
+    /// Per layer.
+    pub per_layer: Vec<LayerCureCheck>,
+}
+
+/// The model's inputs of `manifest`, or an error naming the bundle and what is missing:
+/// the `cure` record, or a single projector.
+pub fn model_of(manifest: &Manifest, source: &dyn BundleSource) -> Result<CureModel> {
+    let err = |msg: String| Error::Bundle {
+        path: source.shown(MANIFEST),
+        msg,
+    };
+    let Some(c) = &manifest.cure else {
+        return Err(err(
+            "--cure: the job has no `cure` record (it was sliced with a profile without \
+             psf_sigma_px, or imported): nothing to predict with"
+                .into(),
+        ));
+    };
+    let n = manifest.machine.projector.len();
+    if n != 1 {
+        return Err(err(format!(
+            "--cure: the job has {n} projectors; the cure check handles one (overlap \
+             blending would need the projectors' light summed in the field)"
+        )));
+    }
+    Ok(CureModel {
+        sigma_px: c.psf_sigma_px,
+        pixel_mm: c.pixel_mm,
+        dp_mm: c.dp_mm,
+        ec_mj_cm2: c.ec_mj_cm2,
+        overcure_mm: c.overcure_mm,
+        layer_mm: c.layer_mm,
+    })
+}
+
+/// A layer's relative irradiance inside its lit box (pixels, ends exclusive).
+#[derive(Debug, Clone, Default)]
+pub struct Irradiance {
+    /// `[c0, r0, c1, r1]`; empty when nothing is lit.
+    pub bbox: [usize; 4],
+    /// Row-major over the box.
+    pub data: Vec<f32>,
+}
+
+impl Irradiance {
+    /// The irradiance of a whole `w`×`h` image, cut to its nonzero box.
+    pub fn from_image(w: usize, h: usize, img: &[f32]) -> Irradiance {
+        let (mut c0, mut r0, mut c1, mut r1) = (w, h, 0, 0);
+        for r in 0..h {
+            let row = &img[r * w..(r + 1) * w];
+            if let Some(a) = row.iter().position(|&v| v > 0.0) {
+                let b = row.iter().rposition(|&v| v > 0.0).unwrap_or(a);
+                c0 = c0.min(a);
+                c1 = c1.max(b + 1);
+                r0 = r0.min(r);
+                r1 = r + 1;
+            }
+        }
+        Irradiance::cut(w, img, [c0, r0, c1, r1])
+    }
+
+    fn cut(w: usize, img: &[f32], bbox: [usize; 4]) -> Irradiance {
+        let [c0, r0, c1, r1] = bbox;
+        if c0 >= c1 || r0 >= r1 {
+            return Irradiance::default();
+        }
+        let mut data = Vec::with_capacity((c1 - c0) * (r1 - r0));
+        for r in r0..r1 {
+            data.extend_from_slice(&img[r * w + c0..r * w + c1]);
+        }
+        Irradiance { bbox, data }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// The value at pixel (c, r), 0 outside the box.
+    #[inline]
+    pub fn at(&self, c: usize, r: usize) -> f32 {
+        let [c0, r0, c1, r1] = self.bbox;
+        if c < c0 || c >= c1 || r < r0 || r >= r1 {
+            0.0
+        } else {
+            self.data[(r - r0) * (c1 - c0) + c - c0]
+        }
+    }
+}
+
+/// What one layer gave.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LayerOut {
+    /// Cured samples (fractions of a sample at the cured edge).
+    pub cured_samples: f64,
+    /// Σ|∇| of the irradiance, px.
+    pub perimeter_px: f64,
+    /// Islands.
+    pub islands: usize,
+    /// Vanished islands: (pixels, centroid column, row in pixel units).
+    pub vanished: Vec<(u64, [f64; 2])>,
+    /// Merges: (islands, pixels, centroid).
+    pub merged: Vec<(usize, u64, [f64; 2])>,
+    /// Deepest cure below the layer's bottom at downward-facing pixels, mm.
+    pub print_through_mm: Option<f64>,
+}
+
+/// The sequential part of the check: the accumulation buffer, the PSF weights and the
+/// scratch buffers, for a field of `w`×`h` pixels.
+pub struct Engine {
+    w: usize,
+    h: usize,
+    /// Samples across and down.
+    sw: usize,
+    /// Pixels either side of a sample's pixel the PSF reaches.
+    reach: usize,
+    /// `weights[k][d + reach]`: the light at sub-sample `k` of a pixel from the pixel `d`
+    /// away.
+    weights: Vec<Vec<f32>>,
+    q: f32,
+    /// Relative light at a layer's top at which its mid-plane cures.
+    mid: f32,
+    /// At which the resin just below its bottom cures.
+    bottom: f32,
+    dp_mm: f64,
+    acc: Vec<f32>,
+    /// The sample box where `acc` may be nonzero.
+    acc_box: Option<[usize; 4]>,
+    /// A = `acc` × `scale` (the decay by q of every layer, applied to the buffer only
+    /// when the factor falls below [`RENORMALIZE`]).
+    scale: f32,
+    hbuf: Vec<f32>,
+    /// The layer's own light over its sample box (before the exposure ratio).
+    own: Vec<f32>,
+    pad: Vec<f32>,
+    conv: Vec<f32>,
+    labels: Vec<u32>,
+    parent: Vec<u32>,
+}
+
+impl Engine {
+    /// An engine for a `w`×`h` field and `model`.
+    pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
+        let psf = Psf {
+            sigma_px: model.sigma_px,
+        };
+        let reach = psf.reach_px().ceil() as usize + 1;
+        let weights = (0..SUB)
+            .map(|k| {
+                let u = (k as f64 + 0.5) / SUB as f64;
+                (0..=2 * reach)
+                    .map(|d| psf.axis_weight(u - (d as f64 - reach as f64)) as f32)
+                    .collect()
+            })
+            .collect();
+        let h_mm = model.layer_mm;
+        Engine {
+            w,
+            h,
+            sw: w * SUB,
+            reach,
+            weights,
+            q: (-h_mm / model.dp_mm).exp() as f32,
+            mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
+            bottom: model.threshold(h_mm, Some(0)) as f32,
+            dp_mm: model.dp_mm,
+            acc: vec![0.0; w * h * SUB * SUB],
+            acc_box: None,
+            scale: 1.0,
+            hbuf: Vec::new(),
+            own: Vec::new(),
+            pad: Vec::new(),
+            conv: Vec::new(),
+            labels: Vec::new(),
+            parent: Vec::new(),
+        }
+    }
+
+    /// The accumulated light at sample (`x`, `y`) after the last layer.
+    pub fn acc_at(&self, x: usize, y: usize) -> f32 {
+        self.acc[y * self.sw + x] * self.scale
+    }
+
+    /// The sample box a layer lit in pixel box `b` reaches.
+    fn reach_box(&self, b: [usize; 4]) -> [usize; 4] {
+        let r = self.reach;
+        [
+            b[0].saturating_sub(r) * SUB,
+            b[1].saturating_sub(r) * SUB,
+            (b[2] + r).min(self.w) * SUB,
+            (b[3] + r).min(self.h) * SUB,
+        ]
+    }
+
+    /// Adds layer `cur` (light scaled by `ratio`) on top of the layers processed so far
+    /// (the ones above it) and evaluates its cure; `below` is the layer under it (`None`
+    /// for the first layer, which rests on the platform).
+    pub fn layer(&mut self, cur: &Irradiance, below: Option<&Irradiance>, ratio: f32) -> LayerOut {
+        // Everything above reaches this layer's top through one more layer: one factor,
+        // folded into the buffer once it gets small.
+        self.scale *= self.q;
+        if self.scale < RENORMALIZE {
+            if let Some([x0, y0, x1, y1]) = self.acc_box {
+                let f = self.scale;
+                for y in y0..y1 {
+                    for a in &mut self.acc[y * self.sw + x0..y * self.sw + x1] {
+                        *a *= f;
+                    }
+                }
+            }
+            self.scale = 1.0;
+        }
+        let mut out = LayerOut::default();
+        if cur.is_empty() {
+            return out;
+        }
+        let sbox = self.reach_box(cur.bbox);
+        self.acc_box = Some(match self.acc_box {
+            None => sbox,
+            Some(a) => [
+                a[0].min(sbox[0]),
+                a[1].min(sbox[1]),
+                a[2].max(sbox[2]),
+                a[3].max(sbox[3]),
+            ],
+        });
+        self.blur_into_acc(cur, sbox, ratio);
+        out.cured_samples = self.cured_samples(sbox);
+        out.perimeter_px = perimeter(cur);
+        self.islands(cur, sbox, &mut out);
+        if let Some(below) = below {
+            out.print_through_mm = self.print_through(cur, below);
+        }
+        out
+    }
+
+    /// The cured samples of `sbox` where the layer's own light is at least [`NEAR`], each
+    /// counted by the fraction of its cell on the cured side: a sample whose four neighbours lie on its side of the threshold counts 0 or 1;
+    /// one next to the cured edge clamp(½ + (A − T)/|∇A|), its signed distance from the
+    /// edge in sample steps (A linear across the cell). Summed over an edge the fractions
+    /// give the area behind it without the grid's quantization (exactly for an edge along
+    /// the grid, whatever its position).
+    #[inline(never)]
+    fn cured_samples(&self, sbox: [usize; 4]) -> f64 {
+        let [x0, y0, x1, y1] = sbox;
+        let (sw, sh) = (self.sw, self.acc.len() / self.sw);
+        let t = self.mid / self.scale;
+        let zero = vec![0.0f32; sw];
+        let mut sum = 0.0f64;
+        for y in y0..y1 {
+            let row = &self.acc[y * sw..(y + 1) * sw];
+            let up = if y > 0 {
+                &self.acc[(y - 1) * sw..y * sw]
+            } else {
+                &zero[..]
+            };
+            let down = if y + 1 < sh {
+                &self.acc[(y + 1) * sw..(y + 2) * sw]
+            } else {
+                &zero[..]
+            };
+            let own = &self.own[(y - y0) * (x1 - x0)..(y - y0 + 1) * (x1 - x0)];
+            for x in x0..x1 {
+                if own[x - x0] < NEAR {
+                    continue;
+                }
+                let a = row[x];
+                let l = if x > 0 { row[x - 1] } else { 0.0 };
+                let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
+                let (u, d) = (up[x], down[x]);
+                let side = a >= t;
+                if side {
+                    if l >= t && r >= t && u >= t && d >= t {
+                        sum += 1.0;
+                        continue;
+                    }
+                } else if l < t && r < t && u < t && d < t {
+                    continue;
+                }
+                let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
+                let g = (gx * gx + gy * gy).sqrt();
+                sum += if g > 0.0 {
+                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
+                } else {
+                    side as u8 as f64
+                };
+            }
+        }
+        sum
+    }
+
+    /// acc += ratio · (the blurred light of `cur`) over the sample box `sbox`.
+    #[inline(never)]
+    fn blur_into_acc(&mut self, cur: &Irradiance, sbox: [usize; 4], ratio: f32) {
+        let [c0, r0, c1, r1] = cur.bbox;
+        let [x0, y0, x1, y1] = sbox;
+        let bw = x1 - x0;
+        let reach = self.reach;
+        let cw = c1 - c0;
+        // Only the rows' extents are written and read: no clearing.
+        if self.hbuf.len() < bw * (r1 - r0) {
+            self.hbuf.resize(bw * (r1 - r0), 0.0);
+        }
+        // Along rows: the light of each lit row at the sample columns its lit pixels
+        // reach (`extent`, relative to x0; empty for a dark row). Per sub-sample k, a 1-D
+        // convolution of the row (padded with `reach` zeros each side) over the pixels'
+        // bases, tap by tap (vectorizes), then interleaved into the samples.
+        let mut extent = vec![(0usize, 0usize); r1 - r0];
+        let taps = 2 * reach + 1;
+        let mut pad = std::mem::take(&mut self.pad);
+        let mut conv = std::mem::take(&mut self.conv);
+        for r in r0..r1 {
+            let row = &cur.data[(r - r0) * cw..(r - r0 + 1) * cw];
+            let Some(first) = row.iter().position(|&v| v != 0.0) else {
+                continue;
+            };
+            let last = row.iter().rposition(|&v| v != 0.0).unwrap_or(first);
+            // Pixel bases whose samples the lit pixels reach, inside the sample box.
+            let (pa, pb) = (
+                (c0 + first).saturating_sub(reach).max(x0 / SUB),
+                (c0 + last + 1 + reach).min(self.w).min(x1 / SUB),
+            );
+            // pad[j] = pixel pa − reach + j.
+            let n = pb - pa;
+            pad.clear();
+            pad.resize(n + 2 * reach, 0.0);
+            for (j, p) in pad.iter_mut().enumerate() {
+                let c = (pa + j) as isize - reach as isize;
+                if c >= (c0 + first) as isize && c <= (c0 + last) as isize {
+                    *p = row[c as usize - c0];
+                }
+            }
+            let out = &mut self.hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
+            for k in 0..SUB {
+                // Sample k of base b: Σ_d weights[k][d]·pixel(b + d − reach).
+                conv.clear();
+                conv.resize(n, 0.0);
+                let wk = &self.weights[k];
+                for d in 0..taps {
+                    let wgt = wk[d];
+                    for (o, v) in conv.iter_mut().zip(&pad[d..d + n]) {
+                        *o += wgt * v;
+                    }
+                }
+                for (j, v) in conv.iter().enumerate() {
+                    out[(pa + j) * SUB + k - x0] = *v;
+                }
+            }
+            extent[r - r0] = (pa * SUB - x0, pb * SUB - x0);
+        }
+        self.pad = pad;
+        self.conv = conv;
+        // Down columns: the layer's own light at every sample (`own`), added to the
+        // accumulation.
+        let sbw = x1 - x0;
+        let gain = ratio / self.scale;
+        self.own.clear();
+        self.own.resize(sbw * (y1 - y0), 0.0);
+        for y in y0..y1 {
+            let (base, k) = (y / SUB, y % SUB);
+            let wk = &self.weights[k];
+            let lo = (base + reach).saturating_sub(reach * 2).max(r0);
+            let hi = (base + reach).min(r1 - 1);
+            if lo > hi {
+                continue;
+            }
+            let own = &mut self.own[(y - y0) * sbw..(y - y0 + 1) * sbw];
+            for r in lo..=hi {
+                let (a, b) = extent[r - r0];
+                if a == b {
+                    continue;
+                }
+                let wgt = wk[r + reach - base];
+                let src = &self.hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
+                for (o, s) in own[a..b].iter_mut().zip(src) {
+                    *o += wgt * s;
+                }
+            }
+            let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
+            for (a, o) in acc.iter_mut().zip(own.iter()) {
+                *a += gain * o;
+            }
+        }
+    }
+
+    /// Islands of `cur` (4-connected lit pixels): which cure nowhere, which one cured
+    /// region joins.
+    #[inline(never)]
+    fn islands(&mut self, cur: &Irradiance, sbox: [usize; 4], out: &mut LayerOut) {
+        let [c0, r0, c1, r1] = cur.bbox;
+        let (bw, bh) = (c1 - c0, r1 - r0);
+        let n = label(
+            bw,
+            bh,
+            |c, r| cur.data[r * bw + c] >= LIT,
+            &mut self.labels,
+            &mut self.parent,
+        );
+        out.islands = n;
+        if n == 0 {
+            return;
+        }
+        let island_of = std::mem::take(&mut self.labels);
+        // Per island: pixels, centroid sums, cured.
+        let mut px = vec![0u64; n];
+        let mut sum = vec![[0.0f64; 2]; n];
+        let mut cured = vec![false; n];
+        for r in 0..bh {
+            for c in 0..bw {
+                let l = island_of[r * bw + c];
+                if l == 0 {
+                    continue;
+                }
+                let i = l as usize - 1;
+                px[i] += 1;
+                sum[i][0] += (c0 + c) as f64 + 0.5;
+                sum[i][1] += (r0 + r) as f64 + 0.5;
+                if !cured[i] && self.pixel_max(c0 + c, r0 + r) >= self.mid / self.scale {
+                    cured[i] = true;
+                }
+            }
+        }
+        let centroid = |i: usize| [sum[i][0] / px[i] as f64, sum[i][1] / px[i] as f64];
+        for i in 0..n {
+            if !cured[i] {
+                out.vanished.push((px[i], centroid(i)));
+            }
+        }
+        if cured.iter().filter(|&&c| c).count() >= 2 {
+            // The cured samples' regions, and the islands each touches.
+            let [x0, y0, x1, y1] = sbox;
+            let (sw, mid) = (self.sw, self.mid / self.scale);
+            let acc = &self.acc;
+            let mut labels = Vec::new();
+            let m = label(
+                x1 - x0,
+                y1 - y0,
+                |x, y| acc[(y0 + y) * sw + x0 + x] >= mid,
+                &mut labels,
+                &mut self.parent,
+            );
+            let mut region: Vec<Vec<usize>> = vec![Vec::new(); m + 1];
+            for r in 0..bh {
+                for c in 0..bw {
+                    let l = island_of[r * bw + c];
+                    if l == 0 {
+                        continue;
+                    }
+                    for k in 0..SUB * SUB {
+                        let x = (c0 + c) * SUB + k % SUB - x0;
+                        let y = (r0 + r) * SUB + k / SUB - y0;
+                        let g = labels[y * (x1 - x0) + x] as usize;
+                        if g != 0 && region[g].last() != Some(&(l as usize - 1)) {
+                            region[g].push(l as usize - 1);
+                        }
+                    }
+                }
+            }
+            for mut isl in region {
+                isl.sort_unstable();
+                isl.dedup();
+                if isl.len() >= 2 {
+                    let p: u64 = isl.iter().map(|&i| px[i]).sum();
+                    let s = isl
+                        .iter()
+                        .fold([0.0, 0.0], |a, &i| [a[0] + sum[i][0], a[1] + sum[i][1]]);
+                    out.merged
+                        .push((isl.len(), p, [s[0] / p as f64, s[1] / p as f64]));
+                }
+            }
+        }
+        self.labels = island_of;
+    }
+
+    /// The largest accumulated light over pixel (c, r)'s samples.
+    fn pixel_max(&self, c: usize, r: usize) -> f32 {
+        let mut m = 0.0f32;
+        for k in 0..SUB * SUB {
+            m = m.max(self.acc[(r * SUB + k / SUB) * self.sw + c * SUB + k % SUB]);
+        }
+        m
+    }
+
+    /// Deepest cure below the layer's bottom at its downward-facing pixels: lit in `cur`,
+    /// and neither they nor their 4 neighbours lit in `below` (an anti-aliased wall whose
+    /// edge pixel crosses one half from one layer to the next is not an overhang).
+    #[inline(never)]
+    fn print_through(&self, cur: &Irradiance, below: &Irradiance) -> Option<f64> {
+        let [c0, r0, c1, r1] = cur.bbox;
+        let mut best: Option<f32> = None;
+        for r in r0..r1 {
+            for c in c0..c1 {
+                if cur.data[(r - r0) * (c1 - c0) + c - c0] >= LIT && dark_around(below, c, r) {
+                    let a = self.pixel_max(c, r);
+                    if a > self.bottom / self.scale && best.is_none_or(|b| a > b) {
+                        best = Some(a);
+                    }
+                }
+            }
+        }
+        best.map(|a| self.dp_mm * ((a * self.scale) as f64 / self.bottom as f64).ln())
+    }
+}
+
+/// Whether pixel (c, r) and its 4 neighbours are below [`LIT`] in `layer`.
+fn dark_around(layer: &Irradiance, c: usize, r: usize) -> bool {
+    layer.at(c, r) < LIT
+        && layer.at(c + 1, r) < LIT
+        && layer.at(c, r + 1) < LIT
+        && (c == 0 || layer.at(c - 1, r) < LIT)
+        && (r == 0 || layer.at(c, r - 1) < LIT)
+}
+
+/// Σ|∇I| by central differences over the box grown by one pixel: the drawn perimeter, px.
+#[inline(never)]
+fn perimeter(cur: &Irradiance) -> f64 {
+    let [c0, r0, c1, r1] = cur.bbox;
+    let (w, h) = (c1 - c0, r1 - r0);
+    // The box with two pixels of zeros around it.
+    let pw = w + 4;
+    let mut pad = vec![0.0f32; pw * (h + 4)];
+    for r in 0..h {
+        pad[(r + 2) * pw + 2..(r + 2) * pw + 2 + w].copy_from_slice(&cur.data[r * w..(r + 1) * w]);
+    }
+    let mut s = 0.0f64;
+    for r in 1..h + 3 {
+        let (up, row, down) = (
+            &pad[(r - 1) * pw..r * pw],
+            &pad[r * pw..(r + 1) * pw],
+            &pad[(r + 1) * pw..(r + 2) * pw],
+        );
+        for c in 1..w + 3 {
+            let gx = 0.5 * (row[c + 1] - row[c - 1]);
+            let gy = 0.5 * (down[c] - up[c]);
+            if gx != 0.0 || gy != 0.0 {
+                s += ((gx * gx + gy * gy) as f64).sqrt();
+            }
+        }
+    }
+    s
+}
+
+/// 4-connected components of the cells of a `w`×`h` grid where `on` holds: `labels`
+/// (row-major, 0 off, else 1..=count), returns the count. Union-find over runs.
+#[inline(never)]
+fn label(
+    w: usize,
+    h: usize,
+    on: impl Fn(usize, usize) -> bool,
+    labels: &mut Vec<u32>,
+    parent: &mut Vec<u32>,
+) -> usize {
+    labels.clear();
+    labels.resize(w * h, 0);
+    parent.clear();
+    parent.push(0);
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for r in 0..h {
+        let mut c = 0;
+        while c < w {
+            if !on(c, r) {
+                c += 1;
+                continue;
+            }
+            let start = c;
+            while c < w && on(c, r) {
+                c += 1;
+            }
+            let id = parent.len() as u32;
+            parent.push(id);
+            let mut root = id;
+            if r > 0 {
+                for x in start..c {
+                    let up = labels[(r - 1) * w + x];
+                    if up != 0 {
+                        let a = find(parent, up);
+                        let b = find(parent, root);
+                        if a != b {
+                            let (lo, hi) = (a.min(b), a.max(b));
+                            parent[hi as usize] = lo;
+                            root = lo;
+                        }
+                    }
+                }
+            }
+            for x in start..c {
+                labels[r * w + x] = id;
+            }
+        }
+    }
+    // Compact the roots to 1..=count.
+    let mut map = vec![0u32; parent.len()];
+    let mut count = 0u32;
+    for i in 1..parent.len() as u32 {
+        let root = find(parent, i);
+        if map[root as usize] == 0 {
+            count += 1;
+            map[root as usize] = count;
+        }
+        map[i as usize] = map[root as usize];
+    }
+    for l in labels.iter_mut() {
+        *l = map[*l as usize];
+    }
+    count as usize
+}
+
+/// How a mask's gray turns into relative irradiance.
+enum Light {
+    /// g/255.
+    Linear([f32; 256]),
+    /// S(g)/S(G(px)): `s[g]` and 1/S(G) per pixel (0 where G = 0: g/255 there).
+    Compensated { s: [f32; 256], inv_full: Vec<f32> },
+}
+
+impl Light {
+    fn of(manifest: &Manifest, source: &dyn BundleSource) -> Result<Light> {
+        let mut linear = [0f32; 256];
+        for (g, v) in linear.iter_mut().enumerate() {
+            *v = g as f32 / 255.0;
+        }
+        let Some(o) = &manifest.optics else {
+            return Ok(Light::Linear(linear));
+        };
+        let bad = |msg: String| Error::Bundle {
+            path: source.shown(&o.gray_map),
+            msg,
+        };
+        let proj = manifest
+            .machine
+            .projector
+            .get(o.projector as usize)
+            .ok_or_else(|| bad("--cure: the gray map's projector is not the machine's".into()))?;
+        let cal = proj.calibration.as_ref().ok_or_else(|| {
+            bad("--cure: light compensation without the projector's calibration".into())
+        })?;
+        let [lo, hi] = cal.response.valid_gray();
+        let curve = cal.response.curve();
+        let mut s = [0f32; 256];
+        for (g, v) in s.iter_mut().enumerate().skip(1) {
+            *v = curve.eval(g.clamp(lo as usize, hi as usize) as f64) as f32;
+        }
+        let (w, h, full) = decode(source, &o.gray_map)?;
+        if (w, h) != (proj.width_px as usize, proj.height_px as usize) {
+            return Err(bad(format!(
+                "gray map is {w}x{h}, the projector {}x{}",
+                proj.width_px, proj.height_px
+            )));
+        }
+        let inv_full = full
+            .iter()
+            .map(|&g| if g == 0 { 0.0 } else { 1.0 / s[g as usize] })
+            .collect();
+        Ok(Light::Compensated { s, inv_full })
+    }
+
+    /// The relative irradiance of a `w`-wide mask, cut to its lit box.
+    fn irradiance(&self, w: usize, h: usize, mask: &[u8]) -> Irradiance {
+        let (mut c0, mut r0, mut c1, mut r1) = (w, h, 0, 0);
+        for (r, row) in mask.chunks(w).enumerate() {
+            if let Some(a) = row.iter().position(|&v| v != 0) {
+                let b = row.iter().rposition(|&v| v != 0).unwrap_or(a);
+                c0 = c0.min(a);
+                c1 = c1.max(b + 1);
+                r0 = r0.min(r);
+                r1 = r + 1;
+            }
+        }
+        if c0 >= c1 {
+            return Irradiance::default();
+        }
+        let mut data = Vec::with_capacity((c1 - c0) * (r1 - r0));
+        for r in r0..r1 {
+            let row = &mask[r * w + c0..r * w + c1];
+            match self {
+                Light::Linear(t) => data.extend(row.iter().map(|&g| t[g as usize])),
+                Light::Compensated { s, inv_full } => {
+                    let inv = &inv_full[r * w + c0..r * w + c1];
+                    data.extend(row.iter().zip(inv).map(|(&g, &i)| {
+                        if i > 0.0 {
+                            s[g as usize] * i
+                        } else {
+                            g as f32 / 255.0
+                        }
+                    }))
+                }
+            }
+        }
+        Irradiance {
+            bbox: [c0, r0, c1, r1],
+            data,
+        }
+    }
+}
+
+/// Decodes an 8-bit gray PNG of the bundle.
+fn decode(source: &dyn BundleSource, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
+    let bad = |msg: String| Error::Bundle {
+        path: source.shown(rel),
+        msg,
+    };
+    let bytes = source
+        .read(rel)
+        .map_err(|e| bad(format!("cannot read: {e}")))?;
+    let dec = PngDecoder::new(std::io::Cursor::new(&bytes[..]))
+        .map_err(|e| bad(format!("not a decodable PNG: {e}")))?;
+    if dec.color_type() != image::ColorType::L8 {
+        return Err(bad("not 8-bit gray".into()));
+    }
+    let (w, h) = dec.dimensions();
+    let mut buf = vec![0u8; dec.total_bytes() as usize];
+    dec.read_image(&mut buf)
+        .map_err(|e| bad(format!("PNG does not decode: {e}")))?;
+    Ok((w as usize, h as usize, buf))
+}
+
+/// The cure of every layer of the job whose files `source` reads, from its masks (see the
+/// module docs). `model` from [`model_of`].
+pub fn check(
+    manifest: &Manifest,
+    source: &dyn BundleSource,
+    model: &CureModel,
+) -> Result<CureCheck> {
+    let proj = &manifest.machine.projector[0];
+    let (w, h) = (proj.width_px as usize, proj.height_px as usize);
+    let light = Light::of(manifest, source)?;
+    let normal_s = manifest.machine.exposure.layer_s.get();
+    let n = manifest.layers.len();
+    let decode_layer = |i: usize| -> Result<Irradiance> {
+        let Some(m) = manifest.layers[i].masks.first() else {
+            return Ok(Irradiance::default());
+        };
+        let (mw, mh, px) = decode(source, &m.file)?;
+        if (mw, mh) != (w, h) {
+            return Err(Error::Bundle {
+                path: source.shown(&m.file),
+                msg: format!("mask is {mw}x{mh}, the projector {w}x{h}"),
+            });
+        }
+        Ok(light.irradiance(w, h, &px))
+    };
+    let decode_chunk = |hi: usize| -> Result<Vec<Irradiance>> {
+        // Layers hi−1 down to hi−CHUNK (top first).
+        let lo = hi.saturating_sub(CHUNK);
+        (lo..hi)
+            .rev()
+            .collect::<Vec<_>>()
+            .par_iter()
+            .map(|&i| decode_layer(i))
+            .collect()
+    };
+    let mut engine = Engine::new(w, h, model);
+    let mut outs: Vec<LayerOut> = vec![LayerOut::default(); n];
+    let mut hi = n;
+    let mut cur = if n > 0 { decode_chunk(n)? } else { Vec::new() };
+    while hi > 0 {
+        let lo = hi.saturating_sub(CHUNK);
+        // Decode the next chunk while this one runs through the recurrence.
+        let (next, ()) = rayon::join(
+            || {
+                if lo > 0 {
+                    decode_chunk(lo)
+                } else {
+                    Ok(Vec::new())
+                }
+            },
+            || {
+                for k in 0..cur.len() - 1 {
+                    let i = hi - 1 - k;
+                    let r = (manifest.layers[i].exposure_s / normal_s) as f32;
+                    outs[i] = engine.layer(&cur[k], Some(&cur[k + 1]), r);
+                }
+            },
+        );
+        let next = next?;
+        let i = lo;
+        let r = (manifest.layers[i].exposure_s / normal_s) as f32;
+        let last = cur.last().expect("a chunk has a layer");
+        outs[i] = engine.layer(last, next.first(), r);
+        cur = next;
+        hi = lo;
+    }
+    Ok(summarize(manifest, model, proj, outs))
+}
+
+/// The job's figures from the layers'.
+fn summarize(
+    manifest: &Manifest,
+    model: &CureModel,
+    proj: &crate::profile::Projector,
+    outs: Vec<LayerOut>,
+) -> CureCheck {
+    let p = model.pixel_mm;
+    let sample_mm2 = p * p / (SUB * SUB) as f64;
+    let c = manifest.cure.as_ref();
+    let held = c.map_or(0, |c| c.held_back_layers);
+    // Mask pixel (column, row) in pixel units → build-plane mm.
+    let field_h = manifest.machine.field().height_px as f64;
+    let to_mm = |[u, v]: [f64; 2]| {
+        let u = if proj.mirror_x {
+            proj.width_px as f64 - u
+        } else {
+            u
+        };
+        let v = if proj.mirror_y {
+            proj.height_px as f64 - v
+        } else {
+            v
+        };
+        [
+            (proj.offset_px[0] as f64 + u) * p,
+            (field_h - proj.offset_px[1] as f64 - v) * p,
+        ]
+    };
+    let mut per_layer = Vec::with_capacity(outs.len());
+    let mut findings = Vec::new();
+    let mut agree = SlicerAgreement::default();
+    let mut any_slicer = false;
+    for (i, o) in outs.into_iter().enumerate() {
+        let l = &manifest.layers[i];
+        let cured_mm2 = o.cured_samples * sample_mm2;
+        let offset_px = if o.perimeter_px > 0.0 {
+            (cured_mm2 - l.area_mm2) / (p * p) / o.perimeter_px
+        } else {
+            0.0
+        };
+        for &(px, at) in &o.vanished {
+            findings.push(Finding {
+                layer: i,
+                kind: "vanished",
+                islands: 1,
+                pixels: px,
+                at_mm: to_mm(at),
+            });
+        }
+        for &(k, px, at) in &o.merged {
+            findings.push(Finding {
+                layer: i,
+                kind: "merged",
+                islands: k,
+                pixels: px,
+                at_mm: to_mm(at),
+            });
+        }
+        let slicer = l.cure.as_ref();
+        let diff = slicer
+            .filter(|_| o.perimeter_px > 0.0)
+            .map(|s| offset_px - s.mean_px);
+        if let Some(s) = slicer {
+            any_slicer = true;
+            if (s.vanished == 0) != o.vanished.is_empty() {
+                agree.vanish_disagreements.push(i);
+            }
+        }
+        if let Some(d) = diff {
+            agree.layers += 1;
+            if agree.max_diff_layer.is_none() || d.abs() > agree.max_diff_px {
+                agree.max_diff_px = d.abs();
+                agree.max_diff_layer = Some(i);
+            }
+        }
+        per_layer.push(LayerCureCheck {
+            index: i,
+            section_mm2: l.area_mm2,
+            cured_mm2,
+            perimeter_mm: o.perimeter_px * p,
+            offset_px,
+            offset_mm: offset_px * p,
+            islands: o.islands,
+            vanished: o.vanished.len(),
+            merged: o.merged.len(),
+            print_through_mm: o.print_through_mm,
+            slicer_mean_px: slicer.map(|s| s.mean_px),
+            slicer_diff_px: diff,
+        });
+    }
+    let checked: Vec<&LayerCureCheck> = per_layer.iter().filter(|l| l.perimeter_mm > 0.0).collect();
+    let total: f64 = checked.iter().map(|l| l.perimeter_mm).sum();
+    let mut edge = OffsetStats::default();
+    let mut signed = 0.0;
+    if total > 0.0 {
+        edge.mean = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px.abs())
+            .sum::<f64>()
+            / total;
+        signed = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px)
+            .sum::<f64>()
+            / total;
+        let mut by: Vec<(f64, f64)> = checked
+            .iter()
+            .map(|l| (l.offset_px.abs(), l.perimeter_mm))
+            .collect();
+        by.sort_by(|a, b| a.0.total_cmp(&b.0));
+        edge.max = by.last().map_or(0.0, |b| b.0);
+        let mut cum = 0.0;
+        edge.p95 = edge.max;
+        for (a, wgt) in by {
+            cum += wgt;
+            if cum >= 0.95 * total {
+                edge.p95 = a;
+                break;
+            }
+        }
+    }
+    let mut worst: Vec<&LayerCureCheck> = checked.clone();
+    worst.sort_by(|a, b| {
+        b.offset_px
+            .abs()
+            .total_cmp(&a.offset_px.abs())
+            .then(a.index.cmp(&b.index))
+    });
+    let print_through = per_layer
+        .iter()
+        .filter_map(|l| l.print_through_mm)
+        .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+    CureCheck {
+        correction: c.map_or_else(String::new, |c| c.correction.clone()),
+        held_back_layers: held,
+        samples_per_px: SUB,
+        layers_checked: checked.len(),
+        edge_offset_px: edge,
+        signed_mean_px: signed,
+        signed_mean_mm: signed * p,
+        vanished: per_layer.iter().map(|l| l.vanished).sum(),
+        merged: per_layer.iter().map(|l| l.merged).sum(),
+        print_through_mm: print_through,
+        z_error_mm: (held > 0)
+            .then(|| print_through.map(|t| t - held as f64 * model.layer_mm))
+            .flatten(),
+        slicer: any_slicer.then_some(agree),
+        worst_layers: worst.iter().take(WORST_LAYERS).map(|l| l.index).collect(),
+        findings,
+        per_layer,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::resin::psf::phi_inv;
+
+    fn model() -> CureModel {
+        CureModel {
+            sigma_px: 0.5,
+            pixel_mm: 0.0634765625,
+            dp_mm: 0.15,
+            ec_mj_cm2: 10.0,
+            overcure_mm: 0.03,
+            layer_mm: 0.05,
+        }
+    }
+
+    /// A `w`×`h` image with `v` in the pixel rectangle [c0, c1) × [r0, r1).
+    fn rect(w: usize, h: usize, [c0, r0, c1, r1]: [usize; 4], v: f32) -> Vec<f32> {
+        let mut img = vec![0.0; w * h];
+        for r in r0..r1 {
+            for c in c0..c1 {
+                img[r * w + c] = v;
+            }
+        }
+        img
+    }
+
+    /// Runs a stack (bottom first) through the engine, top down; the layers' outputs
+    /// bottom first.
+    fn run(e: &mut Engine, w: usize, h: usize, stack: &[(Vec<f32>, f32)]) -> Vec<LayerOut> {
+        let irr: Vec<Irradiance> = stack
+            .iter()
+            .map(|(img, _)| Irradiance::from_image(w, h, img))
+            .collect();
+        let mut out = vec![LayerOut::default(); stack.len()];
+        for i in (0..stack.len()).rev() {
+            out[i] = e.layer(&irr[i], i.checked_sub(1).map(|b| &irr[b]), stack[i].1);
+        }
+        out
+    }
+
+    /// A_0 of the recurrence equals Σ_k q^k·r_k·L_k with every pixel's light summed
+    /// directly (no separable passes, no boxes), on a small random stack.
+    #[test]
+    fn the_recurrence_equals_a_direct_sum_over_layers() {
+        let m = model();
+        let (w, h) = (14, 11);
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as f32 / (1u64 << 31) as f32
+        };
+        let stack: Vec<(Vec<f32>, f32)> = (0..5)
+            .map(|k| {
+                let img = (0..w * h)
+                    .map(|p| {
+                        let (c, r) = (p % w, p / w);
+                        if (3..11).contains(&c) && (2..9).contains(&r) && rnd() > 0.3 {
+                            rnd()
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                (img, [2.0, 1.0, 0.5, 1.0, 1.5][k])
+            })
+            .collect();
+        let mut e = Engine::new(w, h, &m);
+        run(&mut e, w, h, &stack);
+        let psf = Psf { sigma_px: 0.5 };
+        let q = (-m.layer_mm / m.dp_mm).exp();
+        let mut worst = 0.0f64;
+        for y in 0..h * SUB {
+            for x in 0..w * SUB {
+                let (u, v) = ((x as f64 + 0.5) / SUB as f64, (y as f64 + 0.5) / SUB as f64);
+                let direct: f64 = stack
+                    .iter()
+                    .enumerate()
+                    .map(|(k, (img, r))| {
+                        let mut l = 0.0;
+                        for (p, &val) in img.iter().enumerate() {
+                            let (c, rr) = ((p % w) as f64, (p / w) as f64);
+                            l += val as f64 * psf.axis_weight(u - c) * psf.axis_weight(v - rr);
+                        }
+                        q.powi(k as i32) * *r as f64 * l
+                    })
+                    .sum();
+                worst = worst.max((e.acc_at(x, y) as f64 - direct).abs());
+            }
+        }
+        assert!(worst < 1e-4, "{worst}");
+    }
+
+    /// The cured edge offset of a fully lit square, its light scaled as under infinitely
+    /// many layers like it (one layer, r = 1/(1 − q)).
+    fn square_offset(m: &CureModel, n: usize, side: usize, phase: f32) -> f64 {
+        let (w, h) = (n, n);
+        let a = (n - side) / 2;
+        // Whole pixels [a, a + side), and `phase` of a pixel more on every side.
+        let mut img = rect(w, h, [a - 1, a - 1, a + side + 1, a + side + 1], phase);
+        for r in a..a + side {
+            for c in a..a + side {
+                img[r * w + c] = 1.0;
+            }
+        }
+        for (c, r) in [
+            (a - 1, a - 1),
+            (a + side, a - 1),
+            (a - 1, a + side),
+            (a + side, a + side),
+        ] {
+            img[r * w + c] = phase * phase;
+        }
+        let q = (-m.layer_mm / m.dp_mm).exp();
+        let mut e = Engine::new(w, h, m);
+        let out = run(&mut e, w, h, &[(img, (1.0 / (1.0 - q)) as f32)]);
+        let o = &out[0];
+        let s = side as f64 + 2.0 * phase as f64;
+        assert!(
+            (o.perimeter_px - 4.0 * s).abs() < 0.01 * 4.0 * s,
+            "{}",
+            o.perimeter_px
+        );
+        assert_eq!((o.islands, o.vanished.len(), o.merged.len()), (1, 0, 0));
+        (o.cured_samples / (SUB * SUB) as f64 - s * s) / o.perimeter_px
+    }
+
+    /// A fully lit square's cured edge against the closed form: s* = −σₑ·Φ⁻¹(T) for
+    /// anti-aliased edges (docs/CURE.md), within 0.05 px, with a PSF wide enough for the
+    /// Gaussian-and-box approximation to hold at any edge position (σ = 1.5 px); and
+    /// −σ·Φ⁻¹(T) exactly for edges on pixel boundaries, where the pixels add up to a sharp
+    /// half-plane (σ = 0.5 px: 0.43 px).
+    #[test]
+    fn a_lit_squares_edge_moves_by_the_closed_form() {
+        let mut m = model();
+        let t = m.edge_threshold();
+        let sharp = -m.sigma_px * phi_inv(t);
+        let got = square_offset(&m, 64, 40, 0.0);
+        assert!(
+            (got - sharp).abs() < 0.02,
+            "offset {got}, closed form {sharp}"
+        );
+        m.sigma_px = 1.5;
+        let psf = Psf { sigma_px: 1.5 };
+        let want = -psf.sigma_edge_px() * phi_inv(t);
+        for phase in [0.25, 0.75] {
+            let got = square_offset(&m, 240, 200, phase);
+            assert!(
+                (got - want).abs() < 0.05,
+                "phase {phase}: offset {got}, closed form {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_one_pixel_island_vanishes_and_squares_a_pixel_apart_merge() {
+        let m = model();
+        let (w, h) = (40, 30);
+        // One layer: a pixel alone gets too little light to cure; a square beside it
+        // cures.
+        let mut img = rect(w, h, [5, 5, 15, 15], 1.0);
+        img[20 * w + 30] = 1.0;
+        let mut e = Engine::new(w, h, &m);
+        let out = run(&mut e, w, h, &[(img, 1.0)]);
+        assert_eq!(out[0].islands, 2);
+        assert_eq!(out[0].vanished.len(), 1);
+        let (px, at) = out[0].vanished[0];
+        assert_eq!((px, at), (1, [30.5, 20.5]));
+        assert!(out[0].merged.is_empty());
+        // Two squares one pixel apart under many layers like them: the gap cures.
+        let mut img = rect(w, h, [5, 5, 15, 15], 1.0);
+        for r in 5..15 {
+            for c in 16..26 {
+                img[r * w + c] = 1.0;
+            }
+        }
+        let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
+        let mut e = Engine::new(w, h, &m);
+        let out = run(&mut e, w, h, &stack);
+        assert_eq!(out[0].islands, 2);
+        assert!(out[0].vanished.is_empty());
+        assert_eq!(out[0].merged.len(), 1);
+        assert_eq!(out[0].merged[0].0, 2);
+        assert_eq!(out[0].merged[0].1, 200);
+        // Three pixels apart they stay apart.
+        let mut img = rect(w, h, [5, 5, 15, 15], 1.0);
+        for r in 5..15 {
+            for c in 18..28 {
+                img[r * w + c] = 1.0;
+            }
+        }
+        let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
+        let mut e = Engine::new(w, h, &m);
+        let out = run(&mut e, w, h, &stack);
+        assert!(out[0].merged.is_empty());
+    }
+
+    /// `--cure` needs the `cure` record and one projector; each refusal names the bundle.
+    #[test]
+    fn jobs_without_the_record_or_with_several_projectors_are_refused() {
+        use crate::bundle::DirSource;
+        let src = DirSource::new(std::path::Path::new("some.dmdjob"));
+        let mut man = crate::exec::testutil::two_layer_topdown();
+        man.cure = None;
+        let e = model_of(&man, &src).unwrap_err().to_string();
+        assert!(
+            e.contains("some.dmdjob") && e.contains("`cure` record"),
+            "{e}"
+        );
+        let m = model();
+        man.cure = Some(crate::bundle::Cure {
+            psf_sigma_px: m.sigma_px,
+            pixel_mm: m.pixel_mm,
+            dp_mm: m.dp_mm,
+            ec_mj_cm2: m.ec_mj_cm2,
+            overcure_mm: m.overcure_mm,
+            layer_mm: m.layer_mm,
+            edge_threshold: m.edge_threshold(),
+            correction: "xy".into(),
+            shift_px: 0.49,
+            print_through_mm: m.print_through_mm(None),
+            held_back_layers: 0,
+            predicted: None,
+        });
+        assert_eq!(model_of(&man, &src).unwrap(), m);
+        man.machine = crate::profile::Profile::resolve("tiled-2x1").unwrap();
+        let e = model_of(&man, &src).unwrap_err().to_string();
+        assert!(
+            e.contains("some.dmdjob") && e.contains("2 projectors"),
+            "{e}"
+        );
+        assert_eq!(e.lines().count(), 1);
+    }
+
+    /// Print-through under an overhang: the closed form with the layers above it.
+    #[test]
+    fn print_through_under_an_overhang_follows_the_closed_form() {
+        let m = model();
+        let (w, h) = (40, 40);
+        let lit = rect(w, h, [5, 5, 35, 35], 1.0);
+        // Layer 0 empty, layers 1..=200 lit: layer 1 is downward-facing. (The pending
+        // decay q^k is folded into the buffer after about 140 layers.)
+        let mut stack: Vec<(Vec<f32>, f32)> = vec![(vec![0.0; w * h], 1.0)];
+        stack.extend((0..200).map(|_| (lit.clone(), 1.0)));
+        let mut e = Engine::new(w, h, &m);
+        let out = run(&mut e, w, h, &stack);
+        let got = out[1].print_through_mm.unwrap();
+        let want = m.print_through_mm(Some(199));
+        assert!((got - want).abs() < 1e-4, "{got} vs {want}");
+        assert!(out[2].print_through_mm.is_none());
+    }
+}
