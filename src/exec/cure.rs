@@ -1345,6 +1345,7 @@ mod tests {
             print_through_mm: m.print_through_mm(None),
             held_back_layers: 0,
             predicted: None,
+            dropped: None,
         });
         assert_eq!(model_of(&man, &src).unwrap(), m);
         man.machine = crate::profile::Profile::resolve("tiled-2x1").unwrap();

@@ -30,6 +30,9 @@
 //!   pre-warp's tolerance) are fully covered and lit: at least max(1, π(r/p − √2)²) of
 //!   them once r ≥ √2·p, spanning 2(r/p − √2) px across.
 //!
+//! With the Z correction (`cure.held_back_layers` > 0) a layer's masks light only what the
+//! layers below it also hold, so the last rule is not applied to such jobs.
+//!
 //! The lit box may fall short of `bbox_mm` by any amount: a sliver of the section thinner
 //! than 1/510 of a pixel shows as 0, binary masks leave pixels below 50 % coverage dark
 //! and compensated ones those below the lowest usable gray (thin walls, tips, a shorter
@@ -627,6 +630,9 @@ struct ContentRule {
     warp_mm: f64,
     /// Mask values are coverage: every pixel the section covers noticeably is lit.
     coverage: bool,
+    /// The Z correction held back downward-facing surfaces (`cure.held_back_layers` > 0):
+    /// a layer's masks may light less than its section, down to nothing.
+    held_back: bool,
 }
 
 impl ContentRule {
@@ -650,6 +656,10 @@ impl ContentRule {
             coverage: !manifest.settings.binary
                 && manifest.settings.compensation == "off"
                 && linear,
+            held_back: manifest
+                .cure
+                .as_ref()
+                .is_some_and(|c| c.held_back_layers > 0),
         }
     }
 
@@ -658,8 +668,9 @@ impl ContentRule {
         let p = self.pixel_mm;
         let area_px = layer.area_mm2 / (p * p);
         let mut min: f64 = 0.0;
-        if layer.area_mm2 <= 0.0 {
-            // No section: nothing must be lit.
+        if layer.area_mm2 <= 0.0 || self.held_back {
+            // No section: nothing must be lit. Held back (`xyz`): a layer over nothing
+            // lights only what its layers below also hold, possibly nothing.
             return min;
         }
         if self.coverage {
@@ -1182,6 +1193,49 @@ mod tests {
             "{}",
             v.problems[3].message
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn held_back_layers_may_light_less_than_their_section() {
+        let dir = scratch("held");
+        // A section of 200 px whose mask lights nothing: the first layer of an overhang
+        // the Z correction holds back.
+        let dark = gray_png(64, 48, |_, _| 0);
+        let mut m = manifest(
+            small_profile(),
+            vec![layer_with(
+                &dir,
+                0,
+                &dark,
+                Some([10.0, 5.0, 30.0, 15.0]),
+                200.0,
+            )],
+        );
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        let cure = |held: u32| -> crate::bundle::Cure {
+            serde_json::from_value(serde_json::json!({
+                "psf_sigma_px": 0.5, "pixel_mm": PX, "dp_mm": 0.15, "ec_mj_cm2": 10.0,
+                "overcure_mm": 0.03, "layer_mm": 0.1, "edge_threshold": 0.2,
+                "correction": if held > 0 { "xyz" } else { "xy" }, "shift_px": 0.49,
+                "print_through_mm": 0.2, "held_back_layers": held
+            }))
+            .unwrap()
+        };
+        m.cure = Some(cure(0));
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        m.cure = Some(cure(4));
+        assert_eq!(found(&verify(&dir, &m)), vec![]);
+        // Light outside the section's box is still found.
+        let outside = gray_png(64, 48, rect(40, 5, 50, 15, 255));
+        m.layers = vec![layer_with(
+            &dir,
+            0,
+            &outside,
+            Some([10.0, 5.0, 30.0, 15.0]),
+            200.0,
+        )];
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
