@@ -50,6 +50,10 @@ pub const PIXEL_MM: f64 = 0.0076;
 const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
 /// The build platform's highest position, mm.
 const TRAVEL_MAX_MM: f64 = 90.0;
+/// Most layer records (exposures, duplications counted) a job may have: the zip reader's
+/// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
+/// follow than layers it holds.
+pub const MAX_LAYERS: u64 = 100_000;
 
 /// The top-level `.json` entry that holds print settings (`Header` and `Default layer
 /// settings`), `print_settings.json` first. (The standard allows one JSON file at the
@@ -389,6 +393,15 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
                 .map(|l| super::expr::resolve(l, &scoped))
                 .collect::<std::result::Result<_, _>>()
                 .map_err(|e| format!("Named layer groups.{name}: {e}"))?;
+            let total = (layers.len() as u64)
+                .saturating_mul(copies)
+                .saturating_add(out.len() as u64);
+            if total > MAX_LAYERS {
+                return Err(format!(
+                    "{at}: {copies} duplications of layer group `{name}` ({} layers) make more than the {MAX_LAYERS} layers a job may have",
+                    layers.len()
+                ));
+            }
             for _ in 0..copies {
                 out.extend(layers.iter().cloned());
             }
@@ -473,6 +486,18 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     for s in &specs {
         if s.images.is_empty() {
             return Err(r.bad(format!("{}: the layer has no image", s.at)));
+        }
+        let total = (s.images.len() as u64)
+            .saturating_mul(s.copies)
+            .saturating_add(exposures.len() as u64);
+        if total > MAX_LAYERS {
+            return Err(r.bad(format!(
+                "{}: {} duplications of {} {} make more than the {MAX_LAYERS} layer records a job may have",
+                s.at,
+                s.copies,
+                s.images.len(),
+                if s.images.len() == 1 { "image" } else { "images" }
+            )));
         }
         for _ in 0..s.copies {
             for (k, image) in s.images.iter().enumerate() {
@@ -651,4 +676,78 @@ fn machine(
     m.blend = None;
     m.validate()?;
     Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+    use std::io::Write;
+
+    /// Imports a control-file zip of `settings` and one 4 × 3 image `slices/a.png`.
+    fn import_settings(settings: &Value) -> Result<Job> {
+        let mut img = image::GrayImage::new(4, 3);
+        img.put_pixel(1, 1, image::Luma([255]));
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let opts = zip::write::SimpleFileOptions::default();
+        w.start_file("print_settings.json", opts).unwrap();
+        w.write_all(&serde_json::to_vec(settings).unwrap()).unwrap();
+        w.start_file("slices/a.png", opts).unwrap();
+        w.write_all(&png).unwrap();
+        let bytes = w.finish().unwrap().into_inner();
+        let path = std::path::Path::new("job.zip");
+        let archive =
+            crate::archive::read::read_zip_bytes(path, &bytes, &Default::default()).unwrap();
+        let entry = settings_entry(&archive).unwrap();
+        import(archive, &entry, "0")
+    }
+
+    fn settings(layers: Value) -> Value {
+        json!({
+            "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
+            "Default layer settings": {
+                "Number of duplications": 1,
+                "Position settings": {
+                    "Layer thickness (um)": 10, "Distance up (mm)": 0.3,
+                    "Initial wait (ms)": 0, "BP up speed (mm/sec)": 2,
+                    "BP up acceleration (mm/sec^2)": 20, "Up wait (ms)": 0,
+                    "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 10,
+                    "Final wait (ms)": 0
+                },
+                "Image settings": {
+                    "Image file": "a.png", "Layer exposure time (ms)": 100,
+                    "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
+                }
+            },
+            "Named layer groups": {"g": [{}, {}]},
+            "Layers": layers
+        })
+    }
+
+    #[test]
+    fn duplications_past_the_layer_bound_are_refused_before_anything_is_made() {
+        let job = import_settings(&settings(json!([
+            {"Number of duplications": 3},
+            {"Using named layer group": "g", "Number of duplications": 2}
+        ])))
+        .unwrap();
+        assert_eq!(job.manifest.layers.len(), 3 + 4);
+        for (layers, what) in [
+            (
+                json!([{"Number of duplications": u64::MAX}]),
+                "Layers[0]: 18446744073709551615 duplications of 1 image make more than the 100000 layer records",
+            ),
+            (
+                json!([{}, {"Using named layer group": "g", "Number of duplications": 50_000}]),
+                "Layers[1]: 50000 duplications of layer group `g` (2 layers) make more than the 100000 layers",
+            ),
+        ] {
+            let e = import_settings(&settings(layers)).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+            assert!(e.contains("job.zip") && e.contains("print_settings.json"), "{e}");
+        }
+    }
 }

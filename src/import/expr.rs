@@ -46,10 +46,16 @@ impl V {
     }
 }
 
+/// Deepest nesting of parentheses, unary signs and powers an expression may have (Python
+/// refuses deeper nesting too); the parser recurses once a level.
+const MAX_DEPTH: usize = 100;
+
 struct Parser<'a> {
     s: &'a [u8],
     i: usize,
     vars: &'a Map<String, Value>,
+    /// Levels of parentheses, signs and powers entered and not left.
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -125,10 +131,21 @@ impl Parser<'_> {
         }
     }
 
+    /// `f` one level deeper, refused past [`MAX_DEPTH`].
+    fn nested(&mut self, f: fn(&mut Self) -> Result<V, String>) -> Result<V, String> {
+        if self.depth >= MAX_DEPTH {
+            return Err(format!("nested deeper than {MAX_DEPTH} levels"));
+        }
+        self.depth += 1;
+        let v = f(self);
+        self.depth -= 1;
+        v
+    }
+
     fn power(&mut self) -> Result<V, String> {
         let a = self.unary()?;
         if self.eat("**") {
-            let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(self.power()?)?);
+            let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(self.nested(Self::power)?)?);
             return Ok(V::Num(x.powf(y), xi && yi && y >= 0.0));
         }
         Ok(a)
@@ -136,11 +153,11 @@ impl Parser<'_> {
 
     fn unary(&mut self) -> Result<V, String> {
         if self.eat("-") {
-            let (x, i) = Self::num(self.unary()?)?;
+            let (x, i) = Self::num(self.nested(Self::unary)?)?;
             return Ok(V::Num(-x, i));
         }
         if self.eat("+") {
-            return self.unary();
+            return self.nested(Self::unary);
         }
         self.atom()
     }
@@ -148,7 +165,7 @@ impl Parser<'_> {
     fn atom(&mut self) -> Result<V, String> {
         self.skip();
         if self.eat("(") {
-            let v = self.sum()?;
+            let v = self.nested(Self::sum)?;
             if !self.eat(")") {
                 return Err("a `(` is not closed".into());
             }
@@ -206,6 +223,7 @@ fn eval(e: &str, vars: &Map<String, Value>) -> Result<V, String> {
         s: e.as_bytes(),
         i: 0,
         vars,
+        depth: 0,
     };
     let v = p.sum()?;
     p.skip();
@@ -274,5 +292,41 @@ mod tests {
         for bad in ["${m}", "${n +}", "${(n}", "${n / 0}", "${dir * 2}", "x ${n"] {
             assert!(resolve(&json!(bad), vars).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_without_exhausting_the_stack() {
+        let vars = Map::new();
+        let deep = |open: &str, close: &str| {
+            format!("${{{}1{}}}", open.repeat(100_000), close.repeat(100_000))
+        };
+        for e in [
+            deep("(", ")"),
+            deep("-", ""),
+            format!("${{2{}}}", "**2".repeat(100_000)),
+        ] {
+            let err = resolve(&json!(e), &vars).unwrap_err();
+            assert!(
+                err.contains("nested deeper than 100 levels"),
+                "{}",
+                &err[err.len() - 60..]
+            );
+        }
+        // Within the bound it evaluates.
+        assert_eq!(
+            resolve(
+                &json!(deep("(", ")")
+                    .replace(&"(".repeat(99_950), "")
+                    .replace(&")".repeat(99_950), "")),
+                &vars
+            )
+            .unwrap(),
+            json!(1)
+        );
+        // A long flat expression is no nesting.
+        assert_eq!(
+            resolve(&json!(format!("${{0{}}}", "+1".repeat(100_000))), &vars).unwrap(),
+            json!(100_000)
+        );
     }
 }
