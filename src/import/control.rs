@@ -15,7 +15,11 @@
 //! expressions over `Variables` are evaluated first, as the standard's validator does
 //! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
 //! `Special print techniques` are information only. A setting that is still not a
-//! number where a number is needed is an error naming the entry and the key.
+//! number where a number is needed is an error naming the entry and the key. A job of more
+//! than [`MAX_LAYERS`] layer records (duplications and group calls counted) is refused
+//! before any is made, and so are
+//! settings whose expansion makes more than 64 MiB plus 16 times the entry's size (text
+//! interpolation and group calls repeat what they name).
 //!
 //! ## Steps
 //! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
@@ -35,6 +39,7 @@
 //! limit) at up to 800 mm/min (the standard's limit; a faster move is a `speed`
 //! violation), accelerating as fast as the file asks, in 0.1 µm steps.
 
+use super::expr::{resolve, Budget};
 use super::{bbox_mm, manifest_of, mask_figures, Format, Job, ManifestParts};
 use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
@@ -54,6 +59,11 @@ const TRAVEL_MAX_MM: f64 = 90.0;
 /// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
 /// follow than layers it holds.
 pub const MAX_LAYERS: u64 = 100_000;
+/// What the `${...}` expansion and the layer groups may make, bytes: this much plus
+/// [`EXPANSION_FACTOR`] times the settings entry's size.
+const EXPANSION_BYTES: u64 = 64 << 20;
+/// See [`EXPANSION_BYTES`].
+const EXPANSION_FACTOR: u64 = 16;
 
 /// The top-level `.json` entry that holds print settings (`Header` and `Default layer
 /// settings`), `print_settings.json` first. (The standard allows one JSON file at the
@@ -348,7 +358,7 @@ impl Reader<'_> {
 /// groups (each group's layers repeated `Number of duplications` times, their `${...}`
 /// evaluated over the global `Variables` overridden by the call's), then every `${...}`
 /// left, over the global `Variables`.
-fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
+fn expand(root: &mut Map<String, Value>, budget: &mut Budget) -> std::result::Result<(), String> {
     let vars = |v: Option<&Value>| -> std::result::Result<Map<String, Value>, String> {
         match v {
             None => Ok(Map::new()),
@@ -377,7 +387,7 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
                 ))?;
             let mut scoped = globals.clone();
             scoped.extend(vars(item.get("Variables"))?);
-            let scoped = match super::expr::resolve(&Value::Object(scoped.clone()), &scoped) {
+            let scoped = match resolve(&Value::Object(scoped.clone()), &scoped, budget) {
                 Ok(Value::Object(m)) => m,
                 Ok(_) => scoped,
                 Err(e) => return Err(format!("{at}: Variables: {e}")),
@@ -390,7 +400,7 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
             };
             let layers: Vec<Value> = group
                 .iter()
-                .map(|l| super::expr::resolve(l, &scoped))
+                .map(|l| resolve(l, &scoped, budget))
                 .collect::<std::result::Result<_, _>>()
                 .map_err(|e| format!("Named layer groups.{name}: {e}"))?;
             let total = (layers.len() as u64)
@@ -402,13 +412,19 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
                     layers.len()
                 ));
             }
+            // The copies cost what the group's layers do, once a copy.
+            let size: u64 = layers
+                .iter()
+                .map(|l| l.to_string().len() as u64)
+                .sum::<u64>();
+            budget.take(size.saturating_mul(copies - 1))?;
             for _ in 0..copies {
                 out.extend(layers.iter().cloned());
             }
         }
         root.insert("Layers".into(), Value::Array(out));
     }
-    let resolved = super::expr::resolve(&Value::Object(std::mem::take(root)), &globals)?;
+    let resolved = resolve(&Value::Object(std::mem::take(root)), &globals, budget)?;
     if let Value::Object(m) = resolved {
         *root = m;
     }
@@ -474,7 +490,9 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         root,
     };
     check_top(&r)?;
-    expand(&mut r.root).map_err(|m| r.bad(m))?;
+    let size = archive.get(entry).map_or(0, <[u8]>::len) as u64;
+    let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
+    expand(&mut r.root, &mut budget).map_err(|m| r.bad(m))?;
     let specs = r.layers()?;
     // One record per exposure.
     struct Exposure<'a> {
@@ -749,5 +767,27 @@ mod tests {
             assert!(e.contains(what), "{e}");
             assert!(e.contains("job.zip") && e.contains("print_settings.json"), "{e}");
         }
+    }
+
+    #[test]
+    fn text_interpolation_that_repeats_a_large_variable_is_refused() {
+        // 100 KB of variable named 1000 times: 100 MB of text from a 110 KB file.
+        let mut s = settings(json!([{}]));
+        s["Variables"] = json!({"big": "x".repeat(100_000)});
+        s["Design"] = json!({"Purpose": "${big}".repeat(1000)});
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("the settings expand to more than"), "{e}");
+        // Its own name inside it (text interpolating itself) too, without hanging.
+        s["Design"] = json!({});
+        s["Variables"] = json!({"big": format!("x{}", "${big}".repeat(20_000))});
+        s["Layers"] = json!([{"Using named layer group": "g"}]);
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("more than"), "{e}");
+        // A group of large layers called many times.
+        s["Variables"] = json!({});
+        s["Named layer groups"] = json!({"g": [{"Comment": "y".repeat(100_000)}]});
+        s["Layers"] = json!([{"Using named layer group": "g", "Number of duplications": 5000}]);
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("the settings expand to more than"), "{e}");
     }
 }

@@ -2,7 +2,9 @@
 //! `"${name}"` or an arithmetic expression over the file's `Variables`
 //! (`"${base_ms * 1.5}"`), keeping the value's type, or text with expressions inside
 //! (`"slice_${n}.png"`). The standard's own tools evaluate them with Python's simpleeval;
-//! this reads numbers, names, `+ - * / // % **`, unary minus and parentheses.
+//! this reads numbers, names, `+ - * / // % **`, unary minus and parentheses, nested at
+//! most 100 levels (parentheses, signs and powers; deeper is an error, never a stack
+//! overflow).
 
 use serde_json::{Map, Number, Value};
 
@@ -50,10 +52,43 @@ impl V {
 /// refuses deeper nesting too); the parser recurses once a level.
 const MAX_DEPTH: usize = 100;
 
+/// What an expansion may still make, bytes: the text of every string it produces, one a
+/// value otherwise. Text interpolation repeats what it names, so without a bound a small
+/// file could ask for any amount of memory.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Budget {
+    left: u64,
+    of: u64,
+}
+
+impl Budget {
+    /// A budget of `bytes`.
+    pub(crate) fn new(bytes: u64) -> Budget {
+        Budget {
+            left: bytes,
+            of: bytes,
+        }
+    }
+
+    /// Takes `n` bytes, or says the expansion is too large.
+    pub(crate) fn take(&mut self, n: u64) -> Result<(), String> {
+        if n > self.left {
+            return Err(format!(
+                "the settings expand to more than {} bytes",
+                self.of
+            ));
+        }
+        self.left -= n;
+        Ok(())
+    }
+}
+
 struct Parser<'a> {
     s: &'a [u8],
     i: usize,
     vars: &'a Map<String, Value>,
+    /// Longest text a step may make, bytes.
+    max_text: u64,
     /// Levels of parentheses, signs and powers entered and not left.
     depth: usize,
 }
@@ -95,7 +130,15 @@ impl Parser<'_> {
             };
             let b = self.product()?;
             a = match (a, b, op) {
-                (V::Text(x), V::Text(y), '+') => V::Text(x + &y),
+                (V::Text(x), V::Text(y), '+') => {
+                    if (x.len() + y.len()) as u64 > self.max_text {
+                        return Err(format!(
+                            "the text passes the {} bytes the settings may expand to",
+                            self.max_text
+                        ));
+                    }
+                    V::Text(x + &y)
+                }
                 (a, b, op) => {
                     let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(b)?);
                     V::Num(if op == '+' { x + y } else { x - y }, xi && yi)
@@ -217,12 +260,13 @@ impl Parser<'_> {
     }
 }
 
-/// The value of expression `e` over `vars`.
-fn eval(e: &str, vars: &Map<String, Value>) -> Result<V, String> {
+/// The value of expression `e` over `vars`, its text at most `max_text` bytes.
+fn eval(e: &str, vars: &Map<String, Value>, max_text: u64) -> Result<V, String> {
     let mut p = Parser {
         s: e.as_bytes(),
         i: 0,
         vars,
+        max_text,
         depth: 0,
     };
     let v = p.sum()?;
@@ -233,26 +277,43 @@ fn eval(e: &str, vars: &Map<String, Value>) -> Result<V, String> {
     Ok(v)
 }
 
-/// `v` with every `${...}` in its strings evaluated over `vars` (errors name the text).
-pub(crate) fn resolve(v: &Value, vars: &Map<String, Value>) -> Result<Value, String> {
+/// `v` with every `${...}` in its strings evaluated over `vars` (errors name the text),
+/// what it makes taken from `budget`.
+pub(crate) fn resolve(
+    v: &Value,
+    vars: &Map<String, Value>,
+    budget: &mut Budget,
+) -> Result<Value, String> {
     Ok(match v {
-        Value::Object(m) => Value::Object(
-            m.iter()
-                .map(|(k, v)| Ok((k.clone(), resolve(v, vars)?)))
-                .collect::<Result<_, String>>()?,
-        ),
-        Value::Array(a) => Value::Array(
-            a.iter()
-                .map(|v| resolve(v, vars))
-                .collect::<Result<_, _>>()?,
-        ),
+        Value::Object(m) => {
+            budget.take(1)?;
+            Value::Object(
+                m.iter()
+                    .map(|(k, v)| {
+                        budget.take(k.len() as u64)?;
+                        Ok((k.clone(), resolve(v, vars, budget)?))
+                    })
+                    .collect::<Result<_, String>>()?,
+            )
+        }
+        Value::Array(a) => {
+            budget.take(1)?;
+            Value::Array(
+                a.iter()
+                    .map(|v| resolve(v, vars, budget))
+                    .collect::<Result<_, _>>()?,
+            )
+        }
         Value::String(s) if s.contains("${") => {
             let bad = |m: String| format!("{s:?}: {m}");
             let t = s.trim();
             if t.starts_with("${") && t.ends_with('}') && t[2..].find('}') == Some(t.len() - 3) {
-                return eval(&t[2..t.len() - 1], vars)
-                    .map(V::into_json)
-                    .map_err(bad);
+                let v = eval(&t[2..t.len() - 1], vars, budget.left).map_err(bad)?;
+                budget.take(match &v {
+                    V::Text(x) => x.len() as u64,
+                    _ => 1,
+                })?;
+                return Ok(v.into_json());
             }
             let mut out = String::new();
             let mut rest = s.as_str();
@@ -261,13 +322,25 @@ pub(crate) fn resolve(v: &Value, vars: &Map<String, Value>) -> Result<Value, Str
                 let b = rest[a..]
                     .find('}')
                     .ok_or_else(|| bad("a `${` is not closed".into()))?;
-                out.push_str(&eval(&rest[a + 2..a + b], vars).map_err(bad)?.text());
+                let piece = eval(&rest[a + 2..a + b], vars, budget.left)
+                    .map_err(bad)?
+                    .text();
+                budget.take((a + piece.len()) as u64)?;
+                out.push_str(&piece);
                 rest = &rest[a + b + 1..];
             }
+            budget.take(rest.len() as u64)?;
             out.push_str(rest);
             Value::String(out)
         }
-        other => other.clone(),
+        Value::String(s) => {
+            budget.take(s.len() as u64)?;
+            v.clone()
+        }
+        other => {
+            budget.take(1)?;
+            other.clone()
+        }
     })
 }
 
@@ -280,7 +353,7 @@ mod tests {
     fn expressions_keep_their_type_and_text_interpolates() {
         let vars = json!({"n": 3, "t": 400, "f": 1.5, "dir": "slices", "on": true});
         let vars = vars.as_object().unwrap();
-        let r = |v: Value| resolve(&v, vars).unwrap();
+        let r = |v: Value| resolve(&v, vars, &mut Budget::new(1 << 20)).unwrap();
         assert_eq!(r(json!("${n}")), json!(3));
         assert_eq!(r(json!("${t * f}")), json!(600.0));
         assert_eq!(r(json!("${(n + 1) * 2 - -1}")), json!(9));
@@ -290,7 +363,10 @@ mod tests {
         assert_eq!(r(json!("img_${n}_${f}.png")), json!("img_3_1.5.png"));
         assert_eq!(r(json!({"a": ["${n}", 2, "x"]})), json!({"a": [3, 2, "x"]}));
         for bad in ["${m}", "${n +}", "${(n}", "${n / 0}", "${dir * 2}", "x ${n"] {
-            assert!(resolve(&json!(bad), vars).is_err(), "{bad}");
+            assert!(
+                resolve(&json!(bad), vars, &mut Budget::new(1 << 20)).is_err(),
+                "{bad}"
+            );
         }
     }
 
@@ -305,7 +381,7 @@ mod tests {
             deep("-", ""),
             format!("${{2{}}}", "**2".repeat(100_000)),
         ] {
-            let err = resolve(&json!(e), &vars).unwrap_err();
+            let err = resolve(&json!(e), &vars, &mut Budget::new(1 << 20)).unwrap_err();
             assert!(
                 err.contains("nested deeper than 100 levels"),
                 "{}",
@@ -318,14 +394,20 @@ mod tests {
                 &json!(deep("(", ")")
                     .replace(&"(".repeat(99_950), "")
                     .replace(&")".repeat(99_950), "")),
-                &vars
+                &vars,
+                &mut Budget::new(1 << 20)
             )
             .unwrap(),
             json!(1)
         );
         // A long flat expression is no nesting.
         assert_eq!(
-            resolve(&json!(format!("${{0{}}}", "+1".repeat(100_000))), &vars).unwrap(),
+            resolve(
+                &json!(format!("${{0{}}}", "+1".repeat(100_000))),
+                &vars,
+                &mut Budget::new(1 << 20)
+            )
+            .unwrap(),
             json!(100_000)
         );
     }

@@ -8,13 +8,25 @@
 //! `target/fuzz-crash-TARGET-N.bin`; a watchdog aborts the process, after writing the input
 //! the same way, when one execution takes longer than 10 s.
 //!
-//! CI runs 10⁴ inputs per target (seconds). A long run (docs/BENCHMARKS.md, "Fuzzing"):
+//! The archive targets open a whole job as `dmdsl run` does (`import::open` on a scratch
+//! file, then `exec::run`: verification and simulation): `archive` mutates the bytes of
+//! the zips (most die at a CRC), `sl1`, `control` and `zipped` change a seed archive's
+//! entries by what they hold (settings values set to extreme numbers, huge counts or deep
+//! `${...}` expressions, keys removed, PNG headers and chunks changed with their CRCs
+//! made right, entries dropped, duplicated, renamed, moved or taken from another seed)
+//! and zip it again validly. The SL1 seeds are the fixtures with their displays shrunk 8
+//! times in pixels (same settings, same code paths, a fraction of the time).
+//!
+//! CI runs 10⁴ inputs per target (seconds) and fewer for the archive targets (1500, 150,
+//! 800, 150), which add about 17 s in all in a debug build on 2 cores (measured on a
+//! machine shared with other builds: 4.9, 5.6, 3.0 and 3.2 s). A long run (docs/BENCHMARKS.md, "Fuzzing"):
 //!
 //! ```sh
 //! DMDSL_FUZZ_RUNS=1000000 cargo test --release --test it fuzz -- --nocapture
 //! ```
 //!
-//! `DMDSL_FUZZ_SEED` changes the seed; `DMDSL_FUZZ_TARGET` runs one target. Every crash
+//! `DMDSL_FUZZ_RUNS` sets every target's count, `DMDSL_FUZZ_SEED` changes the seed;
+//! `DMDSL_FUZZ_TARGET` runs one target. Every crash
 //! found becomes a regression input under `fixtures/fuzz/` (replayed by
 //! `regression_inputs_are_refused_cleanly`).
 
