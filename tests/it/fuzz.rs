@@ -18,17 +18,18 @@
 //! times in pixels (same settings, same code paths, a fraction of the time).
 //!
 //! CI runs 10⁴ inputs per target (seconds) and fewer for the archive targets (1500, 150,
-//! 800, 150), which add about 17 s in all in a debug build on 2 cores (measured on a
-//! machine shared with other builds: 4.9, 5.6, 3.0 and 3.2 s). A long run (docs/BENCHMARKS.md, "Fuzzing"):
+//! 800, 150), which add 12 to 22 s in all in a debug build on 2 cores shared with other
+//! builds (three runs; one: 4.9, 5.6, 3.0 and 3.2 s). A long run
+//! (docs/BENCHMARKS.md, "Fuzzing"):
 //!
 //! ```sh
 //! DMDSL_FUZZ_RUNS=1000000 cargo test --release --test it fuzz -- --nocapture
 //! ```
 //!
 //! `DMDSL_FUZZ_RUNS` sets every target's count, `DMDSL_FUZZ_SEED` changes the seed;
-//! `DMDSL_FUZZ_TARGET` runs one target. Every crash
-//! found becomes a regression input under `fixtures/fuzz/` (replayed by
-//! `regression_inputs_are_refused_cleanly`).
+//! `DMDSL_FUZZ_TARGET` runs one target. Every crash found becomes a regression input under
+//! `fixtures/fuzz/` (replayed by `regression_inputs_are_refused_cleanly`; an archive is
+//! opened and replayed as the archive targets do).
 
 use crate::common::*;
 use dmdsl::bundle::Manifest;
@@ -107,7 +108,7 @@ fn shrunk_sl1(bytes: &[u8], f: u32) -> Vec<u8> {
         .into_iter()
         .map(|(name, b)| {
             if name.ends_with(".png") {
-                // Every f-th pixel of every f-th row (nearest; what is lit stays lit).
+                // Every f-th pixel of every f-th row.
                 use image::ImageDecoder;
                 let dec = image::codecs::png::PngDecoder::new(std::io::Cursor::new(&b)).unwrap();
                 let (w, h) = dec.dimensions();
@@ -149,8 +150,12 @@ fn shrunk_sl1(bytes: &[u8], f: u32) -> Vec<u8> {
 
 /// The job archive `bytes` exported as a zipped bundle (`dmdsl export`).
 fn as_zipped_bundle(bytes: &[u8]) -> Vec<u8> {
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
-    let (from, to) = (dir.join("fuzz-seed.sl1"), dir.join("fuzz-seed.dmdjob.zip"));
+    // Tests run in parallel threads: a folder of this thread's, the same file names (the
+    // manifest records the name).
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("fuzz-seed-{:?}", std::thread::current().id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (from, to) = (dir.join("seed.sl1"), dir.join("seed.dmdjob.zip"));
     std::fs::write(&from, bytes).unwrap();
     let job = dmdsl::import::open(&from).unwrap();
     dmdsl::export::write(
@@ -188,7 +193,7 @@ fn bytes_mutated(rng: &mut Rng, seed: &[u8], other: &[u8]) -> Vec<u8> {
     input
 }
 
-/// The targets: name, parser, seeds.
+/// The targets.
 fn targets() -> Vec<Target> {
     let read = |name: &str| std::fs::read(fixture(name)).unwrap();
     let ascii = b"solid t\nfacet normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 10 0 0\n  vertex 0 10 5\n endloop\nendfacet\nfacet normal 0 0 1\n outer loop\n  vertex 10 0 0\n  vertex 10 10 5\n  vertex 0 10 5\n endloop\nendfacet\nendsolid t\n".to_vec();
