@@ -15,7 +15,11 @@
 //! expressions over `Variables` are evaluated first, as the standard's validator does
 //! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
 //! `Special print techniques` are information only. A setting that is still not a
-//! number where a number is needed is an error naming the entry and the key.
+//! number where a number is needed is an error naming the entry and the key. A job of more
+//! than [`MAX_LAYERS`] layer records (duplications and group calls counted) is refused
+//! before any is made, and so are
+//! settings whose expansion makes more than 64 MiB plus 16 times the entry's size (text
+//! interpolation and group calls repeat what they name).
 //!
 //! ## Steps
 //! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
@@ -35,6 +39,7 @@
 //! limit) at up to 800 mm/min (the standard's limit; a faster move is a `speed`
 //! violation), accelerating as fast as the file asks, in 0.1 µm steps.
 
+use super::expr::{resolve, Budget};
 use super::{bbox_mm, manifest_of, mask_figures, Format, Job, ManifestParts};
 use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
@@ -50,6 +55,15 @@ pub const PIXEL_MM: f64 = 0.0076;
 const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
 /// The build platform's highest position, mm.
 const TRAVEL_MAX_MM: f64 = 90.0;
+/// Most layer records (exposures, duplications counted) a job may have: the zip reader's
+/// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
+/// follow than layers it holds.
+pub const MAX_LAYERS: u64 = 100_000;
+/// What the `${...}` expansion and the layer groups may make, bytes: this much plus
+/// [`EXPANSION_FACTOR`] times the settings entry's size.
+const EXPANSION_BYTES: u64 = 64 << 20;
+/// See [`EXPANSION_BYTES`].
+const EXPANSION_FACTOR: u64 = 16;
 
 /// The top-level `.json` entry that holds print settings (`Header` and `Default layer
 /// settings`), `print_settings.json` first. (The standard allows one JSON file at the
@@ -344,7 +358,7 @@ impl Reader<'_> {
 /// groups (each group's layers repeated `Number of duplications` times, their `${...}`
 /// evaluated over the global `Variables` overridden by the call's), then every `${...}`
 /// left, over the global `Variables`.
-fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
+fn expand(root: &mut Map<String, Value>, budget: &mut Budget) -> std::result::Result<(), String> {
     let vars = |v: Option<&Value>| -> std::result::Result<Map<String, Value>, String> {
         match v {
             None => Ok(Map::new()),
@@ -373,7 +387,7 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
                 ))?;
             let mut scoped = globals.clone();
             scoped.extend(vars(item.get("Variables"))?);
-            let scoped = match super::expr::resolve(&Value::Object(scoped.clone()), &scoped) {
+            let scoped = match resolve(&Value::Object(scoped.clone()), &scoped, budget) {
                 Ok(Value::Object(m)) => m,
                 Ok(_) => scoped,
                 Err(e) => return Err(format!("{at}: Variables: {e}")),
@@ -386,16 +400,31 @@ fn expand(root: &mut Map<String, Value>) -> std::result::Result<(), String> {
             };
             let layers: Vec<Value> = group
                 .iter()
-                .map(|l| super::expr::resolve(l, &scoped))
+                .map(|l| resolve(l, &scoped, budget))
                 .collect::<std::result::Result<_, _>>()
                 .map_err(|e| format!("Named layer groups.{name}: {e}"))?;
+            let total = (layers.len() as u64)
+                .saturating_mul(copies)
+                .saturating_add(out.len() as u64);
+            if total > MAX_LAYERS {
+                return Err(format!(
+                    "{at}: {copies} duplications of layer group `{name}` ({} layers) make more than the {MAX_LAYERS} layers a job may have",
+                    layers.len()
+                ));
+            }
+            // The copies cost what the group's layers do, once a copy.
+            let size: u64 = layers
+                .iter()
+                .map(|l| l.to_string().len() as u64)
+                .sum::<u64>();
+            budget.take(size.saturating_mul(copies - 1))?;
             for _ in 0..copies {
                 out.extend(layers.iter().cloned());
             }
         }
         root.insert("Layers".into(), Value::Array(out));
     }
-    let resolved = super::expr::resolve(&Value::Object(std::mem::take(root)), &globals)?;
+    let resolved = resolve(&Value::Object(std::mem::take(root)), &globals, budget)?;
     if let Value::Object(m) = resolved {
         *root = m;
     }
@@ -461,7 +490,9 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         root,
     };
     check_top(&r)?;
-    expand(&mut r.root).map_err(|m| r.bad(m))?;
+    let size = archive.get(entry).map_or(0, <[u8]>::len) as u64;
+    let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
+    expand(&mut r.root, &mut budget).map_err(|m| r.bad(m))?;
     let specs = r.layers()?;
     // One record per exposure.
     struct Exposure<'a> {
@@ -473,6 +504,18 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     for s in &specs {
         if s.images.is_empty() {
             return Err(r.bad(format!("{}: the layer has no image", s.at)));
+        }
+        let total = (s.images.len() as u64)
+            .saturating_mul(s.copies)
+            .saturating_add(exposures.len() as u64);
+        if total > MAX_LAYERS {
+            return Err(r.bad(format!(
+                "{}: {} duplications of {} {} make more than the {MAX_LAYERS} layer records a job may have",
+                s.at,
+                s.copies,
+                s.images.len(),
+                if s.images.len() == 1 { "image" } else { "images" }
+            )));
         }
         for _ in 0..s.copies {
             for (k, image) in s.images.iter().enumerate() {
@@ -651,4 +694,100 @@ fn machine(
     m.blend = None;
     m.validate()?;
     Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+    use std::io::Write;
+
+    /// Imports a control-file zip of `settings` and one 4 × 3 image `slices/a.png`.
+    fn import_settings(settings: &Value) -> Result<Job> {
+        let mut img = image::GrayImage::new(4, 3);
+        img.put_pixel(1, 1, image::Luma([255]));
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let opts = zip::write::SimpleFileOptions::default();
+        w.start_file("print_settings.json", opts).unwrap();
+        w.write_all(&serde_json::to_vec(settings).unwrap()).unwrap();
+        w.start_file("slices/a.png", opts).unwrap();
+        w.write_all(&png).unwrap();
+        let bytes = w.finish().unwrap().into_inner();
+        let path = std::path::Path::new("job.zip");
+        let archive =
+            crate::archive::read::read_zip_bytes(path, &bytes, &Default::default()).unwrap();
+        let entry = settings_entry(&archive).unwrap();
+        import(archive, &entry, "0")
+    }
+
+    fn settings(layers: Value) -> Value {
+        json!({
+            "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
+            "Default layer settings": {
+                "Number of duplications": 1,
+                "Position settings": {
+                    "Layer thickness (um)": 10, "Distance up (mm)": 0.3,
+                    "Initial wait (ms)": 0, "BP up speed (mm/sec)": 2,
+                    "BP up acceleration (mm/sec^2)": 20, "Up wait (ms)": 0,
+                    "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 10,
+                    "Final wait (ms)": 0
+                },
+                "Image settings": {
+                    "Image file": "a.png", "Layer exposure time (ms)": 100,
+                    "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
+                }
+            },
+            "Named layer groups": {"g": [{}, {}]},
+            "Layers": layers
+        })
+    }
+
+    #[test]
+    fn duplications_past_the_layer_bound_are_refused_before_anything_is_made() {
+        let job = import_settings(&settings(json!([
+            {"Number of duplications": 3},
+            {"Using named layer group": "g", "Number of duplications": 2}
+        ])))
+        .unwrap();
+        assert_eq!(job.manifest.layers.len(), 3 + 4);
+        for (layers, what) in [
+            (
+                json!([{"Number of duplications": u64::MAX}]),
+                "Layers[0]: 18446744073709551615 duplications of 1 image make more than the 100000 layer records",
+            ),
+            (
+                json!([{}, {"Using named layer group": "g", "Number of duplications": 50_000}]),
+                "Layers[1]: 50000 duplications of layer group `g` (2 layers) make more than the 100000 layers",
+            ),
+        ] {
+            let e = import_settings(&settings(layers)).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+            assert!(e.contains("job.zip") && e.contains("print_settings.json"), "{e}");
+        }
+    }
+
+    #[test]
+    fn text_interpolation_that_repeats_a_large_variable_is_refused() {
+        // 100 KB of variable named 1000 times: 100 MB of text from a 110 KB file.
+        let mut s = settings(json!([{}]));
+        s["Variables"] = json!({"big": "x".repeat(100_000)});
+        s["Design"] = json!({"Purpose": "${big}".repeat(1000)});
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("the settings expand to more than"), "{e}");
+        // Its own name inside it (text interpolating itself) too, without hanging.
+        s["Design"] = json!({});
+        s["Variables"] = json!({"big": format!("x{}", "${big}".repeat(20_000))});
+        s["Layers"] = json!([{"Using named layer group": "g"}]);
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("more than"), "{e}");
+        // A group of large layers called many times.
+        s["Variables"] = json!({});
+        s["Named layer groups"] = json!({"g": [{"Comment": "y".repeat(100_000)}]});
+        s["Layers"] = json!([{"Using named layer group": "g", "Number of duplications": 5000}]);
+        let e = import_settings(&s).unwrap_err().to_string();
+        assert!(e.contains("the settings expand to more than"), "{e}");
+    }
 }

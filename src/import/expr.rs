@@ -2,7 +2,9 @@
 //! `"${name}"` or an arithmetic expression over the file's `Variables`
 //! (`"${base_ms * 1.5}"`), keeping the value's type, or text with expressions inside
 //! (`"slice_${n}.png"`). The standard's own tools evaluate them with Python's simpleeval;
-//! this reads numbers, names, `+ - * / // % **`, unary minus and parentheses.
+//! this reads numbers, names, `+ - * / // % **`, unary minus and parentheses, nested at
+//! most 100 levels (parentheses, signs and powers; deeper is an error, never a stack
+//! overflow).
 
 use serde_json::{Map, Number, Value};
 
@@ -46,10 +48,49 @@ impl V {
     }
 }
 
+/// Deepest nesting of parentheses, unary signs and powers an expression may have (Python
+/// refuses deeper nesting too); the parser recurses once a level.
+const MAX_DEPTH: usize = 100;
+
+/// What an expansion may still make, bytes: the text of every string it produces, one a
+/// value otherwise. Text interpolation repeats what it names, so without a bound a small
+/// file could ask for any amount of memory.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Budget {
+    left: u64,
+    of: u64,
+}
+
+impl Budget {
+    /// A budget of `bytes`.
+    pub(crate) fn new(bytes: u64) -> Budget {
+        Budget {
+            left: bytes,
+            of: bytes,
+        }
+    }
+
+    /// Takes `n` bytes, or says the expansion is too large.
+    pub(crate) fn take(&mut self, n: u64) -> Result<(), String> {
+        if n > self.left {
+            return Err(format!(
+                "the settings expand to more than {} bytes",
+                self.of
+            ));
+        }
+        self.left -= n;
+        Ok(())
+    }
+}
+
 struct Parser<'a> {
     s: &'a [u8],
     i: usize,
     vars: &'a Map<String, Value>,
+    /// Longest text a step may make, bytes.
+    max_text: u64,
+    /// Levels of parentheses, signs and powers entered and not left.
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -89,7 +130,15 @@ impl Parser<'_> {
             };
             let b = self.product()?;
             a = match (a, b, op) {
-                (V::Text(x), V::Text(y), '+') => V::Text(x + &y),
+                (V::Text(x), V::Text(y), '+') => {
+                    if (x.len() + y.len()) as u64 > self.max_text {
+                        return Err(format!(
+                            "the text passes the {} bytes the settings may expand to",
+                            self.max_text
+                        ));
+                    }
+                    V::Text(x + &y)
+                }
                 (a, b, op) => {
                     let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(b)?);
                     V::Num(if op == '+' { x + y } else { x - y }, xi && yi)
@@ -125,10 +174,21 @@ impl Parser<'_> {
         }
     }
 
+    /// `f` one level deeper, refused past [`MAX_DEPTH`].
+    fn nested(&mut self, f: fn(&mut Self) -> Result<V, String>) -> Result<V, String> {
+        if self.depth >= MAX_DEPTH {
+            return Err(format!("nested deeper than {MAX_DEPTH} levels"));
+        }
+        self.depth += 1;
+        let v = f(self);
+        self.depth -= 1;
+        v
+    }
+
     fn power(&mut self) -> Result<V, String> {
         let a = self.unary()?;
         if self.eat("**") {
-            let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(self.power()?)?);
+            let ((x, xi), (y, yi)) = (Self::num(a)?, Self::num(self.nested(Self::power)?)?);
             return Ok(V::Num(x.powf(y), xi && yi && y >= 0.0));
         }
         Ok(a)
@@ -136,11 +196,11 @@ impl Parser<'_> {
 
     fn unary(&mut self) -> Result<V, String> {
         if self.eat("-") {
-            let (x, i) = Self::num(self.unary()?)?;
+            let (x, i) = Self::num(self.nested(Self::unary)?)?;
             return Ok(V::Num(-x, i));
         }
         if self.eat("+") {
-            return self.unary();
+            return self.nested(Self::unary);
         }
         self.atom()
     }
@@ -148,7 +208,7 @@ impl Parser<'_> {
     fn atom(&mut self) -> Result<V, String> {
         self.skip();
         if self.eat("(") {
-            let v = self.sum()?;
+            let v = self.nested(Self::sum)?;
             if !self.eat(")") {
                 return Err("a `(` is not closed".into());
             }
@@ -200,12 +260,14 @@ impl Parser<'_> {
     }
 }
 
-/// The value of expression `e` over `vars`.
-fn eval(e: &str, vars: &Map<String, Value>) -> Result<V, String> {
+/// The value of expression `e` over `vars`, its text at most `max_text` bytes.
+fn eval(e: &str, vars: &Map<String, Value>, max_text: u64) -> Result<V, String> {
     let mut p = Parser {
         s: e.as_bytes(),
         i: 0,
         vars,
+        max_text,
+        depth: 0,
     };
     let v = p.sum()?;
     p.skip();
@@ -215,26 +277,43 @@ fn eval(e: &str, vars: &Map<String, Value>) -> Result<V, String> {
     Ok(v)
 }
 
-/// `v` with every `${...}` in its strings evaluated over `vars` (errors name the text).
-pub(crate) fn resolve(v: &Value, vars: &Map<String, Value>) -> Result<Value, String> {
+/// `v` with every `${...}` in its strings evaluated over `vars` (errors name the text),
+/// what it makes taken from `budget`.
+pub(crate) fn resolve(
+    v: &Value,
+    vars: &Map<String, Value>,
+    budget: &mut Budget,
+) -> Result<Value, String> {
     Ok(match v {
-        Value::Object(m) => Value::Object(
-            m.iter()
-                .map(|(k, v)| Ok((k.clone(), resolve(v, vars)?)))
-                .collect::<Result<_, String>>()?,
-        ),
-        Value::Array(a) => Value::Array(
-            a.iter()
-                .map(|v| resolve(v, vars))
-                .collect::<Result<_, _>>()?,
-        ),
+        Value::Object(m) => {
+            budget.take(1)?;
+            Value::Object(
+                m.iter()
+                    .map(|(k, v)| {
+                        budget.take(k.len() as u64)?;
+                        Ok((k.clone(), resolve(v, vars, budget)?))
+                    })
+                    .collect::<Result<_, String>>()?,
+            )
+        }
+        Value::Array(a) => {
+            budget.take(1)?;
+            Value::Array(
+                a.iter()
+                    .map(|v| resolve(v, vars, budget))
+                    .collect::<Result<_, _>>()?,
+            )
+        }
         Value::String(s) if s.contains("${") => {
             let bad = |m: String| format!("{s:?}: {m}");
             let t = s.trim();
             if t.starts_with("${") && t.ends_with('}') && t[2..].find('}') == Some(t.len() - 3) {
-                return eval(&t[2..t.len() - 1], vars)
-                    .map(V::into_json)
-                    .map_err(bad);
+                let v = eval(&t[2..t.len() - 1], vars, budget.left).map_err(bad)?;
+                budget.take(match &v {
+                    V::Text(x) => x.len() as u64,
+                    _ => 1,
+                })?;
+                return Ok(v.into_json());
             }
             let mut out = String::new();
             let mut rest = s.as_str();
@@ -243,13 +322,25 @@ pub(crate) fn resolve(v: &Value, vars: &Map<String, Value>) -> Result<Value, Str
                 let b = rest[a..]
                     .find('}')
                     .ok_or_else(|| bad("a `${` is not closed".into()))?;
-                out.push_str(&eval(&rest[a + 2..a + b], vars).map_err(bad)?.text());
+                let piece = eval(&rest[a + 2..a + b], vars, budget.left)
+                    .map_err(bad)?
+                    .text();
+                budget.take((a + piece.len()) as u64)?;
+                out.push_str(&piece);
                 rest = &rest[a + b + 1..];
             }
+            budget.take(rest.len() as u64)?;
             out.push_str(rest);
             Value::String(out)
         }
-        other => other.clone(),
+        Value::String(s) => {
+            budget.take(s.len() as u64)?;
+            v.clone()
+        }
+        other => {
+            budget.take(1)?;
+            other.clone()
+        }
     })
 }
 
@@ -262,7 +353,7 @@ mod tests {
     fn expressions_keep_their_type_and_text_interpolates() {
         let vars = json!({"n": 3, "t": 400, "f": 1.5, "dir": "slices", "on": true});
         let vars = vars.as_object().unwrap();
-        let r = |v: Value| resolve(&v, vars).unwrap();
+        let r = |v: Value| resolve(&v, vars, &mut Budget::new(1 << 20)).unwrap();
         assert_eq!(r(json!("${n}")), json!(3));
         assert_eq!(r(json!("${t * f}")), json!(600.0));
         assert_eq!(r(json!("${(n + 1) * 2 - -1}")), json!(9));
@@ -272,7 +363,52 @@ mod tests {
         assert_eq!(r(json!("img_${n}_${f}.png")), json!("img_3_1.5.png"));
         assert_eq!(r(json!({"a": ["${n}", 2, "x"]})), json!({"a": [3, 2, "x"]}));
         for bad in ["${m}", "${n +}", "${(n}", "${n / 0}", "${dir * 2}", "x ${n"] {
-            assert!(resolve(&json!(bad), vars).is_err(), "{bad}");
+            assert!(
+                resolve(&json!(bad), vars, &mut Budget::new(1 << 20)).is_err(),
+                "{bad}"
+            );
         }
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_without_exhausting_the_stack() {
+        let vars = Map::new();
+        let deep = |open: &str, close: &str| {
+            format!("${{{}1{}}}", open.repeat(100_000), close.repeat(100_000))
+        };
+        for e in [
+            deep("(", ")"),
+            deep("-", ""),
+            format!("${{2{}}}", "**2".repeat(100_000)),
+        ] {
+            let err = resolve(&json!(e), &vars, &mut Budget::new(1 << 20)).unwrap_err();
+            assert!(
+                err.contains("nested deeper than 100 levels"),
+                "{}",
+                &err[err.len() - 60..]
+            );
+        }
+        // Within the bound it evaluates.
+        assert_eq!(
+            resolve(
+                &json!(deep("(", ")")
+                    .replace(&"(".repeat(99_950), "")
+                    .replace(&")".repeat(99_950), "")),
+                &vars,
+                &mut Budget::new(1 << 20)
+            )
+            .unwrap(),
+            json!(1)
+        );
+        // A long flat expression is no nesting.
+        assert_eq!(
+            resolve(
+                &json!(format!("${{0{}}}", "+1".repeat(100_000))),
+                &vars,
+                &mut Budget::new(1 << 20)
+            )
+            .unwrap(),
+            json!(100_000)
+        );
     }
 }

@@ -254,12 +254,21 @@ pub(crate) struct MaskFigures {
     pub lit_box: Option<[u32; 4]>,
 }
 
+/// Most bytes deflate makes of one compressed byte (a run of 258-byte copies); a PNG's
+/// pixels are at most this many times its size.
+const DEFLATE_MAX_RATIO: u64 = 1032;
+
 /// Decodes PNG `bytes` to 8-bit gray and measures it; `None` when it does not decode
-/// (the executor's verification names that problem). `buf` is reused between calls.
+/// (the executor's verification names that problem), also when its header declares more
+/// pixels than its size can hold (nothing is allocated for them). `buf` is reused between
+/// calls.
 pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32, MaskFigures)> {
     use image::ImageDecoder;
     let dec = image::codecs::png::PngDecoder::new(std::io::Cursor::new(bytes)).ok()?;
     let (w, h) = dec.dimensions();
+    if dec.total_bytes() > DEFLATE_MAX_RATIO.saturating_mul(bytes.len() as u64) {
+        return None;
+    }
     if dec.color_type() == image::ColorType::L8 {
         buf.resize(dec.total_bytes() as usize, 0);
         dec.read_image(buf).ok()?;
@@ -308,4 +317,38 @@ pub(crate) fn bbox_mm(b: [u32; 4], height_px: u32, pixel_mm: f64) -> [[f64; 2]; 
         [b[0] as f64 * pixel_mm, (h - b[3] as f64) * pixel_mm],
         [b[2] as f64 * pixel_mm, (h - b[1] as f64) * pixel_mm],
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4 × 3 gray PNG, one pixel lit.
+    fn png() -> Vec<u8> {
+        let mut img = image::GrayImage::new(4, 3);
+        img.put_pixel(1, 2, image::Luma([255]));
+        let mut out = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn a_mask_declaring_more_pixels_than_its_bytes_hold_is_not_decoded() {
+        let mut buf = Vec::new();
+        let good = png();
+        let (w, h, f) = mask_figures(&good, &mut buf).unwrap();
+        assert_eq!(
+            (w, h, f.coverage_px, f.lit_box),
+            (4, 3, 1.0, Some([1, 2, 2, 3]))
+        );
+        // The header (CRC right) says 2³¹ − 1 pixels square: nothing is allocated for it.
+        let mut huge = good.clone();
+        huge[16..24].copy_from_slice(&[0x7f, 0xff, 0xff, 0xff, 0x7f, 0xff, 0xff, 0xff]);
+        let crc = crc32fast::hash(&huge[12..29]);
+        huge[29..33].copy_from_slice(&crc.to_be_bytes());
+        assert!(image::codecs::png::PngDecoder::new(std::io::Cursor::new(&huge)).is_ok());
+        assert!(mask_figures(&huge, &mut buf).is_none());
+        assert!(buf.capacity() < 1 << 20);
+    }
 }

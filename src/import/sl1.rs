@@ -479,7 +479,8 @@ fn machine(p: &MachineParts) -> std::result::Result<Profile, String> {
     m.exposure.layer_s = pos(p.model.exp_s, "expTime")?;
     m.exposure.bottom_s = pos(p.model.first_s, "expTimeFirst")?;
     m.exposure.bottom_layers = FIRST_LAYERS as u32;
-    m.exposure.transition_layers = p.model.fade as u32;
+    // A `numFade` past what the profile holds fades over every layer all the same.
+    m.exposure.transition_layers = u32::try_from(p.model.fade).unwrap_or(u32::MAX);
     if !p.material.is_empty() {
         m.resin.name = p.material.to_string();
     }
@@ -521,6 +522,35 @@ mod tests {
         // (fixtures/sl1/cube3mm.sl1): exposures + 30 × (5 s tilt + 0.5 s tower).
         let total: f64 = e.iter().sum::<f64>() + 30.0 * 5.5;
         assert!((total - 534.818182).abs() < 1e-5, "{total}");
+    }
+
+    #[test]
+    fn a_huge_num_fade_saturates_the_machines_transition_layers() {
+        let transition = |fade: usize| {
+            let model = Model { fade, ..model() };
+            let parts = MachineParts {
+                model_name: "SL1",
+                material: "",
+                w_px: 64,
+                h_px: 32,
+                pixel_mm: 0.05,
+                layer_mm: 0.05,
+                max_height_mm: 150.0,
+                model: &model,
+            };
+            machine(&parts).unwrap().exposure.transition_layers
+        };
+        assert_eq!(transition(10), 10);
+        assert_eq!(transition(1 << 32), u32::MAX);
+        assert_eq!(transition(usize::MAX), u32::MAX);
+        // The steps follow the file's fade: after the bottom layers the exposure steps
+        // down from expTimeFirst by a vanishing amount.
+        let e = Model {
+            fade: usize::MAX,
+            ..model()
+        }
+        .exposures(5);
+        assert_eq!(e[3], 30.0);
     }
 
     #[test]
