@@ -596,6 +596,19 @@ fn check_png(
             ),
         ));
     }
+    let most = crate::import::DEFLATE_MAX_RATIO.saturating_mul(out.bytes);
+    if format_ok && dec.total_bytes() > most {
+        // A header of the projector's size on a file too small to hold its pixels (a
+        // large imported display): refused before anything is allocated for them.
+        out.faults.push((
+            FileFault::Decode,
+            format!(
+                "{shown}: {what}: PNG declares {w}x{h} pixels, more than its {} bytes can hold",
+                out.bytes
+            ),
+        ));
+        return out;
+    }
     if format_ok {
         // Decode the pixels: a PNG whose header is fine may still be truncated or corrupt.
         buf.resize(dec.total_bytes() as usize, 0);
@@ -1192,6 +1205,34 @@ mod tests {
                 .contains("(4x4 px), less than the section's largest inscribed circle"),
             "{}",
             v.problems[3].message
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_header_larger_than_its_file_can_hold_is_refused_before_decoding() {
+        let dir = scratch("huge-header");
+        // A 64 × 48 PNG whose header says 4096 × 4096 (its CRC recomputed), shown by a
+        // projector of that size: 16 Mpx from about a hundred bytes.
+        let mut b = png(64, 48, ExtendedColorType::L8);
+        b[16..20].copy_from_slice(&4096u32.to_be_bytes());
+        b[20..24].copy_from_slice(&4096u32.to_be_bytes());
+        let crc = crc32fast::hash(&b[12..29]);
+        b[29..33].copy_from_slice(&crc.to_be_bytes());
+        let mut p = profile();
+        p.projector[0].width_px = 4096;
+        p.projector[0].height_px = 4096;
+        let mut l = layer(0, 0.1, 0.1, Mode::Layered, 1.0, vec![], 0.0);
+        std::fs::write(dir.join(&l.masks[0].file), &b).unwrap();
+        l.masks[0].sha256 = sha256_hex(&b);
+        let v = verify(&dir, &manifest(p, vec![l]));
+        assert_eq!(found(&v), vec![(Some(0), "mask-decode")]);
+        assert!(
+            v.problems[0]
+                .message
+                .contains("declares 4096x4096 pixels, more than its"),
+            "{}",
+            v.problems[0].message
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

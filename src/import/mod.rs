@@ -256,7 +256,7 @@ pub(crate) struct MaskFigures {
 
 /// Most bytes deflate makes of one compressed byte (a run of 258-byte copies); a PNG's
 /// pixels are at most this many times its size.
-const DEFLATE_MAX_RATIO: u64 = 1032;
+pub(crate) const DEFLATE_MAX_RATIO: u64 = 1032;
 
 /// Decodes PNG `bytes` to 8-bit gray and measures it; `None` when it does not decode
 /// (the executor's verification names that problem), also when its header declares more
