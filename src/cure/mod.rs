@@ -14,6 +14,7 @@ pub mod held_back;
 pub mod plots;
 pub mod predict;
 pub mod segments;
+pub mod widen;
 
 pub use crate::resin::CureModel;
 pub use crate::resin::Psf;
