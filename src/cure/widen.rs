@@ -8,10 +8,11 @@
 //!
 //! 1. **Small features** ([`small_features`]): an outer contour with the holes inside it
 //!    is small when 2A/P < 2·(s* + 4σ) px (A its area less its holes', P the length of
-//!    its contours and its holes'). 2A/P is the width of a wall and at most the diameter
-//!    of the largest disc inside any feature (a disc of diameter d gives d/2), so every
-//!    feature whose interior is not flat (some point farther than s* + 4σ from every edge)
-//!    is small. It misses a thin part of a larger feature (a fin on a block).
+//!    its contours and its holes'). 2A/P is the width of a wall and half a disc's
+//!    diameter; for a convex feature it is at most twice the radius of the largest disc
+//!    inside it, so a convex feature without a flat interior (a point farther than
+//!    s* + 4σ from every edge) is small. It misses a thin part of a larger feature (a fin
+//!    on a block).
 //! 2. **Peak**: the largest predicted light ([`super::predict::light`]) over the pixel
 //!    centres within 0.75 px of the feature (inside it or at its edge), refined by a
 //!    search in steps of 1/4, 1/8 and 1/16 px. A feature peaking at T·(1 + [`MARGIN`]) or
@@ -123,24 +124,6 @@ pub fn small_features(
     out
 }
 
-impl SmallFeature {
-    /// The sum of `mask`'s values over the pixels its outer contour's bounding box
-    /// touches.
-    pub fn light_sum(&self, mask: &Mask) -> u64 {
-        let w = mask.width as usize;
-        let b = self.pixels;
-        let (r1, c1) = (b.r1.min(mask.height as usize), b.c1.min(w));
-        (b.r0..r1)
-            .map(|r| {
-                mask.data[r * w..][b.c0.min(c1)..c1]
-                    .iter()
-                    .map(|&v| v as u64)
-                    .sum::<u64>()
-            })
-            .sum()
-    }
-}
-
 /// Margin around a feature's pixels that widening may touch, px.
 fn margin_px(shift_px: f64) -> usize {
     (std::f64::consts::FRAC_1_SQRT_2 + shift_px.abs() + MAX_OUT_PX).ceil() as usize + 1
@@ -161,6 +144,9 @@ fn neighbourhood(f: &SmallFeature, shift_px: f64, width: usize, height: usize) -
 /// correction changes the mask.
 pub struct Uncorrected {
     boxes: Vec<(PixelBox, Vec<u8>)>,
+    /// The same boxes, each pixel at most the coverage of the layers below given to
+    /// [`Uncorrected::hold_back`] (none given: `None`).
+    held: Option<Vec<Vec<u8>>>,
 }
 
 impl Uncorrected {
@@ -178,15 +164,44 @@ impl Uncorrected {
                 (b, v)
             })
             .collect();
-        Uncorrected { boxes }
+        Uncorrected { boxes, held: None }
+    }
+
+    /// Lowers each saved pixel's held-back copy to at most `below`'s coverage (the Z
+    /// correction's minimum over the held-back layers below).
+    pub fn hold_back(&mut self, below: &Mask) {
+        let w = below.width as usize;
+        let held = self
+            .held
+            .get_or_insert_with(|| self.boxes.iter().map(|b| b.1.clone()).collect());
+        for ((b, _), h) in self.boxes.iter().zip(held.iter_mut()) {
+            let bw = b.c1 - b.c0;
+            for r in b.rows() {
+                let row = &below.data[r * w..][b.cols()];
+                for (v, &l) in h[(r - b.r0) * bw..][..bw].iter_mut().zip(row) {
+                    *v = (*v).min(l);
+                }
+            }
+        }
+    }
+
+    /// Whether feature `k` is held back: the held-back layers below take more than half
+    /// of its uncorrected coverage.
+    pub fn held_back(&self, k: usize) -> bool {
+        let Some(held) = &self.held else {
+            return false;
+        };
+        let exact: u64 = self.boxes[k].1.iter().map(|&v| v as u64).sum();
+        let kept: u64 = held[k].iter().map(|&v| v as u64).sum();
+        2 * kept < exact
     }
 }
 
 /// Draws the small `features` of the section `contours` whose predicted peak light in
 /// the corrected coverage `mask` (lit box `lit`) is below T·(1 + [`MARGIN`]) back to
 /// their uncorrected coverage (`saved`, from [`Uncorrected::take`]) and then wider, as
-/// the module describes. `keep(feature)` false leaves a feature as it is (the Z
-/// correction's held-back features).
+/// the module describes. A feature `saved` finds held back ([`Uncorrected::held_back`])
+/// is left as it is.
 pub fn widen(
     model: &CureModel,
     mask: &mut Mask,
@@ -195,7 +210,6 @@ pub fn widen(
     features: &[SmallFeature],
     saved: &Uncorrected,
     shift_px: f64,
-    keep: impl Fn(usize) -> bool,
 ) -> Widening {
     let psf = Psf {
         sigma_px: model.sigma_px,
@@ -210,7 +224,7 @@ pub fn widen(
     };
     let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.max(0.0) + MAX_OUT_PX;
     for (k, f) in features.iter().enumerate() {
-        if !keep(k) {
+        if saved.held_back(k) {
             continue;
         }
         let (nb, orig) = (&saved.boxes[k].0, &saved.boxes[k].1);

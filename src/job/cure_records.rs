@@ -220,17 +220,11 @@ impl CureJob {
         } else {
             Vec::new()
         };
-        let saved =
+        let mut saved =
             (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, self.shift_px));
         if self.shift_px != 0.0 {
             cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
         }
-        // Their light before the held-back layers' minimum (xyz).
-        let before: Vec<u64> = if held > 0 {
-            small.iter().map(|f| f.light_sum(&m)).collect()
-        } else {
-            Vec::new()
-        };
         let mut ends_below: Option<DroppedScan> = None;
         if !lower.is_empty() {
             LOWER.with(|s| {
@@ -248,6 +242,9 @@ impl CureJob {
                         if let Some(t) = ends_here.as_mut() {
                             t.below(&b);
                         }
+                        if let Some(u) = saved.as_mut() {
+                            u.hold_back(&b);
+                        }
                     }
                     if held > 0 {
                         // lower[0] is the layer below; lower[1..=held] the layers below it.
@@ -261,11 +258,9 @@ impl CureJob {
             });
         }
         // Narrow features widened until they cure; with xyz not those the held-back layers
-        // took more than half the light of (a held-back surface stays held back).
+        // take more than half of (a held-back surface stays held back).
         let mut drawn_lit = lit;
         let widened = saved.and_then(|saved| {
-            let keep = |k: usize| held == 0 || 2 * small[k].light_sum(&m) >= before[k];
-            let keep: Vec<bool> = (0..small.len()).map(keep).collect();
             let wd = widen::widen(
                 &self.model,
                 &mut m,
@@ -274,7 +269,6 @@ impl CureJob {
                 &small,
                 &saved,
                 self.shift_px,
-                |k| keep[k],
             );
             if wd.lit != lit {
                 scratch.grow_lit_box(wd.lit);
