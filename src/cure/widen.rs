@@ -25,7 +25,10 @@
 //!    makes, larger than the part's); one that does not gets its corrected coverage back
 //!    and is left to the prediction (`cure.features-vanish`).
 //!
-//! Masks of layers without small features, or whose small features cure, are not changed.
+//! With the Z correction, a feature the held-back layers' minimum takes more than half the
+//! uncorrected coverage of (a held-back surface) is left as it is; the others are widened
+//! after that minimum. Masks of layers without small features, or whose small features
+//! cure, are not changed.
 
 use super::correct::{halfplane_coverage, nearest_edges};
 use super::segments::Segments;
@@ -79,9 +82,9 @@ pub fn small_features(
 ) -> Vec<SmallFeature> {
     let p = model.pixel_mm;
     let limit_mm = 2.0 * (shift_px.max(0.0) + 4.0 * model.sigma_px) * p;
-    let areas: Vec<f64> = contours.iter().map(|c| signed_area(c)).collect();
-    let lengths: Vec<f64> = contours.iter().map(|c| perimeter(c)).collect();
-    let boxes: Vec<[f64; 4]> = contours.iter().map(|c| bounds(c)).collect();
+    let areas: Vec<f64> = contours.iter().map(signed_area).collect();
+    let lengths: Vec<f64> = contours.iter().map(perimeter).collect();
+    let boxes: Vec<[f64; 4]> = contours.iter().map(bounds).collect();
     // Each hole's outer contour: the smallest one around its first point.
     let mut area = areas.clone();
     let mut length = lengths.clone();
@@ -407,9 +410,7 @@ mod tests {
         let saved = Uncorrected::take(&m, &small, shift);
         super::super::correct_coverage(&mut m, lit, section, model.pixel_mm, shift);
         let plain = m.clone();
-        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift, |_| {
-            true
-        });
+        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift);
         (plain, m, wd, model)
     }
 
@@ -479,6 +480,38 @@ mod tests {
             "widened further than needed: {after}"
         );
         assert_eq!(wd.widened, 1, "{wd:?}");
+    }
+
+    #[test]
+    fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_than_its_section() {
+        let profile = Profile::default_profile();
+        let p = profile.field().pixel_mm;
+        // 0.3 px square: uncorrected its light peaks near 0.05, a quarter of T.
+        let (x0, y0) = (400.6 * p, 300.1 * p);
+        let pin = rect(x0, y0, x0 + 0.3 * p, y0 + 0.3 * p);
+        let exact = Rasterizer::new(profile.field())
+            .coverage(std::slice::from_ref(&pin), &mut Scratch::default());
+        let (_, wide, wd, model) = drawn(&[pin]);
+        let t = model.edge_threshold();
+        let (u, v) = ([399.0, 403.0], [768.0 - 303.0, 768.0 - 299.0]);
+        assert!(grid_peak(&model, &exact, u, v) < 0.5 * t);
+        let after = grid_peak(&model, &wide, u, v);
+        assert!(after >= t, "{after} vs T {t}");
+        assert_eq!(wd.widened, 1, "{wd:?}");
+        // Lit beyond the section, within the 1 px bound.
+        let lit = |m: &Mask| (0..m.data.len()).filter(|&i| m.data[i] > 0).count();
+        assert!(
+            lit(&wide) > lit(&exact),
+            "{} vs {}",
+            lit(&wide),
+            lit(&exact)
+        );
+        for r in 0..768u32 {
+            for c in 0..1024u32 {
+                let near = (398..=402).contains(&c) && (765 - 302..=768 - 298).contains(&r);
+                assert!(near || wide.get(c, r) == 0, "({c}, {r})");
+            }
+        }
     }
 
     #[test]

@@ -110,6 +110,46 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
 }
 
 #[test]
+fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
+    let dir = tempdir("cure-widen-tiny-pin");
+    // A 0.02 mm pin (a third of a pixel): uncorrected it cures nowhere (`cure_dropped.rs`).
+    let p = P as f32;
+    let (x0, y0) = (400.0 * p, 300.0 * p);
+    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
+    tris.extend(box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]));
+    let model = dir.join("pin.stl");
+    write_stl(&model, &tris);
+    let xy = slice(&dir, &model, "xy.dmdjob", "xy");
+    assert!(
+        warnings(&xy, "cure.features-vanish").is_empty(),
+        "{}",
+        xy["warnings"]
+    );
+    let w = warnings(&xy, "cure.features-widened");
+    assert_eq!(w.len(), 1, "{}", xy["warnings"]);
+    assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
+    assert_eq!(w[0]["fields"]["width_mm"], 0.02, "{}", w[0]);
+    let (u, v) = (400.0 + 0.01 / P, ROWS - 300.0 - 0.01 / P);
+    let l = peak(
+        &dir.join("xy.dmdjob"),
+        2,
+        [u - 1.5, u + 1.5],
+        [v - 1.5, v + 1.5],
+    );
+    let t = threshold();
+    assert!(l >= t, "{l}, T {t}");
+    let off = slice(&dir, &model, "off.dmdjob", "off");
+    let l = peak(
+        &dir.join("off.dmdjob"),
+        2,
+        [u - 1.5, u + 1.5],
+        [v - 1.5, v + 1.5],
+    );
+    assert!(l < 0.5 * t, "uncorrected: {l}, T {t}");
+    assert_eq!(warnings(&off, "cure.features-vanish").len(), 1);
+}
+
+#[test]
 fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_changed() {
     let dir = tempdir("cure-widen-wall");
     let p = P as f32;
@@ -150,6 +190,33 @@ fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_chang
     for r in 0..ROWS as usize {
         for c in 0..380 {
             assert_eq!(with[r * w + c], without[r * w + c], "({c}, {r})");
+        }
+    }
+}
+
+#[test]
+fn with_xyz_a_narrow_bar_is_widened_only_above_its_held_back_layers() {
+    let dir = tempdir("cure-widen-xyz");
+    // A block on the platform and a 0.04 mm bar over nothing, z 1.0 to 1.5 mm (layers 20
+    // to 29): xyz holds its first 4 layers back (the default profile's print-through).
+    let p = P as f32;
+    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 1.5]);
+    let x0 = 400.3 * p;
+    tris.extend(box_tris([x0, 250.0 * p, 1.0], [x0 + 0.04, 290.0 * p, 1.5]));
+    let model = dir.join("bar.stl");
+    write_stl(&model, &tris);
+    let v = slice(&dir, &model, "xyz.dmdjob", "xyz");
+    let w = warnings(&v, "cure.features-widened");
+    assert_eq!(w.len(), 1, "{}", v["warnings"]);
+    let f = &w[0]["fields"];
+    assert_eq!(f["first_layer"], 24, "{}", w[0]);
+    assert_eq!(f["features"], 6, "{}", w[0]);
+    // A held-back layer stays dark there.
+    let (wd, _, m) = read_gray(&dir.join("xyz.dmdjob/masks/00021.png"));
+    let r0 = (ROWS - 290.0) as usize;
+    for r in r0 - 2..r0 + 42 {
+        for c in 398..404 {
+            assert_eq!(m[r * wd as usize + c], 0, "({c}, {r})");
         }
     }
 }
