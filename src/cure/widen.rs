@@ -23,7 +23,9 @@
 //!    computes it), one step at a time until the peak reaches T·(1 + [`MARGIN`]). A
 //!    feature that reaches T at the last step cures (at the smallest size the machine
 //!    makes, larger than the part's); one that does not gets its corrected coverage back
-//!    and is left to the prediction (`cure.features-vanish`).
+//!    and is left to the prediction (`cure.features-vanish`). No pixel farther than
+//!    [`BOX_SLACK_PX`] outside the section's bounding box is lit (the executor's check of
+//!    the masks against the layer's recorded box allows 1 px).
 //!
 //! With the Z correction, a feature the held-back layers' minimum takes more than half the
 //! uncorrected coverage of (a held-back surface) is left as it is; the others are widened
@@ -226,6 +228,7 @@ pub fn widen(
         ..Widening::default()
     };
     let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.max(0.0) + MAX_OUT_PX;
+    let within = within_section_box(contours, model.pixel_mm, mask.height as f64);
     for (k, f) in features.iter().enumerate() {
         if saved.held_back(k) {
             continue;
@@ -239,7 +242,9 @@ pub fn widen(
         nearest_edges(&segs, *nb, reach, |r, c, s| {
             let sd = (c as f64 + 0.5 - s.a[0]) * s.n[0] + (r as f64 + 0.5 - s.a[1]) * s.n[1];
             let j = (r - nb.r0) * (nb.c1 - nb.c0) + (c - nb.c0);
-            band.push((r * w + c, j, s.n, sd));
+            if within.rows().contains(&r) && within.cols().contains(&c) {
+                band.push((r * w + c, j, s.n, sd));
+            }
         });
         let probes: Vec<[f64; 2]> = band
             .iter()
@@ -301,6 +306,43 @@ pub fn widen(
     }
     out
 }
+
+/// The pixels within [`BOX_SLACK_PX`] of the bounding box of the section `contours`
+/// (build-plane mm) on a field `height_px` rows high: the most a widened feature may
+/// light (the executor checks that a mask lights nothing more than 1 px outside the
+/// section's box, which the record holds rounded to 1 µm).
+fn within_section_box(contours: &[Contour], pixel_mm: f64, height_px: f64) -> PixelBox {
+    let mut b = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for c in contours {
+        let cb = bounds(c);
+        b = [
+            b[0].min(cb[0]),
+            b[1].min(cb[1]),
+            b[2].max(cb[2]),
+            b[3].max(cb[3]),
+        ];
+    }
+    if b[0] > b[2] {
+        return PixelBox::EMPTY;
+    }
+    let s = BOX_SLACK_PX;
+    let lo = |x: f64| (x - s).ceil().max(0.0) as usize;
+    let hi = |x: f64| (x + s).floor().max(0.0) as usize;
+    PixelBox {
+        c0: lo(b[0] / pixel_mm),
+        c1: hi(b[2] / pixel_mm),
+        r0: lo(height_px - b[3] / pixel_mm),
+        r1: hi(height_px - b[1] / pixel_mm),
+    }
+}
+
+/// How far outside the section's bounding box a widened feature may light pixels, px.
+pub const BOX_SLACK_PX: f64 = 0.95;
 
 /// The largest light over `probes` (field pixel coordinates), refined around the best one
 /// by steps of 1/4, 1/8 and 1/16 px in the 8 directions.
@@ -486,30 +528,42 @@ mod tests {
     fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_than_its_section() {
         let profile = Profile::default_profile();
         let p = profile.field().pixel_mm;
-        // 0.3 px square: uncorrected its light peaks near 0.05, a quarter of T.
+        // 0.3 px square: uncorrected its light peaks near 0.05, a quarter of T. Two
+        // blocks make the layer's box larger than the pin's.
         let (x0, y0) = (400.6 * p, 300.1 * p);
         let pin = rect(x0, y0, x0 + 0.3 * p, y0 + 0.3 * p);
+        let low = rect(100.0 * p, 100.0 * p, 120.0 * p, 120.0 * p);
+        let high = rect(500.0 * p, 400.0 * p, 520.0 * p, 420.0 * p);
         let exact = Rasterizer::new(profile.field())
             .coverage(std::slice::from_ref(&pin), &mut Scratch::default());
-        let (_, wide, wd, model) = drawn(&[pin]);
+        let (plain, wide, wd, model) = drawn(&[low, pin, high]);
         let t = model.edge_threshold();
         let (u, v) = ([399.0, 403.0], [768.0 - 303.0, 768.0 - 299.0]);
         assert!(grid_peak(&model, &exact, u, v) < 0.5 * t);
         let after = grid_peak(&model, &wide, u, v);
         assert!(after >= t, "{after} vs T {t}");
         assert_eq!(wd.widened, 1, "{wd:?}");
-        // Lit beyond the section, within the 1 px bound.
-        let lit = |m: &Mask| (0..m.data.len()).filter(|&i| m.data[i] > 0).count();
+        // Lit beyond the pin's pixel, within the 1 px bound; the blocks as corrected.
+        let near =
+            |c: u32, r: u32| (398..=402).contains(&c) && (768 - 303..=768 - 299).contains(&r);
+        let lit_near = |m: &Mask| {
+            (0..768u32)
+                .flat_map(|r| (0..1024u32).map(move |c| (c, r)))
+                .filter(|&(c, r)| near(c, r) && m.get(c, r) > 0)
+                .count()
+        };
         assert!(
-            lit(&wide) > lit(&exact),
+            lit_near(&wide) > lit_near(&exact),
             "{} vs {}",
-            lit(&wide),
-            lit(&exact)
+            lit_near(&wide),
+            lit_near(&exact)
         );
         for r in 0..768u32 {
             for c in 0..1024u32 {
-                let near = (398..=402).contains(&c) && (765 - 302..=768 - 298).contains(&r);
-                assert!(near || wide.get(c, r) == 0, "({c}, {r})");
+                assert!(
+                    near(c, r) || wide.get(c, r) == plain.get(c, r),
+                    "({c}, {r})"
+                );
             }
         }
     }

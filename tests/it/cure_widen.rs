@@ -95,6 +95,9 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
         "(first: layer 0, at x {x} mm, y {y} mm, 0.05 × 0.05 mm)"
     )));
     assert_eq!(xy["cure"]["predicted"]["vanished"], 0, "{}", xy["cure"]);
+    // The executor finds the widened masks within the layers' boxes.
+    let o = run_in(&dir, &["run", "xy.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
     for layer in [0, 3, 5] {
         let l = peak(&dir.join("xy.dmdjob"), layer, around.0, around.1);
         assert!(l >= t, "layer {layer}: the widened pin peaks at {l}, T {t}");
@@ -138,6 +141,9 @@ fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
     );
     let t = threshold();
     assert!(l >= t, "{l}, T {t}");
+    // At the layer's top right corner it grows only down and left, within the box.
+    let o = run_in(&dir, &["run", "xy.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
     let off = slice(&dir, &model, "off.dmdjob", "off");
     let l = peak(
         &dir.join("off.dmdjob"),
@@ -179,6 +185,8 @@ fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_chang
         let l = peak(&dir.join("xy.dmdjob"), 1, [u - 1.5, u + 1.5], [v, v]);
         assert!(l >= t, "row {row}: {l}, T {t}");
     }
+    let o = run_in(&dir, &["run", "xy.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
     // The block alone has the same masks: the wall's widening stays near the wall.
     let alone = dir.join("block.stl");
     write_stl(&alone, &block());
@@ -211,6 +219,8 @@ fn with_xyz_a_narrow_bar_is_widened_only_above_its_held_back_layers() {
     let f = &w[0]["fields"];
     assert_eq!(f["first_layer"], 24, "{}", w[0]);
     assert_eq!(f["features"], 6, "{}", w[0]);
+    let o = run_in(&dir, &["run", "xyz.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
     // A held-back layer stays dark there.
     let (wd, _, m) = read_gray(&dir.join("xyz.dmdjob/masks/00021.png"));
     let r0 = (ROWS - 290.0) as usize;
