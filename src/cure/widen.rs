@@ -386,7 +386,9 @@ fn perimeter(c: &Contour) -> f64 {
     (0..c.len())
         .map(|i| {
             let (a, b) = (c[i], c[(i + 1) % c.len()]);
-            (b[0] - a[0]).hypot(b[1] - a[1])
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            // (`sqrt` of the sum rather than libm's slower `hypot`: lengths of mm.)
+            (dx * dx + dy * dy).sqrt()
         })
         .sum()
 }

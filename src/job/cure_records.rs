@@ -176,7 +176,8 @@ impl CureJob {
     /// Draws `section`'s coverage, corrects it (XY; with `xyz` each pixel also takes at
     /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
     /// the layers below, nearest first: a downward-facing surface is drawn only from its
-    /// held-back layers on), predicts its cure (`--predict`), then thresholds (`binary`)
+    /// held-back layers on; narrow features the correction starves are then drawn back and
+    /// wider, `cure::widen`), predicts its cure (`--predict`), then thresholds (`binary`)
     /// and compensates (`comp`) it in place. With `xyz` it also finds the flat features
     /// the correction drops whose runs of lit layers end in the layer below (from
     /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
