@@ -141,6 +141,21 @@ impl Scratch {
         self.lit
     }
 
+    /// Grows the last mask's lit box to `b` (and its own box): a caller that lit pixels
+    /// outside it (the cure correction's widened features) keeps the box covering every
+    /// lit pixel, so [`Scratch::recycle`] clears them.
+    pub fn grow_lit_box(&mut self, b: PixelBox) {
+        let l = &mut self.lit;
+        if l.r0 >= l.r1 || l.c0 >= l.c1 {
+            *l = b;
+        } else if b.r0 < b.r1 && b.c0 < b.c1 {
+            l.r0 = l.r0.min(b.r0);
+            l.r1 = l.r1.max(b.r1);
+            l.c0 = l.c0.min(b.c0);
+            l.c1 = l.c1.max(b.c1);
+        }
+    }
+
     /// Whether the last [`Rasterizer::render`] with a map reported its layer as lit
     /// outside the map's area ([`CoverageMap::lit_outside`]): a caller repeating that
     /// layer's mask without drawing it reports it again.

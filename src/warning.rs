@@ -165,6 +165,12 @@ pub const CODES: &[Code] = &[
         "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
     ),
     code(
+        "cure.features-widened",
+        Warn,
+        "the xy correction drew features too thin to cure wider (their uncorrected coverage, then up to 1 px outward) so that they cure: they come out at the smallest size the machine makes, larger than the part's",
+        "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
+    ),
+    code(
         "cure.features-dropped",
         Warn,
         "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part",

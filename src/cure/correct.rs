@@ -12,7 +12,7 @@
 //! light compensation maps the corrected coverage to grays as it maps any coverage: one
 //! target dose for both.
 
-use super::segments::Segments;
+use super::segments::{Segment, Segments};
 use crate::raster::Mask;
 use crate::raster::PixelBox;
 use crate::resin::dose::CureModel;
@@ -73,6 +73,34 @@ pub fn correct_coverage(
     // Edges of fine meshes simplified within 0.01 px: the same correction, fewer edges.
     let segs = Segments::simplified(contours, pixel_mm, mask.height as f64, 0.01);
     let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.abs();
+    let w = mask.width as usize;
+    let mut changed = 0;
+    nearest_edges(&segs, lit, reach, |r, c, s| {
+        let p = [c as f64 + 0.5, r as f64 + 0.5];
+        // Signed distance of the centre outside the edge's line.
+        let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
+        let delta = halfplane_coverage(s.n, -(sd + shift_px)) - halfplane_coverage(s.n, -sd);
+        let m = r * w + c;
+        let v = (mask.data[m] as f64 + 255.0 * delta)
+            .round()
+            .clamp(0.0, 255.0) as u8;
+        if v != mask.data[m] {
+            mask.data[m] = v;
+            changed += 1;
+        }
+    });
+    changed
+}
+
+/// Calls `f(row, column, edge)` for every pixel of the box `lit` whose centre lies within
+/// `reach` px of an edge of `segs`, with its nearest edge; only the pixels some edge comes
+/// near are visited.
+pub(super) fn nearest_edges(
+    segs: &Segments,
+    lit: PixelBox,
+    reach: f64,
+    mut f: impl FnMut(usize, usize, &Segment),
+) {
     let bw = lit.c1 - lit.c0;
     BAND.with(|band| {
         let band = &mut *band.borrow_mut();
@@ -117,27 +145,12 @@ pub fn correct_coverage(
                 }
             }
         }
-        let w = mask.width as usize;
-        let mut changed = 0;
         for &k in &band.touched {
             let (_, i) = band.best[k as usize];
             let (r, c) = (k as usize / bw, k as usize % bw);
-            let s = &segs.segs[i as usize];
-            let p = [(c + lit.c0) as f64 + 0.5, (r + lit.r0) as f64 + 0.5];
-            // Signed distance of the centre outside the edge's line.
-            let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
-            let delta = halfplane_coverage(s.n, -(sd + shift_px)) - halfplane_coverage(s.n, -sd);
-            let m = (r + lit.r0) * w + c + lit.c0;
-            let v = (mask.data[m] as f64 + 255.0 * delta)
-                .round()
-                .clamp(0.0, 255.0) as u8;
-            if v != mask.data[m] {
-                mask.data[m] = v;
-                changed += 1;
-            }
+            f(r + lit.r0, c + lit.c0, &segs.segs[i as usize]);
         }
         band.reset();
-        changed
     })
 }
 

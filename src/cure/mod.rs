@@ -5,8 +5,9 @@
 //! The model itself (the Gaussian point-spread function, the dose convention, Beer–Lambert
 //! in depth) is [`crate::resin`], which the executor shares. Files: `segments.rs` (a section's
 //! edges in pixels, with a grid index), `predict.rs` (cured edges and their errors),
-//! `correct.rs` (the XY correction of the coverage), `held_back.rs` (the flat features the Z
-//! correction drops). Like every algorithm stage it takes
+//! `correct.rs` (the XY correction of the coverage), `widen.rs` (narrow features the
+//! correction would starve, drawn back and wider until they cure), `held_back.rs` (the flat
+//! features the Z correction drops). Like every algorithm stage it takes
 //! inputs and returns values; `job` records them.
 
 pub mod correct;
@@ -14,6 +15,7 @@ pub mod held_back;
 pub mod plots;
 pub mod predict;
 pub mod segments;
+pub mod widen;
 
 pub use crate::resin::CureModel;
 pub use crate::resin::Psf;

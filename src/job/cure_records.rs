@@ -6,7 +6,7 @@ use crate::bundle::{
 };
 use crate::cure::held_back::{Dropped, DroppedScan};
 use crate::cure::predict::Histogram;
-use crate::cure::{self, Correction, CureModel};
+use crate::cure::{self, widen, Correction, CureModel};
 use crate::error::{Error, Result};
 use crate::optics::Compensator;
 use crate::profile::Profile;
@@ -41,6 +41,27 @@ pub(super) struct CureJob {
     /// The flat features the Z correction drops, over the layers drawn so far (sums and
     /// the lowest layer's first feature: the same in any order).
     dropped: Mutex<DroppedFeatures>,
+    /// The narrow features drawn wider, over the layers drawn so far (sums and the lowest
+    /// layer's first feature: the same in any order).
+    widened: Mutex<WidenedFeatures>,
+}
+
+/// The narrow features the XY correction drew wider, over a job's layers.
+#[derive(Debug, Clone, Default)]
+struct WidenedFeatures {
+    features: u64,
+    layers: u64,
+    first_layer: Option<u64>,
+    first: Option<FeatureBox>,
+}
+
+/// The narrow features of one layer the XY correction drew wider so they cure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct LayerWidened {
+    /// How many.
+    pub features: u32,
+    /// The first one's bounding box (in contour order), build-plane mm.
+    pub first: FeatureBox,
 }
 
 /// What drawing a layer through the cure model gave besides its mask.
@@ -57,6 +78,8 @@ pub(super) struct CureDrawn {
     /// below (`(1, …)`) or, for the job's top layer, in this one (`(0, …)`); only those
     /// with pixels.
     pub dropped: Vec<(usize, LayerDropped)>,
+    /// The narrow features drawn wider so they cure (`cure::widen`).
+    pub widened: Option<LayerWidened>,
 }
 
 /// The dropped features of one layer (the last layer of their runs), build-plane mm.
@@ -127,6 +150,7 @@ impl CureJob {
             predict: opts.predict,
             hist: Mutex::new(Histogram::default()),
             dropped: Mutex::new(DroppedFeatures::default()),
+            widened: Mutex::new(WidenedFeatures::default()),
         }))
     }
 
@@ -152,7 +176,8 @@ impl CureJob {
     /// Draws `section`'s coverage, corrects it (XY; with `xyz` each pixel also takes at
     /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
     /// the layers below, nearest first: a downward-facing surface is drawn only from its
-    /// held-back layers on), predicts its cure (`--predict`), then thresholds (`binary`)
+    /// held-back layers on; narrow features the correction starves are then drawn back and
+    /// wider, `cure::widen`), predicts its cure (`--predict`), then thresholds (`binary`)
     /// and compensates (`comp`) it in place. With `xyz` it also finds the flat features
     /// the correction drops whose runs of lit layers end in the layer below (from
     /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
@@ -189,6 +214,15 @@ impl CureJob {
                 && lit.cols().contains(&c)
                 && here[(r - lit.r0) * lit.cols().len() + (c - lit.c0)]
         };
+        // Small features (geometry only) and their uncorrected coverage, for the narrow
+        // ones the correction would starve.
+        let small = if self.shift_px != 0.0 {
+            widen::small_features(&self.model, section, m.height as f64, self.shift_px)
+        } else {
+            Vec::new()
+        };
+        let mut saved =
+            (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, self.shift_px));
         if self.shift_px != 0.0 {
             cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
         }
@@ -209,6 +243,9 @@ impl CureJob {
                         if let Some(t) = ends_here.as_mut() {
                             t.below(&b);
                         }
+                        if let Some(u) = saved.as_mut() {
+                            u.hold_back(&b);
+                        }
                     }
                     if held > 0 {
                         // lower[0] is the layer below; lower[1..=held] the layers below it.
@@ -221,6 +258,28 @@ impl CureJob {
                 }
             });
         }
+        // Narrow features widened until they cure; with xyz not those the held-back layers
+        // take more than half of (a held-back surface stays held back).
+        let mut drawn_lit = lit;
+        let widened = saved.and_then(|saved| {
+            let wd = widen::widen(
+                &self.model,
+                &mut m,
+                lit,
+                section,
+                &small,
+                &saved,
+                self.shift_px,
+            );
+            if wd.lit != lit {
+                scratch.grow_lit_box(wd.lit);
+                drawn_lit = scratch.lit_box();
+            }
+            Some(LayerWidened {
+                features: wd.widened,
+                first: wd.first?,
+            })
+        });
         let (p, h) = (self.model.pixel_mm, m.height);
         let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
             .into_iter()
@@ -243,7 +302,7 @@ impl CureJob {
         } else {
             (None, Histogram::default())
         };
-        let outside = comp.is_some_and(|c| c.apply_in(&mut m, lit));
+        let outside = comp.is_some_and(|c| c.apply_in(&mut m, drawn_lit));
         (
             m,
             CureDrawn {
@@ -252,6 +311,7 @@ impl CureJob {
                 cure,
                 hist,
                 dropped,
+                widened,
             },
         )
     }
@@ -270,6 +330,47 @@ impl CureJob {
                 t.first = d.first;
             }
         }
+    }
+
+    /// Counts the narrow features drawn wider at layer `index` into the job's.
+    pub fn count_widened(&self, index: usize, widened: Option<LayerWidened>) {
+        let Some(w) = widened else { return };
+        let mut t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
+        let layer = index as u64;
+        t.features += w.features as u64;
+        t.layers += 1;
+        if t.first_layer.is_none_or(|f| layer < f) {
+            t.first_layer = Some(layer);
+            t.first = Some(w.first);
+        }
+    }
+
+    /// The warning naming the narrow features drawn wider so they cure, if any.
+    pub fn widened_warning(&self) -> Option<Warning> {
+        let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
+        let (first, at) = (t.first_layer?, t.first?);
+        let (k, n) = (t.features, t.layers);
+        Some(
+            Warning::new(
+                "cure.features-widened",
+                format!(
+                    "cure: {k} {} too thin to cure {} drawn wider so {} cure, in {n} {} (first: layer {first}, at {}); {} cured size is the smallest the machine makes, larger than the part's",
+                    plural(k, "feature", "features"),
+                    plural(k, "was", "were"),
+                    plural(k, "it", "they"),
+                    plural(n, "layer", "layers"),
+                    where_is(&at),
+                    plural(k, "its", "their"),
+                ),
+            )
+            .with("features", k)
+            .with("layers", n)
+            .with("first_layer", first)
+            .with("x_mm", at.x_mm)
+            .with("y_mm", at.y_mm)
+            .with("width_mm", at.width_mm)
+            .with("height_mm", at.height_mm),
+        )
     }
 
     /// The warning naming the flat features the Z correction drops, if any.

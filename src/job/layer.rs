@@ -146,6 +146,7 @@ pub(super) fn layer_masks(
     });
     if let Some(job) = ctx.cure {
         job.count_dropped(i, &drawn.dropped);
+        job.count_widened(i, drawn.widened);
     }
     worker.previous = Some(PreviousLayerMasks {
         index: i,
@@ -218,31 +219,32 @@ fn draw(
     // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
     let comp = ctx.optics.map(|o| &o.compensator);
     let drawn_section = warped.as_deref().unwrap_or(section);
-    let (field_mask, lit_pixels, outside, cure, dropped) = match ctx.cure.filter(|c| c.active()) {
-        // The cure correction and prediction work on the coverage (the relative irradiance
-        // the compensation then delivers): drawn, corrected and predicted, then thresholded
-        // and compensated.
-        Some(job) => {
-            let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
-            let (m, c) = job.draw(
-                ctx.raster,
-                drawn_section,
-                &lower,
-                layer.top,
-                scratch,
-                ctx.binary,
-                comp,
-            );
-            let cure = c.cure.map(|p| (p, c.hist));
-            (m, c.lit_pixels, c.outside, cure, c.dropped)
-        }
-        None => {
-            let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
-            let lit = scratch.lit_pixels(&m);
-            let outside = comp.is_some() && scratch.reported_outside();
-            (m, lit, outside, None, Vec::new())
-        }
-    };
+    let (field_mask, lit_pixels, outside, cure, dropped, widened) =
+        match ctx.cure.filter(|c| c.active()) {
+            // The cure correction and prediction work on the coverage (the relative irradiance
+            // the compensation then delivers): drawn, corrected and predicted, then thresholded
+            // and compensated.
+            Some(job) => {
+                let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+                let (m, c) = job.draw(
+                    ctx.raster,
+                    drawn_section,
+                    &lower,
+                    layer.top,
+                    scratch,
+                    ctx.binary,
+                    comp,
+                );
+                let cure = c.cure.map(|p| (p, c.hist));
+                (m, c.lit_pixels, c.outside, cure, c.dropped, c.widened)
+            }
+            None => {
+                let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
+                let lit = scratch.lit_pixels(&m);
+                let outside = comp.is_some() && scratch.reported_outside();
+                (m, lit, outside, None, Vec::new(), None)
+            }
+        };
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {
@@ -269,6 +271,7 @@ fn draw(
         area_mm2,
         cure,
         dropped,
+        widened,
         pngs,
         runs: if recent.is_some() {
             scratch.lit_runs.clone()

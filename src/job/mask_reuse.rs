@@ -26,6 +26,8 @@ pub(super) struct DrawnMasks {
     /// The flat features the Z correction drops, found while drawing them (empty unless
     /// `xyz`, where masks are not reused).
     pub dropped: Vec<(usize, super::cure_records::LayerDropped)>,
+    /// The narrow features the XY correction drew wider so they cure.
+    pub widened: Option<super::cure_records::LayerWidened>,
     /// PNG bytes, SHA-256 and projector of each mask.
     pub pngs: Vec<(Vec<u8>, String, u32)>,
     /// The lit pixels (for the islands) when drawn from a simplified section, which
@@ -109,6 +111,7 @@ mod tests {
             area_mm2: tag as f64,
             cure: None,
             dropped: Vec::new(),
+            widened: None,
             pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0)],
             runs: Default::default(),
         })

@@ -123,6 +123,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     warnings.append(&mut optics.warnings);
     warnings.extend(cure_records::warnings(&planned.layers));
     warnings.extend(cure.as_ref().and_then(|c| c.dropped_warning()));
+    warnings.extend(cure.as_ref().and_then(|c| c.widened_warning()));
     let mut manifest = manifest::manifest(
         &part,
         &profile,

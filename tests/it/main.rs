@@ -8,6 +8,7 @@ mod common;
 mod cure;
 mod cure_dropped;
 mod cure_models;
+mod cure_widen;
 mod export;
 mod fuzz;
 mod geometry;
