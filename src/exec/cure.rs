@@ -282,42 +282,68 @@ pub struct LayerOut {
     pub print_through_mm: Option<f64>,
 }
 
-/// The sequential part of the check: the accumulation buffer, the PSF weights and the
-/// scratch buffers, for a field of `w`×`h` pixels.
-pub struct Engine {
+/// A run of lit pixels (relative irradiance ≥ [`LIT`]) of one row: columns `[c0, c1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Run {
+    r: u32,
+    c0: u32,
+    c1: u32,
+}
+
+/// What a layer gives that depends on its mask alone, computed ahead of the sequential
+/// recurrence (in parallel, several layers at a time): its own blurred light, perimeter,
+/// lit runs and islands.
+#[derive(Debug, Clone, Default)]
+pub struct Prepared {
+    /// The pixel box of the irradiance; empty when nothing is lit.
+    bbox: [usize; 4],
+    /// The sample box the layer's light reaches.
+    sbox: [usize; 4],
+    /// The layer's own light over `sbox` (before the exposure ratio), row-major.
+    own: Vec<f32>,
+    perimeter_px: f64,
+    /// Lit runs, row-major.
+    runs: Vec<Run>,
+    /// `rows[r − bbox[1]]..rows[r − bbox[1] + 1]`: the runs of row r.
+    rows: Vec<u32>,
+    /// The island (0-based) of each run.
+    island: Vec<u32>,
+    /// Per island: lit pixels and the sums of their centres' columns and rows.
+    px: Vec<u64>,
+    sum: Vec<[f64; 2]>,
+}
+
+impl Prepared {
+    fn is_empty(&self) -> bool {
+        self.own.is_empty()
+    }
+
+    /// The lit runs of row `r` (none outside the box).
+    fn row(&self, r: usize) -> &[Run] {
+        let [_, r0, _, r1] = self.bbox;
+        if r < r0 || r >= r1 {
+            return &[];
+        }
+        let k = r - r0;
+        &self.runs[self.rows[k] as usize..self.rows[k + 1] as usize]
+    }
+}
+
+/// The PSF's weights at the samples and the field's size: what preparing a layer needs.
+#[derive(Debug, Clone)]
+pub struct Kernel {
     w: usize,
     h: usize,
-    /// Samples across and down.
-    sw: usize,
     /// Pixels either side of a sample's pixel the PSF reaches.
     reach: usize,
     /// `weights[k][d + reach]`: the light at sub-sample `k` of a pixel from the pixel `d`
     /// away.
     weights: Vec<Vec<f32>>,
-    q: f32,
-    /// Relative light at a layer's top at which its mid-plane cures.
-    mid: f32,
-    /// At which the resin just below its bottom cures.
-    bottom: f32,
-    dp_mm: f64,
-    acc: Vec<f32>,
-    /// The sample box where `acc` may be nonzero.
-    acc_box: Option<[usize; 4]>,
-    /// A = `acc` × `scale` (the decay by q of every layer, applied to the buffer only
-    /// when the factor falls below [`RENORMALIZE`]).
-    scale: f32,
-    hbuf: Vec<f32>,
-    /// The layer's own light over its sample box (before the exposure ratio).
-    own: Vec<f32>,
-    pad: Vec<f32>,
-    conv: Vec<f32>,
-    labels: Vec<u32>,
-    parent: Vec<u32>,
 }
 
-impl Engine {
-    /// An engine for a `w`×`h` field and `model`.
-    pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
+impl Kernel {
+    /// The kernel of a `w`×`h` field and `model`.
+    pub fn new(w: usize, h: usize, model: &CureModel) -> Kernel {
         let psf = Psf {
             sigma_px: model.sigma_px,
         };
@@ -330,32 +356,12 @@ impl Engine {
                     .collect()
             })
             .collect();
-        let h_mm = model.layer_mm;
-        Engine {
+        Kernel {
             w,
             h,
-            sw: w * SUB,
             reach,
             weights,
-            q: (-h_mm / model.dp_mm).exp() as f32,
-            mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
-            bottom: model.threshold(h_mm, Some(0)) as f32,
-            dp_mm: model.dp_mm,
-            acc: vec![0.0; w * h * SUB * SUB],
-            acc_box: None,
-            scale: 1.0,
-            hbuf: Vec::new(),
-            own: Vec::new(),
-            pad: Vec::new(),
-            conv: Vec::new(),
-            labels: Vec::new(),
-            parent: Vec::new(),
         }
-    }
-
-    /// The accumulated light at sample (`x`, `y`) after the last layer.
-    pub fn acc_at(&self, x: usize, y: usize) -> f32 {
-        self.acc[y * self.sw + x] * self.scale
     }
 
     /// The sample box a layer lit in pixel box `b` reaches.
@@ -369,123 +375,42 @@ impl Engine {
         ]
     }
 
-    /// Adds layer `cur` (light scaled by `ratio`) on top of the layers processed so far
-    /// (the ones above it) and evaluates its cure; `below` is the layer under it (`None`
-    /// for the first layer, which rests on the platform).
-    pub fn layer(&mut self, cur: &Irradiance, below: Option<&Irradiance>, ratio: f32) -> LayerOut {
-        // Everything above reaches this layer's top through one more layer: one factor,
-        // folded into the buffer once it gets small.
-        self.scale *= self.q;
-        if self.scale < RENORMALIZE {
-            if let Some([x0, y0, x1, y1]) = self.acc_box {
-                let f = self.scale;
-                for y in y0..y1 {
-                    for a in &mut self.acc[y * self.sw + x0..y * self.sw + x1] {
-                        *a *= f;
-                    }
-                }
-            }
-            self.scale = 1.0;
-        }
-        let mut out = LayerOut::default();
+    /// The parts of layer `cur`'s cure that depend on its mask alone.
+    pub fn prepare(&self, cur: &Irradiance) -> Prepared {
         if cur.is_empty() {
-            return out;
+            return Prepared::default();
         }
         let sbox = self.reach_box(cur.bbox);
-        self.acc_box = Some(match self.acc_box {
-            None => sbox,
-            Some(a) => [
-                a[0].min(sbox[0]),
-                a[1].min(sbox[1]),
-                a[2].max(sbox[2]),
-                a[3].max(sbox[3]),
-            ],
-        });
-        self.blur_into_acc(cur, sbox, ratio);
-        out.cured_samples = self.cured_samples(sbox);
-        out.perimeter_px = perimeter(cur);
-        self.islands(cur, sbox, &mut out);
-        if let Some(below) = below {
-            out.print_through_mm = self.print_through(cur, below);
-        }
-        out
+        let own = self.blur(cur, sbox);
+        let mut p = Prepared {
+            bbox: cur.bbox,
+            sbox,
+            own,
+            perimeter_px: perimeter(cur),
+            ..Prepared::default()
+        };
+        lit_islands(cur, &mut p);
+        p
     }
 
-    /// The cured samples of `sbox` where the layer's own light is at least [`NEAR`], each
-    /// counted by the fraction of its cell on the cured side: a sample whose four neighbours lie on its side of the threshold counts 0 or 1;
-    /// one next to the cured edge clamp(½ + (A − T)/|∇A|), its signed distance from the
-    /// edge in sample steps (A linear across the cell). Summed over an edge the fractions
-    /// give the area behind it without the grid's quantization (exactly for an edge along
-    /// the grid, whatever its position).
+    /// The blurred light of `cur` over the sample box `sbox`, row-major.
     #[inline(never)]
-    fn cured_samples(&self, sbox: [usize; 4]) -> f64 {
-        let [x0, y0, x1, y1] = sbox;
-        let (sw, sh) = (self.sw, self.acc.len() / self.sw);
-        let t = self.mid / self.scale;
-        let zero = vec![0.0f32; sw];
-        let mut sum = 0.0f64;
-        for y in y0..y1 {
-            let row = &self.acc[y * sw..(y + 1) * sw];
-            let up = if y > 0 {
-                &self.acc[(y - 1) * sw..y * sw]
-            } else {
-                &zero[..]
-            };
-            let down = if y + 1 < sh {
-                &self.acc[(y + 1) * sw..(y + 2) * sw]
-            } else {
-                &zero[..]
-            };
-            let own = &self.own[(y - y0) * (x1 - x0)..(y - y0 + 1) * (x1 - x0)];
-            for x in x0..x1 {
-                if own[x - x0] < NEAR {
-                    continue;
-                }
-                let a = row[x];
-                let l = if x > 0 { row[x - 1] } else { 0.0 };
-                let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
-                let (u, d) = (up[x], down[x]);
-                let side = a >= t;
-                if side {
-                    if l >= t && r >= t && u >= t && d >= t {
-                        sum += 1.0;
-                        continue;
-                    }
-                } else if l < t && r < t && u < t && d < t {
-                    continue;
-                }
-                let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
-                let g = (gx * gx + gy * gy).sqrt();
-                sum += if g > 0.0 {
-                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
-                } else {
-                    side as u8 as f64
-                };
-            }
-        }
-        sum
-    }
-
-    /// acc += ratio · (the blurred light of `cur`) over the sample box `sbox`.
-    #[inline(never)]
-    fn blur_into_acc(&mut self, cur: &Irradiance, sbox: [usize; 4], ratio: f32) {
+    fn blur(&self, cur: &Irradiance, sbox: [usize; 4]) -> Vec<f32> {
         let [c0, r0, c1, r1] = cur.bbox;
         let [x0, y0, x1, y1] = sbox;
         let bw = x1 - x0;
         let reach = self.reach;
         let cw = c1 - c0;
         // Only the rows' extents are written and read: no clearing.
-        if self.hbuf.len() < bw * (r1 - r0) {
-            self.hbuf.resize(bw * (r1 - r0), 0.0);
-        }
+        let mut hbuf = vec![0.0f32; bw * (r1 - r0)];
         // Along rows: the light of each lit row at the sample columns its lit pixels
         // reach (`extent`, relative to x0; empty for a dark row). Per sub-sample k, a 1-D
         // convolution of the row (padded with `reach` zeros each side) over the pixels'
         // bases, tap by tap (vectorizes), then interleaved into the samples.
         let mut extent = vec![(0usize, 0usize); r1 - r0];
         let taps = 2 * reach + 1;
-        let mut pad = std::mem::take(&mut self.pad);
-        let mut conv = std::mem::take(&mut self.conv);
+        let mut pad = Vec::new();
+        let mut conv = Vec::new();
         for r in r0..r1 {
             let row = &cur.data[(r - r0) * cw..(r - r0 + 1) * cw];
             let Some(first) = row.iter().position(|&v| v != 0.0) else {
@@ -507,7 +432,7 @@ impl Engine {
                     *p = row[c as usize - c0];
                 }
             }
-            let out = &mut self.hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
+            let out = &mut hbuf[(r - r0) * bw..(r - r0 + 1) * bw];
             for k in 0..SUB {
                 // Sample k of base b: Σ_d weights[k][d]·pixel(b + d − reach).
                 conv.clear();
@@ -525,14 +450,8 @@ impl Engine {
             }
             extent[r - r0] = (pa * SUB - x0, pb * SUB - x0);
         }
-        self.pad = pad;
-        self.conv = conv;
-        // Down columns: the layer's own light at every sample (`own`), added to the
-        // accumulation.
-        let sbw = x1 - x0;
-        let gain = ratio / self.scale;
-        self.own.clear();
-        self.own.resize(sbw * (y1 - y0), 0.0);
+        // Down columns: the layer's own light at every sample.
+        let mut own = vec![0.0f32; bw * (y1 - y0)];
         for y in y0..y1 {
             let (base, k) = (y / SUB, y % SUB);
             let wk = &self.weights[k];
@@ -541,62 +460,312 @@ impl Engine {
             if lo > hi {
                 continue;
             }
-            let own = &mut self.own[(y - y0) * sbw..(y - y0 + 1) * sbw];
+            let own = &mut own[(y - y0) * bw..(y - y0 + 1) * bw];
             for r in lo..=hi {
                 let (a, b) = extent[r - r0];
                 if a == b {
                     continue;
                 }
                 let wgt = wk[r + reach - base];
-                let src = &self.hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
+                let src = &hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
                 for (o, s) in own[a..b].iter_mut().zip(src) {
                     *o += wgt * s;
                 }
             }
+        }
+        own
+    }
+}
+
+/// The lit runs of `cur` and its islands (4-connected runs, union-find with the smallest
+/// run as root; islands numbered in the order of their first run, row-major).
+#[inline(never)]
+fn lit_islands(cur: &Irradiance, p: &mut Prepared) {
+    let [c0, r0, c1, r1] = cur.bbox;
+    let bw = c1 - c0;
+    p.rows.push(0);
+    for r in r0..r1 {
+        let row = &cur.data[(r - r0) * bw..(r - r0 + 1) * bw];
+        let mut c = 0;
+        while c < bw {
+            if row[c] < LIT {
+                c += 1;
+                continue;
+            }
+            let start = c;
+            while c < bw && row[c] >= LIT {
+                c += 1;
+            }
+            p.runs.push(Run {
+                r: r as u32,
+                c0: (c0 + start) as u32,
+                c1: (c0 + c) as u32,
+            });
+        }
+        p.rows.push(p.runs.len() as u32);
+    }
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    let n = p.runs.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    for k in 1..r1 - r0 {
+        let (above, here) = (
+            p.rows[k - 1] as usize..p.rows[k] as usize,
+            p.rows[k] as usize..p.rows[k + 1] as usize,
+        );
+        let mut j = above.start;
+        for i in here {
+            let a = p.runs[i];
+            while j < above.end && p.runs[j].c1 <= a.c0 {
+                j += 1;
+            }
+            let mut t = j;
+            while t < above.end && p.runs[t].c0 < a.c1 {
+                let (x, y) = (find(&mut parent, t as u32), find(&mut parent, i as u32));
+                if x != y {
+                    parent[x.max(y) as usize] = x.min(y);
+                }
+                t += 1;
+            }
+        }
+    }
+    let mut map = vec![u32::MAX; n];
+    p.island = Vec::with_capacity(n);
+    for i in 0..n {
+        let root = find(&mut parent, i as u32) as usize;
+        if map[root] == u32::MAX {
+            map[root] = p.px.len() as u32;
+            p.px.push(0);
+            p.sum.push([0.0; 2]);
+        }
+        let l = map[root];
+        p.island.push(l);
+        let run = p.runs[i];
+        let len = (run.c1 - run.c0) as u64;
+        p.px[l as usize] += len;
+        // Σ (c + ½) over the run and len·(r + ½): sums of halves, exact in f64.
+        p.sum[l as usize][0] += len as f64 * (run.c0 + run.c1) as f64 * 0.5;
+        p.sum[l as usize][1] += len as f64 * (run.r as f64 + 0.5);
+    }
+}
+
+/// The sequential part of the check: the accumulation buffer and the scratch buffers,
+/// for a field of `w`×`h` pixels.
+pub struct Engine {
+    /// The field's kernel (the one [`Kernel::new`] makes for the same field and model).
+    kernel: Kernel,
+    /// Samples across.
+    sw: usize,
+    q: f32,
+    /// Relative light at a layer's top at which its mid-plane cures.
+    mid: f32,
+    /// At which the resin just below its bottom cures.
+    bottom: f32,
+    dp_mm: f64,
+    acc: Vec<f32>,
+    /// The sample box where `acc` may be nonzero.
+    acc_box: Option<[usize; 4]>,
+    /// A = `acc` × `scale` (the decay by q of every layer, applied to the buffer only
+    /// when the factor falls below [`RENORMALIZE`]).
+    scale: f32,
+    /// A row of zeros (the samples beyond the field's top and bottom).
+    zero: Vec<f32>,
+    labels: Vec<u32>,
+    parent: Vec<u32>,
+    intervals: Vec<(u32, u32)>,
+}
+
+impl Engine {
+    /// An engine for a `w`×`h` field and `model`.
+    pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
+        let h_mm = model.layer_mm;
+        Engine {
+            kernel: Kernel::new(w, h, model),
+            sw: w * SUB,
+            q: (-h_mm / model.dp_mm).exp() as f32,
+            mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
+            bottom: model.threshold(h_mm, Some(0)) as f32,
+            dp_mm: model.dp_mm,
+            acc: vec![0.0; w * h * SUB * SUB],
+            acc_box: None,
+            scale: 1.0,
+            zero: vec![0.0; w * SUB],
+            labels: Vec::new(),
+            parent: Vec::new(),
+            intervals: Vec::new(),
+        }
+    }
+
+    /// The accumulated light at sample (`x`, `y`) after the last layer.
+    pub fn acc_at(&self, x: usize, y: usize) -> f32 {
+        self.acc[y * self.sw + x] * self.scale
+    }
+
+    /// Adds layer `cur` (light scaled by `ratio`) on top of the layers processed so far
+    /// (the ones above it) and evaluates its cure; `below` is the layer under it (`None`
+    /// for the first layer, which rests on the platform).
+    pub fn layer(&mut self, cur: &Prepared, below: Option<&Prepared>, ratio: f32) -> LayerOut {
+        // Everything above reaches this layer's top through one more layer: one factor,
+        // folded into the buffer once it gets small.
+        self.scale *= self.q;
+        if self.scale < RENORMALIZE {
+            if let Some([x0, y0, x1, y1]) = self.acc_box {
+                let f = self.scale;
+                for y in y0..y1 {
+                    for a in &mut self.acc[y * self.sw + x0..y * self.sw + x1] {
+                        *a *= f;
+                    }
+                }
+            }
+            self.scale = 1.0;
+        }
+        let mut out = LayerOut::default();
+        if cur.is_empty() {
+            return out;
+        }
+        let sbox = cur.sbox;
+        self.acc_box = Some(match self.acc_box {
+            None => sbox,
+            Some(a) => [
+                a[0].min(sbox[0]),
+                a[1].min(sbox[1]),
+                a[2].max(sbox[2]),
+                a[3].max(sbox[3]),
+            ],
+        });
+        self.add_own(cur, ratio);
+        out.cured_samples = self.cured_samples(cur);
+        out.perimeter_px = cur.perimeter_px;
+        self.islands(cur, &mut out);
+        if let Some(below) = below {
+            out.print_through_mm = self.print_through(cur, below);
+        }
+        out
+    }
+
+    /// acc += ratio · (the layer's own light) over its sample box.
+    #[inline(never)]
+    fn add_own(&mut self, cur: &Prepared, ratio: f32) {
+        let [x0, y0, x1, y1] = cur.sbox;
+        let bw = x1 - x0;
+        let gain = ratio / self.scale;
+        for y in y0..y1 {
+            let own = &cur.own[(y - y0) * bw..(y - y0 + 1) * bw];
             let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
-            for (a, o) in acc.iter_mut().zip(own.iter()) {
+            for (a, o) in acc.iter_mut().zip(own) {
                 *a += gain * o;
             }
         }
     }
 
+    /// The cured samples of the sample box where the layer's own light is at least
+    /// [`NEAR`], each counted by the fraction of its cell on the cured side: a sample
+    /// whose four neighbours lie on its side of the threshold counts 0 or 1; one next to
+    /// the cured edge clamp(½ + (A − T)/|∇A|), its signed distance from the edge in sample
+    /// steps (A linear across the cell). Summed over an edge the fractions give the area
+    /// behind it without the grid's quantization (exactly for an edge along the grid,
+    /// whatever its position). Whole samples are counted 16 at a time, the fractions only
+    /// in the groups that hold a sample next to the edge.
+    #[inline(never)]
+    fn cured_samples(&self, cur: &Prepared) -> f64 {
+        let [x0, y0, x1, y1] = cur.sbox;
+        let bw = x1 - x0;
+        let (sw, sh) = (self.sw, self.acc.len() / self.sw);
+        let t = self.mid / self.scale;
+        let mut whole = 0u64;
+        let mut frac = 0.0f64;
+        // Samples with both side neighbours inside the field.
+        let (xa, xb) = (x0.max(1), x1.min(sw - 1));
+        const GROUP: usize = 16;
+        for y in y0..y1 {
+            let row = &self.acc[y * sw..(y + 1) * sw];
+            let up = if y > 0 {
+                &self.acc[(y - 1) * sw..y * sw]
+            } else {
+                &self.zero[..]
+            };
+            let down = if y + 1 < sh {
+                &self.acc[(y + 1) * sw..(y + 2) * sw]
+            } else {
+                &self.zero[..]
+            };
+            let own = &cur.own[(y - y0) * bw..(y - y0 + 1) * bw];
+            let sample = |x: usize| -> f64 {
+                if own[x - x0] < NEAR {
+                    return 0.0;
+                }
+                let a = row[x];
+                let l = if x > 0 { row[x - 1] } else { 0.0 };
+                let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
+                let (u, d) = (up[x], down[x]);
+                let side = a >= t;
+                if side {
+                    if l >= t && r >= t && u >= t && d >= t {
+                        return 1.0;
+                    }
+                } else if l < t && r < t && u < t && d < t {
+                    return 0.0;
+                }
+                let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
+                let g = (gx * gx + gy * gy).sqrt();
+                if g > 0.0 {
+                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
+                } else {
+                    side as u8 as f64
+                }
+            };
+            for x in (x0..xa).chain(xb.max(xa)..x1) {
+                frac += sample(x);
+            }
+            let mut x = xa;
+            while x < xb {
+                let e = (x + GROUP).min(xb);
+                let (c, l, r) = (&row[x..e], &row[x - 1..e - 1], &row[x + 1..e + 1]);
+                let (u, d, o) = (&up[x..e], &down[x..e], &own[x - x0..e - x0]);
+                let (mut n, mut edge) = (0u32, false);
+                for j in 0..e - x {
+                    let lo = c[j].min(l[j]).min(r[j]).min(u[j]).min(d[j]);
+                    let hi = c[j].max(l[j]).max(r[j]).max(u[j]).max(d[j]);
+                    let near = o[j] >= NEAR;
+                    n += (near & (lo >= t)) as u32;
+                    edge |= near & (lo < t) & (hi >= t);
+                }
+                if edge {
+                    for xx in x..e {
+                        frac += sample(xx);
+                    }
+                } else {
+                    whole += n as u64;
+                }
+                x = e;
+            }
+        }
+        whole as f64 + frac
+    }
+
     /// Islands of `cur` (4-connected lit pixels): which cure nowhere, which one cured
     /// region joins.
     #[inline(never)]
-    fn islands(&mut self, cur: &Irradiance, sbox: [usize; 4], out: &mut LayerOut) {
-        let [c0, r0, c1, r1] = cur.bbox;
-        let (bw, bh) = (c1 - c0, r1 - r0);
-        let n = label(
-            bw,
-            bh,
-            |c, r| cur.data[r * bw + c] >= LIT,
-            &mut self.labels,
-            &mut self.parent,
-        );
+    fn islands(&mut self, cur: &Prepared, out: &mut LayerOut) {
+        let n = cur.px.len();
         out.islands = n;
         if n == 0 {
             return;
         }
-        let island_of = std::mem::take(&mut self.labels);
-        // Per island: pixels, centroid sums, cured.
-        let mut px = vec![0u64; n];
-        let mut sum = vec![[0.0f64; 2]; n];
+        let mid = self.mid / self.scale;
         let mut cured = vec![false; n];
-        for r in 0..bh {
-            for c in 0..bw {
-                let l = island_of[r * bw + c];
-                if l == 0 {
-                    continue;
-                }
-                let i = l as usize - 1;
-                px[i] += 1;
-                sum[i][0] += (c0 + c) as f64 + 0.5;
-                sum[i][1] += (r0 + r) as f64 + 0.5;
-                if !cured[i] && self.pixel_max(c0 + c, r0 + r) >= self.mid / self.scale {
-                    cured[i] = true;
-                }
+        for (run, &i) in cur.runs.iter().zip(&cur.island) {
+            let i = i as usize;
+            if !cured[i] {
+                cured[i] = (run.c0..run.c1).any(|c| self.pixel_max(c as usize, run.r as usize) >= mid);
             }
         }
+        let (px, sum) = (&cur.px, &cur.sum);
         let centroid = |i: usize| [sum[i][0] / px[i] as f64, sum[i][1] / px[i] as f64];
         for i in 0..n {
             if !cured[i] {
@@ -605,30 +774,27 @@ impl Engine {
         }
         if cured.iter().filter(|&&c| c).count() >= 2 {
             // The cured samples' regions, and the islands each touches.
-            let [x0, y0, x1, y1] = sbox;
-            let (sw, mid) = (self.sw, self.mid / self.scale);
+            let [x0, y0, x1, y1] = cur.sbox;
+            let sw = self.sw;
             let acc = &self.acc;
-            let mut labels = Vec::new();
             let m = label(
                 x1 - x0,
                 y1 - y0,
                 |x, y| acc[(y0 + y) * sw + x0 + x] >= mid,
-                &mut labels,
+                &mut self.labels,
                 &mut self.parent,
             );
+            let labels = &self.labels;
             let mut region: Vec<Vec<usize>> = vec![Vec::new(); m + 1];
-            for r in 0..bh {
-                for c in 0..bw {
-                    let l = island_of[r * bw + c];
-                    if l == 0 {
-                        continue;
-                    }
+            for (run, &l) in cur.runs.iter().zip(&cur.island) {
+                let l = l as usize;
+                for c in run.c0 as usize..run.c1 as usize {
                     for k in 0..SUB * SUB {
-                        let x = (c0 + c) * SUB + k % SUB - x0;
-                        let y = (r0 + r) * SUB + k / SUB - y0;
+                        let x = c * SUB + k % SUB - x0;
+                        let y = run.r as usize * SUB + k / SUB - y0;
                         let g = labels[y * (x1 - x0) + x] as usize;
-                        if g != 0 && region[g].last() != Some(&(l as usize - 1)) {
-                            region[g].push(l as usize - 1);
+                        if g != 0 && region[g].last() != Some(&l) {
+                            region[g].push(l);
                         }
                     }
                 }
@@ -646,10 +812,10 @@ impl Engine {
                 }
             }
         }
-        self.labels = island_of;
     }
 
     /// The largest accumulated light over pixel (c, r)'s samples.
+    #[inline]
     fn pixel_max(&self, c: usize, r: usize) -> f32 {
         let mut m = 0.0f32;
         for k in 0..SUB * SUB {
@@ -660,32 +826,60 @@ impl Engine {
 
     /// Deepest cure below the layer's bottom at its downward-facing pixels: lit in `cur`,
     /// and neither they nor their 4 neighbours lit in `below` (an anti-aliased wall whose
-    /// edge pixel crosses one half from one layer to the next is not an overhang).
+    /// edge pixel crosses one half from one layer to the next is not an overhang). Per
+    /// row, the lit runs of `cur` less the columns `below` rules out (its runs of the rows
+    /// above and below, and of the row itself grown by a pixel each side).
     #[inline(never)]
-    fn print_through(&self, cur: &Irradiance, below: &Irradiance) -> Option<f64> {
-        let [c0, r0, c1, r1] = cur.bbox;
+    fn print_through(&mut self, cur: &Prepared, below: &Prepared) -> Option<f64> {
+        let [_, r0, _, r1] = cur.bbox;
         let mut best: Option<f32> = None;
+        let floor = self.bottom / self.scale;
+        let mut iv = std::mem::take(&mut self.intervals);
         for r in r0..r1 {
-            for c in c0..c1 {
-                if cur.data[(r - r0) * (c1 - c0) + c - c0] >= LIT && dark_around(below, c, r) {
-                    let a = self.pixel_max(c, r);
-                    if a > self.bottom / self.scale && best.is_none_or(|b| a > b) {
-                        best = Some(a);
+            let runs = cur.row(r);
+            if runs.is_empty() {
+                continue;
+            }
+            iv.clear();
+            iv.extend(below.row(r).iter().map(|b| (b.c0.saturating_sub(1), b.c1 + 1)));
+            if r > 0 {
+                iv.extend(below.row(r - 1).iter().map(|b| (b.c0, b.c1)));
+            }
+            iv.extend(below.row(r + 1).iter().map(|b| (b.c0, b.c1)));
+            iv.sort_unstable();
+            for run in runs {
+                let mut pos = run.c0;
+                let mut free = |a: u32, b: u32| {
+                    for c in a..b {
+                        let v = self.pixel_max(c as usize, r);
+                        if v > floor && best.is_none_or(|m| v > m) {
+                            best = Some(v);
+                        }
                     }
+                };
+                for &(s, e) in &iv {
+                    if e <= pos {
+                        continue;
+                    }
+                    if s >= run.c1 {
+                        break;
+                    }
+                    if s > pos {
+                        free(pos, s);
+                    }
+                    pos = pos.max(e);
+                    if pos >= run.c1 {
+                        break;
+                    }
+                }
+                if pos < run.c1 {
+                    free(pos, run.c1);
                 }
             }
         }
+        self.intervals = iv;
         best.map(|a| self.dp_mm * ((a * self.scale) as f64 / self.bottom as f64).ln())
     }
-}
-
-/// Whether pixel (c, r) and its 4 neighbours are below [`LIT`] in `layer`.
-fn dark_around(layer: &Irradiance, c: usize, r: usize) -> bool {
-    layer.at(c, r) < LIT
-        && layer.at(c + 1, r) < LIT
-        && layer.at(c, r + 1) < LIT
-        && (c == 0 || layer.at(c - 1, r) < LIT)
-        && (r == 0 || layer.at(c, r - 1) < LIT)
 }
 
 /// Σ|∇I| by central differences over the box grown by one pixel: the drawn perimeter, px.
@@ -909,9 +1103,10 @@ pub fn check(
     let light = Light::of(manifest, source)?;
     let normal_s = manifest.machine.exposure.layer_s.get();
     let n = manifest.layers.len();
-    let decode_layer = |i: usize| -> Result<Irradiance> {
+    let kernel = Kernel::new(w, h, model);
+    let decode_layer = |i: usize| -> Result<Prepared> {
         let Some(m) = manifest.layers[i].masks.first() else {
-            return Ok(Irradiance::default());
+            return Ok(Prepared::default());
         };
         let (mw, mh, px) = decode(source, &m.file)?;
         if (mw, mh) != (w, h) {
@@ -920,9 +1115,9 @@ pub fn check(
                 msg: format!("mask is {mw}x{mh}, the projector {w}x{h}"),
             });
         }
-        Ok(light.irradiance(w, h, &px))
+        Ok(kernel.prepare(&light.irradiance(w, h, &px)))
     };
-    let decode_chunk = |hi: usize| -> Result<Vec<Irradiance>> {
+    let decode_chunk = |hi: usize| -> Result<Vec<Prepared>> {
         // Layers hi−1 down to hi−CHUNK (top first).
         let lo = hi.saturating_sub(CHUNK);
         (lo..hi)
@@ -1150,9 +1345,10 @@ mod tests {
     /// Runs a stack (bottom first) through the engine, top down; the layers' outputs
     /// bottom first.
     fn run(e: &mut Engine, w: usize, h: usize, stack: &[(Vec<f32>, f32)]) -> Vec<LayerOut> {
-        let irr: Vec<Irradiance> = stack
+        let k = e.kernel.clone();
+        let irr: Vec<Prepared> = stack
             .iter()
-            .map(|(img, _)| Irradiance::from_image(w, h, img))
+            .map(|(img, _)| k.prepare(&Irradiance::from_image(w, h, img)))
             .collect();
         let mut out = vec![LayerOut::default(); stack.len()];
         for i in (0..stack.len()).rev() {
