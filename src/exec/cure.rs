@@ -301,6 +301,8 @@ pub struct Prepared {
     sbox: [usize; 4],
     /// The layer's own light over `sbox` (before the exposure ratio), row-major.
     own: Vec<f32>,
+    /// Per row of `sbox`: the columns (from its left) outside which `own` is zero.
+    spans: Vec<(u32, u32)>,
     perimeter_px: f64,
     /// Lit runs, row-major.
     runs: Vec<Run>,
@@ -381,11 +383,12 @@ impl Kernel {
             return Prepared::default();
         }
         let sbox = self.reach_box(cur.bbox);
-        let own = self.blur(cur, sbox);
+        let (own, spans) = self.blur(cur, sbox);
         let mut p = Prepared {
             bbox: cur.bbox,
             sbox,
             own,
+            spans,
             perimeter_px: perimeter(cur),
             ..Prepared::default()
         };
@@ -393,9 +396,10 @@ impl Kernel {
         p
     }
 
-    /// The blurred light of `cur` over the sample box `sbox`, row-major.
+    /// The blurred light of `cur` over the sample box `sbox`, row-major, and each row's
+    /// span of possibly nonzero samples.
     #[inline(never)]
-    fn blur(&self, cur: &Irradiance, sbox: [usize; 4]) -> Vec<f32> {
+    fn blur(&self, cur: &Irradiance, sbox: [usize; 4]) -> (Vec<f32>, Vec<(u32, u32)>) {
         let [c0, r0, c1, r1] = cur.bbox;
         let [x0, y0, x1, y1] = sbox;
         let bw = x1 - x0;
@@ -452,6 +456,7 @@ impl Kernel {
         }
         // Down columns: the layer's own light at every sample.
         let mut own = vec![0.0f32; bw * (y1 - y0)];
+        let mut spans = vec![(0u32, 0u32); y1 - y0];
         for y in y0..y1 {
             let (base, k) = (y / SUB, y % SUB);
             let wk = &self.weights[k];
@@ -461,11 +466,17 @@ impl Kernel {
                 continue;
             }
             let own = &mut own[(y - y0) * bw..(y - y0 + 1) * bw];
+            let span = &mut spans[y - y0];
             for r in lo..=hi {
                 let (a, b) = extent[r - r0];
                 if a == b {
                     continue;
                 }
+                *span = if span.0 == span.1 {
+                    (a as u32, b as u32)
+                } else {
+                    (span.0.min(a as u32), span.1.max(b as u32))
+                };
                 let wgt = wk[r + reach - base];
                 let src = &hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
                 for (o, s) in own[a..b].iter_mut().zip(src) {
@@ -473,7 +484,7 @@ impl Kernel {
                 }
             }
         }
-        own
+        (own, spans)
     }
 }
 
@@ -504,6 +515,26 @@ fn lit_islands(cur: &Irradiance, p: &mut Prepared) {
         }
         p.rows.push(p.runs.len() as u32);
     }
+    let n = p.runs.len();
+    let (ids, count) = connect(&p.runs, &p.rows);
+    p.px = vec![0; count];
+    p.sum = vec![[0.0; 2]; count];
+    p.island = ids;
+    for i in 0..n {
+        let l = p.island[i] as usize;
+        let run = p.runs[i];
+        let len = (run.c1 - run.c0) as u64;
+        p.px[l] += len;
+        // Σ (c + ½) over the run and len·(r + ½): sums of halves, exact in f64.
+        p.sum[l][0] += len as f64 * (run.c0 + run.c1) as f64 * 0.5;
+        p.sum[l][1] += len as f64 * (run.r as f64 + 0.5);
+    }
+}
+
+/// The 4-connected components of `runs` (row-major, `rows[k]..rows[k + 1]` the runs of
+/// the k-th row): each run's component, numbered from 0 in the order of their first run,
+/// and the count (union-find, a component's smallest run its root).
+fn connect(runs: &[Run], rows: &[u32]) -> (Vec<u32>, usize) {
     fn find(p: &mut [u32], mut x: u32) -> u32 {
         while p[x as usize] != x {
             p[x as usize] = p[p[x as usize] as usize];
@@ -511,21 +542,21 @@ fn lit_islands(cur: &Irradiance, p: &mut Prepared) {
         }
         x
     }
-    let n = p.runs.len();
+    let n = runs.len();
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    for k in 1..r1 - r0 {
+    for k in 1..rows.len().saturating_sub(1) {
         let (above, here) = (
-            p.rows[k - 1] as usize..p.rows[k] as usize,
-            p.rows[k] as usize..p.rows[k + 1] as usize,
+            rows[k - 1] as usize..rows[k] as usize,
+            rows[k] as usize..rows[k + 1] as usize,
         );
         let mut j = above.start;
         for i in here {
-            let a = p.runs[i];
-            while j < above.end && p.runs[j].c1 <= a.c0 {
+            let a = runs[i];
+            while j < above.end && runs[j].c1 <= a.c0 {
                 j += 1;
             }
             let mut t = j;
-            while t < above.end && p.runs[t].c0 < a.c1 {
+            while t < above.end && runs[t].c0 < a.c1 {
                 let (x, y) = (find(&mut parent, t as u32), find(&mut parent, i as u32));
                 if x != y {
                     parent[x.max(y) as usize] = x.min(y);
@@ -535,23 +566,17 @@ fn lit_islands(cur: &Irradiance, p: &mut Prepared) {
         }
     }
     let mut map = vec![u32::MAX; n];
-    p.island = Vec::with_capacity(n);
+    let mut ids = Vec::with_capacity(n);
+    let mut count = 0u32;
     for i in 0..n {
         let root = find(&mut parent, i as u32) as usize;
         if map[root] == u32::MAX {
-            map[root] = p.px.len() as u32;
-            p.px.push(0);
-            p.sum.push([0.0; 2]);
+            map[root] = count;
+            count += 1;
         }
-        let l = map[root];
-        p.island.push(l);
-        let run = p.runs[i];
-        let len = (run.c1 - run.c0) as u64;
-        p.px[l as usize] += len;
-        // Σ (c + ½) over the run and len·(r + ½): sums of halves, exact in f64.
-        p.sum[l as usize][0] += len as f64 * (run.c0 + run.c1) as f64 * 0.5;
-        p.sum[l as usize][1] += len as f64 * (run.r as f64 + 0.5);
+        ids.push(map[root]);
     }
+    (ids, count as usize)
 }
 
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
@@ -575,8 +600,9 @@ pub struct Engine {
     scale: f32,
     /// A row of zeros (the samples beyond the field's top and bottom).
     zero: Vec<f32>,
-    labels: Vec<u32>,
-    parent: Vec<u32>,
+    /// Runs of cured samples and where each row's begin (merges).
+    runs: Vec<Run>,
+    rows: Vec<u32>,
     intervals: Vec<(u32, u32)>,
 }
 
@@ -595,8 +621,8 @@ impl Engine {
             acc_box: None,
             scale: 1.0,
             zero: vec![0.0; w * SUB],
-            labels: Vec::new(),
-            parent: Vec::new(),
+            runs: Vec::new(),
+            rows: Vec::new(),
             intervals: Vec::new(),
         }
     }
@@ -648,15 +674,18 @@ impl Engine {
         out
     }
 
-    /// acc += ratio · (the layer's own light) over its sample box.
+    /// acc += ratio · (the layer's own light) over its sample box (each row's span).
     #[inline(never)]
     fn add_own(&mut self, cur: &Prepared, ratio: f32) {
         let [x0, y0, x1, y1] = cur.sbox;
         let bw = x1 - x0;
         let gain = ratio / self.scale;
+        debug_assert!(x1 <= self.sw);
         for y in y0..y1 {
-            let own = &cur.own[(y - y0) * bw..(y - y0 + 1) * bw];
-            let acc = &mut self.acc[y * self.sw + x0..y * self.sw + x1];
+            let (a, b) = cur.spans[y - y0];
+            let (a, b) = (a as usize, b as usize);
+            let own = &cur.own[(y - y0) * bw + a..(y - y0) * bw + b];
+            let acc = &mut self.acc[y * self.sw + x0 + a..y * self.sw + x0 + b];
             for (a, o) in acc.iter_mut().zip(own) {
                 *a += gain * o;
             }
@@ -679,10 +708,16 @@ impl Engine {
         let t = self.mid / self.scale;
         let mut whole = 0u64;
         let mut frac = 0.0f64;
-        // Samples with both side neighbours inside the field.
-        let (xa, xb) = (x0.max(1), x1.min(sw - 1));
         const GROUP: usize = 16;
         for y in y0..y1 {
+            // Only the row's span can have own light; samples with both side neighbours
+            // inside the field go by groups.
+            let (sa, sb) = cur.spans[y - y0];
+            let (x0s, x1s) = (x0 + sa as usize, x0 + sb as usize);
+            if x0s == x1s {
+                continue;
+            }
+            let (xa, xb) = (x0s.max(1), x1s.min(sw - 1));
             let row = &self.acc[y * sw..(y + 1) * sw];
             let up = if y > 0 {
                 &self.acc[(y - 1) * sw..y * sw]
@@ -719,7 +754,7 @@ impl Engine {
                     side as u8 as f64
                 }
             };
-            for x in (x0..xa).chain(xb.max(xa)..x1) {
+            for x in (x0s..xa).chain(xb.max(xa)..x1s) {
                 frac += sample(x);
             }
             let mut x = xa;
@@ -773,32 +808,51 @@ impl Engine {
             }
         }
         if cured.iter().filter(|&&c| c).count() >= 2 {
-            // The cured samples' regions, and the islands each touches.
+            // The cured samples' regions (runs of samples at or above the threshold,
+            // connected), and the islands each touches: those with a run whose samples
+            // meet one of the region's runs.
             let [x0, y0, x1, y1] = cur.sbox;
             let sw = self.sw;
-            let acc = &self.acc;
-            let m = label(
-                x1 - x0,
-                y1 - y0,
-                |x, y| acc[(y0 + y) * sw + x0 + x] >= mid,
-                &mut self.labels,
-                &mut self.parent,
-            );
-            let labels = &self.labels;
-            let mut region: Vec<Vec<usize>> = vec![Vec::new(); m + 1];
+            let (mut runs, mut rows) = (std::mem::take(&mut self.runs), std::mem::take(&mut self.rows));
+            runs.clear();
+            rows.clear();
+            rows.push(0);
+            for y in y0..y1 {
+                let row = &self.acc[y * sw + x0..y * sw + x1];
+                let mut x = 0;
+                while x < row.len() {
+                    let Some(a) = row[x..].iter().position(|&v| v >= mid) else {
+                        break;
+                    };
+                    let b = row[x + a..].iter().position(|&v| v < mid).map_or(row.len(), |b| x + a + b);
+                    runs.push(Run {
+                        r: y as u32,
+                        c0: (x0 + x + a) as u32,
+                        c1: (x0 + b) as u32,
+                    });
+                    x = b;
+                }
+                rows.push(runs.len() as u32);
+            }
+            let (region_of, m) = connect(&runs, &rows);
+            let mut region: Vec<Vec<usize>> = vec![Vec::new(); m];
             for (run, &l) in cur.runs.iter().zip(&cur.island) {
-                let l = l as usize;
-                for c in run.c0 as usize..run.c1 as usize {
-                    for k in 0..SUB * SUB {
-                        let x = c * SUB + k % SUB - x0;
-                        let y = run.r as usize * SUB + k / SUB - y0;
-                        let g = labels[y * (x1 - x0) + x] as usize;
-                        if g != 0 && region[g].last() != Some(&l) {
-                            region[g].push(l);
+                let (a, b) = (run.c0 * SUB as u32, run.c1 * SUB as u32);
+                for y in run.r as usize * SUB..(run.r as usize + 1) * SUB {
+                    let k = y - y0;
+                    for j in rows[k] as usize..rows[k + 1] as usize {
+                        let s = runs[j];
+                        if s.c0 < b && a < s.c1 {
+                            let g = region_of[j] as usize;
+                            if region[g].last() != Some(&(l as usize)) {
+                                region[g].push(l as usize);
+                            }
                         }
                     }
                 }
             }
+            self.runs = runs;
+            self.rows = rows;
             for mut isl in region {
                 isl.sort_unstable();
                 isl.dedup();
@@ -909,77 +963,6 @@ fn perimeter(cur: &Irradiance) -> f64 {
         }
     }
     s
-}
-
-/// 4-connected components of the cells of a `w`×`h` grid where `on` holds: `labels`
-/// (row-major, 0 off, else 1..=count), returns the count. Union-find over runs.
-#[inline(never)]
-fn label(
-    w: usize,
-    h: usize,
-    on: impl Fn(usize, usize) -> bool,
-    labels: &mut Vec<u32>,
-    parent: &mut Vec<u32>,
-) -> usize {
-    labels.clear();
-    labels.resize(w * h, 0);
-    parent.clear();
-    parent.push(0);
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
-    for r in 0..h {
-        let mut c = 0;
-        while c < w {
-            if !on(c, r) {
-                c += 1;
-                continue;
-            }
-            let start = c;
-            while c < w && on(c, r) {
-                c += 1;
-            }
-            let id = parent.len() as u32;
-            parent.push(id);
-            let mut root = id;
-            if r > 0 {
-                for x in start..c {
-                    let up = labels[(r - 1) * w + x];
-                    if up != 0 {
-                        let a = find(parent, up);
-                        let b = find(parent, root);
-                        if a != b {
-                            let (lo, hi) = (a.min(b), a.max(b));
-                            parent[hi as usize] = lo;
-                            root = lo;
-                        }
-                    }
-                }
-            }
-            for x in start..c {
-                labels[r * w + x] = id;
-            }
-        }
-    }
-    // Compact the roots to 1..=count.
-    let mut map = vec![0u32; parent.len()];
-    let mut count = 0u32;
-    for i in 1..parent.len() as u32 {
-        let root = find(parent, i);
-        if map[root as usize] == 0 {
-            count += 1;
-            map[root as usize] = count;
-        }
-        map[i as usize] = map[root as usize];
-    }
-    for l in labels.iter_mut() {
-        *l = map[*l as usize];
-    }
-    count as usize
 }
 
 /// How a mask's gray turns into relative irradiance.
