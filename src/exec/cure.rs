@@ -301,8 +301,13 @@ pub struct Prepared {
     sbox: [usize; 4],
     /// The layer's own light over `sbox` (before the exposure ratio), row-major.
     own: Vec<f32>,
-    /// Per row of `sbox`: the columns (from its left) outside which `own` is zero.
+    /// Per row of `sbox`: the columns (from its left) outside which `own` is zero (and
+    /// not cleared: never read).
     spans: Vec<(u32, u32)>,
+    /// Samples that cure whole whatever the layers above add: `inner[inner_rows[k]..
+    /// inner_rows[k + 1]]` the column ranges (from the box's left) of the box's k-th row.
+    inner: Vec<(u32, u32)>,
+    inner_rows: Vec<u32>,
     perimeter_px: f64,
     /// Lit runs, row-major.
     runs: Vec<Run>,
@@ -331,11 +336,15 @@ impl Prepared {
     }
 }
 
-/// The PSF's weights at the samples and the field's size: what preparing a layer needs.
-#[derive(Debug, Clone)]
+/// The PSF's weights at the samples, the field's size and the cure threshold: what
+/// preparing a layer needs; and the buffers of layers done, for the next ones.
+#[derive(Debug)]
 pub struct Kernel {
     w: usize,
     h: usize,
+    /// Relative light at a layer's top at which its mid-plane cures.
+    mid: f32,
+    pool: std::sync::Mutex<Vec<Vec<f32>>>,
     /// Pixels either side of a sample's pixel the PSF reaches.
     reach: usize,
     /// `weights[k][d + reach]`: the light at sub-sample `k` of a pixel from the pixel `d`
@@ -361,8 +370,19 @@ impl Kernel {
         Kernel {
             w,
             h,
+            mid: model.threshold(0.5 * model.layer_mm, Some(0)) as f32,
+            pool: std::sync::Mutex::new(Vec::new()),
             reach,
             weights,
+        }
+    }
+
+    /// Gives a prepared layer's buffer back, for a layer prepared later.
+    pub fn recycle(&self, p: Prepared) {
+        if let Ok(mut pool) = self.pool.lock() {
+            if pool.len() < 4 * CHUNK {
+                pool.push(p.own);
+            }
         }
     }
 
@@ -377,8 +397,9 @@ impl Kernel {
         ]
     }
 
-    /// The parts of layer `cur`'s cure that depend on its mask alone.
-    pub fn prepare(&self, cur: &Irradiance) -> Prepared {
+    /// The parts of layer `cur`'s cure that depend on its mask alone (`ratio`: its
+    /// light's scale, see [`Engine::layer`]).
+    pub fn prepare(&self, cur: &Irradiance, ratio: f32) -> Prepared {
         if cur.is_empty() {
             return Prepared::default();
         }
@@ -392,8 +413,80 @@ impl Kernel {
             perimeter_px: perimeter(cur),
             ..Prepared::default()
         };
+        self.inner(&mut p, ratio);
         lit_islands(cur, &mut p);
         p
+    }
+
+    /// The samples that count whole in the cured sum whatever the layers above add: the
+    /// layer's own light, at the sample and its four neighbours, at least [`NEAR`] and,
+    /// scaled by `ratio`, 10⁻⁴ above the threshold (the accumulated light is at least the
+    /// layer's own, and the margin covers the rounding of the scaled values).
+    #[inline(never)]
+    fn inner(&self, p: &mut Prepared, ratio: f32) {
+        let [x0, y0, x1, y1] = p.sbox;
+        let bw = x1 - x0;
+        let theta = if ratio > 0.0 {
+            NEAR.max(self.mid * (1.0 + 1e-4) / ratio)
+        } else {
+            f32::INFINITY
+        };
+        p.inner_rows.push(0);
+        for k in 0..y1 - y0 {
+            let (a, b) = p.spans[k];
+            let (mut a, mut b) = (a as usize + 1, (b as usize).saturating_sub(1));
+            if k == 0 || k + 1 == y1 - y0 {
+                b = 0;
+            } else {
+                for (c, d) in [p.spans[k - 1], p.spans[k + 1]] {
+                    a = a.max(c as usize);
+                    b = b.min(d as usize);
+                }
+            }
+            // Not at the field's edge (its neighbours there are dark).
+            a = a.max(1usize.saturating_sub(x0));
+            b = b.min((self.w * SUB - 1).saturating_sub(x0));
+            if a < b {
+                let row = |j: usize| &p.own[j * bw..(j + 1) * bw];
+                let (up, here, down) = (row(k - 1), row(k), row(k + 1));
+                // Groups of 16 all in or all out decided at once (vectorizes).
+                const GROUP: usize = 16;
+                let ok = |x: usize| {
+                    here[x].min(here[x - 1]).min(here[x + 1]).min(up[x]).min(down[x]) >= theta
+                };
+                let mut start: Option<usize> = None;
+                let mut x = a;
+                while x < b {
+                    let e = (x + GROUP).min(b);
+                    let (c, l, r) = (&here[x..e], &here[x - 1..e - 1], &here[x + 1..e + 1]);
+                    let (u, d) = (&up[x..e], &down[x..e]);
+                    let mut n = 0u32;
+                    for j in 0..e - x {
+                        n += (c[j].min(l[j]).min(r[j]).min(u[j]).min(d[j]) >= theta) as u32;
+                    }
+                    if n as usize == e - x {
+                        start.get_or_insert(x);
+                    } else if n == 0 {
+                        if let Some(s0) = start.take() {
+                            p.inner.push((s0 as u32, x as u32));
+                        }
+                    } else {
+                        for xx in x..e {
+                            if ok(xx) {
+                                start.get_or_insert(xx);
+                            } else if let Some(s0) = start.take() {
+                                p.inner.push((s0 as u32, xx as u32));
+                            }
+                        }
+                    }
+                    x = e;
+                }
+                if let Some(s0) = start {
+                    p.inner.push((s0 as u32, b as u32));
+                }
+            }
+            p.inner_rows.push(p.inner.len() as u32);
+        }
     }
 
     /// The blurred light of `cur` over the sample box `sbox`, row-major, and each row's
@@ -406,7 +499,13 @@ impl Kernel {
         let reach = self.reach;
         let cw = c1 - c0;
         // Only the rows' extents are written and read: no clearing.
-        let mut hbuf = vec![0.0f32; bw * (r1 - r0)];
+        thread_local! {
+            static HBUF: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let mut hbuf = HBUF.with(|b| std::mem::take(&mut *b.borrow_mut()));
+        if hbuf.len() < bw * (r1 - r0) {
+            hbuf.resize(bw * (r1 - r0), 0.0);
+        }
         // Along rows: the light of each lit row at the sample columns its lit pixels
         // reach (`extent`, relative to x0; empty for a dark row). Per sub-sample k, a 1-D
         // convolution of the row (padded with `reach` zeros each side) over the pixels'
@@ -454,8 +553,18 @@ impl Kernel {
             }
             extent[r - r0] = (pa * SUB - x0, pb * SUB - x0);
         }
-        // Down columns: the layer's own light at every sample.
-        let mut own = vec![0.0f32; bw * (y1 - y0)];
+        // Down columns: the layer's own light at every sample of a row's span (the
+        // extents of the rows it sums; cleared there only).
+        let mut own = self
+            .pool
+            .lock()
+            .ok()
+            .and_then(|mut p| p.pop())
+            .unwrap_or_default();
+        if own.len() < bw * (y1 - y0) {
+            own.resize(bw * (y1 - y0), 0.0);
+        }
+        own.truncate(bw * (y1 - y0));
         let mut spans = vec![(0u32, 0u32); y1 - y0];
         for y in y0..y1 {
             let (base, k) = (y / SUB, y % SUB);
@@ -469,14 +578,20 @@ impl Kernel {
             let span = &mut spans[y - y0];
             for r in lo..=hi {
                 let (a, b) = extent[r - r0];
+                if a != b {
+                    *span = if span.0 == span.1 {
+                        (a as u32, b as u32)
+                    } else {
+                        (span.0.min(a as u32), span.1.max(b as u32))
+                    };
+                }
+            }
+            own[span.0 as usize..span.1 as usize].fill(0.0);
+            for r in lo..=hi {
+                let (a, b) = extent[r - r0];
                 if a == b {
                     continue;
                 }
-                *span = if span.0 == span.1 {
-                    (a as u32, b as u32)
-                } else {
-                    (span.0.min(a as u32), span.1.max(b as u32))
-                };
                 let wgt = wk[r + reach - base];
                 let src = &hbuf[(r - r0) * bw + a..(r - r0) * bw + b];
                 for (o, s) in own[a..b].iter_mut().zip(src) {
@@ -484,6 +599,7 @@ impl Kernel {
                 }
             }
         }
+        HBUF.with(|b| *b.borrow_mut() = hbuf);
         (own, spans)
     }
 }
@@ -582,8 +698,9 @@ fn connect(runs: &[Run], rows: &[u32]) -> (Vec<u32>, usize) {
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
 /// for a field of `w`×`h` pixels.
 pub struct Engine {
-    /// The field's kernel (the one [`Kernel::new`] makes for the same field and model).
-    kernel: Kernel,
+    w: usize,
+    h: usize,
+    model: CureModel,
     /// Samples across.
     sw: usize,
     q: f32,
@@ -611,7 +728,9 @@ impl Engine {
     pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
         let h_mm = model.layer_mm;
         Engine {
-            kernel: Kernel::new(w, h, model),
+            w,
+            h,
+            model: *model,
             sw: w * SUB,
             q: (-h_mm / model.dp_mm).exp() as f32,
             mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
@@ -625,6 +744,11 @@ impl Engine {
             rows: Vec::new(),
             intervals: Vec::new(),
         }
+    }
+
+    /// The kernel that prepares the layers of this engine's field and model.
+    pub fn kernel(&self) -> Kernel {
+        Kernel::new(self.w, self.h, &self.model)
     }
 
     /// The accumulated light at sample (`x`, `y`) after the last layer.
@@ -754,12 +878,26 @@ impl Engine {
                     side as u8 as f64
                 }
             };
-            for x in (x0s..xa).chain(xb.max(xa)..x1s) {
-                frac += sample(x);
+            // The span less the samples that cure whole ([`Kernel::inner`]): by groups,
+            // the samples at the field's edge one by one.
+            let inner = &cur.inner[cur.inner_rows[y - y0] as usize..cur.inner_rows[y - y0 + 1] as usize];
+            let mut gaps = Vec::with_capacity(inner.len() + 1);
+            let mut pos = x0s;
+            for &(a, b) in inner {
+                let (a, b) = (x0 + a as usize, x0 + b as usize);
+                gaps.push((pos, a));
+                whole += (b - a) as u64;
+                pos = b;
             }
-            let mut x = xa;
-            while x < xb {
-                let e = (x + GROUP).min(xb);
+            gaps.push((pos, x1s));
+            for (p, q) in gaps {
+                for x in (p..q).filter(|&x| x < xa || x >= xb) {
+                    frac += sample(x);
+                }
+            let (ga, gb) = (p.max(xa), q.min(xb));
+            let mut x = ga;
+            while x < gb {
+                let e = (x + GROUP).min(gb);
                 let (c, l, r) = (&row[x..e], &row[x - 1..e - 1], &row[x + 1..e + 1]);
                 let (u, d, o) = (&up[x..e], &down[x..e], &own[x - x0..e - x0]);
                 let (mut n, mut edge) = (0u32, false);
@@ -778,6 +916,7 @@ impl Engine {
                     whole += n as u64;
                 }
                 x = e;
+            }
             }
         }
         whole as f64 + frac
@@ -1098,7 +1237,8 @@ pub fn check(
                 msg: format!("mask is {mw}x{mh}, the projector {w}x{h}"),
             });
         }
-        Ok(kernel.prepare(&light.irradiance(w, h, &px)))
+        let r = (manifest.layers[i].exposure_s / normal_s) as f32;
+        Ok(kernel.prepare(&light.irradiance(w, h, &px), r))
     };
     let decode_chunk = |hi: usize| -> Result<Vec<Prepared>> {
         // Layers hi−1 down to hi−CHUNK (top first).
@@ -1131,6 +1271,9 @@ pub fn check(
                     let r = (manifest.layers[i].exposure_s / normal_s) as f32;
                     outs[i] = engine.layer(&cur[k], Some(&cur[k + 1]), r);
                 }
+                for p in cur.drain(..cur.len() - 1) {
+                    kernel.recycle(p);
+                }
             },
         );
         let next = next?;
@@ -1138,6 +1281,9 @@ pub fn check(
         let r = (manifest.layers[i].exposure_s / normal_s) as f32;
         let last = cur.last().expect("a chunk has a layer");
         outs[i] = engine.layer(last, next.first(), r);
+        for p in cur.drain(..) {
+            kernel.recycle(p);
+        }
         cur = next;
         hi = lo;
     }
@@ -1328,10 +1474,10 @@ mod tests {
     /// Runs a stack (bottom first) through the engine, top down; the layers' outputs
     /// bottom first.
     fn run(e: &mut Engine, w: usize, h: usize, stack: &[(Vec<f32>, f32)]) -> Vec<LayerOut> {
-        let k = e.kernel.clone();
+        let k = e.kernel();
         let irr: Vec<Prepared> = stack
             .iter()
-            .map(|(img, _)| k.prepare(&Irradiance::from_image(w, h, img)))
+            .map(|(img, r)| k.prepare(&Irradiance::from_image(w, h, img), *r))
             .collect();
         let mut out = vec![LayerOut::default(); stack.len()];
         for i in (0..stack.len()).rev() {
