@@ -1191,11 +1191,23 @@ impl Engine {
 fn perimeter(cur: &Irradiance) -> f64 {
     let [c0, r0, c1, r1] = cur.bbox;
     let (w, h) = (c1 - c0, r1 - r0);
-    // The box with two pixels of zeros around it.
+    // The box with two pixels of zeros around it (a buffer of the thread's, only its
+    // frame cleared).
+    thread_local! {
+        static PAD: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
     let pw = w + 4;
-    let mut pad = vec![0.0f32; pw * (h + 4)];
+    let mut pad = PAD.with(|b| std::mem::take(&mut *b.borrow_mut()));
+    if pad.len() < pw * (h + 4) {
+        pad.resize(pw * (h + 4), 0.0);
+    }
+    pad[..2 * pw].fill(0.0);
+    pad[(h + 2) * pw..(h + 4) * pw].fill(0.0);
     for r in 0..h {
-        pad[(r + 2) * pw + 2..(r + 2) * pw + 2 + w].copy_from_slice(&cur.data[r * w..(r + 1) * w]);
+        let row = &mut pad[(r + 2) * pw..(r + 3) * pw];
+        row[..2].fill(0.0);
+        row[2..2 + w].copy_from_slice(&cur.data[r * w..(r + 1) * w]);
+        row[2 + w..].fill(0.0);
     }
     let mut s = 0.0f64;
     for r in 1..h + 3 {
@@ -1212,6 +1224,7 @@ fn perimeter(cur: &Irradiance) -> f64 {
             }
         }
     }
+    PAD.with(|b| *b.borrow_mut() = pad);
     s
 }
 
@@ -1309,6 +1322,14 @@ impl Light {
 
 /// Decodes an 8-bit gray PNG of the bundle.
 fn decode(source: &dyn BundleSource, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
+    let mut buf = Vec::new();
+    let (w, h) = decode_into(source, rel, &mut buf)?;
+    Ok((w, h, buf))
+}
+
+/// Decodes an 8-bit gray PNG of the bundle into `buf` (its size, the image's; cleared
+/// only where it grows): its width and height.
+fn decode_into(source: &dyn BundleSource, rel: &str, buf: &mut Vec<u8>) -> Result<(usize, usize)> {
     let bad = |msg: String| Error::Bundle {
         path: source.shown(rel),
         msg,
@@ -1322,10 +1343,10 @@ fn decode(source: &dyn BundleSource, rel: &str) -> Result<(usize, usize, Vec<u8>
         return Err(bad("not 8-bit gray".into()));
     }
     let (w, h) = dec.dimensions();
-    let mut buf = vec![0u8; dec.total_bytes() as usize];
-    dec.read_image(&mut buf)
+    buf.resize(dec.total_bytes() as usize, 0);
+    dec.read_image(buf)
         .map_err(|e| bad(format!("PNG does not decode: {e}")))?;
-    Ok((w as usize, h as usize, buf))
+    Ok((w as usize, h as usize))
 }
 
 /// The cure of every layer of the job whose files `source` reads, from its masks (see the
@@ -1345,7 +1366,11 @@ pub fn check(
         let Some(m) = manifest.layers[i].masks.first() else {
             return Ok(Prepared::default());
         };
-        let (mw, mh, px) = decode(source, &m.file)?;
+        thread_local! {
+            static MASK: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let mut px = MASK.with(|b| std::mem::take(&mut *b.borrow_mut()));
+        let (mw, mh) = decode_into(source, &m.file, &mut px)?;
         if (mw, mh) != (w, h) {
             return Err(Error::Bundle {
                 path: source.shown(&m.file),
@@ -1353,7 +1378,9 @@ pub fn check(
             });
         }
         let r = (manifest.layers[i].exposure_s / normal_s) as f32;
-        Ok(kernel.prepare(&light.irradiance(w, h, &px), r))
+        let p = kernel.prepare(&light.irradiance(w, h, &px), r);
+        MASK.with(|b| *b.borrow_mut() = px);
+        Ok(p)
     };
     let decode_chunk = |hi: usize| -> Result<Vec<Prepared>> {
         // Layers hi−1 down to hi−CHUNK (top first).
