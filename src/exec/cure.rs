@@ -482,7 +482,12 @@ impl Kernel {
             // Groups of 16 all in or all out decided at once (vectorizes).
             const GROUP: usize = 16;
             let ok = |x: usize| {
-                here[x].min(here[x - 1]).min(here[x + 1]).min(up[x]).min(down[x]) >= theta
+                here[x]
+                    .min(here[x - 1])
+                    .min(here[x + 1])
+                    .min(up[x])
+                    .min(down[x])
+                    >= theta
             };
             let mut start: Option<usize> = None;
             let mut x = a;
@@ -516,7 +521,6 @@ impl Kernel {
             }
         }
     }
-
 
     /// The blurred light of `cur` over the sample box `sbox`, row-major, each row's span
     /// of possibly nonzero samples, and the samples that cure whole (`theta`,
@@ -939,7 +943,8 @@ impl Engine {
             };
             // The span less the samples that cure whole ([`Kernel::inner`]): by groups,
             // the samples at the field's edge one by one.
-            let inner = &cur.inner[cur.inner_rows[y - y0] as usize..cur.inner_rows[y - y0 + 1] as usize];
+            let inner =
+                &cur.inner[cur.inner_rows[y - y0] as usize..cur.inner_rows[y - y0 + 1] as usize];
             let mut gaps = Vec::with_capacity(inner.len() + 1);
             let mut pos = x0s;
             for &(a, b) in inner {
@@ -953,29 +958,29 @@ impl Engine {
                 for x in (p..q).filter(|&x| x < xa || x >= xb) {
                     frac += sample(x);
                 }
-            let (ga, gb) = (p.max(xa), q.min(xb));
-            let mut x = ga;
-            while x < gb {
-                let e = (x + GROUP).min(gb);
-                let (c, l, r) = (&row[x..e], &row[x - 1..e - 1], &row[x + 1..e + 1]);
-                let (u, d, o) = (&up[x..e], &down[x..e], &own[x - x0..e - x0]);
-                let (mut n, mut edge) = (0u32, false);
-                for j in 0..e - x {
-                    let lo = c[j].min(l[j]).min(r[j]).min(u[j]).min(d[j]);
-                    let hi = c[j].max(l[j]).max(r[j]).max(u[j]).max(d[j]);
-                    let near = o[j] >= NEAR;
-                    n += (near & (lo >= t)) as u32;
-                    edge |= near & (lo < t) & (hi >= t);
-                }
-                if edge {
-                    for xx in x..e {
-                        frac += sample(xx);
+                let (ga, gb) = (p.max(xa), q.min(xb));
+                let mut x = ga;
+                while x < gb {
+                    let e = (x + GROUP).min(gb);
+                    let (c, l, r) = (&row[x..e], &row[x - 1..e - 1], &row[x + 1..e + 1]);
+                    let (u, d, o) = (&up[x..e], &down[x..e], &own[x - x0..e - x0]);
+                    let (mut n, mut edge) = (0u32, false);
+                    for j in 0..e - x {
+                        let lo = c[j].min(l[j]).min(r[j]).min(u[j]).min(d[j]);
+                        let hi = c[j].max(l[j]).max(r[j]).max(u[j]).max(d[j]);
+                        let near = o[j] >= NEAR;
+                        n += (near & (lo >= t)) as u32;
+                        edge |= near & (lo < t) & (hi >= t);
                     }
-                } else {
-                    whole += n as u64;
+                    if edge {
+                        for xx in x..e {
+                            frac += sample(xx);
+                        }
+                    } else {
+                        whole += n as u64;
+                    }
+                    x = e;
                 }
-                x = e;
-            }
             }
         }
         whole as f64 + frac
@@ -995,7 +1000,8 @@ impl Engine {
         for (run, &i) in cur.runs.iter().zip(&cur.island) {
             let i = i as usize;
             if !cured[i] {
-                cured[i] = (run.c0..run.c1).any(|c| self.pixel_max(c as usize, run.r as usize) >= mid);
+                cured[i] =
+                    (run.c0..run.c1).any(|c| self.pixel_max(c as usize, run.r as usize) >= mid);
             }
         }
         let (px, sum) = (&cur.px, &cur.sum);
@@ -1011,7 +1017,10 @@ impl Engine {
             // meet one of the region's runs.
             let [x0, y0, x1, y1] = cur.sbox;
             let sw = self.sw;
-            let (mut runs, mut rows) = (std::mem::take(&mut self.runs), std::mem::take(&mut self.rows));
+            let (mut runs, mut rows) = (
+                std::mem::take(&mut self.runs),
+                std::mem::take(&mut self.rows),
+            );
             runs.clear();
             rows.clear();
             rows.push(0);
@@ -1022,7 +1031,10 @@ impl Engine {
                     let Some(a) = row[x..].iter().position(|&v| v >= mid) else {
                         break;
                     };
-                    let b = row[x + a..].iter().position(|&v| v < mid).map_or(row.len(), |b| x + a + b);
+                    let b = row[x + a..]
+                        .iter()
+                        .position(|&v| v < mid)
+                        .map_or(row.len(), |b| x + a + b);
                     runs.push(Run {
                         r: y as u32,
                         c0: (x0 + x + a) as u32,
@@ -1145,7 +1157,12 @@ impl Engine {
                 continue;
             }
             iv.clear();
-            iv.extend(below.row(r).iter().map(|b| (b.c0.saturating_sub(1), b.c1 + 1)));
+            iv.extend(
+                below
+                    .row(r)
+                    .iter()
+                    .map(|b| (b.c0.saturating_sub(1), b.c1 + 1)),
+            );
             if r > 0 {
                 iv.extend(below.row(r - 1).iter().map(|b| (b.c0, b.c1)));
             }
