@@ -86,19 +86,32 @@ impl CureModel {
     }
 }
 
+/// The built-in default profile's model, for unit tests.
+#[cfg(test)]
+pub(crate) fn test_model() -> CureModel {
+    CureModel {
+        sigma_px: 0.5,
+        pixel_mm: 0.0634765625,
+        dp_mm: 0.15,
+        ec_mj_cm2: 10.0,
+        overcure_mm: 0.03,
+        layer_mm: 0.05,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn model() -> CureModel {
-        CureModel {
-            sigma_px: 0.5,
-            pixel_mm: 0.0634765625,
-            dp_mm: 0.15,
-            ec_mj_cm2: 10.0,
-            overcure_mm: 0.03,
-            layer_mm: 0.05,
-        }
+        test_model()
+    }
+
+    /// The built-in profile's model is `test_model`.
+    #[test]
+    fn the_test_model_is_the_default_profiles() {
+        let p = crate::profile::Profile::default_profile();
+        assert_eq!(CureModel::from_profile(&p), Some(test_model()));
     }
 
     #[test]

@@ -93,6 +93,19 @@ pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]]) {
     std::fs::write(path, dmdsl::mesh::binary_stl(tris)).unwrap();
 }
 
+/// A 0.02 mm pin (a third of a default pixel: uncorrected its light peaks at a quarter of
+/// the cure threshold) at field pixel (400, 300) beside a 100 px block, 0.3 mm (6 layers)
+/// tall, written to `dir/pin.stl`: the STL and the pin's corner (build-plane mm).
+pub fn tiny_pin_part(dir: &Path) -> (std::path::PathBuf, [f64; 2]) {
+    let p = 65.0f32 / 1024.0; // the default pixel, 0.0634765625 mm
+    let (x0, y0) = (400.0 * p, 300.0 * p);
+    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
+    tris.extend(box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]));
+    let model = dir.join("pin.stl");
+    write_stl(&model, &tris);
+    (model, [x0 as f64, y0 as f64])
+}
+
 /// Triangles of an axis-aligned box [lo, hi], outward facing.
 pub fn box_tris(lo: [f32; 3], hi: [f32; 3]) -> Vec<[[f32; 3]; 3]> {
     let p = |i: usize| {

@@ -173,15 +173,8 @@ fn a_tab_at_the_top_of_the_job_is_named_and_one_on_the_platform_is_not() {
 #[test]
 fn a_pin_too_thin_to_cure_is_named_by_its_position() {
     let dir = tempdir("cure-vanish-pin");
-    // A 0.02 mm pin (a third of a pixel: its pixel's light peaks at a quarter of T) beside
-    // a 100 px block, 6 layers; uncorrected, as the xy correction would widen it
-    // (`cure_widen.rs`).
-    let p = P as f32;
-    let (x0, y0) = (400.0 * p, 300.0 * p);
-    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
-    tris.extend(box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]));
-    let model = dir.join("pin.stl");
-    write_stl(&model, &tris);
+    // A 0.02 mm pin, uncorrected, as the xy correction would widen it (`cure_widen.rs`).
+    let (model, [x0, y0]) = tiny_pin_part(&dir);
     let (v, _) = slice(
         &dir,
         &model,
@@ -191,7 +184,6 @@ fn a_pin_too_thin_to_cure_is_named_by_its_position() {
     let w = warnings(&v, "cure.features-vanish");
     assert_eq!(w.len(), 1, "{}", v["warnings"]);
     let w = w[0];
-    let (x0, y0) = (x0 as f64, y0 as f64);
     names_a_point_in(w, [x0, x0 + 0.02], [y0, y0 + 0.02]);
     let f = &w["fields"];
     assert_eq!(f["features"], 6, "{w}");

@@ -115,13 +115,8 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
 #[test]
 fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
     let dir = tempdir("cure-widen-tiny-pin");
-    // A 0.02 mm pin (a third of a pixel): uncorrected it cures nowhere (`cure_dropped.rs`).
-    let p = P as f32;
-    let (x0, y0) = (400.0 * p, 300.0 * p);
-    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
-    tris.extend(box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]));
-    let model = dir.join("pin.stl");
-    write_stl(&model, &tris);
+    // A 0.02 mm pin at pixel (400, 300): uncorrected it cures nowhere (`cure_dropped.rs`).
+    let (model, _) = tiny_pin_part(&dir);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
     assert!(
         warnings(&xy, "cure.features-vanish").is_empty(),

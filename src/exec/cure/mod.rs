@@ -184,14 +184,7 @@ mod tests {
 
     /// The model of the unit tests.
     pub(super) fn model() -> CureModel {
-        CureModel {
-            sigma_px: 0.5,
-            pixel_mm: 0.0634765625,
-            dp_mm: 0.15,
-            ec_mj_cm2: 10.0,
-            overcure_mm: 0.03,
-            layer_mm: 0.05,
-        }
+        crate::resin::dose::test_model()
     }
 
     /// `--cure` needs the `cure` record and one projector; each refusal names the bundle.
