@@ -175,15 +175,30 @@ pub fn signal(child: &std::process::Child, signal: &str) {
 /// The entries of the zip at `p`, in archive order, with their bytes (read with the zip
 /// crate: an oracle independent of dmdsl's reader).
 pub fn zip_entries(p: &Path) -> Vec<(String, Vec<u8>)> {
+    let bytes = std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    zip_entries_of(&bytes).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// The entries of the zip `bytes`, in archive order, with their bytes (the zip crate).
+pub fn zip_entries_of(bytes: &[u8]) -> zip::result::ZipResult<Vec<(String, Vec<u8>)>> {
     use std::io::Read;
-    let mut z = zip::ZipArchive::new(std::fs::File::open(p).unwrap())
-        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    (0..z.len())
+    let mut z = zip::ZipArchive::new(std::io::Cursor::new(bytes))?;
+    Ok((0..z.len())
         .map(|i| {
             let mut e = z.by_index(i).unwrap();
             let mut b = Vec::new();
             e.read_to_end(&mut b).unwrap();
             (String::from_utf8_lossy(e.name_raw()).into_owned(), b)
         })
+        .collect())
+}
+
+/// The warnings of `code` in a `--json` summary or a manifest.
+pub fn warnings_of<'a>(v: &'a serde_json::Value, code: &str) -> Vec<&'a serde_json::Value> {
+    v["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["code"] == code)
         .collect()
 }

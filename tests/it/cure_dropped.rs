@@ -33,16 +33,6 @@ fn slice(dir: &Path, model: &Path, out: &str, args: &[&str]) -> (Value, Value) {
     (summary, serde_json::from_slice(&job).unwrap())
 }
 
-/// The warnings of `code` in a summary.
-fn warnings<'a>(v: &'a Value, code: &str) -> Vec<&'a Value> {
-    v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|w| w["code"] == code)
-        .collect()
-}
-
 /// Whether the warning's position lies in the box `[x, y]` (mm), its figures and its
 /// message alike.
 fn names_a_point_in(w: &Value, x: [f64; 2], y: [f64; 2]) {
@@ -64,7 +54,7 @@ fn xyz_names_a_flat_tab_it_drops_and_xy_does_not() {
         held, 4,
         "the fixtures are made for the default profile's 4 layers"
     );
-    let w = warnings(&v, "cure.features-dropped");
+    let w = warnings_of(&v, "cure.features-dropped");
     assert_eq!(w.len(), 1, "{}", v["warnings"]);
     let w = w[0];
     assert_eq!(w["severity"], "warning");
@@ -105,7 +95,7 @@ fn xyz_names_a_flat_tab_it_drops_and_xy_does_not() {
     // With `xy` the tab is drawn and nothing is dropped: no warning, no record.
     let (v, job) = slice(&dir, &tab, "xy.dmdjob", &["--cure-correction", "xy"]);
     assert!(
-        warnings(&v, "cure.features-dropped").is_empty(),
+        warnings_of(&v, "cure.features-dropped").is_empty(),
         "{}",
         v["warnings"]
     );
@@ -123,7 +113,7 @@ fn a_tab_one_layer_thicker_than_the_held_back_layers_is_drawn_without_a_warning(
         &["--cure-correction", "xyz"],
     );
     assert!(
-        warnings(&v, "cure.features-dropped").is_empty(),
+        warnings_of(&v, "cure.features-dropped").is_empty(),
         "{}",
         v["warnings"]
     );
@@ -162,7 +152,7 @@ fn a_tab_at_the_top_of_the_job_is_named_and_one_on_the_platform_is_not() {
     write_stl(&model, &tris);
     let (v, job) = slice(&dir, &model, "top.dmdjob", &["--cure-correction", "xyz"]);
     assert_eq!(v["layers"], 22);
-    let w = warnings(&v, "cure.features-dropped");
+    let w = warnings_of(&v, "cure.features-dropped");
     assert_eq!(w.len(), 1, "{}", v["warnings"]);
     names_a_point_in(w[0], TAB_X, TAB_Y);
     assert_eq!(w[0]["fields"]["first_layer"], 21, "{}", w[0]);
@@ -181,7 +171,7 @@ fn a_pin_too_thin_to_cure_is_named_by_its_position() {
         "pin.dmdjob",
         &["--predict", "--cure-correction", "off"],
     );
-    let w = warnings(&v, "cure.features-vanish");
+    let w = warnings_of(&v, "cure.features-vanish");
     assert_eq!(w.len(), 1, "{}", v["warnings"]);
     let w = w[0];
     names_a_point_in(w, [x0, x0 + 0.02], [y0, y0 + 0.02]);
@@ -227,7 +217,7 @@ fn a_tab_exactly_as_thick_as_the_held_back_layers_across_two_windows_is_named() 
         );
         assert!(o.status.success(), "{}", stderr(&o));
         let v: Value = serde_json::from_slice(&o.stdout).unwrap();
-        let w = warnings(&v, "cure.features-dropped");
+        let w = warnings_of(&v, "cure.features-dropped");
         assert_eq!(w.len(), 1, "{}", v["warnings"]);
         names_a_point_in(w[0], TAB_X, TAB_Y);
         let f = &w[0]["fields"];

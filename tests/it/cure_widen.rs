@@ -32,16 +32,6 @@ fn slice(dir: &Path, model: &Path, out: &str, correction: &str) -> Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
-/// The warnings of `code` in a summary.
-fn warnings<'a>(v: &'a Value, code: &str) -> Vec<&'a Value> {
-    v["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|w| w["code"] == code)
-        .collect()
-}
-
 /// The oracle's largest light on a 0.05 px grid over the field pixel box [u0, u1] × [v0,
 /// v1] of layer `layer`'s mask.
 fn peak(b: &Path, layer: usize, u: [f64; 2], v: [f64; 2]) -> f64 {
@@ -72,11 +62,11 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
 
     let xy = slice(&dir, &pin, "xy.dmdjob", "xy");
     assert!(
-        warnings(&xy, "cure.features-vanish").is_empty(),
+        warnings_of(&xy, "cure.features-vanish").is_empty(),
         "{}",
         xy["warnings"]
     );
-    let w = warnings(&xy, "cure.features-widened");
+    let w = warnings_of(&xy, "cure.features-widened");
     assert_eq!(w.len(), 1, "{}", xy["warnings"]);
     let f = &w[0]["fields"];
     assert_eq!(f["features"], 6, "{}", w[0]);
@@ -106,8 +96,8 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
     // Uncorrected, the pin's own 0.62 coverage cures too: nothing vanishes, nothing is
     // widened.
     let off = slice(&dir, &pin, "off.dmdjob", "off");
-    assert!(warnings(&off, "cure.features-widened").is_empty());
-    assert!(warnings(&off, "cure.features-vanish").is_empty());
+    assert!(warnings_of(&off, "cure.features-widened").is_empty());
+    assert!(warnings_of(&off, "cure.features-vanish").is_empty());
     let l = peak(&dir.join("off.dmdjob"), 0, around.0, around.1);
     assert!(l >= t, "uncorrected: {l}, T {t}");
 }
@@ -119,11 +109,11 @@ fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
     let (model, _) = tiny_pin_part(&dir);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
     assert!(
-        warnings(&xy, "cure.features-vanish").is_empty(),
+        warnings_of(&xy, "cure.features-vanish").is_empty(),
         "{}",
         xy["warnings"]
     );
-    let w = warnings(&xy, "cure.features-widened");
+    let w = warnings_of(&xy, "cure.features-widened");
     assert_eq!(w.len(), 1, "{}", xy["warnings"]);
     assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
     assert_eq!(w[0]["fields"]["width_mm"], 0.02, "{}", w[0]);
@@ -147,7 +137,7 @@ fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
         [v - 1.5, v + 1.5],
     );
     assert!(l < 0.5 * t, "uncorrected: {l}, T {t}");
-    assert_eq!(warnings(&off, "cure.features-vanish").len(), 1);
+    assert_eq!(warnings_of(&off, "cure.features-vanish").len(), 1);
 }
 
 #[test]
@@ -164,11 +154,11 @@ fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_chang
     write_stl(&model, &tris);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
     assert!(
-        warnings(&xy, "cure.features-vanish").is_empty(),
+        warnings_of(&xy, "cure.features-vanish").is_empty(),
         "{}",
         xy["warnings"]
     );
-    let w = warnings(&xy, "cure.features-widened");
+    let w = warnings_of(&xy, "cure.features-widened");
     assert_eq!(w.len(), 1, "{}", xy["warnings"]);
     assert_eq!(w[0]["fields"]["features"], 4, "{}", w[0]);
     assert_eq!(w[0]["fields"]["width_mm"], 0.04, "{}", w[0]);
@@ -186,7 +176,7 @@ fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_chang
     let alone = dir.join("block.stl");
     write_stl(&alone, &block());
     let b = slice(&dir, &alone, "block.dmdjob", "xy");
-    assert!(warnings(&b, "cure.features-widened").is_empty());
+    assert!(warnings_of(&b, "cure.features-widened").is_empty());
     let (wd, _, with) = read_gray(&dir.join("xy.dmdjob/masks/00001.png"));
     let (_, _, without) = read_gray(&dir.join("block.dmdjob/masks/00001.png"));
     let w = wd as usize;
@@ -209,7 +199,7 @@ fn with_xyz_a_narrow_bar_is_widened_only_above_its_held_back_layers() {
     let model = dir.join("bar.stl");
     write_stl(&model, &tris);
     let v = slice(&dir, &model, "xyz.dmdjob", "xyz");
-    let w = warnings(&v, "cure.features-widened");
+    let w = warnings_of(&v, "cure.features-widened");
     assert_eq!(w.len(), 1, "{}", v["warnings"]);
     let f = &w[0]["fields"];
     assert_eq!(f["first_layer"], 24, "{}", w[0]);

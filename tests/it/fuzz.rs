@@ -409,16 +409,7 @@ fn mutate(rng: &mut Rng, input: &mut Vec<u8>, other: &[u8]) {
 
 /// The entries of a zip (a seed: always readable).
 fn unzip(bytes: &[u8]) -> Vec<(String, Vec<u8>)> {
-    use std::io::Read;
-    let mut z = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
-    (0..z.len())
-        .map(|i| {
-            let mut e = z.by_index(i).unwrap();
-            let mut b = Vec::new();
-            e.read_to_end(&mut b).unwrap();
-            (String::from_utf8_lossy(e.name_raw()).into_owned(), b)
-        })
-        .collect()
+    zip_entries_of(bytes).unwrap()
 }
 
 /// A valid zip of `entries` (a name given twice keeps its first entry).
