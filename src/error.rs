@@ -126,7 +126,7 @@ impl Error {
     }
 
     /// Process exit code for this error: 130 for an interrupt, 2 for everything else
-    /// (usage and input errors; see README "Exit codes").
+    /// (usage and input errors; docs/CLI.md, "Exit codes").
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Interrupted => 130,

@@ -98,7 +98,7 @@ pub(crate) struct SliceArgs {
     /// Form of the output [default: what the -o name says; a directory bundle]:
     /// dmdjob (directory), dmdjob-zip (the same files in one zip), sl1 / sl1s (Prusa
     /// SL1/SL1S, opened by PrusaSlicer and UVtools), sla-control (the SLA control-file
-    /// standard, schema v5). See README "Formats" for what each carries.
+    /// standard, schema v5). docs/FORMATS.md says what each carries.
     #[arg(long, value_enum, value_name = "FORMAT")]
     format: Option<super::export::FormatArg>,
     /// Machine profile: a built-in name or a TOML file.
