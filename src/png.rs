@@ -15,6 +15,9 @@
 //! adds its bytes to the Adler-32 from the source row's sums, so a repeating row costs
 //! less than scanning it; masks whose rows never repeat pay for the signature of each row.
 //! The output is a standard PNG that any decoder reads (tests decode it with `image`).
+//!
+//! Invariants: the bytes are deterministic and independent of the lit box the caller gives;
+//! a test pins the stream to an obvious bit-by-bit encoder of the same rule.
 
 use std::ops::Range;
 

@@ -6,6 +6,10 @@
 //! and produces a [`MeshReport`] like admesh's. Defective meshes load with warnings;
 //! only files that hold no usable geometry are errors. [`binary_stl`] writes binary STL
 //! (for tests and tools that make meshes).
+//!
+//! Invariants: all coordinates are finite; triangles with a repeated vertex are removed;
+//! vertex and edge ids are in order of first appearance whatever the thread count; defects
+//! are reported, never fatal.
 
 mod obj;
 mod stl;
