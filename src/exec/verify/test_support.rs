@@ -1,0 +1,93 @@
+//! Masks, layers and a field of 64 × 48 pixels for the verification's tests.
+
+use super::Verification;
+use crate::bundle::{sha256_hex, Layer, Mode};
+use crate::exec::testutil::*;
+use crate::profile::Profile;
+use image::codecs::png::PngEncoder;
+use image::{ExtendedColorType, ImageEncoder};
+use std::path::{Path, PathBuf};
+
+/// The default projector's pixel, mm.
+pub(super) const PX: f64 = 0.0634765625;
+
+pub(super) fn png(w: u32, h: u32, ct: ExtendedColorType) -> Vec<u8> {
+    let ch = if ct == ExtendedColorType::Rgb8 { 3 } else { 1 };
+    let px: Vec<u8> = (0..w * h * ch).map(|i| (i % 251) as u8).collect();
+    let mut out = Vec::new();
+    PngEncoder::new(&mut out)
+        .write_image(&px, w, h, ct)
+        .unwrap();
+    out
+}
+
+/// A `w`×`h` gray PNG with `f(column, row)` as pixel values.
+pub(super) fn gray_png(w: u32, h: u32, f: impl Fn(u32, u32) -> u8) -> Vec<u8> {
+    let px: Vec<u8> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| (c, r)))
+        .map(|(c, r)| f(c, r))
+        .collect();
+    let mut out = Vec::new();
+    PngEncoder::new(&mut out)
+        .write_image(&px, w, h, ExtendedColorType::L8)
+        .unwrap();
+    out
+}
+
+/// Value `v` inside columns c0..c1, rows r0..r1 (ends exclusive), else 0.
+pub(super) fn rect(c0: u32, r0: u32, c1: u32, r1: u32, v: u8) -> impl Fn(u32, u32) -> u8 {
+    move |c, r| {
+        if (c0..c1).contains(&c) && (r0..r1).contains(&r) {
+            v
+        } else {
+            0
+        }
+    }
+}
+
+/// A scratch bundle directory with `masks/`.
+pub(super) fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dmdsl-verify-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("masks")).unwrap();
+    dir
+}
+
+/// Layer `i` (0.1 mm, one exposure) whose mask file holds `png`, with section box
+/// `bbox_px` = [c0, r0, c1, r1] in pixels of a 64×48 field (None: no section) and
+/// area `area_px` pixels.
+pub(super) fn layer_with(
+    dir: &Path,
+    i: usize,
+    png: &[u8],
+    bbox_px: Option<[f64; 4]>,
+    area_px: f64,
+) -> Layer {
+    let mut l = layer(
+        i,
+        0.1 * (i + 1) as f64,
+        0.1,
+        Mode::Layered,
+        1.0,
+        vec![],
+        0.0,
+    );
+    std::fs::write(dir.join(&l.masks[0].file), png).unwrap();
+    l.masks[0].sha256 = sha256_hex(png);
+    // Rows count from the top: y = (48 − row)·p.
+    l.bbox_mm =
+        bbox_px.map(|[c0, r0, c1, r1]| [[c0 * PX, (48.0 - r1) * PX], [c1 * PX, (48.0 - r0) * PX]]);
+    l.area_mm2 = area_px * PX * PX;
+    l
+}
+
+pub(super) fn small_profile() -> Profile {
+    let mut p = profile();
+    p.projector[0].width_px = 64;
+    p.projector[0].height_px = 48;
+    p
+}
+
+pub(super) fn found(v: &Verification) -> Vec<(Option<usize>, &str)> {
+    v.problems.iter().map(|p| (p.layer, p.kind)).collect()
+}
