@@ -448,20 +448,6 @@ pub fn any_error(warnings: &[Warning]) -> bool {
     warnings.iter().any(|w| w.severity == Severity::Error)
 }
 
-/// `one` when `n` is 1, else `many` ("1 layer", "3 layers").
-pub fn plural<'a>(n: u64, one: &'a str, many: &'a str) -> &'a str {
-    if n == 1 {
-        one
-    } else {
-        many
-    }
-}
-
-/// `n` and the noun that goes with it: "1 layer", "2 layers".
-pub fn count(n: u64, one: &str, many: &str) -> String {
-    format!("{n} {}", plural(n, one, many))
-}
-
 impl std::fmt::Display for Warning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} [{}]", self.message, self.code)

@@ -241,10 +241,10 @@ fn check_options(
     for f in &opts.faults {
         if f.layer >= n {
             return Err(Error::Usage(format!(
-                "--fault {}@{}: the job has {n} {} (0..{})",
+                "--fault {}@{}: the job has {} (0..{})",
                 f.kind,
                 f.layer,
-                report::plural(n, "layer", "layers"),
+                crate::text::count(n as u64, "layer", "layers"),
                 n.saturating_sub(1)
             )));
         }

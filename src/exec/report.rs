@@ -4,6 +4,7 @@
 use super::sim::{FaultEvent, Motion, SegKind, Segment, ShutterState, Sink};
 use super::Violation;
 use crate::plot::{Band, Canvas, Chart, Panel, Series, Style};
+use crate::text::{hms, plural};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -341,21 +342,6 @@ impl Sink for PlotCollector {
     }
 }
 
-/// `one` for 1, else `many`: "1 layer", "2 layers".
-pub fn plural<'a>(n: usize, one: &'a str, many: &'a str) -> &'a str {
-    if n == 1 {
-        one
-    } else {
-        many
-    }
-}
-
-/// "1h02m03s".
-pub fn hms(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
-}
-
 /// Most violations listed in the human summary.
 pub const LIST_MAX: usize = 20;
 
@@ -368,9 +354,9 @@ pub fn render_human(r: &Report) -> String {
         r.bundle,
         shown_format(r.format),
         r.layers,
-        plural(r.layers, "layer", "layers"),
+        plural(r.layers as u64, "layer", "layers"),
         r.masks_verified,
-        plural(r.masks_verified, "mask", "masks")
+        plural(r.masks_verified as u64, "mask", "masks")
     );
     if let Some(m) = &r.machine {
         if m.differences.is_empty() {

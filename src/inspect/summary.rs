@@ -2,6 +2,7 @@
 //! per-layer extremes, from the manifest alone.
 
 use crate::bundle::{Layer, Manifest};
+use crate::text::hms;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -122,12 +123,6 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         extremes,
         pictures: Vec::new(),
     }
-}
-
-/// "1h02m03s".
-fn hms(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
 }
 
 /// The summary for people.

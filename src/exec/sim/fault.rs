@@ -5,6 +5,7 @@
 use super::steps::Simulation;
 use super::{SegKind, Segment, ShutterState};
 use crate::bundle::Step;
+use crate::text::fixed;
 use std::fmt;
 use std::str::FromStr;
 
@@ -131,8 +132,8 @@ impl Simulation<'_, '_, '_> {
                 .any(|s| matches!(s, Step::Move { .. } | Step::Sweep { .. }));
             if !has_motion {
                 let msg = format!(
-                    "{kind} at the start of layer {i} (the layer has no move): stage stopped at {:.4} mm",
-                    self.pos
+                    "{kind} at the start of layer {i} (the layer has no move): stage stopped at {} mm",
+                    fixed(self.pos, 4)
                 );
                 self.abort(kind, self.t, msg, false);
                 return false;
@@ -172,8 +173,8 @@ impl Simulation<'_, '_, '_> {
             self.record.light_s += seg.duration();
             self.t = seg.t1;
             let msg = format!(
-                "shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {:.4} mm; layer {} got {:.3} s of extra light",
-                self.pos,
+                "shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {} mm; layer {} got {:.3} s of extra light",
+                fixed(self.pos, 4),
                 self.record.index,
                 seg.duration()
             );
@@ -213,9 +214,10 @@ impl Simulation<'_, '_, '_> {
                             "limit switch hit"
                         };
                         format!(
-                            "{what} at {:.4} mm during the {} to {target:.4} mm (step {}); shutter closed, stage stopped",
-                            self.pos,
+                            "{what} at {} mm during the {} to {} mm (step {}); shutter closed, stage stopped",
+                            fixed(self.pos, 4),
                             seg.kind.name(),
+                            fixed(target, 4),
                             seg.step.unwrap_or(0)
                         )
                     }
@@ -235,13 +237,13 @@ impl Simulation<'_, '_, '_> {
             .map(|m| m.file.as_str())
             .collect();
         format!(
-            "DMD failed to load {}; shutter kept closed, stage stopped at {:.4} mm",
+            "DMD failed to load {}; shutter kept closed, stage stopped at {} mm",
             if files.is_empty() {
                 "the layer's mask".to_string()
             } else {
                 files.join(", ")
             },
-            self.pos
+            fixed(self.pos, 4)
         )
     }
 

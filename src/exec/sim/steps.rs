@@ -7,6 +7,7 @@ use super::{Motion, SegKind, Segment, ShutterState};
 use crate::bundle::{Manifest, Step};
 use crate::exec::Violation;
 use crate::motion::move_time;
+use crate::text::number;
 
 /// The state of one simulation run: the machine, the clock, the stage, the shutter of a
 /// sweep run, the faults and what was measured so far.
@@ -258,7 +259,10 @@ impl Simulation<'_, '_, '_> {
             self.report_invalid_step(
                 k,
                 format!(
-                    "move to {to_mm} mm at {speed_mm_s} mm/s, {accel_mm_s2} mm/s² cannot be executed (speed and acceleration must be > 0)"
+                    "move to {} mm at {} mm/s, {} mm/s² cannot be executed (speed and acceleration must be > 0)",
+                    number(to_mm),
+                    number(speed_mm_s),
+                    number(accel_mm_s2)
                 ),
             );
             return true;
@@ -291,7 +295,7 @@ impl Simulation<'_, '_, '_> {
     /// A `wait` step of `s` seconds.
     fn wait(&mut self, k: usize, s: f64) -> bool {
         if !(s.is_finite() && s >= 0.0) {
-            self.report_invalid_step(k, format!("wait of {s} s (must be >= 0)"));
+            self.report_invalid_step(k, format!("wait of {} s (must be >= 0)", number(s)));
             return true;
         }
         let w = self.still_segment(SegKind::Wait, Some(k), s, ShutterState::Closed);
@@ -301,7 +305,7 @@ impl Simulation<'_, '_, '_> {
     /// An `expose` step of `s` seconds: wait for the mask, open, light, close.
     fn expose(&mut self, k: usize, s: f64) -> bool {
         if !(s.is_finite() && s >= 0.0) {
-            self.report_invalid_step(k, format!("expose of {s} s (must be >= 0)"));
+            self.report_invalid_step(k, format!("expose of {} s (must be >= 0)", number(s)));
             return true;
         }
         if !self.wait_for_mask(k) {
@@ -326,7 +330,11 @@ impl Simulation<'_, '_, '_> {
         if !(speed_mm_s.is_finite() && speed_mm_s > 0.0 && to_mm.is_finite()) {
             self.report_invalid_step(
                 k,
-                format!("sweep to {to_mm} mm at {speed_mm_s} mm/s (speed must be > 0)"),
+                format!(
+                    "sweep to {} mm at {} mm/s (speed must be > 0)",
+                    number(to_mm),
+                    number(speed_mm_s)
+                ),
             );
             return true;
         }

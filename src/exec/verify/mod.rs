@@ -98,10 +98,10 @@ pub fn verify_source(
             "manifest",
             Some(MANIFEST),
             format!(
-                "{}: totals.layers is {} but the manifest has {n} layer record{}",
+                "{}: totals.layers is {} but the manifest has {}",
                 job.display(),
                 manifest.totals.layers,
-                if n == 1 { "" } else { "s" }
+                crate::text::count(n as u64, "layer record", "layer records")
             ),
         ));
     }
