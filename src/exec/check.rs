@@ -15,7 +15,7 @@
 //!   estimate by more than 1 % (`estimate`).
 
 use super::sim::{LayerRecord, Machine, Motion, SegKind, Segment, Sink};
-use super::Violation;
+use super::{Kind, Violation};
 use crate::bundle::{Manifest, Mode};
 use crate::text::{fixed, number, signed};
 
@@ -50,7 +50,7 @@ impl<'a> Checker<'a> {
         }
     }
 
-    fn push(&mut self, layer: usize, time_s: f64, kind: &'static str, message: String) {
+    fn push(&mut self, layer: usize, time_s: f64, kind: Kind, message: String) {
         self.violations.push(Violation {
             layer: Some(layer),
             time_s: Some(time_s),
@@ -70,7 +70,7 @@ impl<'a> Checker<'a> {
                 self.violations.push(Violation {
                     layer: None,
                     time_s: Some(total_s),
-                    kind: "estimate",
+                    kind: Kind::Estimate,
                     message: format!(
                         "simulated job time {} s differs from the manifest's totals.print_time_s {} s by {} % (tolerance 1 %)",
                         fixed(total_s, 3),
@@ -111,7 +111,7 @@ impl Sink for Checker<'_> {
                 k => self.push(
                     i,
                     s.t0,
-                    "light-during-move",
+                    Kind::LightDuringMove,
                     format!("light on during a {} of layer {i}", k.name()),
                 ),
             }
@@ -119,7 +119,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "light-during-move",
+                    Kind::LightDuringMove,
                     format!(
                         "light on while the stage moves from {} to {} mm in layer {i}, which is planned as layered",
                         fixed(s.from_mm, 4),
@@ -131,7 +131,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "mask",
+                    Kind::Mask,
                     format!(
                         "light on at {} s before layer {i}'s mask is on the DMD",
                         fixed(s.t0, 3)
@@ -147,7 +147,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "travel",
+                    Kind::Travel,
                     format!(
                         "layer {i}: {} from {} to {} mm leaves the stage travel [{}, {}] mm",
                         s.kind.name(),
@@ -174,7 +174,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "speed",
+                    Kind::Speed,
                     format!(
                         "layer {i}: {} at {} mm/s exceeds the stage's max_speed_mm_s {}",
                         s.kind.name(),
@@ -188,7 +188,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "accel",
+                    Kind::Accel,
                     format!(
                         "layer {i}: {} at {} mm/s² exceeds the stage's max_accel_mm_s2 {}",
                         s.kind.name(),
@@ -204,7 +204,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     s.t0,
-                    "position",
+                    Kind::Position,
                     format!(
                         "layer {i} exposed with the stage at {} mm, its z_mm is {}",
                         fixed(s.from_mm, 4),
@@ -225,7 +225,7 @@ impl Sink for Checker<'_> {
             self.push(
                 i,
                 r.start_s,
-                "position",
+                Kind::Position,
                 format!(
                     "layer {i}: z_mm {} but the layers' thicknesses put its top at {} mm",
                     number(layer.z_mm),
@@ -243,7 +243,7 @@ impl Sink for Checker<'_> {
                 self.push(
                     i,
                     end,
-                    "position",
+                    Kind::Position,
                     format!(
                         "layer {i}'s sweep ends at {} mm, its z_mm is {}",
                         fixed(e, 4),
@@ -258,7 +258,7 @@ impl Sink for Checker<'_> {
             self.push(
                 i,
                 end,
-                "dose",
+                Kind::Dose,
                 format!(
                     "layer {i} received {} s of light, its exposure_s is {}",
                     fixed(r.light_s, 6),
@@ -273,7 +273,7 @@ impl Sink for Checker<'_> {
             self.push(
                 i,
                 end,
-                "estimate",
+                Kind::Estimate,
                 format!(
                     "layer {i} takes {} s, the manifest's time_s is {} s ({} %, tolerance 1 %)",
                     fixed(r.time_s, 3),
@@ -302,7 +302,7 @@ mod tests {
         c.finish(o.total_s, o.fault.is_none())
     }
 
-    fn kinds(v: &[Violation]) -> Vec<(&'static str, Option<usize>)> {
+    fn kinds(v: &[Violation]) -> Vec<(Kind, Option<usize>)> {
         v.iter().map(|v| (v.kind, v.layer)).collect()
     }
 
@@ -344,7 +344,7 @@ mod tests {
             accel_mm_s2: 50.0,
         };
         let v = check(&m);
-        let travel: Vec<_> = v.iter().filter(|v| v.kind == "travel").collect();
+        let travel: Vec<_> = v.iter().filter(|v| v.kind == Kind::Travel).collect();
         // Out (0.5 → 130) and back (130 → 1.0): both moves touch 130 mm.
         assert_eq!(travel.len(), 2, "{v:?}");
         assert_eq!(travel[0].layer, Some(1));
@@ -353,8 +353,12 @@ mod tests {
             .contains("move from 0.5000 to 130.0000 mm leaves the stage travel [0, 120]"));
         assert!((travel[0].time_s.unwrap() - 33.91).abs() < 1e-9);
         // The longer moves also break the estimate.
-        assert!(v.iter().any(|v| v.kind == "estimate" && v.layer == Some(1)));
-        assert!(v.iter().any(|v| v.kind == "estimate" && v.layer.is_none()));
+        assert!(v
+            .iter()
+            .any(|v| v.kind == Kind::Estimate && v.layer == Some(1)));
+        assert!(v
+            .iter()
+            .any(|v| v.kind == Kind::Estimate && v.layer.is_none()));
     }
 
     #[test]
@@ -378,7 +382,7 @@ mod tests {
         let v = check(&m);
         assert_eq!(
             kinds(&v),
-            vec![("speed", Some(0)), ("accel", Some(1))],
+            vec![(Kind::Speed, Some(0)), (Kind::Accel, Some(1))],
             "{v:?}"
         );
         assert!(v[0]
@@ -396,7 +400,7 @@ mod tests {
         let v = check(&m);
         assert_eq!(
             kinds(&v),
-            vec![("position", Some(1)), ("dose", Some(1))],
+            vec![(Kind::Position, Some(1)), (Kind::Dose, Some(1))],
             "{v:?}"
         );
         assert!(v[0].message.contains("stage at 0.9000 mm, its z_mm is 1"));
@@ -410,7 +414,7 @@ mod tests {
         let mut m = clean();
         m.layers[1].thickness_mm = 0.4;
         let v = check(&m);
-        assert_eq!(kinds(&v), vec![("position", Some(1))]);
+        assert_eq!(kinds(&v), vec![(Kind::Position, Some(1))]);
         assert!(v[0].message.contains("thicknesses put its top at 0.900000"));
     }
 
@@ -436,8 +440,8 @@ mod tests {
         assert_eq!(
             kinds(&v),
             vec![
-                ("light-during-move", Some(0)),
-                ("light-during-move", Some(1))
+                (Kind::LightDuringMove, Some(0)),
+                (Kind::LightDuringMove, Some(1))
             ]
         );
     }
@@ -460,7 +464,7 @@ mod tests {
             )],
         );
         let v = check(&m);
-        assert_eq!(kinds(&v), vec![("position", Some(0))], "{v:?}");
+        assert_eq!(kinds(&v), vec![(Kind::Position, Some(0))], "{v:?}");
         assert!(v[0].message.contains("sweep ends at 0.2000 mm"));
     }
 
@@ -471,11 +475,14 @@ mod tests {
         m.layers[1].time_s = 25.91 * 0.98; // 2 % short
         m.totals.print_time_s = 59.82;
         let v = check(&m);
-        assert_eq!(kinds(&v), vec![("estimate", Some(1))]);
+        assert_eq!(kinds(&v), vec![(Kind::Estimate, Some(1))]);
         assert!(v[0].message.contains("+2.04 %"), "{}", v[0].message);
         m.totals.print_time_s = 59.82 * 1.02;
         let v = check(&m);
-        assert_eq!(kinds(&v), vec![("estimate", Some(1)), ("estimate", None)]);
+        assert_eq!(
+            kinds(&v),
+            vec![(Kind::Estimate, Some(1)), (Kind::Estimate, None)]
+        );
     }
 
     #[test]

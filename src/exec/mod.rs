@@ -30,6 +30,7 @@ pub mod report;
 pub mod sim;
 pub mod trace;
 pub mod verify;
+mod violation;
 
 pub mod testutil;
 
@@ -39,29 +40,12 @@ use crate::output::write_atomic;
 use crate::plot::Format;
 use crate::profile::Profile;
 use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
-use serde::Serialize;
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// One thing wrong with a job: a verification problem, a broken invariant or a fault.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Violation {
-    /// Layer concerned (`None`: the whole job).
-    pub layer: Option<usize>,
-    /// Simulated time, s (for verification problems: when the layer starts).
-    #[serde(serialize_with = "report::six_opt")]
-    pub time_s: Option<f64>,
-    /// Machine-readable kind, e.g. `travel`, `mask-checksum`, `stall` (see docs/EXECUTOR.md).
-    pub kind: &'static str,
-    /// One line for people; names the file for mask problems.
-    pub message: String,
-    /// File concerned, relative to the bundle.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub file: Option<String>,
-}
+pub use violation::{Kind, Violation};
 
 /// What to do besides verifying and simulating.
 #[derive(Debug, Clone, Default)]
@@ -154,7 +138,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     // The cure from the masks, once every mask and gray map read as recorded (a
     // `mask-content` problem does not stop it), under the job's own machine (its
     // exposure, calibration and projector).
-    let unreadable = verified.problems.iter().any(|p| p.kind != "mask-content");
+    let unreadable = verified
+        .problems
+        .iter()
+        .any(|p| p.kind != Kind::MaskContent);
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, &*source, model)?), None),
         Some(_) => (
@@ -310,7 +297,7 @@ fn simulate_into_sinks(
         timeline.push(Violation {
             layer: Some(f.layer),
             time_s: Some(f.time_s),
-            kind: f.kind,
+            kind: f.kind.into(),
             message: f.message.clone(),
             file: None,
         });
@@ -375,7 +362,7 @@ fn report(
     let Simulated { outcome, stats, .. } = simulated;
     let mut counts = BTreeMap::new();
     for v in &violations {
-        *counts.entry(v.kind).or_insert(0) += 1;
+        *counts.entry(v.kind.name()).or_insert(0) += 1;
     }
     let per_layer = outcome
         .layers

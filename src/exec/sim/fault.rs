@@ -31,14 +31,10 @@ impl FaultKind {
         FaultKind::MaskLoad,
     ];
 
-    /// Name on the command line and in reports.
+    /// Name on the command line and in reports: its violation kind's
+    /// ([`crate::exec::Kind`]).
     pub fn name(self) -> &'static str {
-        match self {
-            FaultKind::Stall => "stall",
-            FaultKind::Limit => "limit",
-            FaultKind::ShutterStuck => "shutter-stuck",
-            FaultKind::MaskLoad => "mask-load",
-        }
+        crate::exec::Kind::from(self).name()
     }
 }
 
@@ -76,11 +72,17 @@ impl FromStr for FaultSpec {
     }
 }
 
+impl serde::Serialize for FaultKind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
 /// A fault that happened during the run.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct FaultEvent {
     /// What failed.
-    pub kind: &'static str,
+    pub kind: FaultKind,
     /// Layer during which it happened.
     pub layer: usize,
     /// Time the firmware detected it, s.
@@ -266,7 +268,7 @@ impl Simulation<'_, '_, '_> {
         self.record.completed = false;
         self.finish_layer();
         self.fault = Some(FaultEvent {
-            kind: kind.name(),
+            kind,
             layer: self.record.index,
             time_s: tf,
             stage_mm: self.pos,
@@ -294,7 +296,7 @@ mod tests {
         for kind in [FaultKind::Stall, FaultKind::Limit] {
             let (o, c) = run_collecting(&layered(), &[FaultSpec { kind, layer: 1 }]);
             let f = o.fault.unwrap();
-            assert_eq!((f.kind, f.layer), (kind.name(), 1));
+            assert_eq!((f.kind, f.layer), (kind, 1));
             // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
             assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
             let want = Machine::from_profile(&profile()).quantize(position_at(
@@ -340,7 +342,7 @@ mod tests {
             }],
         );
         let f = o.fault.unwrap();
-        assert_eq!((f.kind, f.layer), ("mask-load", 1));
+        assert_eq!((f.kind, f.layer), (FaultKind::MaskLoad, 1));
         assert!(close(f.time_s, 33.91 + 0.02));
         // 0.02 s into a move accelerating at 50 mm/s²: 0.01 mm.
         assert!(close(f.stage_mm, 0.51));
@@ -359,7 +361,7 @@ mod tests {
             }],
         );
         let f = o.fault.unwrap();
-        assert_eq!((f.kind, f.layer), ("shutter-stuck", 0));
+        assert_eq!((f.kind, f.layer), (FaultKind::ShutterStuck, 0));
         // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, found stuck 0.05 s
         // later, DMD dark after its 0.02 s load.
         assert!(close(f.time_s, 33.93));
@@ -427,7 +429,7 @@ mod tests {
             layer: 0,
         };
         let (o, _) = run_collecting(&layered(), &[stall, limit]);
-        assert_eq!(o.fault.unwrap().kind, "limit");
+        assert_eq!(o.fault.unwrap().kind, FaultKind::Limit);
         assert_eq!(o.untriggered, vec![stall]);
     }
 

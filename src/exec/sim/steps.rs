@@ -5,7 +5,7 @@
 use super::{FaultEvent, FaultKind, FaultSpec, LayerRecord, Machine, Sink};
 use super::{Motion, SegKind, Segment, ShutterState};
 use crate::bundle::{Manifest, Step};
-use crate::exec::Violation;
+use crate::exec::{Kind, Violation};
 use crate::motion::move_time;
 use crate::text::number;
 
@@ -217,7 +217,7 @@ impl Simulation<'_, '_, '_> {
         self.invalid_steps.push(Violation {
             layer: Some(self.record.index),
             time_s: Some(self.t),
-            kind: "invalid-step",
+            kind: Kind::InvalidStep,
             message: format!("layer {} step {k}: {msg}; step skipped", self.record.index),
             file: None,
         });

@@ -33,7 +33,7 @@
 
 use super::{problem, LitPixels};
 use crate::bundle::{BundleSource, Layer, Manifest, MaskRef};
-use crate::exec::Violation;
+use crate::exec::{Kind, Violation};
 use crate::profile::Profile;
 
 /// Lit pixels a section's masks may miss below half its area (coverage masks), px².
@@ -133,7 +133,7 @@ impl ContentRule {
         let at = |msg: String| {
             Some(problem(
                 Some(i),
-                "mask-content",
+                Kind::MaskContent,
                 Some(file),
                 format!("{shown}: layer {i}: {msg}"),
             ))
@@ -228,6 +228,7 @@ mod tests {
     use super::super::verify;
     use crate::bundle::{sha256_hex, MaskRef};
     use crate::exec::testutil::manifest;
+    use crate::exec::Kind;
 
     #[test]
     fn masks_that_do_not_show_their_layer_are_found() {
@@ -294,12 +295,12 @@ mod tests {
         assert_eq!(
             found(&v),
             vec![
-                (Some(1), "mask-content"),
-                (Some(2), "mask-content"),
-                (Some(3), "mask-content"),
-                (Some(5), "mask-content"),
-                (Some(6), "mask-content"),
-                (Some(10), "mask-content"),
+                (Some(1), Kind::MaskContent),
+                (Some(2), Kind::MaskContent),
+                (Some(3), Kind::MaskContent),
+                (Some(5), Kind::MaskContent),
+                (Some(6), Kind::MaskContent),
+                (Some(10), Kind::MaskContent),
             ],
             "{:#?}",
             v.problems
@@ -340,9 +341,9 @@ mod tests {
         assert_eq!(
             found(&v),
             vec![
-                (Some(1), "mask-content"),
-                (Some(3), "mask-content"),
-                (Some(6), "mask-content")
+                (Some(1), Kind::MaskContent),
+                (Some(3), Kind::MaskContent),
+                (Some(6), Kind::MaskContent)
             ],
             "{:#?}",
             v.problems
@@ -357,13 +358,13 @@ mod tests {
         assert_eq!(
             found(&v),
             vec![
-                (Some(1), "mask-content"),
-                (Some(2), "mask-content"),
-                (Some(3), "mask-content"),
-                (Some(5), "mask-content"),
-                (Some(6), "mask-content"),
-                (Some(7), "mask-content"),
-                (Some(10), "mask-content"),
+                (Some(1), Kind::MaskContent),
+                (Some(2), Kind::MaskContent),
+                (Some(3), Kind::MaskContent),
+                (Some(5), Kind::MaskContent),
+                (Some(6), Kind::MaskContent),
+                (Some(7), Kind::MaskContent),
+                (Some(10), Kind::MaskContent),
             ],
             "{:#?}",
             v.problems
@@ -394,7 +395,7 @@ mod tests {
                 200.0,
             )],
         );
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
         let cure = |held: u32| -> crate::bundle::Cure {
             serde_json::from_value(serde_json::json!({
                 "psf_sigma_px": 0.5, "pixel_mm": PX, "dp_mm": 0.15, "ec_mj_cm2": 10.0,
@@ -405,7 +406,7 @@ mod tests {
             .unwrap()
         };
         m.cure = Some(cure(0));
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
         m.cure = Some(cure(4));
         assert_eq!(found(&verify(&dir, &m)), vec![]);
         // Light outside the section's box is still found.
@@ -417,7 +418,7 @@ mod tests {
             Some([10.0, 5.0, 30.0, 15.0]),
             200.0,
         )];
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -436,7 +437,7 @@ mod tests {
                 200.0,
             )],
         );
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), "mask-content")]);
+        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
         let fit: crate::bundle::FitReport = serde_json::from_value(serde_json::json!({
             "source": "lens.csv", "sha256": "", "points": 9, "degree": 2,
             "residual_weight": 0.0, "poly_rms_mm": 0.0, "poly_max_mm": 0.0,
@@ -477,7 +478,7 @@ mod tests {
         // Unmirrored, the second projector's share lands at field columns 52..64.
         m.machine.projector[1].mirror_x = false;
         let v = verify(&dir, &m);
-        assert_eq!(found(&v), vec![(Some(0), "mask-content")]);
+        assert_eq!(found(&v), vec![(Some(0), Kind::MaskContent)]);
         assert!(
             v.problems[0].message.contains(
                 "masks/00000.png, masks/p1/00000.png: layer 0: its masks light columns 20..63"

@@ -3,7 +3,7 @@
 
 use super::{problem, LitPixels};
 use crate::bundle::{sha256_hex, BundleSource, Manifest, MANIFEST};
-use crate::exec::Violation;
+use crate::exec::{Kind, Violation};
 use crate::profile::{Profile, Projector};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
@@ -32,7 +32,7 @@ pub(super) fn check_gray_maps(
         let Some(proj) = machine.projector.get(o.projector as usize) else {
             found.push(problem(
                 None,
-                "optics-file",
+                Kind::OpticsFile,
                 Some(file),
                 format!(
                     "{}: {what}: the machine has {} projector(s)",
@@ -45,7 +45,7 @@ pub(super) fn check_gray_maps(
         if !is_inside(file) {
             found.push(problem(
                 None,
-                "optics-file",
+                Kind::OpticsFile,
                 Some(file),
                 format!(
                     "{}: {what}: path {file:?} is not a relative path inside the bundle",
@@ -65,7 +65,7 @@ pub(super) fn check_gray_maps(
     for ((file, ..), c) in files.iter().zip(checked) {
         *bytes += c.bytes;
         for (_, msg) in c.faults {
-            found.push(problem(None, "optics-file", Some(file), msg));
+            found.push(problem(None, Kind::OpticsFile, Some(file), msg));
         }
     }
     problems.extend(found);
@@ -93,12 +93,12 @@ pub(super) enum FileFault {
 
 impl FileFault {
     /// The violation kind of this fault in a mask file.
-    pub(super) fn mask_kind(self) -> &'static str {
+    pub(super) fn mask_kind(self) -> Kind {
         match self {
-            FileFault::Missing => "mask-missing",
-            FileFault::Checksum => "mask-checksum",
-            FileFault::Decode => "mask-decode",
-            FileFault::Format => "mask-format",
+            FileFault::Missing => Kind::MaskMissing,
+            FileFault::Checksum => Kind::MaskChecksum,
+            FileFault::Decode => Kind::MaskDecode,
+            FileFault::Format => Kind::MaskFormat,
         }
     }
 }
@@ -243,7 +243,7 @@ mod tests {
         std::fs::write(dir.join(&l.masks[0].file), &b).unwrap();
         l.masks[0].sha256 = sha256_hex(&b);
         let v = verify(&dir, &manifest(p, vec![l]));
-        assert_eq!(found(&v), vec![(Some(0), "mask-decode")]);
+        assert_eq!(found(&v), vec![(Some(0), Kind::MaskDecode)]);
         assert!(
             v.problems[0]
                 .message
@@ -295,7 +295,7 @@ mod tests {
         ];
         m.optics = Some(optics(0, "optics/p0-gray-map.png", &"0".repeat(64)));
         let v = verify(&dir, &m);
-        let got: Vec<(&str, Option<&str>)> = v
+        let got: Vec<(Kind, Option<&str>)> = v
             .problems
             .iter()
             .map(|p| (p.kind, p.file.as_deref()))
@@ -303,12 +303,12 @@ mod tests {
         assert_eq!(
             got,
             vec![
-                ("manifest", Some("job.json")),
-                ("optics-file", Some("optics/p2-gray-map.png")),
-                ("optics-file", Some("/etc/gray-map.png")),
-                ("optics-file", Some("optics/p0-gray-map.png")),
-                ("optics-file", Some("optics/p1-gray-map.png")),
-                ("optics-file", Some("optics/missing.png")),
+                (Kind::Manifest, Some("job.json")),
+                (Kind::OpticsFile, Some("optics/p2-gray-map.png")),
+                (Kind::OpticsFile, Some("/etc/gray-map.png")),
+                (Kind::OpticsFile, Some("optics/p0-gray-map.png")),
+                (Kind::OpticsFile, Some("optics/p1-gray-map.png")),
+                (Kind::OpticsFile, Some("optics/missing.png")),
             ],
             "{:#?}",
             v.problems

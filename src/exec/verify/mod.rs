@@ -18,7 +18,7 @@ mod test_support;
 
 pub use lit::LitPixels;
 
-use super::Violation;
+use super::{Kind, Violation};
 use crate::bundle::{BundleSource, DirSource, Manifest, MaskRef, MANIFEST};
 use crate::profile::Profile;
 use content::ContentRule;
@@ -40,12 +40,7 @@ pub struct Verification {
     pub problems: Vec<Violation>,
 }
 
-fn problem(
-    layer: Option<usize>,
-    kind: &'static str,
-    file: Option<&str>,
-    message: String,
-) -> Violation {
+fn problem(layer: Option<usize>, kind: Kind, file: Option<&str>, message: String) -> Violation {
     Violation {
         layer,
         time_s: None,
@@ -87,7 +82,7 @@ pub fn verify_source(
     if n == 0 {
         problems.push(problem(
             None,
-            "manifest",
+            Kind::Manifest,
             Some(MANIFEST),
             format!("{}: the job has no layers", job.display()),
         ));
@@ -95,7 +90,7 @@ pub fn verify_source(
     if manifest.totals.layers != n as u64 {
         problems.push(problem(
             None,
-            "manifest",
+            Kind::Manifest,
             Some(MANIFEST),
             format!(
                 "{}: totals.layers is {} but the manifest has {}",
@@ -115,7 +110,7 @@ pub fn verify_source(
         if l.index != i as u64 {
             problems.push(problem(
                 Some(i),
-                "manifest",
+                Kind::Manifest,
                 Some(MANIFEST),
                 format!("{}: layer record {i} has index {}", job.display(), l.index),
             ));
@@ -125,7 +120,7 @@ pub fn verify_source(
             if (m.projector as usize) >= projectors.len() {
                 problems.push(problem(
                     Some(i),
-                    "manifest",
+                    Kind::Manifest,
                     Some(&m.file),
                     format!(
                         "{}: layer {i}: mask for projector {}, but the machine has {} projector(s)",
@@ -140,7 +135,7 @@ pub fn verify_source(
             if !seen.insert(m.projector) {
                 problems.push(problem(
                     Some(i),
-                    "manifest",
+                    Kind::Manifest,
                     Some(&m.file),
                     format!(
                         "{}: layer {i}: second mask for projector {}",
@@ -153,7 +148,7 @@ pub fn verify_source(
             if !is_inside(&m.file) {
                 problems.push(problem(
                     Some(i),
-                    "manifest",
+                    Kind::Manifest,
                     Some(&m.file),
                     format!(
                         "{}: layer {i}: mask path {:?} is not a relative path inside the bundle",
@@ -175,7 +170,7 @@ pub fn verify_source(
                     };
                     problems.push(problem(
                         Some(i),
-                        "mask-shared",
+                        Kind::MaskShared,
                         Some(&m.file),
                         format!(
                             "{}: layer {i}: the mask of projector {} is the same file as {other}: every layer's mask has its own file",
@@ -193,7 +188,7 @@ pub fn verify_source(
         if seen.len() < projectors.len() {
             problems.push(problem(
                 Some(i),
-                "manifest",
+                Kind::Manifest,
                 Some(MANIFEST),
                 format!(
                     "{}: layer {i} has masks for {} of the machine's {} projector(s)",
@@ -322,19 +317,17 @@ mod tests {
         let m = manifest(p, layers);
         let v = verify(&dir, &m);
         assert_eq!(v.masks, 6);
-        let got: Vec<(Option<usize>, &str)> =
-            v.problems.iter().map(|p| (p.layer, p.kind)).collect();
         assert_eq!(
-            got,
+            found(&v),
             vec![
-                (Some(1), "mask-checksum"),
-                (Some(1), "mask-decode"),
-                (Some(2), "mask-missing"),
-                (Some(3), "mask-format"),
-                (Some(4), "mask-format"),
-                (Some(5), "mask-decode"),
-                (Some(6), "manifest"),
-                (Some(7), "manifest"),
+                (Some(1), Kind::MaskChecksum),
+                (Some(1), Kind::MaskDecode),
+                (Some(2), Kind::MaskMissing),
+                (Some(3), Kind::MaskFormat),
+                (Some(4), Kind::MaskFormat),
+                (Some(5), Kind::MaskDecode),
+                (Some(6), Kind::Manifest),
+                (Some(7), Kind::Manifest),
             ],
             "{:#?}",
             v.problems
@@ -372,7 +365,7 @@ mod tests {
         let v = verify(&dir, &m);
         assert_eq!(
             found(&v),
-            vec![(Some(2), "mask-shared")],
+            vec![(Some(2), Kind::MaskShared)],
             "{:#?}",
             v.problems
         );
@@ -388,7 +381,7 @@ mod tests {
     fn a_job_without_layers_is_a_manifest_problem() {
         let dir = scratch("empty");
         let v = verify(&dir, &manifest(small_profile(), vec![]));
-        assert_eq!(found(&v), vec![(None, "manifest")]);
+        assert_eq!(found(&v), vec![(None, Kind::Manifest)]);
         assert!(v.problems[0]
             .message
             .ends_with("job.json: the job has no layers"));

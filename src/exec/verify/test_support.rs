@@ -3,6 +3,7 @@
 use super::Verification;
 use crate::bundle::{sha256_hex, Layer, Mode};
 use crate::exec::testutil::*;
+use crate::exec::Kind;
 use crate::profile::Profile;
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder};
@@ -88,6 +89,6 @@ pub(super) fn small_profile() -> Profile {
     p
 }
 
-pub(super) fn found(v: &Verification) -> Vec<(Option<usize>, &str)> {
+pub(super) fn found(v: &Verification) -> Vec<(Option<usize>, Kind)> {
     v.problems.iter().map(|p| (p.layer, p.kind)).collect()
 }
