@@ -225,14 +225,12 @@ impl ContentRule {
 #[cfg(test)]
 mod tests {
     use super::super::test_support::*;
-    use super::super::verify;
-    use crate::bundle::{sha256_hex, MaskRef};
+    use super::super::{verify, Verification};
+    use crate::bundle::{sha256_hex, Manifest, MaskRef};
     use crate::exec::testutil::manifest;
-    use crate::exec::Kind;
 
-    #[test]
-    fn masks_that_do_not_show_their_layer_are_found() {
-        let dir = scratch("content");
+    /// Layers 0 to 10, each a case of what a mask may show of its section.
+    fn content_cases(dir: &Scratch) -> Manifest {
         let white = gray_png(64, 48, |_, _| 255);
         let black = gray_png(64, 48, |_, _| 0);
         // A 20×10 px rectangle with anti-aliased (half-covered) edge pixels around it.
@@ -248,106 +246,61 @@ mod tests {
         });
         let section = Some([9.5, 4.5, 30.5, 15.5]);
         let area = 21.0 * 11.0;
-        let layers = vec![
-            // 0: as sliced.
-            layer_with(&dir, 0, &soft, section, area),
-            // 1: all white.
-            layer_with(&dir, 1, &white, section, area),
-            // 2: all black.
-            layer_with(&dir, 2, &black, section, area),
-            // 3: no section, lit.
-            layer_with(&dir, 3, &soft, None, 0.0),
-            // 4: no section, dark: fine.
-            layer_with(&dir, 4, &black, None, 0.0),
-            // 5: a 4×4 px patch inside the section's box.
-            layer_with(
-                &dir,
-                5,
-                &gray_png(64, 48, rect(12, 6, 16, 10, 255)),
-                section,
-                area,
-            ),
+        let cases = [
+            (&soft, section, area),                   // 0: as sliced.
+            (&white, section, area),                  // 1: all white.
+            (&black, section, area),                  // 2: all black.
+            (&soft, None, 0.0),                       // 3: no section, lit.
+            (&black, None, 0.0),                      // 4: no section, dark: fine.
+            (&lit_png(12, 6, 16, 10), section, area), // 5: a 4×4 px patch inside the box.
             // 6: another layer's mask, moved: lit 3 px right of the section.
-            layer_with(
-                &dir,
-                6,
-                &gray_png(64, 48, rect(13, 5, 34, 15, 255)),
-                section,
-                area,
-            ),
+            (&lit_png(13, 5, 34, 15), section, area),
             // 7: a sliver too small to show: dark is fine.
-            layer_with(&dir, 7, &black, Some([40.0, 40.0, 40.002, 41.0]), 0.002),
+            (&black, Some([40.0, 40.0, 40.002, 41.0]), 0.002),
             // 8: lit within a pixel of the section's box: fine.
-            layer_with(
-                &dir,
-                8,
-                &gray_png(64, 48, rect(9, 4, 31, 16, 255)),
-                section,
-                area,
-            ),
+            (&lit_png(9, 4, 31, 16), section, area),
             // 9 and 10: an area but no box (bundles from before it was recorded): the
             // area is checked, the box cannot be.
-            layer_with(&dir, 9, &soft, None, area),
-            layer_with(&dir, 10, &black, None, area),
+            (&soft, None, area),
+            (&black, None, area),
         ];
-        let m = manifest(small_profile(), layers);
+        let layers = cases.iter().enumerate();
+        let layers = layers.map(|(i, &(png, bbox, area))| layer_with(dir, i, png, bbox, area));
+        manifest(small_profile(), layers.collect())
+    }
+
+    #[test]
+    fn masks_that_do_not_show_their_layer_are_found() {
+        let dir = Scratch::new("content");
+        let mut m = content_cases(&dir);
         let v = verify(&dir, &m);
         assert_eq!(
             found(&v),
-            vec![
-                (Some(1), Kind::MaskContent),
-                (Some(2), Kind::MaskContent),
-                (Some(3), Kind::MaskContent),
-                (Some(5), Kind::MaskContent),
-                (Some(6), Kind::MaskContent),
-                (Some(10), Kind::MaskContent),
-            ],
+            content(&[1, 2, 3, 5, 6, 10]),
             "{:#?}",
             v.problems
         );
-        let msg = |i: usize| v.problems[i].message.clone();
-        assert!(msg(0).contains("masks/00001.png: layer 1: its masks light columns 0..63, rows 0..47 of the field, outside the section"), "{}", msg(0));
-        assert!(
-            msg(0).contains("covers columns 9..30, rows 4..15"),
-            "{}",
-            msg(0)
+        says(&v, 0, "masks/00001.png: layer 1: its masks light columns 0..63, rows 0..47 of the field, outside the section");
+        says(&v, 0, "covers columns 9..30, rows 4..15");
+        says(
+            &v,
+            1,
+            "layer 2: the section's area is 0.931 mm² but its masks light no pixel",
         );
-        assert!(
-            msg(1)
-                .contains("layer 2: the section's area is 0.931 mm² but its masks light no pixel"),
-            "{}",
-            msg(1)
+        says(
+            &v,
+            2,
+            "layer 3: the layer has no section (bbox_mm null) but its masks light 264 pixel(s)",
         );
-        assert!(
-            msg(2).contains(
-                "layer 3: the layer has no section (bbox_mm null) but its masks light 264 pixel(s)"
-            ),
-            "{}",
-            msg(2)
-        );
-        assert!(msg(3).contains("layer 5: its masks light 16 pixel(s) (0.064 mm²), too few for the section's area 0.931 mm² (at least 112 expected)"), "{}", msg(3));
-        assert!(
-            msg(4).contains("layer 6: its masks light columns 13..33, rows 5..14"),
-            "{}",
-            msg(4)
-        );
+        says(&v, 3, "layer 5: its masks light 16 pixel(s) (0.064 mm²), too few for the section's area 0.931 mm² (at least 112 expected)");
+        says(&v, 4, "layer 6: its masks light columns 13..33, rows 5..14");
         assert_eq!(v.problems[0].file.as_deref(), Some("masks/00001.png"));
 
         // Binary and compensated masks may leave thin parts dark: only the largest
         // inscribed circle's pixels must be lit.
-        let mut m = m;
         m.settings.binary = true;
         let v = verify(&dir, &m);
-        assert_eq!(
-            found(&v),
-            vec![
-                (Some(1), Kind::MaskContent),
-                (Some(3), Kind::MaskContent),
-                (Some(6), Kind::MaskContent)
-            ],
-            "{:#?}",
-            v.problems
-        );
+        assert_eq!(found(&v), content(&[1, 3, 6]), "{:#?}", v.problems);
         // A section 11 px high holds a circle of 5.5 px: 4.1 px wholly lit around its centre.
         for l in &mut m.layers {
             l.max_fill_distance_mm = 5.5 * PX;
@@ -357,46 +310,32 @@ mod tests {
         let v = verify(&dir, &m);
         assert_eq!(
             found(&v),
-            vec![
-                (Some(1), Kind::MaskContent),
-                (Some(2), Kind::MaskContent),
-                (Some(3), Kind::MaskContent),
-                (Some(5), Kind::MaskContent),
-                (Some(6), Kind::MaskContent),
-                (Some(7), Kind::MaskContent),
-                (Some(10), Kind::MaskContent),
-            ],
+            content(&[1, 2, 3, 5, 6, 7, 10]),
             "{:#?}",
             v.problems
         );
-        assert!(
-            v.problems[3]
-                .message
-                .contains("(4x4 px), less than the section's largest inscribed circle"),
-            "{}",
-            v.problems[3].message
+        says(
+            &v,
+            3,
+            "(4x4 px), less than the section's largest inscribed circle",
         );
-        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// The problems of one layer of section [`BOX`] whose mask is `png`, in a job changed
+    /// by `f`.
+    fn verify_one(dir: &Scratch, png: &[u8], f: impl FnOnce(&mut Manifest)) -> Verification {
+        let mut m = manifest(small_profile(), vec![layer_with(dir, 0, png, BOX, 200.0)]);
+        f(&mut m);
+        verify(dir, &m)
     }
 
     #[test]
     fn held_back_layers_may_light_less_than_their_section() {
-        let dir = scratch("held");
+        let dir = Scratch::new("held");
         // A section of 200 px whose mask lights nothing: the first layer of an overhang
         // the Z correction holds back.
         let dark = gray_png(64, 48, |_, _| 0);
-        let mut m = manifest(
-            small_profile(),
-            vec![layer_with(
-                &dir,
-                0,
-                &dark,
-                Some([10.0, 5.0, 30.0, 15.0]),
-                200.0,
-            )],
-        );
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
-        let cure = |held: u32| -> crate::bundle::Cure {
+        let cure = |held: u32| -> Option<crate::bundle::Cure> {
             serde_json::from_value(serde_json::json!({
                 "psf_sigma_px": 0.5, "pixel_mm": PX, "dp_mm": 0.15, "ec_mj_cm2": 10.0,
                 "overcure_mm": 0.03, "layer_mm": 0.1, "edge_threshold": 0.2,
@@ -405,39 +344,29 @@ mod tests {
             }))
             .unwrap()
         };
-        m.cure = Some(cure(0));
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
-        m.cure = Some(cure(4));
-        assert_eq!(found(&verify(&dir, &m)), vec![]);
+        assert_eq!(found(&verify_one(&dir, &dark, |_| {})), content(&[0]));
+        assert_eq!(
+            found(&verify_one(&dir, &dark, |m| m.cure = cure(0))),
+            content(&[0])
+        );
+        assert_eq!(
+            found(&verify_one(&dir, &dark, |m| m.cure = cure(4))),
+            vec![]
+        );
         // Light outside the section's box is still found.
-        let outside = gray_png(64, 48, rect(40, 5, 50, 15, 255));
-        m.layers = vec![layer_with(
-            &dir,
-            0,
-            &outside,
-            Some([10.0, 5.0, 30.0, 15.0]),
-            200.0,
-        )];
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
-        let _ = std::fs::remove_dir_all(&dir);
+        let outside = lit_png(40, 5, 50, 15);
+        assert_eq!(
+            found(&verify_one(&dir, &outside, |m| m.cure = cure(4))),
+            content(&[0])
+        );
     }
 
     #[test]
     fn pre_warped_masks_may_move_by_the_largest_correction() {
-        let dir = scratch("warp");
+        let dir = Scratch::new("warp");
         // Lit 3 px right of the section: beyond 1 px, within 1 + 0.1 mm / p + 1 = 3.6 px.
-        let moved = gray_png(64, 48, rect(13, 5, 33, 15, 255));
-        let mut m = manifest(
-            small_profile(),
-            vec![layer_with(
-                &dir,
-                0,
-                &moved,
-                Some([10.0, 5.0, 30.0, 15.0]),
-                200.0,
-            )],
-        );
-        assert_eq!(found(&verify(&dir, &m)), vec![(Some(0), Kind::MaskContent)]);
+        let moved = lit_png(13, 5, 33, 15);
+        assert_eq!(found(&verify_one(&dir, &moved, |_| {})), content(&[0]));
         let fit: crate::bundle::FitReport = serde_json::from_value(serde_json::json!({
             "source": "lens.csv", "sha256": "", "points": 9, "degree": 2,
             "residual_weight": 0.0, "poly_rms_mm": 0.0, "poly_max_mm": 0.0,
@@ -445,14 +374,13 @@ mod tests {
             "max_correction_mm": 0.1, "extrapolated_points": 0
         }))
         .unwrap();
-        m.settings.distortion = Some(fit);
-        assert_eq!(found(&verify(&dir, &m)), vec![]);
-        let _ = std::fs::remove_dir_all(&dir);
+        let v = verify_one(&dir, &moved, |m| m.settings.distortion = Some(fit));
+        assert_eq!(found(&v), vec![]);
     }
 
     #[test]
     fn tiled_masks_show_their_share_of_the_layer() {
-        let dir = scratch("tiled");
+        let dir = Scratch::new("tiled");
         std::fs::create_dir_all(dir.join("masks/p1")).unwrap();
         // Two 32×48 projectors side by side, the second mirrored in x; the section spans
         // columns 20..44 of the 64 px field.
@@ -463,29 +391,26 @@ mod tests {
         p1.offset_px = [32, 0];
         p1.mirror_x = true;
         p.projector.push(p1);
-        let left = gray_png(32, 48, rect(20, 10, 32, 20, 255));
         // Field columns 32..44 are projector columns 20..32 once mirrored.
-        let right = gray_png(32, 48, rect(20, 10, 32, 20, 255));
-        let mut l = layer_with(&dir, 0, &left, Some([20.0, 10.0, 44.0, 20.0]), 240.0);
+        let share = gray_png(32, 48, rect(20, 10, 32, 20, 255));
+        let mut l = layer_with(&dir, 0, &share, Some([20.0, 10.0, 44.0, 20.0]), 240.0);
+        let (file, sha256) = ("masks/p1/00000.png".to_string(), sha256_hex(&share));
+        std::fs::write(dir.join(&file), &share).unwrap();
         l.masks.push(MaskRef {
-            file: "masks/p1/00000.png".into(),
-            sha256: sha256_hex(&right),
+            file,
+            sha256,
             projector: 1,
         });
-        std::fs::write(dir.join("masks/p1/00000.png"), &right).unwrap();
         let mut m = manifest(p, vec![l]);
         assert_eq!(found(&verify(&dir, &m)), vec![]);
         // Unmirrored, the second projector's share lands at field columns 52..64.
         m.machine.projector[1].mirror_x = false;
         let v = verify(&dir, &m);
-        assert_eq!(found(&v), vec![(Some(0), Kind::MaskContent)]);
-        assert!(
-            v.problems[0].message.contains(
-                "masks/00000.png, masks/p1/00000.png: layer 0: its masks light columns 20..63"
-            ),
-            "{}",
-            v.problems[0].message
+        assert_eq!(found(&v), content(&[0]));
+        says(
+            &v,
+            0,
+            "masks/00000.png, masks/p1/00000.png: layer 0: its masks light columns 20..63",
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

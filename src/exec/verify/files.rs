@@ -1,7 +1,7 @@
 //! Each PNG file of the bundle on its own: the masks and the light compensation's gray
 //! maps, present, as recorded (SHA-256), and decodable PNGs of their projector's size.
 
-use super::{problem, LitPixels};
+use super::{problem, problem_in, LitPixels};
 use crate::bundle::{sha256_hex, BundleSource, Manifest, MANIFEST};
 use crate::exec::{Kind, Violation};
 use crate::profile::{Profile, Projector};
@@ -24,34 +24,23 @@ pub(super) fn check_gray_maps(
         .iter()
         .chain(&manifest.projector_optics)
         .collect();
-    let mut found = Vec::new();
     let mut files = Vec::new();
     for o in &records {
         let file = o.gray_map.as_str();
         let what = format!("gray map of projector {}", o.projector);
+        let mut bad = |shown, msg: String| {
+            problems.push(problem_in(dir, None, Kind::OpticsFile, (file, shown), &msg));
+        };
         let Some(proj) = machine.projector.get(o.projector as usize) else {
-            found.push(problem(
-                None,
-                Kind::OpticsFile,
-                Some(file),
-                format!(
-                    "{}: {what}: the machine has {} projector(s)",
-                    dir.shown(file).display(),
-                    machine.projector.len()
-                ),
-            ));
+            let k = machine.projector.len();
+            bad(file, format!("{what}: the machine has {k} projector(s)"));
             continue;
         };
         if !is_inside(file) {
-            found.push(problem(
-                None,
-                Kind::OpticsFile,
-                Some(file),
-                format!(
-                    "{}: {what}: path {file:?} is not a relative path inside the bundle",
-                    dir.shown(MANIFEST).display()
-                ),
-            ));
+            bad(
+                MANIFEST,
+                format!("{what}: path {file:?} is not a relative path inside the bundle"),
+            );
             continue;
         }
         files.push((file, o.gray_map_sha256.as_str(), proj, what));
@@ -65,10 +54,9 @@ pub(super) fn check_gray_maps(
     for ((file, ..), c) in files.iter().zip(checked) {
         *bytes += c.bytes;
         for (_, msg) in c.faults {
-            found.push(problem(None, Kind::OpticsFile, Some(file), msg));
+            problems.push(problem(None, Kind::OpticsFile, Some(file), msg));
         }
     }
-    problems.extend(found);
     files.len()
 }
 
@@ -222,36 +210,26 @@ mod tests {
     use super::super::test_support::*;
     use super::super::verify;
     use super::*;
-    use crate::bundle::Mode;
-    use crate::exec::testutil::*;
-    use image::ExtendedColorType;
+    use crate::exec::testutil::manifest;
 
     #[test]
     fn a_header_larger_than_its_file_can_hold_is_refused_before_decoding() {
-        let dir = scratch("huge-header");
+        let dir = Scratch::new("huge-header");
         // A 64 × 48 PNG whose header says 4096 × 4096 (its CRC recomputed), shown by a
         // projector of that size: 16 Mpx from about a hundred bytes.
-        let mut b = png(64, 48, ExtendedColorType::L8);
+        let mut b = png(64, 48, image::ExtendedColorType::L8);
         b[16..20].copy_from_slice(&4096u32.to_be_bytes());
         b[20..24].copy_from_slice(&4096u32.to_be_bytes());
         let crc = crc32fast::hash(&b[12..29]);
         b[29..33].copy_from_slice(&crc.to_be_bytes());
-        let mut p = profile();
-        p.projector[0].width_px = 4096;
-        p.projector[0].height_px = 4096;
-        let mut l = layer(0, 0.1, 0.1, Mode::Layered, 1.0, vec![], 0.0);
-        std::fs::write(dir.join(&l.masks[0].file), &b).unwrap();
-        l.masks[0].sha256 = sha256_hex(&b);
-        let v = verify(&dir, &manifest(p, vec![l]));
-        assert_eq!(found(&v), vec![(Some(0), Kind::MaskDecode)]);
-        assert!(
-            v.problems[0]
-                .message
-                .contains("declares 4096x4096 pixels, more than its"),
-            "{}",
-            v.problems[0].message
+        let mut p = small_profile();
+        (p.projector[0].width_px, p.projector[0].height_px) = (4096, 4096);
+        let v = verify(
+            &dir,
+            &manifest(p, vec![layer_with(&dir, 0, &b, None, 1.0 / PX / PX)]),
         );
-        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(found(&v), vec![(Some(0), Kind::MaskDecode)]);
+        says(&v, 0, "declares 4096x4096 pixels, more than its");
     }
 
     /// A light compensation record of projector `k` whose gray map is `file`.
@@ -272,7 +250,7 @@ mod tests {
 
     #[test]
     fn every_projectors_gray_map_is_verified() {
-        let dir = scratch("gray-maps");
+        let dir = Scratch::new("gray-maps");
         std::fs::create_dir_all(dir.join("optics")).unwrap();
         let mut p = small_profile();
         let mut p1 = p.projector[0].clone();
@@ -300,40 +278,37 @@ mod tests {
             .iter()
             .map(|p| (p.kind, p.file.as_deref()))
             .collect();
-        assert_eq!(
-            got,
-            vec![
-                (Kind::Manifest, Some("job.json")),
-                (Kind::OpticsFile, Some("optics/p2-gray-map.png")),
-                (Kind::OpticsFile, Some("/etc/gray-map.png")),
-                (Kind::OpticsFile, Some("optics/p0-gray-map.png")),
-                (Kind::OpticsFile, Some("optics/p1-gray-map.png")),
-                (Kind::OpticsFile, Some("optics/missing.png")),
-            ],
-            "{:#?}",
-            v.problems
-        );
+        let want = vec![
+            (Kind::Manifest, Some("job.json")),
+            (Kind::OpticsFile, Some("optics/p2-gray-map.png")),
+            (Kind::OpticsFile, Some("/etc/gray-map.png")),
+            (Kind::OpticsFile, Some("optics/p0-gray-map.png")),
+            (Kind::OpticsFile, Some("optics/p1-gray-map.png")),
+            (Kind::OpticsFile, Some("optics/missing.png")),
+        ];
+        assert_eq!(got, want, "{:#?}", v.problems);
         assert_eq!(v.gray_maps, 4);
-        let msg = |i: usize| v.problems[i].message.clone();
-        assert!(
-            msg(1).ends_with("gray map of projector 2: the machine has 2 projector(s)"),
-            "{}",
-            msg(1)
+        ends(
+            &v,
+            1,
+            "gray map of projector 2: the machine has 2 projector(s)",
         );
-        assert!(
-            msg(2).contains("path \"/etc/gray-map.png\" is not a relative path inside the bundle"),
-            "{}",
-            msg(2)
+        says(
+            &v,
+            2,
+            "path \"/etc/gray-map.png\" is not a relative path inside the bundle",
         );
-        assert!(msg(3).contains("optics/p0-gray-map.png: gray map of projector 0: SHA-256 mismatch (manifest 000000000000"), "{}", msg(3));
-        assert!(msg(4).contains("optics/p1-gray-map.png: gray map of projector 1: PNG is 64x48, projector p1 is 32x48"), "{}", msg(4));
-        assert!(
-            msg(5)
-                .ends_with("optics/missing.png: gray map of projector 0: gray map file is missing"),
-            "{}",
-            msg(5)
+        says(&v, 3, "optics/p0-gray-map.png: gray map of projector 0: SHA-256 mismatch (manifest 000000000000");
+        says(
+            &v,
+            4,
+            "optics/p1-gray-map.png: gray map of projector 1: PNG is 64x48, projector p1 is 32x48",
+        );
+        ends(
+            &v,
+            5,
+            "optics/missing.png: gray map of projector 0: gray map file is missing",
         );
         assert!(v.problems.iter().all(|p| p.layer.is_none()));
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

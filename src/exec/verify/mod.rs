@@ -50,6 +50,19 @@ fn problem(layer: Option<usize>, kind: Kind, file: Option<&str>, message: String
     }
 }
 
+/// A problem with `file` whose message reads "PATH: `msg`", PATH the bundle's `shown` (the
+/// file itself, or job.json for what the manifest says of it).
+fn problem_in(
+    dir: &dyn BundleSource,
+    layer: Option<usize>,
+    kind: Kind,
+    (file, shown): (&str, &str),
+    msg: &str,
+) -> Violation {
+    let message = format!("{}: {msg}", dir.shown(shown).display());
+    problem(layer, kind, Some(file), message)
+}
+
 /// Verifies the manifest's structure and every mask of the bundle at `dir` for the
 /// machine the manifest embeds.
 pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
@@ -77,129 +90,9 @@ pub fn verify_source(
     shared_masks: bool,
 ) -> Verification {
     let mut problems = Vec::new();
-    let job = dir.shown(MANIFEST);
-    let n = manifest.layers.len();
-    if n == 0 {
-        problems.push(problem(
-            None,
-            Kind::Manifest,
-            Some(MANIFEST),
-            format!("{}: the job has no layers", job.display()),
-        ));
-    }
-    if manifest.totals.layers != n as u64 {
-        problems.push(problem(
-            None,
-            Kind::Manifest,
-            Some(MANIFEST),
-            format!(
-                "{}: totals.layers is {} but the manifest has {}",
-                job.display(),
-                manifest.totals.layers,
-                crate::text::count(n as u64, "layer record", "layer records")
-            ),
-        ));
-    }
+    let (refs, mut incomplete) =
+        check_structure(dir, manifest, machine, shared_masks, &mut problems);
     let projectors = &machine.projector;
-    let mut refs: Vec<(usize, &MaskRef)> = Vec::new();
-    // Layers whose masks cannot all be read as the projectors': no content check.
-    let mut incomplete: HashSet<usize> = HashSet::new();
-    // Every mask file by its normalized path: the first layer and projector naming it.
-    let mut owners: HashMap<PathBuf, (usize, u32)> = HashMap::new();
-    for (i, l) in manifest.layers.iter().enumerate() {
-        if l.index != i as u64 {
-            problems.push(problem(
-                Some(i),
-                Kind::Manifest,
-                Some(MANIFEST),
-                format!("{}: layer record {i} has index {}", job.display(), l.index),
-            ));
-        }
-        let mut seen = HashSet::new();
-        for m in &l.masks {
-            if (m.projector as usize) >= projectors.len() {
-                problems.push(problem(
-                    Some(i),
-                    Kind::Manifest,
-                    Some(&m.file),
-                    format!(
-                        "{}: layer {i}: mask for projector {}, but the machine has {} projector(s)",
-                        dir.shown(&m.file).display(),
-                        m.projector,
-                        projectors.len()
-                    ),
-                ));
-                incomplete.insert(i);
-                continue;
-            }
-            if !seen.insert(m.projector) {
-                problems.push(problem(
-                    Some(i),
-                    Kind::Manifest,
-                    Some(&m.file),
-                    format!(
-                        "{}: layer {i}: second mask for projector {}",
-                        dir.shown(&m.file).display(),
-                        m.projector
-                    ),
-                ));
-                incomplete.insert(i);
-            }
-            if !is_inside(&m.file) {
-                problems.push(problem(
-                    Some(i),
-                    Kind::Manifest,
-                    Some(&m.file),
-                    format!(
-                        "{}: layer {i}: mask path {:?} is not a relative path inside the bundle",
-                        job.display(),
-                        m.file
-                    ),
-                ));
-                incomplete.insert(i);
-                continue;
-            }
-            let key: PathBuf = Path::new(&m.file).components().collect();
-            match owners.get(&key) {
-                Some(_) if shared_masks => {}
-                Some(&(j, k)) => {
-                    let other = if j == i {
-                        format!("projector {k}'s mask of the same layer")
-                    } else {
-                        format!("layer {j}'s mask")
-                    };
-                    problems.push(problem(
-                        Some(i),
-                        Kind::MaskShared,
-                        Some(&m.file),
-                        format!(
-                            "{}: layer {i}: the mask of projector {} is the same file as {other}: every layer's mask has its own file",
-                            dir.shown(&m.file).display(),
-                            m.projector,
-                        ),
-                    ));
-                }
-                None => {
-                    owners.insert(key, (i, m.projector));
-                }
-            }
-            refs.push((i, m));
-        }
-        if seen.len() < projectors.len() {
-            problems.push(problem(
-                Some(i),
-                Kind::Manifest,
-                Some(MANIFEST),
-                format!(
-                    "{}: layer {i} has masks for {} of the machine's {} projector(s)",
-                    job.display(),
-                    seen.len(),
-                    projectors.len()
-                ),
-            ));
-            incomplete.insert(i);
-        }
-    }
     let per_file: Vec<PngCheck> = refs
         .par_iter()
         .map_init(Vec::new, |buf, &(i, m)| {
@@ -217,7 +110,7 @@ pub fn verify_source(
         .collect();
     let mut bytes = 0;
     // The masks' lit pixels per layer (as field pixels), once every mask decoded cleanly.
-    let mut lit: Vec<Option<(LitPixels, Vec<&MaskRef>)>> = vec![None; n];
+    let mut lit: Vec<Option<(LitPixels, Vec<&MaskRef>)>> = vec![None; manifest.layers.len()];
     for (&(i, m), c) in refs.iter().zip(per_file) {
         bytes += c.bytes;
         let clean = c.faults.is_empty();
@@ -252,45 +145,127 @@ pub fn verify_source(
     }
 }
 
+/// Every mask file the manifest names, with its layer.
+type MaskFiles<'m> = Vec<(usize, &'m MaskRef)>;
+
+/// Checks the manifest's structure against `machine` (see [`verify_source`]): the mask
+/// files to read, and the layers whose masks cannot all be read as the projectors' (no
+/// content check for them).
+fn check_structure<'m>(
+    dir: &dyn BundleSource,
+    manifest: &'m Manifest,
+    machine: &Profile,
+    shared_masks: bool,
+    problems: &mut Vec<Violation>,
+) -> (MaskFiles<'m>, HashSet<usize>) {
+    let mut add = |layer, kind, at, msg: &str| problems.push(problem_in(dir, layer, kind, at, msg));
+    let (job, n) = ((MANIFEST, MANIFEST), manifest.layers.len());
+    if n == 0 {
+        add(None, Kind::Manifest, job, "the job has no layers");
+    }
+    if manifest.totals.layers != n as u64 {
+        let records = crate::text::count(n as u64, "layer record", "layer records");
+        let msg = format!(
+            "totals.layers is {} but the manifest has {records}",
+            manifest.totals.layers
+        );
+        add(None, Kind::Manifest, job, &msg);
+    }
+    let projectors = machine.projector.len();
+    let (mut refs, mut incomplete) = (Vec::new(), HashSet::new());
+    // Every mask file by its normalized path: the first layer and projector naming it.
+    let mut owners: HashMap<PathBuf, (usize, u32)> = HashMap::new();
+    for (i, l) in manifest.layers.iter().enumerate() {
+        let at = Some(i);
+        if l.index != i as u64 {
+            add(
+                at,
+                Kind::Manifest,
+                job,
+                &format!("layer record {i} has index {}", l.index),
+            );
+        }
+        let mut seen = HashSet::new();
+        for m in &l.masks {
+            let (f, k) = (m.file.as_str(), m.projector);
+            if k as usize >= projectors {
+                let msg = format!("layer {i}: mask for projector {k}, but the machine has {projectors} projector(s)");
+                add(at, Kind::Manifest, (f, f), &msg);
+                incomplete.insert(i);
+                continue;
+            }
+            if !seen.insert(k) {
+                add(
+                    at,
+                    Kind::Manifest,
+                    (f, f),
+                    &format!("layer {i}: second mask for projector {k}"),
+                );
+                incomplete.insert(i);
+            }
+            if !is_inside(f) {
+                let msg =
+                    format!("layer {i}: mask path {f:?} is not a relative path inside the bundle");
+                add(at, Kind::Manifest, (f, MANIFEST), &msg);
+                incomplete.insert(i);
+                continue;
+            }
+            let key: PathBuf = Path::new(f).components().collect();
+            match owners.get(&key) {
+                Some(_) if shared_masks => {}
+                Some(&(j, o)) => {
+                    let other = if j == i {
+                        format!("projector {o}'s mask of the same layer")
+                    } else {
+                        format!("layer {j}'s mask")
+                    };
+                    let msg = format!("layer {i}: the mask of projector {k} is the same file as {other}: every layer's mask has its own file");
+                    add(at, Kind::MaskShared, (f, f), &msg);
+                }
+                None => {
+                    owners.insert(key, (i, k));
+                }
+            }
+            refs.push((i, m));
+        }
+        if seen.len() < projectors {
+            let msg = format!(
+                "layer {i} has masks for {} of the machine's {projectors} projector(s)",
+                seen.len()
+            );
+            add(at, Kind::Manifest, job, &msg);
+            incomplete.insert(i);
+        }
+    }
+    (refs, incomplete)
+}
+
 #[cfg(test)]
 mod tests {
     use super::test_support::*;
     use super::*;
-    use crate::bundle::{sha256_hex, Mode, Step};
-    use crate::exec::testutil::*;
-    use image::ExtendedColorType;
+    use crate::bundle::{sha256_hex, Step};
+    use crate::exec::testutil::manifest;
+    use image::ExtendedColorType::{Rgb8, L8};
 
     #[test]
     fn every_mask_problem_is_found_and_named() {
-        let dir = std::env::temp_dir().join(format!("dmdsl-verify-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(dir.join("masks")).unwrap();
-        let mut p = profile();
-        p.projector[0].width_px = 64;
-        p.projector[0].height_px = 48;
-        let good = png(64, 48, ExtendedColorType::L8);
+        let dir = Scratch::new("files");
+        let good = png(64, 48, L8);
         let mut truncated = good.clone();
         truncated.truncate(good.len() - 30);
         let files: Vec<Option<Vec<u8>>> = vec![
-            Some(good.clone()),                         // 0: fine
-            Some(good.clone()),                         // 1: bytes flipped after hashing
-            None,                                       // 2: missing
-            Some(png(32, 48, ExtendedColorType::L8)),   // 3: wrong size
-            Some(png(64, 48, ExtendedColorType::Rgb8)), // 4: colour
-            Some(truncated),                            // 5: truncated (hash matches)
+            Some(good.clone()),      // 0: fine
+            Some(good.clone()),      // 1: bytes flipped after hashing
+            None,                    // 2: missing
+            Some(png(32, 48, L8)),   // 3: wrong size
+            Some(png(64, 48, Rgb8)), // 4: colour
+            Some(truncated),         // 5: truncated (hash matches)
         ];
         let mut layers = Vec::new();
         for (i, f) in files.iter().enumerate() {
-            let mut l = layer(
-                i,
-                0.1 * (i + 1) as f64,
-                0.1,
-                Mode::Layered,
-                1.0,
-                vec![Step::Expose { s: 1.0 }],
-                1.1,
-            );
-            let name = format!("masks/{i:05}.png");
+            let mut l = blank_layer(i);
+            (l.steps, l.time_s) = (vec![Step::Expose { s: 1.0 }], 1.1);
             // The section fills the field (the mask lights almost every pixel).
             l.bbox_mm = Some([[0.0, 0.0], [64.0 * PX, 48.0 * PX]]);
             l.area_mm2 = 64.0 * 48.0 * PX * PX;
@@ -299,92 +274,67 @@ mod tests {
                 let mut b = b.clone();
                 if i == 1 {
                     let n = b.len();
-                    for x in &mut b[n / 2..n / 2 + 8] {
-                        *x ^= 0xff;
-                    }
+                    b[n / 2..n / 2 + 8].iter_mut().for_each(|x| *x ^= 0xff);
                 }
-                std::fs::write(dir.join(&name), b).unwrap();
+                std::fs::write(dir.join(&l.masks[0].file), b).unwrap();
             }
             layers.push(l);
         }
         // Layer 6 points outside the bundle; layer 7 has no mask.
-        let mut l6 = layer(6, 0.7, 0.1, Mode::Layered, 1.0, vec![], 0.0);
-        l6.masks[0].file = "../escape.png".into();
-        let mut l7 = layer(7, 0.8, 0.1, Mode::Layered, 1.0, vec![], 0.0);
-        l7.masks.clear();
-        layers.push(l6);
-        layers.push(l7);
-        let m = manifest(p, layers);
-        let v = verify(&dir, &m);
+        layers.push(blank_layer(6));
+        layers[6].masks[0].file = "../escape.png".into();
+        layers.push(blank_layer(7));
+        layers[7].masks.clear();
+        let v = verify(&dir, &manifest(small_profile(), layers));
         assert_eq!(v.masks, 6);
-        assert_eq!(
-            found(&v),
-            vec![
-                (Some(1), Kind::MaskChecksum),
-                (Some(1), Kind::MaskDecode),
-                (Some(2), Kind::MaskMissing),
-                (Some(3), Kind::MaskFormat),
-                (Some(4), Kind::MaskFormat),
-                (Some(5), Kind::MaskDecode),
-                (Some(6), Kind::Manifest),
-                (Some(7), Kind::Manifest),
-            ],
-            "{:#?}",
-            v.problems
-        );
-        let msg = |i: usize| v.problems[i].message.clone();
-        assert!(
-            msg(0).contains("masks/00001.png: layer 1: SHA-256 mismatch"),
-            "{}",
-            msg(0)
-        );
-        assert!(msg(2).contains("masks/00002.png: layer 2: mask file is missing"));
-        assert!(msg(3).contains("PNG is 32x48, projector p0 is 64x48"));
-        assert!(msg(4).contains("expected 8-bit grayscale"));
-        assert!(msg(6).contains("not a relative path inside the bundle"));
-        assert!(msg(7).contains("masks for 0 of the machine's 1 projector"));
+        let want = [
+            (1, Kind::MaskChecksum),
+            (1, Kind::MaskDecode),
+            (2, Kind::MaskMissing),
+            (3, Kind::MaskFormat),
+            (4, Kind::MaskFormat),
+            (5, Kind::MaskDecode),
+            (6, Kind::Manifest),
+            (7, Kind::Manifest),
+        ];
+        let want: Vec<_> = want.iter().map(|&(i, k)| (Some(i), k)).collect();
+        assert_eq!(found(&v), want, "{:#?}", v.problems);
+        says(&v, 0, "masks/00001.png: layer 1: SHA-256 mismatch");
+        says(&v, 2, "masks/00002.png: layer 2: mask file is missing");
+        says(&v, 3, "PNG is 32x48, projector p0 is 64x48");
+        says(&v, 4, "expected 8-bit grayscale");
+        says(&v, 6, "not a relative path inside the bundle");
+        says(&v, 7, "masks for 0 of the machine's 1 projector");
         assert_eq!(v.problems[2].file.as_deref(), Some("masks/00002.png"));
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_mask_file_named_by_two_layers_is_found() {
-        let dir = scratch("shared");
-        let png = gray_png(64, 48, rect(10, 5, 30, 15, 255));
-        let section = Some([10.0, 5.0, 30.0, 15.0]);
-        let mut l2 = layer_with(&dir, 2, &png, section, 200.0);
-        l2.masks[0].file = "masks//00000.png".into();
-        let m = manifest(
-            small_profile(),
-            vec![
-                layer_with(&dir, 0, &png, section, 200.0),
-                layer_with(&dir, 1, &png, section, 200.0),
-                l2,
-            ],
-        );
-        let v = verify(&dir, &m);
+        let dir = Scratch::new("shared");
+        let png = lit_png(10, 5, 30, 15);
+        let mut layers: Vec<_> = (0..3)
+            .map(|i| layer_with(&dir, i, &png, BOX, 200.0))
+            .collect();
+        layers[2].masks[0].file = "masks//00000.png".into();
+        let v = verify(&dir, &manifest(small_profile(), layers));
         assert_eq!(
             found(&v),
             vec![(Some(2), Kind::MaskShared)],
             "{:#?}",
             v.problems
         );
-        assert!(
-            v.problems[0].message.contains("masks//00000.png: layer 2: the mask of projector 0 is the same file as layer 0's mask"),
-            "{}",
-            v.problems[0].message
+        says(
+            &v,
+            0,
+            "masks//00000.png: layer 2: the mask of projector 0 is the same file as layer 0's mask",
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn a_job_without_layers_is_a_manifest_problem() {
-        let dir = scratch("empty");
+        let dir = Scratch::new("empty");
         let v = verify(&dir, &manifest(small_profile(), vec![]));
         assert_eq!(found(&v), vec![(None, Kind::Manifest)]);
-        assert!(v.problems[0]
-            .message
-            .ends_with("job.json: the job has no layers"));
-        let _ = std::fs::remove_dir_all(&dir);
+        ends(&v, 0, "job.json: the job has no layers");
     }
 }
