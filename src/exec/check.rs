@@ -288,7 +288,6 @@ impl Sink for Checker<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bundle::Step;
     use crate::exec::sim::{simulate, FaultKind, FaultSpec};
     use crate::exec::testutil::*;
 
@@ -313,78 +312,42 @@ mod tests {
     #[test]
     fn clean_jobs_have_no_violations() {
         assert_eq!(check(&clean()), vec![]);
-        let sweep = |i: usize, t: f64| {
-            let z = 0.1 * (i + 1) as f64;
-            layer(
-                i,
-                z,
-                0.1,
-                Mode::Continuous,
-                2.0,
-                vec![Step::Sweep {
-                    to_mm: z,
-                    speed_mm_s: 0.05,
-                }],
-                t,
-            )
-        };
-        let m = manifest(
-            profile(),
-            vec![sweep(0, 2.07), sweep(1, 2.0), sweep(2, 2.05)],
+        assert_eq!(
+            check(&sweep_layers(Mode::Continuous, &[2.07, 2.0, 2.05])),
+            vec![]
         );
-        assert_eq!(check(&m), vec![]);
     }
 
     #[test]
     fn a_move_beyond_travel_is_a_violation() {
         let mut m = clean();
-        m.layers[1].steps[0] = Step::Move {
-            to_mm: 130.0,
-            speed_mm_s: 2.0,
-            accel_mm_s2: 50.0,
-        };
+        m.layers[1].steps[0] = move_to(130.0, 2.0, 50.0);
         let v = check(&m);
         let travel: Vec<_> = v.iter().filter(|v| v.kind == Kind::Travel).collect();
         // Out (0.5 → 130) and back (130 → 1.0): both moves touch 130 mm.
         assert_eq!(travel.len(), 2, "{v:?}");
         assert_eq!(travel[0].layer, Some(1));
-        assert!(travel[0]
-            .message
-            .contains("move from 0.5000 to 130.0000 mm leaves the stage travel [0, 120]"));
+        let msg = &travel[0].message;
+        assert!(msg.contains("move from 0.5000 to 130.0000 mm leaves the stage travel [0, 120]"));
         assert!((travel[0].time_s.unwrap() - 33.91).abs() < 1e-9);
         // The longer moves also break the estimate.
-        assert!(v
-            .iter()
-            .any(|v| v.kind == Kind::Estimate && v.layer == Some(1)));
-        assert!(v
-            .iter()
-            .any(|v| v.kind == Kind::Estimate && v.layer.is_none()));
+        let estimate = |l| v.iter().any(|v| v.kind == Kind::Estimate && v.layer == l);
+        assert!(estimate(Some(1)) && estimate(None));
     }
 
     #[test]
     fn commanding_more_speed_or_acceleration_than_the_stage_has_is_a_violation() {
         let mut m = clean();
-        m.layers[0].steps[0] = Step::Move {
-            to_mm: 5.5,
-            speed_mm_s: 20.0,
-            accel_mm_s2: 50.0,
-        };
-        m.layers[1].steps[1] = Step::Move {
-            to_mm: 1.0,
-            speed_mm_s: 1.0,
-            accel_mm_s2: 500.0,
-        };
+        m.layers[0].steps[0] = move_to(5.5, 20.0, 50.0);
+        m.layers[1].steps[1] = move_to(1.0, 1.0, 500.0);
         // Keep the estimates right so only the limits trip: 5.5 mm at 20 mm/s, 50 mm/s²
         // is a triangle, 2·sqrt(5.5/50); 5 mm at 1 mm/s, 500 mm/s²: 0.004 + 4.998.
         m.layers[0].time_s = 2.0 * (5.5f64 / 50.0).sqrt() + 5.02 + 26.1;
         m.layers[1].time_s = 2.79 + 0.004 + 4.998 + 18.1;
         m.totals.print_time_s = m.layers[0].time_s + m.layers[1].time_s;
         let v = check(&m);
-        assert_eq!(
-            kinds(&v),
-            vec![(Kind::Speed, Some(0)), (Kind::Accel, Some(1))],
-            "{v:?}"
-        );
+        let want = vec![(Kind::Speed, Some(0)), (Kind::Accel, Some(1))];
+        assert_eq!(kinds(&v), want, "{v:?}");
         assert!(v[0]
             .message
             .contains("20 mm/s exceeds the stage's max_speed_mm_s 10"));
@@ -398,11 +361,8 @@ mod tests {
         m.layers[1].time_s = 2.79 + 5.02 + 10.0 + 7.1;
         m.totals.print_time_s = 33.91 + m.layers[1].time_s;
         let v = check(&m);
-        assert_eq!(
-            kinds(&v),
-            vec![(Kind::Position, Some(1)), (Kind::Dose, Some(1))],
-            "{v:?}"
-        );
+        let want = vec![(Kind::Position, Some(1)), (Kind::Dose, Some(1))];
+        assert_eq!(kinds(&v), want, "{v:?}");
         assert!(v[0].message.contains("stage at 0.9000 mm, its z_mm is 1"));
         assert!(v[1]
             .message
@@ -420,50 +380,26 @@ mod tests {
 
     #[test]
     fn sweeping_in_a_layered_layer_is_light_during_a_move() {
-        let sweep = |i: usize, t: f64| {
-            let z = 0.1 * (i + 1) as f64;
-            layer(
-                i,
-                z,
-                0.1,
-                Mode::Layered,
-                2.0,
-                vec![Step::Sweep {
-                    to_mm: z,
-                    speed_mm_s: 0.05,
-                }],
-                t,
-            )
-        };
-        let m = manifest(profile(), vec![sweep(0, 2.07), sweep(1, 2.05)]);
-        let v = check(&m);
-        assert_eq!(
-            kinds(&v),
-            vec![
-                (Kind::LightDuringMove, Some(0)),
-                (Kind::LightDuringMove, Some(1))
-            ]
-        );
+        let v = check(&sweep_layers(Mode::Layered, &[2.07, 2.05]));
+        let want = vec![
+            (Kind::LightDuringMove, Some(0)),
+            (Kind::LightDuringMove, Some(1)),
+        ];
+        assert_eq!(kinds(&v), want);
     }
 
     #[test]
     fn a_sweep_must_end_at_the_layer() {
-        let m = manifest(
-            profile(),
-            vec![layer(
-                0,
-                0.1,
-                0.1,
-                Mode::Continuous,
-                2.0,
-                vec![Step::Sweep {
-                    to_mm: 0.2,
-                    speed_mm_s: 0.1,
-                }],
-                2.12,
-            )],
+        let l = layer(
+            0,
+            0.1,
+            0.1,
+            Mode::Continuous,
+            2.0,
+            vec![sweep_to(0.2, 0.1)],
+            2.12,
         );
-        let v = check(&m);
+        let v = check(&manifest(profile(), vec![l]));
         assert_eq!(kinds(&v), vec![(Kind::Position, Some(0))], "{v:?}");
         assert!(v[0].message.contains("sweep ends at 0.2000 mm"));
     }
@@ -492,36 +428,28 @@ mod tests {
         let layers = (0..6)
             .map(|i| {
                 let z = 0.0333 * (i + 1) as f64;
-                let t = 0.0333 / 0.02
-                    + if i == 0 { 0.07 } else { 0.0 }
-                    + if i == 5 { 0.05 } else { 0.0 };
+                let light = 0.0333 / 0.02;
+                let t = light + [0.07, 0.0, 0.0, 0.0, 0.0, 0.05][i];
                 layer(
                     i,
                     z,
                     0.0333,
                     Mode::Continuous,
-                    0.0333 / 0.02,
-                    vec![Step::Sweep {
-                        to_mm: z,
-                        speed_mm_s: 0.02,
-                    }],
+                    light,
+                    vec![sweep_to(z, 0.02)],
                     t,
                 )
             })
             .collect();
-        let m = manifest(profile(), layers);
-        assert_eq!(check(&m), vec![]);
+        assert_eq!(check(&manifest(profile(), layers)), vec![]);
     }
 
     #[test]
     fn an_aborted_layer_is_not_checked_for_dose_or_estimate() {
-        let v = check_with(
-            &clean(),
-            &[FaultSpec {
-                kind: FaultKind::Stall,
-                layer: 1,
-            }],
-        );
-        assert_eq!(v, vec![]);
+        let stall = FaultSpec {
+            kind: FaultKind::Stall,
+            layer: 1,
+        };
+        assert_eq!(check_with(&clean(), &[stall]), vec![]);
     }
 }

@@ -279,7 +279,7 @@ impl Simulation<'_, '_, '_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{close, layered, run_collecting, sweeps};
+    use super::super::test_support::{close, fault, layered, run_collecting, sweeps};
     use super::super::{Machine, SegKind};
     use super::*;
     use crate::bundle::Mode;
@@ -299,13 +299,8 @@ mod tests {
             assert_eq!((f.kind, f.layer), (kind, 1));
             // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
             assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
-            let want = Machine::from_profile(&profile()).quantize(position_at(
-                0.5,
-                6.0,
-                2.0,
-                50.0,
-                2.79 / 2.0,
-            ));
+            let halfway = position_at(0.5, 6.0, 2.0, 50.0, 2.79 / 2.0);
+            let want = Machine::from_profile(&profile()).quantize(halfway);
             assert!(close(f.stage_mm, want), "{} {want}", f.stage_mm);
             assert!(close(o.total_s, f.time_s));
             assert_eq!(o.layers.len(), 2);
@@ -316,13 +311,7 @@ mod tests {
 
     #[test]
     fn a_stall_during_a_sweep_closes_the_shutter() {
-        let (o, c) = run_collecting(
-            &sweeps(Mode::Continuous),
-            &[FaultSpec {
-                kind: FaultKind::Stall,
-                layer: 1,
-            }],
-        );
+        let (o, c) = run_collecting(&sweeps(Mode::Continuous), &[fault(FaultKind::Stall, 1)]);
         let f = o.fault.unwrap();
         assert!(close(f.time_s, 2.07 + 1.0));
         assert!(close(f.stage_mm, 0.15));
@@ -334,13 +323,7 @@ mod tests {
 
     #[test]
     fn a_failed_mask_load_stops_the_stage_with_the_shutter_closed() {
-        let (o, c) = run_collecting(
-            &layered(),
-            &[FaultSpec {
-                kind: FaultKind::MaskLoad,
-                layer: 1,
-            }],
-        );
+        let (o, c) = run_collecting(&layered(), &[fault(FaultKind::MaskLoad, 1)]);
         let f = o.fault.unwrap();
         assert_eq!((f.kind, f.layer), (FaultKind::MaskLoad, 1));
         assert!(close(f.time_s, 33.91 + 0.02));
@@ -353,24 +336,15 @@ mod tests {
 
     #[test]
     fn a_stuck_shutter_blanks_the_dmd_after_the_close_latency() {
-        let (o, c) = run_collecting(
-            &layered(),
-            &[FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 0,
-            }],
-        );
+        let (o, c) = run_collecting(&layered(), &[fault(FaultKind::ShutterStuck, 0)]);
         let f = o.fault.unwrap();
         assert_eq!((f.kind, f.layer), (FaultKind::ShutterStuck, 0));
         // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, found stuck 0.05 s
         // later, DMD dark after its 0.02 s load.
         assert!(close(f.time_s, 33.93));
         assert!(close(o.layers[0].light_s, 16.07));
-        assert!(
-            f.message.contains("got 0.070 s of extra light"),
-            "{}",
-            f.message
-        );
+        let msg = &f.message;
+        assert!(msg.contains("got 0.070 s of extra light"), "{msg}");
         let last = c.segs.last().unwrap();
         assert_eq!(last.kind, SegKind::StuckOpen);
         assert!(close(o.total_s, 33.93));
@@ -381,53 +355,28 @@ mod tests {
         // A machine whose shutter closes at once (like the built-in bottom-up profile).
         let mut m = layered();
         m.machine.shutter.close_s = crate::units::NonNegative::new(0.0).unwrap();
-        let (o, _) = run_collecting(
-            &m,
-            &[FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 0,
-            }],
-        );
+        let (o, _) = run_collecting(&m, &[fault(FaultKind::ShutterStuck, 0)]);
         let f = o.fault.unwrap();
         assert!(close(o.layers[0].light_s, 16.02));
-        assert!(
-            f.message.contains("got 0.020 s of extra light"),
-            "{}",
-            f.message
-        );
+        let msg = &f.message;
+        assert!(msg.contains("got 0.020 s of extra light"), "{msg}");
     }
 
     #[test]
     fn untriggered_faults_are_listed() {
         // No shutter close at or after layer 0 of a job without light.
+        let wait = vec![Step::Wait { s: 1.0 }];
         let m = manifest(
             profile(),
-            vec![layer(
-                0,
-                0.5,
-                0.5,
-                Mode::Layered,
-                0.0,
-                vec![Step::Wait { s: 1.0 }],
-                1.0,
-            )],
+            vec![layer(0, 0.5, 0.5, Mode::Layered, 0.0, wait, 1.0)],
         );
-        let spec = FaultSpec {
-            kind: FaultKind::ShutterStuck,
-            layer: 0,
-        };
+        let spec = fault(FaultKind::ShutterStuck, 0);
         let (o, _) = run_collecting(&m, &[spec]);
         assert!(o.fault.is_none());
         assert_eq!(o.untriggered, vec![spec]);
         // A fault whose layer the run never reaches, after the one that ends it.
-        let stall = FaultSpec {
-            kind: FaultKind::Stall,
-            layer: 1,
-        };
-        let limit = FaultSpec {
-            kind: FaultKind::Limit,
-            layer: 0,
-        };
+        let stall = fault(FaultKind::Stall, 1);
+        let limit = fault(FaultKind::Limit, 0);
         let (o, _) = run_collecting(&layered(), &[stall, limit]);
         assert_eq!(o.fault.unwrap().kind, FaultKind::Limit);
         assert_eq!(o.untriggered, vec![stall]);
@@ -436,21 +385,10 @@ mod tests {
     #[test]
     fn fault_specs_parse() {
         let f: FaultSpec = "shutter-stuck@12".parse().unwrap();
-        assert_eq!(
-            f,
-            FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 12
-            }
-        );
-        assert!("stall"
-            .parse::<FaultSpec>()
-            .unwrap_err()
-            .contains("KIND@LAYER"));
-        assert!("jam@1"
-            .parse::<FaultSpec>()
-            .unwrap_err()
-            .contains("unknown kind"));
+        assert_eq!(f, fault(FaultKind::ShutterStuck, 12));
+        let err = |s: &str| s.parse::<FaultSpec>().unwrap_err();
+        assert!(err("stall").contains("KIND@LAYER"));
+        assert!(err("jam@1").contains("unknown kind"));
         assert!("limit@-1".parse::<FaultSpec>().is_err());
     }
 }

@@ -422,56 +422,19 @@ mod tests {
         let mut p = profile();
         p.dmd.load_s = NonNegative::new(0.5).unwrap();
         p.stage.home_mm = 0.1;
-        let m = manifest(
-            p,
-            vec![
-                // At home already: waits the whole load.
-                layer(
-                    0,
-                    0.1,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![Step::Expose { s: 1.0 }],
-                    1.6,
-                ),
-                // 0.1 mm at 1 mm/s, 50 mm/s²: 0.04 + 0.08 = 0.12 s, then waits to 0.5 s.
-                layer(
-                    1,
-                    0.2,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![
-                        Step::Move {
-                            to_mm: 0.2,
-                            speed_mm_s: 1.0,
-                            accel_mm_s2: 50.0,
-                        },
-                        Step::Expose { s: 1.0 },
-                    ],
-                    1.6,
-                ),
-                // A 1 s wait hides the load.
-                layer(
-                    2,
-                    0.3,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![
-                        Step::Wait { s: 1.0 },
-                        Step::Move {
-                            to_mm: 0.3,
-                            speed_mm_s: 1.0,
-                            accel_mm_s2: 50.0,
-                        },
-                        Step::Expose { s: 1.0 },
-                    ],
-                    2.22,
-                ),
-            ],
-        );
+        let expose = Step::Expose { s: 1.0 };
+        let steps = [
+            // At home already: waits the whole load.
+            vec![expose],
+            // 0.1 mm at 1 mm/s, 50 mm/s²: 0.04 + 0.08 = 0.12 s, then waits to 0.5 s.
+            vec![move_to(0.2, 1.0, 50.0), expose],
+            // A 1 s wait hides the load.
+            vec![Step::Wait { s: 1.0 }, move_to(0.3, 1.0, 50.0), expose],
+        ];
+        let (z, times) = ([0.1, 0.2, 0.3], [1.6, 1.6, 2.22]);
+        let layers = steps.into_iter().enumerate();
+        let layers = layers.map(|(i, st)| layer(i, z[i], 0.1, Mode::Layered, 1.0, st, times[i]));
+        let m = manifest(p, layers.collect());
         let (o, c) = run_collecting(&m, &[]);
         assert!(close(o.layers[0].time_s, 0.5 + 0.05 + 1.0 + 0.05));
         assert!(close(o.layers[1].time_s, 0.5 + 0.05 + 1.0 + 0.05));
@@ -514,10 +477,7 @@ mod tests {
     fn a_layer_without_steps_does_not_end_a_sweep_run() {
         let mut m = sweeps(Mode::Continuous);
         m.layers[1].steps.clear();
-        m.layers[2].steps = vec![Step::Sweep {
-            to_mm: 0.3,
-            speed_mm_s: 0.05,
-        }];
+        m.layers[2].steps = vec![sweep_to(0.3, 0.05)];
         let (o, c) = run_collecting(&m, &[]);
         assert!(close(o.layers[0].time_s, 2.07));
         assert_eq!(o.layers[1].time_s, 0.0);
@@ -528,25 +488,9 @@ mod tests {
 
     #[test]
     fn positions_are_quantized_to_steps() {
-        let m = manifest(
-            profile(),
-            vec![layer(
-                0,
-                0.1234,
-                0.1234,
-                Mode::Layered,
-                1.0,
-                vec![
-                    Step::Move {
-                        to_mm: 0.1234,
-                        speed_mm_s: 1.0,
-                        accel_mm_s2: 50.0,
-                    },
-                    Step::Expose { s: 1.0 },
-                ],
-                1.2,
-            )],
-        );
+        let steps = vec![move_to(0.1234, 1.0, 50.0), Step::Expose { s: 1.0 }];
+        let l = layer(0, 0.1234, 0.1234, Mode::Layered, 1.0, steps, 1.2);
+        let m = manifest(profile(), vec![l]);
         let (o, c) = run_collecting(&m, &[]);
         // 0.1234 mm × 800 = 98.72 steps → 99 steps = 0.12375 mm.
         let mv = c.segs.iter().find(|s| s.kind == SegKind::Move).unwrap();
@@ -559,19 +503,10 @@ mod tests {
     #[test]
     fn invalid_steps_are_reported_and_skipped() {
         let mut steps = recoat_steps(0.5, 1.0, 2.0);
-        steps.insert(
-            0,
-            Step::Move {
-                to_mm: 3.0,
-                speed_mm_s: 0.0,
-                accel_mm_s2: 50.0,
-            },
-        );
+        steps.insert(0, move_to(3.0, 0.0, 50.0));
         steps.push(Step::Wait { s: -1.0 });
-        let m = manifest(
-            profile(),
-            vec![layer(0, 0.5, 0.5, Mode::Layered, 2.0, steps, 10.91)],
-        );
+        let l = layer(0, 0.5, 0.5, Mode::Layered, 2.0, steps, 10.91);
+        let m = manifest(profile(), vec![l]);
         let (o, _) = run_collecting(&m, &[]);
         assert_eq!(o.invalid_steps.len(), 2);
         assert!(o.invalid_steps[0].message.contains("layer 0 step 0"));
