@@ -50,38 +50,33 @@ impl<'a> Checker<'a> {
         }
     }
 
-    fn push(&mut self, layer: usize, time_s: f64, kind: Kind, message: String) {
-        self.violations.push(Violation {
-            layer: Some(layer),
-            time_s: Some(time_s),
-            kind,
-            message,
-            file: None,
-        });
+    fn push(&mut self, layer: Option<usize>, time_s: f64, kind: Kind, message: String) {
+        self.violations
+            .push(violation(layer, time_s, kind, message));
     }
 
     /// Ends the check: compares the job's simulated total with `totals.print_time_s`
     /// (skipped when the run was aborted) and returns the violations in time order.
     pub fn finish(mut self, total_s: f64, completed: bool) -> Vec<Violation> {
         let est = self.manifest.totals.print_time_s;
-        if completed {
-            let tol = ESTIMATE_TOLERANCE * est.abs() + self.quantization_s + 1e-9;
-            if (total_s - est).abs() > tol {
-                self.violations.push(Violation {
-                    layer: None,
-                    time_s: Some(total_s),
-                    kind: Kind::Estimate,
-                    message: format!(
-                        "simulated job time {} s differs from the manifest's totals.print_time_s {} s by {} % (tolerance 1 %)",
-                        fixed(total_s, 3),
-                        fixed(est, 3),
-                        signed(pct(total_s, est), 2)
-                    ),
-                    file: None,
-                });
-            }
+        let tol = ESTIMATE_TOLERANCE * est.abs() + self.quantization_s + 1e-9;
+        if completed && (total_s - est).abs() > tol {
+            let (total, diff) = (fixed(total_s, 3), signed(pct(total_s, est), 2));
+            let msg = format!("simulated job time {total} s differs from the manifest's totals.print_time_s {} s by {diff} % (tolerance 1 %)", fixed(est, 3));
+            self.push(None, total_s, Kind::Estimate, msg);
         }
         self.violations
+    }
+}
+
+/// A violation of `kind` found at `time_s` in `layer`.
+fn violation(layer: Option<usize>, time_s: f64, kind: Kind, message: String) -> Violation {
+    Violation {
+        layer,
+        time_s: Some(time_s),
+        kind,
+        message,
+        file: None,
     }
 }
 
@@ -103,61 +98,42 @@ impl Sink for Checker<'_> {
         let Some(layer) = self.manifest.layers.get(s.layer) else {
             return;
         };
-        let i = s.layer;
+        let (i, t, what) = (s.layer, s.t0, s.kind.name());
+        let mut push = |kind, msg| self.violations.push(violation(Some(i), t, kind, msg));
         let moving = s.motion != Motion::Still && s.from_mm != s.to_mm;
+        let (from, to) = (fixed(s.from_mm, 4), fixed(s.to_mm, 4));
         if s.light {
-            match s.kind {
-                SegKind::Expose | SegKind::Sweep | SegKind::StuckOpen => {}
-                k => self.push(
-                    i,
-                    s.t0,
+            let exposing = matches!(
+                s.kind,
+                SegKind::Expose | SegKind::Sweep | SegKind::StuckOpen
+            );
+            if !exposing {
+                push(
                     Kind::LightDuringMove,
-                    format!("light on during a {} of layer {i}", k.name()),
-                ),
+                    format!("light on during a {what} of layer {i}"),
+                );
             }
             if moving && layer.mode == Mode::Layered {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::LightDuringMove,
-                    format!(
-                        "light on while the stage moves from {} to {} mm in layer {i}, which is planned as layered",
-                        fixed(s.from_mm, 4),
-                        fixed(s.to_mm, 4)
-                    ),
-                );
+                let msg = format!("light on while the stage moves from {from} to {to} mm in layer {i}, which is planned as layered");
+                push(Kind::LightDuringMove, msg);
             }
-            if s.t0 < s.mask_ready_s && s.duration() > 0.0 {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::Mask,
-                    format!(
-                        "light on at {} s before layer {i}'s mask is on the DMD",
-                        fixed(s.t0, 3)
-                    ),
+            if t < s.mask_ready_s && s.duration() > 0.0 {
+                let msg = format!(
+                    "light on at {} s before layer {i}'s mask is on the DMD",
+                    fixed(t, 3)
                 );
+                push(Kind::Mask, msg);
             }
         }
-        if moving || s.kind == SegKind::Home {
-            let (lo, hi) = (self.machine.travel_min_mm, self.machine.travel_max_mm);
-            let eps = 1e-9;
-            let out = |p: f64| p < lo - eps || p > hi + eps;
-            if out(s.from_mm) || out(s.to_mm) {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::Travel,
-                    format!(
-                        "layer {i}: {} from {} to {} mm leaves the stage travel [{}, {}] mm",
-                        s.kind.name(),
-                        fixed(s.from_mm, 4),
-                        fixed(s.to_mm, 4),
-                        number(lo),
-                        number(hi)
-                    ),
-                );
-            }
+        let m = self.machine;
+        let (lo, hi) = (m.travel_min_mm, m.travel_max_mm);
+        let out = |p: f64| p < lo - 1e-9 || p > hi + 1e-9;
+        if (moving || s.kind == SegKind::Home) && (out(s.from_mm) || out(s.to_mm)) {
+            let (lo, hi) = (number(lo), number(hi));
+            let msg = format!(
+                "layer {i}: {what} from {from} to {to} mm leaves the stage travel [{lo}, {hi}] mm"
+            );
+            push(Kind::Travel, msg);
         }
         let (speed, accel) = match s.motion {
             Motion::Still => (0.0, 0.0),
@@ -168,50 +144,23 @@ impl Sink for Checker<'_> {
                 ..
             } => (speed_mm_s, accel_mm_s2),
         };
-        if moving {
-            let vmax = self.machine.max_speed_mm_s;
-            if speed > vmax * (1.0 + LIMIT_SLACK) {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::Speed,
-                    format!(
-                        "layer {i}: {} at {} mm/s exceeds the stage's max_speed_mm_s {}",
-                        s.kind.name(),
-                        number(speed),
-                        number(vmax)
-                    ),
-                );
-            }
-            let amax = self.machine.max_accel_mm_s2;
-            if accel > amax * (1.0 + LIMIT_SLACK) {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::Accel,
-                    format!(
-                        "layer {i}: {} at {} mm/s² exceeds the stage's max_accel_mm_s2 {}",
-                        s.kind.name(),
-                        number(accel),
-                        number(amax)
-                    ),
-                );
-            }
+        let (vmax, amax) = (m.max_speed_mm_s, m.max_accel_mm_s2);
+        if moving && speed > vmax * (1.0 + LIMIT_SLACK) {
+            let (v, max) = (number(speed), number(vmax));
+            let msg =
+                format!("layer {i}: {what} at {v} mm/s exceeds the stage's max_speed_mm_s {max}");
+            push(Kind::Speed, msg);
         }
-        if s.kind == SegKind::Expose {
-            let z = layer.z_mm;
-            if (s.from_mm - z).abs() > self.machine.half_step_mm() + 1e-9 {
-                self.push(
-                    i,
-                    s.t0,
-                    Kind::Position,
-                    format!(
-                        "layer {i} exposed with the stage at {} mm, its z_mm is {}",
-                        fixed(s.from_mm, 4),
-                        number(z)
-                    ),
-                );
-            }
+        if moving && accel > amax * (1.0 + LIMIT_SLACK) {
+            let (a, max) = (number(accel), number(amax));
+            let msg =
+                format!("layer {i}: {what} at {a} mm/s² exceeds the stage's max_accel_mm_s2 {max}");
+            push(Kind::Accel, msg);
+        }
+        if s.kind == SegKind::Expose && (s.from_mm - layer.z_mm).abs() > m.half_step_mm() + 1e-9 {
+            let z = number(layer.z_mm);
+            let msg = format!("layer {i} exposed with the stage at {from} mm, its z_mm is {z}");
+            push(Kind::Position, msg);
         }
     }
 
@@ -219,19 +168,13 @@ impl Sink for Checker<'_> {
         let Some(layer) = self.manifest.layers.get(r.index) else {
             return;
         };
-        let i = r.index;
-        let expected = self.prev_z + layer.thickness_mm;
+        let (i, at) = (r.index, Some(r.index));
+        let (z, expected) = (number(layer.z_mm), self.prev_z + layer.thickness_mm);
         if (layer.z_mm - expected).abs() > 1e-6 {
-            self.push(
-                i,
-                r.start_s,
-                Kind::Position,
-                format!(
-                    "layer {i}: z_mm {} but the layers' thicknesses put its top at {} mm",
-                    number(layer.z_mm),
-                    fixed(expected, 6)
-                ),
-            );
+            let top = fixed(expected, 6);
+            let msg =
+                format!("layer {i}: z_mm {z} but the layers' thicknesses put its top at {top} mm");
+            self.push(at, r.start_s, Kind::Position, msg);
         }
         self.prev_z = layer.z_mm;
         if !r.completed {
@@ -240,47 +183,28 @@ impl Sink for Checker<'_> {
         let end = r.start_s + r.time_s;
         if let Some(e) = r.last_sweep_end_mm {
             if (e - layer.z_mm).abs() > self.machine.half_step_mm() + 1e-9 {
-                self.push(
-                    i,
-                    end,
-                    Kind::Position,
-                    format!(
-                        "layer {i}'s sweep ends at {} mm, its z_mm is {}",
-                        fixed(e, 4),
-                        number(layer.z_mm)
-                    ),
+                let msg = format!(
+                    "layer {i}'s sweep ends at {} mm, its z_mm is {z}",
+                    fixed(e, 4)
                 );
+                self.push(at, end, Kind::Position, msg);
             }
         }
         let want = layer.exposure_s;
         let tol = DOSE_TOLERANCE * want.abs() + r.dose_quantization_s + 1e-9;
         if (r.light_s - want).abs() > tol {
-            self.push(
-                i,
-                end,
-                Kind::Dose,
-                format!(
-                    "layer {i} received {} s of light, its exposure_s is {}",
-                    fixed(r.light_s, 6),
-                    number(want)
-                ),
-            );
+            let (light, want) = (fixed(r.light_s, 6), number(want));
+            let msg = format!("layer {i} received {light} s of light, its exposure_s is {want}");
+            self.push(at, end, Kind::Dose, msg);
         }
         self.quantization_s += r.quantization_s;
         let est = layer.time_s;
         let tol = ESTIMATE_TOLERANCE * est.abs() + r.quantization_s + 1e-9;
         if (r.time_s - est).abs() > tol {
-            self.push(
-                i,
-                end,
-                Kind::Estimate,
-                format!(
-                    "layer {i} takes {} s, the manifest's time_s is {} s ({} %, tolerance 1 %)",
-                    fixed(r.time_s, 3),
-                    fixed(est, 3),
-                    signed(pct(r.time_s, est), 2)
-                ),
-            );
+            let (took, diff) = (fixed(r.time_s, 3), signed(pct(r.time_s, est), 2));
+            let est = fixed(est, 3);
+            let msg = format!("layer {i} takes {took} s, the manifest's time_s is {est} s ({diff} %, tolerance 1 %)");
+            self.push(at, end, Kind::Estimate, msg);
         }
     }
 }
