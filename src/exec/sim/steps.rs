@@ -157,33 +157,13 @@ impl Simulation<'_, '_, '_> {
             return false;
         }
         for (k, step) in steps.iter().enumerate() {
-            if self.run_open && !matches!(step, Step::Sweep { .. }) {
-                let c = self.still_segment(
-                    SegKind::Close,
-                    Some(k),
-                    self.machine.close_s,
-                    ShutterState::Closing,
-                );
-                self.run_open = false;
-                if !self.emit(c) {
-                    return false;
-                }
-            }
-            if !self.step(k, step) {
+            let ends_run = self.run_open && !matches!(step, Step::Sweep { .. });
+            if (ends_run && !self.end_sweep_run(Some(k))) || !self.step(k, step) {
                 return false;
             }
         }
-        if self.run_open && !next_sweeps {
-            let c = self.still_segment(
-                SegKind::Close,
-                None,
-                self.machine.close_s,
-                ShutterState::Closing,
-            );
-            self.run_open = false;
-            if !self.emit(c) {
-                return false;
-            }
+        if self.run_open && !next_sweeps && !self.end_sweep_run(None) {
+            return false;
         }
         if let Some(tf) = self.mask_load_fault_s {
             // The steps ended before the DMD reported the failed load.
@@ -201,6 +181,15 @@ impl Simulation<'_, '_, '_> {
         self.record.completed = true;
         self.finish_layer();
         true
+    }
+
+    /// Closes the shutter a sweep run kept open (before step `step`, or at the layer's
+    /// end); false if a fault ended the run.
+    fn end_sweep_run(&mut self, step: Option<usize>) -> bool {
+        let m = self.machine;
+        let c = self.still_segment(SegKind::Close, step, m.close_s, ShutterState::Closing);
+        self.run_open = false;
+        self.emit(c)
     }
 
     /// Hands the current layer's record to every sink and keeps it.
