@@ -128,37 +128,23 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
 /// The summary for people.
 pub fn render_human(s: &Summary) -> String {
     let mut o = String::new();
-    let _ = writeln!(
-        o,
-        "{}{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
-        s.bundle,
-        if s.format == "dmdjob" {
-            String::new()
-        } else {
-            format!(" ({})", s.format)
-        },
-        s.layers,
-        s.layer_height_mm,
-        s.height_mm,
-        s.source,
-        s.profile,
-        if s.projectors > 1 {
-            format!(" ({} projectors)", s.projectors)
-        } else {
-            String::new()
-        }
-    );
-    let _ = writeln!(
-        o,
-        "estimated print time {} ({:.1} s), exposure {:.1} s, resin {:.2} ml{}",
-        hms(s.print_time_s),
-        s.print_time_s,
-        s.exposure_s,
-        s.resin_volume_ml,
-        s.continuous_layers.map_or(String::new(), |c| format!(
-            ", {c} layers printed continuously"
-        ))
-    );
+    let format = if s.format == "dmdjob" {
+        String::new()
+    } else {
+        format!(" ({})", s.format)
+    };
+    let projectors = match s.projectors {
+        0 | 1 => String::new(),
+        k => format!(" ({k} projectors)"),
+    };
+    let (n, h, tall) = (s.layers, s.layer_height_mm, s.height_mm);
+    let (source, profile) = (&s.source, &s.profile);
+    let _ = writeln!(o, "{}{format}: {n} layers of {h} mm, {tall:.2} mm tall; sliced from {source} for {profile}{projectors}", s.bundle);
+    let continuous = s.continuous_layers.map_or(String::new(), |c| {
+        format!(", {c} layers printed continuously")
+    });
+    let (t, exposure, resin) = (s.print_time_s, s.exposure_s, s.resin_volume_ml);
+    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, resin {resin:.2} ml{continuous}", hms(t));
     if s.warnings == 0 {
         let _ = writeln!(o, "warnings: none");
     } else {
