@@ -61,8 +61,7 @@ pub(super) struct Scratch(PathBuf);
 impl Scratch {
     /// A fresh directory for the test `name`.
     pub(super) fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("dmdsl-verify-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = crate::test_support::scratch("verify", name);
         std::fs::create_dir_all(dir.join("masks")).unwrap();
         Scratch(dir)
     }
