@@ -82,12 +82,13 @@ impl Simulation<'_, '_, '_> {
         }
     }
 
-    /// A segment of the current layer from now, `dur` long, with the stage still.
-    pub(super) fn still_segment(
+    /// A segment of the current layer from now, `dur` long, taking the stage to `to.0`
+    /// with motion `to.1`; light on while the shutter is open.
+    fn segment(
         &self,
-        kind: SegKind,
-        step: Option<usize>,
+        (kind, step): (SegKind, Option<usize>),
         dur: f64,
+        to: (f64, Motion),
         shutter: ShutterState,
     ) -> Segment {
         Segment {
@@ -97,12 +98,23 @@ impl Simulation<'_, '_, '_> {
             t0: self.t,
             t1: self.t + dur,
             from_mm: self.pos,
-            to_mm: self.pos,
-            motion: Motion::Still,
+            to_mm: to.0,
+            motion: to.1,
             shutter,
             light: shutter == ShutterState::Open,
             mask_ready_s: self.record.mask_ready_s,
         }
+    }
+
+    /// A segment of the current layer from now, `dur` long, with the stage still.
+    pub(super) fn still_segment(
+        &self,
+        kind: SegKind,
+        step: Option<usize>,
+        dur: f64,
+        shutter: ShutterState,
+    ) -> Segment {
+        self.segment((kind, step), dur, (self.pos, Motion::Still), shutter)
     }
 
     /// Homes the stage and simulates every layer, until the end or a fault.
@@ -261,23 +273,17 @@ impl Simulation<'_, '_, '_> {
         let exact_dur = move_time(to_mm - self.exact_mm, speed_mm_s, accel_mm_s2);
         self.record.quantization_s += (dur - exact_dur).abs();
         self.exact_mm = to_mm;
-        let seg = Segment {
-            kind: SegKind::Move,
-            layer: self.record.index,
-            step: Some(k),
-            t0: self.t,
-            t1: self.t + dur,
-            from_mm: self.pos,
-            to_mm: target,
-            motion: Motion::Trapezoid {
-                target_mm: target,
-                speed_mm_s,
-                accel_mm_s2,
-            },
-            shutter: ShutterState::Closed,
-            light: false,
-            mask_ready_s: self.record.mask_ready_s,
+        let motion = Motion::Trapezoid {
+            target_mm: target,
+            speed_mm_s,
+            accel_mm_s2,
         };
+        let seg = self.segment(
+            (SegKind::Move, Some(k)),
+            dur,
+            (target, motion),
+            ShutterState::Closed,
+        );
         self.emit(seg)
     }
 
@@ -349,21 +355,15 @@ impl Simulation<'_, '_, '_> {
         self.record.quantization_s += q;
         self.record.dose_quantization_s += q;
         self.exact_mm = to_mm;
-        let seg = Segment {
-            kind: SegKind::Sweep,
-            layer: self.record.index,
-            step: Some(k),
-            t0: self.t,
-            t1: self.t + dur,
-            from_mm: self.pos,
-            to_mm: target,
-            motion: Motion::Constant {
-                velocity_mm_s: speed_mm_s.copysign(dist),
-            },
-            shutter: ShutterState::Open,
-            light: true,
-            mask_ready_s: self.record.mask_ready_s,
+        let motion = Motion::Constant {
+            velocity_mm_s: speed_mm_s.copysign(dist),
         };
+        let seg = self.segment(
+            (SegKind::Sweep, Some(k)),
+            dur,
+            (target, motion),
+            ShutterState::Open,
+        );
         let ok = self.emit(seg);
         if ok {
             self.record.last_sweep_end_mm = Some(target);
