@@ -109,6 +109,7 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// profile (the one simulated), bad options, or a trace/plot file that cannot be written.
 /// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
+    use crate::import::Format as JobFormat;
     let t0 = Instant::now();
     let job = crate::import::open(path)?;
     let crate::import::Job {
@@ -128,11 +129,8 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
 
     let t1 = Instant::now();
     let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
-    let imported = !matches!(
-        format,
-        crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip
-    );
-    let verified = verify::verify_source(&*source, &manifest, machine, imported);
+    let native = matches!(format, JobFormat::Dmdjob | JobFormat::DmdjobZip);
+    let verified = verify::verify_source(&*source, &manifest, machine, !native);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
     // The cure from the masks, once every mask and gray map read as recorded (a
@@ -168,12 +166,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         simulate_s,
         cure_s,
     };
-    let estimate_source = match (&estimate, format) {
+    let estimate_source = match (&estimate, native) {
         (Some(e), _) => e.source.clone(),
-        (None, crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip) => {
-            "planner".into()
-        }
-        (None, _) => "import steps".into(),
+        (None, true) => "planner".into(),
+        (None, false) => "import steps".into(),
     };
     let mut report = report(
         (dir, format.name(), estimate_source),
@@ -311,16 +307,13 @@ fn simulate_into_sinks(
         t.finish()?;
     }
     if let (Some(p), Some(path)) = (plot, opts.plot.as_deref()) {
-        let title = format!(
-            "{}: stage position and light over time{}",
-            dir.file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            match &range {
-                Some(r) => format!(", layers {}–{}", r.start(), r.end()),
-                None => String::new(),
-            }
-        );
+        let name = dir
+            .file_name()
+            .map_or(String::new(), |s| s.to_string_lossy().into_owned());
+        let layers = range.map_or(String::new(), |r| {
+            format!(", layers {}–{}", r.start(), r.end())
+        });
+        let title = format!("{name}: stage position and light over time{layers}");
         let format = Format::from_path(path).map_err(Error::Usage)?;
         write_atomic(path, &p.render(&title).encode(format))?;
     }

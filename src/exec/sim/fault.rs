@@ -171,24 +171,16 @@ impl Simulation<'_, '_, '_> {
             seg.shutter = ShutterState::Open;
             seg.light = true;
             seg.t1 = seg.t0 + close_s + load_s;
-            self.send(&seg);
-            self.record.light_s += seg.duration();
+            self.send_counted(&seg);
             self.t = seg.t1;
-            let msg = format!(
-                "shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {} mm; layer {} got {:.3} s of extra light",
-                fixed(self.pos, 4),
-                self.record.index,
-                seg.duration()
-            );
+            let (at, i, extra) = (fixed(self.pos, 4), self.record.index, seg.duration());
+            let msg = format!("shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {at} mm; layer {i} got {extra:.3} s of extra light");
             self.abort(FaultKind::ShutterStuck, seg.t1, msg, false);
             return false;
         }
         match hit {
             None => {
-                self.send(&seg);
-                if seg.light {
-                    self.record.light_s += seg.duration();
-                }
+                self.send_counted(&seg);
                 self.t = seg.t1;
                 self.pos = seg.to_mm;
                 true
@@ -200,34 +192,34 @@ impl Simulation<'_, '_, '_> {
                 if started {
                     seg.to_mm = self.machine.quantize(seg.position_at(tf));
                     seg.t1 = tf;
-                    self.send(&seg);
-                    if seg.light {
-                        self.record.light_s += seg.duration();
-                    }
+                    self.send_counted(&seg);
                     self.pos = seg.to_mm;
                 }
                 self.t = tf;
                 let msg = match kind {
                     FaultKind::MaskLoad => self.mask_load_msg(),
                     FaultKind::Stall | FaultKind::Limit => {
-                        let what = if kind == FaultKind::Stall {
-                            "stage stalled"
-                        } else {
-                            "limit switch hit"
+                        let what = match kind {
+                            FaultKind::Stall => "stage stalled",
+                            _ => "limit switch hit",
                         };
-                        format!(
-                            "{what} at {} mm during the {} to {} mm (step {}); shutter closed, stage stopped",
-                            fixed(self.pos, 4),
-                            seg.kind.name(),
-                            fixed(target, 4),
-                            seg.step.unwrap_or(0)
-                        )
+                        let (at, to) = (fixed(self.pos, 4), fixed(target, 4));
+                        let (during, step) = (seg.kind.name(), seg.step.unwrap_or(0));
+                        format!("{what} at {at} mm during the {during} to {to} mm (step {step}); shutter closed, stage stopped")
                     }
                     FaultKind::ShutterStuck => unreachable!("handled above"),
                 };
                 self.abort(kind, tf, msg, was_open);
                 false
             }
+        }
+    }
+
+    /// Hands `seg` to the sinks and adds its light to the layer's.
+    fn send_counted(&mut self, seg: &Segment) {
+        self.send(seg);
+        if seg.light {
+            self.record.light_s += seg.duration();
         }
     }
 
@@ -238,15 +230,12 @@ impl Simulation<'_, '_, '_> {
             .iter()
             .map(|m| m.file.as_str())
             .collect();
-        format!(
-            "DMD failed to load {}; shutter kept closed, stage stopped at {} mm",
-            if files.is_empty() {
-                "the layer's mask".to_string()
-            } else {
-                files.join(", ")
-            },
-            fixed(self.pos, 4)
-        )
+        let masks = match files.len() {
+            0 => "the layer's mask".to_string(),
+            _ => files.join(", "),
+        };
+        let at = fixed(self.pos, 4);
+        format!("DMD failed to load {masks}; shutter kept closed, stage stopped at {at} mm")
     }
 
     /// Firmware reaction to a fault at time `tf`: close the shutter if it is (partly)
@@ -254,12 +243,8 @@ impl Simulation<'_, '_, '_> {
     pub(super) fn abort(&mut self, kind: FaultKind, tf: f64, message: String, shutter_open: bool) {
         self.t = tf;
         if kind != FaultKind::ShutterStuck && (self.run_open || shutter_open) {
-            let c = self.still_segment(
-                SegKind::Close,
-                None,
-                self.machine.close_s,
-                ShutterState::Closing,
-            );
+            let m = self.machine;
+            let c = self.still_segment(SegKind::Close, None, m.close_s, ShutterState::Closing);
             self.send(&c);
             self.t = c.t1;
         }

@@ -184,13 +184,11 @@ mod tests {
             .collect();
         // Rows 1 and 3 light columns 2 and 4.
         let lit = LitPixels::of_gray8(6, &data);
-        assert_eq!(
-            lit,
-            LitPixels {
-                count: 4,
-                bbox: Some([2, 1, 5, 4])
-            }
-        );
+        let px = |count, bbox| LitPixels {
+            count,
+            bbox: Some(bbox),
+        };
+        assert_eq!(lit, px(4, [2, 1, 5, 4]));
         assert_eq!(LitPixels::of_gray8(6, &[0; 24]), LitPixels::default());
         let mut p = small_profile().projector.remove(0);
         p.width_px = 6;
@@ -203,17 +201,7 @@ mod tests {
         p.mirror_y = true;
         // Rows 1..4 of 4 mirrored are 0..3.
         assert_eq!(lit.in_field(&p).bbox, Some([101, 10, 104, 13]));
-        let u = lit.union(LitPixels {
-            count: 1,
-            bbox: Some([0, 3, 1, 9]),
-        });
-        assert_eq!(
-            u,
-            LitPixels {
-                count: 5,
-                bbox: Some([0, 1, 5, 9])
-            }
-        );
+        assert_eq!(lit.union(px(1, [0, 3, 1, 9])), px(5, [0, 1, 5, 9]));
         assert_eq!(LitPixels::default().union(lit), lit);
     }
 }
