@@ -35,6 +35,7 @@ use super::{problem, LitPixels};
 use crate::bundle::{BundleSource, Layer, Manifest, MaskRef};
 use crate::exec::{Kind, Violation};
 use crate::profile::Profile;
+use crate::text::number;
 
 /// Lit pixels a section's masks may miss below half its area (coverage masks), px².
 const AREA_SLACK_PX: f64 = 4.0;
@@ -131,28 +132,15 @@ impl ContentRule {
         let files: Vec<&str> = masks.iter().map(|m| m.file.as_str()).collect();
         let shown = format!("{}", dir.shown(&files.join(", ")).display());
         let at = |msg: String| {
-            Some(problem(
-                Some(i),
-                Kind::MaskContent,
-                Some(file),
-                format!("{shown}: layer {i}: {msg}"),
-            ))
+            let message = format!("{shown}: layer {i}: {msg}");
+            Some(problem(Some(i), Kind::MaskContent, Some(file), message))
         };
-        let lit_text = |b: [u32; 4]| {
-            format!(
-                "columns {}..{}, rows {}..{}",
-                b[0],
-                b[2] - 1,
-                b[1],
-                b[3] - 1
-            )
-        };
-        if let (None, true, Some(b)) = (layer.bbox_mm, layer.area_mm2 <= 0.0, px.bbox) {
-            return at(format!(
-                "the layer has no section (bbox_mm null) but its masks light {} pixel(s) ({} of the field)",
-                px.count,
-                lit_text(b)
-            ));
+        let lit_text =
+            |[c0, r0, c1, r1]: [u32; 4]| format!("columns {c0}..{}, rows {r0}..{}", c1 - 1, r1 - 1);
+        let (count, area) = (px.count, layer.area_mm2);
+        if let (None, true, Some(b)) = (layer.bbox_mm, area <= 0.0, px.bbox) {
+            let lit = lit_text(b);
+            return at(format!("the layer has no section (bbox_mm null) but its masks light {count} pixel(s) ({lit} of the field)"));
         }
         let min = self.min_lit(layer);
         let Some(b) = px.bbox else {
@@ -160,8 +148,7 @@ impl ContentRule {
                 return None;
             }
             return at(format!(
-                "the section's area is {:.3} mm² but its masks light no pixel",
-                layer.area_mm2
+                "the section's area is {area:.3} mm² but its masks light no pixel"
             ));
         };
         let p = self.pixel_mm;
@@ -188,14 +175,9 @@ impl ContentRule {
                     (want[2].ceil() as u32).max(1),
                     (want[3].ceil() as u32).max(1),
                 ];
-                let [[x0, y0], [x1, y1]] = bb;
-                return at(format!(
-                    "its masks light {} of the field, outside the section \
-                     (bbox_mm [[{x0}, {y0}], [{x1}, {y1}]] covers {}; tolerance {:.1} px)",
-                    lit_text(b),
-                    lit_text(touched),
-                    self.tol_px,
-                ));
+                let [[x0, y0], [x1, y1]] = bb.map(|c| c.map(number));
+                let (lit, covers, tol) = (lit_text(b), lit_text(touched), self.tol_px);
+                return at(format!("its masks light {lit} of the field, outside the section (bbox_mm [[{x0}, {y0}], [{x1}, {y1}]] covers {covers}; tolerance {tol:.1} px)"));
             }
         }
         // The pixels wholly inside the largest inscribed circle are lit: the lit box is at
@@ -203,20 +185,12 @@ impl ContentRule {
         let inner = 2.0 * (self.inner_radius_px(layer) - 1e-3);
         let (w, h) = (got[2] - got[0], got[3] - got[1]);
         if w < inner || h < inner {
-            return at(format!(
-                "its masks light {} of the field ({w}x{h} px), less than the section's largest inscribed circle (max_fill_distance_mm {}) leaves lit ({inner:.1} px across)",
-                lit_text(b),
-                layer.max_fill_distance_mm,
-            ));
+            let (lit, r) = (lit_text(b), number(layer.max_fill_distance_mm));
+            return at(format!("its masks light {lit} of the field ({w}x{h} px), less than the section's largest inscribed circle (max_fill_distance_mm {r}) leaves lit ({inner:.1} px across)"));
         }
         if (px.count as f64) < min {
-            return at(format!(
-                "its masks light {} pixel(s) ({:.3} mm²), too few for the section's area {:.3} mm² (at least {:.0} expected)",
-                px.count,
-                px.count as f64 * p * p,
-                layer.area_mm2,
-                min.ceil()
-            ));
+            let (lit_mm2, least) = (count as f64 * p * p, min.ceil());
+            return at(format!("its masks light {count} pixel(s) ({lit_mm2:.3} mm²), too few for the section's area {area:.3} mm² (at least {least:.0} expected)"));
         }
         None
     }

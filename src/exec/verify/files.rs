@@ -113,92 +113,83 @@ pub(super) fn check_png(
     noun: &str,
     buf: &mut Vec<u8>,
 ) -> PngCheck {
-    let path = dir.shown(rel);
-    let shown = path.display();
-    let mut out = PngCheck {
-        bytes: 0,
-        faults: Vec::new(),
-        lit: None,
-    };
+    let shown = dir.shown(rel);
+    let mut faults = Vec::new();
+    let mut fault =
+        |f, msg: String| faults.push((f, format!("{}: {what}: {msg}", shown.display())));
     let bytes = match dir.read(rel) {
         Ok(b) => b,
         Err(e) => {
-            let msg = if e.kind() == std::io::ErrorKind::NotFound {
-                format!("{shown}: {what}: {noun} file is missing")
-            } else {
-                format!("{shown}: {what}: cannot read {noun}: {e}")
+            let msg = match e.kind() {
+                std::io::ErrorKind::NotFound => format!("{noun} file is missing"),
+                _ => format!("cannot read {noun}: {e}"),
             };
-            out.faults.push((FileFault::Missing, msg));
-            return out;
+            fault(FileFault::Missing, msg);
+            return PngCheck {
+                bytes: 0,
+                faults,
+                lit: None,
+            };
         }
     };
-    out.bytes = bytes.len() as u64;
+    let n = bytes.len() as u64;
     let sha = sha256_hex(&bytes);
     if !sha.eq_ignore_ascii_case(sha256) {
-        out.faults.push((
+        let (want, got) = (short(sha256), short(&sha));
+        fault(
             FileFault::Checksum,
-            format!(
-                "{shown}: {what}: SHA-256 mismatch (manifest {}, file {})",
-                short(sha256),
-                short(&sha)
-            ),
-        ));
+            format!("SHA-256 mismatch (manifest {want}, file {got})"),
+        );
     }
     let dec = match PngDecoder::new(std::io::Cursor::new(&bytes)) {
         Ok(d) => d,
         Err(e) => {
-            out.faults.push((
-                FileFault::Decode,
-                format!("{shown}: {what}: not a decodable PNG: {e}"),
-            ));
-            return out;
+            fault(FileFault::Decode, format!("not a decodable PNG: {e}"));
+            return PngCheck {
+                bytes: n,
+                faults,
+                lit: None,
+            };
         }
     };
-    let (w, h) = dec.dimensions();
-    let ct = dec.color_type();
-    let mut format_ok = true;
+    let ((w, h), ct, size) = (
+        dec.dimensions(),
+        dec.color_type(),
+        (proj.width_px, proj.height_px),
+    );
     if ct != ColorType::L8 {
-        format_ok = false;
-        out.faults.push((
+        fault(
             FileFault::Format,
-            format!("{shown}: {what}: PNG is {ct:?}, expected 8-bit grayscale (L8)"),
-        ));
+            format!("PNG is {ct:?}, expected 8-bit grayscale (L8)"),
+        );
     }
-    if (w, h) != (proj.width_px, proj.height_px) {
-        format_ok = false;
-        out.faults.push((
-            FileFault::Format,
-            format!(
-                "{shown}: {what}: PNG is {w}x{h}, projector {} is {}x{}",
-                proj.name, proj.width_px, proj.height_px
-            ),
-        ));
+    if (w, h) != size {
+        let msg = format!(
+            "PNG is {w}x{h}, projector {} is {}x{}",
+            proj.name, size.0, size.1
+        );
+        fault(FileFault::Format, msg);
     }
-    let most = crate::import::DEFLATE_MAX_RATIO.saturating_mul(out.bytes);
-    if format_ok && dec.total_bytes() > most {
+    let format_ok = ct == ColorType::L8 && (w, h) == size;
+    let mut lit = None;
+    if format_ok && dec.total_bytes() > crate::import::DEFLATE_MAX_RATIO.saturating_mul(n) {
         // A header of the projector's size on a file too small to hold its pixels (a
         // large imported display): refused before anything is allocated for them.
-        out.faults.push((
-            FileFault::Decode,
-            format!(
-                "{shown}: {what}: PNG declares {w}x{h} pixels, more than its {} bytes can hold",
-                out.bytes
-            ),
-        ));
-        return out;
-    }
-    if format_ok {
+        let msg = format!("PNG declares {w}x{h} pixels, more than its {n} bytes can hold");
+        fault(FileFault::Decode, msg);
+    } else if format_ok {
         // Decode the pixels: a PNG whose header is fine may still be truncated or corrupt.
         buf.resize(dec.total_bytes() as usize, 0);
         match dec.read_image(buf) {
-            Ok(()) => out.lit = Some(LitPixels::of_gray8(w, buf)),
-            Err(e) => out.faults.push((
-                FileFault::Decode,
-                format!("{shown}: {what}: PNG does not decode: {e}"),
-            )),
+            Ok(()) => lit = Some(LitPixels::of_gray8(w, buf)),
+            Err(e) => fault(FileFault::Decode, format!("PNG does not decode: {e}")),
         }
     }
-    out
+    PngCheck {
+        bytes: n,
+        faults,
+        lit,
+    }
 }
 
 fn short(hex: &str) -> &str {
