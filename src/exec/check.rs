@@ -1,18 +1,8 @@
 //! Invariants checked on the simulated timeline.
 //!
 //! The [`Checker`] is a [`Sink`]: it sees every segment the simulator produces and every
-//! finished layer, and records a [`Violation`] whenever
-//! * light reaches the resin outside an `expose` or `sweep` (`light-during-move`), or
-//!   while the stage moves in a layer planned as `layered`;
-//! * the stage leaves its travel (`travel`);
-//! * a move or sweep commands more speed or acceleration than the stage has (`speed`,
-//!   `accel`);
-//! * a layer is exposed somewhere else than its `z_mm` (`position`; sweeps: the layer's
-//!   last sweep must end at `z_mm`), or `z_mm` does not follow from the thicknesses;
-//! * the light time a layer receives differs from its `exposure_s` (`dose`);
-//! * light is on before the layer's own mask is on the DMD (`mask`);
-//! * the simulated duration of a layer (or of the job) differs from the manifest's
-//!   estimate by more than 1 % (`estimate`).
+//! finished layer, and records a [`Violation`] for every broken invariant, of the kinds
+//! `light-during-move` to `estimate` of [`Kind`] (each variant says what is checked).
 
 use super::sim::{LayerRecord, Machine, Motion, SegKind, Segment, Sink};
 use super::{Kind, Violation};
