@@ -157,34 +157,15 @@ pub fn render_human(s: &Summary) -> String {
     }
     if let Some(e) = &s.extremes {
         let rows = [
-            (
-                "largest area",
-                format!("{:.2} mm²", e.area_mm2.value),
-                e.area_mm2.layer,
-            ),
-            (
-                "longest exposure",
-                format!("{:.2} s", e.exposure_s.value),
-                e.exposure_s.layer,
-            ),
-            (
-                "largest fill distance",
-                format!("{:.3} mm", e.max_fill_distance_mm.value),
-                e.max_fill_distance_mm.layer,
-            ),
-            (
-                "most islands",
-                format!("{}", e.islands.value),
-                e.islands.layer,
-            ),
-            (
-                "longest layer time",
-                format!("{:.2} s", e.time_s.value),
-                e.time_s.layer,
-            ),
+            ("largest area", &e.area_mm2, 2, " mm²"),
+            ("longest exposure", &e.exposure_s, 2, " s"),
+            ("largest fill distance", &e.max_fill_distance_mm, 3, " mm"),
+            ("most islands", &e.islands, 0, ""),
+            ("longest layer time", &e.time_s, 2, " s"),
         ];
-        for (what, value, layer) in rows {
-            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {layer}");
+        for (what, x, decimals, unit) in rows {
+            let value = format!("{:.decimals$}{unit}", x.value);
+            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {}", x.layer);
         }
     }
     for p in &s.pictures {
