@@ -57,6 +57,7 @@ pub mod slice;
 mod table;
 #[cfg(test)]
 mod test_support;
+pub mod text;
 pub mod units;
 pub mod warning;
 

@@ -1,12 +1,12 @@
 //! `dmdsl slice`: parts into job bundles, one after another.
 
 use clap::Args;
-use dmdsl::exec::report::hms;
 use dmdsl::geometry::distortion::DistortionChoice;
 use dmdsl::job::{self, PlacementMode, SliceOptions, SliceSummary, Transform};
 use dmdsl::profile::{self, Override, Profile};
+use dmdsl::text::hms;
+use dmdsl::text::{count, plural};
 use dmdsl::units::Positive;
-use dmdsl::warning::count;
 use serde::Serialize;
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -407,9 +407,9 @@ fn slice_each(
                     let left = parts.len() - i - 1;
                     if left > 0 {
                         eprintln!(
-                            "dmdsl: the {left} {} after it {} not sliced",
-                            if left == 1 { "part" } else { "parts" },
-                            if left == 1 { "was" } else { "were" }
+                            "dmdsl: the {} after it {} not sliced",
+                            count(left as u64, "part", "parts"),
+                            plural(left as u64, "was", "were")
                         );
                     }
                     return Ok(130);

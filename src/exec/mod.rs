@@ -30,6 +30,7 @@ pub mod report;
 pub mod sim;
 pub mod trace;
 pub mod verify;
+mod violation;
 
 pub mod testutil;
 
@@ -39,29 +40,12 @@ use crate::output::write_atomic;
 use crate::plot::Format;
 use crate::profile::Profile;
 use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
-use serde::Serialize;
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// One thing wrong with a job: a verification problem, a broken invariant or a fault.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Violation {
-    /// Layer concerned (`None`: the whole job).
-    pub layer: Option<usize>,
-    /// Simulated time, s (for verification problems: when the layer starts).
-    #[serde(serialize_with = "report::six_opt")]
-    pub time_s: Option<f64>,
-    /// Machine-readable kind, e.g. `travel`, `mask-checksum`, `stall` (see docs/EXECUTOR.md).
-    pub kind: &'static str,
-    /// One line for people; names the file for mask problems.
-    pub message: String,
-    /// File concerned, relative to the bundle.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub file: Option<String>,
-}
+pub use violation::{Kind, Violation};
 
 /// What to do besides verifying and simulating.
 #[derive(Debug, Clone, Default)]
@@ -125,6 +109,7 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// profile (the one simulated), bad options, or a trace/plot file that cannot be written.
 /// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
+    use crate::import::Format as JobFormat;
     let t0 = Instant::now();
     let job = crate::import::open(path)?;
     let crate::import::Job {
@@ -144,17 +129,17 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
 
     let t1 = Instant::now();
     let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
-    let imported = !matches!(
-        format,
-        crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip
-    );
-    let verified = verify::verify_source(&*source, &manifest, machine, imported);
+    let native = matches!(format, JobFormat::Dmdjob | JobFormat::DmdjobZip);
+    let verified = verify::verify_source(&*source, &manifest, machine, !native);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
     // The cure from the masks, once every mask and gray map read as recorded (a
     // `mask-content` problem does not stop it), under the job's own machine (its
     // exposure, calibration and projector).
-    let unreadable = verified.problems.iter().any(|p| p.kind != "mask-content");
+    let unreadable = verified
+        .problems
+        .iter()
+        .any(|p| p.kind != Kind::MaskContent);
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, &*source, model)?), None),
         Some(_) => (
@@ -181,12 +166,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         simulate_s,
         cure_s,
     };
-    let estimate_source = match (&estimate, format) {
+    let estimate_source = match (&estimate, native) {
         (Some(e), _) => e.source.clone(),
-        (None, crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip) => {
-            "planner".into()
-        }
-        (None, _) => "import steps".into(),
+        (None, true) => "planner".into(),
+        (None, false) => "import steps".into(),
     };
     let mut report = report(
         (dir, format.name(), estimate_source),
@@ -241,10 +224,10 @@ fn check_options(
     for f in &opts.faults {
         if f.layer >= n {
             return Err(Error::Usage(format!(
-                "--fault {}@{}: the job has {n} {} (0..{})",
+                "--fault {}@{}: the job has {} (0..{})",
                 f.kind,
                 f.layer,
-                report::plural(n, "layer", "layers"),
+                crate::text::count(n as u64, "layer", "layers"),
                 n.saturating_sub(1)
             )));
         }
@@ -310,7 +293,7 @@ fn simulate_into_sinks(
         timeline.push(Violation {
             layer: Some(f.layer),
             time_s: Some(f.time_s),
-            kind: f.kind,
+            kind: f.kind.into(),
             message: f.message.clone(),
             file: None,
         });
@@ -324,16 +307,13 @@ fn simulate_into_sinks(
         t.finish()?;
     }
     if let (Some(p), Some(path)) = (plot, opts.plot.as_deref()) {
-        let title = format!(
-            "{}: stage position and light over time{}",
-            dir.file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            match &range {
-                Some(r) => format!(", layers {}–{}", r.start(), r.end()),
-                None => String::new(),
-            }
-        );
+        let name = dir
+            .file_name()
+            .map_or(String::new(), |s| s.to_string_lossy().into_owned());
+        let layers = range.map_or(String::new(), |r| {
+            format!(", layers {}–{}", r.start(), r.end())
+        });
+        let title = format!("{name}: stage position and light over time{layers}");
         let format = Format::from_path(path).map_err(Error::Usage)?;
         write_atomic(path, &p.render(&title).encode(format))?;
     }
@@ -375,7 +355,7 @@ fn report(
     let Simulated { outcome, stats, .. } = simulated;
     let mut counts = BTreeMap::new();
     for v in &violations {
-        *counts.entry(v.kind).or_insert(0) += 1;
+        *counts.entry(v.kind.name()).or_insert(0) += 1;
     }
     let per_layer = outcome
         .layers

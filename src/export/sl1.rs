@@ -22,7 +22,8 @@ use crate::archive::write::{Method, ZipOut};
 use crate::bundle::BundleSource;
 use crate::bundle::{Manifest, Mode};
 use crate::error::{Error, Result};
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 

@@ -510,11 +510,10 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
             .saturating_add(exposures.len() as u64);
         if total > MAX_LAYERS {
             return Err(r.bad(format!(
-                "{}: {} duplications of {} {} make more than the {MAX_LAYERS} layer records a job may have",
+                "{}: {} duplications of {} make more than the {MAX_LAYERS} layer records a job may have",
                 s.at,
                 s.copies,
-                s.images.len(),
-                if s.images.len() == 1 { "image" } else { "images" }
+                crate::text::count(s.images.len() as u64, "image", "images")
             )));
         }
         for _ in 0..s.copies {

@@ -12,7 +12,8 @@ use crate::optics::Compensator;
 use crate::profile::Profile;
 use crate::raster::{Mask, Rasterizer, Scratch};
 use crate::slice::Contour;
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use std::sync::Mutex;
 
 /// What a job asks of the cure model.

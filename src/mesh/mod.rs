@@ -18,7 +18,8 @@ pub use crate::input::MESH_MAX_BYTES;
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};

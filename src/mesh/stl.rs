@@ -2,7 +2,7 @@
 
 use super::Soup;
 use crate::error::{Error, Result};
-use crate::warning::count;
+use crate::text::count;
 use std::path::Path;
 
 /// Parses an STL file. Binary when the size matches the header's triangle count

@@ -21,8 +21,9 @@ use super::{Calibration, FitSummary, Units};
 use crate::error::{Error, Result};
 use crate::polyfit::LeastSquares;
 use crate::table::{self, cell_error, Columns};
+use crate::text::count;
 use crate::units::{NonNegative, Positive};
-use crate::warning::{count, Warning};
+use crate::warning::Warning;
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -483,7 +484,7 @@ impl<'a> Setup<'a> {
                 return Err(input_error(format!(
                     "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
                     vals.len(),
-                    crate::warning::plural(vals.len() as u64, "value", "values")
+                    crate::text::plural(vals.len() as u64, "value", "values")
                 )));
             }
         }

@@ -47,7 +47,8 @@ use crate::bundle::Optics;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
 use crate::raster::Mask;
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

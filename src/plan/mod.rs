@@ -30,7 +30,8 @@ pub use analysis::LayerAnalysis;
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
 use crate::round;
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 
 /// What the planner needs to know about one layer.
 #[derive(Debug, Clone, PartialEq)]

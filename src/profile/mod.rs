@@ -380,7 +380,7 @@ impl Profile {
             return Err(format!(
                 "stage.steps_per_mm = {:?} gives steps of {} mm, coarser than the layer height ({:?} mm)",
                 s.steps_per_mm.get(),
-                crate::round::for_message(step_mm),
+                crate::text::number(step_mm),
                 self.slicing.layer_height_mm.get()
             ));
         }

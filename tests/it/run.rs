@@ -43,6 +43,44 @@ fn kinds(r: &Value) -> Vec<String> {
         .collect()
 }
 
+/// The violation kinds (`dmdsl::exec::Kind`) are exactly the enums of the report's schema
+/// (faults: the injected ones) and the table of `docs/EXECUTOR.md`, in their order and
+/// with their meanings.
+#[test]
+fn violation_kinds_are_the_schemas_and_the_docs() {
+    use dmdsl::exec::{sim::FaultKind, Kind};
+    let names = |ks: &[Kind]| Value::from(ks.iter().map(|k| k.name()).collect::<Vec<_>>());
+    let text = |f: &str| std::fs::read_to_string(root().join(f)).unwrap();
+    let schema: Value = serde_json::from_str(&text("docs/schemas/run-report.schema.json")).unwrap();
+    let p = &schema["properties"];
+    assert_eq!(
+        p["violations"]["items"]["properties"]["kind"]["enum"],
+        names(Kind::ALL)
+    );
+    let faults = FaultKind::ALL.map(Kind::from);
+    assert_eq!(
+        p["fault"]["oneOf"][1]["properties"]["kind"]["enum"],
+        names(&faults)
+    );
+    let doc = text("docs/EXECUTOR.md");
+    let section = doc
+        .split("\n## Invariants and violation kinds\n")
+        .nth(1)
+        .unwrap();
+    let section = section.split("\n## ").next().unwrap();
+    let rows: Vec<&str> = section.lines().filter(|l| l.starts_with("| `")).collect();
+    let want: Vec<String> = Kind::ALL
+        .iter()
+        .map(|k| format!("| `{}` | {} |", k.name(), k.meaning()))
+        .collect();
+    assert_eq!(
+        rows,
+        want,
+        "docs/EXECUTOR.md's table must be:\n{}",
+        want.join("\n")
+    );
+}
+
 #[test]
 fn fresh_bundle_replays_cleanly() {
     let (dir, b) = sliced("clean");
