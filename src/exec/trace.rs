@@ -167,7 +167,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("t.csv");
-        let mach = Machine::from_profile(&m.machine);
+        let mach = Machine::of(&m.machine);
         let mut all = TraceWriter::create(&path, None, mach).unwrap();
         let part_path = dir.join("l1.csv");
         let mut part = TraceWriter::create(&part_path, Some(1..=1), mach).unwrap();
@@ -220,8 +220,12 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("dmdsl-trace2-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let w = TraceWriter::create(&dir.join("t.csv"), None, Machine::from_profile(&profile()))
-            .unwrap();
+        let w = TraceWriter::create(
+            &dir.join("t.csv"),
+            None,
+            Machine::of(&crate::bundle::Machine::of(&profile())),
+        )
+        .unwrap();
         drop(w);
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
         let _ = std::fs::remove_dir_all(&dir);

@@ -39,8 +39,8 @@
 //! feature's top).
 
 use super::Violation;
+use crate::bundle::machine::{Machine, Projector};
 use crate::bundle::{sha256_hex, BundleSource, DirSource, Layer, Manifest, MaskRef, MANIFEST};
-use crate::profile::{Profile, Projector};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
 use rayon::prelude::*;
@@ -225,7 +225,7 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
 }
 
 /// [`verify_source`] for the bundle directory `dir`.
-pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verification {
+pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Machine) -> Verification {
     verify_source(&DirSource::new(dir), manifest, machine, false)
 }
 
@@ -241,7 +241,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
 pub fn verify_source(
     dir: &dyn BundleSource,
     manifest: &Manifest,
-    machine: &Profile,
+    machine: &Machine,
     shared_masks: bool,
 ) -> Verification {
     let mut problems = Vec::new();
@@ -425,7 +425,7 @@ pub fn verify_source(
 fn check_gray_maps(
     dir: &dyn BundleSource,
     manifest: &Manifest,
-    machine: &Profile,
+    machine: &Machine,
     bytes: &mut u64,
     problems: &mut Vec<Violation>,
 ) -> usize {
@@ -650,7 +650,7 @@ struct ContentRule {
 
 impl ContentRule {
     /// The rule for `manifest`'s masks shown by `machine`.
-    fn of(manifest: &Manifest, machine: &Profile) -> ContentRule {
+    fn of(manifest: &Manifest, machine: &Machine) -> ContentRule {
         let field = machine.field();
         let p = field.pixel_mm;
         let warp_mm = manifest
@@ -818,6 +818,7 @@ mod tests {
     use super::*;
     use crate::bundle::{Mode, Step};
     use crate::exec::testutil::*;
+    use crate::profile::Profile;
     use image::codecs::png::PngEncoder;
     use image::{ExtendedColorType, ImageEncoder};
 
@@ -1035,7 +1036,7 @@ mod tests {
             }
         );
         assert_eq!(LitPixels::of_gray8(6, &[0; 24]), LitPixels::default());
-        let mut p = small_profile().projector.remove(0);
+        let mut p = Machine::of(&small_profile()).projector.remove(0);
         p.width_px = 6;
         p.height_px = 4;
         p.offset_px = [100, 10];

@@ -68,15 +68,15 @@ pub fn write(
     }
 }
 
-/// Checks, before anything is written, that `format` can hold the job of `profile`:
+/// Checks, before anything is written, that `format` can hold a job for `machine`:
 /// SL1/SL1S hold one projector's masks. `out` names the output in the error.
 /// A directory in the way of a one-file format is refused here too.
-pub fn check_fits(format: Format, profile: &crate::profile::Profile, out: &Path) -> Result<()> {
+pub fn check_fits(format: Format, machine: &crate::bundle::Machine, out: &Path) -> Result<()> {
     if format.is_one_file() {
         crate::archive::write::check_dest(out)?;
     }
     match format {
-        Format::Sl1 | Format::Sl1s => sl1::check_projectors(profile.projector.len(), out),
+        Format::Sl1 | Format::Sl1s => sl1::check_projectors(machine.projector.len(), out),
         _ => Ok(()),
     }
 }

@@ -40,12 +40,10 @@
 //! violation), accelerating as fast as the file asks, in 0.1 µm steps.
 
 use super::expr::{resolve, Budget};
-use super::{bbox_mm, manifest_of, mask_figures, Format, Job, ManifestParts};
+use super::{bbox_mm, manifest_of, mask_figures, Format, Implied, Job, ManifestParts};
 use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
 use crate::error::{Error, Result};
-use crate::profile::Profile;
-use crate::units::{NonNegative, Positive};
 use rayon::prelude::*;
 use serde_json::{Map, Value};
 
@@ -55,6 +53,8 @@ pub const PIXEL_MM: f64 = 0.0076;
 const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
 /// The build platform's highest position, mm.
 const TRAVEL_MAX_MM: f64 = 90.0;
+/// The least acceleration limit of the imported stage (the file's fastest if faster), mm/s².
+const MIN_ACCEL_MM_S2: f64 = 20.0;
 /// Most layer records (exposures, duplications counted) a job may have: the zip reader's
 /// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
 /// follow than layers it holds.
@@ -549,7 +549,7 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         .ok_or_else(|| archive.error(None, "no image of the job is present and decodable"))?;
     let px_area = PIXEL_MM * PIXEL_MM;
     let mut layers = Vec::with_capacity(exposures.len());
-    let (mut z, mut max_speed, mut max_accel) = (0.0f64, 1.0f64, 1.0f64);
+    let (mut z, mut max_accel) = (0.0f64, 1.0f64);
     for (i, e) in exposures.iter().enumerate() {
         let s = e.spec;
         let mut steps = Vec::new();
@@ -578,7 +578,6 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
                 accel_mm_s2: s.down_accel,
             });
             time_s += crate::motion::move_time(up - top, s.down_speed, s.down_accel);
-            max_speed = max_speed.max(s.up_speed).max(s.down_speed);
             max_accel = max_accel.max(s.up_accel).max(s.down_accel);
         }
         wait(&mut steps, &mut time_s, e.image.before_s);
@@ -618,18 +617,29 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         z = top;
     }
     let nominal = specs.first().map_or(0.01, |s| s.thickness_mm).max(1e-4);
-    let machine = machine(w_px, h_px, nominal, max_speed, max_accel)
-        .map_err(|m| archive.error(Some(entry), format!("the machine it implies: {m}")))?;
-    let mut generator = "SLA control file v5".to_string();
-    if let Some(s) = r
-        .root
-        .get("Design")
-        .and_then(|d| d.get("Slicer"))
-        .and_then(Value::as_str)
-        .filter(|s| !s.is_empty())
-    {
-        generator = format!("{generator} ({s})");
+    let design = |key: &str| {
+        let v = r.root.get("Design").and_then(|d| d.get(key));
+        v.and_then(Value::as_str).unwrap_or_default().to_string()
+    };
+    let machine = Implied {
+        name: "sla-control-import".into(),
+        resin: design("Resin"),
+        projector: "light-engine",
+        size_px: (w_px, h_px),
+        pixel_mm: PIXEL_MM,
+        travel_max_mm: TRAVEL_MAX_MM,
+        // The standard's build-platform limit: a move the file asks faster is a `speed`
+        // violation.
+        max_speed_mm_s: BP_MAX_SPEED_MM_S,
+        max_accel_mm_s2: max_accel.max(MIN_ACCEL_MM_S2),
+        steps_per_mm: 10_000f64.max(1.0 / nominal),
     }
+    .machine(&layers)
+    .map_err(|m| archive.error(Some(entry), format!("the machine it implies: {m}")))?;
+    let generator = match design("Slicer") {
+        s if s.is_empty() => "SLA control file v5".to_string(),
+        s => format!("SLA control file v5 ({s})"),
+    };
     let manifest = manifest_of(
         &path,
         ManifestParts {
@@ -649,51 +659,6 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         manifest,
         estimate: None,
     })
-}
-
-/// The machine a control file implies (module docs).
-fn machine(
-    w_px: u32,
-    h_px: u32,
-    layer_mm: f64,
-    speed: f64,
-    accel: f64,
-) -> std::result::Result<Profile, String> {
-    let pos = |v: f64, what: &str| {
-        Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
-    };
-    let mut m = Profile::resolve("bottom-up").map_err(|e| e.to_string())?;
-    m.name = "sla-control-import".into();
-    m.description = format!(
-        "imported from an SLA control file: {w_px}x{h_px} px images, {PIXEL_MM} mm pixels assumed"
-    );
-    let p = &mut m.projector[0];
-    p.name = "light-engine".into();
-    p.width_px = w_px;
-    p.height_px = h_px;
-    p.pixel_mm = pos(PIXEL_MM, "pixel")?;
-    p.offset_px = [0, 0];
-    p.mirror_x = false;
-    p.mirror_y = false;
-    p.calibration = None;
-    m.projector.truncate(1);
-    m.slicing.layer_height_mm = pos(layer_mm, "layer thickness")?;
-    m.stage.travel_min_mm = 0.0;
-    m.stage.travel_max_mm = TRAVEL_MAX_MM;
-    m.stage.home_mm = 0.0;
-    // The standard's build-platform limit, 800 mm/min; moves the file asks faster than
-    // that are `speed` violations.
-    let _ = speed;
-    m.stage.max_speed_mm_s = pos(BP_MAX_SPEED_MM_S, "speed")?;
-    m.stage.max_accel_mm_s2 = pos(accel.max(m.stage.max_accel_mm_s2.get()), "acceleration")?;
-    m.stage.steps_per_mm = pos(10_000f64.max(1.0 / layer_mm), "steps")?;
-    m.shutter.open_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.shutter.close_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.dmd.load_s = NonNegative::new(0.0).ok_or("load")?;
-    m.distortion = None;
-    m.blend = None;
-    m.validate()?;
-    Ok(m)
 }
 
 #[cfg(test)]

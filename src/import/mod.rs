@@ -27,8 +27,8 @@ pub mod sl1;
 
 use crate::archive::read::{read_zip_bytes, Archive, Limits};
 use crate::bundle::{
-    BundleSource, DirSource, Generator, Layer, Manifest, MemSource, Placement, Settings, Source,
-    Totals, MANIFEST,
+    BundleSource, DirSource, Generator, Layer, Machine, Manifest, MemSource, Placement, Settings,
+    Source, Totals, MANIFEST,
 };
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -162,7 +162,7 @@ pub(crate) struct ManifestParts {
     /// The imported file's SHA-256.
     pub sha256: String,
     /// The machine the file implies.
-    pub machine: crate::profile::Profile,
+    pub machine: crate::bundle::Machine,
     /// Nominal layer height, mm.
     pub layer_height_mm: f64,
     /// Whether the masks are binary.
@@ -172,6 +172,77 @@ pub(crate) struct ManifestParts {
     /// The file's own total time estimate, if it has one; otherwise the sum of the
     /// layers' `time_s`.
     pub print_time_s: Option<f64>,
+}
+
+/// What an importer knows of the machine a file implies.
+pub(crate) struct Implied<'a> {
+    /// The record's name, e.g. `sl1-import-sl1`.
+    pub name: String,
+    /// The resin the file names (empty when it names none).
+    pub resin: String,
+    /// The projector's name.
+    pub projector: &'a str,
+    /// The images' size, px.
+    pub size_px: (u32, u32),
+    /// Pixel edge, mm.
+    pub pixel_mm: f64,
+    /// Highest stage position, mm.
+    pub travel_max_mm: f64,
+    /// Stage speed limit, mm/s.
+    pub max_speed_mm_s: f64,
+    /// Stage acceleration limit, mm/s².
+    pub max_accel_mm_s2: f64,
+    /// Stage resolution, steps per mm.
+    pub steps_per_mm: f64,
+}
+
+impl Implied<'_> {
+    /// The machine record: a bottom-up stage from 0 (home) to `travel_max_mm`, no shutter
+    /// or DMD latency, one projector showing the images as they are (no offset, mirroring
+    /// or calibration); the normal exposure is the last layer's. The error names the value
+    /// out of range.
+    pub(crate) fn machine(self, layers: &[Layer]) -> std::result::Result<Machine, String> {
+        use crate::bundle::machine::{Dmd, Exposure, Projector, Resin, Shutter, Stage};
+        use crate::units::{NonNegative, Positive};
+        let pos = |v: f64, what: &str| {
+            Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
+        };
+        let zero = NonNegative::default();
+        let last_s = layers.last().map_or(0.0, |l| l.exposure_s);
+        let m = Machine {
+            name: self.name,
+            process: crate::profile::Process::BottomUp,
+            stage: Stage {
+                travel_min_mm: 0.0,
+                travel_max_mm: self.travel_max_mm,
+                home_mm: 0.0,
+                max_speed_mm_s: pos(self.max_speed_mm_s, "stage speed")?,
+                max_accel_mm_s2: pos(self.max_accel_mm_s2, "stage acceleration")?,
+                steps_per_mm: pos(self.steps_per_mm, "stage steps per mm")?,
+            },
+            shutter: Shutter {
+                open_s: zero,
+                close_s: zero,
+            },
+            dmd: Dmd { load_s: zero },
+            projector: vec![Projector {
+                name: self.projector.into(),
+                width_px: self.size_px.0,
+                height_px: self.size_px.1,
+                pixel_mm: pos(self.pixel_mm, "pixel size")?,
+                offset_px: [0, 0],
+                mirror_x: false,
+                mirror_y: false,
+                calibration: None,
+            }],
+            exposure: Exposure {
+                layer_s: NonNegative::new(last_s).unwrap_or(zero),
+            },
+            resin: Resin { name: self.resin },
+        };
+        m.validate()?;
+        Ok(m)
+    }
 }
 
 /// A manifest for an imported job at `path`.

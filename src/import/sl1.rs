@@ -39,12 +39,12 @@
 //! undecodable or wrongly sized mask is a violation of the layer in the report (a layer
 //! whose mask is missing counts as fast).
 
-use super::{bbox_mm, manifest_of, mask_figures, ForeignEstimate, Format, Job, ManifestParts};
+use super::{
+    bbox_mm, manifest_of, mask_figures, ForeignEstimate, Format, Implied, Job, ManifestParts,
+};
 use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
 use crate::error::Result;
-use crate::profile::Profile;
-use crate::units::{NonNegative, Positive};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 
@@ -375,16 +375,22 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
         });
     }
 
-    let machine = machine(&MachineParts {
-        model_name: &model_name,
-        material: cfg.opt_text("materialName").unwrap_or_default(),
-        w_px,
-        h_px,
+    let machine = Implied {
+        name: match model_name.as_str() {
+            "" => "sl1-import".into(),
+            m => format!("sl1-import-{}", m.to_lowercase()),
+        },
+        resin: cfg.opt_text("materialName").unwrap_or_default().into(),
+        projector: "display",
+        size_px: (w_px, h_px),
         pixel_mm,
-        layer_mm,
-        max_height_mm,
-        model: &model,
-    })
+        travel_max_mm: max_height_mm.max(layer_mm),
+        max_speed_mm_s: TOWER_SPEED_MM_S,
+        max_accel_mm_s2: TOWER_ACCEL_MM_S2,
+        // 1 µm steps, or finer for layers thinner than that.
+        steps_per_mm: 1000f64.max(1.0 / layer_mm),
+    }
+    .machine(&layers)
     .map_err(|m| {
         archive.error(
             Some(PRUSASLICER),
@@ -414,80 +420,6 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
             print_time_s,
         }),
     })
-}
-
-/// What the imported machine is made of.
-struct MachineParts<'a> {
-    model_name: &'a str,
-    material: &'a str,
-    w_px: u32,
-    h_px: u32,
-    pixel_mm: f64,
-    layer_mm: f64,
-    max_height_mm: f64,
-    model: &'a Model,
-}
-
-/// The machine an SL1 file implies: the built-in `bottom-up` profile with the display as
-/// the projector, the tower as the stage, no shutter or DMD latency, the exposure settings.
-fn machine(p: &MachineParts) -> std::result::Result<Profile, String> {
-    let pos = |v: f64, what: &str| {
-        Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
-    };
-    let mut m = Profile::resolve("bottom-up").map_err(|e| e.to_string())?;
-    m.name = format!(
-        "sl1-import{}",
-        if p.model_name.is_empty() {
-            String::new()
-        } else {
-            format!("-{}", p.model_name.to_lowercase())
-        }
-    );
-    m.description = format!(
-        "imported from a PrusaSlicer SL1 file{}: {}x{} px display, {} mm pixels",
-        if p.model_name.is_empty() {
-            String::new()
-        } else {
-            format!(" for the {}", p.model_name)
-        },
-        p.w_px,
-        p.h_px,
-        p.pixel_mm
-    );
-    let proj = &mut m.projector[0];
-    proj.name = "display".into();
-    proj.width_px = p.w_px;
-    proj.height_px = p.h_px;
-    proj.pixel_mm = pos(p.pixel_mm, "pixel size")?;
-    proj.offset_px = [0, 0];
-    proj.mirror_x = false;
-    proj.mirror_y = false;
-    proj.calibration = None;
-    m.projector.truncate(1);
-    m.slicing.layer_height_mm = pos(p.layer_mm, "layerHeight")?;
-    m.slicing.binary = false;
-    m.stage.travel_min_mm = 0.0;
-    m.stage.travel_max_mm = p.max_height_mm.max(p.layer_mm);
-    m.stage.home_mm = 0.0;
-    m.stage.max_speed_mm_s = pos(TOWER_SPEED_MM_S, "tower speed")?;
-    m.stage.max_accel_mm_s2 = pos(TOWER_ACCEL_MM_S2, "tower acceleration")?;
-    // 1 µm steps, or finer for layers thinner than that.
-    m.stage.steps_per_mm = pos(1000f64.max(1.0 / p.layer_mm), "steps")?;
-    m.shutter.open_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.shutter.close_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.dmd.load_s = NonNegative::new(0.0).ok_or("load")?;
-    m.exposure.layer_s = pos(p.model.exp_s, "expTime")?;
-    m.exposure.bottom_s = pos(p.model.first_s, "expTimeFirst")?;
-    m.exposure.bottom_layers = FIRST_LAYERS as u32;
-    // A `numFade` past what the profile holds fades over every layer all the same.
-    m.exposure.transition_layers = u32::try_from(p.model.fade).unwrap_or(u32::MAX);
-    if !p.material.is_empty() {
-        m.resin.name = p.material.to_string();
-    }
-    m.distortion = None;
-    m.blend = None;
-    m.validate()?;
-    Ok(m)
 }
 
 #[cfg(test)]
@@ -525,24 +457,7 @@ mod tests {
     }
 
     #[test]
-    fn a_huge_num_fade_saturates_the_machines_transition_layers() {
-        let transition = |fade: usize| {
-            let model = Model { fade, ..model() };
-            let parts = MachineParts {
-                model_name: "SL1",
-                material: "",
-                w_px: 64,
-                h_px: 32,
-                pixel_mm: 0.05,
-                layer_mm: 0.05,
-                max_height_mm: 150.0,
-                model: &model,
-            };
-            machine(&parts).unwrap().exposure.transition_layers
-        };
-        assert_eq!(transition(10), 10);
-        assert_eq!(transition(1 << 32), u32::MAX);
-        assert_eq!(transition(usize::MAX), u32::MAX);
+    fn a_huge_num_fade_steps_down_by_a_vanishing_amount() {
         // The steps follow the file's fade: after the bottom layers the exposure steps
         // down from expTimeFirst by a vanishing amount.
         let e = Model {

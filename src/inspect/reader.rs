@@ -98,7 +98,7 @@ pub struct Bundle {
 impl Bundle {
     /// Opens the job at `path` in any form [`crate::import::open`] reads (a bundle
     /// directory, a zipped bundle, an SL1/SL1S file, an SLA control-file zip): reads and
-    /// checks its manifest, including its machine profile and the projector of every mask.
+    /// checks its manifest, including its machine record and the projector of every mask.
     pub fn open(path: &Path) -> Result<Bundle> {
         let job = crate::import::open(path)?;
         let manifest = job.manifest;
@@ -109,7 +109,7 @@ impl Bundle {
         manifest
             .machine
             .validate()
-            .map_err(|m| bad(format!("machine profile: {m}")))?;
+            .map_err(|m| bad(format!("machine: {m}")))?;
         let projectors = manifest.machine.projector.len();
         for l in &manifest.layers {
             for m in &l.masks {

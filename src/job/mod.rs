@@ -94,7 +94,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         .clone()
         .unwrap_or_else(|| default_output_as(&opts.input, opts.format.unwrap_or(Format::Dmdjob)));
     let format = Format::for_output(opts.format, &out)?;
-    crate::export::check_fits(format, &profile, &out)?;
+    crate::export::check_fits(format, &crate::bundle::Machine::of(&profile), &out)?;
     let made = MadeDirs::parents_of(&out)?;
     // The cure plots' directory (and its missing parents), made before slicing like the
     // bundle's parents, so that a path that cannot be a directory fails first.

@@ -295,7 +295,7 @@ mod tests {
             assert_eq!((f.kind, f.layer), (kind.name(), 1));
             // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
             assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
-            let want = Machine::from_profile(&profile()).quantize(position_at(
+            let want = Machine::of(&crate::bundle::Machine::of(&profile())).quantize(position_at(
                 0.5,
                 6.0,
                 2.0,
