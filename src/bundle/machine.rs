@@ -176,7 +176,7 @@ impl Machine {
     }
 
     /// Every key in which `self` (the job's machine) and `other` differ, in record order,
-    /// but for [`NOT_COMPARED`]: each value, a list of numbers as one value, a list of
+    /// but for names and what the job was made for (`NOT_COMPARED`): each value, a list of numbers as one value, a list of
     /// records by index after its length.
     pub fn differences(&self, other: &Machine) -> Vec<Difference> {
         let tree = |m: &Machine| {
