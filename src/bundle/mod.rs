@@ -36,11 +36,9 @@ use crate::warning::Warning;
 use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
-mod format;
 pub mod machine;
 mod source;
 mod writer;
-pub use format::Format;
 pub use machine::Machine;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
 pub use writer::{is_bundle, BundleWriter};

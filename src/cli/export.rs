@@ -2,7 +2,7 @@
 //! control-file standard); also the `--format` values `slice` shares.
 
 use clap::Args;
-use dmdsl::export::Format;
+use dmdsl::formats::Format;
 use std::path::PathBuf;
 
 pub(crate) const EXPORT_HELP: &str = "Examples:
@@ -81,10 +81,16 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     super::interrupt::on_interrupt(cancel.clone());
     let policy = a.warnings.policy(&[])?;
     let format = Format::for_output(a.format.map(Into::into), &a.output)?;
-    let (manifest, files) = dmdsl::export::open_bundle(&a.bundle)?;
-    dmdsl::export::check_fits(format, &manifest.machine, &a.output)?;
-    let warnings =
-        dmdsl::export::write(format, &manifest, files.as_ref(), &a.output, Some(&cancel))?;
+    let job = dmdsl::formats::open(&a.bundle)?;
+    let manifest = &job.manifest;
+    dmdsl::formats::check_fits(format, &manifest.machine, &a.output)?;
+    let warnings = dmdsl::formats::write(
+        format,
+        manifest,
+        job.source.as_ref(),
+        &a.output,
+        Some(&cancel),
+    )?;
     let warnings = policy.apply(&warnings);
     let failed = dmdsl::warning::any_error(&warnings);
     if a.json {

@@ -204,7 +204,7 @@ struct Job<'a> {
     cure: dmdsl::job::CureOptions,
     cancel: &'a AtomicBool,
     show_progress: bool,
-    format: Option<dmdsl::export::Format>,
+    format: Option<dmdsl::formats::Format>,
 }
 
 impl Job<'_> {
@@ -591,7 +591,7 @@ fn bundle_path(part: &Part, a: &SliceArgs) -> PathBuf {
 /// The default output of part `input`: `<stem>` and the ending of `--format` (`.dmdjob`
 /// without it), in the current directory.
 fn default_output(input: &Path, a: &SliceArgs) -> PathBuf {
-    let format = a.format.map_or(dmdsl::export::Format::Dmdjob, Into::into);
+    let format = a.format.map_or(dmdsl::formats::Format::Dmdjob, Into::into);
     job::default_output_as(input, format)
 }
 

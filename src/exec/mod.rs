@@ -117,7 +117,7 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 }
 
 /// Verifies and simulates the job at `path` — a bundle directory, a zipped bundle, an
-/// SL1/SL1S file or an SLA control-file zip ([`crate::import::open`]) — on the machine the
+/// SL1/SL1S file or an SLA control-file zip ([`crate::formats::open`]) — on the machine the
 /// manifest embeds (for an imported job, the machine the file implies) or on
 /// [`RunOptions::machine`].
 ///
@@ -126,8 +126,8 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let job = crate::import::open(path)?;
-    let crate::import::Job {
+    let job = crate::formats::open(path)?;
+    let crate::formats::Job {
         format,
         manifest,
         source,
@@ -146,7 +146,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
     let imported = !matches!(
         format,
-        crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip
+        crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip
     );
     let verified = verify::verify_source(&*source, &manifest, machine, imported);
     let verify_s = t1.elapsed().as_secs_f64();
@@ -183,7 +183,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     };
     let estimate_source = match (&estimate, format) {
         (Some(e), _) => e.source.clone(),
-        (None, crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip) => {
+        (None, crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip) => {
             "planner".into()
         }
         (None, _) => "import steps".into(),

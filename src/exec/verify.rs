@@ -596,7 +596,7 @@ fn check_png(
             ),
         ));
     }
-    let most = crate::import::DEFLATE_MAX_RATIO.saturating_mul(out.bytes);
+    let most = crate::formats::DEFLATE_MAX_RATIO.saturating_mul(out.bytes);
     if format_ok && dec.total_bytes() > most {
         // A header of the projector's size on a file too small to hold its pixels (a
         // large imported display): refused before anything is allocated for them.

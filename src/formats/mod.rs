@@ -13,7 +13,7 @@
 //! The form is found from the content, not the extension: a directory is a bundle; a zip
 //! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
 //! is SL1, one holding a top-level `.json` with `Header` and `Design` objects is a
-//! control file. Zips are read whole into memory by [`crate::archive::read`], which
+//! control file. Zips are read whole into memory by [`archive::read`], which
 //! refuses anything unsafe; nothing is extracted.
 //!
 //! An imported job's layer records come from its masks (lit area and box), so the
@@ -21,20 +21,23 @@
 //! missing, undecodable, of the wrong size or colour type); a missing setting or a file
 //! that cannot be a job of the format is an error.
 
+pub mod archive;
 pub mod control;
-mod expr;
+mod format;
+mod native;
 pub mod sl1;
 
-use crate::archive::read::{read_zip_bytes, Archive, Limits};
 use crate::bundle::{
     BundleSource, DirSource, Generator, Layer, Machine, Manifest, MemSource, Placement, Settings,
     Source, Totals, MANIFEST,
 };
 use crate::error::{Error, Result};
+use crate::warning::Warning;
+use archive::read::{read_zip_bytes, Archive, Limits};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
-/// The form a job came in.
-pub use crate::bundle::Format;
+pub use format::Format;
 
 /// Where an imported job's total time estimate comes from, when not from dmdsl's planner.
 #[derive(Debug, Clone, PartialEq)]
@@ -94,7 +97,7 @@ pub fn open(path: &Path) -> Result<Job> {
     }
     let limits = Limits::default();
     let bytes = crate::input::read_file(path, "job", limits.max_archive_bytes)?;
-    if !crate::archive::read::looks_like_zip(&bytes) {
+    if !archive::read::looks_like_zip(&bytes) {
         return Err(Error::Bundle {
             path: path.into(),
             msg: "not a job: neither a bundle directory nor a zip archive (a zipped bundle, an SL1/SL1S file or an SLA control-file zip)".into(),
@@ -388,6 +391,50 @@ pub(crate) fn bbox_mm(b: [u32; 4], height_px: u32, pixel_mm: f64) -> [[f64; 2]; 
         [b[0] as f64 * pixel_mm, (h - b[3] as f64) * pixel_mm],
         [b[2] as f64 * pixel_mm, (h - b[1] as f64) * pixel_mm],
     ]
+}
+
+/// The files of a bundle its manifest names, in the order the native forms store them:
+/// every layer's masks, then the gray maps.
+pub fn bundle_files(m: &Manifest) -> Vec<&str> {
+    let mut files: Vec<&str> = m
+        .layers
+        .iter()
+        .flat_map(|l| l.masks.iter().map(|k| k.file.as_str()))
+        .collect();
+    files.extend(m.optics.iter().map(|o| o.gray_map.as_str()));
+    files.extend(m.projector_optics.iter().map(|o| o.gray_map.as_str()));
+    files
+}
+
+/// Writes the job (`manifest` and its `files`) at `out` in `format`, atomically; returns
+/// what the format could not carry. Nothing is left at `out` (nor beside it) on failure,
+/// nor when `cancel` is set while it is written ([`crate::error::Error::Interrupted`]).
+pub fn write(
+    format: Format,
+    manifest: &Manifest,
+    files: &dyn BundleSource,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<Vec<Warning>> {
+    match format {
+        Format::Dmdjob => native::write_dir(manifest, files, out, cancel).map(|()| Vec::new()),
+        Format::DmdjobZip => native::write_zip(manifest, files, out, cancel).map(|()| Vec::new()),
+        Format::Sl1 | Format::Sl1s => sl1::write::write(format, manifest, files, out, cancel),
+        Format::SlaControl => control::write::write(manifest, files, out, cancel),
+    }
+}
+
+/// Checks, before anything is written, that `format` can hold a job for `machine`:
+/// SL1/SL1S hold one projector's masks. `out` names the output in the error.
+/// A directory in the way of a one-file format is refused here too.
+pub fn check_fits(format: Format, machine: &crate::bundle::Machine, out: &Path) -> Result<()> {
+    if format.is_one_file() {
+        archive::write::check_dest(out)?;
+    }
+    match format {
+        Format::Sl1 | Format::Sl1s => sl1::write::check_projectors(machine.projector.len(), out),
+        _ => Ok(()),
+    }
 }
 
 #[cfg(test)]

@@ -1,8 +1,8 @@
 //! The native bundle, as a directory (through [`BundleWriter`]) or as one zip: the same
 //! files with the same bytes, `job.json` first, images stored.
 
+use super::archive::write::{Method, ZipOut};
 use super::bundle_files;
-use crate::archive::write::{Method, ZipOut};
 use crate::bundle::BundleSource;
 use crate::bundle::{BundleWriter, Manifest, MANIFEST};
 use crate::error::Result;

@@ -12,13 +12,11 @@
 //! Like the executor it never uses the slicer or the planner.
 
 pub mod chart;
-pub mod field;
-pub mod preview;
 pub mod reader;
 pub mod sheet;
 pub mod summary;
 
-pub use preview::preview;
+pub use crate::picture::{field, preview};
 pub use reader::{Bundle, DirMasks, MaskReader, SourceMasks};
 pub use summary::{summarize, Summary};
 

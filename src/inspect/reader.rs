@@ -4,19 +4,10 @@
 
 use crate::bundle::{BundleSource, DirSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
-use crate::import::Format;
+use crate::formats::Format;
+pub use crate::picture::{decode_mask, MaskReader};
 use image::GrayImage;
 use std::path::{Path, PathBuf};
-
-/// Where a bundle's mask files come from.
-pub trait MaskReader: Sync {
-    /// The mask file `rel` (a path as the manifest names it, e.g. `masks/00012.png`),
-    /// decoded to 8-bit gray. Errors name the file.
-    fn read_mask(&self, rel: &str) -> Result<GrayImage>;
-
-    /// How mask file `rel` is named in messages (e.g. `part.dmdjob/masks/00012.png`).
-    fn shown(&self, rel: &str) -> PathBuf;
-}
 
 /// The masks of a bundle directory.
 #[derive(Debug, Clone)]
@@ -73,16 +64,6 @@ impl MaskReader for SourceMasks {
     }
 }
 
-/// Decodes the PNG `bytes` of the mask at `path` (for errors) to 8-bit gray.
-pub fn decode_mask(bytes: &[u8], path: &Path) -> Result<GrayImage> {
-    image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
-        .map(|img| img.into_luma8())
-        .map_err(|e| Error::Bundle {
-            path: path.into(),
-            msg: format!("mask is not a decodable PNG: {e}"),
-        })
-}
-
 /// A bundle opened for inspection.
 pub struct Bundle {
     /// The bundle's path, as given.
@@ -96,11 +77,11 @@ pub struct Bundle {
 }
 
 impl Bundle {
-    /// Opens the job at `path` in any form [`crate::import::open`] reads (a bundle
+    /// Opens the job at `path` in any form [`crate::formats::open`] reads (a bundle
     /// directory, a zipped bundle, an SL1/SL1S file, an SLA control-file zip): reads and
     /// checks its manifest, including its machine record and the projector of every mask.
     pub fn open(path: &Path) -> Result<Bundle> {
-        let job = crate::import::open(path)?;
+        let job = crate::formats::open(path)?;
         let manifest = job.manifest;
         let bad = |msg: String| Error::Bundle {
             path: job.source.shown(MANIFEST),

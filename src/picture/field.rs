@@ -2,7 +2,7 @@
 //! offset with its mirroring undone (overlaps add up), cut to the part's footprint and
 //! averaged over cells. The contact sheet's thumbnails and the preview's voxels are made so.
 
-use super::reader::MaskReader;
+use super::MaskReader;
 use crate::bundle::Manifest;
 use crate::error::{Error, Result};
 

@@ -8,7 +8,7 @@
 //! about as thick as a cell is wide.
 
 use super::field::{layer_cells, part_crop};
-use super::reader::MaskReader;
+use super::MaskReader;
 use crate::bundle::Manifest;
 use crate::error::Result;
 use crate::plot::Canvas;

@@ -13,7 +13,7 @@
 //! default.
 //! Named settings may inherit from other named settings (a circle is an error). `${...}`
 //! expressions over `Variables` are evaluated first, as the standard's validator does
-//! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
+//! (named layer groups with their call's variables; `expr.rs`). `Design` and
 //! `Special print techniques` are information only. A setting that is still not a
 //! number where a number is needed is an error naming the entry and the key. A job of more
 //! than [`MAX_LAYERS`] layer records (duplications and group calls counted) is refused
@@ -40,10 +40,10 @@
 //! violation), accelerating as fast as the file asks, in 0.1 µm steps.
 
 use super::expr::{resolve, Budget};
-use super::{bbox_mm, manifest_of, mask_figures, Format, Implied, Job, ManifestParts};
-use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
 use crate::error::{Error, Result};
+use crate::formats::archive::read::Archive;
+use crate::formats::{bbox_mm, manifest_of, mask_figures, Format, Implied, Job, ManifestParts};
 use rayon::prelude::*;
 use serde_json::{Map, Value};
 
@@ -102,7 +102,7 @@ const TOP_KEYS: &[&str] = &[
 ];
 
 /// An image's SHA-256 and, when it decodes, its size and figures.
-type ImageFigures = (String, Option<(u32, u32, super::MaskFigures)>);
+type ImageFigures = (String, Option<(u32, u32, crate::formats::MaskFigures)>);
 
 /// One exposure of a layer.
 #[derive(Debug, Clone)]
@@ -683,7 +683,8 @@ mod tests {
         let bytes = w.finish().unwrap().into_inner();
         let path = std::path::Path::new("job.zip");
         let archive =
-            crate::archive::read::read_zip_bytes(path, &bytes, &Default::default()).unwrap();
+            crate::formats::archive::read::read_zip_bytes(path, &bytes, &Default::default())
+                .unwrap();
         let entry = settings_entry(&archive).unwrap();
         import(archive, &entry, "0")
     }

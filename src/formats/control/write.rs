@@ -18,10 +18,10 @@
 //!   layer's exposure; an exposure over the schema's 10 000 ms is split into equal
 //!   exposures of the same image.
 
-use crate::archive::write::{Method, ZipOut};
 use crate::bundle::BundleSource;
 use crate::bundle::{Layer, Manifest, Step};
 use crate::error::Result;
+use crate::formats::archive::write::{Method, ZipOut};
 use crate::warning::{plural, Warning};
 use serde_json::{json, Map, Value};
 use std::path::Path;
@@ -150,7 +150,7 @@ fn image_name(mask: &str) -> &str {
 }
 
 /// Writes the job as a control-file zip at `out`; returns what it lost or assumed.
-pub(super) fn write(
+pub(crate) fn write(
     m: &Manifest,
     files: &dyn BundleSource,
     out: &Path,

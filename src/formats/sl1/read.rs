@@ -39,12 +39,12 @@
 //! undecodable or wrongly sized mask is a violation of the layer in the report (a layer
 //! whose mask is missing counts as fast).
 
-use super::{
-    bbox_mm, manifest_of, mask_figures, ForeignEstimate, Format, Implied, Job, ManifestParts,
-};
-use crate::archive::read::Archive;
 use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
 use crate::error::Result;
+use crate::formats::archive::read::Archive;
+use crate::formats::{
+    bbox_mm, manifest_of, mask_figures, ForeignEstimate, Format, Implied, Job, ManifestParts,
+};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 
@@ -319,7 +319,7 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
                 .unwrap_or_else(|| format!("{job_dir}{i:05}.png"))
         })
         .collect();
-    let figures: Vec<(String, Option<super::MaskFigures>)> = names
+    let figures: Vec<(String, Option<crate::formats::MaskFigures>)> = names
         .par_iter()
         .map_init(Vec::new, |buf, name| match archive.get(name) {
             Some(b) => (

@@ -1,11 +1,11 @@
 //! The preview pictures an SL1 carries (`thumbnail/thumbnail400x400.png`,
 //! `thumbnail/thumbnail800x480.png`): the shaded picture of the part its masks build
-//! ([`crate::inspect::preview()`]), as RGBA PNGs like PrusaSlicer's.
+//! ([`crate::picture::preview()`]), as RGBA PNGs like PrusaSlicer's.
 
 use crate::bundle::BundleSource;
 use crate::bundle::Manifest;
 use crate::error::Result;
-use crate::inspect::reader::{decode_mask, MaskReader};
+use crate::picture::{decode_mask, MaskReader};
 use image::{GrayImage, ImageEncoder, RgbImage};
 use std::path::PathBuf;
 
@@ -77,7 +77,7 @@ pub(super) fn thumbnails(
     let masks = Masks(files);
     let thin = slabs(manifest);
     let (w, h) = SIZES[1];
-    let wide = crate::inspect::preview(&thin, &masks, w, h)?;
+    let wide = crate::picture::preview(&thin, &masks, w, h)?;
     let background = *wide.get_pixel(0, 0);
     let side = w.max(h);
     let mut square = RgbImage::from_pixel(side, side, background);

@@ -17,11 +17,11 @@
 //! own stage steps, several projectors, the light-compensation records cannot be said at
 //! all (warnings, or a refusal for several projectors).
 
-use super::Format;
-use crate::archive::write::{Method, ZipOut};
 use crate::bundle::BundleSource;
 use crate::bundle::{Manifest, Mode};
 use crate::error::{Error, Result};
+use crate::formats::archive::write::{Method, ZipOut};
+use crate::formats::Format;
 use crate::warning::{plural, Warning};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -43,9 +43,9 @@ const SLOW_TILT_S: f64 = 8.0;
 const HV_TILT_S: f64 = 10.0;
 
 /// `printTime` of the job's layers with the scheme's exposures, as PrusaSlicer 2.5
-/// estimates it (`import::sl1`'s model, the one `dmdsl run` replays an SL1 with).
+/// estimates it (`sl1::read`'s model, the one `dmdsl run` replays an SL1 with).
 fn print_time(scheme: &Scheme, layer_mm: f64, display_area_mm2: f64, areas_mm2: &[f64]) -> f64 {
-    let model = crate::import::sl1::Model {
+    let model = super::read::Model {
         exp_s: scheme.exp_s,
         first_s: scheme.first_s,
         fade: scheme.fade,
@@ -54,7 +54,7 @@ fn print_time(scheme: &Scheme, layer_mm: f64, display_area_mm2: f64, areas_mm2: 
         slow_tilt_s: SLOW_TILT_S,
         hv_tilt_s: HV_TILT_S,
         fast_max_mm2: display_area_mm2 * AREA_FILL_PCT / 100.0,
-        speed: crate::import::sl1::PrintSpeed::Fast,
+        speed: super::read::PrintSpeed::Fast,
     };
     model.print_time_s(areas_mm2)
 }
@@ -64,7 +64,7 @@ const SL1_DISPLAY: (u32, u32, f64, f64) = (1440, 2560, 68.04, 120.96);
 const SL1S_DISPLAY: (u32, u32, f64, f64) = (1620, 2560, 81.0, 128.0);
 
 /// Refuses a job of several projectors: an SL1 shows one image per layer.
-pub(super) fn check_projectors(projectors: usize, out: &Path) -> Result<()> {
+pub(crate) fn check_projectors(projectors: usize, out: &Path) -> Result<()> {
     if projectors > 1 {
         return Err(Error::Usage(format!(
             "{}: SL1/SL1S carry one image per layer, but this job's machine has {projectors} projectors; export it as dmdjob-zip or sla-control instead",
@@ -197,7 +197,7 @@ fn ini(pairs: &[(&str, String)]) -> String {
 }
 
 /// Writes the job as an SL1 (`format` Sl1) or SL1S at `out`; returns what it lost.
-pub(super) fn write(
+pub(crate) fn write(
     format: Format,
     m: &Manifest,
     files: &dyn BundleSource,
