@@ -176,8 +176,8 @@ impl Machine {
     }
 
     /// Every key in which `self` (the job's machine) and `other` differ, in record order,
-    /// but for names and what the job was made for (`NOT_COMPARED`): each value, a list of numbers as one value, a list of
-    /// records by index after its length.
+    /// but for names and what the job was made for (`NOT_COMPARED`): each value (a list of
+    /// numbers is one value), a list of records by index after its length.
     pub fn differences(&self, other: &Machine) -> Vec<Difference> {
         let tree = |m: &Machine| {
             let text = serde_json::to_string(m).expect("a machine record serializes");
@@ -190,84 +190,58 @@ impl Machine {
 }
 
 /// A serialized record whose objects keep their keys in record order (a
-/// `serde_json::Value` sorts them), its values as the summary shows them: numbers as the
-/// shortest decimal (`50`, `0.05`), a list of numbers as `[0, 0]`, text without quotes.
-#[derive(Debug, PartialEq)]
+/// `serde_json::Value` sorts them).
+#[derive(PartialEq, Deserialize)]
+#[serde(untagged)]
 enum Tree {
-    Value(String),
-    Object(Vec<(String, Tree)>),
+    Object(#[serde(deserialize_with = "entries")] Vec<(String, Tree)>),
     List(Vec<Tree>),
+    Value(serde_json::Value),
+}
+
+/// An object's entries in order.
+fn entries<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<(String, Tree)>, D::Error> {
+    struct Entries;
+    impl<'de> serde::de::Visitor<'de> for Entries {
+        type Value = Vec<(String, Tree)>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("an object")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut a: A,
+        ) -> Result<Self::Value, A::Error> {
+            let mut entries = Vec::new();
+            while let Some(entry) = a.next_entry()? {
+                entries.push(entry);
+            }
+            Ok(entries)
+        }
+    }
+    d.deserialize_map(Entries)
 }
 
 impl Tree {
+    /// The value as the summary shows it: numbers as the shortest decimal (`50`, `0.05`),
+    /// a list of numbers as `[0, 0]`, text without quotes, a list of records by length.
     fn text(&self) -> String {
+        use serde_json::Value;
         match self {
-            Tree::Value(v) => v.clone(),
+            Tree::Value(Value::Number(n)) if n.as_u64().is_none() => {
+                format!("{}", n.as_f64().unwrap_or(f64::NAN))
+            }
+            Tree::Value(Value::String(s)) => s.clone(),
+            Tree::Value(v) => v.to_string(),
+            Tree::List(l) if l.iter().all(|t| matches!(t, Tree::Value(_))) => {
+                let items: Vec<String> = l.iter().map(Tree::text).collect();
+                format!("[{}]", items.join(", "))
+            }
+            Tree::List(l) => {
+                let n = l.len() as u64;
+                format!("{n} {}", crate::warning::plural(n, "entry", "entries"))
+            }
             Tree::Object(_) => "{…}".into(),
-            Tree::List(l) => format!(
-                "{} {}",
-                l.len(),
-                crate::warning::plural(l.len() as u64, "entry", "entries")
-            ),
         }
-    }
-}
-
-impl<'de> Deserialize<'de> for Tree {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Tree, D::Error> {
-        d.deserialize_any(TreeVisitor)
-    }
-}
-
-struct TreeVisitor;
-
-impl<'de> serde::de::Visitor<'de> for TreeVisitor {
-    type Value = Tree;
-
-    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        f.write_str("a JSON value")
-    }
-    fn visit_bool<E>(self, v: bool) -> Result<Tree, E> {
-        Ok(Tree::Value(v.to_string()))
-    }
-    fn visit_u64<E>(self, v: u64) -> Result<Tree, E> {
-        Ok(Tree::Value(v.to_string()))
-    }
-    fn visit_i64<E>(self, v: i64) -> Result<Tree, E> {
-        Ok(Tree::Value(v.to_string()))
-    }
-    fn visit_f64<E>(self, v: f64) -> Result<Tree, E> {
-        Ok(Tree::Value(format!("{v}")))
-    }
-    fn visit_str<E>(self, v: &str) -> Result<Tree, E> {
-        Ok(Tree::Value(v.to_string()))
-    }
-    fn visit_unit<E>(self) -> Result<Tree, E> {
-        Ok(Tree::Value("none".into()))
-    }
-    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut a: A) -> Result<Tree, A::Error> {
-        let mut items = Vec::new();
-        while let Some(t) = a.next_element()? {
-            items.push(t);
-        }
-        let values: Option<Vec<String>> = items
-            .iter()
-            .map(|t| match t {
-                Tree::Value(v) => Some(v.clone()),
-                _ => None,
-            })
-            .collect();
-        Ok(match values {
-            Some(v) if !items.is_empty() => Tree::Value(format!("[{}]", v.join(", "))),
-            _ => Tree::List(items),
-        })
-    }
-    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut a: A) -> Result<Tree, A::Error> {
-        let mut entries = Vec::new();
-        while let Some(entry) = a.next_entry()? {
-            entries.push(entry);
-        }
-        Ok(Tree::Object(entries))
     }
 }
 
@@ -277,41 +251,43 @@ fn walk(a: &Tree, b: &Tree, (key, pattern): (&str, &str), out: &mut Vec<Differen
     if NOT_COMPARED.contains(&pattern) {
         return;
     }
-    let absent = Tree::Value("absent".into());
+    let records = |l: &[Tree]| l.iter().any(|t| matches!(t, Tree::Object(_)));
+    // A list's length goes before its entries.
+    let start = out.len();
     match (a, b) {
         (Tree::Object(x), Tree::Object(y)) => {
+            let absent = Tree::Value("absent".into());
             let extra = y.iter().filter(|(k, _)| x.iter().all(|(j, _)| j != k));
             for (k, _) in x.iter().chain(extra) {
                 let get = |o: &[(String, Tree)]| o.iter().position(|(j, _)| j == k);
+                let u = get(x).map_or(&absent, |i| &x[i].1);
+                let v = get(y).map_or(&absent, |i| &y[i].1);
                 let (key, pattern) = match key {
                     "" => (k.clone(), k.clone()),
                     _ => (format!("{key}.{k}"), format!("{pattern}.{k}")),
                 };
-                let u = get(x).map_or(&absent, |i| &x[i].1);
-                let v = get(y).map_or(&absent, |i| &y[i].1);
                 walk(u, v, (&key, &pattern), out);
             }
+            return;
         }
-        (Tree::List(x), Tree::List(y)) => {
-            if x.len() != y.len() {
-                out.push(Difference {
-                    key: key.into(),
-                    job: a.text(),
-                    machine: b.text(),
-                });
-            }
+        (Tree::List(x), Tree::List(y)) if records(x) || records(y) => {
             let pattern = format!("{pattern}[]");
             for (i, (u, v)) in x.iter().zip(y).enumerate() {
                 walk(u, v, (&format!("{key}[{i}]"), &pattern), out);
             }
+            if x.len() == y.len() {
+                return;
+            }
         }
-        _ if a != b => out.push(Difference {
-            key: key.into(),
-            job: a.text(),
-            machine: b.text(),
-        }),
+        _ if a == b => return,
         _ => {}
     }
+    let d = Difference {
+        key: key.into(),
+        job: a.text(),
+        machine: b.text(),
+    };
+    out.insert(start, d);
 }
 
 #[cfg(test)]

@@ -41,6 +41,7 @@ mod source;
 mod writer;
 pub use machine::Machine;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
+pub(crate) use writer::stale_siblings;
 pub use writer::{is_bundle, BundleWriter};
 
 /// Value of the manifest's `format` field.

@@ -13,28 +13,22 @@ use crate::bundle::{
     Generator, Layer, Machine, Manifest, MaskRef, MemSource, Mode, Placement, Settings, Source,
     Step, Totals,
 };
+use crate::error::Result;
 use crate::units::{NonNegative, Positive};
 use rayon::prelude::*;
 
-/// What an importer knows of the machine a file implies.
+/// What an importer knows of the machine a file implies (the rest is [`Implied::machine`]'s).
 pub(crate) struct Implied<'a> {
     /// The record's name, e.g. `sl1-import-sl1`.
     pub name: String,
     /// The resin the file names (empty when it names none).
     pub resin: String,
-    /// The projector's name.
     pub projector: &'a str,
-    /// The images' size, px.
     pub size_px: (u32, u32),
-    /// Pixel edge, mm.
     pub pixel_mm: f64,
-    /// Highest stage position, mm.
     pub travel_max_mm: f64,
-    /// Stage speed limit, mm/s.
     pub max_speed_mm_s: f64,
-    /// Stage acceleration limit, mm/s².
     pub max_accel_mm_s2: f64,
-    /// Stage resolution, steps per mm.
     pub steps_per_mm: f64,
 }
 
@@ -43,7 +37,7 @@ impl Implied<'_> {
     /// or DMD latency, one projector showing the images as they are (no offset, mirroring
     /// or calibration); the normal exposure is the last layer's. The error names the value
     /// out of range.
-    pub(crate) fn machine(self, layers: &[Layer]) -> std::result::Result<Machine, String> {
+    fn machine(self, layers: &[Layer]) -> std::result::Result<Machine, String> {
         let pos = |v: f64, what: &str| {
             Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
         };
@@ -102,14 +96,12 @@ pub(crate) fn images(archive: &Archive, names: &[&str]) -> Vec<Image> {
         .collect()
 }
 
-/// The pixels of an imported job's images on the build plane.
+/// The pixels of an imported job's images on the build plane: the images' height, px,
+/// a pixel's edge along x, mm, and its area, mm².
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Grid {
-    /// Height of the images, px.
     pub height_px: u32,
-    /// Pixel edge along x, mm.
     pub pixel_mm: f64,
-    /// Area of a pixel, mm².
     pub pixel_area_mm2: f64,
 }
 
@@ -159,28 +151,29 @@ pub(crate) fn layer(
 }
 
 /// An imported job's layers and what the file says around them.
-pub(crate) struct Imported {
-    /// The form the file is in.
+pub(crate) struct Imported<'a> {
     pub format: Format,
     /// Who wrote the file, e.g. "PrusaSlicer-2.5.0".
     pub generator: String,
     /// The imported file's SHA-256.
     pub sha256: String,
-    /// The machine the file implies.
-    pub machine: Machine,
+    pub machine: Implied<'a>,
     /// Nominal layer height, mm.
     pub layer_height_mm: f64,
-    /// The layers.
     pub layers: Vec<Layer>,
     /// The file's own total time estimate, if it has one (otherwise the sum of the
     /// layers' `time_s` is the job's).
     pub estimate: Option<ForeignEstimate>,
 }
 
-impl Imported {
+impl Imported<'_> {
     /// The job: a manifest as a bundle would have it, the archive's files as its files.
-    pub(crate) fn job(self, archive: Archive) -> Job {
+    /// A machine out of range is an error about entry `entry`, the machine named `what`.
+    pub(crate) fn job(self, archive: Archive, (entry, what): (&str, &str)) -> Result<Job> {
         let path = archive.path().to_path_buf();
+        let machine = (self.machine)
+            .machine(&self.layers)
+            .map_err(|m| archive.error(Some(entry), format!("{what}: {m}")))?;
         let layers = self.layers;
         let time_sum: f64 = layers.iter().map(|l| l.time_s).sum();
         let resin_mm3: f64 = layers.iter().map(|l| l.area_mm2 * l.thickness_mm).sum();
@@ -225,7 +218,7 @@ impl Imported {
                 compensation: "off".into(),
                 distortion: None,
             },
-            machine: self.machine,
+            machine,
             totals: Totals {
                 layers: layers.len() as u64,
                 height_mm: layers.last().map_or(0.0, |l| l.z_mm),
@@ -240,13 +233,13 @@ impl Imported {
             optics: None,
             projector_optics: Vec::new(),
         };
-        Job {
+        Ok(Job {
             source: Box::new(MemSource::new(&path, archive.into_files())),
             path,
             format: self.format,
             manifest,
             estimate: self.estimate,
-        }
+        })
     }
 }
 

@@ -35,26 +35,17 @@ const EXPOSURE_MAX_MS: i64 = 10_000;
 const POWER_SETTING: i64 = 100;
 const WAVELENGTH_NM: i64 = 365;
 
-/// A layer's "Position settings", in mm and s.
+/// A layer's "Position settings", in mm and s (the keys are [`Position::to_json`]'s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Position {
-    /// "Layer thickness (um)".
     thickness_mm: f64,
-    /// "Distance up (mm)".
     up_mm: f64,
-    /// "Initial wait (ms)".
     initial_s: f64,
-    /// "BP up speed (mm/sec)".
     up_speed: f64,
-    /// "BP up acceleration (mm/sec^2)".
     up_accel: f64,
-    /// "Up wait (ms)".
     up_wait_s: f64,
-    /// "BP down speed (mm/sec)".
     down_speed: f64,
-    /// "BP down acceleration (mm/sec^2)".
     down_accel: f64,
-    /// "Final wait (ms)".
     final_s: f64,
 }
 

@@ -607,21 +607,6 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         let v = r.root.get("Design").and_then(|d| d.get(key));
         v.and_then(Value::as_str).unwrap_or_default().to_string()
     };
-    let machine = Implied {
-        name: "sla-control-import".into(),
-        resin: design("Resin"),
-        projector: "light-engine",
-        size_px: (w_px, h_px),
-        pixel_mm: PIXEL_MM,
-        travel_max_mm: TRAVEL_MAX_MM,
-        // The standard's build-platform limit: a move the file asks faster is a `speed`
-        // violation.
-        max_speed_mm_s: BP_MAX_SPEED_MM_S,
-        max_accel_mm_s2: max_accel.max(MIN_ACCEL_MM_S2),
-        steps_per_mm: 10_000f64.max(1.0 / nominal),
-    }
-    .machine(&layers)
-    .map_err(|m| archive.error(Some(entry), format!("the machine it implies: {m}")))?;
     let generator = match design("Slicer") {
         s if s.is_empty() => "SLA control file v5".to_string(),
         s => format!("SLA control file v5 ({s})"),
@@ -630,12 +615,24 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         format: Format::SlaControl,
         generator,
         sha256: sha256.into(),
-        machine,
+        machine: Implied {
+            name: "sla-control-import".into(),
+            resin: design("Resin"),
+            projector: "light-engine",
+            size_px: (w_px, h_px),
+            pixel_mm: PIXEL_MM,
+            travel_max_mm: TRAVEL_MAX_MM,
+            // The standard's build-platform limit: a move the file asks faster is a `speed`
+            // violation.
+            max_speed_mm_s: BP_MAX_SPEED_MM_S,
+            max_accel_mm_s2: max_accel.max(MIN_ACCEL_MM_S2),
+            steps_per_mm: 10_000f64.max(1.0 / nominal),
+        },
         layer_height_mm: nominal,
         layers,
         estimate: None,
     };
-    Ok(imported.job(archive))
+    imported.job(archive, (entry, "the machine it implies"))
 }
 
 #[cfg(test)]

@@ -268,28 +268,6 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
     let s = settings(&archive, &cfg, &ps)?;
     let layers = layers(&s, &archive, &image_names(&archive, &s.job_dir)?);
     let layer_mm = s.model.layer_mm;
-    let machine = Implied {
-        name: match s.printer_model.as_str() {
-            "" => "sl1-import".into(),
-            m => format!("sl1-import-{}", m.to_lowercase()),
-        },
-        resin: cfg.opt_text("materialName").unwrap_or_default().into(),
-        projector: "display",
-        size_px: s.size_px,
-        pixel_mm: s.grid.pixel_mm,
-        travel_max_mm: s.max_height_mm.max(layer_mm),
-        max_speed_mm_s: TOWER_SPEED_MM_S,
-        max_accel_mm_s2: TOWER_ACCEL_MM_S2,
-        // 1 µm steps, or finer for layers thinner than that.
-        steps_per_mm: 1000f64.max(1.0 / layer_mm),
-    }
-    .machine(&layers)
-    .map_err(|m| {
-        archive.error(
-            Some(PRUSASLICER),
-            format!("the display and tower it describes: {m}"),
-        )
-    })?;
     let sl1s = archive
         .path()
         .extension()
@@ -304,7 +282,21 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
             .unwrap_or("PrusaSlicer")
             .to_string(),
         sha256: sha256.into(),
-        machine,
+        machine: Implied {
+            name: match s.printer_model.as_str() {
+                "" => "sl1-import".into(),
+                m => format!("sl1-import-{}", m.to_lowercase()),
+            },
+            resin: cfg.opt_text("materialName").unwrap_or_default().into(),
+            projector: "display",
+            size_px: s.size_px,
+            pixel_mm: s.grid.pixel_mm,
+            travel_max_mm: s.max_height_mm.max(layer_mm),
+            max_speed_mm_s: TOWER_SPEED_MM_S,
+            max_accel_mm_s2: TOWER_ACCEL_MM_S2,
+            // 1 µm steps, or finer for layers thinner than that.
+            steps_per_mm: 1000f64.max(1.0 / layer_mm),
+        },
         layer_height_mm: layer_mm,
         layers,
         estimate: Some(ForeignEstimate {
@@ -312,5 +304,5 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
             print_time_s: s.print_time_s,
         }),
     };
-    Ok(imported.job(archive))
+    imported.job(archive, (PRUSASLICER, "the display and tower it describes"))
 }
