@@ -29,15 +29,13 @@
 //! input files) are private.
 #![warn(missing_docs)]
 
-pub mod archive;
 pub mod bundle;
 pub mod cure;
 mod digest;
 pub mod error;
 pub mod exec;
-pub mod export;
+pub mod formats;
 pub mod geometry;
-pub mod import;
 mod input;
 pub mod inspect;
 pub mod job;
@@ -45,6 +43,7 @@ pub mod mesh;
 pub mod motion;
 pub mod optics;
 pub mod output;
+pub mod picture;
 pub mod plan;
 pub mod plot;
 mod png;

@@ -88,7 +88,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
             (None, _) if layers.len() == n => "every layer".into(),
             (None, _) => "evenly spaced".into(),
         };
-        let c = sheet::contact_sheet(&b.name(), &b.manifest, b.masks.as_ref(), &layers, &how)?;
+        let c = sheet::contact_sheet(&b.name(), &b.manifest, b.files.as_ref(), &layers, &how)?;
         inspect::write_picture(path, &c, *format)?;
         written(path);
     }

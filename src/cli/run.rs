@@ -65,7 +65,8 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         .machine
         .as_deref()
         .map(dmdsl::profile::Profile::resolve)
-        .transpose()?;
+        .transpose()?
+        .map(|p| dmdsl::bundle::Machine::of(&p));
     let opts = dmdsl::exec::RunOptions {
         faults,
         trace: a.trace,

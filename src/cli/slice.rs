@@ -99,8 +99,8 @@ pub(crate) struct SliceArgs {
     /// dmdjob (directory), dmdjob-zip (the same files in one zip), sl1 / sl1s (Prusa
     /// SL1/SL1S, opened by PrusaSlicer and UVtools), sla-control (the SLA control-file
     /// standard, schema v5). docs/FORMATS.md says what each carries.
-    #[arg(long, value_enum, value_name = "FORMAT")]
-    format: Option<super::export::FormatArg>,
+    #[arg(long, value_name = "FORMAT", value_parser = super::export::formats())]
+    format: Option<dmdsl::formats::Format>,
     /// Machine profile: a built-in name or a TOML file.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
@@ -204,7 +204,7 @@ struct Job<'a> {
     cure: dmdsl::job::CureOptions,
     cancel: &'a AtomicBool,
     show_progress: bool,
-    format: Option<dmdsl::export::Format>,
+    format: Option<dmdsl::formats::Format>,
 }
 
 impl Job<'_> {
@@ -306,7 +306,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             plots: a.cure.cure_plots.clone(),
         },
         cancel: &cancel,
-        format: a.format.map(Into::into),
+        format: a.format,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -591,7 +591,7 @@ fn bundle_path(part: &Part, a: &SliceArgs) -> PathBuf {
 /// The default output of part `input`: `<stem>` and the ending of `--format` (`.dmdjob`
 /// without it), in the current directory.
 fn default_output(input: &Path, a: &SliceArgs) -> PathBuf {
-    let format = a.format.map_or(dmdsl::export::Format::Dmdjob, Into::into);
+    let format = a.format.unwrap_or(dmdsl::formats::Format::Dmdjob);
     job::default_output_as(input, format)
 }
 

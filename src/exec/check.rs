@@ -33,7 +33,7 @@ impl<'a> Checker<'a> {
     pub fn new(manifest: &'a Manifest) -> Self {
         Checker {
             manifest,
-            machine: Machine::from_profile(&manifest.machine),
+            machine: Machine::of(&manifest.machine),
             prev_z: 0.0,
             quantization_s: 0.0,
             violations: Vec::new(),

@@ -56,15 +56,7 @@ pub struct LayerTiming {
 }
 
 /// One key in which the machine given with `--machine` differs from the job's.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct MachineDifference {
-    /// Dotted profile key, e.g. `stage.max_speed_mm_s`, `projector[1].offset_px`.
-    pub key: String,
-    /// Its value in the machine the manifest embeds.
-    pub job: String,
-    /// Its value in the given machine.
-    pub machine: String,
-}
+pub use crate::bundle::machine::Difference as MachineDifference;
 
 /// The machine a job was checked against with `--machine`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]

@@ -68,7 +68,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             compensation: "off".into(),
             distortion: None,
         },
-        machine,
+        machine: Machine::of(&machine),
         totals: Totals {
             layers: layers.len() as u64,
             height_mm: layers.last().map_or(0.0, |l| l.z_mm),

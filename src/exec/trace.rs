@@ -165,7 +165,7 @@ mod tests {
         let m = two_layer_topdown();
         let dir = crate::test_support::scratch("trace", "rows");
         let path = dir.join("t.csv");
-        let mach = Machine::from_profile(&m.machine);
+        let mach = Machine::of(&m.machine);
         let mut all = TraceWriter::create(&path, None, mach).unwrap();
         let part_path = dir.join("l1.csv");
         let mut part = TraceWriter::create(&part_path, Some(1..=1), mach).unwrap();
@@ -213,8 +213,12 @@ mod tests {
     #[test]
     fn an_unfinished_trace_leaves_nothing() {
         let dir = crate::test_support::scratch("trace", "unfinished");
-        let w = TraceWriter::create(&dir.join("t.csv"), None, Machine::from_profile(&profile()))
-            .unwrap();
+        let w = TraceWriter::create(
+            &dir.join("t.csv"),
+            None,
+            Machine::of(&crate::bundle::Machine::of(&profile())),
+        )
+        .unwrap();
         drop(w);
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
         let _ = std::fs::remove_dir_all(&dir);

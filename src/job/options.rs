@@ -3,7 +3,7 @@
 use super::{PlacementMode, Transform};
 use crate::bundle::FitReport;
 use crate::bundle::Totals;
-use crate::export::Format;
+use crate::formats::Format;
 use crate::geometry::distortion::DistortionChoice;
 use crate::mesh::MeshReport;
 use crate::profile::Profile;

@@ -480,24 +480,38 @@ fn unreadable_bundles_and_bad_options_exit_2() {
 }
 
 #[test]
-fn version_1_bundle_with_text_warnings_still_runs() {
-    // Version 1 manifests stored warnings as text; `run` reads them (as code
-    // `bundle.uncoded`) and replays the job as before.
+fn version_1_and_2_bundles_still_run_and_export_as_version_3() {
+    // Versions 1 and 2 embedded the whole resolved profile as `machine`; the reader takes
+    // the machine record's keys from it. Version 1 stored warnings as text (read as code
+    // `bundle.uncoded`).
     let (dir, b) = sliced("v1");
     let mut j = job(&b);
-    assert_eq!(j["version"], 2);
-    j["version"] = 1.into();
-    j["warnings"] = serde_json::json!(["mesh has 3 open edges (holes)"]);
-    set_job(&b, &j);
-    let (code, r) = run_json(&dir, &[]);
-    assert_eq!(code, 0, "{r}");
-    assert_eq!(r["violations"].as_array().unwrap().len(), 0);
-    j["version"] = 3.into();
+    assert_eq!(j["version"], 3);
+    let record = j["machine"].clone();
+    assert!(record.get("recoat").is_none() && record.get("slicing").is_none());
+    j["machine"] = serde_json::to_value(dmdsl::Profile::default_profile()).unwrap();
+    for version in [2, 1] {
+        j["version"] = version.into();
+        if version == 1 {
+            j["warnings"] = serde_json::json!(["mesh has 3 open edges (holes)"]);
+        }
+        set_job(&b, &j);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 0, "{r}");
+        assert_eq!(r["violations"].as_array().unwrap().len(), 0);
+    }
+    // What is read is held, and written, as the current version.
+    let o = run_in(&dir, &["export", "box.dmdjob", "-o", "new.dmdjob", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let new = job(&dir.join("new.dmdjob"));
+    assert_eq!((&new["version"], &new["machine"]), (&3.into(), &record));
+    assert_eq!(new["warnings"][0]["code"], "bundle.uncoded");
+    j["version"] = 4.into();
     set_job(&b, &j);
     let o = run_in(&dir, &["run", "box.dmdjob"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("unsupported version Some(3); this dmdsl reads versions 1 to 2"),
+        stderr(&o).contains("unsupported version Some(4); this dmdsl reads versions 1 to 3"),
         "{}",
         stderr(&o)
     );

@@ -144,7 +144,7 @@ pub struct CureCheck {
 pub(super) fn summarize(
     manifest: &Manifest,
     model: &CureModel,
-    proj: &crate::profile::Projector,
+    proj: &crate::bundle::machine::Projector,
     outs: Vec<LayerOut>,
 ) -> CureCheck {
     let p = model.pixel_mm;

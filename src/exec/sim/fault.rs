@@ -285,7 +285,7 @@ mod tests {
             // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
             assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
             let halfway = position_at(0.5, 6.0, 2.0, 50.0, 2.79 / 2.0);
-            let want = Machine::from_profile(&profile()).quantize(halfway);
+            let want = Machine::of(&crate::bundle::Machine::of(&profile())).quantize(halfway);
             assert!(close(f.stage_mm, want), "{} {want}", f.stage_mm);
             assert!(close(o.total_s, f.time_s));
             assert_eq!(o.layers.len(), 2);

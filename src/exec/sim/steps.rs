@@ -53,7 +53,7 @@ impl<'a, 's, 'k> Simulation<'a, 's, 'k> {
         faults: &[FaultSpec],
         sinks: &'s mut [&'k mut dyn Sink],
     ) -> Self {
-        let machine = Machine::from_profile(&manifest.machine);
+        let machine = Machine::of(&manifest.machine);
         Simulation {
             machine,
             manifest,

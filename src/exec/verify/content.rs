@@ -32,9 +32,9 @@
 //! feature's top).
 
 use super::{problem, LitPixels};
+use crate::bundle::machine::Machine;
 use crate::bundle::{BundleSource, Layer, Manifest, MaskRef};
 use crate::exec::{Kind, Violation};
-use crate::profile::Profile;
 use crate::text::number;
 
 /// Lit pixels a section's masks may miss below half its area (coverage masks), px².
@@ -60,7 +60,7 @@ pub(super) struct ContentRule {
 
 impl ContentRule {
     /// The rule for `manifest`'s masks shown by `machine`.
-    pub(super) fn of(manifest: &Manifest, machine: &Profile) -> ContentRule {
+    pub(super) fn of(manifest: &Manifest, machine: &Machine) -> ContentRule {
         let field = machine.field();
         let p = field.pixel_mm;
         let warp_mm = manifest

@@ -2,9 +2,9 @@
 //! maps, present, as recorded (SHA-256), and decodable PNGs of their projector's size.
 
 use super::{problem, problem_in, LitPixels};
+use crate::bundle::machine::{Machine, Projector};
 use crate::bundle::{sha256_hex, BundleSource, Manifest, MANIFEST};
 use crate::exec::{Kind, Violation};
-use crate::profile::{Profile, Projector};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
 use rayon::prelude::*;
@@ -15,7 +15,7 @@ use std::path::{Component, Path};
 pub(super) fn check_gray_maps(
     dir: &dyn BundleSource,
     manifest: &Manifest,
-    machine: &Profile,
+    machine: &Machine,
     bytes: &mut u64,
     problems: &mut Vec<Violation>,
 ) -> usize {
@@ -172,7 +172,7 @@ pub(super) fn check_png(
     }
     let format_ok = ct == ColorType::L8 && (w, h) == size;
     let mut lit = None;
-    if format_ok && dec.total_bytes() > crate::import::DEFLATE_MAX_RATIO.saturating_mul(n) {
+    if format_ok && dec.total_bytes() > crate::formats::DEFLATE_MAX_RATIO.saturating_mul(n) {
         // A header of the projector's size on a file too small to hold its pixels (a
         // large imported display): refused before anything is allocated for them.
         let msg = format!("PNG declares {w}x{h} pixels, more than its {n} bytes can hold");

@@ -1,7 +1,7 @@
 //! The lit (nonzero) pixels of a decoded mask: counted and boxed a row at a time, with
 //! the row scans vectorized.
 
-use crate::profile::Projector;
+use crate::bundle::machine::Projector;
 
 /// The nonzero pixels of an 8-bit gray image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -190,7 +190,9 @@ mod tests {
         };
         assert_eq!(lit, px(4, [2, 1, 5, 4]));
         assert_eq!(LitPixels::of_gray8(6, &[0; 24]), LitPixels::default());
-        let mut p = small_profile().projector.remove(0);
+        let mut p = crate::bundle::Machine::of(&small_profile())
+            .projector
+            .remove(0);
         p.width_px = 6;
         p.height_px = 4;
         p.offset_px = [100, 10];

@@ -19,8 +19,8 @@ mod test_support;
 pub use lit::LitPixels;
 
 use super::{Kind, Violation};
+use crate::bundle::machine::Machine;
 use crate::bundle::{BundleSource, DirSource, Manifest, MaskRef, MANIFEST};
-use crate::profile::Profile;
 use content::ContentRule;
 use files::{check_gray_maps, check_png, is_inside, PngCheck};
 use rayon::prelude::*;
@@ -70,7 +70,7 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
 }
 
 /// [`verify_source`] for the bundle directory `dir`.
-pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verification {
+pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Machine) -> Verification {
     verify_source(&DirSource::new(dir), manifest, machine, false)
 }
 
@@ -86,7 +86,7 @@ pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Profile) -> Verifica
 pub fn verify_source(
     dir: &dyn BundleSource,
     manifest: &Manifest,
-    machine: &Profile,
+    machine: &Machine,
     shared_masks: bool,
 ) -> Verification {
     let mut problems = Vec::new();
@@ -154,7 +154,7 @@ type MaskFiles<'m> = Vec<(usize, &'m MaskRef)>;
 fn check_structure<'m>(
     dir: &dyn BundleSource,
     manifest: &'m Manifest,
-    machine: &Profile,
+    machine: &Machine,
     shared_masks: bool,
     problems: &mut Vec<Violation>,
 ) -> (MaskFiles<'m>, HashSet<usize>) {
