@@ -56,6 +56,7 @@ impl Mask {
     }
 
     /// Sum of values / 255: the lit area in pixels.
+    #[cfg(any(test, feature = "internals"))]
     pub fn lit_pixels(&self) -> f64 {
         self.lit_pixels_in(PixelBox::whole(self.width as usize, self.height as usize))
     }
@@ -89,6 +90,7 @@ pub struct LitRuns {
 impl LitRuns {
     /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (a
     /// [`PixelBox`]'s rows `r0..r1` and columns `c0..c1`; zero outside).
+    #[cfg(test)]
     pub fn of_mask(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> LitRuns {
         let mut l = LitRuns::default();
         l.scan_mask(m, PixelBox { r0, r1, c0, c1 });
@@ -384,6 +386,7 @@ impl Rasterizer {
 
     /// Binary mask: 255 where the anti-aliased coverage is at least 50 % (value ≥ 128),
     /// else 0.
+    #[cfg(test)]
     pub fn binary(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
         self.render::<NoMap>(contours, scratch, true, None)
     }

@@ -17,7 +17,7 @@
 //!   `machine.dmd.load_s`, concurrently with the layer's first steps (light is off). An
 //!   `expose` or the first `sweep` of a run waits until the load is done.
 //! * `move {to_mm, speed_mm_s, accel_mm_s2}`: shutter closed, trapezoidal velocity profile
-//!   from rest to rest ([`crate::motion::move_time`]).
+//!   from rest to rest (`motion::move_time`).
 //! * `wait {s}`: nothing happens for `s` seconds.
 //! * `expose {s}`: stage still; the shutter opens (`shutter.open_s`, light not yet on),
 //!   light is on for exactly `s`, the shutter closes (`shutter.close_s`). Duration

@@ -1,8 +1,8 @@
 //! `dmdsl export`: a job (any form `run` reads) into another form (one zip, Prusa SL1/SL1S, the SLA
 //! control-file standard); also the `--format` values `slice` shares.
 
+use crate::formats::Format;
 use clap::Args;
-use dmdsl::formats::Format;
 use std::path::PathBuf;
 
 pub(crate) const EXPORT_HELP: &str = "Examples:
@@ -60,10 +60,10 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     super::interrupt::on_interrupt(cancel.clone());
     let policy = a.warnings.policy(&[])?;
     let format = Format::for_output(a.format, &a.output)?;
-    let job = dmdsl::formats::open(&a.bundle)?;
+    let job = crate::formats::open(&a.bundle)?;
     let manifest = &job.manifest;
-    dmdsl::formats::check_fits(format, &manifest.machine, &a.output)?;
-    let warnings = dmdsl::formats::write(
+    crate::formats::check_fits(format, &manifest.machine, &a.output)?;
+    let warnings = crate::formats::write(
         format,
         manifest,
         job.source.as_ref(),
@@ -71,7 +71,7 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
         Some(&cancel),
     )?;
     let warnings = policy.apply(&warnings);
-    let failed = dmdsl::warning::any_error(&warnings);
+    let failed = crate::warning::any_error(&warnings);
     if a.json {
         super::print_json(&serde_json::json!({
             "ok": !failed,

@@ -32,6 +32,7 @@ pub mod trace;
 pub mod verify;
 mod violation;
 
+#[cfg(any(test, feature = "internals"))]
 pub mod testutil;
 
 use crate::bundle::Machine as MachineRecord;
@@ -63,7 +64,7 @@ pub struct RunOptions {
     /// and DMD are simulated, its projectors' sizes and placement verified (`--machine`:
     /// [`MachineRecord::of`] a profile).
     pub machine: Option<MachineRecord>,
-    /// Predict what cures from the masks (`--cure`, [`cure`]): needs the manifest's `cure`
+    /// Predict what cures from the masks (`--cure`, `exec::cure`): needs the manifest's `cure`
     /// record and one projector.
     pub cure: bool,
 }

@@ -15,7 +15,7 @@ pub mod sheet;
 pub mod summary;
 
 pub use crate::picture::preview;
-pub use summary::{summarize, Summary};
+pub use summary::summarize;
 
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};

@@ -28,9 +28,10 @@ mod placement;
 mod sink;
 
 pub use cure_records::CureOptions;
-pub use options::{default_output, default_output_as, SliceOptions, SliceSummary, Timings};
+pub use options::{default_output_as, SliceOptions, SliceSummary, Timings};
+#[cfg(any(test, feature = "internals"))]
 pub use pipeline::BLOCK;
-pub use placement::{place_mesh, placement, PlacementMode, Transform};
+pub use placement::{place_mesh, PlacementMode, Transform};
 
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};

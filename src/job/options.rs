@@ -169,7 +169,3 @@ fn stem(input: &Path) -> String {
         .unwrap_or_else(|| "part".into())
 }
 
-/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
-pub fn default_output(input: &Path) -> PathBuf {
-    default_output_as(input, Format::Dmdjob)
-}

@@ -15,6 +15,7 @@ mod obj;
 mod stl;
 
 pub use crate::input::MESH_MAX_BYTES;
+#[cfg(any(test, feature = "internals"))]
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
@@ -142,6 +143,7 @@ impl MeshReport {
 pub(crate) type Soup = Vec<[[f32; 3]; 3]>;
 
 /// Loads a mesh file (STL binary/ASCII or OBJ), welds and validates it.
+#[cfg(any(test, feature = "internals"))]
 pub fn load(path: &Path) -> Result<Mesh> {
     let bytes = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
     load_bytes(path, &bytes)

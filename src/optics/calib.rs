@@ -107,6 +107,7 @@ fn readings(path: &Path, rows: Vec<table::Row<TableRow>>) -> Result<Vec<Reading>
 }
 
 /// Parses a measurement table. Errors name `path`, the line and the column.
+#[cfg(any(test, feature = "internals"))]
 pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Reading>> {
     readings(path, table::parse(path, text, &TABLE)?)
 }

@@ -40,8 +40,6 @@ pub(crate) mod synthetic;
 /// carries it).
 pub use crate::profile::calibration::{field, response, Calibration, FitSummary, Units};
 pub use compensate::Compensator;
-pub use field::{FieldModel, Poly};
-pub use response::{GrayVariable, Interpolation, Response};
 
 use crate::bundle::Optics;
 use crate::error::{Error, Result};

@@ -20,7 +20,7 @@ pub use lit::LitPixels;
 
 use super::{Kind, Violation};
 use crate::bundle::machine::Machine;
-use crate::bundle::{BundleSource, DirSource, Manifest, MaskRef, MANIFEST};
+use crate::bundle::{BundleSource, Manifest, MaskRef, MANIFEST};
 use content::ContentRule;
 use files::{check_gray_maps, check_png, is_inside, PngCheck};
 use rayon::prelude::*;
@@ -65,13 +65,9 @@ fn problem_in(
 
 /// Verifies the manifest's structure and every mask of the bundle at `dir` for the
 /// machine the manifest embeds.
+#[cfg(any(test, feature = "internals"))]
 pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
-    verify_on(dir, manifest, &manifest.machine)
-}
-
-/// [`verify_source`] for the bundle directory `dir`.
-pub fn verify_on(dir: &Path, manifest: &Manifest, machine: &Machine) -> Verification {
-    verify_source(&DirSource::new(dir), manifest, machine, false)
+    verify_source(&crate::bundle::DirSource::new(dir), manifest, &manifest.machine, false)
 }
 
 /// Verifies the bundle whose files `dir` reads for `machine`, which may differ from the one the manifest

@@ -16,7 +16,6 @@ pub mod read;
 mod write;
 
 pub(crate) use read::{import, settings_entry};
-pub use read::{MAX_LAYERS, PIXEL_MM};
 pub(crate) use write::write;
 
 use crate::bundle::Manifest;
