@@ -11,12 +11,6 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
-/// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
-/// with the lit pixels `prev` of the layer below.
-pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
-    count_islands(cur, prev)
-}
-
 /// The runs of `cur` that share no pixel with a run of `prev` in the same row (indexes
 /// into `cur.runs`, increasing), into `out`.
 fn unsupported_runs(cur: &LitRuns, prev: &LitRuns, out: &mut Vec<u32>) {
@@ -35,11 +29,12 @@ fn unsupported_runs(cur: &LitRuns, prev: &LitRuns, out: &mut Vec<u32>) {
     }
 }
 
-/// [`islands`]. A region is supported when one of its runs is; so only the
-/// runs that rest on nothing (usually none, else a few along the layer's new parts) are
-/// joined into regions (union-find over them), each region marked supported when one of
-/// its runs touches a supported run in the row above or below.
-pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+/// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
+/// with the lit pixels `prev` of the layer below. A region is supported when one of its
+/// runs is; so only the runs that rest on nothing (usually none, else a few along the
+/// layer's new parts) are joined into regions (union-find over them), each region marked
+/// supported when one of its runs touches a supported run in the row above or below.
+pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
     // Empty (no allocation) in the usual case.
     let mut unsup = Vec::new();
     unsupported_runs(cur, prev, &mut unsup);
@@ -86,7 +81,7 @@ pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::analysis::test_support::{lit, ngon, rect, xorshift};
+    use crate::plan::analysis::test_support::{lit, rect, ring, xorshift};
     use crate::slice::Contour;
 
     /// [`islands`] of two sections.
@@ -105,14 +100,11 @@ mod tests {
         // Nothing below at all.
         assert_eq!(islands_of(&two, &[]), 2);
         // A ring counts once, and rests on a base touching only part of it.
-        let ring = [
-            ngon(40.0, 30.0, 10.0, 64, true),
-            ngon(40.0, 30.0, 8.0, 64, false),
-        ];
-        assert_eq!(islands_of(&ring, &[]), 1);
-        assert_eq!(islands_of(&ring, &[rect(48.0, 28.0, 52.0, 32.0)]), 0);
+        let section = ring([40.0, 30.0], 10.0, 8.0, 64);
+        assert_eq!(islands_of(&section, &[]), 1);
+        assert_eq!(islands_of(&section, &[rect(48.0, 28.0, 52.0, 32.0)]), 0);
         // A base inside the ring's hole does not support it.
-        assert_eq!(islands_of(&ring, &[rect(38.0, 28.0, 42.0, 32.0)]), 1);
+        assert_eq!(islands_of(&section, &[rect(38.0, 28.0, 42.0, 32.0)]), 1);
         assert_eq!(islands_of(&[], &base), 0);
         // Pixels, not contours: a region lighting no pixel is no island, and regions that
         // touch only at a corner are two (4-connected).
@@ -138,7 +130,7 @@ mod tests {
         }
     }
 
-    /// [`count_islands`] the direct way (without the shortcut of the unsupported runs): every run
+    /// [`islands`] the direct way (without the shortcut of the unsupported runs): every run
     /// joined into its region (union-find), a region supported when one of its runs
     /// shares a pixel with a run below.
     fn join_and_count(cur: &LitRuns, prev: &LitRuns) -> u32 {
@@ -216,12 +208,11 @@ mod tests {
                 .collect();
             if rnd() < 0.5 {
                 let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
-                v.push(ngon(cx, cy, r, 48, true));
-                v.push(ngon(cx, cy, r * 0.6, 48, false));
+                v.extend(ring([cx, cy], r, r * 0.6, 48));
             }
             v
         };
-        let (mut shortcut, mut islands) = (0, 0);
+        let (mut shortcut, mut found) = (0, 0);
         for _ in 0..200 {
             let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
             // Sometimes the layer below is the same or larger, so all runs rest on it.
@@ -234,10 +225,10 @@ mod tests {
                 assert_eq!(joined, 0);
                 shortcut += 1;
             }
-            assert_eq!(count_islands(&rc, &rp), joined);
-            islands += joined;
+            assert_eq!(islands(&rc, &rp), joined);
+            found += joined;
         }
-        assert!(shortcut > 40 && islands > 40, "{shortcut} {islands}");
+        assert!(shortcut > 40 && found > 40, "{shortcut} {found}");
     }
 
     #[test]
@@ -307,7 +298,7 @@ mod tests {
                 want += u32::from(!rests);
             }
             let (rc, rb) = (runs_of(&cur), runs_of(&below));
-            assert_eq!(count_islands(&rc, &rb), want, "case {case}");
+            assert_eq!(islands(&rc, &rb), want, "case {case}");
             assert_eq!(join_and_count(&rc, &rb), want, "case {case}");
             total += want;
         }

@@ -278,17 +278,13 @@ impl Edges {
     }
 
     /// Whether no point of the square `[c ± h]` inside the section is deeper than `t`,
-    /// shown from the walls crossing it: when the edges meeting the square form at most
-    /// two runs of consecutive edges, each close to a line over the square ([`Wall`]),
-    /// the square falls into the walls' bands (depth at most twice the band's half-width),
-    /// the part beyond each wall and the part between them (or on either side of a single
-    /// wall). No edge meets those parts, so each is wholly inside or wholly outside the
-    /// section (one inside test); an inside part is bounded by the walls' depth bounds,
-    /// convex, so by their largest value at the part's corners (between two walls, their
-    /// mean: the smaller is at most the mean). `false` means not shown.
-    ///
-    /// This drops cells that straddle a wall thinner than the cell (a thin ring's cells
-    /// stick out of it on both sides, so discs around wall points cannot cover them).
+    /// shown from the walls crossing it: the edges meeting the square must form at most
+    /// two runs of consecutive edges, each close to a line over the square ([`Wall`]).
+    /// The square then falls into the walls' bands (depth at most twice a band's
+    /// half-width) and parts no edge meets, each wholly inside or outside the section (one
+    /// inside test) and bounded by the walls' convex bounds at its corners
+    /// (docs/PLANNING.md, "Wall covers"). This drops cells across a wall thinner than
+    /// themselves, which no discs around wall points cover. `false` means not shown.
     pub(super) fn walls_cover(&self, c: [f64; 2], h: f64, t: f64, hints: [u32; 2]) -> bool {
         let mut es = [0u32; MAX_CROSSING_EDGES];
         let Some(m) = self.crossing(c, h, &mut es) else {
@@ -445,10 +441,7 @@ mod tests {
         for _ in 0..6 {
             let (r, w) = (2.0 + 10.0 * rnd(), 0.01 + 0.3 * rnd());
             let n = 64 + (600.0 * rnd()) as usize;
-            out.push(vec![
-                ngon(0.0, 0.0, r + w, n, true),
-                ngon(0.0, 0.0, r, n, false),
-            ]);
+            out.push(ring([0.0, 0.0], r + w, r, n));
         }
         out.push(cross_cut_pieces(6.0, 5.9, 0.05, 200));
         let a = rnd();
@@ -498,11 +491,8 @@ mod tests {
     fn walls_cover_drops_cells_across_a_thin_ring_and_no_deeper() {
         // A ring 0.04 mm wide (depth 0.02): a cell of half-size 0.2 across it holds no
         // point deeper than 0.04, but points deeper than 0.015.
-        let ring = vec![
-            ngon(0.0, 0.0, 11.29, 1440, true),
-            ngon(0.0, 0.0, 11.25, 1440, false),
-        ];
-        let e = Edges::new(&ring);
+        let section = ring([0.0, 0.0], 11.29, 11.25, 1440);
+        let e = Edges::new(&section);
         let c = [11.27, 0.05];
         assert!(e.walls_cover(c, 0.2, 0.04, [u32::MAX; 2]));
         assert!(!e.walls_cover(c, 0.2, 0.015, [u32::MAX; 2]));
@@ -513,11 +503,8 @@ mod tests {
         assert!(!Edges::new(&disc).walls_cover([0.0, 0.0], 0.5, 0.01, [u32::MAX; 2]));
         // The search keeps the guarantee on such rings.
         for w in [0.03, 0.05, 0.2] {
-            let ring = vec![
-                ngon(0.0, 0.0, 11.25 + w, 1440, true),
-                ngon(0.0, 0.0, 11.25, 1440, false),
-            ];
-            let r = max_fill_distance(&ring).0;
+            let section = ring([0.0, 0.0], 11.25 + w, 11.25, 1440);
+            let r = max_fill_distance(&section).0;
             // The regular polygons' ring is a little narrower than w where their edges
             // are (their apothems differ from their radii by the same factor).
             let exact = 0.5 * w * (std::f64::consts::PI / 1440.0).cos();
