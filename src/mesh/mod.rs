@@ -19,7 +19,7 @@ pub use crate::input::MESH_MAX_BYTES;
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
-use crate::text::plural;
+use crate::text::count;
 use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -71,61 +71,34 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// The warnings for the defects found (empty for a clean mesh).
+    /// The warnings for the defects found (empty for a clean mesh). A count's figure is
+    /// named after its code (`mesh.open-edges`: `open_edges`).
     pub fn warnings(&self) -> Vec<Warning> {
-        let mut w = Vec::new();
-        if self.open_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.open-edges",
-                    format!(
-                        "mesh has {} open {} (holes); open section contours are closed or dropped",
-                        self.open_edges,
-                        plural(self.open_edges, "edge", "edges")
-                    ),
-                )
-                .with("open_edges", self.open_edges),
-            );
-        }
-        if self.nonmanifold_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.nonmanifold-edges",
-                    format!(
-                        "mesh has {} non-manifold {}",
-                        self.nonmanifold_edges,
-                        plural(self.nonmanifold_edges, "edge", "edges")
-                    ),
-                )
-                .with("nonmanifold_edges", self.nonmanifold_edges),
-            );
-        }
-        if self.backwards_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.backwards-edges",
-                    format!(
-                        "mesh has {} backwards {} (inconsistently oriented facets); contours are oriented by majority",
-                        self.backwards_edges,
-                        plural(self.backwards_edges, "edge", "edges")
-                    ),
-                )
-                .with("backwards_edges", self.backwards_edges),
-            );
-        }
-        if self.degenerate_triangles > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.degenerate-facets",
-                    format!(
-                        "mesh has {} degenerate {}",
-                        self.degenerate_triangles,
-                        plural(self.degenerate_triangles, "triangle", "triangles")
-                    ),
-                )
-                .with("degenerate_facets", self.degenerate_triangles),
-            );
-        }
+        let counts = [
+            (
+                "mesh.open-edges",
+                self.open_edges,
+                "open edge",
+                " (holes); open section contours are closed or dropped",
+            ),
+            ("mesh.nonmanifold-edges", self.nonmanifold_edges, "non-manifold edge", ""),
+            (
+                "mesh.backwards-edges",
+                self.backwards_edges,
+                "backwards edge",
+                " (inconsistently oriented facets); contours are oriented by majority",
+            ),
+            ("mesh.degenerate-facets", self.degenerate_triangles, "degenerate triangle", ""),
+        ];
+        let mut w: Vec<Warning> = counts
+            .into_iter()
+            .filter(|c| c.1 > 0)
+            .map(|(code, n, what, more)| {
+                let many = count(n, what, &format!("{what}s"));
+                Warning::new(code, format!("mesh has {many}{more}"))
+                    .with(&code[5..].replace('-', "_"), n)
+            })
+            .collect();
         if self.volume_mm3 < 0.0 {
             w.push(
                 Warning::new(
