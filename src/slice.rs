@@ -276,6 +276,24 @@ fn chain(segs: &[Seg]) -> Section {
         }
         None
     };
+    // The next segment of a chain at `node`, marked used: one leaving it the way the
+    // chain runs (`fwd`: from its start edge), else one leaving it the other way (a
+    // flipped facet). Its other end's point and edge, and its vote for the orientation.
+    let step = |node: u32, fwd: bool, used: &mut [bool]| {
+        for from_start in [fwd, !fwd] {
+            if let Some(s) = find(if from_start { &starts } else { &ends }, used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                let vote = if from_start == fwd { 1 } else { -1 };
+                return Some(if from_start {
+                    (sg.q, sg.to_edge, vote)
+                } else {
+                    (sg.p, sg.from_edge, vote)
+                });
+            }
+        }
+        None
+    };
 
     let mut section = Section::default();
     let mut open: Vec<Contour> = Vec::new();
@@ -291,21 +309,11 @@ fn chain(segs: &[Seg]) -> Section {
         let mut node = first.to_edge;
         let mut closed = node == start_node;
         while !closed {
-            if let Some(s) = find(&starts, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                pts.push(sg.q);
-                node = sg.to_edge;
-                agree += 1;
-            } else if let Some(s) = find(&ends, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                pts.push(sg.p);
-                node = sg.from_edge;
-                agree -= 1;
-            } else {
+            let Some((p, next, vote)) = step(node, true, &mut used) else {
                 break;
-            }
+            };
+            pts.push(p);
+            (node, agree) = (next, agree + vote);
             closed = node == start_node;
         }
         if closed {
@@ -319,22 +327,9 @@ fn chain(segs: &[Seg]) -> Section {
         // Open: extend backwards from the start node too.
         let mut back: Vec<[f64; 2]> = Vec::new();
         let mut node = start_node;
-        loop {
-            if let Some(s) = find(&ends, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                back.push(sg.p);
-                node = sg.from_edge;
-                agree += 1;
-            } else if let Some(s) = find(&starts, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                back.push(sg.q);
-                node = sg.to_edge;
-                agree -= 1;
-            } else {
-                break;
-            }
+        while let Some((p, next, vote)) = step(node, false, &mut used) {
+            back.push(p);
+            (node, agree) = (next, agree + vote);
         }
         back.reverse();
         back.extend(pts);
