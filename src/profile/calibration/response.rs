@@ -375,19 +375,16 @@ pub fn pchip_eval(pts: &[[f64; 2]], x: f64) -> f64 {
     }
     let x = x.clamp(pts[0][0], pts[n - 1][0]);
     let k = (pts.partition_point(|p| p[0] <= x)).clamp(1, n - 1) - 1;
-    let d0 = pchip_slope(pts, k);
-    let d1 = pchip_slope(pts, k + 1);
-    let (x0, y0) = (pts[k][0], pts[k][1]);
-    let (x1, y1) = (pts[k + 1][0], pts[k + 1][1]);
-    let h = x1 - x0;
-    let t = (x - x0) / h;
-    let t2 = t * t;
-    let t3 = t2 * t;
-    let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
-    let h10 = t3 - 2.0 * t2 + t;
-    let h01 = -2.0 * t3 + 3.0 * t2;
-    let h11 = t3 - t2;
-    h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+    let (d0, d1) = (pchip_slope(pts, k), pchip_slope(pts, k + 1));
+    hermite(
+        pts[k][0],
+        pts[k][1],
+        d0,
+        pts[k + 1][0],
+        pts[k + 1][1],
+        d1,
+        x,
+    )
 }
 
 /// PCHIP derivative at node `k`.
