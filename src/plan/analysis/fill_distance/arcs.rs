@@ -633,6 +633,15 @@ mod tests {
     use crate::plan::analysis::test_support::*;
     use crate::slice::Contour;
 
+    /// The hints the search gives: the edge nearest to `c` and the one nearest to the
+    /// mirror of that edge's point through `c`.
+    fn hints(e: &Edges, c: [f64; 2]) -> [u32; 2] {
+        let near = e.nearest(c, u32::MAX).1;
+        let q = e.closest_point(near, c);
+        let far = e.nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX);
+        [near, far.1]
+    }
+
     /// Sections with curved walls: rings (concentric, off-centre, coarse and fine), a
     /// ring cut into quarters (straight and curved walls), an elliptic ring (walls that
     /// are no circles), a disc and a wavy blob.
@@ -650,13 +659,10 @@ mod tests {
         out.push(cross_cut_pieces(12.0, 7.0, 1.5, 240));
         out.push(vec![ellipse(12.0, 8.0, true), ellipse(9.0, 5.0, false)]);
         out.push(vec![ngon(1.0, -2.0, 6.0, 300, true)]);
-        out.push(vec![(0..500)
-            .map(|i| {
-                let t = std::f64::consts::TAU * i as f64 / 500.0;
-                let r = 8.0 + 1.5 * (5.0 * t).sin();
-                [r * t.cos(), r * t.sin()]
-            })
-            .collect()]);
+        out.push(vec![closed(500, true, |t| {
+            let r = 8.0 + 1.5 * (5.0 * t).sin();
+            [r * t.cos(), r * t.sin()]
+        })]);
         out
     }
 
@@ -692,17 +698,11 @@ mod tests {
                     }
                 }
                 let t = m - 0.02 + 0.1 * rnd();
-                // The hints: the nearest edge and the one nearest the mirror of its point.
-                let near = e.nearest(c, u32::MAX).1;
-                let q = e.closest_point(near, c);
-                let far = e
-                    .nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX)
-                    .1;
                 if rnd() < 0.2 {
                     cache.clear();
                 }
                 tried += 1;
-                if !e.arcs_cover(c, h, t, [near, far], &mut cache) {
+                if !e.arcs_cover(c, h, t, hints(&e, c), &mut cache) {
                     continue;
                 }
                 dropped += 1;
@@ -826,15 +826,7 @@ mod tests {
         // discs around wall points cover, and a cell across its inner wall.
         let section = ring([0.0, 0.0], 14.0, 10.0, 720);
         let e = Edges::new(&section);
-        let hints = |c: [f64; 2]| {
-            let near = e.nearest(c, u32::MAX).1;
-            let q = e.closest_point(near, c);
-            [
-                near,
-                e.nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX)
-                    .1,
-            ]
-        };
+        let hints = |c: [f64; 2]| hints(&e, c);
         let mut cache = ArcCache::default();
         for c in [[12.0, 0.3], [0.5, -12.0], [8.4, 8.6]] {
             assert!(e.arcs_cover(c, 0.9, 2.001, hints(c), &mut cache), "{c:?}");

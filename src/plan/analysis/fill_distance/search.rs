@@ -216,6 +216,18 @@ fn far_corner(c: [f64; 2], h: f64, q: [f64; 2]) -> f64 {
 }
 
 impl Search<'_> {
+    /// Keeps `centre` (at `depth`, nearest edge `near`) as the best when it is deeper.
+    #[inline]
+    fn raise(&mut self, centre: [f64; 2], depth: f64, near: u32) {
+        if depth > self.best.depth {
+            self.best = Best {
+                centre,
+                depth,
+                near,
+            };
+        }
+    }
+
     /// Queues the square cells of side `size` (the box's smaller side) that cover the box
     /// from `lo` of width `w` and height `h`.
     fn queue_grid(&mut self, lo: [f64; 2], (w, h): (f64, f64), size: f64) {
@@ -281,13 +293,7 @@ impl Search<'_> {
         for k in 0..SEED_PROBES {
             let v = (k * e.segs.len() / SEED_PROBES) as u32;
             if let Some((p, d, near)) = e.ridge_probe(v, self.precision, size) {
-                if d > self.best.depth {
-                    self.best = Best {
-                        centre: p,
-                        depth: d,
-                        near,
-                    };
-                }
+                self.raise(p, d, near);
             }
         }
     }
@@ -403,13 +409,7 @@ impl Search<'_> {
         } else {
             -d
         };
-        if d > self.best.depth {
-            self.best = Best {
-                centre: c.c,
-                depth: d,
-                near,
-            };
-        }
+        self.raise(c.c, d, near);
         let lip = d + reach;
         if lip - self.best.depth <= self.precision {
             return None;
@@ -473,11 +473,10 @@ impl Search<'_> {
         behind
     }
 
-    /// Ridge probe: half-way between the two walls along the line through `q` (the
-    /// boundary point nearest to the centre, on edge `near`; `d` away) and the centre is
-    /// (for parallel walls exactly) the deepest point nearby; it keeps the best depth close
-    /// to a ridge's height so ridge cells can be pruned. `(q2, i2)`: the boundary point
-    /// behind the centre and its edge.
+    /// Ridge probe: the point half-way between the two walls on the line through the
+    /// centre and `q` (its nearest boundary point, on edge `near`, `d` away), the deepest
+    /// point nearby for parallel walls, raises the best so ridge cells can be pruned.
+    /// `(q2, i2)`: the boundary point behind the centre and its edge.
     #[inline]
     fn probe_ridge(&mut self, c: &Cell, d: f64, q: [f64; 2], near: u32, (q2, i2): ([f64; 2], u32)) {
         let e = self.e;
@@ -494,11 +493,7 @@ impl Search<'_> {
             if self.best.depth < 0.0 || start.0 > self.best.depth * self.best.depth {
                 let (dp, np) = e.nearest_from(p, start);
                 if dp > self.best.depth && e.inside(p) {
-                    self.best = Best {
-                        centre: p,
-                        depth: dp,
-                        near: np,
-                    };
+                    self.raise(p, dp, np);
                 }
             }
         }
@@ -535,15 +530,11 @@ impl Search<'_> {
     }
 
     /// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
-    /// `(centre, half-size)`: adds the boundary point nearest to `x` after the points of
-    /// `pts` and tries again, at most [`MAX_EXTRA_COVER_POINTS`] times; returns whether the
-    /// square is now covered at radius `T` = best depth + precision. The nearest point is
-    /// first looked for by following the cell's `walls` (edges, `u32::MAX`: none) along
-    /// their contours to `x` ([`Edges::descend`]); only when that point is farther than `T`
-    /// is the exact nearest edge searched. Every point added is a boundary point, so a
-    /// cover stays a proof. If `x` is inside the section and deeper than `T`, it becomes
-    /// the best centre (and the square cannot be covered). The uncovered points found go to
-    /// `wit`.
+    /// `(centre, half-size)`: adds the boundary point nearest to `x` (found by following
+    /// the cell's `walls` to `x`, searched only when that one is farther than `T`) after
+    /// `pts`' own and tries again, at most [`MAX_EXTRA_COVER_POINTS`] times; returns whether
+    /// the square is now covered at `T`. An `x` inside the section and deeper than `T`
+    /// becomes the best centre. The uncovered points found go to `wit`.
     fn cover_more(
         &mut self,
         sq: ([f64; 2], f64),
@@ -573,11 +564,7 @@ impl Search<'_> {
             };
             if dx > t {
                 if e.inside(x) {
-                    self.best = Best {
-                        centre: x,
-                        depth: dx,
-                        near: ix,
-                    };
+                    self.raise(x, dx, ix);
                 }
                 return false;
             }
