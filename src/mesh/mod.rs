@@ -459,32 +459,17 @@ impl Mesh {
 /// An outward-facing cube of edge `s` with its lowest corner at `at` (for unit tests).
 #[cfg(test)]
 pub(crate) fn cube_soup(s: f32, at: [f32; 3]) -> Soup {
-    let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
-    let v = [
-        p(0., 0., 0.),
-        p(1., 0., 0.),
-        p(1., 1., 0.),
-        p(0., 1., 0.),
-        p(0., 0., 1.),
-        p(1., 0., 1.),
-        p(1., 1., 1.),
-        p(0., 1., 1.),
+    // Corners 0..8 as bits x, y, z (in the order 0, x, xy, y, then z above them).
+    const CORNERS: [u8; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+    const FACES: [usize; 36] = [
+        0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4, 1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6,
+        3, 0, 4, 3, 4, 7,
     ];
-    let f = [
-        [0, 2, 1],
-        [0, 3, 2],
-        [4, 5, 6],
-        [4, 6, 7],
-        [0, 1, 5],
-        [0, 5, 4],
-        [1, 2, 6],
-        [1, 6, 5],
-        [2, 3, 7],
-        [2, 7, 6],
-        [3, 0, 4],
-        [3, 4, 7],
-    ];
-    f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
+    let v = CORNERS.map(|b| [0, 1, 2].map(|k| at[k] + f32::from(b >> k & 1) * s));
+    FACES
+        .chunks(3)
+        .map(|t| [v[t[0]], v[t[1]], v[t[2]]])
+        .collect()
 }
 
 #[cfg(test)]

@@ -24,43 +24,33 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
     if looks_ascii {
         return Ok((parse_ascii(path, b)?, "stl-ascii"));
     }
-    match declared {
-        Some(n) => {
-            let need = 84 + 50 * n;
-            if need > b.len() as u64 {
-                Err(Error::input(
-                    path,
-                    format!(
-                        "truncated or not an STL: binary header declares {} ({need} bytes) but the file has {}",
-                        count(n, "triangle", "triangles"),
-                        count(b.len() as u64, "byte", "bytes")
-                    ),
-                ))
-            } else {
-                // Trailing bytes after the declared triangles: some exporters pad files.
-                let extra = b.len() as u64 - need;
-                if extra >= 50 {
-                    Err(Error::input(
-                        path,
-                        format!(
-                            "not a valid STL: binary header declares {} ({need} bytes) but the file has {} bytes",
-                            count(n, "triangle", "triangles"),
-                            b.len()
-                        ),
-                    ))
-                } else {
-                    Ok((parse_binary(b, n as usize), "stl-binary"))
-                }
-            }
-        }
-        None => Err(Error::input(
+    let Some(n) = declared else {
+        return Err(Error::input(
             path,
             format!(
                 "not an STL file: {} is too short for binary STL and it is not ASCII STL",
                 count(b.len() as u64, "byte", "bytes")
             ),
-        )),
+        ));
+    };
+    // Up to 49 bytes after the declared triangles: some exporters pad files.
+    let need = 84 + 50 * n;
+    if need <= b.len() as u64 && b.len() as u64 - need < 50 {
+        return Ok((parse_binary(b, n as usize), "stl-binary"));
     }
+    let what = if need > b.len() as u64 {
+        "truncated or not an STL"
+    } else {
+        "not a valid STL"
+    };
+    Err(Error::input(
+        path,
+        format!(
+            "{what}: binary header declares {} ({need} bytes) but the file has {}",
+            count(n, "triangle", "triangles"),
+            count(b.len() as u64, "byte", "bytes")
+        ),
+    ))
 }
 
 /// Encodes `triangles` as a binary STL: an 80-byte header of zeros, the count, and per
