@@ -515,43 +515,14 @@ impl Edges {
         }
         true
     }
-}
 
-impl Edges {
     /// An edge whose bounding box meets the square `[c ± h]` and that is none of `arcs`'
     /// stretches' (`u32::MAX` when the index is too deep to tell), or `None` when every
     /// edge meeting the square is one of theirs.
     fn stray(&self, c: [f64; 2], h: f64, arcs: &[&Arc]) -> Option<u32> {
-        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let k = stack[sp] as usize;
-            let n = &self.nodes[k];
-            if !(n.lo[0] <= hi[0] && n.hi[0] >= lo[0] && n.lo[1] <= hi[1] && n.hi[1] >= lo[1])
-                || arcs.iter().any(|a| a.has_span(self.spans[k]))
-            {
-                continue;
-            }
-            if n.count > 0 {
-                let f = n.first;
-                for v in f..f + n.count {
-                    if self.seg_meets(v, lo, hi) && !arcs.iter().any(|a| a.has(v)) {
-                        return Some(v);
-                    }
-                }
-            } else {
-                if sp + 2 > stack.len() {
-                    return Some(u32::MAX);
-                }
-                stack[sp] = n.first;
-                stack[sp + 1] = n.first + 1;
-                sp += 2;
-            }
-        }
-        None
+        let skip = |k: usize| arcs.iter().any(|a| a.has_span(self.spans[k]));
+        let stray = |v: u32| (!arcs.iter().any(|a| a.has(v))).then_some(v);
+        self.walk_square(c, h, skip, stray).unwrap_or(Some(u32::MAX))
     }
 
     /// Whether no point of the square `[c ± h]` is deeper than `t`, shown from two walls

@@ -116,6 +116,49 @@ impl ConvexPolygon {
 const WALL_BAND_MARGIN_MM: f64 = 1e-9;
 
 impl Edges {
+    /// Walks, depth first, the edges whose bounding boxes meet the square `[c ± h]`,
+    /// giving each to `f` until it returns a value; the subtrees of the nodes `skip`
+    /// refuses (by index) are left out. `Err(())` when the hierarchy is too deep to walk.
+    pub(super) fn walk_square<T>(
+        &self,
+        c: [f64; 2],
+        h: f64,
+        skip: impl Fn(usize) -> bool,
+        mut f: impl FnMut(u32) -> Option<T>,
+    ) -> Result<Option<T>, ()> {
+        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
+        let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let k = stack[sp] as usize;
+            let n = &self.nodes[k];
+            if !(n.lo[0] <= hi[0] && n.hi[0] >= lo[0] && n.lo[1] <= hi[1] && n.hi[1] >= lo[1])
+                || skip(k)
+            {
+                continue;
+            }
+            if n.count > 0 {
+                for v in n.first..n.first + n.count {
+                    if self.seg_meets(v, lo, hi) {
+                        if let Some(r) = f(v) {
+                            return Ok(Some(r));
+                        }
+                    }
+                }
+            } else {
+                if sp + 2 > stack.len() {
+                    return Err(());
+                }
+                stack[sp] = n.first;
+                stack[sp + 1] = n.first + 1;
+                sp += 2;
+            }
+        }
+        Ok(None)
+    }
+
     /// Edges whose bounding boxes meet the square `[c ± h]`, into `out`; `None` when there
     /// are more than [`MAX_CROSSING_EDGES`].
     pub(super) fn crossing(
@@ -124,41 +167,16 @@ impl Edges {
         h: f64,
         out: &mut [u32; MAX_CROSSING_EDGES],
     ) -> Option<usize> {
-        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
-        let meets = |a: [f64; 2], b: [f64; 2]| {
-            a[0] <= hi[0] && b[0] >= lo[0] && a[1] <= hi[1] && b[1] >= lo[1]
-        };
         let mut m = 0;
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let n = &self.nodes[stack[sp] as usize];
-            if !meets(n.lo, n.hi) {
-                continue;
+        let walk = self.walk_square(c, h, |_| false, |v| {
+            if m == MAX_CROSSING_EDGES {
+                return Some(());
             }
-            if n.count > 0 {
-                let f = n.first as usize;
-                for v in f..f + n.count as usize {
-                    if self.seg_meets(v as u32, lo, hi) {
-                        if m == MAX_CROSSING_EDGES {
-                            return None;
-                        }
-                        out[m] = v as u32;
-                        m += 1;
-                    }
-                }
-            } else {
-                if sp + 2 > stack.len() {
-                    return None;
-                }
-                stack[sp] = n.first;
-                stack[sp + 1] = n.first + 1;
-                sp += 2;
-            }
-        }
-        Some(m)
+            out[m] = v;
+            m += 1;
+            None
+        });
+        matches!(walk, Ok(None)).then_some(m)
     }
 
     /// Whether the bounding box of edge `v` meets the box `[lo, hi]`.
