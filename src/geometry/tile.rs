@@ -130,22 +130,20 @@ impl Tiler {
                 return Err(perr(format!("two projectors are named {:?}", p.name)));
             }
         }
-        let mut responses = Vec::with_capacity(n);
-        for p in ps {
-            responses.push(match &p.calibration {
-                None => Response::linear(),
-                Some(c) => {
-                    let lv = c.response.levels();
-                    let pairs: Vec<(u8, f64)> = lv.gray.iter().copied().zip(lv.s).collect();
-                    Response::from_levels(&pairs).ok_or_else(|| {
-                        perr(format!(
-                            "projector {} calibration: the response has no usable gray levels",
-                            p.name
-                        ))
-                    })?
-                }
-            });
-        }
+        let response = |p: &Projector| {
+            let Some(c) = &p.calibration else {
+                return Ok(Response::linear());
+            };
+            let lv = c.response.levels();
+            let pairs: Vec<(u8, f64)> = lv.gray.iter().copied().zip(lv.s).collect();
+            Response::from_levels(&pairs).ok_or_else(|| {
+                perr(format!(
+                    "projector {} calibration: the response has no usable gray levels",
+                    p.name
+                ))
+            })
+        };
+        let responses = ps.iter().map(response).collect::<Result<Vec<_>>>()?;
         let curve = profile.blend.unwrap_or_default();
         let mut tiler = Tiler::new(ps, &curve, &responses, &vec![None; n]);
         let calibrated = ps.iter().filter(|p| p.calibration.is_some()).count();
