@@ -371,46 +371,38 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
             let end = *open[i].last().unwrap();
             // Candidates: own start, other chains' starts (appended), other chains' ends
             // (appended reversed: a flipped piece).
-            let d_self = dist2(end, open[i][0]);
-            let mut best: Option<(f64, usize, bool)> = Some((d_self, i, false));
+            let mut best = (dist2(end, open[i][0]), i, false);
             for (j, c) in open.iter().enumerate() {
                 if j == i || !alive[j] {
                     continue;
                 }
-                let ds = dist2(end, c[0]);
-                if ds <= max2 && best.is_none_or(|b| ds < b.0) {
-                    best = Some((ds, j, false));
-                }
-                let de = dist2(end, *c.last().unwrap());
-                if de <= max2 && best.is_none_or(|b| de < b.0) {
-                    best = Some((de, j, true));
+                for (d, rev) in [(dist2(end, c[0]), false), (dist2(end, *c.last().unwrap()), true)] {
+                    if d <= max2 && d < best.0 {
+                        best = (d, j, rev);
+                    }
                 }
             }
-            match best {
-                Some((d2, j, _)) if j == i => {
-                    let crossing =
-                        d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
-                    let mut pts = std::mem::take(&mut open[i]);
-                    finish_loop(&mut pts, false);
-                    alive[i] = false;
-                    if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
-                        section.contours.push(pts);
-                        section.joined_chains += 1;
-                    } else {
-                        section.dropped_chains += 1;
-                    }
-                    break;
+            let (d2, j, rev) = best;
+            if j != i {
+                let mut other = std::mem::take(&mut open[j]);
+                alive[j] = false;
+                if rev {
+                    other.reverse();
                 }
-                Some((_, j, rev)) => {
-                    let mut other = std::mem::take(&mut open[j]);
-                    alive[j] = false;
-                    if rev {
-                        other.reverse();
-                    }
-                    open[i].extend(other);
-                }
-                None => unreachable!("own start is always a candidate"),
+                open[i].extend(other);
+                continue;
             }
+            let crossing = d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
+            let mut pts = std::mem::take(&mut open[i]);
+            finish_loop(&mut pts, false);
+            alive[i] = false;
+            if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
+                section.contours.push(pts);
+                section.joined_chains += 1;
+            } else {
+                section.dropped_chains += 1;
+            }
+            break;
         }
     }
 }
