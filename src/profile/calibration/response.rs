@@ -1,22 +1,12 @@
 //! The gray response S(g): relative irradiance as a function of the pixel value g shown by
-//! a mirror (255 = fully on), and its inverse on the 8-bit levels.
-//!
-//! Two representations are stored in calibration files:
-//! * `polynomial`: a polynomial in the pixel value (`variable = "pixel"`) or in the
-//!   attenuation z = 255 − pixel value (`variable = "attenuation"`, the reading of Xu et
-//!   al. 2010), valid on an explicit gray range over which it must be strictly increasing
-//!   in g;
-//! * `table`: points (g, S) strictly increasing in both, joined by a not-a-knot cubic
-//!   spline (`interpolation = "spline"`, exact for cubic responses such as that of Xu et
-//!   al. 2010) or by a monotone cubic (`"pchip"`, Fritsch–Carlson), valid from the first to the
-//!   last point. This is what `dmdsl calibrate` writes (spline when it is monotone on the
-//!   measured range, else PCHIP). Its first point may be [0, 0] (mirror off, no light):
-//!   then S between 0 and the next point is a monotone cubic from (0, 0) that meets the
-//!   curve with the three-point end slope of the measured points (limited to 3× the
-//!   secant from 0).
-//!
-//! Outside its valid range S is never used, with one exception: pixel value 0 (mirror off)
-//! delivers no light, S(0) = 0, unless the valid range itself starts at 0.
+//! a mirror (255 = fully on), and its inverse on the 8-bit levels (docs/CALIBRATION.md,
+//! "Model"). Stored as a polynomial in the pixel value or the attenuation 255 − g on an
+//! explicit valid range, or as a table of points joined by a not-a-knot spline or a
+//! monotone PCHIP, valid from its first point to its last; a table's first point may be
+//! [0, 0] (mirror off), S below the next point then a monotone cubic from (0, 0) meeting
+//! the curve with the measured points' three-point end slope (at most 3× the secant).
+//! Outside its valid range S is never used, except that pixel value 0 (mirror off) gives
+//! S(0) = 0.
 
 use serde::{Deserialize, Serialize};
 
