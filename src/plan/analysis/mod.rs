@@ -354,17 +354,13 @@ pub fn bbox(contours: &[Contour]) -> Option<[[f64; 2]; 2]> {
     let mut b = [first, first];
     // Plain comparisons (`f64::min` also orders NaNs, which contours do not have).
     for p in it {
-        if p[0] < b[0][0] {
-            b[0][0] = p[0];
-        }
-        if p[1] < b[0][1] {
-            b[0][1] = p[1];
-        }
-        if p[0] > b[1][0] {
-            b[1][0] = p[0];
-        }
-        if p[1] > b[1][1] {
-            b[1][1] = p[1];
+        for k in 0..2 {
+            if p[k] < b[0][k] {
+                b[0][k] = p[k];
+            }
+            if p[k] > b[1][k] {
+                b[1][k] = p[k];
+            }
         }
     }
     Some(b)

@@ -11,14 +11,6 @@ pub(super) const MAX_EXTRA_COVER_POINTS: usize = 3;
 /// Most points of a cover test: the six wall points and the [`MAX_EXTRA_COVER_POINTS`] ones.
 pub(super) const MAX_COVER_POINTS: usize = 6 + MAX_EXTRA_COVER_POINTS;
 
-/// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
-/// of `q` (at most [`MAX_COVER_POINTS`] points). When it is not, no point of the square is
-/// farther than `sqrt(t2)` from the boundary the points lie on: the square is covered by
-/// discs of radius `sqrt(t2)` around boundary points. Decided by [`exceeds`].
-pub(super) fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
-    exceeds(c, h, q, t2).0
-}
-
 /// [`uncovered`], but only after [`exceeds`] (cheaper when the square is covered) has
 /// found the square not covered. A corner (or centre) [`exceeds`] found far from every
 /// point is the point [`uncovered`] gives (the same points left out, the same candidates
@@ -47,8 +39,9 @@ enum CoverOutcome {
 }
 
 /// [`cover_test`]: whether some point of the square `[c ± h]` is farther than `sqrt(t2)`
-/// from every point of `q` and, when that was found on an edge or at a corner, such a
-/// point.
+/// from every point of `q` (at most [`MAX_COVER_POINTS`]) and, when that was found on an
+/// edge or at a corner, such a point. When none is, the discs of radius `sqrt(t2)` around
+/// the points cover the square: around boundary points, no point of it is deeper.
 pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
     match cover_test(c, h, q, t2) {
         CoverOutcome::Covered => (false, None),
@@ -57,7 +50,7 @@ pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Op
     }
 }
 
-/// [`points_exceed`] from the union of the discs itself, in `O(n²)` instead of the
+/// [`exceeds`] from the union of the discs itself, in `O(n²)` instead of the
 /// `O(n³)` candidates of [`uncovered`], with a witness when one comes cheaply: the discs
 /// cover the square if and only if (up to ties) their chords cover its four edges and
 /// every crossing of two circles inside it lies strictly inside a third disc
@@ -176,7 +169,7 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> CoverOutcome {
     CoverOutcome::Covered
 }
 
-/// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
+/// [`exceeds`] with a witness: a point of the square `[c ± h]` farther than
 /// `sqrt(t2)` from every point of `q` (at most [`MAX_COVER_POINTS`] points), or `None` when the
 /// discs of radius `sqrt(t2)` around the points cover the square.
 ///
@@ -320,7 +313,7 @@ mod tests {
     }
 
     #[test]
-    fn points_exceed_matches_a_grid() {
+    fn exceeds_matches_a_grid() {
         // Random point sets and squares: the decision must agree with the largest
         // min-distance found on a fine grid of the square, away from the threshold.
         let mut rnd = xorshift(0x2545f4914f6cdd1d);
@@ -339,7 +332,7 @@ mod tests {
             if (t - grid_max).abs() < 2.0 * step {
                 continue;
             }
-            let exceed = points_exceed(c, h, &q, t * t);
+            let exceed = exceeds(c, h, &q, t * t).0;
             assert_eq!(exceed, grid_max > t, "{q:?} {c:?} {h} {t} {grid_max}");
             decided[exceed as usize] += 1;
         }

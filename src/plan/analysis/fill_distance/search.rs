@@ -8,7 +8,7 @@ use super::cells::{Cell, Queue};
 use super::edges::{seg_d2, Edges};
 use super::plane::d2;
 use super::points::{
-    exceeds, points_exceed, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
+    exceeds, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
 };
 use super::SearchScratch;
 
@@ -306,7 +306,7 @@ impl Search<'_> {
         let t = self.best.depth + self.precision;
         if c.pts != u32::MAX && t > 0.0 && self.best.depth > c.best {
             let (p, n) = &self.arena[c.pts as usize];
-            return !points_exceed(c.c, c.h, &p[..*n as usize], t * t);
+            return !exceeds(c.c, c.h, &p[..*n as usize], t * t).0;
         }
         false
     }
@@ -655,7 +655,7 @@ impl Search<'_> {
                 // A child holding an uncovered point of the cell's test is not covered
                 // by the same points.
                 if !wit.uncover(cc, qh, &pts[..n], t * t)
-                    && !points_exceed(cc, qh, &pts[..n], t * t)
+                    && !exceeds(cc, qh, &pts[..n], t * t).0
                 {
                     continue;
                 }
