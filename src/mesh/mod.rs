@@ -345,20 +345,9 @@ impl Mesh {
             first_face,
         } = edge_table(&triangles, vertices.len());
         let edge_count = faces.len();
-        let mut open = 0;
-        let mut nonmanifold = 0;
-        let mut backwards = 0;
-        for e in 0..edge_count {
-            match faces[e] {
-                1 => open += 1,
-                2 => {
-                    if fwd[e] != 1 {
-                        backwards += 1
-                    }
-                }
-                _ => nonmanifold += 1,
-            }
-        }
+        let open = faces.iter().filter(|&&n| n == 1).count() as u64;
+        let backwards = faces.iter().zip(&fwd).filter(|&(&n, &f)| n == 2 && f != 1).count() as u64;
+        let nonmanifold = faces.iter().filter(|&&n| !(1..=2).contains(&n)).count() as u64;
 
         // Shells: union-find over triangles sharing an edge.
         let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
