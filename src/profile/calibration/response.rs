@@ -486,24 +486,25 @@ mod tests {
         }
     }
 
+    fn table(interpolation: Interpolation, points: Vec<[f64; 2]>) -> Response {
+        Response::Table {
+            interpolation,
+            points,
+        }
+    }
+
     #[test]
     fn table_validation() {
-        let bad = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.5], [200.0, 0.4]],
-        };
+        let bad = table(Interpolation::Pchip, vec![[100.0, 0.5], [200.0, 0.4]]);
         assert!(bad.validate().is_err());
-        let good = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.2], [180.0, 0.5], [255.0, 1.0]],
-        };
+        let good = table(
+            Interpolation::Pchip,
+            vec![[100.0, 0.2], [180.0, 0.5], [255.0, 1.0]],
+        );
         good.validate().unwrap();
         assert_eq!(good.valid_gray(), [100, 255]);
-        let zero_inside = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.2], [180.0, 0.0], [255.0, 1.0]],
-        };
-        assert!(zero_inside.validate().is_err());
+        let zero_inside = vec![[100.0, 0.2], [180.0, 0.0], [255.0, 1.0]];
+        assert!(table(Interpolation::Pchip, zero_inside).validate().is_err());
     }
 
     #[test]
@@ -517,10 +518,7 @@ mod tests {
             .collect();
         let mut with0 = vec![[0.0, 0.0]];
         with0.extend(pts.iter().copied());
-        let r = Response::Table {
-            interpolation: Interpolation::Spline,
-            points: with0,
-        };
+        let r = table(Interpolation::Spline, with0);
         r.validate().unwrap();
         let c = r.curve();
         for g in 135..=255 {
@@ -538,11 +536,7 @@ mod tests {
         let gam = |g: f64| (g / 255.0).powf(2.2);
         let mut p = vec![[0.0, 0.0]];
         p.extend([135.0, 155.0, 175.0, 195.0, 215.0, 235.0, 255.0].map(|g| [g, gam(g)]));
-        let c = Response::Table {
-            interpolation: Interpolation::Spline,
-            points: p,
-        }
-        .curve();
+        let c = table(Interpolation::Spline, p).curve();
         assert!((c.eval(100.0) / gam(100.0) - 1.0).abs() < 0.01);
         for g in 135..=255 {
             assert!(
