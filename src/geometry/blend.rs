@@ -23,6 +23,10 @@ pub struct Rect {
 }
 
 impl Rect {
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        ((self.x1 - self.x0) as usize, (self.y1 - self.y0) as usize)
+    }
     fn overlaps_rows(&self, o: &Rect) -> bool {
         self.y0 < o.y1 && o.y0 < self.y1
     }
@@ -87,8 +91,7 @@ pub fn weight_maps(rects: &[Rect], curve: &BlendCurve) -> Vec<Vec<f32>> {
         .iter()
         .enumerate()
         .map(|(k, a)| {
-            let w = (a.x1 - a.x0) as usize;
-            let h = (a.y1 - a.y0) as usize;
+            let (w, h) = a.size();
             let mut out = vec![1.0f32; w * h];
             if *curve == BlendCurve::None {
                 return out;

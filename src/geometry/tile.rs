@@ -256,10 +256,7 @@ impl Tiler {
             return self.render_compensated(k, o, field);
         }
         let t = &self.tiles[k];
-        let (w, h) = (
-            (t.rect.x1 - t.rect.x0) as usize,
-            (t.rect.y1 - t.rect.y0) as usize,
-        );
+        let (w, h) = t.rect.size();
         let fw = field.width as usize;
         let mut out = Mask::zeros(w as u32, h as u32);
         let lut = &t.lut[..];
@@ -303,10 +300,7 @@ impl Tiler {
     /// Compensated path: crop, scale by the share (8-bit), compensate, mirror.
     fn render_compensated(&self, k: usize, o: &JobOptics, field: &Mask) -> Mask {
         let t = &self.tiles[k];
-        let (w, h) = (
-            (t.rect.x1 - t.rect.x0) as usize,
-            (t.rect.y1 - t.rect.y0) as usize,
-        );
+        let (w, h) = t.rect.size();
         let fw = field.width as usize;
         let mut out = Mask::zeros(w as u32, h as u32);
         for r in 0..h {
