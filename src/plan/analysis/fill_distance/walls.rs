@@ -1,7 +1,7 @@
 //! The wall cover: a cell across thin walls is dropped when the walls crossing it, each
 //! close to a line over the cell, bound the depth of every part of it inside the section.
 
-use super::plane::corners;
+use super::plane::{corners, unit};
 use super::Edges;
 
 /// Most edges meeting a cell that [`Edges::crossing`] lists: the wall and arc covers give up
@@ -216,11 +216,7 @@ impl Edges {
         let corners = ConvexPolygon::square(c, h);
         // Projections on the line from `a` along the unit vector `u`: of the corners, and
         // whether the points from `back` to `fwd` cover them.
-        let frame = |a: [f64; 2], b: [f64; 2]| {
-            let d = [b[0] - a[0], b[1] - a[1]];
-            let l = (d[0] * d[0] + d[1] * d[1]).sqrt();
-            (l > 0.0 && l.is_finite()).then(|| (a, [d[0] / l, d[1] / l]))
-        };
+        let frame = |a: [f64; 2], b: [f64; 2]| unit([b[0] - a[0], b[1] - a[1]]).map(|u| (a, u));
         let proj =
             |(a, u): ([f64; 2], [f64; 2]), x: [f64; 2]| u[0] * (x[0] - a[0]) + u[1] * (x[1] - a[1]);
         let span = |f: ([f64; 2], [f64; 2])| {
@@ -232,19 +228,25 @@ impl Edges {
                     (m.min(t), n.max(t))
                 })
         };
+        // The ranges of the points `from` to `to` along the line `f` and across it.
+        let extent = |f: ([f64; 2], [f64; 2]), from: u32, to: u32| {
+            let n = [-f.1[1], f.1[0]];
+            let (mut t, mut l) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+            let mut k = from;
+            loop {
+                let x = self.vert(k);
+                let (a, b) = (proj(f, x), n[0] * (x[0] - f.0[0]) + n[1] * (x[1] - f.0[1]));
+                (t, l) = ([t[0].min(a), t[1].max(a)], [l[0].min(b), l[1].max(b)]);
+                if k == to {
+                    return (t, l);
+                }
+                k = self.next[k as usize];
+            }
+        };
         // First pass: along the line through the run's ends (the edge's, for one edge).
         let f = frame(self.vert(first), self.vert(end))?;
         let (q_lo, q_hi) = span(f);
-        let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut k = first;
-        loop {
-            let t = proj(f, self.vert(k));
-            (t_lo, t_hi) = (t_lo.min(t), t_hi.max(t));
-            if k == end {
-                break;
-            }
-            k = self.next[k as usize];
-        }
+        let ([mut t_lo, mut t_hi], _) = extent(f, first, end);
         let (mut back, mut fwd) = (first, end);
         let mut steps = 0;
         while t_lo > q_lo {
@@ -269,20 +271,7 @@ impl Edges {
         let f = frame(self.vert(back), self.vert(fwd))?;
         let (q_lo, q_hi) = span(f);
         let n = [-f.1[1], f.1[0]];
-        let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let (mut l_lo, mut l_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut k = back;
-        loop {
-            let x = self.vert(k);
-            let t = proj(f, x);
-            let l = n[0] * (x[0] - f.0[0]) + n[1] * (x[1] - f.0[1]);
-            (t_lo, t_hi) = (t_lo.min(t), t_hi.max(t));
-            (l_lo, l_hi) = (l_lo.min(l), l_hi.max(l));
-            if k == fwd {
-                break;
-            }
-            k = self.next[k as usize];
-        }
+        let ([t_lo, t_hi], [l_lo, l_hi]) = extent(f, back, fwd);
         if t_lo > q_lo || t_hi < q_hi {
             return None;
         }
