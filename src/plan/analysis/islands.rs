@@ -81,7 +81,7 @@ pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::analysis::test_support::{lit, rect, ring, xorshift};
+    use crate::plan::analysis::test_support::{lit, rect, ring, scattered, xorshift};
     use crate::slice::Contour;
 
     /// [`islands`] of two sections.
@@ -185,13 +185,7 @@ mod tests {
         // shortcut is that of a flood fill of the pixels.
         let mut rnd = xorshift(0x1d5_0a7e_u64);
         let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
-            let n = 1 + (rnd() * 5.0) as usize;
-            let mut v: Vec<Contour> = (0..n)
-                .map(|_| {
-                    let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 8.0);
-                    rect(x, y, x + w, y + 0.2 + rnd() * 8.0)
-                })
-                .collect();
+            let mut v = scattered(rnd, 5.0, 8.0);
             if rnd() < 0.5 {
                 let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
                 v.extend(ring([cx, cy], r, r * 0.6, 48));

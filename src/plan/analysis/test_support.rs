@@ -51,6 +51,18 @@ pub(super) fn star(
     })
 }
 
+/// Between 1 and `n` rectangles scattered over 20 mm, sides from 0.2 mm to
+/// `0.2 + side` mm (some overlapping: several runs per row).
+pub(super) fn scattered(rnd: &mut dyn FnMut() -> f64, n: f64, side: f64) -> Vec<Contour> {
+    let n = 1 + (rnd() * n) as usize;
+    (0..n)
+        .map(|_| {
+            let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * side);
+            rect(x, y, x + w, y + 0.2 + rnd() * side)
+        })
+        .collect()
+}
+
 /// The lit pixels of a section on the default profile's field, as the slicer's
 /// rasterizer keeps them.
 pub(super) fn lit(c: &[Contour]) -> LitRuns {
