@@ -2,31 +2,28 @@
 //! closed, oriented contours.
 //!
 //! Layer `i` of height `h` is cut by the plane `z = (i + 0.5)·h`; a partial top layer is
-//! dropped (PrusaSlicer's rule). A vertex is "below" a plane when `z <= Z` and "above" when
-//! `z > Z`: the solid is treated as the half-open slab `z_min <= Z < z_max`, so a vertex
-//! lying exactly on a plane never produces duplicate or missing points, a bottom face
-//! lying on a plane is part of the section and a top face lying on a plane is not.
+//! dropped (PrusaSlicer's rule). A vertex is "below" a plane when `z <= Z`, "above" when
+//! `z > Z` (the solid is the half-open slab `z_min <= Z < z_max`): a vertex on a plane
+//! gives no duplicate or missing point, a bottom face on a plane is part of the section and
+//! a top face on a plane is not.
 //!
-//! Each triangle that straddles a plane yields one segment from the point on its
-//! "down" edge (above→below in the triangle's winding) to the point on its "up" edge,
-//! which orients outer contours counter-clockwise seen from +Z. The two end points are
-//! identified by mesh edge ids, and segments are chained through those ids, never
-//! through rounded coordinates. Intersection points are computed from the edge's
-//! endpoints in canonical (vertex id) order, so the two triangles sharing an edge agree
-//! on the point bit for bit.
+//! A triangle straddling a plane gives one segment from the point on its "down" edge
+//! (above→below in its winding) to the point on its "up" edge, so outer contours run
+//! counter-clockwise seen from +Z. End points are identified by mesh edge ids and chained
+//! through them, never through rounded coordinates; each is computed from its edge's end
+//! points in vertex id order, so the two triangles of an edge agree bit for bit.
 //!
 //! ## Repair rule for broken meshes
-//! 1. A segment whose facet is flipped is still chained through its edge ids; each
-//!    closed loop takes the orientation most of its segments agree with.
-//! 2. Chains that do not close (holes in the surface) are repaired greedily: a chain's end
-//!    is joined to the nearest end of another open chain if that is within [`MAX_GAP_MM`]
-//!    and nearer than the chain's own start; otherwise the chain is closed with a straight
-//!    edge back to its own start, unless that edge is longer than [`MAX_GAP_MM`] and
-//!    crosses another contour of the layer (or the chain itself): such a chain is
-//!    dropped, as are chains of fewer than three points or no area. Joined, closed and dropped chains are counted in [`SliceStats`] and
-//!    reported as warnings.
-//! 3. The sections are filled with the nonzero winding rule, so overlapping and
-//!    touching shells union.
+//! 1. A flipped facet's segment is still chained through its edge ids; each closed loop
+//!    takes the orientation most of its segments agree with.
+//! 2. Open chains (holes in the surface) are repaired greedily: a chain's end is joined to
+//!    the nearest end of another open chain within [`MAX_GAP_MM`] and nearer than its own
+//!    start; otherwise it is closed by a straight edge back to its start, unless that edge
+//!    is longer than [`MAX_GAP_MM`] and crosses another contour of the layer (or the chain
+//!    itself). Such chains are dropped, as are chains of fewer than three points or no
+//!    area; joined, closed and dropped chains are counted in [`SliceStats`] and reported.
+//! 3. The sections are filled with the nonzero winding rule, so overlapping and touching
+//!    shells union.
 
 use crate::mesh::Mesh;
 use rayon::prelude::*;

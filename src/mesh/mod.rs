@@ -1,15 +1,12 @@
-//! Loading, welding and validating triangle meshes.
-//!
-//! [`load`] reads binary or ASCII STL (told apart by content and size, not by a leading
-//! `solid`) or OBJ (through tobj, triangulated), welds corners with bit-identical
-//! coordinates into shared vertices, builds the edge table the slicer chains through,
-//! and produces a [`MeshReport`] like admesh's. Defective meshes load with warnings;
-//! only files that hold no usable geometry are errors. [`binary_stl`] writes binary STL
-//! (for tests and tools that make meshes).
+//! Loading, welding and validating triangle meshes: [`load`] reads binary or ASCII STL
+//! (told apart by content and size, not by a leading `solid`) or OBJ (through tobj,
+//! triangulated), welds corners with bit-identical coordinates into shared vertices, builds
+//! the edge table the slicer chains through and a [`MeshReport`] like admesh's.
+//! [`binary_stl`] writes binary STL (for tests and tools that make meshes).
 //!
 //! Invariants: all coordinates are finite; triangles with a repeated vertex are removed;
 //! vertex and edge ids are in order of first appearance whatever the thread count; defects
-//! are reported, never fatal.
+//! are reported as warnings, never fatal (only a file with no usable geometry is an error).
 
 mod obj;
 mod stl;

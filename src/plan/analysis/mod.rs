@@ -134,15 +134,11 @@ struct BelowComparison {
     same: bool,
 }
 
-/// Analyses consecutive layers. A worker handling a block of consecutive layers keeps one:
-/// it keeps the lit pixels (for the islands) of the layer below, and a layer whose section
-/// equals the layer below's (a prism: see [`COLLINEAR_MM`]) takes that layer's analysis,
-/// with no islands, instead of being analysed again.
-///
-/// So a layer's analysis is: the layer below's, with no islands, when the two sections are
-/// equal without their collinear points; otherwise that of its own contours (the fill
-/// distance and bounding box of `cur`, the islands of its lit pixels over those below). It
-/// never depends on the order of the calls or on where blocks start.
+/// Analyses consecutive layers; a worker keeps one for its block of layers. A layer's
+/// analysis is the layer below's, with no islands, when the two sections are equal
+/// without their collinear points; otherwise that of its own contours (the fill distance
+/// and bounding box of `cur`, the islands of its lit pixels over those below). It never
+/// depends on the order of the calls or on where blocks start.
 #[derive(Debug, Default)]
 pub struct Analyser {
     last: Option<LastLayer>,

@@ -187,15 +187,10 @@ impl Response {
                 points,
             } => {
                 let anchored = points.len() >= 3 && points[0] == [0.0, 0.0];
-                let pts: Vec<[f64; 2]> = if anchored {
-                    points[1..].to_vec()
-                } else {
-                    points.clone()
-                };
+                let pts = points[usize::from(anchored)..].to_vec();
                 let measured = match interpolation {
                     Interpolation::Spline => {
-                        let m = spline_second_derivatives(&pts);
-                        MeasuredCurve::Spline(pts.clone(), m)
+                        MeasuredCurve::Spline(pts.clone(), spline_second_derivatives(&pts))
                     }
                     Interpolation::Pchip => MeasuredCurve::Pchip(pts.clone()),
                 };
