@@ -10,11 +10,8 @@
 //!   redone with an exact-span nonzero-winding scanline fill on 32 sub-scanlines per row.
 //! * Binary masks (`--binary`) threshold that coverage at 50 %.
 //!
-//! Why not tiny-skia for masks: its anti-aliasing supersamples 4× (coverage quantized to
-//! 1/4 px), and its non-anti-aliased fill snaps edges to fixed point; measured against
-//! PrusaSlicer (docs/BENCHMARKS.md, "Mask agreement") both disagree on ~10× more pixels
-//! than the exact coverage does. tiny-skia draws the plots (`plot`) and serves as
-//! the reference renderer in `benches/raster.rs`.
+//! Why not tiny-skia: docs/ARCHITECTURE.md (it is the reference renderer of
+//! `benches/raster.rs`).
 
 pub use crate::png::PixelBox;
 use crate::profile::{Field, Projector};
@@ -26,7 +23,7 @@ mod scan;
 
 use accum::{line, zeroed_by_writes, Accum, BLOCK};
 pub use scan::map_words;
-use scan::{scan_runs, Mapped, Plain, ScanSpan};
+use scan::{scan_runs, Mapped, Plain};
 
 /// A grayscale image, row-major, top row first.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -64,17 +61,7 @@ impl Mask {
     /// Like [`lit_pixels`](Self::lit_pixels) when the mask is known to be zero outside
     /// `lit_box` (e.g. [`Scratch::lit_box`]): visits only that box.
     pub fn lit_pixels_in(&self, lit_box: PixelBox) -> f64 {
-        let PixelBox { r0, r1, c0, c1 } = lit_box;
-        let w = self.width as usize;
-        let mut sum = 0u64;
-        for r in r0..r1 {
-            // u32 partial sums per row vectorize well; a row cannot overflow them.
-            sum += self.data[r * w + c0..r * w + c1]
-                .iter()
-                .map(|&v| v as u32)
-                .sum::<u32>() as u64;
-        }
-        sum as f64 / 255.0
+        box_sum(self, lit_box) as f64 / 255.0
     }
 }
 
@@ -282,20 +269,9 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
-        let lit = PixelBox {
-            r0,
-            r1,
-            c0,
-            c1: c1.min(w),
-        };
+        let lit = PixelBox::new(r0, r1, c0, c1.min(w));
         scratch.lit = lit;
         let fused = map.filter(|m| m.fusable(lit));
-        let span = ScanSpan {
-            r0,
-            r1,
-            c0,
-            end: c1.min(w),
-        };
         let mut outside = false;
         let runs = scratch.record_runs.then_some(&mut scratch.lit_runs);
         let (lit_sum, max_winding) = match (fused, binary) {
@@ -307,24 +283,24 @@ impl Rasterizer {
                 let o = &mut outside;
                 match (binary, check) {
                     (false, false) => {
-                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o, runs)
+                        scan_runs::<_, false, false>(acc, data, w, lit, Mapped(m), o, runs)
                     }
                     (false, true) => {
-                        scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o, runs)
+                        scan_runs::<_, false, true>(acc, data, w, lit, Mapped(m), o, runs)
                     }
                     (true, false) => {
-                        scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o, runs)
+                        scan_runs::<_, true, false>(acc, data, w, lit, Mapped(m), o, runs)
                     }
                     (true, true) => {
-                        scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o, runs)
+                        scan_runs::<_, true, true>(acc, data, w, lit, Mapped(m), o, runs)
                     }
                 }
             }
             (None, false) => {
-                scan_runs::<_, false, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
+                scan_runs::<_, false, false>(acc, &mut out.data, w, lit, Plain, &mut outside, runs)
             }
             (None, true) => {
-                scan_runs::<_, true, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
+                scan_runs::<_, true, false>(acc, &mut out.data, w, lit, Plain, &mut outside, runs)
             }
         };
         scratch.lit_sum = Some(lit_sum);
@@ -410,7 +386,8 @@ fn threshold_in(m: &mut Mask, lit_box: PixelBox) {
     }
 }
 
-/// Sum of a mask's values inside `b`.
+/// Sum of a mask's values inside `b` (u32 partial sums per row vectorize well; a row
+/// cannot overflow them).
 fn box_sum(m: &Mask, b: PixelBox) -> u64 {
     let PixelBox { r0, r1, c0, c1 } = b;
     let w = m.width as usize;
@@ -475,18 +452,18 @@ impl CoverageMap for NoMap {
     }
 }
 
+/// Whether projector `p` shows a `width × height` field as it is: it covers it exactly,
+/// unmirrored.
+pub fn shows_as_is(p: &Projector, width: u32, height: u32) -> bool {
+    p.offset_px == [0, 0] && (p.width_px, p.height_px) == (width, height) && !p.mirror_x && !p.mirror_y
+}
+
 /// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the
 /// field mask when the projector covers it exactly, unmirrored).
 pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::Cow<'a, Mask> {
     let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
     let (w, h) = (p.width_px as usize, p.height_px as usize);
-    if ox == 0
-        && oy == 0
-        && w == field_mask.width as usize
-        && h == field_mask.height as usize
-        && !p.mirror_x
-        && !p.mirror_y
-    {
+    if shows_as_is(p, field_mask.width, field_mask.height) {
         return std::borrow::Cow::Borrowed(field_mask);
     }
     let fw = field_mask.width as usize;
