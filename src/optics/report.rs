@@ -161,24 +161,16 @@ fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
                 .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })
         .collect::<Result<_>>()?;
-    let cleanup = |upto: usize| {
-        for t in &tmp[..upto] {
-            let _ = std::fs::remove_file(t);
-        }
+    // Removes the temporary files left (those not written yet or renamed already are gone).
+    let fail = |path: &Path, e| {
+        tmp.iter().for_each(|t| drop(std::fs::remove_file(t)));
+        Error::io(path, e)
     };
-    for (i, ((_, bytes), t)) in files.iter().zip(&tmp).enumerate() {
-        if let Err(e) = std::fs::write(t, bytes) {
-            cleanup(i + 1);
-            return Err(Error::io(t, e));
-        }
+    for ((_, bytes), t) in files.iter().zip(&tmp) {
+        std::fs::write(t, bytes).map_err(|e| fail(t, e))?;
     }
-    for (i, ((p, _), t)) in files.iter().zip(&tmp).enumerate() {
-        if let Err(e) = std::fs::rename(t, p) {
-            for t2 in &tmp[i..] {
-                let _ = std::fs::remove_file(t2);
-            }
-            return Err(Error::io(p, e));
-        }
+    for ((p, _), t) in files.iter().zip(&tmp) {
+        std::fs::rename(t, p).map_err(|e| fail(p, e))?;
     }
     Ok(())
 }

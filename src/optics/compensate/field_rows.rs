@@ -192,7 +192,7 @@ impl FieldSource<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optics::compensate::test_support::{random_field, rng};
+    use crate::optics::compensate::test_support::{self, random_field, rng};
 
     /// P at a pixel centre as the set-up defines it: inside the polynomial's rectangle
     /// Horner in u (f64) rounded to f32 and scaled in f32, elsewhere `eval` rounded to f32.
@@ -226,11 +226,7 @@ mod tests {
         let mut rnd = rng(0x9e37_79b9_7f4a_7c15);
         for case in 0..36 {
             let fm = random_field(&mut rnd, case);
-            let field = Field {
-                width_px: 61 + (case as u32 % 5) * 7,
-                height_px: 47,
-                pixel_mm: 0.73,
-            };
+            let field = test_support::field(61 + (case as u32 % 5) * 7, 47, 0.73);
             let (w, h) = (field.width_px as usize, field.height_px as usize);
             let mut rows = FieldRows::new(&fm, &field);
             let (mut a, mut b) = (vec![0f32; w], vec![0f32; w]);

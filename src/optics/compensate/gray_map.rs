@@ -107,13 +107,8 @@ impl Compensator {
         p: &crate::profile::Projector,
         png: impl Fn(&Mask) -> Vec<u8>,
     ) -> Vec<u8> {
-        let identity = p.offset_px == [0, 0]
-            && p.width_px as usize == self.w
-            && p.height_px as usize == self.h
-            && !p.mirror_x
-            && !p.mirror_y;
-        if identity {
-            let (w, h) = (self.w as u32, self.h as u32);
+        let (w, h) = (self.w as u32, self.h as u32);
+        if crate::raster::shows_as_is(p, w, h) {
             crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
         } else {
             let m = self.gray_map();

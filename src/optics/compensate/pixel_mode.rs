@@ -5,7 +5,6 @@ use super::gray_map::GrayMap;
 use super::setup::{FieldSurvey, ModePrediction};
 use super::spread::{spread, Spread};
 use super::Levels;
-use crate::png::PixelBox;
 
 /// Pixel mode's per-pixel tables (row-major, top row first).
 #[derive(Debug, Default)]
@@ -39,12 +38,8 @@ impl PixelSetUp {
         forced_target: Option<f64>,
     ) -> PixelSetUp {
         let zones = &survey.zones;
-        let (w, h, nz, zcols) = (
-            zones.of_col.len(),
-            zones.of_row.len(),
-            zones.count(),
-            zones.cols,
-        );
+        let (w, h) = (zones.of_col.len(), zones.of_row.len());
+        let (nz, zcols) = (zones.count(), zones.cols);
         let s_max = lv.s_max();
         let target = forced_target.unwrap_or(smallest_inside_p(survey) * s_max);
         let mut unreachable = 0;
@@ -56,12 +51,7 @@ impl PixelSetUp {
         let mut zg = vec![0u64; nz];
         let mut after_px = Spread::new();
         let mut ti_row = vec![0f64; w];
-        let PixelBox {
-            r0: ir0,
-            r1: ir1,
-            c0: ic0,
-            c1: ic1,
-        } = survey.inside;
+        let inside = survey.inside;
         for r in 0..h {
             let base = r * w;
             let prow = &pp[base..base + w];
@@ -87,11 +77,11 @@ impl PixelSetUp {
                 trow[c] = ti as f32;
             }
             let zr = zones.of_row[r] as usize * zcols;
-            let inside_row = (ir0..ir1).contains(&r);
+            let inside_row = inside.rows().contains(&r);
             for &(zc, a, b) in &zones.segments {
                 let (ia, ib) = if inside_row {
-                    let ia = a.max(ic0).min(b);
-                    (ia, b.min(ic1).max(ia))
+                    let ia = a.max(inside.c0).min(b);
+                    (ia, b.min(inside.c1).max(ia))
                 } else {
                     (b, b)
                 };
