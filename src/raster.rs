@@ -455,7 +455,8 @@ impl CoverageMap for NoMap {
 /// Whether projector `p` shows a `width × height` field as it is: it covers it exactly,
 /// unmirrored.
 pub fn shows_as_is(p: &Projector, width: u32, height: u32) -> bool {
-    p.offset_px == [0, 0] && (p.width_px, p.height_px) == (width, height) && !p.mirror_x && !p.mirror_y
+    let unmirrored = !p.mirror_x && !p.mirror_y;
+    p.offset_px == [0, 0] && (p.width_px, p.height_px) == (width, height) && unmirrored
 }
 
 /// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the

@@ -142,26 +142,11 @@ impl Chart {
         let bottom = h - (axes::x_labels_height() + 6.0 + label_h + PAD);
         let panel_h = ((bottom - top - PANEL_GAP * (n - 1.0)) / n).max(20.0);
 
-        let xs = Scale {
-            lo: x_range.0,
-            hi: x_range.1,
-            px0: ml,
-            px1: ml + plot_w,
-        };
+        let xs = Scale::new(x_range.0, x_range.1, ml, ml + plot_w);
         let x_ticks = axes::ticks(x_range.0, x_range.1, (plot_w / 110.0) as usize, false);
         for (k, p) in self.panels.iter().enumerate() {
-            let area = Area {
-                x: ml,
-                y: top + k as f32 * (panel_h + PANEL_GAP),
-                w: plot_w,
-                h: panel_h,
-            };
-            let ys = Scale {
-                lo: y_ranges[k].0,
-                hi: y_ranges[k].1,
-                px0: area.bottom(),
-                px1: area.y,
-            };
+            let area = Area::new(ml, top + k as f32 * (panel_h + PANEL_GAP), plot_w, panel_h);
+            let ys = Scale::new(y_ranges[k].0, y_ranges[k].1, area.bottom(), area.y);
             draw_bands(&mut c, area, &xs, &p.bands);
             let last = k + 1 == self.panels.len();
             let marks = |labels| axes::Marks { grid: true, labels };
