@@ -20,8 +20,6 @@ pub mod exposure;
 pub mod plots;
 pub mod report;
 #[cfg(test)]
-mod sweep;
-#[cfg(test)]
 pub(crate) mod synthetic;
 
 /// The calibration model this stage fits and applies (defined with the profile that
