@@ -74,21 +74,12 @@ fn readings(path: &Path, rows: Vec<table::Row<TableRow>>) -> Result<Vec<Reading>
     rows.into_iter()
         .map(|table::Row { line, value: r }| {
             let (g, e) = (r.gray, r.irradiance_mw_cm2);
+            let bad = |column, msg: String| Err(cell_error(path, line, column, msg));
             if !(0.0..=255.0).contains(&g) || g.fract() != 0.0 {
-                return Err(cell_error(
-                    path,
-                    line,
-                    "gray",
-                    format!("{g} is not an integer pixel value 0..255"),
-                ));
+                return bad("gray", format!("{g} is not an integer pixel value 0..255"));
             }
             if e <= 0.0 {
-                return Err(cell_error(
-                    path,
-                    line,
-                    "irradiance_mw_cm2",
-                    format!("must be > 0, got {e}"),
-                ));
+                return bad("irradiance_mw_cm2", format!("must be > 0, got {e}"));
             }
             Ok(Reading {
                 line,
@@ -247,15 +238,8 @@ fn log_linear_fit(rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFi
     }
     let (x, condition) = solve_scaled(&a, &b, true)?;
     let coef = (0..m).map(|t| x[t] / norms[t]).collect();
-    let s = (0..nlev)
-        .map(|j| {
-            if j + 1 < nlev {
-                (x[m + j] / norms[m + j]).exp()
-            } else {
-                1.0
-            }
-        })
-        .collect();
+    let mut s: Vec<f64> = (m..cols).map(|t| (x[t] / norms[t]).exp()).collect();
+    s.push(1.0);
     Ok(FactorFit {
         form: Form::Exponential,
         coef,
@@ -435,6 +419,7 @@ impl<'a> Setup<'a> {
             *v = i;
         }
         let npos = pos.len();
+        let positions = count(npos as u64, "distinct zone position", "distinct zone positions");
         let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
         // Without several grays nothing else can be fitted: say so first.
         if grays.len() < 3 {
@@ -443,8 +428,7 @@ impl<'a> Setup<'a> {
         let min_terms = Poly::terms(3);
         if npos < min_terms {
             return Err(input_error(format!(
-                "only {}; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones",
-                count(npos as u64, "distinct zone position", "distinct zone positions")
+                "only {positions}; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
             )));
         }
         if let Some(d) = opts.degree {
@@ -455,12 +439,7 @@ impl<'a> Setup<'a> {
             }
             if npos < Poly::terms(d) {
                 return Err(input_error(format!(
-                    "only {}; a degree-{d} P(x, y) has {} terms",
-                    count(
-                        npos as u64,
-                        "distinct zone position",
-                        "distinct zone positions"
-                    ),
+                    "only {positions}; a degree-{d} P(x, y) has {} terms",
                     Poly::terms(d)
                 )));
             }
