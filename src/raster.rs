@@ -274,34 +274,26 @@ impl Rasterizer {
         let fused = map.filter(|m| m.fusable(lit));
         let mut outside = false;
         let runs = scratch.record_runs.then_some(&mut scratch.lit_runs);
+        // The scan for each emitter, threshold (`BIN`) and outside check (`CHECK`).
+        macro_rules! scan {
+            ($emit:expr, $bin:literal, $check:literal) => {
+                scan_runs::<_, $bin, $check>(acc, &mut out.data, w, lit, $emit, &mut outside, runs)
+            };
+        }
         let (lit_sum, max_winding) = match (fused, binary) {
             (Some(m), binary) => {
                 // Whether the scan must look for lit pixels outside the map's area.
                 let area = m.area();
                 let check = r0 < area.r0 || r1 > area.r1 || c0 < area.c0 || c1.min(w) > area.c1;
-                let data = &mut out.data;
-                let o = &mut outside;
                 match (binary, check) {
-                    (false, false) => {
-                        scan_runs::<_, false, false>(acc, data, w, lit, Mapped(m), o, runs)
-                    }
-                    (false, true) => {
-                        scan_runs::<_, false, true>(acc, data, w, lit, Mapped(m), o, runs)
-                    }
-                    (true, false) => {
-                        scan_runs::<_, true, false>(acc, data, w, lit, Mapped(m), o, runs)
-                    }
-                    (true, true) => {
-                        scan_runs::<_, true, true>(acc, data, w, lit, Mapped(m), o, runs)
-                    }
+                    (false, false) => scan!(Mapped(m), false, false),
+                    (false, true) => scan!(Mapped(m), false, true),
+                    (true, false) => scan!(Mapped(m), true, false),
+                    (true, true) => scan!(Mapped(m), true, true),
                 }
             }
-            (None, false) => {
-                scan_runs::<_, false, false>(acc, &mut out.data, w, lit, Plain, &mut outside, runs)
-            }
-            (None, true) => {
-                scan_runs::<_, true, false>(acc, &mut out.data, w, lit, Plain, &mut outside, runs)
-            }
+            (None, false) => scan!(Plain, false, false),
+            (None, true) => scan!(Plain, true, false),
         };
         scratch.lit_sum = Some(lit_sum);
         let mut mapped = fused.is_some();

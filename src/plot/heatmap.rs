@@ -235,18 +235,14 @@ impl Heatmap {
 
     /// Fills the cells (and writes their values when `annotate`).
     fn draw_cells(&self, c: &mut Canvas, area: Area, cell_w: f32, cell_h: f32) {
+        // The cells' edges, whole pixels.
+        let xs: Vec<f32> = (0..=self.cols).map(|k| (area.x + k as f32 * cell_w).round()).collect();
+        let ys: Vec<f32> = (0..=self.rows).map(|k| (area.y + k as f32 * cell_h).round()).collect();
         for r in 0..self.rows {
-            let (y0, y1) = (
-                (area.y + r as f32 * cell_h).round(),
-                (area.y + (r + 1) as f32 * cell_h).round(),
-            );
+            let (y0, y1) = (ys[r], ys[r + 1]);
             for col in 0..self.cols {
-                let (x0, x1) = (
-                    (area.x + col as f32 * cell_w).round(),
-                    (area.x + (col + 1) as f32 * cell_w).round(),
-                );
-                let v = self.values.get(r * self.cols + col).copied();
-                let v = v.unwrap_or(f64::NAN);
+                let (x0, x1) = (xs[col], xs[col + 1]);
+                let v = self.values.get(r * self.cols + col).copied().unwrap_or(f64::NAN);
                 let color = self.color_of(v);
                 c.fill_rect(x0, y0, x1 - x0, y1 - y0, color, 255);
                 if self.annotate && v.is_finite() {

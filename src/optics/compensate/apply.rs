@@ -198,7 +198,7 @@ impl crate::raster::CoverageMap for Compensator {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{response_s as s, rng, setup, small_setup};
+    use super::super::test_support::{response_s as s, rng, setup, small_setup, MODES};
     use super::*;
 
     #[test]
@@ -271,13 +271,7 @@ mod tests {
                 shapes
             })
             .collect();
-        for (mode, dither) in [
-            (Mode::Zone, Dither::Auto),
-            (Mode::Zone, Dither::On),
-            (Mode::Zone, Dither::Off),
-            (Mode::Pixel, Dither::Off),
-            (Mode::Pixel, Dither::On),
-        ] {
+        for (mode, dither) in MODES {
             for binary in [false, true] {
                 let fused = Compensator::new(&cal, &field, mode, dither).unwrap();
                 let reference = Compensator::new(&cal, &field, mode, dither).unwrap();

@@ -119,8 +119,8 @@ impl Compensator {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::small_setup;
-    use super::super::{Dither, Mode};
+    use super::super::test_support::{small_setup, MODES};
+    use super::super::Mode;
     use super::*;
 
     #[test]
@@ -131,12 +131,7 @@ mod tests {
         // `encode_gray8` of the map, also as mirrored projectors see it.
         let (cal, field) = small_setup();
         let (w, h) = (200usize, 150usize);
-        for (mode, dither) in [
-            (Mode::Zone, Dither::Auto),
-            (Mode::Zone, Dither::On),
-            (Mode::Zone, Dither::Off),
-            (Mode::Pixel, Dither::Off),
-        ] {
+        for (mode, dither) in MODES.into_iter().take(4) {
             let c = Compensator::new(&cal, &field, mode, dither).unwrap();
             let map = c.gray_map();
             if mode == Mode::Zone {

@@ -4,9 +4,9 @@
 
 use super::field_pass::{field_sums, FieldSums};
 use super::field_rows::{pixel_p, FieldRows, FieldSource};
-use super::pixel_mode::{PixelSetUp, PixelTables};
-use super::spread::{pixel_spread, spread};
-use super::zone_mode::{ZoneSetUp, ZoneTables};
+use super::pixel_mode::{self, PixelTables};
+use super::spread::{pixel_spread, zone_spread};
+use super::zone_mode::{self, ZoneTables};
 use super::zones::ZoneGrid;
 use super::{Calibration, Compensator, Dither, Field, FieldModel, Mode, Prediction, Spreads};
 use crate::png::PixelBox;
@@ -139,18 +139,19 @@ impl Compensator {
         let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area);
         let (zone_tables, pixel_tables, gray_map, after) = match mode {
             Mode::Zone => {
-                let Some(z) = ZoneSetUp::new(&survey, &levels, dither, forced_target) else {
+                let Some((t, g, p)) = zone_mode::set_up(&survey, &levels, dither, forced_target)
+                else {
                     let [ax0, ay0, ax1, ay1] = fm.area_mm;
                     return Err(format!(
                         "no {} mm zone of the field has its centre in the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm",
                         cal.zone_mm.get()
                     ));
                 };
-                (z.tables, PixelTables::default(), z.gray_map, z.prediction)
+                (t, PixelTables::default(), g, p)
             }
             Mode::Pixel => {
-                let p = PixelSetUp::new(&survey, &levels, &pp, forced_target);
-                (ZoneTables::default(), p.tables, p.gray_map, p.prediction)
+                let (t, g, p) = pixel_mode::set_up(&survey, &levels, &pp, forced_target);
+                (ZoneTables::default(), t, g, p)
             }
             Mode::Off => unreachable!(),
         };
@@ -189,11 +190,7 @@ fn predict(survey: &FieldSurvey, area: PixelBox, s_max: f64, after: ModePredicti
     let area_pixels = (area.r1 - area.r0) * (area.c1 - area.c0);
     let zones = &survey.zones;
     let (zone_p, zone_inside) = (&survey.zone_p, &survey.zone_inside);
-    let before_zone = spread(
-        (0..zones.count())
-            .filter(|&z| zone_inside[z])
-            .map(|z| zone_p[z] * s_max),
-    );
+    let before_zone = zone_spread(zone_inside, |z| zone_p[z] * s_max);
     let before_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |_, _| s_max);
     Prediction {
         target: after.target,
@@ -220,7 +217,7 @@ fn predict(survey: &FieldSurvey, area: PixelBox, s_max: f64, after: ModePredicti
 #[cfg(test)]
 mod tests {
     use super::super::spread::Spread;
-    use super::super::test_support::{self, setup};
+    use super::super::test_support::{self, setup, MODES};
     use super::*;
 
     #[test]
@@ -263,12 +260,7 @@ mod tests {
                 let (x, y) = (x * p, y * p);
                 x >= area[0] && x <= area[2] && y >= area[1] && y <= area[3]
             };
-            for (mode, dither) in [
-                (Mode::Zone, Dither::Auto),
-                (Mode::Zone, Dither::On),
-                (Mode::Zone, Dither::Off),
-                (Mode::Pixel, Dither::Off),
-            ] {
+            for (mode, dither) in MODES.into_iter().take(4) {
                 let c = Compensator::new(&cal, &field, mode, dither).unwrap();
                 let pr = &c.prediction;
                 let what = format!("{area:?} {mode:?} {dither:?}");

@@ -2,9 +2,19 @@
 
 use super::super::field::{FieldModel, Form, Poly};
 use super::super::response::{Interpolation, Response};
-use super::super::{Calibration, Units};
+use super::super::{Calibration, Dither, Mode, Units};
 use crate::profile::Field;
 use crate::units::{NonNegative, Positive};
+
+/// Every compensation mode with every dithering that applies to it; pixel mode with error
+/// diffusion last (its plate is not the gray map).
+pub(super) const MODES: [(Mode, Dither); 5] = [
+    (Mode::Zone, Dither::Auto),
+    (Mode::Zone, Dither::On),
+    (Mode::Zone, Dither::Off),
+    (Mode::Pixel, Dither::Off),
+    (Mode::Pixel, Dither::On),
+];
 
 /// A 40 × 30 mm field of 1 mm pixels; P = 1 + x/40 (x in mm), S(g) = (g/255)²
 /// ([`response_s`]) measured 50..255 and anchored at 0.

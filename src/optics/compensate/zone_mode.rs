@@ -5,7 +5,7 @@
 
 use super::gray_map::GrayMap;
 use super::setup::{FieldSurvey, ModePrediction};
-use super::spread::{pixel_spread, spread};
+use super::spread::{pixel_spread, zone_spread};
 use super::zones::ZoneGrid;
 use super::{Dither, Levels};
 
@@ -60,13 +60,6 @@ impl ZoneTables {
     }
 }
 
-/// What zone mode's set-up gives.
-pub(super) struct ZoneSetUp {
-    pub(super) tables: ZoneTables,
-    pub(super) gray_map: GrayMap,
-    pub(super) prediction: ModePrediction,
-}
-
 /// Each zone's coverage → gray table (entry 255 still the nearest gray) and
 /// full-coverage gray, with what they predict ([`zone_grays`]).
 struct ZoneGrays {
@@ -78,16 +71,15 @@ struct ZoneGrays {
     mixed: u64,
 }
 
-impl ZoneSetUp {
-    /// Zone mode's tables and prediction for `survey` on the levels `lv`, with the target
-    /// `forced_target` or chosen here. `None` when no zone has its centre in the
-    /// calibrated area.
-    pub(super) fn new(
-        survey: &FieldSurvey,
-        lv: &Levels,
-        dither: Dither,
-        forced_target: Option<f64>,
-    ) -> Option<ZoneSetUp> {
+/// Zone mode's tables, gray map and prediction for `survey` on the levels `lv`, with the
+/// target `forced_target` or chosen here. `None` when no zone has its centre in the
+/// calibrated area.
+pub(super) fn set_up(
+    survey: &FieldSurvey,
+    lv: &Levels,
+    dither: Dither,
+    forced_target: Option<f64>,
+) -> Option<(ZoneTables, GrayMap, ModePrediction)> {
         let target = zone_target(survey, lv, dither, forced_target)?;
         let grays = zone_grays(&survey.zone_p, lv, target, dither);
         let zones = &survey.zones;
@@ -102,13 +94,7 @@ impl ZoneSetUp {
                 }
             })
             .collect();
-        let zone_inside = &survey.zone_inside;
-        let zone_after = &grays.zone_after;
-        let after_zone = spread(
-            (0..zones.count())
-                .filter(|&z| zone_inside[z])
-                .map(|z| zone_after[z]),
-        );
+        let after_zone = zone_spread(&survey.zone_inside, |z| grays.zone_after[z]);
         // Per-pixel prediction: each row of a zone shows one gray.
         let s_by_gray = s_of_gray(lv);
         let after_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |r, zc| {
@@ -116,20 +102,16 @@ impl ZoneSetUp {
         });
         let tables = ZoneTables::new(&grays, zones);
         let gray_map = GrayMap::of_zone_tables(&tables, zones);
-        Some(ZoneSetUp {
-            tables,
-            gray_map,
-            prediction: ModePrediction {
-                target,
-                zone_gray,
-                zone_after: grays.zone_after,
-                after_zone_pct: after_zone,
-                after_pixel_pct: after_pixel,
-                unreachable: grays.unreachable,
-                mixed_zones: grays.mixed,
-            },
-        })
-    }
+        let prediction = ModePrediction {
+            target,
+            zone_gray,
+            zone_after: grays.zone_after,
+            after_zone_pct: after_zone,
+            after_pixel_pct: after_pixel,
+            unreachable: grays.unreachable,
+            mixed_zones: grays.mixed,
+        };
+        Some((tables, gray_map, prediction))
 }
 
 /// S of each gray on the levels `lv` (0 for grays that are not levels).
