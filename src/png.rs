@@ -33,6 +33,8 @@ pub struct PixelBox {
 impl PixelBox {
     /// The box of no pixel.
     pub const EMPTY: PixelBox = PixelBox::new(0, 0, 0, 0);
+    /// Every pixel of any image, for passes that clip the box to the image.
+    pub const ALL: PixelBox = PixelBox::new(0, usize::MAX, 0, usize::MAX);
 
     /// Rows `r0..r1`, columns `c0..c1`.
     pub const fn new(r0: usize, r1: usize, c0: usize, c1: usize) -> PixelBox {
@@ -57,12 +59,7 @@ impl PixelBox {
 
 /// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
 pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
-    encode_gray8_in(
-        width,
-        height,
-        data,
-        PixelBox::whole(width as usize, height as usize),
-    )
+    encode_gray8_in(width, height, data, PixelBox::ALL)
 }
 
 /// Like [`encode_gray8`] for a mask known to be zero outside `lit_box`: only the box is
@@ -76,12 +73,7 @@ pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) 
 /// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
 /// image in one piece (the same bytes).
 pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
-    encode_rows(
-        width,
-        height,
-        row,
-        PixelBox::whole(width as usize, height as usize),
-    )
+    encode_rows(width, height, row, PixelBox::ALL)
 }
 
 #[inline(always)]

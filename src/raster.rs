@@ -362,9 +362,7 @@ impl Rasterizer {
 
 /// Thresholds a coverage mask at 50 % in place: values ≥ 128 become 255, others 0.
 pub fn threshold(m: &mut Mask) {
-    for v in &mut m.data {
-        *v = if *v >= 128 { 255 } else { 0 };
-    }
+    threshold_in(m, PixelBox::whole(m.width as usize, m.height as usize));
 }
 
 /// Thresholds the box `lit_box` of a mask at 50 % in place (the mask is zero outside it).

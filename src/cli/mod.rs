@@ -42,31 +42,34 @@ pub(crate) fn print_json<T: Serialize>(body: &T) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What failed, in a `--json` object's `error`: the error's code, its file and message.
+#[derive(Serialize)]
+pub(crate) struct Failure<'a> {
+    pub(crate) code: &'a str,
+    pub(crate) file: Option<String>,
+    pub(crate) message: &'a str,
+}
+
 /// The JSON object of a failure: `{schema_version, ok: false, error: {code, file,
 /// message}}` (one line).
 pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> String {
-    #[derive(Serialize)]
-    struct Failure<'a> {
-        code: &'a str,
-        file: Option<String>,
-        message: &'a str,
-    }
     #[derive(Serialize)]
     struct Out<'a> {
         schema_version: u32,
         ok: bool,
         error: Failure<'a>,
     }
-    serde_json::to_string(&Out {
+    let error = Failure {
+        code,
+        file,
+        message,
+    };
+    let out = Out {
         schema_version: SCHEMA_VERSION,
         ok: false,
-        error: Failure {
-            code,
-            file,
-            message,
-        },
-    })
-    .expect("serializes")
+        error,
+    };
+    serde_json::to_string(&out).expect("serializes")
 }
 
 /// The format a picture path asks for (`.png`, `.jpg`, `.jpeg`); anything else is a usage

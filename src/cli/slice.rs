@@ -385,10 +385,10 @@ fn slice_each(
                         ok: false,
                         input,
                         summary: None,
-                        error: Some(Failure {
+                        error: Some(super::Failure {
                             code: e.code(),
-                            file,
-                            message,
+                            file: Some(file),
+                            message: &message,
                         }),
                     })?;
                 }
@@ -444,15 +444,7 @@ struct PartLine<'a> {
     #[serde(flatten)]
     summary: Option<&'a SliceSummary>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    error: Option<Failure>,
-}
-
-/// Why a part failed.
-#[derive(Serialize)]
-struct Failure {
-    code: &'static str,
-    file: String,
-    message: String,
+    error: Option<super::Failure<'a>>,
 }
 
 /// Prints `line` as one line of JSON on stdout.

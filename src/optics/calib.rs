@@ -710,17 +710,14 @@ fn response_through(grays: &[u8], s: &[f64], to_zero: bool) -> Response {
         points.push([0.0, 0.0]);
     }
     points.extend(grays.iter().zip(s).map(|(&g, &v)| [g as f64, v]));
-    let spline = Response::Table {
-        interpolation: Interpolation::Spline,
+    let table = |interpolation| Response::Table {
+        interpolation,
         points: points.clone(),
     };
-    if spline.validate().is_ok() {
-        spline
-    } else {
-        Response::Table {
-            interpolation: Interpolation::Pchip,
-            points,
-        }
+    let spline = table(Interpolation::Spline);
+    match spline.validate() {
+        Ok(()) => spline,
+        Err(_) => table(Interpolation::Pchip),
     }
 }
 

@@ -237,12 +237,11 @@ impl ZoneValues {
             })
             .collect();
         let fitted: Vec<f64> = (0..nz).map(|i| pr.zone_p[i] * s_max).collect();
-        // After zone compensation: each zone at its gray.
-        // Effective S of each zone (a mixing zone's mean of its two grays).
-        let gray_s: Vec<f64> = (0..nz).map(|i| pr.zone_after[i] / pr.zone_p[i]).collect();
+        // After zone compensation: each zone at the effective S of its gray (a mixing
+        // zone's mean of its two grays).
         let pct = |v: f64| v / target * 100.0;
         let measured_after: Vec<f64> = (0..nz)
-            .map(|i| pct(measured[i] / s_max * gray_s[i]))
+            .map(|i| pct(measured[i] / s_max * (pr.zone_after[i] / pr.zone_p[i])))
             .collect();
         let fitted_after: Vec<f64> = pr.zone_after.iter().map(|&v| pct(v)).collect();
         ZoneValues {

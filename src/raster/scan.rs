@@ -25,7 +25,7 @@ impl Emit for Plain {
     #[inline(always)]
     fn row(&self, _: usize) {}
     fn area(&self) -> PixelBox {
-        PixelBox::new(0, usize::MAX, 0, usize::MAX)
+        PixelBox::ALL
     }
     #[inline(always)]
     fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
