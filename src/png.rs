@@ -1,16 +1,10 @@
 //! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
 //! deflate block whose back-references are runs (distance 1) and copies of one of the
-//! eight rows above.
+//! eight rows above (zone-compensated masks repeat rows, [`zlib_rows`]); the work grows with
+//! the number of runs, not of pixels (docs/ARCHITECTURE.md, `png`).
 //!
-//! Masks are long runs of 0 and 255 with a thin band of edge values, so runs are found
-//! eight bytes at a time and the Adler-32 of a run is computed in closed form: the work
-//! grows with the number of runs, not of pixels. Zone-compensated masks hold a run per
-//! zone and repeat their rows with a short period, so a row of four or more runs equal to
-//! one of the eight rows above is coded as a copy of it (see [`zlib_rows`]).
-//!
-//! Invariants: a standard PNG (tests decode it with `image`); the bytes are deterministic
-//! and independent of the lit box the caller gives; a test pins the stream to an obvious
-//! bit-by-bit encoder of the same rule.
+//! Invariants: a standard PNG; the bytes are deterministic and independent of the lit box
+//! the caller gives; a test pins the stream to an obvious bit-by-bit encoder of the same rule.
 
 use std::ops::Range;
 

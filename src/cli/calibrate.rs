@@ -47,12 +47,10 @@ pub(crate) struct CalibrateArgs {
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     use crate::optics::report::{self, CalibrateOptions};
-    use crate::optics::Units;
+    use crate::optics::{calib::FitOptions, Units};
     let policy = a.warnings.policy(&[])?;
     let field = Profile::resolve(&a.profile)?.field();
-    let mut r = report::calibrate(&CalibrateOptions {
-        input: a.input,
-        output: a.output,
+    let fit = FitOptions {
         units: if a.relative {
             Units::Relative
         } else {
@@ -60,8 +58,14 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         },
         zone_mm: a.zone_mm,
         extrapolate_mm: a.extrapolate_mm,
-        field,
+        field_mm: (field.width_mm(), field.height_mm()),
         degree: a.degree,
+    };
+    let mut r = report::calibrate(&CalibrateOptions {
+        input: a.input,
+        output: a.output,
+        fit,
+        field,
         plots: !a.no_plots,
     })?;
     r.warnings = policy.apply(&r.warnings);

@@ -1,14 +1,9 @@
-//! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements (method:
-//! docs/CALIBRATION.md).
-//!
-//! Input: a CSV table `x_mm,y_mm,gray,irradiance_mw_cm2` (any column order; `#` comments
-//! and blank lines ignored; read by `table`): a zone centre in build-plane mm, the pixel
-//! value shown there (255 = fully on) and the measured irradiance; any grid of zones, any
-//! set of gray levels, repeated readings. The model is fitted by alternating least squares
-//! on relative residuals; the valid gray range is the run of levels, from the brightest
-//! down, over which S keeps falling; P's form and degree are chosen by cross-validation
-//! over zones; S is normalised to 1 at the brightest valid level (so P is the full-on
-//! irradiance).
+//! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements (docs/CALIBRATION.md):
+//! alternating least squares on relative residuals, the valid gray range from the first
+//! pass's S, P's form and degree by cross-validation over zones, S normalised to 1 at the
+//! brightest valid level (so P is the full-on irradiance). Input: a CSV table
+//! `x_mm,y_mm,gray,irradiance_mw_cm2` (read by `table`) of zone centres in build-plane mm,
+//! pixel values shown there (255 = fully on) and readings, in any grid and order.
 
 use super::field::{FieldModel, Form, Poly, MAX_DEGREE};
 use super::response::{Interpolation, Response};

@@ -1,13 +1,8 @@
-//! Light-uniformity calibration and compensation (method in docs/CALIBRATION.md).
-//!
-//! The irradiance on the build plane is modelled as E(x, y, g) = P(x, y)·S(g) (Xu et al.
-//! 2010): a field factor P ([`field::FieldModel`]) times a gray response S, monotone on its
-//! valid gray range ([`response::Response`]). The model a projector carries
-//! ([`Calibration`]) belongs to the machine description ([`crate::profile::calibration`]);
-//! [`calib`] fits it to measurements (`dmdsl calibrate`, with [`report`] and [`plots`]),
-//! [`compensate`] turns each layer's coverage into grays with it, [`exposure`] gives the
-//! layer exposure. Like every algorithm stage it returns values (the gray map, the
-//! manifest record); the job writes the bundle.
+//! Light-uniformity calibration and compensation (docs/CALIBRATION.md): the irradiance is
+//! modelled as E(x, y, g) = P(x, y)·S(g) ([`Calibration`], part of the machine description);
+//! [`calib`] fits it (`dmdsl calibrate`, with [`report`] and [`plots`]), [`compensate`]
+//! turns each layer's coverage into grays with it, [`exposure`] gives the layer exposure.
+//! It returns values (the gray map, the manifest record); the job writes the bundle.
 //!
 //! Invariants: coverage 0 stays 0; a pixel gets the level nearest to coverage·E* in
 //! irradiance; S is strictly increasing on its valid range (enforced when a calibration is

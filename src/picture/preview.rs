@@ -1,11 +1,7 @@
-//! A shaded picture of the part as the masks build it: the lit pixels of the layers stacked
-//! into voxels and seen from the front right, above, with light from the upper left and
-//! farther surfaces darker. It is the picture a person recognises the part by (and the
-//! thumbnail a bundle can carry).
-//!
-//! Fast for long jobs: the masks are shrunk first (about [`XY_CELLS`] cells across the
-//! part's footprint) and only about [`Z_SLABS`] layers are read, one per slab of layers
-//! about as thick as a cell is wide.
+//! A shaded picture of the part as the masks build it (and the thumbnail a bundle can
+//! carry): the lit pixels of about [`Z_SLABS`] layers, shrunk to about [`XY_CELLS`] cells
+//! across, stacked into voxels and seen from the front right, above (docs/ARCHITECTURE.md,
+//! "Inspection").
 
 use super::field::{layer_cells, part_crop};
 use crate::bundle::BundleSource;

@@ -39,15 +39,10 @@ pub(super) fn field_sums(
 }
 
 /// The set-up's pass over P (`w` values per row from `src`) over the zones of `zones` and
-/// the calibrated area `inside` ([`FieldSums`]).
-///
-/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
-/// checked on the field's extremes: true for any real calibration) the order of the
-/// additions does not matter, so the top and bottom halves of the field are summed side
-/// by side (rayon), four or eight values at a time; otherwise a second pass adds them one
-/// by one in row-major order. Either way the sums are those of adding the values one by
-/// one in row-major order, bit for bit. `avx2` (only where the CPU has it): the same
-/// operations on wider vectors (no fused multiply-add), so the same bits.
+/// the calibrated area `inside` ([`FieldSums`]): the sums are those of adding the values
+/// one by one in row-major order, bit for bit. When every sum is exact ([`sums_are_exact`])
+/// the two halves of the field are summed side by side, several values at a time (`avx2`:
+/// the same operations on wider vectors); otherwise a second pass adds them one by one.
 pub(super) fn field_sums_with(
     avx2: bool,
     src: &mut FieldSource,

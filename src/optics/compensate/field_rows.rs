@@ -8,12 +8,10 @@ use super::kernels::horner_avx2;
 use super::kernels::horner_f32;
 use super::{Field, FieldModel, Form};
 
-/// P at the pixel centres of the field, one row at a time (no w × h buffer). Inside the
-/// polynomial's rectangle: Horner in u with the row's coefficients (in f64, rounded to f32,
-/// times the scale in f32); elsewhere [`FieldModel::eval`] rounded to f32 (its linear
-/// continuation from the polynomial's value and gradient at the nearest point of the
-/// rectangle, computed once per column for the rows above and below it, once per row
-/// for the columns left and right of it).
+/// P at the pixel centres of the field, one row at a time (no w × h buffer): inside the
+/// polynomial's rectangle Horner in u with the row's coefficients (in f64, rounded to f32,
+/// times the scale in f32), elsewhere [`FieldModel::eval`] rounded to f32 (its linear
+/// continuation, from gradients computed once per column or per row).
 #[derive(Clone)]
 pub(super) struct FieldRows<'a> {
     fm: &'a FieldModel,

@@ -7,9 +7,8 @@ use super::zones::ZoneGrid;
 use super::{Compensator, Mask};
 
 /// The full-coverage gray of every pixel as distinct rows (`w` bytes each) and the index
-/// of each image row's: in zone mode a row is one gray per zone segment, so rows repeat
-/// (about 15 distinct rows per zone row, instead of a w × h map to allocate and fill); in
-/// pixel mode every row is its own.
+/// of each image row's (zone mode: about 15 distinct rows per zone row; pixel mode: every
+/// row its own).
 #[derive(Debug)]
 pub(super) struct GrayMap {
     pub(super) rows: Vec<u8>,

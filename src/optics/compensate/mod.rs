@@ -1,22 +1,13 @@
-//! Applying a calibration: coverage → gray, per zone or per pixel.
+//! Applying a calibration: coverage → gray, per zone or per pixel (docs/CALIBRATION.md,
+//! "Compensation"). A pixel of coverage c = v/255 gets the 8-bit level whose S·P is nearest
+//! to c·E*, with P the zone's mean (zone mode) or the pixel's own (pixel mode).
 //!
 //! [`Compensator::new`] computes once per job what depends only on the calibration and the
-//! field: P at the pixel centres, the target E*, and one 256-entry table per zone (zone
-//! mode, the per-zone compensation of Xu et al. 2010) or the full-coverage gray, its level
-//! index and E*/P per pixel (pixel mode). A pixel of coverage c = v/255 asks for irradiance
-//! c·E* and gets the 8-bit level whose S·P is nearest to it (an edge pixel gets
-//! S⁻¹(c·E*/P), never c × the full gray), with P the zone's mean (zone mode) or the
-//! pixel's own (pixel mode, optionally with error diffusion, `dither`).
-//!
-//! The rasterizer applies it while it writes a mask (the compensator is its
-//! [`crate::raster::CoverageMap`]), or [`Compensator::apply`] rewrites a finished coverage
-//! mask; both give the same bytes. The set-up's sums of P equal adding P pixel by pixel in
-//! row-major order, bit for bit, whatever the order or vector width (`field_pass`).
-//!
-//! The parts: `setup` reads P (`field_rows`) in one pass over the field (`field_pass`,
-//! vector kernels in `kernels`) over the zone grid (`zones`), measures the spreads
-//! (`spread`) and builds the tables of `zone_mode` or `pixel_mode` and the gray map
-//! (`gray_map`); `apply` and `dither` turn each layer's coverage into grays.
+//! field (`setup`: P from `field_rows` in one pass over the field, `field_pass` with the
+//! vector `kernels`, over the `zones`; the `spread`s; the tables of `zone_mode` or
+//! `pixel_mode` and the `gray_map`). The rasterizer applies it while it writes a mask (the
+//! compensator is its [`crate::raster::CoverageMap`]) or [`Compensator::apply`] rewrites a
+//! finished coverage mask (`apply`, `dither`); both give the same bytes.
 
 mod apply;
 mod dither;

@@ -275,13 +275,18 @@ mod tests {
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
                 assert!(close(pr.spreads.before_pixel_pct, before.pct()), "{what}");
-                // Zone means: the sums of P added one by one in row-major order.
-                let (mut zs, mut zn) = (vec![0f64; pr.zone_p.len()], vec![0usize; pr.zone_p.len()]);
+                // Zone means before and (pixel mode) after: P and P · S(gray) added pixel by
+                // pixel in row-major order.
+                let nz = pr.zone_p.len();
+                let (mut zs, mut zn, mut za) = (vec![0f64; nz], vec![0usize; nz], vec![0f64; nz]);
                 for (i, &v) in pp.iter().enumerate() {
                     let z = c.zones.of_row[i / w] as usize * c.zones.cols
                         + c.zones.of_col[i % w] as usize;
                     zs[z] += v as f64;
                     zn[z] += 1;
+                    if mode == Mode::Pixel {
+                        za[z] += v as f64 * c.levels.s[c.pixel_tables.full_idx[i] as usize];
+                    }
                 }
                 for (z, &pz) in pr.zone_p.iter().enumerate() {
                     let want = if zn[z] > 0 {
@@ -292,13 +297,6 @@ mod tests {
                     assert_eq!(pz.to_bits(), want.to_bits(), "{what} zone {z}");
                 }
                 if mode == Mode::Pixel {
-                    // Zone means after: P · S(gray) added pixel by pixel in row-major order.
-                    let mut za = vec![0f64; pr.zone_p.len()];
-                    for (i, &v) in pp.iter().enumerate() {
-                        let z = c.zones.of_row[i / w] as usize * c.zones.cols
-                            + c.zones.of_col[i % w] as usize;
-                        za[z] += v as f64 * c.levels.s[c.pixel_tables.full_idx[i] as usize];
-                    }
                     for (z, &a) in pr.zone_after.iter().enumerate() {
                         let want = za[z] / zn[z].max(1) as f64;
                         assert_eq!(a.to_bits(), want.to_bits(), "{what} zone {z}");

@@ -14,9 +14,8 @@ use super::{Dither, Levels};
 pub const MIX_TOLERANCE: f64 = 0.0075;
 
 /// Whether row `r` of a mixing zone shows the upper of its two grays, for a mix of `k`
-/// sixty-fourths: the 6-bit bit-reversal of r mod 64 (a 1-D ordered dither) is below
-/// `k`. Any 8 consecutive rows hold k/64 of them to within 1/8, any 64 exactly. Whole
-/// rows (not a checkerboard) keep the masks run-length friendly.
+/// sixty-fourths: the 6-bit bit-reversal of r mod 64 is below `k` (any 8 consecutive rows
+/// hold k/64 of them to within 1/8, any 64 exactly).
 #[inline]
 pub(super) fn upper_row(r: usize, k: u8) -> bool {
     (((r & 63) as u8).reverse_bits() >> 2) < k
@@ -148,11 +147,9 @@ fn zone_target(
     })
 }
 
-/// The zone-mode target: among targets within 3 % of `emax` (the highest every inside
-/// zone can reach; about one gray step), the centre of the narrowest irradiance window
-/// that holds one achievable full-coverage value P̄·S(level) of every inside zone. One
-/// gray per zone cannot do better than that window's width; nearest rounding to `emax`
-/// alone can be up to one gray step worse. Falls back to `emax`.
+/// The zone-mode target (docs/CALIBRATION.md): the centre of the narrowest irradiance window
+/// within 3 % of `emax` (the highest every inside zone can reach) that holds one achievable
+/// value P̄·S(level) of every inside zone; `emax` if there is none.
 fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     let zones: Vec<usize> = (0..zone_p.len()).filter(|&z| inside[z]).collect();
     let (lo_b, hi_b) = (emax * 0.97, emax * 1.03);
