@@ -58,9 +58,9 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Dither {
-    /// Zone mode: a zone whose nearest gray misses the target by more than
-    /// [`compensate::MIX_TOLERANCE`] mixes the two grays around its target (ordered 8×8
-    /// pattern); every other zone keeps one gray. Pixel mode: no dithering.
+    /// Zone mode: a zone whose nearest gray misses the target by more than 0.75 %
+    /// (`MIX_TOLERANCE`) mixes the two grays around its target in whole rows; every other
+    /// zone keeps one gray. Pixel mode: no dithering.
     #[default]
     Auto,
     /// Zone mode: every zone mixes the two grays around its target. Pixel mode:

@@ -90,7 +90,7 @@ fn spread_pct(v: &[f64]) -> f64 {
 /// The plot files (path, PNG bytes) for a fit, named after `out` (the calibration file):
 /// measured and fitted full-on irradiance per zone (on one scale), both after zone
 /// compensation (% of target; the fitted spread over the zones inside the calibrated
-/// area), the zone grays and the response ([`response_chart`]).
+/// area), the zone grays and the response S(g).
 pub fn calibration_plots(
     out: &Path,
     fit: &FitResult,
