@@ -227,11 +227,10 @@ impl Rasterizer {
     /// The mask of a layer as it is written: coverage, thresholded at 50 % when `binary`
     /// (as [`threshold`] does), then mapped through `map` (light compensation) when given.
     ///
-    /// The map is applied by the scan itself, where it writes each value (one pass over the
-    /// lit box instead of two), unless [`CoverageMap::fusable`] declines the layer or its
-    /// shells overlap (nonzero fallback): then the finished (thresholded) coverage mask goes
-    /// through [`CoverageMap::apply`]. Either way the bytes are the same. The lit area
-    /// ([`Scratch::lit_pixels`]) is always that of the coverage, before threshold and map.
+    /// The scan applies the map as it writes each value, unless the map is not
+    /// [`CoverageMap::fusable`] or the shells overlap (nonzero fallback): then the finished
+    /// (thresholded) coverage goes through [`CoverageMap::apply`], with the same bytes. The
+    /// lit area ([`Scratch::lit_pixels`]) is that of the coverage, before threshold and map.
     #[inline(never)]
     pub fn render<M: CoverageMap>(
         &self,
@@ -271,7 +270,7 @@ impl Rasterizer {
         debug_assert!(c1 < stride);
         let lit = PixelBox::new(r0, r1, c0, c1.min(w));
         scratch.lit = lit;
-        let fused = map.filter(|m| m.fusable(lit));
+        let fused = map.filter(|m| m.fusable());
         let mut outside = false;
         let runs = scratch.record_runs.then_some(&mut scratch.lit_runs);
         // The scan for each emitter, threshold (`BIN`) and outside check (`CHECK`).
@@ -395,10 +394,9 @@ fn box_sum(m: &Mask, b: PixelBox) -> u64 {
 /// writes the mask ([`Rasterizer::render`]): light compensation
 /// ([`crate::optics::Compensator`]). Coverage 0 always stays 0.
 pub trait CoverageMap {
-    /// Whether the scan may apply the map to a layer whose lit pixels all lie in
-    /// `lit_box`; if not, [`apply`](Self::apply) maps the finished mask (e.g. when the map
-    /// must look at the coverage of other pixels first).
-    fn fusable(&self, lit_box: PixelBox) -> bool;
+    /// Whether the scan may apply the map as it writes; if not, [`apply`](Self::apply) maps
+    /// the finished mask (e.g. when the map must look at the coverage of other pixels first).
+    fn fusable(&self) -> bool;
     /// The map's area: the scan reports through [`lit_outside`](Self::lit_outside) a layer
     /// it mapped that has a lit pixel (coverage, thresholded when binary, above zero)
     /// outside it.
@@ -423,7 +421,7 @@ pub trait CoverageMap {
 enum NoMap {}
 
 impl CoverageMap for NoMap {
-    fn fusable(&self, _: PixelBox) -> bool {
+    fn fusable(&self) -> bool {
         match *self {}
     }
     fn area(&self) -> PixelBox {

@@ -13,15 +13,10 @@ use std::process::ExitCode;
 /// is complete, so this never leaves anything half-written.
 #[cfg(unix)]
 fn default_sigpipe() {
-    unsafe extern "C" {
-        fn signal(signum: i32, handler: usize) -> usize;
-    }
-    const SIGPIPE: i32 = 13;
-    const SIG_DFL: usize = 0;
     // SAFETY: called once at start-up, before any other thread exists; SIG_DFL is a valid
     // disposition for SIGPIPE.
     unsafe {
-        signal(SIGPIPE, SIG_DFL);
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

@@ -136,10 +136,8 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
     let p = field.pixel_mm;
     let longer = crop.width().max(crop.height()) as f64;
     let scale = (XY_CELLS as f64 / longer).min(1.0);
-    let want = (
-        ((crop.width() as f64 * scale).round() as u32).max(1),
-        ((crop.height() as f64 * scale).round() as u32).max(1),
-    );
+    let cells = |px: u32| ((px as f64 * scale).round() as u32).max(1);
+    let want = (cells(crop.width()), cells(crop.height()));
     let layers = &manifest.layers;
     let n = layers.len();
     let height = layers.last().map_or(0.0, |l| l.z_mm);
@@ -160,11 +158,8 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
             Ok((c.width, c.height, occ))
         })
         .collect::<Result<_>>()?;
-    let (nx, ny) = planes
-        .first()
-        .map_or((want.0 as usize, want.1 as usize), |p| {
-            (p.0 as usize, p.1 as usize)
-        });
+    let (nx, ny) = planes.first().map_or(want, |p| (p.0, p.1));
+    let (nx, ny) = (nx as usize, ny as usize);
     // Cells come row 0 at the top (back of the field); voxels count y from the front.
     let mut occ = vec![0u8; nx * ny * nz];
     for (z, (_, _, plane)) in planes.iter().enumerate() {

@@ -120,7 +120,7 @@ pub struct CompRow<'a> {
 /// finished coverage goes through `apply_in`): error diffusion (pixel mode, `--dither
 /// on`), which reads the neighbours' coverage.
 impl crate::raster::CoverageMap for Compensator {
-    fn fusable(&self, _: PixelBox) -> bool {
+    fn fusable(&self) -> bool {
         !(self.mode == Mode::Pixel && self.dither == Dither::On)
     }
 
@@ -289,7 +289,7 @@ mod tests {
                     let what = format!("{mode:?} {dither:?} binary {binary} case {case}");
                     assert!(got == want, "{what}: masks differ");
                     assert_eq!(s_fused.lit_pixels(&got), area, "{what}: lit area");
-                    in_scan += fused.fusable(lit) as usize;
+                    in_scan += fused.fusable() as usize;
                     s_fused.recycle(got);
                     s_ref.recycle(want);
                 }
