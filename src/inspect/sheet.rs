@@ -118,6 +118,14 @@ pub fn contact_sheet(
     } else {
         "Each thumbnail is one layer's mask as the projector shows it: gray on black, white = full light."
     };
+    let zone = manifest.optics.as_ref().or(manifest.projector_optics.first());
+    let note1 = match zone.filter(|o| o.mode == "zone") {
+        Some(o) => format!(
+            "{note1} Faint squares inside the part: the light compensation's {} mm zones, each with its own gray.",
+            crate::text::number(o.zone_mm)
+        ),
+        None => note1.to_owned(),
+    };
     let note2 = format!(
         "Cut to the part: x {:.1}–{:.1} mm, y {:.1}–{:.1} mm of the {:.2} × {:.2} mm field; labels: layer number · height (z) of its top.",
         crop.x0 as f64 * p,
@@ -129,13 +137,15 @@ pub fn contact_sheet(
     );
     let width = (GAP + cols * cell_w)
         .max(2 * GAP + text::text_width(&title, TITLE.size).ceil() as u32)
+        .max(2 * GAP + text::text_width(&note1, SMALL.size).ceil() as u32)
         .max(2 * GAP + text::text_width(&note2, SMALL.size).ceil() as u32);
     let height = top + rows * cell_h + GAP;
     let mut c = Canvas::new(width, height, BACKGROUND);
     c.text(GAP as f32, GAP as f32, &title, TITLE);
     let y1 = (GAP + title_h + 6) as f32;
-    c.text(GAP as f32, y1, note1, SMALL);
+    c.text(GAP as f32, y1, &note1, SMALL);
     c.text(GAP as f32, y1 + (note_h + 2) as f32, &note2, SMALL);
+    let decimals = z_decimals(layers.iter().map(|&l| manifest.layers[l].z_mm));
     for (k, (thumb, &l)) in thumbs.iter().zip(layers).enumerate() {
         let (col, row) = (k as u32 % cols, k as u32 / cols);
         let x = GAP + col * cell_w + (cell_w - GAP - tw) / 2;
@@ -145,16 +155,36 @@ pub fn contact_sheet(
         c.text(
             (x + tw / 2) as f32,
             (y + th + 3) as f32,
-            &format!("layer {l} · {z:.2} mm"),
+            &format!("layer {l} · {z:.decimals$} mm"),
             TextStyle::new(SMALL.size, INK).aligned(Align::Center),
         );
     }
     Ok(c)
 }
 
+/// Decimals (2 to 4) that write every height of `zs` (mm) exactly, or 4: 5 µm layers read
+/// 0.005, 0.010, … instead of four labels of 0.01.
+fn z_decimals(zs: impl Iterator<Item = f64> + Clone) -> usize {
+    (2..=4)
+        .find(|&d| {
+            let scale = 10f64.powi(d as i32);
+            zs.clone().all(|z| ((z * scale).round() - z * scale).abs() < 1e-6)
+        })
+        .unwrap_or(4)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn heights_are_labelled_with_the_decimals_they_need() {
+        assert_eq!(z_decimals([0.05, 0.1, 0.15].into_iter()), 2);
+        assert_eq!(z_decimals([0.005, 0.01, 0.015].into_iter()), 3);
+        assert_eq!(z_decimals([0.0125, 0.025].into_iter()), 4);
+        assert_eq!(z_decimals([1.0 / 3.0].into_iter()), 4);
+        assert_eq!(z_decimals(std::iter::empty()), 2);
+    }
 
     #[test]
     fn layers_are_chosen_as_asked() {

@@ -2,7 +2,7 @@
 //! per-layer extremes, from the manifest alone.
 
 use crate::bundle::{Layer, Manifest};
-use crate::text::hms;
+use crate::text::{hms, number};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -62,6 +62,12 @@ pub struct Summary {
     /// Layers printed continuously (hybrid process), if any.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub continuous_layers: Option<u64>,
+    /// The light compensation's mode (`zone` or `pixel`), if the masks are compensated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compensation: Option<String>,
+    /// Its zone edge, mm (zone mode).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone_mm: Option<f64>,
     /// Number of warnings (notes included).
     pub warnings: usize,
     /// Warnings counted by code.
@@ -97,6 +103,7 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         *by_code.entry(w.code.clone()).or_insert(0) += 1;
     }
     let l = &m.layers;
+    let optics = m.optics.as_ref().or(m.projector_optics.first());
     let extremes = (!l.is_empty()).then(|| Extremes {
         area_mm2: extreme(l, |l| l.area_mm2),
         exposure_s: extreme(l, |l| l.exposure_s),
@@ -118,6 +125,8 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         exposure_s: m.totals.exposure_s,
         resin_volume_ml: m.totals.resin_volume_ml,
         continuous_layers: m.totals.continuous_layers,
+        compensation: optics.map(|o| o.mode.clone()),
+        zone_mm: optics.filter(|o| o.mode == "zone").map(|o| o.zone_mm),
         warnings: m.warnings.len(),
         warnings_by_code: by_code,
         extremes,
@@ -145,6 +154,15 @@ pub fn render_human(s: &Summary) -> String {
     });
     let (t, exposure, resin) = (s.print_time_s, s.exposure_s, s.resin_volume_ml);
     let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, resin {resin:.2} ml{continuous}", hms(t));
+    match (s.compensation.as_deref(), s.zone_mm) {
+        (Some("zone"), Some(z)) => {
+            let _ = writeln!(o, "light compensation: zone: each {} mm zone has its own gray, so a mask shows faint squares inside the part (darker where the projector is brighter)", number(z));
+        }
+        (Some(mode), _) => {
+            let _ = writeln!(o, "light compensation: {mode}: each pixel has its own gray, darker where the projector is brighter");
+        }
+        (None, _) => {}
+    }
     if s.warnings == 0 {
         let _ = writeln!(o, "warnings: none");
     } else {

@@ -99,6 +99,64 @@ fn completions_for_each_shell() {
     assert_eq!(o.status.code(), Some(2));
 }
 
+/// What bash completes for the words `line` (the last one being completed), in `dir`.
+fn bash_completes(dir: &std::path::Path, script: &std::path::Path, line: &[&str]) -> Vec<String> {
+    let words = line
+        .iter()
+        .map(|w| format!("'{w}'"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let prog = format!(
+        "source '{}'; COMP_WORDS=({words}); COMP_CWORD={}; COMP_LINE='{}'; COMP_POINT=${{#COMP_LINE}}; \
+         _dmdsl dmdsl '{}' '{}'; printf '%s\\n' \"${{COMPREPLY[@]}}\"",
+        script.display(),
+        line.len() - 1,
+        line.join(" "),
+        line[line.len() - 1],
+        line[line.len().saturating_sub(2)],
+    );
+    let o = std::process::Command::new("bash")
+        .args(["--norc", "-c", &prog])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn bash_completes_profile_names_files_and_warning_rules() {
+    let dir = tempdir("bash-completion");
+    let o = run_in(&dir, &["completions", "bash"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let script = dir.join("dmdsl.bash");
+    std::fs::write(&script, &o.stdout).unwrap();
+    std::fs::write(dir.join("bottom-mine.toml"), "").unwrap();
+    let got = bash_completes(&dir, &script, &["dmdsl", "slice", "part.stl", "-p", "bot"]);
+    assert!(got.contains(&"bottom-up".to_owned()), "{got:?}");
+    assert!(got.contains(&"bottom-mine.toml".to_owned()), "{got:?}");
+    let got = bash_completes(&dir, &script, &["dmdsl", "profile", "show", "tiled"]);
+    assert!(got.contains(&"tiled-2x1".to_owned()), "{got:?}");
+    let got = bash_completes(
+        &dir,
+        &script,
+        &["dmdsl", "slice", "part.stl", "-W", "plan.wait"],
+    );
+    assert!(
+        got.contains(&"plan.wait-capped=allow".to_owned()),
+        "{got:?}"
+    );
+    let got = bash_completes(
+        &dir,
+        &script,
+        &["dmdsl", "export", "a.dmdjob", "--format", "sl"],
+    );
+    assert!(got.contains(&"sla-control".to_owned()), "{got:?}");
+}
+
 #[test]
 fn man_pages() {
     let dir = tempdir("man");
@@ -110,10 +168,12 @@ fn man_pages() {
         "{}",
         &page[..page.len().min(300)]
     );
-    assert!(
-        page.contains("slice") && page.contains("Exit codes"),
-        "{page}"
-    );
+    assert!(page.contains("slice"), "{page}");
+    // Examples and exit codes are sections of their own, set line by line as in --help.
+    for section in [".SH \"EXAMPLES\"\n.nf\n", ".SH \"EXIT STATUS\"\n.nf\n"] {
+        assert!(page.contains(section), "{section}: {page}");
+    }
+    assert!(!page.contains("EXTRA"), "{page}");
     let o = run_in(&dir, &["man", "slice"]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let page = stdout(&o);
@@ -123,6 +183,10 @@ fn man_pages() {
         &page[..page.len().min(300)]
     );
     assert!(page.contains("layer\\-height"), "{page}");
+    assert!(
+        page.contains("  dmdsl slice part.stl \\-o part.sl1 "),
+        "an example line kept whole: {page}"
+    );
     let o = run_in(&dir, &["man", "nope"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(

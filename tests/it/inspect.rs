@@ -114,6 +114,17 @@ fn summary_numbers_are_the_manifests() {
     );
     assert!(out.contains("largest area"), "{out}");
     assert!(out.contains("estimated print time"), "{out}");
+    // The default profile's zone compensation, and what it looks like in a mask.
+    assert_eq!(s["compensation"], "zone");
+    assert_eq!(s["zone_mm"], j["optics"]["zone_mm"]);
+    assert!(
+        out.contains("light compensation: zone: each 5 mm zone has its own gray, so a mask shows faint squares"),
+        "{out}"
+    );
+    let (off, _) = stepped("summary-off", &["--compensation", "off"]);
+    let o = run_in(&off, &["inspect", "step.dmdjob"]);
+    ok(&o);
+    assert!(!stdout(&o).contains("light compensation"), "{}", stdout(&o));
 }
 
 /// The x ranges of the thumbnails in row `y` of a contact sheet: runs of gray pixels (a
