@@ -143,6 +143,7 @@ pub(crate) fn layer(
             file: file.into(),
             sha256: image.0.clone(),
             projector: 0,
+            pixels: None,
         }],
         steps,
         time_s,

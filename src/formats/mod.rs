@@ -29,6 +29,7 @@ mod format;
 mod imported;
 mod native;
 pub mod sl1;
+mod written;
 
 use crate::bundle::{BundleSource, Machine, Manifest, MANIFEST};
 use crate::error::{Error, Result};
@@ -122,12 +123,30 @@ pub fn open(path: &Path) -> Result<Job> {
 /// Writes the job (`manifest` and its `files`) at `out` in `format`, atomically; returns
 /// what the format could not carry. Nothing is left at `out` (nor beside it) on failure,
 /// nor when `cancel` is set while it is written ([`crate::error::Error::Interrupted`]).
+///
+/// Every PNG is written as its bytes up to the end of its `IEND` chunk: what follows it
+/// (which PNG readers ignore) is dropped. A native form records the masks' hashes of
+/// the bytes written and every mask's pixels (counted from the file when the manifest has
+/// no record: an older bundle, an imported job).
 pub fn write(
     format: Format,
     manifest: &Manifest,
     files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
+) -> Result<Vec<Warning>> {
+    write_at_most(format, manifest, files, out, cancel, None)
+}
+
+/// [`write()`], refused before anything is written when the images would add up to more
+/// than `max_bytes` (each image as many times as the format writes it).
+pub fn write_at_most(
+    format: Format,
+    manifest: &Manifest,
+    files: &dyn BundleSource,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+    max_bytes: Option<u64>,
 ) -> Result<Vec<Warning>> {
     check_fits(format, &manifest.machine, out)?;
     let foreign = matches!(format, Format::Sl1 | Format::Sl1s | Format::SlaControl);
@@ -137,6 +156,17 @@ pub fn write(
             msg: "the job has no layers".into(),
         });
     }
+    let files = written::Trimmed(files);
+    let (bytes, manifest) = written::survey(manifest, &files, !foreign)?;
+    if let Some(max) = max_bytes.filter(|&m| bytes > m) {
+        let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+        let (now, most) = (mib(bytes), mib(max));
+        return Err(Error::Bundle {
+            path: out.into(),
+            msg: format!("its images would add up to {bytes} bytes ({now:.3} MiB), more than the {max} ({most:.3} MiB) allowed (--max-size; --force writes it anyway)"),
+        });
+    }
+    let (manifest, files) = (manifest.as_ref(), &files as &dyn BundleSource);
     let warnings = match format {
         Format::Dmdjob | Format::DmdjobZip => Vec::new(),
         Format::Sl1 | Format::Sl1s => sl1::cannot_carry(format, manifest),

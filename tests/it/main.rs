@@ -25,4 +25,5 @@ mod run;
 mod run_cure;
 mod schema;
 mod slice;
+mod tamper;
 mod warnings;
