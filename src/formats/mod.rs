@@ -14,8 +14,9 @@
 //!   `slices/`), read as layers and steps from its position and image settings;
 //! * `imported.rs`: what the importers share (the machine record a file implies, the layer
 //!   record of an image, the job around them);
-//! * [`archive`]: zips, read whole into memory refusing anything unsafe (nothing is
-//!   extracted), and written through a temporary sibling.
+//! * [`archive`]: zips, their entries inflated into memory only as a reader asks for
+//!   them, refusing anything unsafe (nothing is extracted), and written through a
+//!   temporary sibling.
 //!
 //! The form is found from the content, not the extension: a directory is a bundle; a zip
 //! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
@@ -34,7 +35,7 @@ mod written;
 use crate::bundle::{BundleSource, Machine, Manifest, MANIFEST};
 use crate::error::{Error, Result};
 use crate::warning::Warning;
-use archive::read::{read_zip_bytes, Limits};
+use archive::read::{read_zip, Limits};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -98,9 +99,8 @@ pub fn open(path: &Path) -> Result<Job> {
             msg: "not a job: neither a bundle directory nor a zip archive (a zipped bundle, an SL1/SL1S file or an SLA control-file zip)".into(),
         });
     }
-    let archive = read_zip_bytes(path, &bytes, &limits)?;
     let sha256 = crate::digest::sha256_hex(&bytes);
-    drop(bytes);
+    let archive = read_zip(path, bytes, &limits)?;
     if let Some(dir) = native::bundle_folder(&archive) {
         return native::open_zip(archive, &dir);
     }
