@@ -473,22 +473,20 @@ fn a_job_run_fails_is_not_converted_unless_forced() {
         stderr(&o)
     );
     assert_eq!(names(&d), ["a.sl1"]);
-    // RGB and 16-bit masks, their hashes recorded.
+    // RGB, 16-bit and palette masks, their hashes recorded.
     slice(
         &d,
         "cube10.stl",
         &["--scale", "0.3", "--layer-height", "1", "-o", "b.dmdjob"],
     );
     let b = d.join("b.dmdjob");
-    for (depth, kind) in [
-        ("rgb", "expected 8-bit grayscale"),
-        ("16-bit", "expected 8-bit grayscale"),
-    ] {
+    for depth in ["rgb", "16-bit", "palette"] {
         let mask = b.join("masks/00001.png");
         let img = image::open(&mask).unwrap();
         match depth {
             "rgb" => img.to_rgb8().save(&mask).unwrap(),
-            _ => img.to_luma16().save(&mask).unwrap(),
+            "16-bit" => img.to_luma16().save(&mask).unwrap(),
+            _ => std::fs::write(&mask, palette_png(&img.to_luma8())).unwrap(),
         }
         let mut j: serde_json::Value =
             serde_json::from_slice(&std::fs::read(b.join("job.json")).unwrap()).unwrap();
@@ -497,9 +495,46 @@ fn a_job_run_fails_is_not_converted_unless_forced() {
         std::fs::write(b.join("job.json"), serde_json::to_vec_pretty(&j).unwrap()).unwrap();
         let o = run_in(&d, &["export", "b.dmdjob", "-o", "b.sl1"]);
         assert_eq!(o.status.code(), Some(1), "{depth}");
-        assert!(stderr(&o).contains(kind), "{depth}: {}", stderr(&o));
+        let e = stderr(&o);
+        assert!(e.contains("expected 8-bit grayscale"), "{depth}: {e}");
         assert!(!d.join("b.sl1").exists());
     }
+}
+
+/// `img` as an 8-bit palette PNG (colour type 3) whose 256 entries are the grays, so it
+/// shows the same picture: the gray PNG's chunks with its header's colour type changed
+/// and a `PLTE` chunk before its data.
+fn palette_png(img: &image::GrayImage) -> Vec<u8> {
+    let gray = dmdsl::png::encode_gray8(img.width(), img.height(), img.as_raw());
+    let chunk = |out: &mut Vec<u8>, kind: &[u8], body: &[u8]| {
+        out.extend((body.len() as u32).to_be_bytes());
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(kind);
+        crc.update(body);
+        out.extend(kind);
+        out.extend(body);
+        out.extend(crc.finalize().to_be_bytes());
+    };
+    let mut out = gray[..8].to_vec();
+    let mut at = 8;
+    while at + 8 <= gray.len() {
+        let len = u32::from_be_bytes(gray[at..at + 4].try_into().unwrap()) as usize;
+        let kind = &gray[at + 4..at + 8];
+        let mut body = gray[at + 8..at + 8 + len].to_vec();
+        if kind == b"IHDR" {
+            assert_eq!((body[8], body[9]), (8, 0), "8-bit gray");
+            body[9] = 3;
+        }
+        if kind == b"IDAT" && !out.windows(4).any(|w| w == b"PLTE") {
+            let grays: Vec<u8> = (0..=255u8).flat_map(|g| [g, g, g]).collect();
+            chunk(&mut out, b"PLTE", &grays);
+        }
+        chunk(&mut out, kind, &body);
+        at += 12 + len;
+    }
+    let back = image::load_from_memory(&out).unwrap().to_luma8();
+    assert!(back == *img, "the palette PNG shows the same picture");
+    out
 }
 
 /// Masks are written up to their IEND chunk, and an output's size is known before it is

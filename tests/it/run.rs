@@ -985,7 +985,11 @@ fn numbers_out_of_range_are_refused_and_every_figure_is_finite() {
     }
     let clean = job(&b);
     type Edit = fn(&mut Value);
-    let cases: [(Edit, &str); 5] = [
+    let cases: [(Edit, &str); 6] = [
+        (
+            |j| j["layers"][2]["steps"][1]["accel_mm_s2"] = 1e-308.into(),
+            "layers[2].steps[1].accel_mm_s2 = 1e-308 is not an acceleration a machine has",
+        ),
         (
             |j| j["layers"][1]["area_mm2"] = 1e308.into(),
             "layers[1].area_mm2 = 1e308 is not an area of the 3168.75 mm² field",
