@@ -234,3 +234,53 @@ fn settings_changed_on_their_own_fail_run() {
         );
     }
 }
+
+/// What `run` cannot see (docs/EXECUTOR.md, "Mask records and settings"): the records are
+/// checks, not signatures, so a mask with an 80 × 80 px hole, its SHA-256 and its pixel
+/// record both written again, passes: it stays within what its layer's section allows.
+#[test]
+fn an_edit_with_its_records_rewritten_is_checked_against_the_section_only() {
+    let dir = tempdir("tamper-records");
+    let mut part = box_tris([0.0; 3], [12.0, 12.0, 2.0]);
+    part.extend(box_tris([3.0, 3.0, 2.0], [9.0, 9.0, 4.0]));
+    write_stl(&dir.join("part.stl"), &part);
+    let o = run_in(&dir, &["slice", "part.stl", "--layer-height", "0.5", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let b = dir.join("part.dmdjob");
+    let mut j = job(&b);
+    let rec = &j["layers"][1]["masks"][0];
+    let path = b.join(rec["file"].as_str().unwrap());
+    let (_, _, pixels) = read_gray(&path);
+    let hole = edits(&pixels, &pixels)
+        .into_iter()
+        .find(|(n, _)| *n == "80 x 80 px hole");
+    let hole = hole.unwrap().1;
+    image::GrayImage::from_raw(W as u32, H as u32, hole.clone())
+        .unwrap()
+        .save(&path)
+        .unwrap();
+    // The hash alone: the pixel record tells.
+    let sha = dmdsl::bundle::sha256_hex(&std::fs::read(&path).unwrap());
+    j["layers"][1]["masks"][0]["sha256"] = sha.into();
+    set_job(&b, &j);
+    let (code, r) = run(&dir);
+    let kinds = kinds_on(&r, 1);
+    assert_eq!(
+        (code, &kinds[..]),
+        (1, &["mask-pixels".to_string()][..]),
+        "{}",
+        r["violations"]
+    );
+    // The pixel record too, placed as the projector shows it.
+    let p = &j["machine"]["projector"][0];
+    let n = |v: &Value| v.as_u64().unwrap() as u32;
+    let px = dmdsl::bundle::MaskPixels::of_gray8(W as u32, &hole).placed(
+        [n(&p["width_px"]), n(&p["height_px"])],
+        [n(&p["offset_px"][0]), n(&p["offset_px"][1])],
+        [p["mirror_x"] == true, p["mirror_y"] == true],
+    );
+    j["layers"][1]["masks"][0]["pixels"] = serde_json::to_value(px).unwrap();
+    set_job(&b, &j);
+    let (code, r) = run(&dir);
+    assert_eq!(code, 0, "{}", r["violations"]);
+}
