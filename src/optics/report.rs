@@ -152,11 +152,14 @@ fn header(cal: &Calibration, input: &Path) -> String {
 }
 
 /// Writes `files` (path, bytes) all-or-nothing: each goes to a temporary sibling first and
-/// is renamed into place only when every file was written.
+/// is renamed into place only when every file was written. A symbolic link at a path is
+/// refused ([`crate::output::refuse_link`]); an error names the file, not its temporary
+/// sibling.
 fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     let tmp: Vec<PathBuf> = files
         .iter()
         .map(|(p, _)| {
+            crate::output::refuse_link(p)?;
             crate::output::temp_sibling(p)
                 .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })
@@ -166,10 +169,10 @@ fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
             let _ = std::fs::remove_file(t);
         }
     };
-    for (i, ((_, bytes), t)) in files.iter().zip(&tmp).enumerate() {
+    for (i, ((p, bytes), t)) in files.iter().zip(&tmp).enumerate() {
         if let Err(e) = std::fs::write(t, bytes) {
             cleanup(i + 1);
-            return Err(Error::io(t, e));
+            return Err(Error::io(p, e));
         }
     }
     for (i, ((p, _), t)) in files.iter().zip(&tmp).enumerate() {

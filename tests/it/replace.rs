@@ -125,7 +125,7 @@ fn a_directory_that_only_looks_like_a_bundle_is_refused() {
 }
 
 /// One rule for links, whatever the output (a bundle directory, a one-file job, a trace, a
-/// plot): a symbolic link at the path is refused, what it points to left alone.
+/// calibration): a symbolic link at the path is refused, what it points to left alone.
 #[cfg(unix)]
 #[test]
 fn a_symlink_output_is_refused_and_its_target_left_alone() {
@@ -155,6 +155,15 @@ fn a_symlink_output_is_refused_and_its_target_left_alone() {
     refused(run_in(&dir, &export), "link.sl1", "real.sl1");
     let trace = ["run", "real.dmdjob", "--trace", "link.csv"];
     refused(run_in(&dir, &trace), "link.csv", "real.csv");
+    let m = fixture("measurements.csv");
+    let calibrate = [
+        "calibrate",
+        m.to_str().unwrap(),
+        "-o",
+        "link.csv",
+        "--no-plots",
+    ];
+    refused(run_in(&dir, &calibrate), "link.csv", "real.csv");
     for name in ["link.dmdjob", "link.sl1", "link.csv"] {
         assert!(std::fs::symlink_metadata(dir.join(name))
             .unwrap()
@@ -171,7 +180,7 @@ fn a_symlink_output_is_refused_and_its_target_left_alone() {
 /// A write that fails (a full disk: here a file-size limit, `RLIMIT_FSIZE`, which fails
 /// writes past it with EFBIG as a full disk does with ENOSPC) is one error line naming the
 /// output, exit 2, and leaves nothing: a one-file job (the zip library printed its own
-/// line in front), a trace (its temporary file stayed), a bundle directory.
+/// line in front), a trace (its temporary file stayed), a calibration, a bundle directory.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_full_disk_is_one_error_line_and_leaves_nothing() {
@@ -181,7 +190,14 @@ fn a_full_disk_is_one_error_line_and_leaves_nothing() {
     let f = fixture("cube10.stl");
     let model = f.to_str().unwrap();
     let err = "File too large (os error 27)";
-    let cases: [(&[&str], String, u64); 4] = [
+    let m = fixture("measurements.csv");
+    let m = m.to_str().unwrap();
+    let cases: [(&[&str], String, u64); 5] = [
+        (
+            &["calibrate", m, "-o", "c.toml", "--no-plots"],
+            format!("c.toml: {err}"),
+            200,
+        ),
         (
             &["export", "cube.dmdjob", "-o", "a.sl1"],
             format!("a.sl1: {err}"),
@@ -225,10 +241,18 @@ fn errors_name_the_output_not_its_temporary_file() {
     let dir = tempdir("replace-staging");
     assert!(slice_cube(&dir, "cube.dmdjob").status.success());
     std::fs::write(dir.join("ro"), "a file, not a folder").unwrap();
-    let o = run_in(&dir, &["export", "cube.dmdjob", "-o", "ro/a.sl1"]);
-    assert_eq!(o.status.code(), Some(2));
-    let e = stderr(&o);
-    assert_eq!(e, "dmdsl: error: ro/a.sl1: Not a directory (os error 20)\n");
+    for (args, out) in [
+        (&["export", "cube.dmdjob", "-o", "ro/a.sl1"][..], "ro/a.sl1"),
+        (&["run", "cube.dmdjob", "--trace", "ro/t.csv"], "ro/t.csv"),
+    ] {
+        let o = run_in(&dir, args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let e = stderr(&o);
+        assert_eq!(
+            e,
+            format!("dmdsl: error: {out}: Not a directory (os error 20)\n")
+        );
+    }
 }
 
 /// A success summary shows control characters of a path as escapes, as errors do.
