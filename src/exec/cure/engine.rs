@@ -5,7 +5,9 @@
 use crate::resin::CureModel;
 
 use super::islands::{connect, Run};
-use super::kernel::{Kernel, Prepared};
+#[cfg(test)]
+use super::kernel::Kernel;
+use super::kernel::Prepared;
 use super::{NEAR, SUB};
 
 /// The accumulation's pending decay factor below which it is applied to the buffer.
@@ -31,8 +33,11 @@ pub struct LayerOut {
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
 /// for a field of `w`×`h` pixels.
 pub struct Engine {
+    #[cfg(test)]
     w: usize,
+    #[cfg(test)]
     h: usize,
+    #[cfg(test)]
     model: CureModel,
     /// Samples across.
     sw: usize,
@@ -61,8 +66,11 @@ impl Engine {
     pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
         let h_mm = model.layer_mm;
         Engine {
+            #[cfg(test)]
             w,
+            #[cfg(test)]
             h,
+            #[cfg(test)]
             model: *model,
             sw: w * SUB,
             q: (-h_mm / model.dp_mm).exp() as f32,
@@ -80,6 +88,7 @@ impl Engine {
     }
 
     /// The kernel that prepares the layers of this engine's field and model.
+    #[cfg(test)]
     pub fn kernel(&self) -> Kernel {
         Kernel::new(self.w, self.h, &self.model)
     }
