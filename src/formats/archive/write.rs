@@ -17,9 +17,9 @@
 use crate::error::{Error, Result};
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
-use std::sync::{Arc, Mutex};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, DateTime, ZipWriter};
 
@@ -38,12 +38,15 @@ pub struct ZipOut<'a> {
 
 /// The archive's file, which keeps its first write error (in `failed`) and from then on
 /// only counts what it is asked to write: the writes and seeks after a failure succeed
-/// (at a position kept as if they had been done) without touching the file.
+/// (at a position kept as if they had been done) without touching the file. The position
+/// is followed from the start, so it is right whenever the failure comes (an error of
+/// the file, or the archive dropped unfinished).
 struct Quiet {
     file: BufWriter<File>,
     failed: Arc<Mutex<Option<std::io::Error>>>,
-    /// The position after the failure, as if every write had been done.
+    /// The position, as if every write had been done.
     at: u64,
+    /// The largest position reached: the end of the file.
     end: u64,
 }
 
@@ -52,57 +55,58 @@ impl Quiet {
         self.failed.lock().map_or(true, |f| f.is_some())
     }
 
-    /// `r`, or `ok` (the file left alone from now on) after keeping its error.
-    fn keep<T>(&mut self, r: std::io::Result<T>, ok: T) -> std::io::Result<T> {
-        match r {
-            Err(e) => {
-                self.at = self.file.get_ref().stream_position().unwrap_or(0);
-                self.end = self.at;
-                if let Ok(mut f) = self.failed.lock() {
-                    f.get_or_insert(e);
-                }
-                Ok(ok)
-            }
-            r => r,
+    /// Keeps `e` as the file's error unless it has one already.
+    fn keep(&self, e: std::io::Error) {
+        if let Ok(mut f) = self.failed.lock() {
+            f.get_or_insert(e);
         }
+    }
+
+    /// Moves the position to `at`.
+    fn moved(&mut self, at: u64) -> u64 {
+        self.at = at;
+        self.end = self.end.max(at);
+        at
     }
 }
 
 impl Write for Quiet {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        if self.failed() {
-            self.at += buf.len() as u64;
-            self.end = self.end.max(self.at);
-            return Ok(buf.len());
-        }
-        let r = self.file.write(buf);
-        self.keep(r, buf.len())
+        let n = match self.failed() {
+            true => buf.len(),
+            false => self.file.write(buf).unwrap_or_else(|e| {
+                self.keep(e);
+                buf.len()
+            }),
+        };
+        self.moved(self.at + n as u64);
+        Ok(n)
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        if self.failed() {
-            return Ok(());
+        if !self.failed() {
+            if let Err(e) = self.file.flush() {
+                self.keep(e);
+            }
         }
-        let r = self.file.flush();
-        self.keep(r, ())
+        Ok(())
     }
 }
 
 impl Seek for Quiet {
     fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
         if !self.failed() {
-            let r = self.file.seek(to);
-            if r.is_ok() || self.failed() {
-                return r;
+            match self.file.seek(to) {
+                Ok(at) => return Ok(self.moved(at)),
+                Err(e) => self.keep(e),
             }
-            self.keep(r, 0)?;
         }
-        self.at = match to {
+        let at = match to {
             SeekFrom::Start(n) => n,
             SeekFrom::Current(d) => self.at.saturating_add_signed(d),
             SeekFrom::End(d) => self.end.saturating_add_signed(d),
         };
-        Ok(self.at)
+        Ok(self.moved(at))
     }
 }
 
