@@ -1,9 +1,15 @@
 //! Writing output files (plots, pictures, traces, calibrations) so that a reader never sees
 //! half a file: each is written to a hidden temporary sibling, `.NAME.tmp-PID`, and renamed
 //! over the destination once complete. Bundles, which are directories, have their own
-//! writer (`bundle::BundleWriter`).
+//! writer (`bundle::BundleWriter`), and so do one-file jobs (`formats::archive::write`).
 //!
-//! A reader sees the old file or the whole new one; a failed write leaves nothing.
+//! A reader sees the old file or the whole new one; a failed write leaves nothing, and an
+//! error names the output, never the temporary file.
+//!
+//! One rule for every output, bundles and one-file jobs included: a symbolic link at the
+//! output path is refused ([`refuse_link`]). Renaming a new file over it would replace the
+//! link itself, not the file it points to, and writing through it would not be atomic
+//! where the file is; the path it points to is the output to give.
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -19,11 +25,29 @@ pub fn temp_sibling(path: &Path) -> Option<PathBuf> {
     )))
 }
 
+/// Refuses an output at `path` that is a symbolic link (see the module docs), naming
+/// where it points.
+pub fn refuse_link(path: &Path) -> Result<()> {
+    let link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    if !link {
+        return Ok(());
+    }
+    let to = std::fs::read_link(path)
+        .map(|t| format!(" (to {})", t.display()))
+        .unwrap_or_default();
+    Err(Error::Bundle {
+        path: path.into(),
+        msg: format!("is a symbolic link{to}; refusing to replace it (to replace what it points to, give that path as the output)"),
+    })
+}
+
 /// Writes `bytes` to `path` through a temporary sibling renamed into place; on failure
-/// the temporary file is removed and `path` is left as it was.
+/// the temporary file is removed and `path` is left as it was. A symbolic link at `path`
+/// is refused ([`refuse_link`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = temp_sibling(path)
         .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
+    refuse_link(path)?;
     std::fs::write(&tmp, bytes)
         .and_then(|_| std::fs::rename(&tmp, path))
         .map_err(|e| {
@@ -47,6 +71,14 @@ mod tests {
         std::fs::create_dir_all(dir.join("d.png/x")).unwrap();
         assert!(write_atomic(&dir.join("d.png"), b"x").is_err());
         assert_eq!(crate::test_support::names(&dir), ["a.png", "d.png"]);
+        // A link at the path is refused; what it points to stays.
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink("a.png", dir.join("l.png")).unwrap();
+            let e = write_atomic(&dir.join("l.png"), b"x").unwrap_err().to_string();
+            assert!(e.ends_with("l.png: is a symbolic link (to a.png); refusing to replace it (to replace what it points to, give that path as the output)"), "{e}");
+            assert_eq!(std::fs::read(dir.join("a.png")).unwrap(), b"two");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

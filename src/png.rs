@@ -90,6 +90,40 @@ fn encode_rows<'a>(
     out
 }
 
+/// The Adler-32 of an image's PNG scanlines of filter type 0 (each row of `width` bytes
+/// after a 0 byte): what a zlib stream of the unfiltered image ends with, so what the
+/// IDAT of [`encode_gray8`] ends with ([`scanlines_adler32_of`]). Computed by runs of
+/// equal bytes, a row of zeros at once.
+pub fn scanlines_adler32(width: u32, data: &[u8]) -> u32 {
+    let mut ad = Adler {
+        a: 1,
+        b: 0,
+        pending: 0,
+    };
+    for row in data.chunks(width.max(1) as usize) {
+        if row.iter().fold(0, |a, &v| a | v) == 0 {
+            ad.run(0, row.len() as u64 + 1);
+            continue;
+        }
+        ad.run(0, 1);
+        let mut i = 0;
+        while i < row.len() {
+            let k = run_len(&row[i..], row[i]);
+            ad.run(row[i], k as u64);
+            i += k;
+        }
+    }
+    (((ad.b % ADLER_MOD) as u32) << 16) | (ad.a % ADLER_MOD) as u32
+}
+
+/// The Adler-32 at the end of the zlib stream of `png`, a PNG as [`encode_gray8`] writes
+/// it (one IDAT, then IEND): [`scanlines_adler32`] of its pixels, read from its bytes.
+pub fn scanlines_adler32_of(png: &[u8]) -> u32 {
+    // The Adler-32, the IDAT's CRC, then the 12 bytes of IEND.
+    let at = png.len() - 20;
+    u32::from_be_bytes(png[at..at + 4].try_into().expect("4 bytes"))
+}
+
 fn chunk(out: &mut Vec<u8>, kind: &[u8; 4], body: &[u8]) {
     out.extend_from_slice(&(body.len() as u32).to_be_bytes());
     let start = out.len();
@@ -965,6 +999,32 @@ mod tests {
             }
         }
         assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
+    }
+
+    #[test]
+    fn the_scanlines_adler32_is_the_encoders() {
+        let mut seed = 7u64;
+        for (w, h) in [(1, 1), (5, 3), (1024, 768), (333, 17)] {
+            for zeros in [false, true] {
+                let d: Vec<u8> = (0..w * h)
+                    .map(|i| if zeros && (i / w) % 3 != 1 { 0 } else { xorshift(&mut seed) as u8 % 4 * 60 })
+                    .collect();
+                let png = encode_gray8(w as u32, h as u32, &d);
+                let mut plain = Vec::new();
+                for row in d.chunks(w) {
+                    plain.push(0);
+                    plain.extend_from_slice(row);
+                }
+                let (mut a, mut b) = (1u64, 0u64);
+                for &x in &plain {
+                    a = (a + x as u64) % ADLER_MOD;
+                    b = (b + a) % ADLER_MOD;
+                }
+                let want = (b << 16 | a) as u32;
+                assert_eq!(scanlines_adler32(w as u32, &d), want);
+                assert_eq!(scanlines_adler32_of(&png), want);
+            }
+        }
     }
 
     #[test]

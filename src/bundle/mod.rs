@@ -37,21 +37,26 @@ use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
 pub mod machine;
+mod pixels;
 mod source;
 mod writer;
 pub use machine::Machine;
+pub use pixels::MaskPixels;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
 pub(crate) use writer::stale_siblings;
 pub use writer::{is_bundle, BundleWriter};
 
 /// Value of the manifest's `format` field.
 pub const FORMAT: &str = "dmdsl-job";
-/// Manifest version written by this build. Version 3 records the machine as the job's own
-/// record ([`Machine`]); versions 1 and 2 embedded the whole resolved profile, of which a
-/// reader takes the record's keys (the same names), ignoring the rest. Version 1 stored
-/// `warnings` as text, read as code `bundle.uncoded` with the text as the message. Readers
-/// accept [`OLDEST_READ`]..=[`VERSION`] and hold what they read as this version.
-pub const VERSION: u32 = 3;
+/// Manifest version written by this build. Version 4 records every mask's pixels
+/// ([`MaskRef::pixels`], required from it on); version 3 records the machine as the job's
+/// own record ([`Machine`]); versions 1 and 2 embedded the whole resolved profile, of
+/// which a reader takes the record's keys (the same names), ignoring the rest. Version 1
+/// stored `warnings` as text, read as code `bundle.uncoded` with the text as the message.
+/// Readers accept [`OLDEST_READ`]..=[`VERSION`] and hold what they read as this version.
+pub const VERSION: u32 = 4;
+/// The first version whose masks all carry their [`MaskPixels`] record.
+pub const PIXELS_SINCE: u32 = 4;
 /// Oldest manifest version this build reads.
 pub const OLDEST_READ: u32 = 1;
 /// File name of the manifest inside a bundle.
@@ -528,6 +533,10 @@ pub struct MaskRef {
     pub sha256: String,
     /// Index of the projector that shows it.
     pub projector: u32,
+    /// What the mask shows, its box placed in the field by its projector (version 4 on;
+    /// absent in older bundles and in imported jobs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixels: Option<MaskPixels>,
 }
 
 /// One machine step.
@@ -605,8 +614,8 @@ impl Manifest {
                 })
             }
         }
-        match v.get("version").and_then(|f| f.as_u64()) {
-            Some(n) if (OLDEST_READ as u64..=VERSION as u64).contains(&n) => {}
+        let version = match v.get("version").and_then(|f| f.as_u64()) {
+            Some(n) if (OLDEST_READ as u64..=VERSION as u64).contains(&n) => n as u32,
             other => {
                 return Err(Error::Bundle {
                     path,
@@ -615,13 +624,103 @@ impl Manifest {
                     ),
                 })
             }
+        };
+        let bad = |msg: String| Error::Bundle {
+            path: path.clone(),
+            msg,
+        };
+        let mut m: Manifest =
+            serde_json::from_value(v).map_err(|e| bad(format!("invalid manifest: {e}")))?;
+        for (i, l) in m.layers.iter().enumerate() {
+            let bare = l.masks.iter().position(|x| x.pixels.is_none());
+            if let (Some(k), true) = (bare, version >= PIXELS_SINCE) {
+                return Err(bad(format!("layers[{i}].masks[{k}] has no `pixels` record (every mask has one from version {PIXELS_SINCE} on)")));
+            }
         }
-        let mut m: Manifest = serde_json::from_value(v).map_err(|e| Error::Bundle {
-            path,
-            msg: format!("invalid manifest: {e}"),
-        })?;
+        m.check_numbers().map_err(bad)?;
         m.version = VERSION;
         Ok(m)
+    }
+}
+
+impl Manifest {
+    /// Checks that every number of the layers and the totals is one a job can hold: the
+    /// lengths, durations, speeds and accelerations in the ranges a machine has (the
+    /// profile's, by the unit the key names), a layer's thickness, exposure, fill
+    /// distance, time and area not negative, the area at most the field's, the box's
+    /// corners in order. The error names the key (`layers[3].area_mm2 = -1.0 is …`). A
+    /// step's speed, acceleration or time of 0 or less is the executor's to report
+    /// (`invalid-step`).
+    pub fn check_numbers(&self) -> std::result::Result<(), String> {
+        let unit = crate::profile::check_unit;
+        let field = self.machine.field();
+        let field_mm2 = field.width_mm() * field.height_mm();
+        for (i, l) in self.layers.iter().enumerate() {
+            let at = |k: &str| format!("layers[{i}].{k}");
+            unit(&at("z_mm"), "z_mm", l.z_mm)?;
+            unit(&at("slice_z_mm"), "_mm", l.slice_z_mm)?;
+            let figures = [
+                ("thickness_mm", l.thickness_mm),
+                ("exposure_s", l.exposure_s),
+                ("max_fill_distance_mm", l.max_fill_distance_mm),
+                ("time_s", l.time_s),
+            ];
+            for (k, v) in figures {
+                unit(&at(k), k, v)?;
+                if v < 0.0 {
+                    return Err(format!("{} = {v:?} is negative", at(k)));
+                }
+            }
+            let a = l.area_mm2;
+            if a < 0.0 || (field_mm2 > 0.0 && a > field_mm2 * (1.0 + 1e-9)) {
+                return Err(format!(
+                    "{} = {a:?} is not an area of the {} mm² field",
+                    at("area_mm2"),
+                    crate::text::number(field_mm2)
+                ));
+            }
+            if let Some([lo, hi]) = l.bbox_mm {
+                for v in [lo, hi].into_iter().flatten() {
+                    unit(&at("bbox_mm"), "_mm", v)?;
+                }
+                if lo[0] > hi[0] || lo[1] > hi[1] {
+                    return Err(format!("{}: the corners are not in order", at("bbox_mm")));
+                }
+            }
+            for (j, step) in l.steps.iter().enumerate() {
+                let at = |k: &str| format!("layers[{i}].steps[{j}].{k}");
+                let named: &[(&str, f64)] = match *step {
+                    Step::Move {
+                        to_mm,
+                        speed_mm_s,
+                        accel_mm_s2,
+                    } => &[
+                        ("to_mm", to_mm),
+                        ("speed_mm_s", speed_mm_s),
+                        ("accel_mm_s2", accel_mm_s2),
+                    ],
+                    Step::Wait { s } | Step::Expose { s } => &[("s", s)],
+                    Step::Sweep { to_mm, speed_mm_s } => {
+                        &[("to_mm", to_mm), ("speed_mm_s", speed_mm_s)]
+                    }
+                };
+                for &(k, v) in named {
+                    // `s` is a duration: the unit its key names is `_s`.
+                    unit(&at(k), if k == "s" { "_s" } else { k }, v)?;
+                }
+            }
+        }
+        let t = &self.totals;
+        unit("totals.height_mm", "height_mm", t.height_mm)?;
+        let totals = [
+            ("print_time_s", t.print_time_s),
+            ("exposure_s", t.exposure_s),
+            ("resin_volume_ml", t.resin_volume_ml),
+        ];
+        match totals.iter().find(|(_, v)| *v < 0.0) {
+            Some((k, v)) => Err(format!("totals.{k} = {v:?} is negative")),
+            None => Ok(()),
+        }
     }
 }
 
@@ -675,7 +774,7 @@ mod tests {
         let text = serde_json::to_vec(&v).unwrap();
         let e = Manifest::from_json(&text, Path::new("job.json")).unwrap_err();
         assert!(
-            e.to_string().contains("this dmdsl reads versions 1 to 3"),
+            e.to_string().contains("this dmdsl reads versions 1 to 4"),
             "{e}"
         );
     }

@@ -106,14 +106,7 @@ fn check_replaceable(dest: &Path) -> Result<bool> {
         Err(e) => return Err(Error::io(dest, e)),
         Ok(m) => m,
     };
-    if meta.file_type().is_symlink() {
-        let to = std::fs::read_link(dest)
-            .map(|t| format!(" (to {})", t.display()))
-            .unwrap_or_default();
-        return Err(refuse(format!(
-            "is a symbolic link{to}; refusing to replace it (to replace the bundle it points to, give that path as the output)"
-        )));
-    }
+    crate::output::refuse_link(dest)?;
     let manifest = if meta.is_dir() {
         manifest_json(dest)
     } else {
@@ -349,7 +342,8 @@ impl BundleWriter {
         if staging.exists() {
             let _ = std::fs::remove_dir_all(&staging);
         }
-        std::fs::create_dir(&staging).map_err(|e| Error::io(&staging, e))?;
+        // Errors name the bundle: the staging directory is ours, not the user's.
+        std::fs::create_dir(&staging).map_err(|e| Error::io(dest, e))?;
         let w = BundleWriter {
             dest: dest.to_path_buf(),
             staging,
@@ -364,16 +358,18 @@ impl BundleWriter {
         &self.staging
     }
 
-    /// Creates a subdirectory (relative path) in the staging directory.
+    /// Creates a subdirectory (relative path) in the staging directory. An error names it
+    /// in the bundle (`part.dmdjob/masks`), not in the staging directory.
     pub fn create_dir(&self, rel: &str) -> Result<()> {
         let p = self.staging.join(rel);
-        std::fs::create_dir_all(&p).map_err(|e| Error::io(&p, e))
+        std::fs::create_dir_all(&p).map_err(|e| Error::io(self.dest.join(rel), e))
     }
 
-    /// Writes a file (relative path) into the staging directory.
+    /// Writes a file (relative path) into the staging directory. An error names it in the
+    /// bundle (`part.dmdjob/masks/00012.png`), not in the staging directory.
     pub fn write_file(&self, rel: &str, bytes: &[u8]) -> Result<()> {
         let p = self.staging.join(rel);
-        std::fs::write(&p, bytes).map_err(|e| Error::io(&p, e))
+        std::fs::write(&p, bytes).map_err(|e| Error::io(self.dest.join(rel), e))
     }
 
     /// Writes the manifest and moves the bundle into place, replacing an older bundle (if

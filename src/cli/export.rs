@@ -11,13 +11,44 @@ pub(crate) const EXPORT_HELP: &str = "Examples:
   dmdsl export part.dmdjob -o print.zip --format sla-control
   dmdsl export part.dmdjob.zip -o part.dmdjob           # back to a directory
 
+The job is verified and replayed first, as `dmdsl run` does: a job with violations is not
+converted (--force converts it anyway, the violations printed). Every PNG is written up to
+its IEND chunk; an output whose images add up to more than --max-size (1 GiB) is refused,
+naming its size, unless --force.
+
 Exit codes:
   0    the file was written (what the format cannot carry is reported as warnings)
-  1    the file was written, but a warning was denied (--deny-warnings, -W CODE=error)
+  1    the job has violations (nothing was written; with --force the file was written),
+       or the file was written but a warning was denied (--deny-warnings, -W CODE=error)
   2    unreadable bundle, a format that cannot hold the job (SL1 with several
-       projectors), a name and --format that disagree, a plain .zip without --format;
-       nothing was written
+       projectors), a name and --format that disagree, a plain .zip without --format,
+       an output above --max-size without --force; nothing was written
   130  interrupted: nothing was written";
+
+/// Parses `--max-size`: bytes, or a number with K, M, G or T (powers of 1024).
+fn size(s: &str) -> Result<u64, String> {
+    let (digits, unit) = match s.find(|c: char| !c.is_ascii_digit()) {
+        Some(i) => s.split_at(i),
+        None => (s, ""),
+    };
+    let shift = match unit.to_ascii_uppercase().as_str() {
+        "" | "B" => 0,
+        "K" => 10,
+        "M" => 20,
+        "G" => 30,
+        "T" => 40,
+        _ => {
+            return Err(format!(
+                "{s:?}: a size in bytes, or with K, M, G or T (e.g. 2G)"
+            ))
+        }
+    };
+    let n: u64 = digits
+        .parse()
+        .map_err(|_| format!("{s:?}: expected a whole number of bytes, e.g. 2G"))?;
+    n.checked_mul(1 << shift)
+        .ok_or_else(|| format!("{s:?}: too large"))
+}
 
 /// The `--format` values: every [`Format`] by its name.
 pub(crate) fn formats() -> impl clap::builder::TypedValueParser<Value = Format> {
@@ -38,6 +69,13 @@ pub(crate) struct ExportArgs {
     /// Form of the output [default: what the -o name says].
     #[arg(long, value_name = "FORMAT", value_parser = formats())]
     format: Option<Format>,
+    /// Convert a job with violations (they are printed), and an output above --max-size.
+    #[arg(long)]
+    force: bool,
+    /// The most bytes of images the output may hold without --force (K, M, G, T: powers
+    /// of 1024).
+    #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = size)]
+    max_size: u64,
     /// Print a machine-readable summary on stdout (one JSON object).
     #[arg(long)]
     json: bool,
@@ -63,33 +101,56 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     let job = crate::formats::open(&a.bundle)?;
     let manifest = &job.manifest;
     crate::formats::check_fits(format, &manifest.machine, &a.output)?;
-    let warnings = crate::formats::write(
-        format,
-        manifest,
-        job.source.as_ref(),
-        &a.output,
-        Some(&cancel),
-    )?;
-    let warnings = policy.apply(&warnings);
-    let failed = crate::warning::any_error(&warnings);
+    // Verified as `run` verifies: a job `run` fails is not converted unless asked.
+    let report = crate::exec::run_job(&job, &Default::default())?;
+    let refused = !report.ok && !a.force;
+    if !report.ok && !a.json && !quiet {
+        let lines = crate::exec::report::render_violations(&report);
+        let what = if refused {
+            "not converted"
+        } else {
+            "converted anyway (--force)"
+        };
+        eprint!("dmdsl: {}: {what}: {lines}", printable(&a.bundle));
+    }
+    let warnings = if refused {
+        Vec::new()
+    } else {
+        let max = (!a.force).then_some(a.max_size);
+        let files = job.source.as_ref();
+        let w =
+            crate::formats::write_at_most(format, manifest, files, &a.output, Some(&cancel), max)?;
+        policy.apply(&w)
+    };
+    let failed = !report.ok || crate::warning::any_error(&warnings);
     if a.json {
         super::print_json(&serde_json::json!({
             "ok": !failed,
+            "written": !refused,
             "bundle": a.bundle,
             "output": a.output,
             "format": format.name(),
             "layers": manifest.layers.len(),
+            "violations": report.violations,
             "warnings": warnings,
         }))?;
-    } else if !quiet {
+    } else if !quiet && !refused {
         super::print_warnings(&warnings, "");
         println!(
             "{}: {} of {} layers from {}",
-            a.output.display(),
+            printable(&a.output),
             format.name(),
             manifest.layers.len(),
-            a.bundle.display()
+            printable(&a.bundle)
         );
     }
+    if refused {
+        eprintln!("dmdsl: error: {}: the job has violations; nothing was written (--force converts it anyway)", printable(&a.bundle));
+    }
     Ok(if failed { 1 } else { 0 })
+}
+
+/// A path as a summary line shows it: control characters as escapes, as in errors.
+fn printable(p: &std::path::Path) -> String {
+    super::process::printable(&p.display().to_string())
 }

@@ -463,7 +463,7 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
     }
     println!(
         "{}: {}, {:.1} mm, est. print time {}, {:.2} ml resin ({:.2} s)",
-        summary.bundle.display(),
+        super::process::printable(&summary.bundle.display().to_string()),
         count(summary.layers as u64, "layer", "layers"),
         summary.totals.height_mm,
         hms(summary.totals.print_time_s),

@@ -112,20 +112,30 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
     let job = crate::formats::open(path)?;
-    let crate::formats::Job {
-        format,
-        manifest,
-        source,
-        estimate,
-        ..
-    } = job;
-    let (mut manifest, range, machine_check) = check_options(manifest, &*source, opts)?;
+    let open_s = t0.elapsed().as_secs_f64();
+    let mut report = run_job(&job, opts)?;
+    report.timings.read_s += open_s;
+    Ok(report)
+}
+
+/// [`run`] on a job opened already ([`crate::formats::open`]): what `dmdsl export`
+/// verifies before it converts a job.
+pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
+    let t0 = Instant::now();
+    let (format, source, estimate) = (job.format, job.source.as_ref(), &job.estimate);
+    let manifest = job.manifest.clone();
+    // A native manifest was checked as it was read; an importer's is checked here.
+    manifest.check_numbers().map_err(|msg| Error::Bundle {
+        path: job.path.clone(),
+        msg,
+    })?;
+    let (mut manifest, range, machine_check) = check_options(manifest, source, opts)?;
     let cure_model = opts
         .cure
-        .then(|| cure::model_of(&manifest, &*source))
+        .then(|| cure::model_of(&manifest, source))
         .transpose()?;
     let read_s = t0.elapsed().as_secs_f64();
-    let dir = path;
+    let dir = job.path.as_path();
 
     let t1 = Instant::now();
     let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
@@ -133,7 +143,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         format,
         crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip
     );
-    let verified = verify::verify_source(&*source, &manifest, machine, !native);
+    let verified = verify::verify_source(source, &manifest, machine, native);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
     // The cure from the masks, once every mask and gray map read as recorded (a
@@ -144,7 +154,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         .iter()
         .any(|p| p.kind != Kind::MaskContent);
     let (cure, cure_skipped) = match &cure_model {
-        Some(model) if !unreadable => (Some(cure::check(&manifest, &*source, model)?), None),
+        Some(model) if !unreadable => (Some(cure::check(&manifest, source, model)?), None),
         Some(_) => (
             None,
             Some("masks, gray maps or the manifest failed verification".to_string()),
@@ -169,7 +179,7 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         simulate_s,
         cure_s,
     };
-    let estimate_source = match (&estimate, native) {
+    let estimate_source = match (estimate, native) {
         (Some(e), _) => e.source.clone(),
         (None, true) => "planner".into(),
         (None, false) => "import steps".into(),

@@ -411,29 +411,7 @@ pub fn render_human(r: &Report) -> String {
         });
         let _ = writeln!(o, "note: fault {u} never triggered{why}");
     }
-    if r.violations.is_empty() {
-        let _ = writeln!(o, "violations: none");
-    } else {
-        let counts: Vec<String> = r
-            .violation_counts
-            .iter()
-            .map(|(k, n)| format!("{k} {n}"))
-            .collect();
-        let _ = writeln!(
-            o,
-            "violations: {} ({})",
-            r.violations.len(),
-            counts.join(", ")
-        );
-        for v in r.violations.iter().take(LIST_MAX) {
-            let layer = v.layer.map_or("job".to_string(), |l| format!("layer {l}"));
-            let time = v.time_s.map_or(String::new(), |t| format!(" at {t:.3} s"));
-            let _ = writeln!(o, "  {layer}{time}: {}: {}", v.kind, v.message);
-        }
-        if let Some(more) = and_more(r.violations.len(), LIST_MAX) {
-            let _ = writeln!(o, "{more}");
-        }
-    }
+    o.push_str(&render_violations(r));
     if let Some(c) = &r.cure {
         render_cure(&mut o, c);
     }
@@ -441,6 +419,32 @@ pub fn render_human(r: &Report) -> String {
         let _ = writeln!(o, "cure: not evaluated: {why}");
     }
     let _ = writeln!(o, "{}", if r.ok { "OK" } else { "FAILED" });
+    o
+}
+
+/// The human summary's lines on the violations: their count by kind, then each (at most
+/// [`LIST_MAX`]) as `layer N at T s: kind: message`.
+pub fn render_violations(r: &Report) -> String {
+    let mut o = String::new();
+    if r.violations.is_empty() {
+        let _ = writeln!(o, "violations: none");
+        return o;
+    }
+    let counts: Vec<String> = r
+        .violation_counts
+        .iter()
+        .map(|(k, n)| format!("{k} {n}"))
+        .collect();
+    let (n, counts) = (r.violations.len(), counts.join(", "));
+    let _ = writeln!(o, "violations: {n} ({counts})");
+    for v in r.violations.iter().take(LIST_MAX) {
+        let layer = v.layer.map_or("job".to_string(), |l| format!("layer {l}"));
+        let time = v.time_s.map_or(String::new(), |t| format!(" at {t:.3} s"));
+        let _ = writeln!(o, "  {layer}{time}: {}: {}", v.kind, v.message);
+    }
+    if let Some(more) = and_more(r.violations.len(), LIST_MAX) {
+        let _ = writeln!(o, "{more}");
+    }
     o
 }
 

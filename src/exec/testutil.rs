@@ -33,6 +33,7 @@ pub fn layer(
             file: format!("masks/{index:05}.png"),
             sha256: String::new(),
             projector: 0,
+            pixels: None,
         }],
         steps,
         time_s,

@@ -56,6 +56,7 @@ impl TraceWriter {
     ) -> Result<Self> {
         let tmp = crate::output::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
+        crate::output::refuse_link(path)?;
         let f = File::create(&tmp).map_err(|e| Error::io(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 16, f);
         let err = writeln!(w, "{HEADER}").err();
@@ -114,10 +115,15 @@ impl TraceWriter {
             self.err = w.flush().err();
         }
         drop(w);
-        if let Some(e) = self.err.take() {
-            return Err(Error::io(&self.path, e));
-        }
-        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        let done = match self.err.take() {
+            Some(e) => Err(e),
+            None => std::fs::rename(&self.tmp, &self.path),
+        };
+        done.map_err(|e| {
+            // A full disk, or the path taken: the temporary file goes.
+            let _ = std::fs::remove_file(&self.tmp);
+            Error::io(&self.path, e)
+        })?;
         Ok(self.rows)
     }
 }

@@ -65,6 +65,8 @@ kinds! {
     MaskFormat "mask-format" "a mask is not 8-bit grayscale of its projector's `width_px × height_px`",
     MaskContent "mask-content" "a layer's masks light pixels outside its section's box, any pixel for a layer without a section, or too few for its area (see \"Mask content\")",
     MaskShared "mask-shared" "a mask file named by two layer records (or two projectors of one layer)",
+    MaskPixels "mask-pixels" "a mask's lit pixel count, lit box in the field, sum of grays or Adler-32 of its rows differs from its record (`masks[].pixels`, version 4): the mask was changed, or its projector's `offset_px` or mirroring",
+    Settings "settings" "the settings disagree with the layers: `settings.layer_height_mm` with a layer's `thickness_mm`, `machine.exposure.layer_s` with the normal layers' exposure, `settings.compensation` with the light compensation records (native jobs)",
     OpticsFile "optics-file" "a gray map of the light compensation: missing, SHA-256 mismatch, not a PNG, not 8-bit gray of its projector's size, truncated, or a path outside the bundle",
     InvalidStep "invalid-step" "a step no machine can execute (speed or acceleration ≤ 0, negative wait or exposure); skipped",
     LightDuringMove "light-during-move" "light on in a segment that is not an `expose`/`sweep`, or while the stage moves in a layer whose `mode` is `layered`",

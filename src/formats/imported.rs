@@ -10,8 +10,8 @@ use super::archive::read::Archive;
 use super::{ForeignEstimate, Format, Job};
 use crate::bundle::machine::{Dmd, Exposure, Projector, Resin, Shutter, Stage};
 use crate::bundle::{
-    Generator, Layer, Machine, Manifest, MaskRef, MemSource, Mode, Placement, Settings, Source,
-    Step, Totals,
+    Generator, Layer, Machine, Manifest, MaskRef, Mode, Placement, Settings, Source, Step,
+    Totals,
 };
 use crate::error::Result;
 use crate::units::{NonNegative, Positive};
@@ -89,8 +89,9 @@ pub(crate) fn images(archive: &Archive, names: &[&str]) -> Vec<Image> {
         .par_iter()
         .map_init(Vec::new, |buf, name| {
             let fig = archive
-                .get(name)
-                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b, buf)));
+                .read(name)
+                .ok()
+                .map(|b| (crate::digest::sha256_hex(&b), mask_figures(&b, buf)));
             fig.unwrap_or_default()
         })
         .collect()
@@ -143,6 +144,7 @@ pub(crate) fn layer(
             file: file.into(),
             sha256: image.0.clone(),
             projector: 0,
+            pixels: None,
         }],
         steps,
         time_s,
@@ -234,7 +236,7 @@ impl Imported<'_> {
             projector_optics: Vec::new(),
         };
         Ok(Job {
-            source: Box::new(MemSource::new(&path, archive.into_files())),
+            source: Box::new(archive.into_source("")),
             path,
             format: self.format,
             manifest,

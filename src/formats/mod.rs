@@ -14,8 +14,9 @@
 //!   `slices/`), read as layers and steps from its position and image settings;
 //! * `imported.rs`: what the importers share (the machine record a file implies, the layer
 //!   record of an image, the job around them);
-//! * [`archive`]: zips, read whole into memory refusing anything unsafe (nothing is
-//!   extracted), and written through a temporary sibling.
+//! * [`archive`]: zips, their entries inflated into memory only as a reader asks for
+//!   them, refusing anything unsafe (nothing is extracted), and written through a
+//!   temporary sibling.
 //!
 //! The form is found from the content, not the extension: a directory is a bundle; a zip
 //! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
@@ -29,11 +30,12 @@ mod format;
 mod imported;
 mod native;
 pub mod sl1;
+mod written;
 
 use crate::bundle::{BundleSource, Machine, Manifest, MANIFEST};
 use crate::error::{Error, Result};
 use crate::warning::Warning;
-use archive::read::{read_zip_bytes, Limits};
+use archive::read::{read_zip, Limits};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -97,9 +99,8 @@ pub fn open(path: &Path) -> Result<Job> {
             msg: "not a job: neither a bundle directory nor a zip archive (a zipped bundle, an SL1/SL1S file or an SLA control-file zip)".into(),
         });
     }
-    let archive = read_zip_bytes(path, &bytes, &limits)?;
     let sha256 = crate::digest::sha256_hex(&bytes);
-    drop(bytes);
+    let archive = read_zip(path, bytes, &limits)?;
     if let Some(dir) = native::bundle_folder(&archive) {
         return native::open_zip(archive, &dir);
     }
@@ -122,12 +123,30 @@ pub fn open(path: &Path) -> Result<Job> {
 /// Writes the job (`manifest` and its `files`) at `out` in `format`, atomically; returns
 /// what the format could not carry. Nothing is left at `out` (nor beside it) on failure,
 /// nor when `cancel` is set while it is written ([`crate::error::Error::Interrupted`]).
+///
+/// Every PNG is written as its bytes up to the end of its `IEND` chunk: what follows it
+/// (which PNG readers ignore) is dropped. A native form records the masks' hashes of
+/// the bytes written and every mask's pixels (counted from the file when the manifest has
+/// no record: an older bundle, an imported job).
 pub fn write(
     format: Format,
     manifest: &Manifest,
     files: &dyn BundleSource,
     out: &Path,
     cancel: Option<&AtomicBool>,
+) -> Result<Vec<Warning>> {
+    write_at_most(format, manifest, files, out, cancel, None)
+}
+
+/// [`write()`], refused before anything is written when the images would add up to more
+/// than `max_bytes` (each image as many times as the format writes it).
+pub fn write_at_most(
+    format: Format,
+    manifest: &Manifest,
+    files: &dyn BundleSource,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+    max_bytes: Option<u64>,
 ) -> Result<Vec<Warning>> {
     check_fits(format, &manifest.machine, out)?;
     let foreign = matches!(format, Format::Sl1 | Format::Sl1s | Format::SlaControl);
@@ -137,6 +156,17 @@ pub fn write(
             msg: "the job has no layers".into(),
         });
     }
+    let files = written::Trimmed(files);
+    let (bytes, manifest) = written::survey(manifest, &files, !foreign)?;
+    if let Some(max) = max_bytes.filter(|&m| bytes > m) {
+        let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+        let (now, most) = (mib(bytes), mib(max));
+        return Err(Error::Bundle {
+            path: out.into(),
+            msg: format!("its images would add up to {bytes} bytes ({now:.3} MiB), more than the {max} ({most:.3} MiB) allowed (--max-size; --force writes it anyway)"),
+        });
+    }
+    let (manifest, files) = (manifest.as_ref(), &files as &dyn BundleSource);
     let warnings = match format {
         Format::Dmdjob | Format::DmdjobZip => Vec::new(),
         Format::Sl1 | Format::Sl1s => sl1::cannot_carry(format, manifest),

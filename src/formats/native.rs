@@ -4,7 +4,7 @@
 use super::archive::read::Archive;
 use super::archive::write::{Method, ZipOut};
 use super::{Format, Job};
-use crate::bundle::{BundleSource, BundleWriter, DirSource, Manifest, MemSource, MANIFEST};
+use crate::bundle::{BundleSource, BundleWriter, DirSource, Manifest, MANIFEST};
 use crate::error::Result;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,12 +24,12 @@ pub(super) fn open_dir(dir: &Path) -> Result<Job> {
 /// at the top, `NAME/` when every entry is in `NAME/` and it holds `NAME/job.json` (a
 /// bundle directory zipped with its folder); `None` for any other archive.
 pub(super) fn bundle_folder(archive: &Archive) -> Option<String> {
-    if archive.get(MANIFEST).is_some() {
+    if archive.contains(MANIFEST) {
         return Some(String::new());
     }
     let first = archive.names().first()?;
     let dir = &first[..first.find('/')? + 1];
-    (archive.get(&format!("{dir}{MANIFEST}")).is_some()
+    (archive.contains(&format!("{dir}{MANIFEST}"))
         && archive.names().iter().all(|n| n.starts_with(dir)))
     .then(|| dir.to_string())
 }
@@ -38,15 +38,10 @@ pub(super) fn bundle_folder(archive: &Archive) -> Option<String> {
 /// bundle's files are in inside the archive ([`bundle_folder`]).
 pub(super) fn open_zip(archive: Archive, dir: &str) -> Result<Job> {
     let path = archive.path().to_path_buf();
-    let text = archive.get(&format!("{dir}{MANIFEST}")).unwrap_or_default();
+    let text = archive.get(&format!("{dir}{MANIFEST}"))?.unwrap_or_default();
     let manifest = Manifest::from_json(text, &path.join(dir).join(MANIFEST))?;
-    let files = archive
-        .into_files()
-        .into_iter()
-        .map(|(k, v)| (k[dir.len()..].to_string(), v))
-        .collect();
     Ok(Job {
-        source: Box::new(MemSource::new(&path.join(dir), files)),
+        source: Box::new(archive.into_source(dir)),
         path,
         format: Format::DmdjobZip,
         manifest,

@@ -4,7 +4,7 @@
 use super::clock::ThreadClock;
 use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
 use super::sink::Sink;
-use crate::bundle::{self, MaskRef};
+use crate::bundle::{self, MaskPixels, MaskRef};
 use crate::error::Result;
 use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
@@ -252,15 +252,25 @@ fn draw(
             Some(t) => Cow::Owned(t.render(k, &field_mask)),
             None => projector_view(&field_mask, p),
         };
-        let png = match &view {
+        let (png, pixels) = match &view {
             // The field mask itself: zero outside the rasterizer's lit box.
             Cow::Borrowed(m) => {
-                crate::png::encode_gray8_in(m.width, m.height, &m.data, scratch.lit_box())
+                let b = scratch.lit_box();
+                let png = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
+                let px = MaskPixels::of_gray8_in(m.width, &m.data, b.rows(), b.cols());
+                let adler32 = crate::png::scanlines_adler32_of(&png);
+                (png, MaskPixels { adler32, ..px })
             }
-            Cow::Owned(m) => super::encode_png(m),
+            Cow::Owned(m) => {
+                let place = ([p.width_px, p.height_px], p.offset_px, [p.mirror_x, p.mirror_y]);
+                let png = super::encode_png(m);
+                let px = MaskPixels::of_gray8_in(m.width, &m.data, 0..m.height as usize, 0..m.width as usize);
+                let adler32 = crate::png::scanlines_adler32_of(&png);
+                (png, MaskPixels { adler32, ..px }.placed(place.0, place.1, place.2))
+            }
         };
         let sha = bundle::sha256_hex(&png);
-        pngs.push((png, sha, k as u32));
+        pngs.push((png, sha, k as u32, pixels));
     }
     scratch.recycle(field_mask);
     let recent = ctx
@@ -288,13 +298,14 @@ fn draw(
 /// Writes layer `i`'s mask files and returns their records.
 fn write_masks(ctx: &LayerContext, drawn: &DrawnMasks, i: usize) -> Result<Vec<MaskRef>> {
     let mut masks = Vec::with_capacity(drawn.pngs.len());
-    for (k, (png, sha, projector)) in drawn.pngs.iter().enumerate() {
+    for (k, (png, sha, projector, pixels)) in drawn.pngs.iter().enumerate() {
         let file = ctx.mask_file(k, i);
         ctx.writer.write_file(&file, png)?;
         masks.push(MaskRef {
             file,
             sha256: sha.clone(),
             projector: *projector,
+            pixels: Some(*pixels),
         });
     }
     Ok(masks)

@@ -28,8 +28,8 @@ pub(super) struct DrawnMasks {
     pub dropped: Vec<(usize, super::cure_records::LayerDropped)>,
     /// The narrow features the XY correction drew wider so they cure.
     pub widened: Option<super::cure_records::LayerWidened>,
-    /// PNG bytes, SHA-256 and projector of each mask.
-    pub pngs: Vec<(Vec<u8>, String, u32)>,
+    /// PNG bytes, SHA-256, projector and pixels (placed in the field) of each mask.
+    pub pngs: Vec<(Vec<u8>, String, u32, crate::bundle::MaskPixels)>,
     /// The lit pixels (for the islands) when drawn from a simplified section, which
     /// [`RecentPrismMasks`] may hand to another worker; empty otherwise.
     pub runs: LitRuns,
@@ -112,7 +112,7 @@ mod tests {
             cure: None,
             dropped: Vec::new(),
             widened: None,
-            pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0)],
+            pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0, Default::default())],
             runs: Default::default(),
         })
     }

@@ -146,11 +146,14 @@ fn header(cal: &Calibration, input: &Path) -> String {
 }
 
 /// Writes `files` (path, bytes) all-or-nothing: each goes to a temporary sibling first and
-/// is renamed into place only when every file was written.
+/// is renamed into place only when every file was written. A symbolic link at a path is
+/// refused ([`crate::output::refuse_link`]); an error names the file, not its temporary
+/// sibling.
 fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     let tmp: Vec<PathBuf> = files
         .iter()
         .map(|(p, _)| {
+            crate::output::refuse_link(p)?;
             crate::output::temp_sibling(p)
                 .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })
@@ -160,8 +163,8 @@ fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
         tmp.iter().for_each(|t| drop(std::fs::remove_file(t)));
         Error::io(path, e)
     };
-    for ((_, bytes), t) in files.iter().zip(&tmp) {
-        std::fs::write(t, bytes).map_err(|e| fail(t, e))?;
+    for ((p, bytes), t) in files.iter().zip(&tmp) {
+        std::fs::write(t, bytes).map_err(|e| fail(p, e))?;
     }
     for ((p, _), t) in files.iter().zip(&tmp) {
         std::fs::rename(t, p).map_err(|e| fail(p, e))?;

@@ -461,6 +461,24 @@ const UNIT_RANGES: [(&str, &str, f64, f64); 6] = [
     ("_mm", "a length", 0.0, 1e4),
 ];
 
+/// Checks `f`, the value of key `key` (at dotted path `path`), against the range of the
+/// unit the key names ([`UNIT_RANGES`]); a key of no unit passes.
+pub(crate) fn check_unit(path: &str, key: &str, f: f64) -> std::result::Result<(), String> {
+    let Some((_, what, lo, hi)) = UNIT_RANGES
+        .iter()
+        .find(|(suffix, ..)| key.ends_with(suffix))
+    else {
+        return Ok(());
+    };
+    let a = f.abs();
+    if a > *hi || (a != 0.0 && a < *lo) {
+        return Err(format!(
+            "{path} = {f:?} is not {what} a machine has ({lo:?} to {hi:?}; check its unit)"
+        ));
+    }
+    Ok(())
+}
+
 /// Checks every number of `v` (a profile as JSON) whose key names a unit in
 /// [`UNIT_RANGES`]; `path` is the dotted key of `v`.
 pub(crate) fn check_unit_ranges(
@@ -476,16 +494,8 @@ pub(crate) fn check_unit_ranges(
                 } else {
                     format!("{path}.{k}")
                 };
-                if let (Some(f), Some((_, what, lo, hi))) = (
-                    x.as_f64(),
-                    UNIT_RANGES.iter().find(|(suffix, ..)| k.ends_with(suffix)),
-                ) {
-                    let a = f.abs();
-                    if a > *hi || (a != 0.0 && a < *lo) {
-                        return Err(format!(
-                            "{p} = {f:?} is not {what} a machine has ({lo:?} to {hi:?}; check its unit)"
-                        ));
-                    }
+                if let Some(f) = x.as_f64() {
+                    check_unit(&p, k, f)?;
                 }
                 check_unit_ranges(x, &p)?;
             }

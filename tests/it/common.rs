@@ -202,3 +202,64 @@ pub fn warnings_of<'a>(v: &'a serde_json::Value, code: &str) -> Vec<&'a serde_js
         .filter(|w| w["code"] == code)
         .collect()
 }
+
+/// Runs `dmdsl` with `args` in `cwd` under resource limits set in the child before it
+/// starts (`setrlimit`: `RLIMIT_AS` address space, `RLIMIT_FSIZE` largest file written,
+/// with SIGXFSZ ignored so a write past it fails with EFBIG, as on a full disk), and its
+/// peak resident memory in bytes (`wait4`'s `ru_maxrss`): the output, the exit code and
+/// the peak.
+#[cfg(target_os = "linux")]
+pub fn run_limited(
+    cwd: &Path,
+    args: &[&str],
+    address_space: Option<u64>,
+    file_size: Option<u64>,
+) -> (Output, Option<i32>, u64) {
+    use std::io::Read;
+    use std::os::unix::process::{CommandExt, ExitStatusExt};
+    let mut cmd = Command::new(bin());
+    cmd.args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    // SAFETY: between fork and exec only async-signal-safe calls (setrlimit, signal).
+    unsafe {
+        cmd.pre_exec(move || {
+            let set = |what, v: u64| {
+                let l = libc::rlimit {
+                    rlim_cur: v,
+                    rlim_max: v,
+                };
+                if libc::setrlimit(what, &l) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            };
+            if let Some(v) = address_space {
+                set(libc::RLIMIT_AS, v)?;
+            }
+            if let Some(v) = file_size {
+                set(libc::RLIMIT_FSIZE, v)?;
+                libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            }
+            Ok(())
+        });
+    }
+    // Waited for by `wait4` below, which also gives its resource use.
+    #[allow(clippy::zombie_processes)]
+    let mut child = cmd.spawn().expect("run dmdsl");
+    let (mut out, mut err) = (Vec::new(), Vec::new());
+    child.stdout.take().unwrap().read_to_end(&mut out).unwrap();
+    child.stderr.take().unwrap().read_to_end(&mut err).unwrap();
+    let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
+    // SAFETY: waits for this child only; `status` and `usage` are valid for writes.
+    let pid = unsafe { libc::wait4(child.id() as i32, &mut status, 0, &mut usage) };
+    assert_eq!(pid, child.id() as i32, "wait4");
+    let status = std::process::ExitStatus::from_raw(status);
+    let output = Output {
+        status,
+        stdout: out,
+        stderr: err,
+    };
+    (output, status.code(), usage.ru_maxrss as u64 * 1024)
+}

@@ -429,3 +429,148 @@ fn the_schemas_name_the_formats_the_code_has() {
     }
     assert_eq!(schemas, 5);
 }
+
+/// A job `run` fails is not converted (exit 1, nothing written, the violations printed):
+/// `fixtures/verdict/shifted.dmdjob.zip` (layer 2's mask moved 12 px, its hash not
+/// updated) into every form, and masks of another colour type or depth with their hashes
+/// recorded; with `--force` it is, and the exit code stays 1.
+#[test]
+fn a_job_run_fails_is_not_converted_unless_forced() {
+    let d = tempdir("export-verified");
+    let shifted = fixture("verdict/shifted.dmdjob.zip");
+    let job = shifted.to_str().unwrap();
+    for (out, format) in [
+        ("a.sl1", None),
+        ("c.zip", Some("sla-control")),
+        ("a.dmdjob", None),
+    ] {
+        let mut args = vec!["export", job, "-o", out];
+        args.extend(format.map(|f| ["--format", f]).iter().flatten());
+        let o = run_in(&d, &args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{out}: {e}");
+        assert!(
+            e.contains("not converted: violations: 1 (mask-checksum 1)"),
+            "{e}"
+        );
+        assert!(
+            e.ends_with(
+                "the job has violations; nothing was written (--force converts it anyway)\n"
+            ),
+            "{e}"
+        );
+        assert!(names(&d).is_empty(), "{out}");
+    }
+    let o = run_in(&d, &["export", job, "-o", "a.sl1", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((&v["ok"], &v["written"]), (&false.into(), &false.into()));
+    assert_eq!(v["violations"][0]["kind"], "mask-checksum");
+    let o = run_in(&d, &["export", job, "-o", "a.sl1", "--force"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("converted anyway (--force): violations: 1"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(names(&d), ["a.sl1"]);
+    // RGB, 16-bit and palette masks, their hashes recorded.
+    slice(
+        &d,
+        "cube10.stl",
+        &["--scale", "0.3", "--layer-height", "1", "-o", "b.dmdjob"],
+    );
+    let b = d.join("b.dmdjob");
+    for depth in ["rgb", "16-bit", "palette"] {
+        let mask = b.join("masks/00001.png");
+        let img = image::open(&mask).unwrap();
+        match depth {
+            "rgb" => img.to_rgb8().save(&mask).unwrap(),
+            "16-bit" => img.to_luma16().save(&mask).unwrap(),
+            _ => std::fs::write(&mask, palette_png(&img.to_luma8())).unwrap(),
+        }
+        let mut j: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(b.join("job.json")).unwrap()).unwrap();
+        j["layers"][1]["masks"][0]["sha256"] =
+            dmdsl::bundle::sha256_hex(&std::fs::read(&mask).unwrap()).into();
+        std::fs::write(b.join("job.json"), serde_json::to_vec_pretty(&j).unwrap()).unwrap();
+        let o = run_in(&d, &["export", "b.dmdjob", "-o", "b.sl1"]);
+        assert_eq!(o.status.code(), Some(1), "{depth}");
+        let e = stderr(&o);
+        assert!(e.contains("expected 8-bit grayscale"), "{depth}: {e}");
+        assert!(!d.join("b.sl1").exists());
+    }
+}
+
+/// `img` as an 8-bit palette PNG (colour type 3) whose 256 entries are the grays, so it
+/// shows the same picture: the gray PNG's chunks with its header's colour type changed
+/// and a `PLTE` chunk before its data.
+fn palette_png(img: &image::GrayImage) -> Vec<u8> {
+    let gray = dmdsl::png::encode_gray8(img.width(), img.height(), img.as_raw());
+    let chunk = |out: &mut Vec<u8>, kind: &[u8], body: &[u8]| {
+        out.extend((body.len() as u32).to_be_bytes());
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(kind);
+        crc.update(body);
+        out.extend(kind);
+        out.extend(body);
+        out.extend(crc.finalize().to_be_bytes());
+    };
+    let mut out = gray[..8].to_vec();
+    let mut at = 8;
+    while at + 8 <= gray.len() {
+        let len = u32::from_be_bytes(gray[at..at + 4].try_into().unwrap()) as usize;
+        let kind = &gray[at + 4..at + 8];
+        let mut body = gray[at + 8..at + 8 + len].to_vec();
+        if kind == b"IHDR" {
+            assert_eq!((body[8], body[9]), (8, 0), "8-bit gray");
+            body[9] = 3;
+        }
+        if kind == b"IDAT" && !out.windows(4).any(|w| w == b"PLTE") {
+            let grays: Vec<u8> = (0..=255u8).flat_map(|g| [g, g, g]).collect();
+            chunk(&mut out, b"PLTE", &grays);
+        }
+        chunk(&mut out, kind, &body);
+        at += 12 + len;
+    }
+    let back = image::load_from_memory(&out).unwrap().to_luma8();
+    assert!(back == *img, "the palette PNG shows the same picture");
+    out
+}
+
+/// Masks are written up to their IEND chunk, and an output's size is known before it is
+/// written: `fixtures/verdict/iend-junk.zip` (a control file whose base image carries
+/// 1 MiB after IEND, its layer repeated 400 times) became a 420 MB `.sl1`; past
+/// `--max-size` the export is refused, naming the size.
+#[test]
+fn masks_are_written_up_to_their_iend_chunk_and_outputs_are_bounded() {
+    let d = tempdir("export-iend");
+    let junk = fixture("verdict/iend-junk.zip");
+    let o = run_in(&d, &["export", junk.to_str().unwrap(), "-o", "a.sl1", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let size = std::fs::metadata(d.join("a.sl1")).unwrap().len();
+    assert!(size < 300_000, "{size}");
+    let pngs = zip_entries(&d.join("a.sl1"));
+    let pngs = pngs.iter().filter(|(n, _)| n.ends_with(".png"));
+    assert!(pngs.clone().count() > 400);
+    for (n, b) in pngs {
+        assert!(b.ends_with(b"IEND\xae\x42\x60\x82"), "{n}");
+    }
+    let o = run_in(&d, &["run", "a.sl1", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let args = [
+        "export",
+        junk.to_str().unwrap(),
+        "-o",
+        "b.sl1",
+        "--max-size",
+        "20K",
+    ];
+    let o = run_in(&d, &args);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.starts_with("dmdsl: error: b.sl1: its images would add up to 57198 bytes (0.055 MiB), more than the 20480 (0.020 MiB) allowed (--max-size; --force writes it anyway)"), "{e}");
+    assert_eq!(names(&d), ["a.sl1"]);
+    let o = run_in(&d, &[&args[..], &["--force", "-q"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(names(&d), ["a.sl1", "b.sl1"]);
+}

@@ -113,7 +113,9 @@ fn raw_string_len(c: &[char]) -> Option<usize> {
 }
 
 /// Where the item following an attribute that ends at `from` ends: after its `;`, or after
-/// the `}` matching its first `{`, whichever comes first (further attributes skipped).
+/// the `}` matching its first `{`, whichever comes first (further attributes skipped). A
+/// field, a struct literal's field or an argument ends at its `,` or at the bracket that
+/// closes what holds it.
 fn item_end(code: &[u8], mut from: usize) -> usize {
     let mut depth = 0usize;
     while from < code.len() {
@@ -135,7 +137,8 @@ fn item_end(code: &[u8], mut from: usize) -> usize {
                     from += 1;
                 }
             }
-            b';' if depth == 0 => return from + 1,
+            b';' | b',' if depth == 0 => return from + 1,
+            b'}' | b')' | b']' if depth == 0 => return from,
             b'{' | b'(' | b'[' => depth += 1,
             b'}' => {
                 depth -= 1;
@@ -578,6 +581,14 @@ mod tests {
 }
 #[cfg(test)]
 const T: [u8; 1] = [crate::t::ONE];
+struct S {
+    n: u8,
+    #[cfg(test)]
+    k: crate::t::K,
+}
+fn s() -> S {
+    S { #[cfg(test)] k: crate::t::K, n: 1 }
+}
 "##,
         ),
         ("a/inner.rs", "use super::super::e::Z;\nuse super::go;"),

@@ -27,4 +27,5 @@ mod run_cure;
 mod schema;
 mod slice;
 mod synthetic;
+mod tamper;
 mod warnings;

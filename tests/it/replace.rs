@@ -124,23 +124,167 @@ fn a_directory_that_only_looks_like_a_bundle_is_refused() {
     assert_eq!(names(&dir), ["thesis.dmdjob"]);
 }
 
+/// One rule for links, whatever the output (a bundle directory, a one-file job, a trace, a
+/// calibration): a symbolic link at the path is refused, what it points to left alone.
 #[cfg(unix)]
 #[test]
 fn a_symlink_output_is_refused_and_its_target_left_alone() {
     let dir = tempdir("replace-link");
     assert!(slice_cube(&dir, "real.dmdjob").status.success());
-    let before = tree(&dir.join("real.dmdjob"));
-    std::os::unix::fs::symlink("real.dmdjob", dir.join("link.dmdjob")).unwrap();
-    let o = slice_cube(&dir, "link.dmdjob");
-    assert_eq!(o.status.code(), Some(2));
-    assert_eq!(
-        stderr(&o),
-        "dmdsl: error: link.dmdjob: is a symbolic link (to real.dmdjob); refusing to replace it (to replace the bundle it points to, give that path as the output)\n"
+    assert!(slice_cube(&dir, "real.sl1").status.success());
+    std::fs::write(dir.join("real.csv"), "old").unwrap();
+    let before = tree(&dir);
+    let link = |name: &str, to: &str| std::os::unix::fs::symlink(to, dir.join(name)).unwrap();
+    link("link.dmdjob", "real.dmdjob");
+    link("link.sl1", "real.sl1");
+    link("link.csv", "real.csv");
+    let refused = |o: std::process::Output, name: &str, to: &str| {
+        assert_eq!(o.status.code(), Some(2), "{name}");
+        assert_eq!(
+            stderr(&o),
+            format!("dmdsl: error: {name}: is a symbolic link (to {to}); refusing to replace it (to replace what it points to, give that path as the output)\n")
+        );
+    };
+    refused(
+        slice_cube(&dir, "link.dmdjob"),
+        "link.dmdjob",
+        "real.dmdjob",
     );
-    let link = std::fs::symlink_metadata(dir.join("link.dmdjob")).unwrap();
-    assert!(link.file_type().is_symlink());
-    assert!(tree(&dir.join("real.dmdjob")) == before);
-    assert_eq!(names(&dir), ["link.dmdjob", "real.dmdjob"]);
+    refused(slice_cube(&dir, "link.sl1"), "link.sl1", "real.sl1");
+    let export = ["export", "real.dmdjob", "-o", "link.sl1"];
+    refused(run_in(&dir, &export), "link.sl1", "real.sl1");
+    let trace = ["run", "real.dmdjob", "--trace", "link.csv"];
+    refused(run_in(&dir, &trace), "link.csv", "real.csv");
+    let m = fixture("measurements.csv");
+    let calibrate = [
+        "calibrate",
+        m.to_str().unwrap(),
+        "-o",
+        "link.csv",
+        "--no-plots",
+    ];
+    refused(run_in(&dir, &calibrate), "link.csv", "real.csv");
+    for name in ["link.dmdjob", "link.sl1", "link.csv"] {
+        assert!(std::fs::symlink_metadata(dir.join(name))
+            .unwrap()
+            .file_type()
+            .is_symlink());
+    }
+    let after: Vec<_> = tree(&dir)
+        .into_iter()
+        .filter(|(n, _)| !n.starts_with("link"))
+        .collect();
+    assert!(after == before);
+}
+
+/// A write that fails (a full disk: here a file-size limit, `RLIMIT_FSIZE`, which fails
+/// writes past it with EFBIG as a full disk does with ENOSPC) is one error line naming the
+/// output, exit 2, and leaves nothing: a one-file job (the zip library printed its own
+/// line in front), a trace (its temporary file stayed), a calibration, a bundle directory.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_is_one_error_line_and_leaves_nothing() {
+    let dir = tempdir("replace-full");
+    assert!(slice_cube(&dir, "cube.dmdjob").status.success());
+    let before = names(&dir);
+    let f = fixture("cube10.stl");
+    let model = f.to_str().unwrap();
+    let err = "File too large (os error 27)";
+    let m = fixture("measurements.csv");
+    let m = m.to_str().unwrap();
+    let cases: [(&[&str], String, u64); 5] = [
+        (
+            &["calibrate", m, "-o", "c.toml", "--no-plots"],
+            format!("c.toml: {err}"),
+            200,
+        ),
+        (
+            &["export", "cube.dmdjob", "-o", "a.sl1"],
+            format!("a.sl1: {err}"),
+            4096,
+        ),
+        (
+            &["slice", model, "-o", "b.dmdjob.zip"],
+            format!("b.dmdjob.zip: {err}"),
+            4096,
+        ),
+        (
+            &["run", "cube.dmdjob", "--trace", "t.csv"],
+            format!("t.csv: {err}"),
+            1000,
+        ),
+        (
+            &["slice", model, "-o", "c.dmdjob"],
+            "c.dmdjob/masks/00".into(),
+            4096,
+        ),
+    ];
+    for (args, says, limit) in cases {
+        let (o, code, _) = run_limited(&dir, args, None, Some(limit));
+        let e = stderr(&o);
+        assert_eq!(code, Some(2), "{args:?}: {e}");
+        assert_eq!(e.lines().count(), 1, "{args:?}: {e}");
+        assert!(
+            e.starts_with(&format!("dmdsl: error: {says}")),
+            "{args:?}: {e}"
+        );
+        assert_eq!(names(&dir), before, "{args:?}");
+    }
+}
+
+/// Errors name the output, never the hidden temporary file dmdsl writes first
+/// (`ro/.a.sl1.tmp-27948: Permission denied`): a one-file output whose folder cannot hold
+/// it (here a file in the way, which fails for every user, root included). The bundle
+/// directory's files are named in the bundle (above, on a full disk).
+#[test]
+fn errors_name_the_output_not_its_temporary_file() {
+    let dir = tempdir("replace-staging");
+    assert!(slice_cube(&dir, "cube.dmdjob").status.success());
+    std::fs::write(dir.join("ro"), "a file, not a folder").unwrap();
+    for (args, out) in [
+        (&["export", "cube.dmdjob", "-o", "ro/a.sl1"][..], "ro/a.sl1"),
+        (&["run", "cube.dmdjob", "--trace", "ro/t.csv"], "ro/t.csv"),
+    ] {
+        let o = run_in(&dir, args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let e = stderr(&o);
+        assert_eq!(
+            e,
+            format!("dmdsl: error: {out}: Not a directory (os error 20)\n")
+        );
+    }
+}
+
+/// A success summary shows control characters of a path as escapes, as errors do.
+#[cfg(unix)]
+#[test]
+fn a_summary_escapes_control_characters_of_a_name() {
+    let dir = tempdir("replace-escapes");
+    assert!(slice_cube(&dir, "cube.dmdjob").status.success());
+    let name = "a\x1b[2Jb.sl1";
+    let o = run_in(&dir, &["export", "cube.dmdjob", "-o", name]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).starts_with("a\\u{1b}[2Jb.sl1: sl1 of 5"),
+        "{:?}",
+        stdout(&o)
+    );
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            fixture("cube10.stl").to_str().unwrap(),
+            "--layer-height",
+            "2",
+            "-o",
+            "c\x07.dmdjob.zip",
+        ],
+    );
+    assert!(
+        stdout(&o).starts_with("c\\u{7}.dmdjob.zip: "),
+        "{:?}",
+        stdout(&o)
+    );
 }
 
 #[test]

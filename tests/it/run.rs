@@ -480,14 +480,18 @@ fn unreadable_bundles_and_bad_options_exit_2() {
 }
 
 #[test]
-fn version_1_and_2_bundles_still_run_and_export_as_version_3() {
+fn older_bundles_still_run_and_export_as_version_4() {
     // Versions 1 and 2 embedded the whole resolved profile as `machine`; the reader takes
     // the machine record's keys from it. Version 1 stored warnings as text (read as code
     // `bundle.uncoded`).
     let (dir, b) = sliced("v1");
     let mut j = job(&b);
-    assert_eq!(j["version"], 3);
+    assert_eq!(j["version"], 4);
     let record = j["machine"].clone();
+    // Versions 1 to 3 have no pixels records.
+    for l in j["layers"].as_array_mut().unwrap() {
+        l["masks"][0].as_object_mut().unwrap().remove("pixels");
+    }
     assert!(record.get("recoat").is_none() && record.get("slicing").is_none());
     j["machine"] = serde_json::to_value(dmdsl::Profile::default_profile()).unwrap();
     for version in [2, 1] {
@@ -504,14 +508,29 @@ fn version_1_and_2_bundles_still_run_and_export_as_version_3() {
     let o = run_in(&dir, &["export", "box.dmdjob", "-o", "new.dmdjob", "-q"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let new = job(&dir.join("new.dmdjob"));
-    assert_eq!((&new["version"], &new["machine"]), (&3.into(), &record));
+    assert_eq!((&new["version"], &new["machine"]), (&4.into(), &record));
     assert_eq!(new["warnings"][0]["code"], "bundle.uncoded");
+    // The export counted the masks' pixels again: the new bundle has every record.
+    assert!(new["layers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|l| l["masks"][0]["pixels"]["lit_px"].as_u64() > Some(0)));
+    let o = run_in(&dir, &["run", "new.dmdjob", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Version 4 without the records is refused; so is a version from the future.
     j["version"] = 4.into();
     set_job(&b, &j);
     let o = run_in(&dir, &["run", "box.dmdjob"]);
     assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.contains("job.json: layers[0].masks[0] has no `pixels` record (every mask has one from version 4 on)"), "{e}");
+    j["version"] = 5.into();
+    set_job(&b, &j);
+    let o = run_in(&dir, &["run", "box.dmdjob"]);
+    assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("unsupported version Some(4); this dmdsl reads versions 1 to 3"),
+        stderr(&o).contains("unsupported version Some(5); this dmdsl reads versions 1 to 4"),
         "{}",
         stderr(&o)
     );
@@ -594,7 +613,8 @@ fn masks_that_do_not_show_their_layer_are_named() {
             }
         };
 
-        // Layers 1 and 2 swapped, checksums and all: each shows the other's section.
+        // Layers 1 and 2 swapped, checksums and all: each shows the other's section, and
+        // other pixels than its record.
         let mut j = job(&b);
         let (s1, s2) = (
             j["layers"][1]["masks"][0]["sha256"].clone(),
@@ -615,7 +635,8 @@ fn masks_that_do_not_show_their_layer_are_named() {
             ],
             "{args:?}: {r}"
         );
-        assert_eq!(kinds(&r), vec!["mask-content", "mask-content"], "{r}");
+        let kinds = kinds(&r);
+        assert_eq!(kinds, ["mask-content", "mask-pixels"].repeat(2), "{r}");
         let o = run_in(&dir, &["run", "box.dmdjob"]);
         let out = stdout(&o);
         assert!(
@@ -945,4 +966,120 @@ fn machine_option_checks_the_job_on_the_real_machine() {
     let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "nope"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("nope"), "{}", stderr(&o));
+}
+
+/// Numbers no job can hold are refused as the manifest is read, naming the key (exit 2):
+/// `fixtures/verdict/never-finishes.dmdjob.zip` (a move at 1e-308 mm/s, which ran "inf s"
+/// and passed), `negative-area.dmdjob.zip`, and more set here. Numbers a job can hold
+/// but that no estimate allows still give finite figures and violations.
+#[test]
+fn numbers_out_of_range_are_refused_and_every_figure_is_finite() {
+    let (dir, b) = sliced("ranges");
+    for (job, key) in [
+        ("verdict/never-finishes.dmdjob.zip", "job.json: layers[2].steps[1].speed_mm_s = 1e-308 is not a speed a machine has (1e-6 to 10000.0; check its unit)"),
+        ("verdict/negative-area.dmdjob.zip", "job.json: layers[1].area_mm2 = -1.0 is not an area of the 30.72 mm² field"),
+    ] {
+        let o = run_in(&dir, &["run", fixture(job).to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2), "{job}");
+        assert!(stderr(&o).ends_with(&format!("{key}\n")), "{job}: {}", stderr(&o));
+    }
+    let clean = job(&b);
+    type Edit = fn(&mut Value);
+    let cases: [(Edit, &str); 6] = [
+        (
+            |j| j["layers"][2]["steps"][1]["accel_mm_s2"] = 1e-308.into(),
+            "layers[2].steps[1].accel_mm_s2 = 1e-308 is not an acceleration a machine has",
+        ),
+        (
+            |j| j["layers"][1]["area_mm2"] = 1e308.into(),
+            "layers[1].area_mm2 = 1e308 is not an area of the 3168.75 mm² field",
+        ),
+        (
+            |j| j["layers"][1]["exposure_s"] = 1e308.into(),
+            "layers[1].exposure_s = 1e308 is not a duration a machine has",
+        ),
+        (
+            |j| j["layers"][2]["steps"][2]["s"] = (-1e300).into(),
+            "layers[2].steps[2].s = -1e300 is not a duration",
+        ),
+        (
+            |j| j["layers"][0]["bbox_mm"][0][0] = 99.0.into(),
+            "layers[0].bbox_mm: the corners are not in order",
+        ),
+        (
+            |j| j["totals"]["print_time_s"] = (-5.0).into(),
+            "totals.print_time_s = -5.0 is negative",
+        ),
+    ];
+    for (edit, says) in cases {
+        let mut j = clean.clone();
+        edit(&mut j);
+        set_job(&b, &j);
+        let o = run_in(&dir, &["run", "box.dmdjob"]);
+        assert_eq!(o.status.code(), Some(2), "{says}");
+        assert!(
+            stderr(&o).contains(&format!("box.dmdjob/job.json: {says}")),
+            "{}",
+            stderr(&o)
+        );
+    }
+    // Waits as long as a machine allows, in every layer: finite, and off the estimate.
+    let mut j = clean.clone();
+    for l in j["layers"].as_array_mut().unwrap() {
+        l["steps"][2]["s"] = 999_999.0.into();
+    }
+    set_job(&b, &j);
+    let (code, r) = run_json(&dir, &[]);
+    assert_eq!(code, 1);
+    for key in [
+        "total_s",
+        "estimate_diff_pct",
+        "light_on_s",
+        "wait_s",
+        "shutter_open_s",
+    ] {
+        assert!(r[key].as_f64().is_some_and(f64::is_finite), "{key}: {r}");
+    }
+    assert!(kinds(&r).iter().all(|k| k == "estimate"), "{r}");
+}
+
+/// Peak memory of `run` on an archive follows the entries the job uses: an SL1 of
+/// `fixtures/sl1/cube1.sl1` with 15 entries it does not use, each 250 MiB of zeros
+/// deflated (3.66 GiB declared, 4 MB of file), used to be inflated whole (3.76 GB); it
+/// runs in an address space of 1 GiB now.
+#[cfg(target_os = "linux")]
+#[test]
+fn unused_large_entries_are_never_inflated() {
+    use std::io::Write;
+    use zip::write::SimpleFileOptions;
+    let dir = tempdir("run-unused-entries");
+    let cube = std::fs::read(fixture("sl1/cube1.sl1")).unwrap();
+    let mut src = zip::ZipArchive::new(std::io::Cursor::new(cube)).unwrap();
+    let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    for i in 0..src.len() {
+        w.raw_copy_file(src.by_index_raw(i).unwrap()).unwrap();
+    }
+    let deflated = SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated)
+        .compression_level(Some(9));
+    w.start_file("unused/00.bin", deflated).unwrap();
+    let zeros = vec![0u8; 1 << 20];
+    for _ in 0..250 {
+        w.write_all(&zeros).unwrap();
+    }
+    let one = w.finish().unwrap().into_inner();
+    let mut src = zip::ZipArchive::new(std::io::Cursor::new(one.clone())).unwrap();
+    let mut w = zip::ZipWriter::new_append(std::io::Cursor::new(one)).unwrap();
+    let big = src.index_for_name("unused/00.bin").unwrap();
+    for k in 1..15 {
+        let f = src.by_index_raw(big).unwrap();
+        w.raw_copy_file_rename(f, format!("unused/{k:02}.bin"))
+            .unwrap();
+    }
+    let bytes = w.finish().unwrap().into_inner();
+    assert!(bytes.len() < 8 << 20, "{}", bytes.len());
+    std::fs::write(dir.join("big.sl1"), &bytes).unwrap();
+    let (o, code, peak) = run_limited(&dir, &["run", "big.sl1", "-q"], Some(1 << 30), None);
+    assert_eq!(code, Some(0), "{}", stderr(&o));
+    assert!(peak < 200 << 20, "peak {peak} bytes");
 }

@@ -683,8 +683,14 @@ fn outputs_made_wrong_on_purpose_are_rejected() {
         (
             "job.schema.json",
             &job,
-            |j| j["version"] = json!(4),
+            |j| j["version"] = json!(5),
             "not one of",
+        ),
+        (
+            "job.schema.json",
+            &job,
+            |j| j["layers"][1]["masks"][0]["pixels"]["lit_px"] = json!(-3),
+            "below the minimum",
         ),
         (
             "slice-summary.schema.json",

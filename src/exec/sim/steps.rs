@@ -224,6 +224,18 @@ impl Simulation<'_, '_, '_> {
         });
     }
 
+    /// Reports step `k` (`what`) as impossible and true when it would take `dur` from now
+    /// to a time no clock holds (not finite): it is skipped, so every simulated figure
+    /// stays finite.
+    fn endless(&mut self, k: usize, dur: f64, what: impl FnOnce() -> String) -> bool {
+        let endless = !(self.t + dur).is_finite();
+        if endless {
+            let msg = format!("{} never ends ({} s)", what(), number(dur));
+            self.report_invalid_step(k, msg);
+        }
+        endless
+    }
+
     /// Waits (stage still) until the layer's mask is loaded.
     fn wait_for_mask(&mut self, k: usize) -> bool {
         let ready = self.mask_load_fault_s.unwrap_or(self.record.mask_ready_s);
@@ -271,6 +283,9 @@ impl Simulation<'_, '_, '_> {
         let target = self.machine.quantize(to_mm);
         let dur = move_time(target - self.pos, speed_mm_s, accel_mm_s2);
         let exact_dur = move_time(to_mm - self.exact_mm, speed_mm_s, accel_mm_s2);
+        if self.endless(k, dur + exact_dur, || format!("move to {} mm", number(to_mm))) {
+            return true;
+        }
         self.record.quantization_s += (dur - exact_dur).abs();
         self.exact_mm = to_mm;
         let motion = Motion::Trapezoid {
@@ -293,6 +308,9 @@ impl Simulation<'_, '_, '_> {
             self.report_invalid_step(k, format!("wait of {} s (must be >= 0)", number(s)));
             return true;
         }
+        if self.endless(k, s, || "wait".into()) {
+            return true;
+        }
         let w = self.still_segment(SegKind::Wait, Some(k), s, ShutterState::Closed);
         self.emit(w)
     }
@@ -303,10 +321,13 @@ impl Simulation<'_, '_, '_> {
             self.report_invalid_step(k, format!("expose of {} s (must be >= 0)", number(s)));
             return true;
         }
+        let m = self.machine;
+        if self.endless(k, m.open_s + s + m.close_s + m.load_s, || "expose".into()) {
+            return true;
+        }
         if !self.wait_for_mask(k) {
             return false;
         }
-        let m = self.machine;
         let o = self.still_segment(SegKind::Open, Some(k), m.open_s, ShutterState::Opening);
         if !self.emit(o) {
             return false;
@@ -333,6 +354,13 @@ impl Simulation<'_, '_, '_> {
             );
             return true;
         }
+        let target = self.machine.quantize(to_mm);
+        let dist = target - self.pos;
+        let dur = dist.abs() / speed_mm_s;
+        let (m, what) = (self.machine, || format!("sweep to {} mm", number(to_mm)));
+        if self.endless(k, dur + m.open_s + m.load_s, what) {
+            return true;
+        }
         if !self.run_open {
             if !self.wait_for_mask(k) {
                 return false;
@@ -348,9 +376,6 @@ impl Simulation<'_, '_, '_> {
                 return false;
             }
         }
-        let target = self.machine.quantize(to_mm);
-        let dist = target - self.pos;
-        let dur = dist.abs() / speed_mm_s;
         let q = ((to_mm - self.exact_mm).abs() - dist.abs()).abs() / speed_mm_s;
         self.record.quantization_s += q;
         self.record.dose_quantization_s += q;
@@ -487,6 +512,25 @@ mod tests {
         assert!(close(mv.duration(), 0.04 + (0.12375 - 0.02)));
         let q = (move_time(0.12375, 1.0, 50.0) - move_time(0.1234, 1.0, 50.0)).abs();
         assert!(close(o.layers[0].quantization_s, q));
+    }
+
+    #[test]
+    fn a_step_that_would_end_past_any_clock_is_skipped() {
+        // Two waits of 1e308 s: the second would end at infinity.
+        let steps = vec![Step::Wait { s: 1e308 }, Step::Wait { s: 1e308 }];
+        let l = layer(0, 0.5, 0.5, Mode::Layered, 0.0, steps, 1.0);
+        let mut m = manifest(profile(), vec![l]);
+        m.layers[0].steps.push(move_to(0.5, 1e-310, 50.0));
+        let (o, _) = run_collecting(&m, &[]);
+        assert_eq!(o.total_s, 1e308);
+        let msgs: Vec<&str> = o.invalid_steps.iter().map(|v| v.message.as_str()).collect();
+        assert_eq!(
+            msgs,
+            [
+                "layer 0 step 1: wait never ends (1e308 s); step skipped",
+                "layer 0 step 2: move to 0.5 mm never ends (inf s); step skipped"
+            ]
+        );
     }
 
     #[test]

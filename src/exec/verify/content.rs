@@ -31,14 +31,17 @@
 //! and compensated ones those below the lowest usable gray (thin walls, tips, a shorter
 //! feature's top).
 
-use super::{problem, LitPixels};
+use super::{box_text, problem};
 use crate::bundle::machine::Machine;
-use crate::bundle::{BundleSource, Layer, Manifest, MaskRef};
+use crate::bundle::{BundleSource, Layer, Manifest, MaskPixels, MaskRef};
 use crate::exec::{Kind, Violation};
 use crate::text::number;
 
 /// Lit pixels a section's masks may miss below half its area (coverage masks), px².
 const AREA_SLACK_PX: f64 = 4.0;
+/// How far the grays of coverage masks may add up from the recorded area (written to 9
+/// significant digits), relative.
+const AREA_REL_TOL: f64 = 1e-8;
 
 /// How a job's masks must agree with its layer records (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,6 +59,11 @@ pub(super) struct ContentRule {
     /// The Z correction held back downward-facing surfaces (`cure.held_back_layers` > 0):
     /// a layer's masks may light less than its section, down to nothing.
     held_back: bool,
+    /// The grays add up to the section's area exactly: coverage masks of one projector,
+    /// neither pre-warped nor moved by the cure correction.
+    exact_area: bool,
+    /// Binary masks of one projector without compensation: every lit pixel is 255.
+    binary: bool,
 }
 
 impl ContentRule {
@@ -68,21 +76,24 @@ impl ContentRule {
             .distortion
             .as_ref()
             .map_or(0.0, |d| d.max_correction_mm.max(0.0) + p);
-        let made = &manifest.machine;
+        let (made, s) = (&manifest.machine, &manifest.settings);
         let linear =
             made.projector.len() <= 1 || made.projector.iter().all(|p| p.calibration.is_none());
+        let coverage = !s.binary && s.compensation == "off" && linear;
+        let one = made.projector.len() == 1;
+        let corrected = manifest.cure.as_ref().is_some_and(|c| c.correction != "off");
         ContentRule {
             pixel_mm: p,
             field_h_px: field.height_px as f64,
             tol_px: 1.0 + warp_mm / p,
             warp_mm,
-            coverage: !manifest.settings.binary
-                && manifest.settings.compensation == "off"
-                && linear,
+            coverage,
             held_back: manifest
                 .cure
                 .as_ref()
                 .is_some_and(|c| c.held_back_layers > 0),
+            exact_area: coverage && one && !corrected && s.distortion.is_none(),
+            binary: s.binary && s.compensation == "off" && one,
         }
     }
 
@@ -125,7 +136,7 @@ impl ContentRule {
         dir: &dyn BundleSource,
         i: usize,
         layer: &Layer,
-        px: LitPixels,
+        px: MaskPixels,
         masks: &[&MaskRef],
     ) -> Option<Violation> {
         let file = masks.first()?.file.as_str();
@@ -135,16 +146,15 @@ impl ContentRule {
             let message = format!("{shown}: layer {i}: {msg}");
             Some(problem(Some(i), Kind::MaskContent, Some(file), message))
         };
-        let lit_text =
-            |[c0, r0, c1, r1]: [u32; 4]| format!("columns {c0}..{}, rows {r0}..{}", c1 - 1, r1 - 1);
-        let (count, area) = (px.count, layer.area_mm2);
-        if let (None, true, Some(b)) = (layer.bbox_mm, area <= 0.0, px.bbox) {
+        let lit_text = |b| box_text(Some(b));
+        let (count, area) = (px.lit_px, layer.area_mm2);
+        if let (None, true, Some(b)) = (layer.bbox_mm, area <= 0.0, px.lit_box_px) {
             let lit = lit_text(b);
             return at(format!("the layer has no section (bbox_mm null) but its masks light {count} pixel(s) ({lit} of the field)"));
         }
         let min = self.min_lit(layer);
-        let Some(b) = px.bbox else {
-            if min < 1.0 {
+        let Some(b) = px.lit_box_px else {
+            if min < 1.0 && !(self.exact_area && area > 0.0) {
                 return None;
             }
             return at(format!(
@@ -188,9 +198,18 @@ impl ContentRule {
             let (lit, r) = (lit_text(b), number(layer.max_fill_distance_mm));
             return at(format!("its masks light {lit} of the field ({w}x{h} px), less than the section's largest inscribed circle (max_fill_distance_mm {r}) leaves lit ({inner:.1} px across)"));
         }
-        if (px.count as f64) < min {
+        if (count as f64) < min {
             let (lit_mm2, least) = (count as f64 * p * p, min.ceil());
             return at(format!("its masks light {count} pixel(s) ({lit_mm2:.3} mm²), too few for the section's area {area:.3} mm² (at least {least:.0} expected)"));
+        }
+        let g = px.gray_sum;
+        if self.binary && g != 255 * count {
+            return at(format!("settings.binary is true, but its masks hold grays other than 0 and 255 ({count} lit pixel(s), gray sum {g})"));
+        }
+        let shown = g as f64 / 255.0 * p * p;
+        if self.exact_area && (shown - area).abs() > AREA_REL_TOL * area {
+            let (shown, area) = (crate::round::area_mm2(shown), crate::round::area_mm2(area));
+            return at(format!("its grays add up to {shown} mm² (gray sum {g} / 255 × pixel area), but the section's area is {area} mm² (the values of coverage masks are the section's area)"));
         }
         None
     }
@@ -219,7 +238,8 @@ mod tests {
             }
         });
         let section = Some([9.5, 4.5, 30.5, 15.5]);
-        let area = 21.0 * 11.0;
+        // What `soft` shows: 200 pixels full, 64 half.
+        let area = 200.0 + 64.0 * 128.0 / 255.0;
         let cases = [
             (&soft, section, area),                   // 0: as sliced.
             (&white, section, area),                  // 1: all white.
@@ -229,9 +249,9 @@ mod tests {
             (&lit_png(12, 6, 16, 10), section, area), // 5: a 4×4 px patch inside the box.
             // 6: another layer's mask, moved: lit 3 px right of the section.
             (&lit_png(13, 5, 34, 15), section, area),
-            // 7: a sliver too small to show: dark is fine.
+            // 7: a sliver too small to show: dark is fine, but not with a lit area.
             (&black, Some([40.0, 40.0, 40.002, 41.0]), 0.002),
-            // 8: lit within a pixel of the section's box: fine.
+            // 8: lit within a pixel of the section's box: fine, but more than its area.
             (&lit_png(9, 4, 31, 16), section, area),
             // 9 and 10: an area but no box (bundles from before it was recorded): the
             // area is checked, the box cannot be.
@@ -250,7 +270,7 @@ mod tests {
         let v = verify(&dir, &m);
         assert_eq!(
             found(&v),
-            content(&[1, 2, 3, 5, 6, 10]),
+            content(&[1, 2, 3, 5, 6, 7, 8, 10]),
             "{:#?}",
             v.problems
         );
@@ -259,22 +279,25 @@ mod tests {
         says(
             &v,
             1,
-            "layer 2: the section's area is 0.931 mm² but its masks light no pixel",
+            "layer 2: the section's area is 0.935 mm² but its masks light no pixel",
         );
         says(
             &v,
             2,
             "layer 3: the layer has no section (bbox_mm null) but its masks light 264 pixel(s)",
         );
-        says(&v, 3, "layer 5: its masks light 16 pixel(s) (0.064 mm²), too few for the section's area 0.931 mm² (at least 112 expected)");
+        says(&v, 3, "layer 5: its masks light 16 pixel(s) (0.064 mm²), too few for the section's area 0.935 mm² (at least 113 expected)");
         says(&v, 4, "layer 6: its masks light columns 13..33, rows 5..14");
+        says(&v, 6, "layer 8: its grays add up to 1.06372833 mm² (gray sum 67320 / 255 × pixel area), but the section's area is 0.935297199 mm²");
         assert_eq!(v.problems[0].file.as_deref(), Some("masks/00001.png"));
 
         // Binary and compensated masks may leave thin parts dark: only the largest
         // inscribed circle's pixels must be lit.
+        // Binary masks light 255 only.
         m.settings.binary = true;
         let v = verify(&dir, &m);
-        assert_eq!(found(&v), content(&[1, 3, 6]), "{:#?}", v.problems);
+        assert_eq!(found(&v), content(&[0, 1, 3, 6, 9]), "{:#?}", v.problems);
+        says(&v, 0, "layer 0: settings.binary is true, but its masks hold grays other than 0 and 255 (264 lit pixel(s), gray sum 59192)");
         // A section 11 px high holds a circle of 5.5 px: 4.1 px wholly lit around its centre.
         for l in &mut m.layers {
             l.max_fill_distance_mm = 5.5 * PX;
@@ -282,15 +305,13 @@ mod tests {
         m.settings.binary = false;
         m.settings.compensation = "zone".into();
         let v = verify(&dir, &m);
-        assert_eq!(
-            found(&v),
-            content(&[1, 2, 3, 5, 6, 7, 10]),
-            "{:#?}",
-            v.problems
-        );
+        // Compensation without its record is a `settings` problem of the job.
+        let mut want = vec![(None, crate::exec::Kind::Settings)];
+        want.extend(content(&[1, 2, 3, 5, 6, 7, 10]));
+        assert_eq!(found(&v), want, "{:#?}", v.problems);
         says(
             &v,
-            3,
+            4,
             "(4x4 px), less than the section's largest inscribed circle",
         );
     }
@@ -374,6 +395,7 @@ mod tests {
             file,
             sha256,
             projector: 1,
+            pixels: None,
         });
         let mut m = manifest(p, vec![l]);
         assert_eq!(found(&verify(&dir, &m)), vec![]);

@@ -1,9 +1,9 @@
 //! Each PNG file of the bundle on its own: the masks and the light compensation's gray
 //! maps, present, as recorded (SHA-256), and decodable PNGs of their projector's size.
 
-use super::{problem, problem_in, LitPixels};
+use super::{problem, problem_in};
 use crate::bundle::machine::{Machine, Projector};
-use crate::bundle::{sha256_hex, BundleSource, Manifest, MANIFEST};
+use crate::bundle::{sha256_hex, BundleSource, Manifest, MaskPixels, MANIFEST};
 use crate::exec::{Kind, Violation};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
@@ -97,8 +97,8 @@ pub(super) struct PngCheck {
     pub(super) bytes: u64,
     /// What is wrong, with a message naming the file.
     pub(super) faults: Vec<(FileFault, String)>,
-    /// Its nonzero pixels, when it decoded.
-    pub(super) lit: Option<LitPixels>,
+    /// Its pixels (the box in its own pixels), when it decoded.
+    pub(super) lit: Option<MaskPixels>,
 }
 
 /// Checks one gray PNG of the bundle (`rel`): present, SHA-256 `sha256`, a PNG of
@@ -181,7 +181,7 @@ pub(super) fn check_png(
         // Decode the pixels: a PNG whose header is fine may still be truncated or corrupt.
         buf.resize(dec.total_bytes() as usize, 0);
         match dec.read_image(buf) {
-            Ok(()) => lit = Some(LitPixels::of_gray8(w, buf)),
+            Ok(()) => lit = Some(MaskPixels::of_gray8(w, buf)),
             Err(e) => fault(FileFault::Decode, format!("PNG does not decode: {e}")),
         }
     }
@@ -263,6 +263,7 @@ mod tests {
             optics(0, "optics/missing.png", &sha),
         ];
         m.optics = Some(optics(0, "optics/p0-gray-map.png", &"0".repeat(64)));
+        m.settings.compensation = "zone".into();
         let v = verify(&dir, &m);
         let got: Vec<(Kind, Option<&str>)> = v
             .problems

@@ -2,25 +2,26 @@
 //! mask file (present, SHA-256 as recorded, decodable PNG of the projector's resolution
 //! and bit depth, its own file), what each layer's masks show against the layer's record
 //! (lit pixels where the section is, enough of them for its area), and the light
-//! compensation's gray maps. All problems are collected, each naming its file and layer.
-//! Files are read, hashed and decoded in parallel (rayon), one file per task, so memory
-//! stays at a few masks per thread; a decoded mask leaves only its [`LitPixels`] behind.
+//! compensation's gray maps; for a native job, each mask against its own record (its lit
+//! pixels, their box in the field and the sum of its grays: [`MaskPixels`]) and the
+//! settings against the layers. All problems are collected, each naming its file and
+//! layer. Files are read, hashed and decoded in parallel (rayon), one file per task, so
+//! memory stays at a few masks per thread; a decoded mask leaves only its
+//! [`MaskPixels`] behind.
 //!
 //! The parts: the manifest's structure and the run of the checks (here), each PNG file
-//! (`files.rs`), the lit pixels of a decoded mask (`lit.rs`) and what a layer's masks must
-//! show (`content.rs`).
+//! (`files.rs`), what a layer's masks must show (`content.rs`) and the settings
+//! (`settings.rs`).
 
 mod content;
 mod files;
-mod lit;
+mod settings;
 #[cfg(test)]
 mod test_support;
 
-pub use lit::LitPixels;
-
 use super::{Kind, Violation};
-use crate::bundle::machine::Machine;
-use crate::bundle::{BundleSource, Manifest, MaskRef, MANIFEST};
+use crate::bundle::machine::{Machine, Projector};
+use crate::bundle::{BundleSource, Manifest, MaskPixels, MaskRef, MANIFEST};
 use content::ContentRule;
 use files::{check_gray_maps, check_png, is_inside, PngCheck};
 use rayon::prelude::*;
@@ -67,27 +68,31 @@ fn problem_in(
 /// machine the manifest embeds.
 #[cfg(any(test, feature = "internals"))]
 pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
-    verify_source(&crate::bundle::DirSource::new(dir), manifest, &manifest.machine, false)
+    verify_source(&crate::bundle::DirSource::new(dir), manifest, &manifest.machine, true)
 }
 
 /// Verifies the bundle whose files `dir` reads for `machine`, which may differ from the one the manifest
 /// embeds (the machine the job will run on): masks must come one per projector of
 /// `machine`, have its projectors' sizes, and show each layer's section where `machine`'s
 /// projectors put it. How the masks were made (binary, compensated, tiled responses) is
-/// read from the manifest (its settings and embedded machine).
+/// read from the manifest (its settings and embedded machine), and so is where a mask's
+/// record places its pixels.
 ///
-/// `shared_masks` allows layers to name the same mask file (jobs imported from formats
-/// where layers share images, such as the SLA control file's duplications); a native
-/// bundle gives every layer its own file, so there it is a `mask-shared` problem.
+/// A `native` job (a bundle dmdsl wrote, in either form) gives every layer its own mask
+/// file (`mask-shared` otherwise) and its settings must agree with its layers
+/// (`settings`); an imported job's layers may share an image (the SLA control file's
+/// duplications), and its settings are the importer's.
 pub fn verify_source(
     dir: &dyn BundleSource,
     manifest: &Manifest,
     machine: &Machine,
-    shared_masks: bool,
+    native: bool,
 ) -> Verification {
     let mut problems = Vec::new();
-    let (refs, mut incomplete) =
-        check_structure(dir, manifest, machine, shared_masks, &mut problems);
+    let (refs, mut incomplete) = check_structure(dir, manifest, machine, !native, &mut problems);
+    if native {
+        settings::check(dir, manifest, &mut problems);
+    }
     let projectors = &machine.projector;
     let per_file: Vec<PngCheck> = refs
         .par_iter()
@@ -106,23 +111,26 @@ pub fn verify_source(
         .collect();
     let mut bytes = 0;
     // The masks' lit pixels per layer (as field pixels), once every mask decoded cleanly.
-    let mut lit: Vec<Option<(LitPixels, Vec<&MaskRef>)>> = vec![None; manifest.layers.len()];
+    let mut lit: Vec<Option<(MaskPixels, Vec<&MaskRef>)>> = vec![None; manifest.layers.len()];
+    // Masks against their records, after each layer's content.
+    let mut records = Vec::new();
     for (&(i, m), c) in refs.iter().zip(per_file) {
         bytes += c.bytes;
         let clean = c.faults.is_empty();
         for (fault, msg) in c.faults {
             problems.push(problem(Some(i), fault.mask_kind(), Some(&m.file), msg));
         }
-        match c.lit.filter(|_| clean) {
-            Some(px) if !incomplete.contains(&i) => {
-                let px = px.in_field(&projectors[m.projector as usize]);
-                let slot = lit[i].get_or_insert_with(|| (LitPixels::default(), Vec::new()));
-                slot.0 = slot.0.union(px);
-                slot.1.push(m);
-            }
-            _ => {
-                incomplete.insert(i);
-            }
+        let Some(px) = c.lit.filter(|_| clean) else {
+            incomplete.insert(i);
+            continue;
+        };
+        let made_by = manifest.machine.projector.get(m.projector as usize);
+        records.extend(made_by.and_then(|p| against_record(dir, i, m, placed(px, p))));
+        if !incomplete.contains(&i) {
+            let px = placed(px, &projectors[m.projector as usize]);
+            let slot = lit[i].get_or_insert_with(|| (MaskPixels::default(), Vec::new()));
+            slot.0 = union(slot.0, px);
+            slot.1.push(m);
         }
     }
     let rule = ContentRule::of(manifest, machine);
@@ -131,6 +139,7 @@ pub fn verify_source(
             problems.extend(rule.check(dir, i, &manifest.layers[i], *px, masks));
         }
     }
+    problems.extend(records);
     let gray_maps = check_gray_maps(dir, manifest, machine, &mut bytes, &mut problems);
     problems.sort_by_key(|p| p.layer.map_or(0, |l| l + 1));
     Verification {
@@ -139,6 +148,65 @@ pub fn verify_source(
         bytes,
         problems,
     }
+}
+
+/// The pixels of projector `p`'s mask with their box in the field.
+fn placed(px: MaskPixels, p: &Projector) -> MaskPixels {
+    px.placed([p.width_px, p.height_px], p.offset_px, [p.mirror_x, p.mirror_y])
+}
+
+/// The pixels of two masks together (pixels lit in both count twice; no checksum).
+fn union(a: MaskPixels, b: MaskPixels) -> MaskPixels {
+    let lit_box_px = match (a.lit_box_px, b.lit_box_px) {
+        (Some(a), Some(b)) => Some([
+            a[0].min(b[0]),
+            a[1].min(b[1]),
+            a[2].max(b[2]),
+            a[3].max(b[3]),
+        ]),
+        (a, b) => a.or(b),
+    };
+    MaskPixels {
+        lit_px: a.lit_px + b.lit_px,
+        lit_box_px,
+        gray_sum: a.gray_sum + b.gray_sum,
+        adler32: 0,
+    }
+}
+
+/// A lit box as the messages give it: `columns 3..9, rows 0..4` (inclusive), or `no pixel`.
+fn box_text(b: Option<[u32; 4]>) -> String {
+    match b {
+        Some([c0, r0, c1, r1]) => format!("columns {c0}..{}, rows {r0}..{}", c1 - 1, r1 - 1),
+        None => "no pixel".into(),
+    }
+}
+
+/// A `mask-pixels` problem when mask `m` of layer `i`, whose pixels placed by the
+/// projector that the job's machine record names are `px`, differs from its record.
+fn against_record(
+    dir: &dyn BundleSource,
+    i: usize,
+    m: &MaskRef,
+    px: MaskPixels,
+) -> Option<Violation> {
+    let rec = m.pixels.filter(|r| *r != px)?;
+    let core = |p: MaskPixels| (p.lit_px, p.lit_box_px, p.gray_sum);
+    let only_adler = core(px) == core(rec);
+    let text = |p: MaskPixels| {
+        let b = box_text(p.lit_box_px);
+        let sum = match only_adler {
+            true => format!("Adler-32 of its rows {:08x}", p.adler32),
+            false => format!("gray sum {}", p.gray_sum),
+        };
+        format!("{} lit pixel(s) ({b} of the field), {sum}", p.lit_px)
+    };
+    let msg = format!(
+        "layer {i}: the mask shows {}, but job.json records {} (the mask, or its projector's offset_px or mirroring, is not what the job was made with)",
+        text(px),
+        text(rec)
+    );
+    Some(problem_in(dir, Some(i), Kind::MaskPixels, (&m.file, &m.file), &msg))
 }
 
 /// Every mask file the manifest names, with its layer.
@@ -262,9 +330,11 @@ mod tests {
         for (i, f) in files.iter().enumerate() {
             let mut l = blank_layer(i);
             (l.steps, l.time_s) = (vec![Step::Expose { s: 1.0 }], 1.1);
-            // The section fills the field (the mask lights almost every pixel).
+            // The section fills the field (the mask lights almost every pixel), its area
+            // what the grays of `good` add up to.
             l.bbox_mm = Some([[0.0, 0.0], [64.0 * PX, 48.0 * PX]]);
-            l.area_mm2 = 64.0 * 48.0 * PX * PX;
+            let sum: u32 = (0..64 * 48).map(|i| i % 251).sum();
+            l.area_mm2 = sum as f64 / 255.0 * PX * PX;
             if let Some(b) = f {
                 l.masks[0].sha256 = sha256_hex(b);
                 let mut b = b.clone();

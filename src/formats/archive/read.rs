@@ -1,23 +1,31 @@
-//! Reading a zip archive from elsewhere, safely: every entry into memory, nothing
-//! extracted to the disk.
+//! Reading a zip archive from elsewhere, safely, without extracting anything to the
+//! disk: its central directory checked when it is opened, each entry inflated only when a
+//! reader asks for it, into memory.
 //!
-//! An archive is input like any other file, so it is read as if hostile. Refused, each
-//! with one line naming the archive and the entry ([`Error::Archive`]): a file that is
-//! not a zip or is truncated or corrupt (a bad CRC included); more than
-//! [`Limits::max_entries`] entries; an entry name that is not UTF-8, holds a backslash,
-//! a NUL or a drive letter, is absolute, or has an empty, `.` or `..` component; two
-//! entries with the same name; an encrypted entry; a method other than stored or
-//! deflated; a symbolic link; an entry whose declared size, or the sum of the declared
-//! sizes, passes [`Limits::max_entry_bytes`] / [`Limits::max_total_bytes`] (checked before
-//! anything is inflated). The declared sizes are not trusted: each entry is inflated
-//! through a reader that stops one byte past its declared size, and an entry that does
-//! not inflate to exactly that size is refused. Directory entries are checked and then
-//! left out.
+//! An archive is input like any other file, so it is read as if hostile. Refused when it
+//! is opened, each with one line naming the archive and the entry ([`Error::Archive`]): a
+//! file that is not a zip or is truncated; more than [`Limits::max_entries`] entries; an
+//! entry name that is not UTF-8, holds a backslash, a NUL or a drive letter, is absolute,
+//! or has an empty, `.` or `..` component; two entries with the same name; an encrypted
+//! entry; a method other than stored or deflated; a symbolic link; an entry whose declared
+//! size, or the sum of the declared sizes, passes [`Limits::max_entry_bytes`] /
+//! [`Limits::max_total_bytes`]. Directory entries are checked and then left out.
+//!
+//! The entries a job does not use are never inflated, so an archive holds in memory its
+//! own bytes and the entries the job reads: the settings the readers parse
+//! ([`Archive::get`], inflated once and kept) and each image while it is read
+//! ([`Archive::read`], [`Archive::into_source`]: inflated again at each read, not kept).
+//! The declared sizes are not trusted: an entry is inflated through a reader that stops
+//! one byte past its declared size, and one that does not inflate to exactly that size,
+//! or fails its CRC, is refused when it is read.
 
+use crate::bundle::BundleSource;
 use crate::error::{Error, Result};
+use std::borrow::Cow;
 use std::collections::HashMap;
-use std::io::Read;
+use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, OnceLock};
 
 /// Bounds on what an archive may hold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,15 +53,36 @@ impl Default for Limits {
     }
 }
 
-/// The files of an archive, in memory.
-#[derive(Debug, Clone, Default)]
+/// The archive's bytes, shared by every reader of its entries.
+#[derive(Debug, Clone)]
+struct Bytes(Arc<Vec<u8>>);
+
+impl AsRef<[u8]> for Bytes {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
+}
+
+/// One file of the archive: its index in the zip, its declared size, and its bytes once a
+/// reader asked for them with [`Archive::get`].
+#[derive(Debug)]
+struct Entry {
+    index: usize,
+    size: u64,
+    kept: OnceLock<Vec<u8>>,
+}
+
+/// The files of an archive, inflated as they are read.
+#[derive(Debug)]
 pub struct Archive {
     /// The archive's path, for messages.
     path: PathBuf,
     /// File names in archive order (directories left out).
     names: Vec<String>,
-    /// Contents by name.
-    files: HashMap<String, Vec<u8>>,
+    /// The files by name.
+    entries: HashMap<String, Entry>,
+    /// The zip over the archive's bytes (cloned for each read: the bytes are shared).
+    zip: zip::ZipArchive<Cursor<Bytes>>,
 }
 
 impl Archive {
@@ -67,14 +96,72 @@ impl Archive {
         &self.names
     }
 
-    /// The contents of file `name`, if the archive holds it.
-    pub fn get(&self, name: &str) -> Option<&[u8]> {
-        self.files.get(name).map(Vec::as_slice)
+    /// Whether the archive holds file `name`.
+    pub fn contains(&self, name: &str) -> bool {
+        self.entries.contains_key(name)
     }
 
-    /// Takes the contents of every file, by name.
-    pub fn into_files(self) -> HashMap<String, Vec<u8>> {
-        self.files
+    /// The contents of file `name` (`None` when the archive has none), inflated the first
+    /// time and kept: for the settings a reader parses. An entry that does not inflate to
+    /// its declared size is an error naming it.
+    pub fn get(&self, name: &str) -> Result<Option<&[u8]>> {
+        let Some(e) = self.entries.get(name) else {
+            return Ok(None);
+        };
+        if let Some(b) = e.kept.get() {
+            return Ok(Some(b));
+        }
+        let b = self.inflate(e).map_err(|msg| self.error(Some(name), msg))?;
+        Ok(Some(e.kept.get_or_init(|| b)))
+    }
+
+    /// The contents of file `name`, inflated now and not kept (an image a job reads once
+    /// or twice). A missing file is an [`std::io::ErrorKind::NotFound`] error, one that
+    /// does not inflate to its declared size an [`std::io::ErrorKind::InvalidData`] one.
+    pub fn read(&self, name: &str) -> std::io::Result<Vec<u8>> {
+        use std::io::{Error as IoError, ErrorKind};
+        let e = self
+            .entries
+            .get(name)
+            .ok_or_else(|| IoError::new(ErrorKind::NotFound, "not in the archive"))?;
+        match e.kept.get() {
+            Some(b) => Ok(b.clone()),
+            None => self
+                .inflate(e)
+                .map_err(|m| IoError::new(ErrorKind::InvalidData, m)),
+        }
+    }
+
+    /// Inflates entry `e`, never past its declared size, checking its size and CRC.
+    fn inflate(&self, e: &Entry) -> std::result::Result<Vec<u8>, String> {
+        let mut zip = self.zip.clone();
+        let f = zip
+            .by_index(e.index)
+            .map_err(|err| format!("cannot be read: {err}"))?;
+        // Grows as it is read: the declared size is not trusted for the allocation either.
+        let mut data = Vec::with_capacity(e.size.min(1 << 20) as usize);
+        // Reading to the end (one byte past the declared size at most) also checks the CRC.
+        f.take(e.size + 1)
+            .read_to_end(&mut data)
+            .map_err(|err| format!("does not inflate: {err}"))?;
+        if data.len() as u64 != e.size {
+            let got = match data.len() as u64 > e.size {
+                true => format!("more than {}", e.size),
+                false => data.len().to_string(),
+            };
+            return Err(format!("inflates to {got} bytes, its header declares {}", e.size));
+        }
+        Ok(data)
+    }
+
+    /// The archive's files under folder `dir` (empty, or ending in `/`), by the names
+    /// they have there, as a job's files (`path/dir/NAME` in messages).
+    pub fn into_source(self, dir: &str) -> ArchiveFiles {
+        ArchiveFiles {
+            shown: self.path.join(dir),
+            dir: dir.to_string(),
+            archive: self,
+        }
     }
 
     /// An error about entry `entry` of this archive.
@@ -87,79 +174,102 @@ impl Archive {
     }
 }
 
+/// A job's files in an archive ([`Archive::into_source`]), each inflated when it is read.
+#[derive(Debug)]
+pub struct ArchiveFiles {
+    archive: Archive,
+    dir: String,
+    shown: PathBuf,
+}
+
+impl BundleSource for ArchiveFiles {
+    fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
+        if !crate::bundle::is_inside(rel) {
+            let msg = format!("path {rel:?} leads outside the bundle");
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, msg));
+        }
+        // The manifest may name a file `masks//a.png` or `masks/./a.png`; the archive
+        // holds it as `masks/a.png`.
+        let key: Vec<&str> = rel
+            .split('/')
+            .filter(|c| !c.is_empty() && *c != ".")
+            .collect();
+        let name = format!("{}{}", self.dir, key.join("/"));
+        self.archive.read(&name).map(Cow::Owned)
+    }
+
+    fn shown(&self, rel: &str) -> PathBuf {
+        self.shown.join(rel)
+    }
+}
+
 /// True when `bytes` start like a zip archive (a local file header, or the end record of
 /// an empty archive).
 pub fn looks_like_zip(bytes: &[u8]) -> bool {
     bytes.starts_with(b"PK\x03\x04") || bytes.starts_with(b"PK\x05\x06")
 }
 
-/// Reads the archive whose bytes are `bytes` (`path` names it in messages).
-pub fn read_zip_bytes(path: &Path, bytes: &[u8], limits: &Limits) -> Result<Archive> {
-    let mut archive = Archive {
+/// Opens the archive whose bytes are `bytes` (`path` names it in messages): its central
+/// directory read and checked, nothing inflated.
+pub fn read_zip(path: &Path, bytes: Vec<u8>, limits: &Limits) -> Result<Archive> {
+    let error = |entry: Option<&str>, msg: String| Error::Archive {
         path: path.into(),
-        ..Archive::default()
+        entry: entry.map(str::to_string),
+        msg,
     };
-    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
-        .map_err(|e| archive.error(None, format!("not a readable zip archive: {e}")))?;
+    let bytes = Bytes(Arc::new(bytes));
+    let mut zip = zip::ZipArchive::new(Cursor::new(bytes.clone()))
+        .map_err(|e| error(None, format!("not a readable zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
         let msg = format!(
             "{} entries, more than the {} this reader accepts",
             zip.len(),
             limits.max_entries
         );
-        return Err(archive.error(None, msg));
+        return Err(error(None, msg));
     }
     // The zip crate keeps one entry per name: a name listed twice shows in the central
     // directory itself.
-    if let Some(dup) = duplicate_name(bytes, zip.len()) {
-        return Err(archive.error(Some(&dup), "the name appears twice in the archive"));
+    if let Some(dup) = duplicate_name(bytes.as_ref(), zip.len()) {
+        return Err(error(Some(&dup), "the name appears twice in the archive".into()));
     }
-    // Inflate each file, never past its declared size.
-    for (i, name, size) in declared(&archive, &mut zip, limits)? {
-        let at = Some(name.as_str());
-        let f = zip
-            .by_index(i)
-            .map_err(|e| archive.error(at, format!("cannot be read: {e}")))?;
-        // Grows as it is read: the declared size is not trusted for the allocation either.
-        let mut data = Vec::with_capacity(size.min(1 << 20) as usize);
-        // Reading to the end (one byte past the declared size at most) also checks the CRC.
-        f.take(size + 1)
-            .read_to_end(&mut data)
-            .map_err(|e| archive.error(at, format!("does not inflate: {e}")))?;
-        if data.len() as u64 != size {
-            let got = match data.len() as u64 > size {
-                true => format!("more than {size}"),
-                false => data.len().to_string(),
-            };
-            let msg = format!("inflates to {got} bytes, its header declares {size}");
-            return Err(archive.error(at, msg));
-        }
+    let files = declared(&mut zip, limits).map_err(|(at, msg)| error(at.as_deref(), msg))?;
+    let mut archive = Archive {
+        path: path.into(),
+        names: Vec::with_capacity(files.len()),
+        entries: HashMap::with_capacity(files.len()),
+        zip,
+    };
+    for (index, name, size) in files {
+        let kept = OnceLock::new();
         archive.names.push(name.clone());
-        archive.files.insert(name, data);
+        archive.entries.insert(name, Entry { index, size, kept });
     }
     Ok(archive)
 }
 
-/// The files of `zip` (`archive` names it in errors) as (index, name, declared size), read
-/// from the central directory and checked (names, kinds, methods, declared sizes within
-/// `limits`) before anything is inflated.
+/// What is wrong with an archive: the entry, if one, and what.
+type Refusal = (Option<String>, String);
+
+/// The files of `zip` as (index, name, declared size), read from the central directory
+/// and checked (names, kinds, methods, declared sizes within `limits`) before anything is
+/// inflated.
 fn declared(
-    archive: &Archive,
-    zip: &mut zip::ZipArchive<std::io::Cursor<&[u8]>>,
+    zip: &mut zip::ZipArchive<Cursor<Bytes>>,
     limits: &Limits,
-) -> Result<Vec<(usize, String, u64)>> {
+) -> std::result::Result<Vec<(usize, String, u64)>, Refusal> {
     let mut entries = Vec::with_capacity(zip.len());
     let mut seen = HashMap::with_capacity(zip.len());
     let mut total: u64 = 0;
     for i in 0..zip.len() {
         let f = zip
             .by_index_raw(i)
-            .map_err(|e| archive.error(None, format!("entry {i} cannot be read: {e}")))?;
+            .map_err(|e| (None, format!("entry {i} cannot be read: {e}")))?;
         let Ok(name) = std::str::from_utf8(f.name_raw()).map(str::to_string) else {
             let shown = String::from_utf8_lossy(f.name_raw()).into_owned();
-            return Err(archive.error(Some(&shown), "name is not UTF-8"));
+            return Err((Some(shown), "name is not UTF-8".into()));
         };
-        let bad = |msg: String| archive.error(Some(&name), msg);
+        let bad = |msg: String| (Some(name.clone()), msg);
         check_name(&name).map_err(bad)?;
         if let Some(first) = seen.insert(name.trim_end_matches('/').to_string(), i) {
             return Err(bad(format!(
@@ -285,31 +395,71 @@ mod tests {
     #[test]
     fn entries_are_read_in_order_and_bounded() {
         let z = zip_of(&["job.json", "masks/00000.png", "masks/00001.png"]);
-        let a = read_zip_bytes(Path::new("a.zip"), &z, &Limits::default()).unwrap();
+        let open = |l: &Limits| read_zip(Path::new("a.zip"), z.clone(), l);
+        let a = open(&Limits::default()).unwrap();
         assert_eq!(
             a.names(),
             ["job.json", "masks/00000.png", "masks/00001.png"]
         );
-        assert_eq!(a.get("masks/00001.png"), Some(&b"masks/00001.png"[..]));
+        assert_eq!(a.get("job.json").unwrap(), Some(&b"job.json"[..]));
+        assert_eq!(a.get("nothing").unwrap(), None);
+        assert_eq!(a.read("masks/00001.png").unwrap(), b"masks/00001.png");
+        let files = a.into_source("masks/");
+        assert_eq!(&*files.read("00000.png").unwrap(), b"masks/00000.png");
+        assert_eq!(files.shown("00000.png"), Path::new("a.zip/masks/00000.png"));
+        let files = open(&Limits::default()).unwrap().into_source("");
+        assert_eq!(&*files.read("masks//00001.png").unwrap(), b"masks/00001.png");
+        let e = files.read("../job.json").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
         let few = Limits {
             max_entries: 2,
             ..Limits::default()
         };
-        let e = read_zip_bytes(Path::new("a.zip"), &z, &few)
-            .unwrap_err()
-            .to_string();
+        let e = open(&few).unwrap_err().to_string();
         assert_eq!(e, "a.zip: 3 entries, more than the 2 this reader accepts");
         let small = Limits {
             max_total_bytes: 20,
             ..Limits::default()
         };
-        let e = read_zip_bytes(Path::new("a.zip"), &z, &small)
-            .unwrap_err()
-            .to_string();
+        let e = open(&small).unwrap_err().to_string();
         assert!(
             e.starts_with("a.zip: entry \"masks/00000.png\": the entries so far declare 23 bytes"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn an_entry_is_inflated_only_when_read_and_checked_then() {
+        // An entry whose header declares fewer bytes than it holds, and one whose CRC is
+        // wrong: the archive opens, and each is refused when read.
+        let mut w = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+        let stored = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored);
+        for n in ["a.txt", "bad-crc.txt", "ok.txt"] {
+            w.start_file(n, stored).unwrap();
+            w.write_all(n.as_bytes()).unwrap();
+        }
+        let mut z = w.finish().unwrap().into_inner();
+        let at = |z: &[u8], what: &[u8], k: usize| {
+            let mut hits = z.windows(what.len()).enumerate().filter(|(_, w)| *w == what);
+            hits.nth(k).unwrap().0
+        };
+        // The local and central sizes of a.txt: 5 bytes declared as 4.
+        for header in [at(&z, b"PK\x03\x04", 0), at(&z, b"PK\x01\x02", 0)] {
+            let size = header + if z[header + 2] == 3 { 22 } else { 24 };
+            z[size] = 4;
+        }
+        // bad-crc.txt's data (its name, then its bytes, then its name again).
+        let data = at(&z, b"bad-crc.txt", 1);
+        z[data] ^= 1;
+        let a = read_zip(Path::new("a.zip"), z, &Limits::default()).unwrap();
+        let e = a.get("a.txt").unwrap_err().to_string();
+        let more = "does not inflate: File is larger than its declared uncompressed size";
+        assert_eq!(e, format!("a.zip: entry \"a.txt\": {more}"));
+        let e = a.read("bad-crc.txt").unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::InvalidData);
+        assert!(e.to_string().contains("does not inflate"), "{e}");
+        assert_eq!(a.read("ok.txt").unwrap(), b"ok.txt");
     }
 
     #[test]

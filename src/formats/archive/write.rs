@@ -8,12 +8,18 @@
 //! time and gains a few per cent at most) or *deflated* (text: manifests, settings), with
 //! the zip's fixed "no date" time stamp (1980-01-01 00:00), so the same entries always give
 //! the same bytes.
+//!
+//! A write that fails (a full disk) is one error naming the destination: the file goes
+//! through [`Quiet`], which after its first error takes every later write without doing
+//! it, so the zip library's own attempt to finish an archive it is dropped with (which
+//! prints to stderr when it fails) finds nothing to report.
 
 use crate::error::{Error, Result};
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, DateTime, ZipWriter};
 
@@ -24,8 +30,84 @@ const BUFFER_BYTES: usize = 1 << 20;
 pub struct ZipOut<'a> {
     dest: PathBuf,
     tmp: PathBuf,
-    zip: Option<ZipWriter<BufWriter<File>>>,
+    zip: Option<ZipWriter<Quiet>>,
+    /// The first write error of the file, if any.
+    failed: Arc<Mutex<Option<std::io::Error>>>,
     cancel: Option<&'a AtomicBool>,
+}
+
+/// The archive's file, which keeps its first write error (in `failed`) and from then on
+/// only counts what it is asked to write: the writes and seeks after a failure succeed
+/// (at a position kept as if they had been done) without touching the file. The position
+/// is followed from the start, so it is right whenever the failure comes (an error of
+/// the file, or the archive dropped unfinished).
+struct Quiet {
+    file: BufWriter<File>,
+    failed: Arc<Mutex<Option<std::io::Error>>>,
+    /// The position, as if every write had been done.
+    at: u64,
+    /// The largest position reached: the end of the file.
+    end: u64,
+}
+
+impl Quiet {
+    fn failed(&self) -> bool {
+        self.failed.lock().map_or(true, |f| f.is_some())
+    }
+
+    /// Keeps `e` as the file's error unless it has one already.
+    fn keep(&self, e: std::io::Error) {
+        if let Ok(mut f) = self.failed.lock() {
+            f.get_or_insert(e);
+        }
+    }
+
+    /// Moves the position to `at`.
+    fn moved(&mut self, at: u64) -> u64 {
+        self.at = at;
+        self.end = self.end.max(at);
+        at
+    }
+}
+
+impl Write for Quiet {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = match self.failed() {
+            true => buf.len(),
+            false => self.file.write(buf).unwrap_or_else(|e| {
+                self.keep(e);
+                buf.len()
+            }),
+        };
+        self.moved(self.at + n as u64);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        if !self.failed() {
+            if let Err(e) = self.file.flush() {
+                self.keep(e);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Seek for Quiet {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        if !self.failed() {
+            match self.file.seek(to) {
+                Ok(at) => return Ok(self.moved(at)),
+                Err(e) => self.keep(e),
+            }
+        }
+        let at = match to {
+            SeekFrom::Start(n) => n,
+            SeekFrom::Current(d) => self.at.saturating_add_signed(d),
+            SeekFrom::End(d) => self.end.saturating_add_signed(d),
+        };
+        Ok(self.moved(at))
+    }
 }
 
 impl std::fmt::Debug for ZipOut<'_> {
@@ -46,8 +128,8 @@ pub enum Method {
     Deflated,
 }
 
-/// Refuses an archive at `dest` before any work is done: a path without a file name, or a
-/// directory in the way.
+/// Refuses an archive at `dest` before any work is done: a path without a file name, a
+/// directory in the way, or a symbolic link ([`crate::output::refuse_link`]).
 pub fn check_dest(dest: &Path) -> Result<()> {
     let refuse = |msg: &str| Error::Bundle {
         path: dest.into(),
@@ -61,7 +143,7 @@ pub fn check_dest(dest: &Path) -> Result<()> {
             "is a directory; refusing to replace it with an archive",
         ));
     }
-    Ok(())
+    crate::output::refuse_link(dest)
 }
 
 impl<'a> ZipOut<'a> {
@@ -76,12 +158,19 @@ impl<'a> ZipOut<'a> {
             path: dest.into(),
             msg: "not a file name".into(),
         })?;
-        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
-        let zip = ZipWriter::new(BufWriter::with_capacity(BUFFER_BYTES, file));
+        let file = File::create(&tmp).map_err(|e| Error::io(dest, e))?;
+        let failed = Arc::new(Mutex::new(None));
+        let zip = ZipWriter::new(Quiet {
+            file: BufWriter::with_capacity(BUFFER_BYTES, file),
+            failed: failed.clone(),
+            at: 0,
+            end: 0,
+        });
         Ok(ZipOut {
             dest: dest.to_path_buf(),
             tmp,
             zip: Some(zip),
+            failed,
             cancel,
         })
     }
@@ -104,28 +193,38 @@ impl<'a> ZipOut<'a> {
             Ok(()) => zip.write_all(bytes).map_err(|e| e.to_string()),
             Err(e) => Err(e.to_string()),
         };
-        written.map_err(|why| self.failed(name, why))
+        match (written, self.error()) {
+            (Ok(()), None) => Ok(()),
+            (_, Some(e)) => Err(Error::io(&self.dest, e)),
+            (Err(why), None) => Err(Error::Bundle {
+                path: self.dest.clone(),
+                msg: format!("cannot write entry {name}: {why}"),
+            }),
+        }
     }
 
-    /// The error of a failed write of entry `name`.
-    fn failed(&self, name: &str, why: String) -> Error {
-        Error::Bundle {
-            path: self.dest.clone(),
-            msg: format!("cannot write entry {name}: {why}"),
-        }
+    /// The file's first write error (it stays failed).
+    fn error(&self) -> Option<std::io::Error> {
+        let mut f = self.failed.lock().ok()?;
+        let e = f.take()?;
+        *f = Some(std::io::Error::new(e.kind(), e.to_string()));
+        Some(e)
     }
 
     /// Writes the central directory, flushes the file to disk and renames it into place.
     pub fn finish(mut self) -> Result<PathBuf> {
         let zip = self.zip.take().expect("open until finished");
-        let buffered = zip.finish().map_err(|e| Error::Bundle {
-            path: self.dest.clone(),
-            msg: format!("cannot finish the archive: {e}"),
-        })?;
-        let file = buffered
-            .into_inner()
-            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
-        drop(file);
+        let finished = zip.finish().map(|q| q.file.into_inner());
+        let failed = |e: std::io::Error| {
+            let _ = std::fs::remove_file(&self.tmp);
+            Error::io(&self.dest, e)
+        };
+        match (finished, self.error()) {
+            (Ok(Ok(file)), None) => drop(file),
+            (_, Some(e)) => return Err(failed(e)),
+            (Ok(Err(e)), None) => return Err(failed(e.into_error())),
+            (Err(e), None) => return Err(failed(std::io::Error::other(e.to_string()))),
+        }
         std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::io(&self.dest, e))?;
         Ok(self.dest.clone())
     }
@@ -144,6 +243,10 @@ fn remove_stale(dest: &Path) {
 impl Drop for ZipOut<'_> {
     fn drop(&mut self) {
         if self.zip.is_some() {
+            // The zip library finishes an archive it is dropped with: into nothing.
+            if let Ok(mut f) = self.failed.lock() {
+                f.get_or_insert_with(|| std::io::Error::other("dropped"));
+            }
             self.zip = None;
             let _ = std::fs::remove_file(&self.tmp);
         }

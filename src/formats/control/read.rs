@@ -77,7 +77,7 @@ pub(crate) fn settings_entry(archive: &Archive) -> Option<String> {
     names
         .into_iter()
         .find(|n| {
-            serde_json::from_slice::<Value>(archive.get(n).unwrap_or_default())
+            serde_json::from_slice::<Value>(archive.get(n).ok().flatten().unwrap_or_default())
                 .ok()
                 .and_then(|v| v.as_object().cloned())
                 .is_some_and(|o| {
@@ -458,7 +458,7 @@ fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
             ),
         ));
     }
-    let root = match serde_json::from_slice::<Value>(archive.get(entry).unwrap_or_default()) {
+    let root = match serde_json::from_slice::<Value>(archive.get(entry)?.unwrap_or_default()) {
         Ok(Value::Object(m)) => m,
         Ok(_) => return Err(archive.error(Some(entry), "is not a JSON object")),
         Err(e) => return Err(archive.error(Some(entry), format!("invalid JSON: {e}"))),
@@ -469,7 +469,7 @@ fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
         root,
     };
     check_top(&r)?;
-    let size = archive.get(entry).map_or(0, <[u8]>::len) as u64;
+    let size = archive.get(entry)?.map_or(0, <[u8]>::len) as u64;
     let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
     expand(&mut r.root, &mut budget).map_err(|m| r.bad(m))?;
     Ok(r)
@@ -656,8 +656,7 @@ mod tests {
         let bytes = w.finish().unwrap().into_inner();
         let path = std::path::Path::new("job.zip");
         let archive =
-            crate::formats::archive::read::read_zip_bytes(path, &bytes, &Default::default())
-                .unwrap();
+            crate::formats::archive::read::read_zip(path, bytes, &Default::default()).unwrap();
         let entry = settings_entry(&archive).unwrap();
         import(archive, &entry, "0")
     }

@@ -66,7 +66,7 @@ const SL1S_DISPLAY: (u32, u32, f64, f64) = (1620, 2560, 81.0, 128.0);
 
 /// True when `archive` holds an SL1's two settings entries.
 pub(crate) fn holds(archive: &super::archive::read::Archive) -> bool {
-    archive.get(CONFIG).is_some() && archive.get(PRUSASLICER).is_some()
+    archive.contains(CONFIG) && archive.contains(PRUSASLICER)
 }
 
 /// Refuses a job of several projectors: an SL1 shows one image per layer.

@@ -41,7 +41,7 @@ struct Ini<'a> {
 
 impl<'a> Ini<'a> {
     fn parse(archive: &'a Archive, entry: &'static str) -> Result<Ini<'a>> {
-        let bytes = archive.get(entry).unwrap_or_default();
+        let bytes = archive.get(entry)?.unwrap_or_default();
         let text = std::str::from_utf8(bytes)
             .map_err(|_| archive.error(Some(entry), "is not UTF-8 text"))?;
         let values = text
