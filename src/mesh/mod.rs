@@ -509,13 +509,8 @@ mod tests {
     fn weld_and_edges_match_the_reference_at_any_thread_count() {
         // Fixed-seed soups on a small lattice (so corners repeat, in both -0.0 and 0.0),
         // with some big fans (buckets past BUCKET_SCAN) and degenerate triangles.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut bits = crate::test_support::xorshift_bits(0x2545_f491_4f6c_dd1d);
+        let mut rnd = |m: u64| bits() % m;
         for case in 0..6 {
             let lattice = [3, 6, 12, 40, 6, 3][case];
             let mut soup: Soup = Vec::new();
