@@ -430,13 +430,12 @@ mod tests {
         // a fresh analysis gives for every layer.
         let mut rnd = xorshift(0x9e15_3a11);
         let outer = ngon(25.0, 20.0, 12.0, 24, true);
-        let hole = rect(20.0, 15.0, 24.0, 19.0);
-        let hole: Contour = hole.into_iter().rev().collect();
+        let inner = hole(20.0, 15.0, 24.0, 19.0);
         let layers: Vec<Vec<Contour>> = (0..23)
             .map(|i| {
                 let mut l = vec![with_collinear_points(&outer, i % 5, &mut rnd)];
                 if (8..15).contains(&i) {
-                    l.push(with_collinear_points(&hole, i % 3, &mut rnd));
+                    l.push(with_collinear_points(&inner, i % 3, &mut rnd));
                 }
                 l
             })

@@ -7,6 +7,11 @@ use crate::slice::Contour;
 
 pub(super) use crate::test_support::{closed, ngon, rect, xorshift};
 
+/// The rectangle `[x0, x1] × [y0, y1]` clockwise: a hole.
+pub(super) fn hole(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
+    rect(x0, y0, x1, y1).into_iter().rev().collect()
+}
+
 /// A ring of `n`-gons around `c`: the outer counter-clockwise, the hole clockwise.
 pub(super) fn ring(c: [f64; 2], outer: f64, inner: f64, n: usize) -> Vec<Contour> {
     vec![ngon(c[0], c[1], outer, n, true), ngon(c[0], c[1], inner, n, false)]

@@ -135,11 +135,7 @@ mod tests {
         assert!((mfd(&two) - 6.0).abs() <= 0.005);
         assert_eq!(mfd(&[]), 0.0);
         // A hole in the middle of a square: the best circle sits between hole and rim.
-        let holed = [rect(0.0, 0.0, 20.0, 20.0), {
-            let mut h = rect(8.0, 8.0, 12.0, 12.0);
-            h.reverse();
-            h
-        }];
+        let holed = [rect(0.0, 0.0, 20.0, 20.0), hole(8.0, 8.0, 12.0, 12.0)];
         // Corner circle touching two sides and the hole corner (8, 8): centre (t, t) with
         // √2·(8 − t) = t → t = 8√2/(1+√2).
         let t = 8.0 * std::f64::consts::SQRT_2 / (1.0 + std::f64::consts::SQRT_2);
