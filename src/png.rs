@@ -641,18 +641,12 @@ fn zlib_rows<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::xorshift_bits;
 
     fn decode(png: &[u8]) -> (u32, u32, Vec<u8>) {
         let img = image::load_from_memory_with_format(png, image::ImageFormat::Png).unwrap();
         let g = img.as_luma8().expect("8-bit gray").clone();
         (g.width(), g.height(), g.into_raw())
-    }
-
-    fn xorshift(state: &mut u64) -> u64 {
-        *state ^= *state << 13;
-        *state ^= *state >> 7;
-        *state ^= *state << 17;
-        *state
     }
 
     /// The same stream written the slow, obvious way: raw scanlines, runs found byte by
@@ -760,13 +754,13 @@ mod tests {
     /// anti-aliased edges, 4 runs (up to 600 long) of four values, 5 one value, 6 runs of
     /// three values (some up to 3000 long), 7 and 8 runs of random bytes (some up to 300
     /// long), 9 and 10 rows repeating rows above ([`repeated_rows`]). Runs cross rows.
-    fn image(w: usize, h: usize, k: usize, seed: &mut u64) -> Vec<u8> {
+    fn image(w: usize, h: usize, k: usize, rnd: &mut dyn FnMut() -> u64) -> Vec<u8> {
         let mut d = vec![0u8; w * h];
         let (mut i, n) = (0, d.len());
         match k {
             0 => {}
             1 => d.fill(255),
-            2 => d.iter_mut().for_each(|v| *v = xorshift(seed) as u8),
+            2 => d.iter_mut().for_each(|v| *v = rnd() as u8),
             3 => {
                 for (i, v) in d.iter_mut().enumerate() {
                     let (x, y) = ((i % w) as f64, (i / w) as f64);
@@ -777,15 +771,15 @@ mod tests {
             }
             4 => {
                 while i < n {
-                    let k = (xorshift(seed) % 600) as usize + 1;
-                    let v = [0u8, 255, 7, 128][(xorshift(seed) % 4) as usize];
+                    let k = (rnd() % 600) as usize + 1;
+                    let v = [0u8, 255, 7, 128][(rnd() % 4) as usize];
                     d[i..(i + k).min(n)].fill(v);
                     i += k;
                 }
             }
             5..=8 => {
                 while i < n {
-                    let r = xorshift(seed);
+                    let r = rnd();
                     let len = match (k, r % 4) {
                         (5, _) => n,
                         (6, 0) => (r >> 8) as usize % 3000 + 1,
@@ -800,7 +794,7 @@ mod tests {
                     i += len;
                 }
             }
-            _ => return repeated_rows(w, h, k == 10, seed),
+            _ => return repeated_rows(w, h, k == 10, rnd),
         }
         d
     }
@@ -809,7 +803,7 @@ mod tests {
     fn bytes_match_the_obvious_encoder_and_decode() {
         // Pins the exact stream (not just what a decoder reads back): masks are hashed
         // into job.json, so a change of bytes is a change of output.
-        let mut seed = 0x0bad_5eed_1234_5678u64;
+        let mut rnd = xorshift_bits(0x0bad_5eed_1234_5678);
         for (w, h) in [
             (1, 1),
             (3, 2),
@@ -824,7 +818,7 @@ mod tests {
             (1024, 768),
         ] {
             for k in 0..11 {
-                let d = image(w, h, k, &mut seed);
+                let d = image(w, h, k, &mut rnd);
                 let png = encode_gray8(w as u32, h as u32, &d);
                 assert!(png == reference_png(w, h, &d), "{w}x{h} image {k}");
                 let by_rows = encode_gray8_rows(w as u32, h as u32, |r| &d[r * w..(r + 1) * w]);
@@ -837,11 +831,11 @@ mod tests {
     /// Rows that often repeat the row above: runs of random values and lengths (`zones`
     /// false), or bands of zone-like rows (a few runs of grays between zeros, bands of
     /// zero rows between them) as zone-compensated masks have.
-    fn repeated_rows(w: usize, h: usize, zones: bool, seed: &mut u64) -> Vec<u8> {
+    fn repeated_rows(w: usize, h: usize, zones: bool, rnd: &mut dyn FnMut() -> u64) -> Vec<u8> {
         let mut d = vec![0u8; w * h];
         let mut row = vec![0u8; w];
         for r in 0..h {
-            let x = xorshift(seed);
+            let x = rnd();
             if r == 0 || x.is_multiple_of(4) {
                 row.fill(0);
                 if zones && x.is_multiple_of(3) {
@@ -851,7 +845,7 @@ mod tests {
                     let (a, b) = (a.min(b), a.max(b) + 1);
                     let mut c = a;
                     while c < b {
-                        let y = xorshift(seed);
+                        let y = rnd();
                         let k = if zones {
                             (y as usize % 80 + 1).min(b - c)
                         } else {
@@ -879,7 +873,7 @@ mod tests {
 
     #[test]
     fn rows_repeating_the_row_above_are_copied() {
-        let mut seed = 0x5eed_0fc0_b1e5_u64;
+        let mut rnd = xorshift_bits(0x5eed_0fc0_b1e5);
         // Distances 2, 4, 10 (extra bits), 301, 1025 and 32768, the largest; no copies
         // beyond it.
         for (w, h) in [
@@ -892,7 +886,7 @@ mod tests {
             (32768, 3),
         ] {
             for zones in [false, true] {
-                let d = repeated_rows(w, h, zones, &mut seed);
+                let d = repeated_rows(w, h, zones, &mut rnd);
                 let png = encode_gray8(w as u32, h as u32, &d);
                 assert!(png == reference_png(w, h, &d), "{w}x{h} {zones}");
                 assert!(decode(&png).2 == d, "{w}x{h} {zones}");
@@ -979,12 +973,12 @@ mod tests {
         assert_eq!((ad.a % ADLER_MOD, ad.b % ADLER_MOD), (a, b));
         // Random runs, short and long, some past the plain-integer limit, over more bytes
         // than one reduction period.
-        let mut state = 0x2545_F491_4F6C_DD1D;
+        let mut rnd = xorshift_bits(0x2545_F491_4F6C_DD1D);
         let (mut a, mut b) = (1u64, 0u64);
         let mut ad = Adler::NEW;
         let mut total = 0u64;
         while total < 12_000_000 {
-            let r = xorshift(&mut state);
+            let r = rnd();
             let v = (r >> 8) as u8;
             let k = match r % 8 {
                 0 => (r >> 20) % 3_000_000,

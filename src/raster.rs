@@ -472,6 +472,7 @@ pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::C
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::{closed, ngon as circle, rect, xorshift};
 
     fn field() -> Field {
         Field {
@@ -479,23 +480,6 @@ mod tests {
             height_px: 768,
             pixel_mm: 0.0634765625,
         }
-    }
-
-    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
-        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-    }
-
-    fn circle(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
-        let mut c: Contour = (0..n)
-            .map(|i| {
-                let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                [cx + r * a.cos(), cy + r * a.sin()]
-            })
-            .collect();
-        if !ccw {
-            c.reverse();
-        }
-        c
     }
 
     #[test]
@@ -541,25 +525,16 @@ mod tests {
         let f = field();
         let (fw, fh) = (1024.0 * f.pixel_mm, 768.0 * f.pixel_mm);
         let r = Rasterizer::new(f);
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut reused = Scratch::default();
         for case in 0..40 {
             let (cx, cy) = (rnd() * fw, rnd() * fh);
             let n = 3 + (rnd() * 60.0) as usize;
             let rmax = 0.2 + rnd() * if case % 4 == 0 { 40.0 } else { 8.0 };
-            let star: Contour = (0..n)
-                .map(|i| {
-                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                    let rad = rmax * (0.3 + 0.7 * rnd());
-                    [cx + rad * a.cos(), cy + rad * a.sin()]
-                })
-                .collect();
+            let star = closed(n, true, |a| {
+                let rad = rmax * (0.3 + 0.7 * rnd());
+                [cx + rad * a.cos(), cy + rad * a.sin()]
+            });
             let shapes = [star.clone()];
             let a = r.coverage(&shapes, &mut reused);
             let b = r.coverage(&shapes, &mut Scratch::default());

@@ -295,8 +295,7 @@ mod tests {
 
     #[test]
     fn reads_files_and_refuses_non_utf8() {
-        let dir = std::env::temp_dir().join(format!("dmdsl-table-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::test_support::scratch("table", "read");
         let good = dir.join("good.csv");
         std::fs::write(&good, "x_mm,y_mm\n1,2\n").unwrap();
         let (bytes, r) = read::<Xy>(&good, &REQUIRED).unwrap();

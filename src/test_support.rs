@@ -1,5 +1,7 @@
-//! Scaffolding the unit tests share: scratch directories and listings.
+//! Scaffolding the unit tests share: scratch directories and listings, a fixed-seed random
+//! number generator, simple contours.
 
+use crate::slice::Contour;
 use std::path::{Path, PathBuf};
 
 /// A fresh, empty scratch directory `dmdsl-PREFIX-PID-TAG` in the temporary directory.
@@ -18,4 +20,43 @@ pub(crate) fn names(dir: &Path) -> Vec<String> {
         .collect();
     v.sort();
     v
+}
+
+/// The xorshift (13, 7, 17) generator from `seed`: its raw 64-bit states.
+pub(crate) fn xorshift_bits(mut s: u64) -> impl FnMut() -> u64 {
+    move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    }
+}
+
+/// [`xorshift_bits`] as numbers uniform in [0, 1).
+pub(crate) fn xorshift(seed: u64) -> impl FnMut() -> f64 {
+    let mut bits = xorshift_bits(seed);
+    move || (bits() >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// The rectangle `[x0, x1] × [y0, y1]`, counter-clockwise.
+pub(crate) fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
+    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+}
+
+/// The closed contour through `f(a)` for `n` angles `a` evenly spaced over a turn
+/// (counter-clockwise, or reversed).
+pub(crate) fn closed(n: usize, ccw: bool, f: impl FnMut(f64) -> [f64; 2]) -> Contour {
+    let mut c: Contour = (0..n)
+        .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
+        .map(f)
+        .collect();
+    if !ccw {
+        c.reverse();
+    }
+    c
+}
+
+/// The regular `n`-gon of circumradius `r` around (`cx`, `cy`).
+pub(crate) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
+    closed(n, ccw, |a| [cx + r * a.cos(), cy + r * a.sin()])
 }

@@ -13,7 +13,7 @@ use super::blend::{self, Rect, Response, LUT_STEPS};
 use crate::bundle::Optics;
 use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
-use crate::optics::{Compensator, Dither, GrayMap, JobOptics, Mode, OpticsOptions};
+use crate::optics::{Compensator, GrayMap, JobOptics, Mode, OpticsOptions};
 use crate::profile::{BlendCurve, Field, Profile, Projector};
 use crate::raster::Mask;
 use crate::warning::Warning;
@@ -146,17 +146,7 @@ impl Tiler {
         let responses = ps.iter().map(response).collect::<Result<Vec<_>>>()?;
         let curve = profile.blend.unwrap_or_default();
         let mut tiler = Tiler::new(ps, &curve, &responses, &vec![None; n]);
-        let calibrated = ps.iter().filter(|p| p.calibration.is_some()).count();
-        let mode = opts.mode.unwrap_or(if calibrated > 0 {
-            Mode::Zone
-        } else {
-            Mode::Off
-        });
-        if opts.dither == Dither::On && mode == Mode::Off {
-            return Err(Error::Usage(
-                "--dither on needs compensation (zone or pixel)".to_string(),
-            ));
-        }
+        let mode = opts.resolve_mode(ps.iter().any(|p| p.calibration.is_some()))?;
         if mode == Mode::Off {
             return Ok(tiler);
         }
@@ -193,13 +183,12 @@ impl Tiler {
                 Compensator::new(c, &local(p), mode, opts.dither).map_err(|m| wrap(p, m))?;
             target = target.min(alone.prediction.target);
         }
-        let mut comps = Vec::with_capacity(n);
-        for (p, c) in ps.iter().zip(&cals) {
-            comps.push(
+        let comps = (ps.iter().zip(&cals))
+            .map(|(p, c)| {
                 Compensator::with_target(c, &local(p), mode, opts.dither, Some(target))
-                    .map_err(|m| wrap(p, m))?,
-            );
-        }
+                    .map_err(|m| wrap(p, m))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let units = cals[0].units;
         let exposure = crate::optics::exposure::resolve(profile, units, target, thickness_mm);
         tiler.optics = comps

@@ -368,27 +368,16 @@ impl Mesh {
             .filter(|&i| find(&mut parent, i) == i)
             .count() as u64;
 
+        let cross = |u: [f64; 3], v: [f64; 3]| {
+            [0, 1, 2].map(|i| u[(i + 1) % 3] * v[(i + 2) % 3] - u[(i + 2) % 3] * v[(i + 1) % 3])
+        };
         let mut volume = 0.0;
         for t in &triangles {
-            let [a, b, c] = [
-                vertices[t[0] as usize],
-                vertices[t[1] as usize],
-                vertices[t[2] as usize],
-            ];
-            let cross = [
-                b[1] * c[2] - b[2] * c[1],
-                b[2] * c[0] - b[0] * c[2],
-                b[0] * c[1] - b[1] * c[0],
-            ];
-            volume += (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0;
-            let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
-            if n[0] == 0.0 && n[1] == 0.0 && n[2] == 0.0 {
+            let [a, b, c] = t.map(|v| vertices[v as usize]);
+            let bc = cross(b, c);
+            volume += (a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2]) / 6.0;
+            let n = cross([0, 1, 2].map(|i| b[i] - a[i]), [0, 1, 2].map(|i| c[i] - a[i]));
+            if n == [0.0; 3] {
                 degenerate += 1;
             }
         }
@@ -509,13 +498,8 @@ mod tests {
     fn weld_and_edges_match_the_reference_at_any_thread_count() {
         // Fixed-seed soups on a small lattice (so corners repeat, in both -0.0 and 0.0),
         // with some big fans (buckets past BUCKET_SCAN) and degenerate triangles.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut bits = crate::test_support::xorshift_bits(0x2545_f491_4f6c_dd1d);
+        let mut rnd = |m: u64| bits() % m;
         for case in 0..6 {
             let lattice = [3, 6, 12, 40, 6, 3][case];
             let mut soup: Soup = Vec::new();

@@ -369,6 +369,9 @@ fn cv_rms(form: Form, rows_d: &[FitRow], nlev: usize, k: usize) -> Option<f64> {
     (n > 0).then(|| (ss / n as f64).sqrt() * 100.0)
 }
 
+/// The forms of P, in the order candidates of as many terms are preferred.
+const FORMS: [Form; 3] = [Form::Polynomial, Form::Exponential, Form::InverseSquare];
+
 fn form_name(f: Form) -> &'static str {
     match f {
         Form::Polynomial => "polynomial",
@@ -440,14 +443,9 @@ impl<'a> Setup<'a> {
             }
         }
         // A cubic needs at least 4 distinct coordinates along each axis.
-        for axis in ["x", "y"] {
-            let vals: std::collections::BTreeSet<i64> = readings
-                .iter()
-                .map(|r| {
-                    let t = if axis == "x" { r.x_mm } else { r.y_mm };
-                    (t * 1e6).round() as i64
-                })
-                .collect();
+        for (i, axis) in ["x", "y"].into_iter().enumerate() {
+            let vals: std::collections::BTreeSet<i64> =
+                readings.iter().map(|r| <[i64; 2]>::from(position_key(r))[i]).collect();
             if vals.len() < 4 {
                 return Err(input_error(format!(
                     "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
@@ -575,20 +573,12 @@ impl<'a> Setup<'a> {
                 break;
             }
             let rows_d = self.rows(d, lo);
-            if d >= 3 {
-                if let Some(e) = cv_rms(Form::Polynomial, &rows_d, valid_n, k) {
-                    m.cv.push((d as u64, e));
-                    cands.push((Poly::terms(d), 0, Form::Polynomial, d, e));
-                }
-            }
-            if let Some(e) = cv_rms(Form::Exponential, &rows_d, valid_n, k) {
-                m.cv_exp.push((d as u64, e));
-                cands.push((Poly::terms(d), 1, Form::Exponential, d, e));
-            }
-            if d <= MAX_INVERSE_SQUARE_DEGREE {
-                if let Some(e) = cv_rms(Form::InverseSquare, &rows_d, valid_n, k) {
-                    m.cv_inv.push((d as u64, e));
-                    cands.push((Poly::terms(d), 2, Form::InverseSquare, d, e));
+            let offered = [d >= 3, true, d <= MAX_INVERSE_SQUARE_DEGREE];
+            let cvs = [&mut m.cv, &mut m.cv_exp, &mut m.cv_inv];
+            for (rank, ((form, cv), ok)) in FORMS.into_iter().zip(cvs).zip(offered).enumerate() {
+                if let Some(e) = ok.then(|| cv_rms(form, &rows_d, valid_n, k)).flatten() {
+                    cv.push((d as u64, e));
+                    cands.push((Poly::terms(d), rank as u8, form, d, e));
                 }
             }
         }
@@ -612,8 +602,7 @@ fn calibrated_area(
     (fw, fh): (f64, f64),
     path: &Path,
 ) -> Result<([f64; 4], [f64; 4])> {
-    let pitch = |vals: Vec<f64>| -> f64 {
-        let mut v = vals;
+    let pitch = |mut v: Vec<f64>| -> f64 {
         v.sort_by(|a, b| a.partial_cmp(b).unwrap());
         v.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
         let mut gaps: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();

@@ -90,6 +90,19 @@ pub struct OpticsOptions {
     pub dither: Dither,
 }
 
+impl OpticsOptions {
+    /// The mode to apply: the one asked for, else zone when a projector is `calibrated`,
+    /// else off. `--dither on` without compensation is a usage error.
+    pub fn resolve_mode(&self, calibrated: bool) -> Result<Mode> {
+        let mode = (self.mode).unwrap_or(if calibrated { Mode::Zone } else { Mode::Off });
+        if self.dither == Dither::On && mode == Mode::Off {
+            let msg = "--dither on needs compensation (zone or pixel)";
+            return Err(Error::Usage(msg.to_string()));
+        }
+        Ok(mode)
+    }
+}
+
 /// Applies `--calibration [PROJECTOR=]FILE` arguments to a profile: each file replaces the
 /// calibration of the named projector (without a name: the first projector, which must
 /// then be the only one).
@@ -152,16 +165,7 @@ pub fn prepare(
         .projector
         .iter()
         .position(|p| p.calibration.is_some());
-    let mode = match (opts.mode, cal) {
-        (Some(m), _) => m,
-        (None, Some(_)) => Mode::Zone,
-        (None, None) => Mode::Off,
-    };
-    if opts.dither == Dither::On && mode == Mode::Off {
-        return Err(Error::Usage(
-            "--dither on needs compensation (zone or pixel)".to_string(),
-        ));
-    }
+    let mode = opts.resolve_mode(cal.is_some())?;
     if mode == Mode::Off {
         return Ok(None);
     }

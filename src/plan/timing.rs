@@ -96,47 +96,35 @@ mod tests {
         }
     }
 
+    fn mv(to_mm: f64, speed_mm_s: f64, accel_mm_s2: f64) -> Step {
+        Step::Move {
+            to_mm,
+            speed_mm_s,
+            accel_mm_s2,
+        }
+    }
+
+    fn sweep(to_mm: f64) -> [Step; 1] {
+        [Step::Sweep {
+            to_mm,
+            speed_mm_s: 0.05,
+        }]
+    }
+
     #[test]
     fn expose_waits_for_load_and_adds_latencies() {
         let a = [Step::Expose { s: 2.0 }];
         assert!((t().layer_times(&[&a])[0] - (0.5 + 0.1 + 2.0 + 0.2)).abs() < 1e-12);
         // A move longer than the load hides it.
-        let b = [
-            Step::Move {
-                to_mm: 10.0,
-                speed_mm_s: 10.0,
-                accel_mm_s2: 100.0,
-            },
-            Step::Wait { s: 0.25 },
-            Step::Expose { s: 2.0 },
-        ];
+        let b = [mv(10.0, 10.0, 100.0), Step::Wait { s: 0.25 }, Step::Expose { s: 2.0 }];
         let mv = move_time(10.0, 10.0, 100.0);
         assert!((t().layer_times(&[&b])[0] - (mv + 0.25 + 2.3)).abs() < 1e-12);
     }
 
     #[test]
     fn sweep_run_opens_once_and_closes_in_last_layer() {
-        let s1 = [Step::Sweep {
-            to_mm: 0.1,
-            speed_mm_s: 0.05,
-        }];
-        let s2 = [Step::Sweep {
-            to_mm: 0.2,
-            speed_mm_s: 0.05,
-        }];
-        let m = [
-            Step::Move {
-                to_mm: 2.3,
-                speed_mm_s: 5.0,
-                accel_mm_s2: 50.0,
-            },
-            Step::Move {
-                to_mm: 0.3,
-                speed_mm_s: 5.0,
-                accel_mm_s2: 50.0,
-            },
-            Step::Expose { s: 1.0 },
-        ];
+        let (s1, s2) = (sweep(0.1), sweep(0.2));
+        let m = [mv(2.3, 5.0, 50.0), mv(0.3, 5.0, 50.0), Step::Expose { s: 1.0 }];
         let v = t().layer_times(&[&s1, &s2, &m]);
         assert!((v[0] - (0.5 + 0.1 + 2.0)).abs() < 1e-12, "{v:?}");
         assert!((v[1] - (2.0 + 0.2)).abs() < 1e-12, "{v:?}");

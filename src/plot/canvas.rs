@@ -67,46 +67,33 @@ impl Canvas {
             return;
         }
         if let Some(path) = path(pts, false) {
+            let (paint, id) = (paint(color, 255, true), Transform::identity());
             let st = Stroke {
                 width,
                 ..Stroke::default()
             };
-            self.pm.stroke_path(
-                &path,
-                &paint(color, 255, true),
-                &st,
-                Transform::identity(),
-                None,
-            );
+            self.pm.stroke_path(&path, &paint, &st, id, None);
         }
     }
 
     /// A filled dot of radius `r` centred on (x, y).
     pub fn dot(&mut self, x: f32, y: f32, r: f32, color: [u8; 3]) {
-        if let Some(path) = PathBuilder::from_circle(x, y, r) {
-            self.pm.fill_path(
-                &path,
-                &paint(color, 255, true),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
-        }
+        self.fill(PathBuilder::from_circle(x, y, r), color, 255);
     }
 
     /// Fills the polygon through `pts` with `color` at `alpha` (anti-aliased).
     pub fn polygon(&mut self, pts: &[(f32, f32)], color: [u8; 3], alpha: u8) {
-        if pts.len() < 3 {
-            return;
+        if pts.len() >= 3 {
+            self.fill(path(pts, true), color, alpha);
         }
-        if let Some(path) = path(pts, true) {
-            self.pm.fill_path(
-                &path,
-                &paint(color, alpha, true),
-                FillRule::Winding,
-                Transform::identity(),
-                None,
-            );
+    }
+
+    /// Fills `path` (if any) with `color` at `alpha`, anti-aliased.
+    fn fill(&mut self, path: Option<tiny_skia::Path>, color: [u8; 3], alpha: u8) {
+        if let Some(path) = path {
+            let paint = paint(color, alpha, true);
+            let id = Transform::identity();
+            self.pm.fill_path(&path, &paint, FillRule::Winding, id, None);
         }
     }
 
@@ -219,15 +206,8 @@ mod tests {
     use crate::plot::text::LABEL;
 
     fn dark(c: &Canvas, x0: u32, y0: u32, x1: u32, y1: u32) -> usize {
-        let mut n = 0;
-        for y in y0..y1 {
-            for x in x0..x1 {
-                if c.pixel(x, y)[0] < 128 {
-                    n += 1;
-                }
-            }
-        }
-        n
+        let px = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
+        px.filter(|&(x, y)| c.pixel(x, y)[0] < 128).count()
     }
 
     #[test]

@@ -31,9 +31,8 @@ pub struct Series {
 impl Series {
     /// A series labelled `label` (empty: not in the legend).
     pub fn new(label: &str, color: [u8; 3], style: Style, points: Vec<(f64, f64)>) -> Series {
-        let label = label.into();
         Series {
-            label,
+            label: label.into(),
             color,
             style,
             points,
@@ -59,12 +58,11 @@ pub struct Band {
 impl Band {
     /// The range `x0..x1` labelled `label` (empty: no legend entry).
     pub fn new(x0: f64, x1: f64, color: [u8; 3], label: &str) -> Band {
-        let label = label.into();
         Band {
             x0,
             x1,
             color,
-            label,
+            label: label.into(),
         }
     }
 }

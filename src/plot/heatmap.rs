@@ -66,11 +66,7 @@ pub fn colormap(t: f64) -> [u8; 3] {
     } * 8.0;
     let i = (t.floor() as usize).min(7);
     let f = t - i as f64;
-    let mut c = [0u8; 3];
-    for k in 0..3 {
-        c[k] = (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f).round() as u8;
-    }
-    c
+    [0, 1, 2].map(|k| (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f).round() as u8)
 }
 
 impl Heatmap {

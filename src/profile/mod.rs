@@ -548,33 +548,26 @@ mod tests {
     }
 
     #[test]
-    fn unknown_key_and_missing_value_are_errors() {
+    fn unknown_keys_missing_and_out_of_range_values_are_one_line_errors() {
         let src = builtin_source(DEFAULT_PROFILE).unwrap();
-        let bad = src.replace("binary = false", "binary = false\nbinnary = true");
-        let e = Profile::from_toml(&bad, "x.toml").unwrap_err().to_string();
+        let err = |from: &str, to: &str| {
+            let bad = src.replace(from, to);
+            assert_ne!(bad, src);
+            Profile::from_toml(&bad, "x.toml").unwrap_err().to_string()
+        };
+        let e = err("binary = false", "binary = false\nbinnary = true");
         assert!(e.contains("unknown field `binnary`"), "{e}");
-        let missing = src.replace("layer_height_mm = 0.05\n", "");
-        let e = Profile::from_toml(&missing, "x.toml")
-            .unwrap_err()
-            .to_string();
+        let e = err("layer_height_mm = 0.05\n", "");
         assert!(e.contains("missing field `layer_height_mm`"), "{e}");
-        let zero = src.replace("layer_height_mm = 0.05", "layer_height_mm = 0.0");
-        let e = Profile::from_toml(&zero, "x.toml").unwrap_err().to_string();
-        assert!(e.contains("must be a finite number > 0"), "{e}");
-        assert!(!e.contains('\n'));
-    }
-
-    #[test]
-    fn a_psf_outside_its_range_is_refused_by_name() {
-        let src = builtin_source(DEFAULT_PROFILE).unwrap();
+        let e = err("layer_height_mm = 0.05", "layer_height_mm = 0.0");
+        assert!(
+            e.contains("must be a finite number > 0") && !e.contains('\n'),
+            "{e}"
+        );
         for bad in ["9.0", "0.01"] {
-            let wide = src.replace("psf_sigma_px = 0.5", &format!("psf_sigma_px = {bad}"));
-            assert_ne!(wide, src);
-            let e = Profile::from_toml(&wide, "x.toml").unwrap_err().to_string();
-            assert!(
-                e.contains(&format!("psf_sigma_px = {bad} is not a point-spread width")),
-                "{e}"
-            );
+            let e = err("psf_sigma_px = 0.5", &format!("psf_sigma_px = {bad}"));
+            let want = format!("psf_sigma_px = {bad} is not a point-spread width");
+            assert!(e.contains(&want), "{e}");
         }
     }
 

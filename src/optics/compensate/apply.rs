@@ -249,16 +249,11 @@ mod tests {
             let (cx, cy) = (2.0 + rnd() * 36.0, 2.0 + rnd() * 27.0);
             let n = 3 + (rnd() * 40.0) as usize;
             let rmax = 0.3 + rnd() * 12.0;
-            (0..n)
-                .map(|i| {
-                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                    let rad = rmax * (0.3 + 0.7 * rnd());
-                    [
-                        (cx + rad * a.cos()).clamp(0.0, 40.0),
-                        (cy + rad * a.sin()).clamp(0.0, 30.0),
-                    ]
-                })
-                .collect::<Vec<[f64; 2]>>()
+            crate::test_support::closed(n, true, |a| {
+                let rad = rmax * (0.3 + 0.7 * rnd());
+                let p = [cx + rad * a.cos(), cy + rad * a.sin()];
+                [p[0].clamp(0.0, 40.0), p[1].clamp(0.0, 30.0)]
+            })
         };
         let layers: Vec<Vec<Vec<[f64; 2]>>> = (0..48)
             .map(|case| {

@@ -147,11 +147,8 @@ mod tests {
                     }
                 }
             }
-            let mut plate = Mask {
-                width: w as u32,
-                height: h as u32,
-                data: vec![255; w * h],
-            };
+            let mut plate = Mask::zeros(w as u32, h as u32);
+            plate.data.fill(255);
             c.apply(&mut plate);
             assert!(plate == map, "{mode:?} {dither:?}");
             let mut p = crate::profile::Profile::default_profile().projector[0].clone();

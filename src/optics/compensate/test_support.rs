@@ -72,16 +72,7 @@ pub(super) fn response_s(g: u8) -> f64 {
     (g as f64 / 255.0).powi(2)
 }
 
-/// A tiny fixed-seed PRNG (xorshift), uniform in [0, 1).
-pub(super) fn rng(seed: u64) -> impl FnMut() -> f64 {
-    let mut s = seed;
-    move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+pub(super) use crate::test_support::xorshift as rng;
 
 /// A random calibration field over a 40 × 30 mm area: every form, degrees 1 to
 /// [`MAX_DEGREE`](crate::optics::field::MAX_DEGREE), sometimes a smaller polynomial

@@ -69,13 +69,8 @@ pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
             }
         }
     }
-    let mut n = 0;
-    for a in 0..u.len() as u32 {
-        if find(&mut parent, a) == a && !supported[a as usize] {
-            n += 1;
-        }
-    }
-    n
+    let roots = (0..u.len() as u32).filter(|&a| find(&mut parent, a) == a);
+    roots.filter(|&a| !supported[a as usize]).count() as u32
 }
 
 #[cfg(test)]

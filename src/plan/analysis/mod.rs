@@ -1,22 +1,14 @@
-//! Per-layer analysis (docs/PLANNING.md): the max fill distance (DisMax-Min of Li et al.)
-//! and the bounding box from the exact section contours (mm: a pixel is 0.063 mm, the fill
-//! distance must be right to ±0.02 mm), the unsupported islands from the pixels the mask
-//! lights.
-//!
-//! * **Max fill distance**: the radius of the largest circle inside the section, found by
-//!   a best-first cell search ([`max_fill_distance_with`], `fill_distance/`): a true
-//!   inscribed radius, never less than the exact value by more than [`PRECISION_MM`].
-//! * **Islands**: 4-connected regions of the lit pixels (coverage ≥ 50 %, the
-//!   [`crate::raster::LitRuns`] the rasterizer keeps as it draws the mask) that share no
-//!   pixel with the layer below's (`islands.rs`). Layer 0 rests on the platform; features
-//!   that light no pixel do not print and are not counted.
-//! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
+//! Per-layer analysis (docs/PLANNING.md): from the exact section contours, the max fill
+//! distance (DisMax-Min of Li et al.: a true inscribed radius within [`PRECISION_MM`] of
+//! the largest, [`max_fill_distance_with`]) and the bounding box of the points (mm,
+//! `[[x_min, y_min], [x_max, y_max]]`); from the pixels the mask lights
+//! ([`crate::raster::LitRuns`]), the islands resting on nothing in the layer below
+//! (`islands.rs`; layer 0 rests on the platform).
 //!
 //! A layer whose section equals the layer below's once collinear points are left out (a
-//! prism: [`COLLINEAR_MM`], `collinear.rs`) takes the layer below's analysis with no
-//! islands instead of being analysed again ([`Analyser`]). Overlapping shells are not
-//! merged first: an edge of one inside another counts as boundary, so the max fill
-//! distance of such a section is a lower bound.
+//! prism, [`COLLINEAR_MM`]) takes the layer below's analysis with no islands
+//! ([`Analyser`]). Overlapping shells are not merged: an edge of one inside another counts
+//! as boundary, so the max fill distance is then a lower bound.
 
 // A `bench-no-analysis` build skips the search (and the rasterizer keeps no lit runs):
 // their state goes unused.
@@ -438,13 +430,12 @@ mod tests {
         // a fresh analysis gives for every layer.
         let mut rnd = xorshift(0x9e15_3a11);
         let outer = ngon(25.0, 20.0, 12.0, 24, true);
-        let hole = rect(20.0, 15.0, 24.0, 19.0);
-        let hole: Contour = hole.into_iter().rev().collect();
+        let inner = hole(20.0, 15.0, 24.0, 19.0);
         let layers: Vec<Vec<Contour>> = (0..23)
             .map(|i| {
                 let mut l = vec![with_collinear_points(&outer, i % 5, &mut rnd)];
                 if (8..15).contains(&i) {
-                    l.push(with_collinear_points(&hole, i % 3, &mut rnd));
+                    l.push(with_collinear_points(&inner, i % 3, &mut rnd));
                 }
                 l
             })

@@ -5,25 +5,11 @@
 use super::{Edges, LitRuns};
 use crate::slice::Contour;
 
-pub(super) fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
-    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-}
+pub(super) use crate::test_support::{closed, ngon, rect, xorshift};
 
-/// The closed contour through `f(a)` for `n` angles `a` evenly spaced over a turn
-/// (counter-clockwise, or reversed).
-pub(super) fn closed(n: usize, ccw: bool, f: impl FnMut(f64) -> [f64; 2]) -> Contour {
-    let mut c: Contour = (0..n)
-        .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
-        .map(f)
-        .collect();
-    if !ccw {
-        c.reverse();
-    }
-    c
-}
-
-pub(super) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
-    closed(n, ccw, |a| [cx + r * a.cos(), cy + r * a.sin()])
+/// The rectangle `[x0, x1] × [y0, y1]` clockwise: a hole.
+pub(super) fn hole(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
+    rect(x0, y0, x1, y1).into_iter().rev().collect()
 }
 
 /// A ring of `n`-gons around `c`: the outer counter-clockwise, the hole clockwise.
@@ -108,15 +94,6 @@ pub(super) fn brute_max(
         }
     }
     brute
-}
-
-pub(super) fn xorshift(mut s: u64) -> impl FnMut() -> f64 {
-    move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// A disc of radius `r` with a cross of half-width `a` cut out (or, with `hole` > 0,

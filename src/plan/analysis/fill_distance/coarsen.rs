@@ -120,7 +120,7 @@ pub(super) fn coarsen_section(contours: &[Contour], out: &mut Vec<Contour>) -> f
 mod tests {
     use super::*;
     use crate::plan::analysis::fill_distance::edges::seg_d2;
-    use crate::plan::analysis::test_support::xorshift;
+    use crate::plan::analysis::test_support::{closed, xorshift};
 
     /// Distance from `p` to the closed polyline `c`.
     fn polyline_distance(c: &[[f64; 2]], p: [f64; 2]) -> f64 {
@@ -142,13 +142,10 @@ mod tests {
         for case in 0..40 {
             let n = 50 + (rnd() * 2000.0) as usize;
             let noise = [0.0, 0.0002, 0.0008, 0.003][case % 4];
-            let mut c: Contour = (0..n)
-                .map(|i| {
-                    let a = std::f64::consts::TAU * i as f64 / n as f64;
-                    let r = 5.0 + noise * (rnd() - 0.5);
-                    [r * a.cos(), r * a.sin()]
-                })
-                .collect();
+            let mut c = closed(n, true, |a| {
+                let r = 5.0 + noise * (rnd() - 0.5);
+                [r * a.cos(), r * a.sin()]
+            });
             if case % 5 == 0 {
                 let k = (rnd() * n as f64) as usize;
                 let p = c[k];

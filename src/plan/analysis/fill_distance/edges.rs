@@ -605,7 +605,7 @@ impl Edges {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::analysis::test_support::{rect, star, xorshift};
+    use crate::plan::analysis::test_support::{hole, rect, star, xorshift};
     use crate::plan::analysis::{max_fill_distance_with, PRECISION_MM};
 
     #[test]
@@ -630,11 +630,7 @@ mod tests {
 
     #[test]
     fn inside_and_distance() {
-        let sq = [rect(0.0, 0.0, 10.0, 10.0), {
-            let mut h = rect(4.0, 4.0, 6.0, 6.0);
-            h.reverse();
-            h
-        }];
+        let sq = [rect(0.0, 0.0, 10.0, 10.0), hole(4.0, 4.0, 6.0, 6.0)];
         let e = Edges::new(&sq);
         assert!(e.inside([1.0, 1.0]));
         assert!(!e.inside([5.0, 5.0]));

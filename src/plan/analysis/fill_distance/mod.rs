@@ -49,26 +49,11 @@ pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f6
     ((r - dev).max(0.0), c)
 }
 
-/// [`max_fill_distance`] on indexed edges with a chosen precision, mm.
-///
-/// Best-first search over square cells ordered by an upper bound of the signed distance
-/// inside them: with `T` the best centre depth so far plus `precision`, a cell is dropped
-/// once shown to hold no point deeper than `T`, and the search ends when the largest bound
-/// left is within `precision` of the best depth; a local pattern search then polishes the
-/// best centre, moving only to deeper points. A popped cell goes through these steps
-/// (`search.rs`; the method, and why each drop is exact: docs/PLANNING.md, "The search"
-/// and "Wall covers"):
-/// 1. its parent's boundary points, tried again once `T` has grown;
-/// 2. its parent's walls followed along their contours (`Edges::descend`);
-/// 3. the centre's exact signed distance (edge hierarchy, band-indexed inside test);
-/// 4. the cover by discs around boundary points near the centre (completed in small cells
-///    by the boundary points nearest to uncovered points), then a ridge probe;
-/// 5. to 7. the straight-wall, arc and ring covers (`Edges::walls_cover`,
-///    `Edges::arcs_cover`, `Edges::ring_cover`);
-/// 8. the split into the children the cell's points do not cover.
-///
-/// Everything depends only on the section's edges, so the result does not depend on
-/// threads or block boundaries.
+/// [`max_fill_distance`] on indexed edges with a chosen precision, mm: a best-first
+/// search over square cells, each dropped once shown to hold no point deeper than the best
+/// depth plus `precision`, then a polish of the best centre (`search.rs`; the steps and why
+/// each drop is exact: docs/PLANNING.md, "The search" and "Wall covers"). The result
+/// depends only on the section's edges, not on threads or block boundaries.
 #[cfg(any(test, feature = "internals"))]
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     search(e, precision, &mut SearchScratch::default())
@@ -150,11 +135,7 @@ mod tests {
         assert!((mfd(&two) - 6.0).abs() <= 0.005);
         assert_eq!(mfd(&[]), 0.0);
         // A hole in the middle of a square: the best circle sits between hole and rim.
-        let holed = [rect(0.0, 0.0, 20.0, 20.0), {
-            let mut h = rect(8.0, 8.0, 12.0, 12.0);
-            h.reverse();
-            h
-        }];
+        let holed = [rect(0.0, 0.0, 20.0, 20.0), hole(8.0, 8.0, 12.0, 12.0)];
         // Corner circle touching two sides and the hole corner (8, 8): centre (t, t) with
         // √2·(8 − t) = t → t = 8√2/(1+√2).
         let t = 8.0 * std::f64::consts::SQRT_2 / (1.0 + std::f64::consts::SQRT_2);

@@ -312,6 +312,11 @@ mod tests {
         max
     }
 
+    /// `n` random points in `[-2, 2]²`.
+    fn random_points(rnd: &mut impl FnMut() -> f64, n: usize) -> Vec<[f64; 2]> {
+        (0..n).map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0]).collect()
+    }
+
     #[test]
     fn exceeds_matches_a_grid() {
         // Random point sets and squares: the decision must agree with the largest
@@ -320,9 +325,7 @@ mod tests {
         let mut decided = [0, 0];
         for _ in 0..300 {
             let n = 1 + (rnd() * 6.0) as usize;
-            let q: Vec<[f64; 2]> = (0..n)
-                .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
-                .collect();
+            let q = random_points(&mut rnd, n);
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let step = 2.0 * h / 60.0;
@@ -352,10 +355,7 @@ mod tests {
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let (q, t): (Vec<[f64; 2]>, f64) = if case % 2 == 0 {
-                let q = (0..n)
-                    .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
-                    .collect();
-                (q, 0.3 + 2.0 * rnd())
+                (random_points(&mut rnd, n), 0.3 + 2.0 * rnd())
             } else {
                 // Points around the square's centre: the discs often cover its edges
                 // and leave a hole inside.
@@ -398,9 +398,7 @@ mod tests {
         let mut seen = [0, 0];
         for _ in 0..400 {
             let n = 1 + (rnd() * MAX_COVER_POINTS as f64) as usize;
-            let q: Vec<[f64; 2]> = (0..n)
-                .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
-                .collect();
+            let q = random_points(&mut rnd, n);
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
             let t = 0.3 + 2.0 * rnd();
