@@ -997,11 +997,11 @@ mod tests {
 
     #[test]
     fn the_scanlines_adler32_is_the_encoders() {
-        let mut seed = 7u64;
+        let mut rnd = xorshift_bits(7);
         for (w, h) in [(1, 1), (5, 3), (1024, 768), (333, 17)] {
             for zeros in [false, true] {
                 let d: Vec<u8> = (0..w * h)
-                    .map(|i| if zeros && (i / w) % 3 != 1 { 0 } else { xorshift(&mut seed) as u8 % 4 * 60 })
+                    .map(|i| if zeros && (i / w) % 3 != 1 { 0 } else { rnd() as u8 % 4 * 60 })
                     .collect();
                 let png = encode_gray8(w as u32, h as u32, &d);
                 let mut plain = Vec::new();
