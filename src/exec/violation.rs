@@ -66,6 +66,7 @@ kinds! {
     MaskContent "mask-content" "a layer's masks light pixels outside its section's box, any pixel for a layer without a section, or too few for its area (see \"Mask content\")",
     MaskShared "mask-shared" "a mask file named by two layer records (or two projectors of one layer)",
     OpticsFile "optics-file" "a gray map of the light compensation: missing, SHA-256 mismatch, not a PNG, not 8-bit gray of its projector's size, truncated, or a path outside the bundle",
+    Hardware "hardware" "an exposure asks what the printer's hardware description (`--machine hardware_config.json`) lacks: a light engine, a wavelength, a grayscale-correction image, the image's size, an XY stage for an image offset, a vacuum controller, the schema version (see \"Checking against the real machine\")",
     InvalidStep "invalid-step" "a step no machine can execute (speed or acceleration ≤ 0, negative wait or exposure); skipped",
     LightDuringMove "light-during-move" "light on in a segment that is not an `expose`/`sweep`, or while the stage moves in a layer whose `mode` is `layered`",
     Travel "travel" "a move or sweep starts or ends outside `[travel_min_mm, travel_max_mm]` (motion is monotonic, so the end points bound it)",

@@ -6,6 +6,7 @@ use super::archive::write::{Method, ZipOut};
 use super::{Format, Job};
 use crate::bundle::{BundleSource, BundleWriter, DirSource, Manifest, MemSource, MANIFEST};
 use crate::error::Result;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -17,6 +18,9 @@ pub(super) fn open_dir(dir: &Path) -> Result<Job> {
         manifest: Manifest::read(dir)?,
         source: Box::new(DirSource::new(dir)),
         estimate: None,
+        requests: Vec::new(),
+        vacuum: false,
+        notes: Vec::new(),
     })
 }
 
@@ -51,7 +55,34 @@ pub(super) fn open_zip(archive: Archive, dir: &str) -> Result<Job> {
         format: Format::DmdjobZip,
         manifest,
         estimate: None,
+        requests: Vec::new(),
+        vacuum: false,
+        notes: Vec::new(),
     })
+}
+
+/// The manifest as a native bundle holds it, and where each of its files comes from:
+/// every layer's masks are their own files (`mask-shared`), so a job whose layers share
+/// an image (an imported control file's duplications) gets `masks/NNNNN.png`
+/// (`masks/pK/NNNNN.png` with several projectors, K the projector's index) for each, the same bytes.
+fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, String>) {
+    let mut seen = HashSet::new();
+    if m.layers.iter().flat_map(|l| &l.masks).all(|k| seen.insert(k.file.as_str())) {
+        return (std::borrow::Cow::Borrowed(m), HashMap::new());
+    }
+    let mut out = m.clone();
+    let mut from = HashMap::new();
+    let several = m.machine.projector.len() > 1;
+    for l in &mut out.layers {
+        for k in &mut l.masks {
+            let name = match several {
+                true => format!("masks/p{}/{:05}.png", k.projector, l.index),
+                false => format!("masks/{:05}.png", l.index),
+            };
+            from.insert(name.clone(), std::mem::replace(&mut k.file, name));
+        }
+    }
+    (std::borrow::Cow::Owned(out), from)
 }
 
 /// The files of a bundle its manifest names, in the order the native forms store them:
@@ -73,17 +104,19 @@ pub(super) fn write_dir(
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
+    let (manifest, from) = own_files(manifest);
     let writer = BundleWriter::create(out)?;
-    for rel in bundle_files(manifest) {
+    for rel in bundle_files(&manifest) {
         if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
             return Err(crate::error::Error::Interrupted);
         }
         if let Some(dir) = Path::new(rel).parent().filter(|d| d != &Path::new("")) {
             writer.create_dir(&dir.to_string_lossy())?;
         }
-        writer.write_file(rel, &files.file(rel)?)?;
+        let src = from.get(rel).map_or(rel, String::as_str);
+        writer.write_file(rel, &files.file(src)?)?;
     }
-    writer.finish(manifest)?;
+    writer.finish(&manifest)?;
     Ok(())
 }
 
@@ -95,10 +128,12 @@ pub(super) fn write_zip(
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
+    let (manifest, from) = own_files(manifest);
     let mut zip = ZipOut::create(out, cancel)?;
     zip.add(MANIFEST, &manifest.to_json(), Method::Deflated)?;
-    for rel in bundle_files(manifest) {
-        zip.add(rel, &files.file(rel)?, Method::Stored)?;
+    for rel in bundle_files(&manifest) {
+        let src = from.get(rel).map_or(rel, String::as_str);
+        zip.add(rel, &files.file(src)?, Method::Stored)?;
     }
     zip.finish()?;
     Ok(())

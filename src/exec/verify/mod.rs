@@ -77,8 +77,10 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
 /// read from the manifest (its settings and embedded machine).
 ///
 /// `shared_masks` allows layers to name the same mask file (jobs imported from formats
-/// where layers share images, such as the SLA control file's duplications); a native
-/// bundle gives every layer its own file, so there it is a `mask-shared` problem.
+/// where layers share images, such as the SLA control file's duplications) and a layer
+/// record to show one projector's image (the control file exposes a layer's images in
+/// turn); a native bundle gives every layer its own file, so there it is a `mask-shared`
+/// problem, and a mask for each projector.
 pub fn verify_source(
     dir: &dyn BundleSource,
     manifest: &Manifest,
@@ -224,7 +226,9 @@ fn check_structure<'m>(
             }
             refs.push((i, m));
         }
-        if seen.len() < projectors {
+        // An imported job exposes one image at a time (the control file's images of a
+        // layer are exposed in turn): its records name one projector each.
+        if seen.len() < projectors && !(shared_masks && seen.len() == 1) {
             let msg = format!(
                 "layer {i} has masks for {} of the machine's {projectors} projector(s)",
                 seen.len()
