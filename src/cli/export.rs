@@ -42,9 +42,9 @@ pub(crate) fn machine_arg(
 }
 
 /// Fits `profile` to the printer `path` describes before a job is sliced for it: its
-/// projectors take the light engines' names and wavelengths, and a profile the printer
-/// cannot run (a stage limit above the build platform's, images its engines cannot
-/// show) is refused, naming the keys.
+/// projectors take the light engines' names and wavelengths, its stage the build
+/// platform's limits where they are tighter (checked as a profile is), and a profile
+/// whose images the engines cannot show is refused, naming the keys.
 pub(crate) fn fit_profile(
     profile: &mut crate::profile::Profile,
     path: &Path,
@@ -59,10 +59,50 @@ pub(crate) fn fit_profile(
     for (p, (name, nm)) in profile.projector.iter_mut().zip(named) {
         (p.name, p.wavelength_nm) = (name, nm);
     }
+    let mine = crate::bundle::Machine::of(profile);
+    let theirs = hw.machine(&mine)?;
+    let (a, b) = (&mine.stage, &theirs.stage);
+    let mut tighter = Vec::new();
+    for (key, v, hw_v, lower) in [
+        (
+            "stage.max_speed_mm_s",
+            a.max_speed_mm_s.get(),
+            b.max_speed_mm_s.get(),
+            true,
+        ),
+        (
+            "stage.max_accel_mm_s2",
+            a.max_accel_mm_s2.get(),
+            b.max_accel_mm_s2.get(),
+            true,
+        ),
+        (
+            "stage.travel_max_mm",
+            a.travel_max_mm,
+            b.travel_max_mm,
+            true,
+        ),
+        (
+            "stage.travel_min_mm",
+            a.travel_min_mm,
+            b.travel_min_mm,
+            false,
+        ),
+    ] {
+        if (lower && hw_v < v) || (!lower && hw_v > v) {
+            let label = format!("--machine {} ({})", path.display(), theirs.label(key));
+            tighter.push(crate::profile::Override::new(
+                label,
+                key,
+                toml::Value::Float(hw_v),
+            ));
+        }
+    }
+    *profile = profile.with_overrides(&tighter)?;
     refuse(
         &hw,
         path,
-        hw.check_machine(&crate::bundle::Machine::of(profile))?,
+        hw.check_projectors(&crate::bundle::Machine::of(profile)),
     )
 }
 

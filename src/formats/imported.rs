@@ -267,21 +267,33 @@ impl Imported {
 }
 
 /// The job `m` imported with pixels of another size: projector placements, layer boxes
-/// and areas and the resin volume rescaled to pixels `pixel_mm` wide (the masks are the
-/// same pixels, now known to be that size).
+/// and areas and the resin volume restated for pixels `pixel_mm` wide (the masks are the
+/// same pixels, now known to be that size; an offset, a physical distance, is fewer or
+/// more of them).
 pub(crate) fn rescale(m: &mut Manifest, pixel_mm: f64) {
     let Some(old) = m.machine.projector.first().map(|p| p.pixel_mm.get()) else {
         return;
     };
     let f = pixel_mm / old;
+    let before = m.machine.clone();
     for p in &mut m.machine.projector {
         p.pixel_mm = pos(pixel_mm);
         p.offset_px = p.offset_px.map(|o| (o as f64 / f).round() as u32);
     }
+    let (h0, h1) = (before.field().height_px as f64, m.machine.field().height_px as f64);
     for l in &mut m.layers {
         l.area_mm2 *= f * f;
-        if let Some(b) = &mut l.bbox_mm {
-            *b = b.map(|c| c.map(|v| v * f));
+        let k = l.masks.first().map_or(0, |k| k.projector as usize);
+        let (Some(a), Some(b)) = (before.projector.get(k), m.machine.projector.get(k)) else {
+            continue;
+        };
+        let [ax, ay] = a.offset_px.map(f64::from);
+        let [bx, by] = b.offset_px.map(f64::from);
+        // The same mask pixel, placed by the new offset in the new field.
+        let x = |v: f64| (v / old - ax + bx) * pixel_mm;
+        let y = |v: f64| (h1 - (h0 - v / old - ay + by)) * pixel_mm;
+        if let Some(bb) = &mut l.bbox_mm {
+            *bb = bb.map(|[u, v]| [x(u), y(v)]);
         }
     }
     m.totals.resin_volume_ml *= f * f;

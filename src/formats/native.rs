@@ -61,28 +61,74 @@ pub(super) fn open_zip(archive: Archive, dir: &str) -> Result<Job> {
     })
 }
 
-/// The manifest as a native bundle holds it, and where each of its files comes from:
-/// every layer's masks are their own files (`mask-shared`), so a job whose layers share
-/// an image (an imported control file's duplications) gets `masks/NNNNN.png`
-/// (`masks/pK/NNNNN.png` with several projectors, K the projector's index) for each, the same bytes.
-fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, String>) {
+/// Where a file of a native bundle comes from: the job's file of that name, or bytes made
+/// for it.
+enum From {
+    File(String),
+    Made(std::sync::Arc<Vec<u8>>),
+}
+
+/// An 8-bit gray PNG of `w` × `h` pixels, all dark.
+fn dark_png(w: u32, h: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    image::GrayImage::new(w, h)
+        .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .expect("a PNG encodes into memory");
+    out
+}
+
+/// The manifest as a native bundle holds it, and where each of its files comes from: a
+/// native bundle gives every layer its own file for every projector (`mask-shared`,
+/// `manifest`), so a job whose layers share images (an imported control file's
+/// duplications) or show one projector at a time (its images exposed in turn) gets
+/// `masks/NNNNN.png` (`masks/pK/NNNNN.png` with several projectors, K the projector's
+/// index) for each, the same bytes, and a dark image for each projector a layer does not
+/// light.
+fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, From>) {
     let mut seen = HashSet::new();
-    if m.layers.iter().flat_map(|l| &l.masks).all(|k| seen.insert(k.file.as_str())) {
+    let n = m.machine.projector.len();
+    let own = m.layers.iter().all(|l| l.masks.len() == n)
+        && m.layers.iter().flat_map(|l| &l.masks).all(|k| seen.insert(k.file.as_str()));
+    if own {
         return (std::borrow::Cow::Borrowed(m), HashMap::new());
     }
     let mut out = m.clone();
     let mut from = HashMap::new();
-    let several = m.machine.projector.len() > 1;
+    let name = |k: usize, i: u64| match n > 1 {
+        true => format!("masks/p{k}/{i:05}.png"),
+        false => format!("masks/{i:05}.png"),
+    };
+    let dark: Vec<_> = m.machine.projector.iter().map(|p| {
+        let png = dark_png(p.width_px, p.height_px);
+        (crate::digest::sha256_hex(&png), std::sync::Arc::new(png))
+    }).collect();
     for l in &mut out.layers {
+        let lit: Vec<u32> = l.masks.iter().map(|k| k.projector).collect();
         for k in &mut l.masks {
-            let name = match several {
-                true => format!("masks/p{}/{:05}.png", k.projector, l.index),
-                false => format!("masks/{:05}.png", l.index),
-            };
-            from.insert(name.clone(), std::mem::replace(&mut k.file, name));
+            let file = name(k.projector as usize, l.index);
+            from.insert(file.clone(), From::File(std::mem::replace(&mut k.file, file)));
         }
+        for (k, (sha, png)) in dark.iter().enumerate().filter(|(k, _)| !lit.contains(&(*k as u32))) {
+            let file = name(k, l.index);
+            from.insert(file.clone(), From::Made(png.clone()));
+            l.masks.push(crate::bundle::MaskRef { file, sha256: sha.clone(), projector: k as u32 });
+        }
+        l.masks.sort_by_key(|k| k.projector);
     }
     (std::borrow::Cow::Owned(out), from)
+}
+
+/// The bytes of bundle file `rel` (`from` says where it comes from).
+fn bytes<'a>(
+    files: &'a dyn BundleSource,
+    from: &'a HashMap<String, From>,
+    rel: &str,
+) -> Result<std::borrow::Cow<'a, [u8]>> {
+    match from.get(rel) {
+        Some(From::Made(b)) => Ok(std::borrow::Cow::Borrowed(b.as_slice())),
+        Some(From::File(f)) => files.file(f),
+        None => files.file(rel),
+    }
 }
 
 /// The files of a bundle its manifest names, in the order the native forms store them:
@@ -113,8 +159,7 @@ pub(super) fn write_dir(
         if let Some(dir) = Path::new(rel).parent().filter(|d| d != &Path::new("")) {
             writer.create_dir(&dir.to_string_lossy())?;
         }
-        let src = from.get(rel).map_or(rel, String::as_str);
-        writer.write_file(rel, &files.file(src)?)?;
+        writer.write_file(rel, &bytes(files, &from, rel)?)?;
     }
     writer.finish(&manifest)?;
     Ok(())
@@ -132,8 +177,7 @@ pub(super) fn write_zip(
     let mut zip = ZipOut::create(out, cancel)?;
     zip.add(MANIFEST, &manifest.to_json(), Method::Deflated)?;
     for rel in bundle_files(&manifest) {
-        let src = from.get(rel).map_or(rel, String::as_str);
-        zip.add(rel, &files.file(src)?, Method::Stored)?;
+        zip.add(rel, &bytes(files, &from, rel)?, Method::Stored)?;
     }
     zip.finish()?;
     Ok(())

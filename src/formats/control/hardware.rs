@@ -244,10 +244,10 @@ impl Hardware {
         s.steps_per_mm =
             Positive::new(a.counts_per_mm).ok_or_else(|| bad("axes_ctspmm", a.counts_per_mm))?;
         let travel = format!(
-            "{} (or its lower limit + {}) from {}.bottom_position",
+            "{}.bottom_position up to {} or the lower limit + {}",
+            a.controller,
             key("limits"),
-            key("axes_travel"),
-            a.controller
+            key("axes_travel")
         );
         for (k, v) in [
             ("stage.travel_min_mm", key("limits")),
@@ -286,24 +286,10 @@ impl Hardware {
             .collect()
     }
 
-    /// What machine record `m` (a profile's, before a job is sliced for this printer)
-    /// allows that the printer cannot do: a stage limit above the build platform's, a
-    /// projector whose images its light engine cannot show.
-    pub fn check_machine(&self, m: &Machine) -> Result<Vec<String>> {
-        let theirs = self.machine(m)?;
-        let (a, b) = (&m.stage, &theirs.stage);
+    /// What the projectors of machine record `m` (a profile's, before a job is sliced for
+    /// this printer) ask that the printer's light engines cannot do.
+    pub fn check_projectors(&self, m: &Machine) -> Vec<String> {
         let mut out = Vec::new();
-        for (key, mine, hw, above) in [
-            ("stage.max_speed_mm_s", a.max_speed_mm_s.get(), b.max_speed_mm_s.get(), true),
-            ("stage.max_accel_mm_s2", a.max_accel_mm_s2.get(), b.max_accel_mm_s2.get(), true),
-            ("stage.travel_max_mm", a.travel_max_mm, b.travel_max_mm, true),
-            ("stage.travel_min_mm", a.travel_min_mm, b.travel_min_mm, false),
-        ] {
-            if (above && mine > hw + 1e-9) || (!above && mine < hw - 1e-9) {
-                let (side, src) = (if above { "above" } else { "below" }, theirs.label(key));
-                out.push(format!("{key} {mine} is {side} the printer's {hw} ({src})"));
-            }
-        }
         for (k, p) in m.projector.iter().enumerate() {
             let um = p.pixel_mm.get() * 1000.0;
             let r = Request {
@@ -320,7 +306,7 @@ impl Hardware {
                 out.push(format!("projector[{k}] ({}): {why}", p.name));
             }
         }
-        Ok(out)
+        out
     }
 
     /// What the exposures `requests` (and a job printing under `vacuum`) ask that this
