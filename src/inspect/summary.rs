@@ -68,6 +68,10 @@ pub struct Summary {
     pub warnings_by_code: BTreeMap<String, usize>,
     /// The per-layer extremes (none for a job without layers).
     pub extremes: Option<Extremes>,
+    /// What an imported job's reader could not take as stated (areas estimated from the
+    /// masks, settings not simulated), one line each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
     /// The pictures written.
     pub pictures: Vec<String>,
 }
@@ -121,6 +125,7 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         warnings: m.warnings.len(),
         warnings_by_code: by_code,
         extremes,
+        notes: Vec::new(),
         pictures: Vec::new(),
     }
 }
@@ -154,6 +159,9 @@ pub fn render_human(s: &Summary) -> String {
             .map(|(c, n)| format!("{c} {n}"))
             .collect();
         let _ = writeln!(o, "warnings: {} ({})", s.warnings, by.join(", "));
+    }
+    for n in &s.notes {
+        let _ = writeln!(o, "note: {n}");
     }
     if let Some(e) = &s.extremes {
         let rows = [

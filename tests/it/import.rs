@@ -276,6 +276,21 @@ fn inspect_reads_imported_jobs() {
         assert_eq!(code, 0, "{s}");
         assert_eq!(s["format"], format);
     }
+    // What the reader could not take as stated is in the summary, as `run` says it.
+    let p = fixture("sla_control/example.zip");
+    let (code, s) = json_run(&dir, &["inspect", p.to_str().unwrap()]);
+    assert_eq!(code, 0, "{s}");
+    let notes = s["notes"].to_string();
+    assert!(
+        notes.contains("Print on film") && notes.contains("no pixel size stated"),
+        "{s}"
+    );
+    let o = run_in(&dir, &["inspect", p.to_str().unwrap()]);
+    assert!(
+        stdout(&o).contains("note: not simulated: Squeeze out resin"),
+        "{}",
+        stdout(&o)
+    );
 }
 
 /// Runs `dmdsl run FILE` on archive bytes `bytes` in a fresh directory and checks the
