@@ -292,6 +292,16 @@ fn a_nanodlp_plate_carries_the_documented_files_and_keys() {
         .first()
         .map_or(0, |w| w["fields"]["layers"].as_u64().unwrap());
     assert_eq!(differ, said, "{a:?} {b:?}");
+    // The normal cure time is the one most layers have: only the ramp from the bottom
+    // exposure down to it differs.
+    let ramp = b
+        .iter()
+        .filter(|&&e| e < b[0] && e > b[b.len() - 1])
+        .count() as u64;
+    assert!(
+        ramp > 0 && differ <= ramp,
+        "{differ} differ, ramp {ramp}: {b:?}"
+    );
 }
 
 #[test]

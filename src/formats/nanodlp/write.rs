@@ -56,6 +56,28 @@ fn group(layers: &[Layer], f: usize, from_mm: f64, limits: (f64, f64)) -> Group 
     g
 }
 
+/// The layer of `layers` (the ones after the support layers) whose settings the plate's
+/// normal set takes: the first exposed as most of them are (a job's ramp from the bottom
+/// exposure down to the normal one is thus counted as differing, not the rest of the job);
+/// `None` for no layers.
+fn normal_layer(layers: &[Layer]) -> Option<usize> {
+    let mut exposures: Vec<f64> = layers.iter().map(|l| l.exposure_s).collect();
+    exposures.sort_by(f64::total_cmp);
+    let (mut best, mut most, mut run) = (*exposures.first()?, 0, 0);
+    for (i, &e) in exposures.iter().enumerate() {
+        run = match i > 0 && (e - exposures[i - 1]).abs() <= SAME {
+            true => run + 1,
+            false => 1,
+        };
+        if run > most {
+            (best, most) = (e, run);
+        }
+    }
+    layers
+        .iter()
+        .position(|l| (l.exposure_s - best).abs() <= SAME)
+}
+
 /// The plate of job `m` (at least one layer): its support layers are the first layers
 /// exposed as layer 0 when the last layer is exposed otherwise.
 fn plate(m: &Manifest) -> Plate {
@@ -70,9 +92,9 @@ fn plate(m: &Manifest) -> Plate {
     };
     let from = |f: usize| if f == 0 { stage.home_mm } else { layers[f - 1].z_mm };
     let support = group(layers, 0, from(0), limits);
-    let other = match bottom < layers.len() {
-        true => group(layers, bottom, from(bottom), limits),
-        false => support,
+    let other = match normal_layer(&layers[bottom..]) {
+        Some(f) => group(layers, bottom + f, from(bottom + f), limits),
+        None => support,
     };
     Plate {
         bottom,
@@ -336,5 +358,20 @@ mod tests {
         r.sort_unstable();
         assert_eq!(r, [2, 5]);
         assert!(regions(&[0; 12], 4).is_empty());
+    }
+
+    #[test]
+    fn the_normal_set_takes_the_exposure_most_layers_have() {
+        use crate::bundle::Mode;
+        use crate::exec::testutil::layer;
+        // A ramp 20.5 … 7 s down to 2.5 s: the normal layers' first at 2.5 s.
+        let layers: Vec<Layer> = [20.5, 16.0, 11.5, 7.0, 2.5, 2.5, 2.5, 3.0, 2.5]
+            .iter()
+            .enumerate()
+            .map(|(i, &e)| layer(i, 0.05 * (i + 1) as f64, 0.05, Mode::Layered, e, vec![], e))
+            .collect();
+        assert_eq!(normal_layer(&layers), Some(4));
+        assert_eq!(normal_layer(&layers[..1]), Some(0));
+        assert_eq!(normal_layer(&[]), None);
     }
 }
