@@ -102,12 +102,24 @@ fn n(v: f64) -> Value {
 pub(crate) fn cannot_carry(m: &Manifest) -> Vec<Warning> {
     let mut warnings = Vec::new();
     let projectors = &m.machine.projector;
-    if projectors.iter().any(|p| p.wavelength_nm.is_none() || p.power_setting.is_none()) {
+    let mut assumed = Vec::new();
+    if projectors.iter().any(|p| p.power_setting.is_none()) {
+        assumed.push(format!(
+            "light engine power setting {POWER_SETTING} (projector.N.power_setting)"
+        ));
+    }
+    if projectors.iter().any(|p| p.wavelength_nm.is_none()) {
+        assumed.push(format!(
+            "wavelength {WAVELENGTH_NM} nm (projector.N.wavelength_nm, or --machine HARDWARE.json)"
+        ));
+    }
+    if !assumed.is_empty() {
         warnings.push(
             Warning::new(
                 "export.control-assumed",
                 format!(
-                    "the machine gives no light engine power setting or wavelength for every projector (projector.N.power_setting, wavelength_nm, or --machine HARDWARE.json): the control file has the schema's defaults ({POWER_SETTING}, {WAVELENGTH_NM} nm) for them"
+                    "the machine does not state every projector's light engine settings: the control file has the schema's defaults for them, {}",
+                    assumed.join(", ")
                 ),
             )
             .with("power_setting", POWER_SETTING)
