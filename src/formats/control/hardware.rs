@@ -3,8 +3,10 @@
 //! hardware_config_example.json`): the build-platform axis `stages.bp_stage` names (its
 //! controller's `default_axis`: travel, limits, counts per mm, speed, acceleration,
 //! `bottom_position`), the `light_engines` (each one's `resolution`, `leds_nm`,
-//! `grayscale_correction_image`, mirroring), whether an XY stage (`stages.xy_stage`) and a
-//! vacuum controller (`mks`) exist, and the schema versions it reads.
+//! `grayscale_correction_image`), whether an XY stage (`stages.xy_stage`) and a vacuum
+//! controller (`mks`) exist, and the schema versions it reads. An engine's own mirroring
+//! (`mirror_long_axis`, `mirror_short_axis`) is how the printer shows every image, not a
+//! limit a job can break: it is not read.
 //!
 //! [`Hardware::machine`] is the machine record a job runs on there (the stage; the rest is
 //! the job's own: the description states no pixel size, shutter or DMD latency), and

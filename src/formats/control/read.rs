@@ -715,6 +715,8 @@ mod tests {
                 },
                 "Image settings": {
                     "Image file": "a.png", "Layer exposure time (ms)": 100,
+                    "Light engine": "e", "Light engine power setting": 100,
+                    "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
                     "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
                 }
             },
