@@ -341,6 +341,7 @@ fn targets() -> Vec<Target> {
         zips("nanodlp", nanodlp, 150),
         Target {
             make: json_or_bytes,
+            runs: 2000,
             ..plain(
                 "hardware",
                 hardware,
