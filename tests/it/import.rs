@@ -945,3 +945,111 @@ fn sl1_files_keep_their_mirroring_and_state_their_resin() {
         .iter()
         .any(|n| n.contains("layer areas are estimates")));
 }
+
+#[test]
+fn hostile_nanodlp_plates_are_one_line_and_exit_2() {
+    let dir = tempdir("hostile-nanodlp");
+    let part = fixture("cube10.stl");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            part.to_str().unwrap(),
+            "--scale",
+            "0.1",
+            "-q",
+            "-o",
+            "p.nanodlp",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let files = zip_entries(&dir.join("p.nanodlp"));
+    // An edit of one JSON entry's value (a JSON pointer), or an entry dropped.
+    let edited = |entry: &str, pointer: &str, value: Value| -> Vec<u8> {
+        let mut files = files.clone();
+        let f = files.iter_mut().find(|(n, _)| n == entry).unwrap();
+        let mut v: Value = serde_json::from_slice(&f.1).unwrap();
+        *v.pointer_mut(pointer).unwrap() = value;
+        f.1 = serde_json::to_vec(&v).unwrap();
+        let e: Vec<(&str, &[u8], bool)> = files
+            .iter()
+            .map(|(n, b)| (n.as_str(), b.as_slice(), true))
+            .collect();
+        zip_of(&e)
+    };
+    let cases: [(&str, &str, &str, Value, &[&str]); 8] = [
+        (
+            "cure-text",
+            "profile.json",
+            "/CureTime",
+            "abc".into(),
+            &["profile.json", "`CureTime`"],
+        ),
+        (
+            "cure-negative",
+            "profile.json",
+            "/CureTime",
+            (-5).into(),
+            &["`CureTime` is -5"],
+        ),
+        (
+            "cure-huge",
+            "profile.json",
+            "/CureTime",
+            1e308.into(),
+            &["`CureTime` is 1e308"],
+        ),
+        (
+            "depth-negative",
+            "profile.json",
+            "/Depth",
+            (-50).into(),
+            &["`Depth` is -50"],
+        ),
+        (
+            "speed-tiny",
+            "profile.json",
+            "/CustomValues/DmdslUpSpeed",
+            "1e-308".into(),
+            &["CustomValues.DmdslUpSpeed"],
+        ),
+        (
+            "layers-huge",
+            "plate.json",
+            "/LayersCount",
+            1e12.into(),
+            &["plate.json", "LayersCount"],
+        ),
+        (
+            "display-empty",
+            "options.json",
+            "/PWidth",
+            0.into(),
+            &["options.json", "PWidth"],
+        ),
+        (
+            "area-negative",
+            "info.json",
+            "/0/TotalSolidArea",
+            (-1).into(),
+            &["info.json", "layer 0", "TotalSolidArea"],
+        ),
+    ];
+    for (name, entry, pointer, value, words) in cases {
+        refused(
+            &format!("nanodlp-{name}"),
+            &edited(entry, pointer, value),
+            words,
+        );
+    }
+    // What NanoDLP's fields ask and dmdsl does not evaluate is said, not silent.
+    let plate = edited("profile.json", "/TransitionalLayer", 3.into());
+    std::fs::write(dir.join("fade.nanodlp"), plate).unwrap();
+    let (code, r) = json_run(&dir, &["run", "fade.nanodlp"]);
+    assert_eq!(code, 0, "{r:.400}");
+    assert!(
+        r["notes"].to_string().contains("TransitionalLayer 3"),
+        "{}",
+        r["notes"]
+    );
+}

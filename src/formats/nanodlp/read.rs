@@ -62,15 +62,21 @@ fn plate(archive: &Archive, profile: &Map<String, Value>) -> Result<(Plate, bool
         for (k, (bottom, other, unit)) in KEYS.iter().enumerate() {
             let key = if gi == 0 { bottom } else { other };
             let default = (k > 1).then_some(0.0);
-            g.set(k, num(archive, (PROFILE, profile), key, default)? / unit);
+            let v = num(archive, (PROFILE, profile), key, default)? / unit;
+            // Durations in s, the thickness and the lift in mm.
+            let (most, what) = if k == 1 || k == 2 { (1e4, "mm") } else { (1e6, "s") };
+            if v > most {
+                return Err(archive.error(Some(PROFILE), format!("`{key}` is {v:?} {what}, more than a machine's {most} {what}")));
+            }
+            g.set(k, v);
         }
         let prefix = if gi == 0 { "DmdslSupport" } else { "Dmdsl" };
         for (k, name) in SPEEDS.iter().enumerate() {
-            let v = custom
-                .and_then(|c| c.get(&format!("{prefix}{name}")))
-                .and_then(Value::as_str)
-                .and_then(|s| s.parse::<f64>().ok())
-                .filter(|v| v.is_finite() && *v > 0.0);
+            let key = format!("{prefix}{name}");
+            let v = match custom.and_then(|c| c.get(&key)) {
+                None => None,
+                Some(v) => Some(custom_speed(archive, &key, v, k % 2 == 1)?),
+            };
             stated &= v.is_some();
             let slot = if k < 2 { &mut g.up[k] } else { &mut g.down[k - 2] };
             *slot = v.unwrap_or(SPEED[k % 2]);
@@ -82,6 +88,35 @@ fn plate(archive: &Archive, profile: &Map<String, Value>) -> Result<(Plate, bool
     }
     let bottom = num(archive, (PROFILE, profile), "SupportLayerNumber", Some(0.0))? as usize;
     Ok((Plate { bottom, groups }, stated))
+}
+
+/// The custom value `key` of `profile.json` (`v`, a number as text): a speed in mm/s, or
+/// with `accel` an acceleration in mm/s², within what a machine has.
+fn custom_speed(archive: &Archive, key: &str, v: &Value, accel: bool) -> Result<f64> {
+    let (unit, most) = if accel { ("mm/s²", 1e6) } else { ("mm/s", 1e4) };
+    let x = v.as_str().and_then(|s| s.trim().parse::<f64>().ok()).or_else(|| v.as_f64());
+    x.filter(|x| (1e-6..=most).contains(x)).ok_or_else(|| {
+        archive.error(Some(PROFILE), format!("`CustomValues.{key}` is {v}, not {unit} a machine has (1e-6 to {most})"))
+    })
+}
+
+/// The layer areas `info.json` states (mm², `None` for a layer it gives none), each a
+/// number from 0 to `most`; no entry, no areas.
+fn stated_areas(archive: &Archive, most: f64) -> Result<Option<Vec<Option<f64>>>> {
+    let Some(bytes) = archive.get(INFO) else {
+        return Ok(None);
+    };
+    let Ok(Value::Array(layers)) = serde_json::from_slice::<Value>(bytes) else {
+        return Err(archive.error(Some(INFO), "is not a JSON list of layers"));
+    };
+    let area = |(i, l): (usize, &Value)| match l.get("TotalSolidArea") {
+        None | Some(Value::Null) => Ok(None),
+        Some(v) => match v.as_f64().filter(|a| (0.0..=most).contains(a)) {
+            Some(a) => Ok(Some(a)),
+            None => Err(archive.error(Some(INFO), format!("layer {i}: `TotalSolidArea` is {v}, not an area from 0 to the display's {most} mm²"))),
+        },
+    };
+    layers.iter().enumerate().map(area).collect::<Result<_>>().map(Some)
 }
 
 /// The notes of what NanoDLP computes while it prints and the reader does not.
@@ -133,7 +168,8 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
     if !speeds {
         unstated.extend(["stage.max_speed_mm_s", "stage.max_accel_mm_s2"]);
     }
-    if pixel <= 0.0 {
+    let pixel_stated = pixel > 0.0;
+    if !pixel_stated {
         unstated.push("projector[].pixel_mm");
     }
     let pixel = if pixel > 0.0 { pixel } else { 0.001 };
@@ -144,8 +180,10 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
     let stage = (top.min(1e4), fastest(0).min(1e4), fastest(1).min(1e6), 10_000.0);
     let resin = profile.get("Title").and_then(Value::as_str).unwrap_or_default().to_string();
     let machine = imported::machine(("nanodlp-import".into(), resin), stage, vec![display], &unstated);
-    let info = archive.get(INFO).and_then(|b| serde_json::from_slice::<Vec<Value>>(b).ok());
-    let area = |i: usize| info.as_ref()?.get(i)?.get("TotalSolidArea")?.as_f64().filter(|a| a.is_finite() && *a >= 0.0);
+    // A display of unstated pixels is bounded by 1 m².
+    let field = if pixel_stated { size.0 * size.1 * pixel * pixel } else { 1e6 };
+    let info = stated_areas(&archive, crate::round::derived(field * 1.0001))?;
+    let area = |i: usize| *info.as_ref()?.get(i)?;
     let mut layers: Vec<Layer> = Vec::with_capacity(n);
     for (i, (top, thickness, steps, time_s)) in given.into_iter().enumerate() {
         let place = (i, (top, top - thickness / 2.0, thickness));
