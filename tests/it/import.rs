@@ -622,7 +622,9 @@ fn control_files_breaking_the_schema_are_refused() {
         let name = format!("schema-{}", c["name"].as_str().unwrap());
         let path = c["path"].as_str().unwrap();
         let bytes = control_edited(&fixture("control/channel.zip"), &|v| {
+            // A JSON pointer: `~1` is a `/` in a key, `~0` a `~`.
             let (parent, key) = path.rsplit_once('/').unwrap();
+            let key = &key.replace("~1", "/").replace("~0", "~");
             let parent = v.pointer_mut(parent).unwrap();
             match parent {
                 Value::Array(a) => a[key.parse::<usize>().unwrap()] = c["value"].clone(),

@@ -127,6 +127,16 @@ struct Reader<'a> {
     root: Map<String, Value>,
 }
 
+/// The range of a setting by the unit its key ends with: (unit, smallest when not 0,
+/// largest); the profile's ranges (`profile::UNIT_RANGES`) in the file's units.
+const RANGES: [(&str, f64, f64); 5] = [
+    ("(ms)", 0.0, 1e9),
+    ("(mm)", 0.0, 1e4),
+    ("(um)", 0.0, 1e7),
+    ("(mm/sec)", 1e-6, 1e4),
+    ("(mm/sec^2)", 1e-6, 1e6),
+];
+
 /// An object's entries (an empty map for anything else: the schema checked the types).
 fn obj(v: Option<&Value>) -> Map<String, Value> {
     v.and_then(Value::as_object).cloned().unwrap_or_default()
@@ -200,13 +210,22 @@ impl Reader<'_> {
     fn num(&self, maps: &[&Map<String, Value>], key: &str, at: &str, positive: bool) -> Result<f64> {
         let v = get(maps, key)
             .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
-        match v.as_f64() {
-            Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => Ok(x),
-            _ => Err(self.bad(format!(
-                "{at}: `{key}` is {v}, not a {} number",
-                if positive { "positive" } else { "non-negative" }
-            ))),
+        let x = match v.as_f64() {
+            Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => x,
+            _ => {
+                return Err(self.bad(format!(
+                    "{at}: `{key}` is {v}, not a {} number",
+                    if positive { "positive" } else { "non-negative" }
+                )))
+            }
+        };
+        // What the schema leaves unbounded, bounded by what a machine has (as a profile's
+        // keys are): a longer wait or move, or a slower one, never finishes a print.
+        let (lo, hi) = RANGES.iter().find(|(unit, ..)| key.ends_with(unit)).map_or((0.0, f64::MAX), |r| (r.1, r.2));
+        if x > hi || (x > 0.0 && x < lo) {
+            return Err(self.bad(format!("{at}: `{key}` is {v}, not what a machine has ({} to {hi:e})", if lo > 0.0 { format!("{lo:e}") } else { "0".into() })));
         }
+        Ok(x)
     }
 
     /// The image `own` of a layer at `at`, over the layer's named default image settings
