@@ -18,7 +18,6 @@ pub mod segments;
 pub mod widen;
 
 pub use crate::resin::CureModel;
-pub use crate::resin::Psf;
 pub use correct::{correct_coverage, edge_shift_px};
 pub use predict::{predict_layer, LayerCure};
 

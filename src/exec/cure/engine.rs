@@ -5,7 +5,7 @@
 use crate::resin::CureModel;
 
 use super::islands::{connect, Run};
-use super::kernel::{Kernel, Prepared};
+use super::kernel::Prepared;
 use super::{NEAR, SUB};
 
 /// The accumulation's pending decay factor below which it is applied to the buffer.
@@ -31,9 +31,6 @@ pub struct LayerOut {
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
 /// for a field of `w`×`h` pixels.
 pub struct Engine {
-    w: usize,
-    h: usize,
-    model: CureModel,
     /// Samples across.
     sw: usize,
     q: f32,
@@ -61,9 +58,6 @@ impl Engine {
     pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
         let h_mm = model.layer_mm;
         Engine {
-            w,
-            h,
-            model: *model,
             sw: w * SUB,
             q: (-h_mm / model.dp_mm).exp() as f32,
             mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
@@ -77,11 +71,6 @@ impl Engine {
             rows: Vec::new(),
             intervals: Vec::new(),
         }
-    }
-
-    /// The kernel that prepares the layers of this engine's field and model.
-    pub fn kernel(&self) -> Kernel {
-        Kernel::new(self.w, self.h, &self.model)
     }
 
     /// The accumulated light at sample (`x`, `y`) after the last layer.
@@ -495,7 +484,7 @@ impl Engine {
 mod tests {
     use super::*;
     use crate::exec::cure::tests::model;
-    use crate::exec::cure::Irradiance;
+    use crate::exec::cure::{Irradiance, Kernel};
     use crate::resin::psf::phi_inv;
     use crate::resin::Psf;
 
@@ -512,8 +501,14 @@ mod tests {
 
     /// Runs a stack (bottom first) through the engine, top down; the layers' outputs
     /// bottom first.
-    fn run(e: &mut Engine, w: usize, h: usize, stack: &[(Vec<f32>, f32)]) -> Vec<LayerOut> {
-        let k = e.kernel();
+    fn run(
+        e: &mut Engine,
+        m: &CureModel,
+        w: usize,
+        h: usize,
+        stack: &[(Vec<f32>, f32)],
+    ) -> Vec<LayerOut> {
+        let k = Kernel::new(w, h, m);
         let irr: Vec<Prepared> = stack
             .iter()
             .map(|(img, r)| k.prepare(&Irradiance::from_image(w, h, img), *r))
@@ -554,7 +549,7 @@ mod tests {
             })
             .collect();
         let mut e = Engine::new(w, h, &m);
-        run(&mut e, w, h, &stack);
+        run(&mut e, &m, w, h, &stack);
         let psf = Psf { sigma_px: 0.5 };
         let q = (-m.layer_mm / m.dp_mm).exp();
         let mut worst = 0.0f64;
@@ -596,7 +591,7 @@ mod tests {
             m.sigma_px = sigma;
             let (w, h) = (48, 40);
             let mut e = Engine::new(w, h, &m);
-            let k = e.kernel();
+            let k = Kernel::new(w, h, &m);
             let mut checked = 0;
             for layer in 0..12 {
                 // Blobs of full and partial light, some reaching the field's edges.
@@ -648,7 +643,7 @@ mod tests {
         }
         let q = (-m.layer_mm / m.dp_mm).exp();
         let mut e = Engine::new(w, h, m);
-        let out = run(&mut e, w, h, &[(img, (1.0 / (1.0 - q)) as f32)]);
+        let out = run(&mut e, m, w, h, &[(img, (1.0 / (1.0 - q)) as f32)]);
         let o = &out[0];
         let s = side as f64 + 2.0 * phase as f64;
         assert!(
@@ -696,7 +691,7 @@ mod tests {
         let mut img = rect(w, h, [5, 5, 15, 15], 1.0);
         img[20 * w + 30] = 1.0;
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &[(img, 1.0)]);
+        let out = run(&mut e, &m, w, h, &[(img, 1.0)]);
         assert_eq!(out[0].islands, 2);
         assert_eq!(out[0].vanished.len(), 1);
         let (px, at) = out[0].vanished[0];
@@ -711,7 +706,7 @@ mod tests {
         }
         let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         assert_eq!(out[0].islands, 2);
         assert!(out[0].vanished.is_empty());
         assert_eq!(out[0].merged.len(), 1);
@@ -726,7 +721,7 @@ mod tests {
         }
         let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         assert!(out[0].merged.is_empty());
     }
 
@@ -741,7 +736,7 @@ mod tests {
         let mut stack: Vec<(Vec<f32>, f32)> = vec![(vec![0.0; w * h], 1.0)];
         stack.extend((0..200).map(|_| (lit.clone(), 1.0)));
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         let got = out[1].print_through_mm.unwrap();
         let want = m.print_through_mm(Some(199));
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");

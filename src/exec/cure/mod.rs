@@ -44,9 +44,12 @@ mod kernel;
 mod report;
 
 pub use engine::{Engine, LayerOut};
+#[cfg(any(test, feature = "internals"))]
 pub use irradiance::Irradiance;
 pub use kernel::{Kernel, Prepared};
-pub use report::{CureCheck, Finding, LayerCureCheck, OffsetStats, SlicerAgreement};
+pub use report::CureCheck;
+#[cfg(any(test, feature = "internals"))]
+pub use report::{Finding, LayerCureCheck, OffsetStats, SlicerAgreement};
 
 use irradiance::{decode_into, Light};
 use report::summarize;
