@@ -805,7 +805,9 @@ fn the_standards_example_on_its_printer_reports_what_the_printer_cannot_do() {
     assert_eq!(r["machine"]["profile"], "hardware_config_example.json");
     // Edited printers: what each lacks is named with its key, layer and image.
     let config: Value = serde_json::from_slice(&std::fs::read(&hw).unwrap()).unwrap();
-    let cases: [(&str, &dyn Fn(&mut Value), &[&str]); 4] = [
+    // (name, the edit of the description, words the finding holds)
+    type Case<'a> = (&'a str, &'a dyn Fn(&mut Value), &'a [&'a str]);
+    let cases: [Case; 4] = [
         (
             "no-wintech",
             &|c| c["light_engines"] = serde_json::json!(["visitech"]),
