@@ -72,6 +72,11 @@ pub struct Summary {
     /// masks, settings not simulated), one line each.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// True when the job states no pixel size (an imported file that has none): its areas
+    /// and resin volume are counts of a stand-in pixel, not measurements, and the summary
+    /// for people says so (the JSON keeps the numbers; `notes` says why).
+    #[serde(skip)]
+    pub unmeasured: bool,
     /// The pictures written.
     pub pictures: Vec<String>,
 }
@@ -126,6 +131,7 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         warnings_by_code: by_code,
         extremes,
         notes: Vec::new(),
+        unmeasured: !m.machine.states("projector[].pixel_mm"),
         pictures: Vec::new(),
     }
 }
@@ -149,7 +155,11 @@ pub fn render_human(s: &Summary) -> String {
         format!(", {c} layers printed continuously")
     });
     let (t, exposure, resin) = (s.print_time_s, s.exposure_s, s.resin_volume_ml);
-    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, resin {resin:.2} ml{continuous}", hms(t));
+    let resin = match s.unmeasured {
+        true => "resin not measured (no pixel size)".to_string(),
+        false => format!("resin {resin:.2} ml"),
+    };
+    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, {resin}{continuous}", hms(t));
     if s.warnings == 0 {
         let _ = writeln!(o, "warnings: none");
     } else {
@@ -172,7 +182,10 @@ pub fn render_human(s: &Summary) -> String {
             ("longest layer time", &e.time_s, 2, " s"),
         ];
         for (what, x, decimals, unit) in rows {
-            let value = format!("{:.decimals$}{unit}", x.value);
+            let value = match s.unmeasured && what == "largest area" {
+                true => "not measured".to_string(),
+                false => format!("{:.decimals$}{unit}", x.value),
+            };
             let _ = writeln!(o, "  {what:<22} {value:>12}  layer {}", x.layer);
         }
     }

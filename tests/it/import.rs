@@ -286,8 +286,30 @@ fn inspect_reads_imported_jobs() {
         "{s}"
     );
     let o = run_in(&dir, &["inspect", p.to_str().unwrap()]);
+    let out = stdout(&o);
     assert!(
-        stdout(&o).contains("note: not simulated: Squeeze out resin"),
+        out.contains("note: not simulated: Squeeze out resin"),
+        "{out}"
+    );
+    // Without a pixel size the areas and the resin are counts of a stand-in pixel: not
+    // shown as measurements.
+    assert!(out.contains("resin not measured (no pixel size)"), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.contains("largest area") && l.contains("not measured")),
+        "{out}"
+    );
+    let o = run_in(
+        &dir,
+        &["inspect", fixture("control/channel.zip").to_str().unwrap()],
+    );
+    assert!(stdout(&o).contains("resin not measured"), "{}", stdout(&o));
+    let o = run_in(
+        &dir,
+        &["inspect", fixture("sl1/cube3mm.sl1").to_str().unwrap()],
+    );
+    assert!(
+        !stdout(&o).contains("not measured") && stdout(&o).contains(" ml"),
         "{}",
         stdout(&o)
     );
