@@ -13,6 +13,7 @@ use crate::profile::calibration::response::Response;
 use crate::profile::{Field, Process, Profile};
 use crate::units::{NonNegative, Positive};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// The machine of a job: made from the profile by [`Machine::of`], or by an importer from
 /// what a foreign file says.
@@ -34,6 +35,16 @@ pub struct Machine {
     pub exposure: Exposure,
     /// The resin.
     pub resin: Resin,
+    /// Keys whose values the record's source does not state (`stage.max_speed_mm_s`,
+    /// `projector[].pixel_mm`: `[]` for every projector): a foreign file or a hardware
+    /// description that gives no speed limit or pixel size. The value is a stand-in the
+    /// simulation needs; no check is made against it, and reports say so.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unstated: Vec<String>,
+    /// Where a key's value was read, for messages: record key → the key of the machine
+    /// description (`stage.max_speed_mm_s` → `galil.axes_speed.D`). Not part of the job.
+    #[serde(skip)]
+    pub sources: BTreeMap<String, String>,
 }
 
 /// One projector: its mirrors, where they land on the build plane, and its light.
@@ -56,6 +67,14 @@ pub struct Projector {
     /// The projector's light response, when calibrated: how its grays turn into light.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<Calibration>,
+    /// The light engine's wavelength, nm, when stated (the SLA control file's `Light
+    /// engine wavelength (nm)`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wavelength_nm: Option<u32>,
+    /// The light engine's power setting, 0 to 1000, when stated (the control file's
+    /// `Light engine power setting`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub power_setting: Option<u32>,
 }
 
 /// What a job keeps of a projector's light calibration.
@@ -127,11 +146,12 @@ pub struct Difference {
 /// Keys [`Machine::differences`] leaves out (`[]` stands for every index): names, and what
 /// the job was made for rather than what runs it (its process, resin, normal exposure and
 /// its projectors' calibrations, which the executor takes from the job's own record).
-const NOT_COMPARED: [&str; 6] = [
+const NOT_COMPARED: [&str; 7] = [
     "name",
     "process",
     "exposure",
     "resin",
+    "unstated",
     "projector[].name",
     "projector[].calibration",
 ];
@@ -163,6 +183,9 @@ impl Machine {
             let size = (p.width_px, p.height_px);
             crate::profile::check_projector(&p.name, size, p.pixel_mm.get(), p.offset_px)?;
             crate::profile::check_same_pixel(p.pixel_mm.get(), first.pixel_mm.get())?;
+            if p.power_setting.is_some_and(|w| w > 1000) {
+                return Err(format!("projector {}: power_setting is above 1000", p.name));
+            }
             if let Some(c) = &p.calibration {
                 c.response
                     .validate()
@@ -177,7 +200,8 @@ impl Machine {
 
     /// Every key in which `self` (the job's machine) and `other` differ, in record order,
     /// but for names and what the job was made for (`NOT_COMPARED`): each value (a list of
-    /// numbers is one value), a list of records by index after its length.
+    /// numbers is one value), a list of records by index after its length. A value its
+    /// record does not state (`unstated`) reads `not stated`.
     pub fn differences(&self, other: &Machine) -> Vec<Difference> {
         let tree = |m: &Machine| {
             let text = serde_json::to_string(m).expect("a machine record serializes");
@@ -185,7 +209,70 @@ impl Machine {
         };
         let mut out = Vec::new();
         walk(&tree(self), &tree(other), ("", ""), &mut out);
+        for d in &mut out {
+            for (m, v) in [(self, &mut d.job), (other, &mut d.machine)] {
+                if !m.states(&d.key) {
+                    *v = "not stated".into();
+                }
+            }
+        }
+        out.retain(|d| d.job != d.machine);
         out
+    }
+
+    /// False when the record's source does not state `key` (a dotted key; a projector's
+    /// index is matched by `[]` in `unstated`).
+    pub fn states(&self, key: &str) -> bool {
+        let pattern: String = key
+            .split('[')
+            .enumerate()
+            .map(|(i, part)| match (i, part.find(']')) {
+                (0, _) | (_, None) => part.to_string(),
+                (_, Some(j)) => format!("[]{}", &part[j + 1..]),
+            })
+            .collect();
+        !self.unstated.iter().any(|k| *k == pattern || *k == key)
+    }
+
+    /// This record with `overrides` (`run --set`, profile key names: `projector.0.pixel_mm`)
+    /// applied, read back and validated; the keys set are stated from then on.
+    pub fn with_overrides(
+        &self,
+        overrides: &[crate::profile::Override],
+    ) -> crate::error::Result<Machine> {
+        let labels: Vec<&str> = overrides.iter().map(|o| o.label.as_str()).collect();
+        let error = |msg: String| crate::error::Error::Profile {
+            origin: self.name.clone(),
+            msg: format!("{}: {msg}", labels.join(", ")),
+        };
+        let mut table = toml::Table::try_from(self).map_err(|e| error(e.to_string()))?;
+        for o in overrides {
+            o.apply(&mut table).map_err(&error)?;
+        }
+        let mut m = Machine::deserialize(toml::Value::Table(table))
+            .map_err(|e| error(e.message().to_string()))?;
+        m.validate().map_err(&error)?;
+        m.sources = self.sources.clone();
+        for o in overrides {
+            // `projector.0.pixel_mm` is `projector[].pixel_mm` in `unstated`.
+            let key = o
+                .key
+                .split('.')
+                .fold(String::new(), |k, part| match part.parse::<u32>() {
+                    Ok(_) => k + "[]",
+                    Err(_) if k.is_empty() => part.to_string(),
+                    Err(_) => format!("{k}.{part}"),
+                });
+            m.unstated.retain(|u| !u.starts_with(&key));
+            m.sources.retain(|k, _| !k.starts_with(&o.key));
+        }
+        Ok(m)
+    }
+
+    /// How a message names record key `key`: the machine description's key it was read
+    /// from (`sources`), or the record's own.
+    pub fn label(&self, key: &str) -> String {
+        self.sources.get(key).cloned().unwrap_or_else(|| key.into())
     }
 }
 

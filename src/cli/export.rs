@@ -1,9 +1,10 @@
 //! `dmdsl export`: a job (any form `run` reads) into another form (one zip, Prusa SL1/SL1S, the SLA
 //! control-file standard); also the `--format` values `slice` shares.
 
+use crate::formats::control::hardware::Hardware;
 use crate::formats::Format;
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub(crate) const EXPORT_HELP: &str = "Examples:
   dmdsl export part.dmdjob -o part.sl1                  # for PrusaSlicer / UVtools
@@ -50,6 +51,134 @@ fn size(s: &str) -> Result<u64, String> {
         .ok_or_else(|| format!("{s:?}: too large"))
 }
 
+/// What `--machine ARG` names: a hardware description (a JSON file that reads as the
+/// SLA control-file standard's printer configuration), or a profile (a built-in name or a
+/// TOML file) as its machine record.
+pub(crate) fn machine_arg(
+    arg: Option<&str>,
+) -> Result<(Option<crate::bundle::Machine>, Option<Hardware>), crate::Error> {
+    let Some(arg) = arg else {
+        return Ok((None, None));
+    };
+    let path = Path::new(arg);
+    if path.is_file()
+        && path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        return Ok((None, Some(Hardware::read(path)?)));
+    }
+    let p = crate::profile::Profile::resolve(arg)?;
+    Ok((Some(crate::bundle::Machine::of(&p)), None))
+}
+
+/// Fits `profile` to the printer `path` describes before a job is sliced for it: its
+/// projectors take the light engines' names and wavelengths, its stage the build
+/// platform's limits where they are tighter (checked as a profile is), and a profile
+/// whose images the engines cannot show is refused, naming the keys.
+pub(crate) fn fit_profile(
+    profile: &mut crate::profile::Profile,
+    path: &Path,
+) -> Result<(), crate::Error> {
+    let hw = Hardware::read(path)?;
+    let named = hw.name_engines(
+        profile
+            .projector
+            .iter()
+            .map(|p| (p.name.clone(), p.wavelength_nm)),
+    );
+    for (p, (name, nm)) in profile.projector.iter_mut().zip(named) {
+        (p.name, p.wavelength_nm) = (name, nm);
+    }
+    let mine = crate::bundle::Machine::of(profile);
+    let theirs = hw.machine(&mine)?;
+    let (a, b) = (&mine.stage, &theirs.stage);
+    let mut tighter = Vec::new();
+    for (key, v, hw_v, lower) in [
+        (
+            "stage.max_speed_mm_s",
+            a.max_speed_mm_s.get(),
+            b.max_speed_mm_s.get(),
+            true,
+        ),
+        (
+            "stage.max_accel_mm_s2",
+            a.max_accel_mm_s2.get(),
+            b.max_accel_mm_s2.get(),
+            true,
+        ),
+        (
+            "stage.travel_max_mm",
+            a.travel_max_mm,
+            b.travel_max_mm,
+            true,
+        ),
+        (
+            "stage.travel_min_mm",
+            a.travel_min_mm,
+            b.travel_min_mm,
+            false,
+        ),
+    ] {
+        if (lower && hw_v < v) || (!lower && hw_v > v) {
+            let label = format!("--machine {} ({})", path.display(), theirs.label(key));
+            tighter.push(crate::profile::Override::new(
+                label,
+                key,
+                toml::Value::Float(hw_v),
+            ));
+        }
+    }
+    *profile = profile.with_overrides(&tighter)?;
+    refuse(
+        &hw,
+        path,
+        hw.check_projectors(&crate::bundle::Machine::of(profile)),
+    )
+}
+
+/// An error naming the first of `problems` (and how many more) when there are any.
+fn refuse(hw: &Hardware, path: &Path, problems: Vec<String>) -> Result<(), crate::Error> {
+    let Some(first) = problems.first() else {
+        return Ok(());
+    };
+    let more = match problems.len() - 1 {
+        0 => String::new(),
+        k => format!(" (and {k} more)"),
+    };
+    Err(crate::Error::Bundle {
+        path: path.into(),
+        msg: format!(
+            "the printer {} cannot run this job: {first}{more}",
+            hw.name()
+        ),
+    })
+}
+
+/// Fits the job to the printer `hw` describes before it is exported for it: its
+/// projectors take the engines' names and wavelengths, and a job the printer cannot run
+/// (a move beyond its build platform's limits, an image its engines cannot show) is
+/// refused.
+fn fit_job(job: &mut crate::formats::Job, hw: &Hardware, path: &Path) -> Result<(), crate::Error> {
+    let m = &mut job.manifest.machine;
+    let named = hw.name_engines(
+        m.projector
+            .iter()
+            .map(|p| (p.name.clone(), p.wavelength_nm)),
+    );
+    for (p, (name, nm)) in m.projector.iter_mut().zip(named) {
+        (p.name, p.wavelength_nm) = (name, nm);
+    }
+    let mut on = job.manifest.clone();
+    on.machine = hw.machine(&on.machine)?;
+    let problems = crate::exec::hardware_check(job, hw)
+        .into_iter()
+        .chain(crate::exec::replay(&on))
+        .map(|v| v.message)
+        .collect();
+    refuse(hw, path, problems)
+}
+
 /// The `--format` values: every [`Format`] by its name.
 pub(crate) fn formats() -> impl clap::builder::TypedValueParser<Value = Format> {
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
@@ -76,6 +205,12 @@ pub(crate) struct ExportArgs {
     /// of 1024).
     #[arg(long, value_name = "SIZE", default_value = "1G", value_parser = size)]
     max_size: u64,
+    /// The printer's hardware description (the SLA control-file standard's
+    /// hardware_config.json): the projectors take its light engines' names and wavelengths,
+    /// and a job it cannot run (moves beyond its build platform's limits, images its
+    /// engines cannot show) is refused, nothing written.
+    #[arg(long, value_name = "HARDWARE.json")]
+    machine: Option<PathBuf>,
     /// Print a machine-readable summary on stdout (one JSON object).
     #[arg(long)]
     json: bool,
@@ -98,11 +233,14 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     super::interrupt::on_interrupt(cancel.clone());
     let policy = a.warnings.policy(&[])?;
     let format = Format::for_output(a.format, &a.output)?;
-    let job = crate::formats::open(&a.bundle)?;
-    let manifest = &job.manifest;
-    crate::formats::check_fits(format, &manifest.machine, &a.output)?;
+    let mut job = crate::formats::open(&a.bundle)?;
+    if let Some(path) = &a.machine {
+        fit_job(&mut job, &Hardware::read(path)?, path)?;
+    }
+    crate::formats::check_fits(format, &job.manifest.machine, &a.output)?;
     // Verified as `run` verifies: a job `run` fails is not converted unless asked.
-    let report = crate::exec::run_job(&job, &Default::default())?;
+    let report = crate::exec::run_job(&mut job, &Default::default())?;
+    let manifest = &job.manifest;
     let refused = !report.ok && !a.force;
     if !report.ok && !a.json && !quiet {
         let lines = crate::exec::report::render_violations(&report);

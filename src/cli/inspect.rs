@@ -70,6 +70,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
         .transpose()?;
     let mut summary = inspect::summarize(&a.bundle.display().to_string(), &b.manifest);
     summary.format = b.format.name().into();
+    summary.notes = b.notes.clone();
     let mut written = |path: &Path| summary.pictures.push(path.display().to_string());
     if let Some((path, format)) = &sheet_out {
         let layers = sheet::select_layers(n, range.clone(), a.every)?;

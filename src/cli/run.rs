@@ -30,11 +30,16 @@ pub(crate) struct RunArgs {
     #[arg(long, value_name = "A..B")]
     layers: Option<String>,
     /// Check the job against this machine instead of the one the bundle embeds: a
-    /// built-in profile name or a TOML file. Its stage, shutter and DMD are simulated and
-    /// its projectors' sizes and placement checked; the report names the keys in which it
-    /// differs from the job's machine.
-    #[arg(long, value_name = "PROFILE")]
+    /// built-in profile name, a TOML profile, or the SLA control-file standard's hardware
+    /// description (hardware_config.json: its build platform is the stage, and every
+    /// image's light engine, wavelength, size and offset are checked). The report names
+    /// the keys in which it differs from the job's machine.
+    #[arg(long, value_name = "PROFILE|HARDWARE.json")]
     machine: Option<String>,
+    /// Change one key of the machine the job runs on, as slice's --set names it (e.g.
+    /// --set projector.0.pixel_mm=0.05, --set stage.max_speed_mm_s=30; repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    set: Vec<String>,
     /// Inject a fault: KIND@LAYER, KIND one of stall, limit, shutter-stuck, mask-load
     /// (repeatable).
     #[arg(long, value_name = "KIND@LAYER")]
@@ -61,12 +66,12 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         .iter()
         .map(|f| f.parse().map_err(crate::Error::Usage))
         .collect::<Result<Vec<_>, _>>()?;
-    let machine = a
-        .machine
-        .as_deref()
-        .map(crate::profile::Profile::resolve)
-        .transpose()?
-        .map(|p| crate::bundle::Machine::of(&p));
+    let (machine, hardware) = super::export::machine_arg(a.machine.as_deref())?;
+    let set = a
+        .set
+        .iter()
+        .map(|s| crate::profile::Override::parse_set(s))
+        .collect::<Result<Vec<_>, _>>()?;
     let opts = crate::exec::RunOptions {
         faults,
         trace: a.trace,
@@ -74,6 +79,8 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         layers: a.layers,
         machine,
         cure: a.cure,
+        hardware,
+        set,
     };
     let report = crate::exec::run(&a.bundle, &opts)?;
     if a.json {

@@ -104,6 +104,11 @@ pub(crate) struct SliceArgs {
     /// Machine profile: a built-in name or a TOML file.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
+    /// The printer's hardware description (the SLA control-file standard's
+    /// hardware_config.json): the projectors take its light engines' names and
+    /// wavelengths, and a profile it cannot run is refused before anything is sliced.
+    #[arg(long, value_name = "HARDWARE.json")]
+    machine: Option<PathBuf>,
     /// Change one key of the profile, e.g. --set exposure.layer_s=6 (repeatable; the value
     /// read as TOML: a number, true/false, a string; a list entry by its index, as in
     /// projector.0.mirror_x). Checked like a profile file; the manifest's machine records
@@ -255,6 +260,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     let overrides = overrides(&a)?;
     let mut profile = Profile::resolve(&a.profile)?.with_overrides(&overrides)?;
     crate::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    if let Some(path) = &a.machine {
+        super::export::fit_profile(&mut profile, path)?;
+    }
     let optics = crate::optics::OpticsOptions {
         mode: a.compensation.map(|c| match c {
             CompensationArg::Zone => crate::optics::Mode::Zone,

@@ -26,17 +26,36 @@ pub struct Checker<'a> {
     /// What position quantization changed in the layers' times so far, s.
     quantization_s: f64,
     violations: Vec<Violation>,
+    /// The limits the machine record states (travel, speed, acceleration), and how
+    /// messages name them (`Machine::label`).
+    limits: [(bool, String); 3],
+    /// Compare the simulated times with the manifest's estimates.
+    pub estimate: bool,
 }
 
 impl<'a> Checker<'a> {
     /// A checker for the manifest's layers and machine.
     pub fn new(manifest: &'a Manifest) -> Self {
+        let m = &manifest.machine;
+        let limit = |key: &str, short: &str| {
+            let label = match m.sources.get(key) {
+                Some(s) => format!("{short} ({s})"),
+                None => short.to_string(),
+            };
+            (m.states(key), label)
+        };
         Checker {
             manifest,
-            machine: Machine::of(&manifest.machine),
+            machine: Machine::of(m),
             prev_z: 0.0,
             quantization_s: 0.0,
             violations: Vec::new(),
+            limits: [
+                limit("stage.travel_max_mm", "stage travel"),
+                limit("stage.max_speed_mm_s", "max_speed_mm_s"),
+                limit("stage.max_accel_mm_s2", "max_accel_mm_s2"),
+            ],
+            estimate: true,
         }
     }
 
@@ -50,7 +69,7 @@ impl<'a> Checker<'a> {
     pub fn finish(mut self, total_s: f64, completed: bool) -> Vec<Violation> {
         let est = self.manifest.totals.print_time_s;
         let tol = ESTIMATE_TOLERANCE * est.abs() + self.quantization_s + 1e-9;
-        if completed && (total_s - est).abs() > tol {
+        if self.estimate && completed && (total_s - est).abs() > tol {
             let (total, diff) = (fixed(total_s, 3), signed(pct(total_s, est), 2));
             let msg = format!("simulated job time {total} s differs from the manifest's totals.print_time_s {} s by {diff} % (tolerance 1 %)", fixed(est, 3));
             self.push(None, total_s, Kind::Estimate, msg);
@@ -116,12 +135,13 @@ impl Sink for Checker<'_> {
             }
         }
         let m = self.machine;
+        let [(travel, travel_is), (speed_max, speed_is), (accel_max, accel_is)] = &self.limits;
         let (lo, hi) = (m.travel_min_mm, m.travel_max_mm);
-        let out = |p: f64| p < lo - 1e-9 || p > hi + 1e-9;
+        let out = |p: f64| p < lo - 1e-9 || (*travel && p > hi + 1e-9);
         if (moving || s.kind == SegKind::Home) && (out(s.from_mm) || out(s.to_mm)) {
             let (lo, hi) = (number(lo), number(hi));
             let msg = format!(
-                "layer {i}: {what} from {from} to {to} mm leaves the stage travel [{lo}, {hi}] mm"
+                "layer {i}: {what} from {from} to {to} mm leaves the {travel_is} [{lo}, {hi}] mm"
             );
             push(Kind::Travel, msg);
         }
@@ -135,16 +155,14 @@ impl Sink for Checker<'_> {
             } => (speed_mm_s, accel_mm_s2),
         };
         let (vmax, amax) = (m.max_speed_mm_s, m.max_accel_mm_s2);
-        if moving && speed > vmax * (1.0 + LIMIT_SLACK) {
+        if *speed_max && moving && speed > vmax * (1.0 + LIMIT_SLACK) {
             let (v, max) = (number(speed), number(vmax));
-            let msg =
-                format!("layer {i}: {what} at {v} mm/s exceeds the stage's max_speed_mm_s {max}");
+            let msg = format!("layer {i}: {what} at {v} mm/s exceeds the stage's {speed_is} {max}");
             push(Kind::Speed, msg);
         }
-        if moving && accel > amax * (1.0 + LIMIT_SLACK) {
+        if *accel_max && moving && accel > amax * (1.0 + LIMIT_SLACK) {
             let (a, max) = (number(accel), number(amax));
-            let msg =
-                format!("layer {i}: {what} at {a} mm/s² exceeds the stage's max_accel_mm_s2 {max}");
+            let msg = format!("layer {i}: {what} at {a} mm/s² exceeds the stage's {accel_is} {max}");
             push(Kind::Accel, msg);
         }
         if s.kind == SegKind::Expose && (s.from_mm - layer.z_mm).abs() > m.half_step_mm() + 1e-9 {
@@ -190,7 +208,7 @@ impl Sink for Checker<'_> {
         self.quantization_s += r.quantization_s;
         let est = layer.time_s;
         let tol = ESTIMATE_TOLERANCE * est.abs() + r.quantization_s + 1e-9;
-        if (r.time_s - est).abs() > tol {
+        if self.estimate && (r.time_s - est).abs() > tol {
             let (took, diff) = (fixed(r.time_s, 3), signed(pct(r.time_s, est), 2));
             let est = fixed(est, 3);
             let msg = format!("layer {i} takes {took} s, the manifest's time_s is {est} s ({diff} %, tolerance 1 %)");

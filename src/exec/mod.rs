@@ -38,6 +38,7 @@ pub mod testutil;
 use crate::bundle::Machine as MachineRecord;
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
+use crate::formats::control::hardware::Hardware;
 use crate::output::write_atomic;
 use crate::plot::Format;
 use report::{LayerTiming, MachineCheck, PlotCollector, Report, Stats, Timings};
@@ -67,6 +68,12 @@ pub struct RunOptions {
     /// Predict what cures from the masks (`--cure`, `exec::cure`): needs the manifest's `cure`
     /// record and one projector.
     pub cure: bool,
+    /// A printer's hardware description (`--machine hardware_config.json`, the SLA
+    /// control-file standard's): its build platform is the stage the job runs on, and what
+    /// the job's exposures ask of its light engines is checked (`hardware` violations).
+    pub hardware: Option<Hardware>,
+    /// Changes to keys of the machine record the job runs on (`--set`), applied last.
+    pub set: Vec<crate::profile::Override>,
 }
 
 /// Parses a layer range for a job of `n` layers: `A..B` or `A..=B` (both inclusive),
@@ -111,25 +118,36 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let job = crate::formats::open(path)?;
+    let mut job = crate::formats::open(path)?;
     let open_s = t0.elapsed().as_secs_f64();
-    let mut report = run_job(&job, opts)?;
+    let mut report = run_job(&mut job, opts)?;
     report.timings.read_s += open_s;
     Ok(report)
 }
 
 /// [`run`] on a job opened already ([`crate::formats::open`]): what `dmdsl export`
-/// verifies before it converts a job.
-pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
+/// verifies before it converts a job. An imported job's records are rescaled when the
+/// options give another pixel size.
+pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
+    let native = matches!(
+        job.format,
+        crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip
+    );
+    let given = run_machine(job, opts, native)?;
+    let hardware = opts
+        .hardware
+        .as_ref()
+        .map_or(Vec::new(), |h| hardware_check(job, h));
     let (format, source, estimate) = (job.format, job.source.as_ref(), &job.estimate);
+    let mut notes = job.notes.clone();
     let manifest = job.manifest.clone();
     // A native manifest was checked as it was read; an importer's is checked here.
     manifest.check_numbers().map_err(|msg| Error::Bundle {
         path: job.path.clone(),
         msg,
     })?;
-    let (mut manifest, range, machine_check) = check_options(manifest, source, opts)?;
+    let (mut manifest, range, machine_check) = check_options(manifest, source, opts, &given)?;
     let cure_model = opts
         .cure
         .then(|| cure::model_of(&manifest, source))
@@ -138,12 +156,9 @@ pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
     let dir = job.path.as_path();
 
     let t1 = Instant::now();
-    let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
-    let native = matches!(
-        format,
-        crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip
-    );
-    let verified = verify::verify_source(source, &manifest, machine, native);
+    let machine = given.as_ref().map_or(&manifest.machine, |g| &g.0);
+    let mut verified = verify::verify_source(source, &manifest, machine, native);
+    verified.problems.extend(hardware);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
     // The cure from the masks, once every mask and gray map read as recorded (a
@@ -152,7 +167,7 @@ pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
     let unreadable = verified
         .problems
         .iter()
-        .any(|p| p.kind != Kind::MaskContent);
+        .any(|p| !matches!(p.kind, Kind::MaskContent | Kind::Hardware));
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, source, model)?), None),
         Some(_) => (
@@ -162,13 +177,21 @@ pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
         None => (None, None),
     };
     let cure_s = t3.elapsed().as_secs_f64();
-    if let Some(p) = &opts.machine {
+    // An imported job's timing has no shutter or DMD latency: a machine that adds some is
+    // not held against the file's own times.
+    let latency = |m: &MachineRecord| m.shutter.open_s.get() + m.shutter.close_s.get() + m.dmd.load_s.get();
+    let check_estimate =
+        native || given.as_ref().is_none_or(|g| latency(&g.0) <= latency(&manifest.machine));
+    if !check_estimate {
+        notes.push("estimate: not checked: the file's own timing has no shutter or DMD latency, the machine's are simulated".into());
+    }
+    if let Some((m, _)) = given {
         // From here on the job runs on the given machine.
-        manifest.machine = p.clone();
+        manifest.machine = m;
     }
 
     let t2 = Instant::now();
-    let mut simulated = simulate_into_sinks(dir, &manifest, opts, range)?;
+    let mut simulated = simulate_into_sinks(dir, &manifest, opts, (range, check_estimate))?;
     let timeline = std::mem::take(&mut simulated.timeline);
     let violations = all_violations(verified.problems, timeline, &simulated.outcome);
     let simulate_s = t2.elapsed().as_secs_f64();
@@ -195,7 +218,71 @@ pub fn run_job(job: &crate::formats::Job, opts: &RunOptions) -> Result<Report> {
     );
     report.cure = cure;
     report.cure_skipped = cure_skipped;
+    report.notes = notes;
     Ok(report)
+}
+
+/// The machine the job runs on when the options change it (`--machine`, a hardware
+/// description, `--set`), and which options gave it. An imported job's records are
+/// rescaled when it gives another pixel size (the same pixels, now known to be that big).
+fn run_machine(
+    job: &mut crate::formats::Job,
+    opts: &RunOptions,
+    native: bool,
+) -> Result<Option<(MachineRecord, &'static str)>> {
+    let given = match (opts.machine.is_some() || opts.hardware.is_some(), opts.set.is_empty()) {
+        (false, true) => return Ok(None),
+        (true, true) => "--machine",
+        (false, false) => "--set",
+        (true, false) => "--machine, --set",
+    };
+    let build = |own: &MachineRecord| -> Result<MachineRecord> {
+        let mut m = opts.machine.clone().unwrap_or_else(|| own.clone());
+        if let Some(h) = &opts.hardware {
+            m = h.machine(&m)?;
+        }
+        match opts.set.is_empty() {
+            true => Ok(m),
+            false => m.with_overrides(&opts.set),
+        }
+    };
+    let mut m = build(&job.manifest.machine)?;
+    let pixel = |m: &MachineRecord| m.projector.first().map(|p| p.pixel_mm.get());
+    if let (false, Some(p)) = (native, pixel(&m)) {
+        if pixel(&job.manifest.machine) != Some(p) {
+            crate::formats::rescale(&mut job.manifest, p);
+            m = build(&job.manifest.machine)?;
+        }
+    }
+    Ok(Some((m, given)))
+}
+
+/// What `job` asks of the light engines and vacuum of the printer `h` describes that it
+/// lacks (`hardware` violations, at no time yet); a native job's projectors take the
+/// engines [`Hardware::engine_of`] gives them.
+pub fn hardware_check(job: &crate::formats::Job, h: &Hardware) -> Vec<Violation> {
+    let mut requests = job.requests();
+    if job.requests.is_empty() {
+        let projectors = &job.manifest.machine.projector;
+        for r in &mut requests {
+            if let Some(k) = projectors.iter().position(|p| p.name == r.engine) {
+                if let Some((engine, nm)) = h.engine_of(&r.engine, k) {
+                    r.engine = engine.into();
+                    r.wavelength_nm = r.wavelength_nm.or(nm);
+                }
+            }
+        }
+    }
+    h.check(&requests, job.vacuum)
+        .into_iter()
+        .map(|f| Violation {
+            layer: f.layer,
+            time_s: None,
+            kind: Kind::Hardware,
+            message: f.message,
+            file: f.file,
+        })
+        .collect()
 }
 
 /// The manifest, the layer range of the trace and the plot, and with `--machine` how the
@@ -206,15 +293,16 @@ type ReadBundle = (
     Option<MachineCheck>,
 );
 
-/// Checks the machine record the job will be simulated on (the manifest's, or
-/// `opts.machine`) and the options against it, and parses the layer range of the trace
-/// and the plot.
+/// Checks the machine record the job will be simulated on (the manifest's, or the
+/// `given` one) and the options against it, and parses the layer range of the trace and
+/// the plot.
 fn check_options(
     manifest: Manifest,
     source: &dyn BundleSource,
     opts: &RunOptions,
+    given: &Option<(MachineRecord, &'static str)>,
 ) -> Result<ReadBundle> {
-    let machine_check = match &opts.machine {
+    let machine_check = match given {
         None => {
             manifest.machine.validate().map_err(|msg| Error::Bundle {
                 path: source.shown(MANIFEST),
@@ -222,13 +310,14 @@ fn check_options(
             })?;
             None
         }
-        Some(p) => {
+        Some((p, by)) => {
             p.validate().map_err(|msg| Error::Profile {
                 origin: p.name.clone(),
                 msg,
             })?;
             Some(MachineCheck {
                 profile: p.name.clone(),
+                given: by,
                 differences: manifest.machine.differences(p),
             })
         }
@@ -275,7 +364,7 @@ fn simulate_into_sinks(
     dir: &Path,
     manifest: &Manifest,
     opts: &RunOptions,
-    range: Option<RangeInclusive<usize>>,
+    (range, estimate): (Option<RangeInclusive<usize>>, bool),
 ) -> Result<Simulated> {
     let machine = Machine::of(&manifest.machine);
     let mut trace = opts
@@ -288,6 +377,7 @@ fn simulate_into_sinks(
         .as_ref()
         .map(|_| PlotCollector::new(range.clone()));
     let mut checker = check::Checker::new(manifest);
+    checker.estimate = estimate;
     let mut stats = Stats::default();
     let outcome = {
         let mut sinks: Vec<&mut dyn Sink> = vec![&mut checker, &mut stats];
@@ -418,6 +508,12 @@ fn report(
         timings,
         cure: None,
         cure_skipped: None,
+        unchecked: ["stage.travel_max_mm", "stage.max_speed_mm_s", "stage.max_accel_mm_s2", "projector[].pixel_mm"]
+            .into_iter()
+            .filter(|k| !manifest.machine.states(k))
+            .map(String::from)
+            .collect(),
+        notes: Vec::new(),
     }
 }
 

@@ -61,8 +61,11 @@ pub use crate::bundle::machine::Difference as MachineDifference;
 /// The machine a job was checked against with `--machine`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct MachineCheck {
-    /// The given profile's `name`.
+    /// The given machine's `name` (a profile's, a hardware description's file name; with
+    /// only `--set`, the job's own).
     pub profile: String,
+    /// What gave it: `--machine`, `--set` or both.
+    pub given: &'static str,
     /// Where it differs from the job's machine (empty: nowhere that matters).
     pub differences: Vec<MachineDifference>,
 }
@@ -151,6 +154,12 @@ pub struct Report {
     /// Why `--cure` was not evaluated (the bundle failed verification).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cure_skipped: Option<String>,
+    /// The machine record's keys whose checks were not made: its source states no value
+    /// for them (`stage.max_speed_mm_s`, …; `projector[].pixel_mm`: areas not measured).
+    pub unchecked: Vec<String>,
+    /// What the job's reader or the run could not take as stated, one line each: settings
+    /// not simulated, figures estimated, checks left out.
+    pub notes: Vec<String>,
     /// True when the bundle verified, replayed without violations and no fault triggered.
     pub ok: bool,
 }
@@ -357,7 +366,8 @@ pub fn render_human(r: &Report) -> String {
     if let Some(m) = &r.machine {
         let name = &m.profile;
         if m.differences.is_empty() {
-            let _ = writeln!(o, "machine {name} (--machine): the same stage, shutter, DMD and projectors as the job's");
+            let by = m.given;
+            let _ = writeln!(o, "machine {name} ({by}): the same stage, shutter, DMD and projectors as the job's");
         } else {
             let shown = m.differences.iter().take(DIFFERENCES_SHOWN);
             let shown: Vec<String> = shown
@@ -369,7 +379,8 @@ pub fn render_human(r: &Report) -> String {
             };
             let _ = writeln!(
                 o,
-                "machine {name} (--machine) differs from the job's: {}{more}",
+                "machine {name} ({}) differs from the job's: {}{more}",
+                m.given,
                 shown.join("; ")
             );
         }
@@ -394,6 +405,13 @@ pub fn render_human(r: &Report) -> String {
         o,
         "stage travel {travel:.1} mm within [{lo:.3}, {hi:.3}] mm, peak speed {peak:.3} mm/s"
     );
+    if !r.unchecked.is_empty() {
+        let keys = r.unchecked.join(", ");
+        let _ = writeln!(o, "not checked: {keys}: the job's machine states no value (give --machine or --set)");
+    }
+    for n in &r.notes {
+        let _ = writeln!(o, "note: {n}");
+    }
     if let Some(f) = &r.fault {
         let (t, at) = (f.time_s, hms(f.time_s));
         let _ = writeln!(

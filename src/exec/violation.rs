@@ -68,6 +68,7 @@ kinds! {
     MaskPixels "mask-pixels" "a mask's lit pixel count, lit box in the field, sum of grays or Adler-32 of its rows differs from its record (`masks[].pixels`, version 4): the mask was changed, or its projector's `offset_px` or mirroring",
     Settings "settings" "the settings disagree with the layers: `settings.layer_height_mm` with a layer's `thickness_mm`, `machine.exposure.layer_s` with the normal layers' exposure, `settings.compensation` with the light compensation records (native jobs)",
     OpticsFile "optics-file" "a gray map of the light compensation: missing, SHA-256 mismatch, not a PNG, not 8-bit gray of its projector's size, truncated, or a path outside the bundle",
+    Hardware "hardware" "an exposure asks what the printer's hardware description (`--machine hardware_config.json`) lacks: a light engine, a wavelength, a grayscale-correction image, the image's size, an XY stage for an image offset, a vacuum controller, the schema version (see \"Checking against the real machine\")",
     InvalidStep "invalid-step" "a step no machine can execute (speed or acceleration ≤ 0, negative wait or exposure); skipped",
     LightDuringMove "light-during-move" "light on in a segment that is not an `expose`/`sweep`, or while the stage moves in a layer whose `mode` is `layered`",
     Travel "travel" "a move or sweep starts or ends outside `[travel_min_mm, travel_max_mm]` (motion is monotonic, so the end points bound it)",

@@ -19,16 +19,20 @@ pub enum Format {
     /// The open SLA 3D printer control-file standard, schema v5: a zip of
     /// `print_settings.json` and `slices/*.png`.
     SlaControl,
+    /// A NanoDLP plate (`part.nanodlp`): `meta.json`, `plate.json`, `profile.json`,
+    /// `options.json`, `info.json`, `1.png …`, `3d.png`.
+    Nanodlp,
 }
 
 impl Format {
     /// Every format, in the order `--format` lists them.
-    pub const ALL: [Format; 5] = [
+    pub const ALL: [Format; 6] = [
         Format::Dmdjob,
         Format::DmdjobZip,
         Format::Sl1,
         Format::Sl1s,
         Format::SlaControl,
+        Format::Nanodlp,
     ];
 
     /// The name `--format` takes.
@@ -39,6 +43,7 @@ impl Format {
             Format::Sl1 => "sl1",
             Format::Sl1s => "sl1s",
             Format::SlaControl => "sla-control",
+            Format::Nanodlp => "nanodlp",
         }
     }
 
@@ -52,6 +57,7 @@ impl Format {
             Format::SlaControl => {
                 "The SLA 3D printer control-file standard, schema v5 (print_settings.json + slices/)"
             }
+            Format::Nanodlp => "A NanoDLP plate (the zip NanoDLP imports)",
         }
     }
 
@@ -61,7 +67,7 @@ impl Format {
     }
 
     /// The file name ending a default output path gets: `.dmdjob`, `.dmdjob.zip`, `.sl1`,
-    /// `.sl1s`, `.zip`.
+    /// `.sl1s`, `.zip`, `.nanodlp`.
     pub fn extension(self) -> &'static str {
         match self {
             Format::Dmdjob => ".dmdjob",
@@ -69,6 +75,7 @@ impl Format {
             Format::Sl1 => ".sl1",
             Format::Sl1s => ".sl1s",
             Format::SlaControl => ".zip",
+            Format::Nanodlp => ".nanodlp",
         }
     }
 
@@ -78,8 +85,8 @@ impl Format {
     }
 
     /// What the name of `path` says: `Some(Ok(format))` for `.dmdjob`, `.dmdjob.zip`,
-    /// `.sl1`, `.sl1s` (any case), `Some(Err(()))` for a plain `.zip` (the native zip or
-    /// the control-file standard: ambiguous), `None` for any other name.
+    /// `.sl1`, `.sl1s`, `.nanodlp` (any case), `Some(Err(()))` for a plain `.zip` (the
+    /// native zip or the control-file standard: ambiguous), `None` for any other name.
     fn of_name(path: &Path) -> Option<std::result::Result<Format, ()>> {
         let name = path.file_name()?.to_string_lossy().to_lowercase();
         let f = if name.ends_with(".dmdjob.zip") {
@@ -92,6 +99,8 @@ impl Format {
             Ok(Format::Sl1)
         } else if name.ends_with(".sl1s") {
             Ok(Format::Sl1s)
+        } else if name.ends_with(".nanodlp") {
+            Ok(Format::Nanodlp)
         } else {
             return None;
         };
@@ -149,6 +158,7 @@ mod tests {
         assert_eq!(f(None, "a.DMDJOB.zip").unwrap(), Format::DmdjobZip);
         assert_eq!(f(None, "a.sl1").unwrap(), Format::Sl1);
         assert_eq!(f(None, "a.sl1s").unwrap(), Format::Sl1s);
+        assert_eq!(f(None, "a.nanodlp").unwrap(), Format::Nanodlp);
         assert_eq!(f(Some("sla-control"), "a.zip").unwrap(), Format::SlaControl);
         assert_eq!(f(Some("dmdjob-zip"), "a.zip").unwrap(), Format::DmdjobZip);
         assert_eq!(f(Some("sl1"), "a").unwrap(), Format::Sl1);

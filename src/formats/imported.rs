@@ -1,13 +1,14 @@
-//! What the importers share: the machine record a foreign file implies ([`Implied`]), the
-//! layer record of one image ([`layer`]), the images' figures ([`images`]) and the job
-//! around the layers ([`Imported::job`]).
+//! What the importers share: the machine record a foreign file implies ([`machine`],
+//! [`projector`]), the layer record of one image ([`layer`]), the images' figures
+//! ([`images`]) and the job around the layers ([`Imported::job`]).
 //!
-//! An imported job's layer records come from its masks (lit area and box), so the
-//! executor's verification checks them for what can be wrong with a foreign file (a mask
-//! missing, undecodable, of the wrong size or colour type).
+//! An imported job's layer records come from its masks (lit box; area from the pixels lit
+//! at least half, unless the file states it), so the executor's verification checks them
+//! for what can be wrong with a foreign file (a mask missing, undecodable, of the wrong
+//! size or colour type).
 
 use super::archive::read::Archive;
-use super::{ForeignEstimate, Format, Job};
+use super::{ForeignEstimate, Format, Job, Request};
 use crate::bundle::machine::{Dmd, Exposure, Projector, Resin, Shutter, Stage};
 use crate::bundle::{
     Generator, Layer, Machine, Manifest, MaskRef, Mode, Placement, Settings, Source, Step,
@@ -17,65 +18,61 @@ use crate::error::Result;
 use crate::units::{NonNegative, Positive};
 use rayon::prelude::*;
 
-/// What an importer knows of the machine a file implies (the rest is [`Implied::machine`]'s).
-pub(crate) struct Implied<'a> {
-    /// The record's name, e.g. `sl1-import-sl1`.
-    pub name: String,
-    /// The resin the file names (empty when it names none).
-    pub resin: String,
-    pub projector: &'a str,
-    pub size_px: (u32, u32),
-    pub pixel_mm: f64,
-    pub travel_max_mm: f64,
-    pub max_speed_mm_s: f64,
-    pub max_accel_mm_s2: f64,
-    pub steps_per_mm: f64,
+/// A positive number as a record value (its stand-in when `v` is not one: the record is
+/// validated in [`Imported::job`], which names the value out of range).
+fn pos(v: f64) -> Positive {
+    Positive::new(v).unwrap_or(Positive::new(1.0).expect("1 is positive"))
 }
 
-impl Implied<'_> {
-    /// The machine record: a bottom-up stage from 0 (home) to `travel_max_mm`, no shutter
-    /// or DMD latency, one projector showing the images as they are (no offset, mirroring
-    /// or calibration); the normal exposure is the last layer's. The error names the value
-    /// out of range.
-    fn machine(self, layers: &[Layer]) -> std::result::Result<Machine, String> {
-        let pos = |v: f64, what: &str| {
-            Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
-        };
-        let zero = NonNegative::default();
-        let last_s = layers.last().map_or(0.0, |l| l.exposure_s);
-        let m = Machine {
-            name: self.name,
-            process: crate::profile::Process::BottomUp,
-            stage: Stage {
-                travel_min_mm: 0.0,
-                travel_max_mm: self.travel_max_mm,
-                home_mm: 0.0,
-                max_speed_mm_s: pos(self.max_speed_mm_s, "stage speed")?,
-                max_accel_mm_s2: pos(self.max_accel_mm_s2, "stage acceleration")?,
-                steps_per_mm: pos(self.steps_per_mm, "stage steps per mm")?,
-            },
-            shutter: Shutter {
-                open_s: zero,
-                close_s: zero,
-            },
-            dmd: Dmd { load_s: zero },
-            projector: vec![Projector {
-                name: self.projector.into(),
-                width_px: self.size_px.0,
-                height_px: self.size_px.1,
-                pixel_mm: pos(self.pixel_mm, "pixel size")?,
-                offset_px: [0, 0],
-                mirror_x: false,
-                mirror_y: false,
-                calibration: None,
-            }],
-            exposure: Exposure {
-                layer_s: NonNegative::new(last_s).unwrap_or(zero),
-            },
-            resin: Resin { name: self.resin },
-        };
-        m.validate()?;
-        Ok(m)
+/// A projector showing images of `size_px` as they are (no offset, mirroring or
+/// calibration), pixels `pixel_mm` wide.
+pub(crate) fn projector(name: &str, size_px: (u32, u32), pixel_mm: f64) -> Projector {
+    Projector {
+        name: name.into(),
+        width_px: size_px.0,
+        height_px: size_px.1,
+        pixel_mm: pos(pixel_mm),
+        offset_px: [0, 0],
+        mirror_x: false,
+        mirror_y: false,
+        calibration: None,
+        wavelength_nm: None,
+        power_setting: None,
+    }
+}
+
+/// The machine a foreign file implies: a bottom-up stage homed at 0 traveling to
+/// `travel_max_mm` at most `(speed, acceleration)` in `steps_per_mm`, no shutter or DMD
+/// latency, `projectors`, the resin it names; `unstated` the keys the file does not
+/// state (their values are stand-ins). The normal exposure is set by [`Imported::job`].
+pub(crate) fn machine(
+    (name, resin): (String, String),
+    (travel_max_mm, speed, accel, steps_per_mm): (f64, f64, f64, f64),
+    projectors: Vec<Projector>,
+    unstated: &[&str],
+) -> Machine {
+    let zero = NonNegative::default();
+    Machine {
+        name,
+        process: crate::profile::Process::BottomUp,
+        stage: Stage {
+            travel_min_mm: 0.0,
+            travel_max_mm,
+            home_mm: 0.0,
+            max_speed_mm_s: pos(speed),
+            max_accel_mm_s2: pos(accel),
+            steps_per_mm: pos(steps_per_mm),
+        },
+        shutter: Shutter {
+            open_s: zero,
+            close_s: zero,
+        },
+        dmd: Dmd { load_s: zero },
+        projector: projectors,
+        exposure: Exposure { layer_s: zero },
+        resin: Resin { name: resin },
+        unstated: unstated.iter().map(|k| k.to_string()).collect(),
+        sources: Default::default(),
     }
 }
 
@@ -97,23 +94,16 @@ pub(crate) fn images(archive: &Archive, names: &[&str]) -> Vec<Image> {
         .collect()
 }
 
-/// The pixels of an imported job's images on the build plane: the images' height, px,
-/// a pixel's edge along x, mm, and its area, mm².
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Grid {
-    pub height_px: u32,
-    pub pixel_mm: f64,
-    pub pixel_area_mm2: f64,
-}
-
 /// The record of layer `index` of an imported job: its top at `z_mm`, cut at
-/// `slice_z_mm`, `thickness_mm` thick, showing image `file` (`image` its figures) during the exposure of its `steps`, which
-/// take `time_s`; area and box from the image's lit pixels on `grid`.
+/// `slice_z_mm`, `thickness_mm` thick, showing image `file` (`image` its figures) on
+/// projector `k` of `machine` during the exposure of its `steps`, which take `time_s`.
+/// Its box comes from the image's lit pixels placed as the projector shows them (offset,
+/// mirroring undone); its area is `area_mm2` when the file states it, else the pixels
+/// lit at least half times `pixel_area_mm2`.
 pub(crate) fn layer(
-    index: usize,
-    (z_mm, slice_z_mm, thickness_mm): (f64, f64, f64),
+    (index, (z_mm, slice_z_mm, thickness_mm)): (usize, (f64, f64, f64)),
     (file, image): (&str, &Image),
-    grid: Grid,
+    (machine, k, pixel_area_mm2, area_mm2): (&Machine, usize, f64, Option<f64>),
     steps: Vec<Step>,
     time_s: f64,
 ) -> Layer {
@@ -122,7 +112,19 @@ pub(crate) fn layer(
         Step::Expose { s } => Some(s),
         _ => None,
     });
-    let [w, h] = [grid.pixel_mm, grid.height_px as f64];
+    let p = &machine.projector[k];
+    let (w, field_h) = (p.pixel_mm.get(), machine.field().height_px as f64);
+    let flip = |a: u32, b: u32, n: u32, m: bool| if m { (n - b, n - a) } else { (a, b) };
+    // Columns x/p, rows H − y/p in the field (the executor's convention).
+    let bbox_mm = fig.and_then(|f| f.lit_box).map(|b| {
+        let (c0, c1) = flip(b[0], b[2], p.width_px, p.mirror_x);
+        let (r0, r1) = flip(b[1], b[3], p.height_px, p.mirror_y);
+        let [ox, oy] = p.offset_px.map(f64::from);
+        [
+            [(ox + c0 as f64) * w, (field_h - oy - r1 as f64) * w],
+            [(ox + c1 as f64) * w, (field_h - oy - r0 as f64) * w],
+        ]
+    });
     Layer {
         index: index as u64,
         z_mm,
@@ -130,20 +132,15 @@ pub(crate) fn layer(
         thickness_mm,
         mode: Mode::Layered,
         exposure_s: exposure_s.unwrap_or(0.0),
-        area_mm2: fig.map_or(0.0, |f| f.coverage_px * grid.pixel_area_mm2),
+        area_mm2: area_mm2
+            .unwrap_or_else(|| fig.map_or(0.0, |f| f.half_px as f64 * pixel_area_mm2)),
         max_fill_distance_mm: 0.0,
         islands: 0,
-        // Columns x/p, rows H − y/p (the executor's convention).
-        bbox_mm: fig.and_then(|f| f.lit_box).map(|b| {
-            [
-                [b[0] as f64 * w, (h - b[3] as f64) * w],
-                [b[2] as f64 * w, (h - b[1] as f64) * w],
-            ]
-        }),
+        bbox_mm,
         masks: vec![MaskRef {
             file: file.into(),
             sha256: image.0.clone(),
-            projector: 0,
+            projector: k as u32,
             pixels: None,
         }],
         steps,
@@ -153,32 +150,55 @@ pub(crate) fn layer(
 }
 
 /// An imported job's layers and what the file says around them.
-pub(crate) struct Imported<'a> {
+pub(crate) struct Imported {
     pub format: Format,
     /// Who wrote the file, e.g. "PrusaSlicer-2.5.0".
     pub generator: String,
     /// The imported file's SHA-256.
     pub sha256: String,
-    pub machine: Implied<'a>,
+    /// The machine the file implies ([`machine`]).
+    pub machine: Machine,
     /// Nominal layer height, mm.
     pub layer_height_mm: f64,
     pub layers: Vec<Layer>,
     /// The file's own total time estimate, if it has one (otherwise the sum of the
     /// layers' `time_s` is the job's).
     pub estimate: Option<ForeignEstimate>,
+    /// The resin volume the file states, ml (otherwise the layers' areas give it).
+    pub resin_ml: Option<f64>,
+    /// The file states the layers' areas (otherwise they are estimates).
+    pub stated_areas: bool,
+    /// What the exposures ask of the light engines (control files).
+    pub requests: Vec<Request>,
+    /// The file asks to print under vacuum.
+    pub vacuum: bool,
+    /// What the reader did not take as stated (module docs of `formats`).
+    pub notes: Vec<String>,
 }
 
-impl Imported<'_> {
+impl Imported {
     /// The job: a manifest as a bundle would have it, the archive's files as its files.
     /// A machine out of range is an error about entry `entry`, the machine named `what`.
-    pub(crate) fn job(self, archive: Archive, (entry, what): (&str, &str)) -> Result<Job> {
+    pub(crate) fn job(mut self, archive: Archive, (entry, what): (&str, &str)) -> Result<Job> {
         let path = archive.path().to_path_buf();
-        let machine = (self.machine)
-            .machine(&self.layers)
+        let mut machine = self.machine;
+        let last_s = self.layers.last().map_or(0.0, |l| l.exposure_s);
+        machine.exposure.layer_s = NonNegative::new(last_s).unwrap_or_default();
+        machine
+            .validate()
             .map_err(|m| archive.error(Some(entry), format!("{what}: {m}")))?;
         let layers = self.layers;
         let time_sum: f64 = layers.iter().map(|l| l.time_s).sum();
-        let resin_mm3: f64 = layers.iter().map(|l| l.area_mm2 * l.thickness_mm).sum();
+        let areas_mm3: f64 = layers.iter().map(|l| l.area_mm2 * l.thickness_mm).sum();
+        if !machine.states("projector[].pixel_mm") {
+            self.notes.push("no pixel size stated (projector[].pixel_mm): layer areas and the resin volume are not measured; give it with --set projector.0.pixel_mm=MM".into());
+        } else if !self.stated_areas {
+            let what = match self.resin_ml {
+                Some(_) => "layer areas are estimates",
+                None => "layer areas and the resin volume are estimates",
+            };
+            self.notes.push(format!("{what}: the masks' pixels lit at least half"));
+        }
         let bbox_mm = layers
             .iter()
             .filter_map(|l| {
@@ -226,7 +246,7 @@ impl Imported<'_> {
                 height_mm: layers.last().map_or(0.0, |l| l.z_mm),
                 print_time_s: self.estimate.as_ref().map_or(time_sum, |e| e.print_time_s),
                 exposure_s: layers.iter().map(|l| l.exposure_s).sum(),
-                resin_volume_ml: resin_mm3 / 1000.0,
+                resin_volume_ml: self.resin_ml.unwrap_or(areas_mm3 / 1000.0),
                 continuous_layers: None,
                 all_layered_time_s: None,
             },
@@ -241,8 +261,45 @@ impl Imported<'_> {
             format: self.format,
             manifest,
             estimate: self.estimate,
+            requests: self.requests,
+            vacuum: self.vacuum,
+            notes: self.notes,
         })
     }
+}
+
+/// The job `m` imported with pixels of another size: projector placements, layer boxes
+/// and areas and the resin volume restated for pixels `pixel_mm` wide (the masks are the
+/// same pixels, now known to be that size; an offset, a physical distance, is fewer or
+/// more of them).
+pub(crate) fn rescale(m: &mut Manifest, pixel_mm: f64) {
+    let Some(old) = m.machine.projector.first().map(|p| p.pixel_mm.get()) else {
+        return;
+    };
+    let f = pixel_mm / old;
+    let before = m.machine.clone();
+    for p in &mut m.machine.projector {
+        p.pixel_mm = pos(pixel_mm);
+        p.offset_px = p.offset_px.map(|o| (o as f64 / f).round() as u32);
+    }
+    let (h0, h1) = (before.field().height_px as f64, m.machine.field().height_px as f64);
+    for l in &mut m.layers {
+        l.area_mm2 *= f * f;
+        let k = l.masks.first().map_or(0, |k| k.projector as usize);
+        let (Some(a), Some(b)) = (before.projector.get(k), m.machine.projector.get(k)) else {
+            continue;
+        };
+        let [ax, ay] = a.offset_px.map(f64::from);
+        let [bx, by] = b.offset_px.map(f64::from);
+        // The same mask pixel, placed by the new offset in the new field.
+        let x = |v: f64| (v / old - ax + bx) * pixel_mm;
+        let y = |v: f64| (h1 - (h0 - v / old - ay + by)) * pixel_mm;
+        if let Some(bb) = &mut l.bbox_mm {
+            *bb = bb.map(|[u, v]| [x(u), y(v)]);
+        }
+    }
+    m.totals.resin_volume_ml *= f * f;
+    m.machine.unstated.retain(|k| k != "projector[].pixel_mm");
 }
 
 /// What a decoded mask shows: its lit pixels.
@@ -250,6 +307,9 @@ impl Imported<'_> {
 pub(crate) struct MaskFigures {
     /// Sum of the pixel values / 255 (the lit area in pixels, coverage counted).
     pub coverage_px: f64,
+    /// Pixels of value 128 or more (lit at least half): the area's estimate, also of
+    /// light-compensated masks, whose grays are not coverage.
+    pub half_px: u64,
     /// Lit box in pixels: [col0, row0, col1, row1) (None when nothing is lit).
     pub lit_box: Option<[u32; 4]>,
 }
@@ -279,7 +339,7 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
             .into_luma8()
             .into_raw();
     }
-    let mut sum: u64 = 0;
+    let (mut sum, mut half) = (0u64, 0u64);
     let mut b = [u32::MAX, u32::MAX, 0, 0];
     for (r, row) in buf.chunks_exact(w.max(1) as usize).enumerate() {
         // Most rows are dark: one vectorized OR over the row says so.
@@ -290,7 +350,9 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
             continue;
         };
         let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
-        sum += u64::from(row[first..=last].iter().map(|&v| u32::from(v)).sum::<u32>());
+        let lit = &row[first..=last];
+        sum += u64::from(lit.iter().map(|&v| u32::from(v)).sum::<u32>());
+        half += lit.iter().filter(|&&v| v >= 128).count() as u64;
         b = [
             b[0].min(first as u32),
             b[1].min(r as u32),
@@ -304,6 +366,7 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
         h,
         MaskFigures {
             coverage_px: sum as f64 / 255.0,
+            half_px: half,
             lit_box,
         },
     ))

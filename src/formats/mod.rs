@@ -11,7 +11,11 @@
 //!   read as layers and steps that reproduce PrusaSlicer 2.5's print-time model on the
 //!   machine the file describes;
 //! * [`control`]: the SLA control-file standard, schema v5 (the print-settings JSON and
-//!   `slices/`), read as layers and steps from its position and image settings;
+//!   `slices/`), read as layers and steps from its position and image settings, and the
+//!   standard's printer description (`control::hardware`);
+//! * [`nanodlp`]: NanoDLP plates (`meta.json`, `plate.json`, `profile.json`,
+//!   `options.json`, `info.json`, `1.png …`), read as layers and steps from the plate's
+//!   profile;
 //! * `imported.rs`: what the importers share (the machine record a file implies, the layer
 //!   record of an image, the job around them);
 //! * [`archive`]: zips, their entries inflated into memory only as a reader asks for
@@ -20,14 +24,15 @@
 //!
 //! The form is found from the content, not the extension: a directory is a bundle; a zip
 //! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
-//! is SL1, one holding a top-level `.json` with `Header` and `Default layer settings` is a
-//! control file. A missing setting or a file that cannot be a job of the format is an
+//! is SL1, one holding `plate.json` and `profile.json` a NanoDLP plate, one holding a
+//! top-level `.json` with `Header` and `Default layer settings` is a control file. A missing setting or a file that cannot be a job of the format is an
 //! error naming the file, the entry and the key.
 
 pub mod archive;
 pub mod control;
 mod format;
 mod imported;
+pub mod nanodlp;
 mod native;
 pub mod sl1;
 mod written;
@@ -41,6 +46,7 @@ use std::sync::atomic::AtomicBool;
 
 pub use format::Format;
 pub(crate) use imported::DEFLATE_MAX_RATIO;
+pub(crate) use imported::rescale;
 
 /// Where an imported job's total time estimate comes from, when not from dmdsl's planner.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +55,30 @@ pub struct ForeignEstimate {
     pub source: String,
     /// The estimate, s (the manifest's `totals.print_time_s`).
     pub print_time_s: f64,
+}
+
+/// What one exposure of a job asks of the printer's light engine, as the SLA control
+/// file's image settings say it (for a native job: its projectors'), for the checks of a
+/// machine description (`run --machine hardware_config.json`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Request {
+    /// The layer record.
+    pub layer: usize,
+    /// Where the file says it, e.g. `Layers[3].Image settings list[1]` (empty for a
+    /// native job).
+    pub at: String,
+    /// The image, as the job names it.
+    pub file: String,
+    /// The light engine.
+    pub engine: String,
+    /// Its wavelength, nm, when stated.
+    pub wavelength_nm: Option<u32>,
+    /// Where the image goes: the control file's `Image x/y offset (um)`.
+    pub offset_um: [f64; 2],
+    /// `Do grayscale correction`.
+    pub gray_correction: bool,
+    /// The image's size, px (when it decodes).
+    pub size_px: Option<(u32, u32)>,
 }
 
 /// A job opened for the executor, `inspect` or `export`.
@@ -63,6 +93,46 @@ pub struct Job {
     pub source: Box<dyn BundleSource>,
     /// The estimate the file carried, for imported jobs that carry one.
     pub estimate: Option<ForeignEstimate>,
+    /// What each exposure asks of the light engines, as an imported file states it
+    /// (empty: the projectors' own, [`Job::requests`]).
+    pub requests: Vec<Request>,
+    /// The job asks to print under vacuum (the control file's `Special print
+    /// techniques`).
+    pub vacuum: bool,
+    /// What the reader could not take as stated, one line each: settings it does not
+    /// simulate, figures it estimated.
+    pub notes: Vec<String>,
+}
+
+impl Job {
+    /// What each exposure asks of the light engines: the file's requests, or one per mask
+    /// from its projector (name, wavelength, offset).
+    pub fn requests(&self) -> Vec<Request> {
+        if !self.requests.is_empty() {
+            return self.requests.clone();
+        }
+        let m = &self.manifest;
+        let mut out = Vec::new();
+        for (i, l) in m.layers.iter().enumerate() {
+            for mask in &l.masks {
+                let Some(p) = m.machine.projector.get(mask.projector as usize) else {
+                    continue;
+                };
+                let um = p.pixel_mm.get() * 1000.0;
+                out.push(Request {
+                    layer: i,
+                    at: String::new(),
+                    file: mask.file.clone(),
+                    engine: p.name.clone(),
+                    wavelength_nm: p.wavelength_nm,
+                    offset_um: p.offset_px.map(|o| o as f64 * um),
+                    gray_correction: false,
+                    size_px: Some((p.width_px, p.height_px)),
+                });
+            }
+        }
+        out
+    }
 }
 
 impl std::fmt::Debug for Job {
@@ -107,15 +177,20 @@ pub fn open(path: &Path) -> Result<Job> {
     if sl1::holds(&archive) {
         return sl1::import(archive, &sha256);
     }
+    if nanodlp::holds(&archive) {
+        return nanodlp::import(archive, &sha256);
+    }
     if let Some(name) = control::settings_entry(&archive) {
         return control::import(archive, &name, &sha256);
     }
     Err(archive.error(
         None,
         format!(
-            "not a job: no `{MANIFEST}` (zipped bundle), no `{}` + `{}` (SL1/SL1S), no print-settings JSON (SLA control file) at the top of the archive",
+            "not a job: no `{MANIFEST}` (zipped bundle), no `{}` + `{}` (SL1/SL1S), no `{}` + `{}` (NanoDLP), no print-settings JSON (SLA control file) at the top of the archive",
             sl1::CONFIG,
-            sl1::PRUSASLICER
+            sl1::PRUSASLICER,
+            nanodlp::PLATE,
+            nanodlp::PROFILE
         ),
     ))
 }
@@ -149,7 +224,7 @@ pub fn write_at_most(
     max_bytes: Option<u64>,
 ) -> Result<Vec<Warning>> {
     check_fits(format, &manifest.machine, out)?;
-    let foreign = matches!(format, Format::Sl1 | Format::Sl1s | Format::SlaControl);
+    let foreign = !matches!(format, Format::Dmdjob | Format::DmdjobZip);
     if foreign && manifest.layers.is_empty() {
         return Err(Error::Bundle {
             path: out.into(),
@@ -171,25 +246,43 @@ pub fn write_at_most(
         Format::Dmdjob | Format::DmdjobZip => Vec::new(),
         Format::Sl1 | Format::Sl1s => sl1::cannot_carry(format, manifest),
         Format::SlaControl => control::cannot_carry(manifest),
+        Format::Nanodlp => nanodlp::cannot_carry(manifest),
     };
     match format {
         Format::Dmdjob => native::write_dir(manifest, files, out, cancel)?,
         Format::DmdjobZip => native::write_zip(manifest, files, out, cancel)?,
         Format::Sl1 | Format::Sl1s => sl1::write(format, manifest, files, out, cancel)?,
         Format::SlaControl => control::write(manifest, files, out, cancel)?,
+        Format::Nanodlp => nanodlp::write(manifest, files, out, cancel)?,
     }
     Ok(warnings)
 }
 
 /// Checks, before anything is written, that `format` can hold a job for `machine`:
-/// SL1/SL1S hold one projector's masks. `out` names the output in the error.
+/// SL1/SL1S and NanoDLP plates hold one projector's masks. `out` names the output in the
+/// error.
 /// A directory in the way of a one-file format is refused here too.
 pub fn check_fits(format: Format, machine: &Machine, out: &Path) -> Result<()> {
     if format.is_one_file() {
         archive::write::check_dest(out)?;
     }
     match format {
-        Format::Sl1 | Format::Sl1s => sl1::check_projectors(machine.projector.len(), out),
+        Format::Sl1 | Format::Sl1s | Format::Nanodlp => {
+            sl1::check_projectors(format, machine.projector.len(), out)
+        }
         _ => Ok(()),
     }
+}
+
+/// Now, s since 1970 (or `SOURCE_DATE_EPOCH`, for reproducible files): the time stamps
+/// the foreign formats record.
+pub(crate) fn now_secs() -> i64 {
+    std::env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|s| s.trim().parse::<i64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs() as i64)
+        })
 }

@@ -6,6 +6,7 @@ use super::archive::write::{Method, ZipOut};
 use super::{Format, Job};
 use crate::bundle::{BundleSource, BundleWriter, DirSource, Manifest, MANIFEST};
 use crate::error::Result;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -17,6 +18,9 @@ pub(super) fn open_dir(dir: &Path) -> Result<Job> {
         manifest: Manifest::read(dir)?,
         source: Box::new(DirSource::new(dir)),
         estimate: None,
+        requests: Vec::new(),
+        vacuum: false,
+        notes: Vec::new(),
     })
 }
 
@@ -46,7 +50,85 @@ pub(super) fn open_zip(archive: Archive, dir: &str) -> Result<Job> {
         format: Format::DmdjobZip,
         manifest,
         estimate: None,
+        requests: Vec::new(),
+        vacuum: false,
+        notes: Vec::new(),
     })
+}
+
+/// Where a file of a native bundle comes from: the job's file of that name, or bytes made
+/// for it.
+enum From {
+    File(String),
+    Made(std::sync::Arc<Vec<u8>>),
+}
+
+/// An 8-bit gray PNG of `w` × `h` pixels, all dark.
+fn dark_png(w: u32, h: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    image::GrayImage::new(w, h)
+        .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .expect("a PNG encodes into memory");
+    out
+}
+
+/// The manifest as a native bundle holds it, and where each of its files comes from: a
+/// native bundle gives every layer its own file for every projector (`mask-shared`,
+/// `manifest`), so a job whose layers share images (an imported control file's
+/// duplications) or show one projector at a time (its images exposed in turn) gets
+/// `masks/NNNNN.png` (`masks/pK/NNNNN.png` with several projectors, K the projector's
+/// index) for each, the same bytes, and a dark image for each projector a layer does not
+/// light.
+fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, From>) {
+    let mut seen = HashSet::new();
+    let n = m.machine.projector.len();
+    let own = m.layers.iter().all(|l| l.masks.len() == n)
+        && m.layers.iter().flat_map(|l| &l.masks).all(|k| seen.insert(k.file.as_str()));
+    if own {
+        return (std::borrow::Cow::Borrowed(m), HashMap::new());
+    }
+    let mut out = m.clone();
+    let mut from = HashMap::new();
+    let name = |k: usize, i: u64| match n > 1 {
+        true => format!("masks/p{k}/{i:05}.png"),
+        false => format!("masks/{i:05}.png"),
+    };
+    let dark: Vec<_> = m.machine.projector.iter().map(|p| {
+        let png = dark_png(p.width_px, p.height_px);
+        (crate::digest::sha256_hex(&png), std::sync::Arc::new(png))
+    }).collect();
+    for l in &mut out.layers {
+        let lit: Vec<u32> = l.masks.iter().map(|k| k.projector).collect();
+        for k in &mut l.masks {
+            let file = name(k.projector as usize, l.index);
+            from.insert(file.clone(), From::File(std::mem::replace(&mut k.file, file)));
+        }
+        for (k, (sha, png)) in dark.iter().enumerate().filter(|(k, _)| !lit.contains(&(*k as u32))) {
+            let file = name(k, l.index);
+            from.insert(file.clone(), From::Made(png.clone()));
+            l.masks.push(crate::bundle::MaskRef {
+                file,
+                sha256: sha.clone(),
+                projector: k as u32,
+                pixels: None,
+            });
+        }
+        l.masks.sort_by_key(|k| k.projector);
+    }
+    (std::borrow::Cow::Owned(out), from)
+}
+
+/// The bytes of bundle file `rel` (`from` says where it comes from).
+fn bytes<'a>(
+    files: &'a dyn BundleSource,
+    from: &'a HashMap<String, From>,
+    rel: &str,
+) -> Result<std::borrow::Cow<'a, [u8]>> {
+    match from.get(rel) {
+        Some(From::Made(b)) => Ok(std::borrow::Cow::Borrowed(b.as_slice())),
+        Some(From::File(f)) => files.file(f),
+        None => files.file(rel),
+    }
 }
 
 /// The files of a bundle its manifest names, in the order the native forms store them:
@@ -68,17 +150,18 @@ pub(super) fn write_dir(
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
+    let (manifest, from) = own_files(manifest);
     let writer = BundleWriter::create(out)?;
-    for rel in bundle_files(manifest) {
+    for rel in bundle_files(&manifest) {
         if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
             return Err(crate::error::Error::Interrupted);
         }
         if let Some(dir) = Path::new(rel).parent().filter(|d| d != &Path::new("")) {
             writer.create_dir(&dir.to_string_lossy())?;
         }
-        writer.write_file(rel, &files.file(rel)?)?;
+        writer.write_file(rel, &bytes(files, &from, rel)?)?;
     }
-    writer.finish(manifest)?;
+    writer.finish(&manifest)?;
     Ok(())
 }
 
@@ -90,10 +173,11 @@ pub(super) fn write_zip(
     out: &Path,
     cancel: Option<&AtomicBool>,
 ) -> Result<()> {
+    let (manifest, from) = own_files(manifest);
     let mut zip = ZipOut::create(out, cancel)?;
     zip.add(MANIFEST, &manifest.to_json(), Method::Deflated)?;
-    for rel in bundle_files(manifest) {
-        zip.add(rel, &files.file(rel)?, Method::Stored)?;
+    for rel in bundle_files(&manifest) {
+        zip.add(rel, &bytes(files, &from, rel)?, Method::Stored)?;
     }
     zip.finish()?;
     Ok(())

@@ -56,6 +56,8 @@ pub struct Bundle {
     pub manifest: Manifest,
     /// Its files (masks, gray maps).
     pub files: Box<dyn BundleSource>,
+    /// What its reader could not take as stated (an imported file's), one line each.
+    pub notes: Vec<String>,
 }
 
 impl Bundle {
@@ -89,6 +91,7 @@ impl Bundle {
             format: job.format,
             manifest,
             files: job.source,
+            notes: job.notes,
         })
     }
 

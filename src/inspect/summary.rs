@@ -74,6 +74,15 @@ pub struct Summary {
     pub warnings_by_code: BTreeMap<String, usize>,
     /// The per-layer extremes (none for a job without layers).
     pub extremes: Option<Extremes>,
+    /// What an imported job's reader could not take as stated (areas estimated from the
+    /// masks, settings not simulated), one line each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+    /// True when the job states no pixel size (an imported file that has none): its areas
+    /// and resin volume are counts of a stand-in pixel, not measurements, and the summary
+    /// for people says so (the JSON keeps the numbers; `notes` says why).
+    #[serde(skip)]
+    pub unmeasured: bool,
     /// The pictures written.
     pub pictures: Vec<String>,
 }
@@ -130,6 +139,8 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         warnings: m.warnings.len(),
         warnings_by_code: by_code,
         extremes,
+        notes: Vec::new(),
+        unmeasured: !m.machine.states("projector[].pixel_mm"),
         pictures: Vec::new(),
     }
 }
@@ -153,7 +164,11 @@ pub fn render_human(s: &Summary) -> String {
         format!(", {c} layers printed continuously")
     });
     let (t, exposure, resin) = (s.print_time_s, s.exposure_s, s.resin_volume_ml);
-    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, resin {resin:.2} ml{continuous}", hms(t));
+    let resin = match s.unmeasured {
+        true => "resin not measured (no pixel size)".to_string(),
+        false => format!("resin {resin:.2} ml"),
+    };
+    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, {resin}{continuous}", hms(t));
     match (s.compensation.as_deref(), s.zone_mm) {
         (Some("zone"), Some(z)) => {
             let _ = writeln!(o, "light compensation: zone: each {} mm zone has its own gray, so a mask shows faint squares inside the part (darker where the projector is brighter)", number(z));
@@ -173,6 +188,9 @@ pub fn render_human(s: &Summary) -> String {
             .collect();
         let _ = writeln!(o, "warnings: {} ({})", s.warnings, by.join(", "));
     }
+    for n in &s.notes {
+        let _ = writeln!(o, "note: {n}");
+    }
     if let Some(e) = &s.extremes {
         let rows = [
             ("largest area", &e.area_mm2, 2, " mm²"),
@@ -182,7 +200,10 @@ pub fn render_human(s: &Summary) -> String {
             ("longest layer time", &e.time_s, 2, " s"),
         ];
         for (what, x, decimals, unit) in rows {
-            let value = format!("{:.decimals$}{unit}", x.value);
+            let value = match s.unmeasured && what == "largest area" {
+                true => "not measured".to_string(),
+                false => format!("{:.decimals$}{unit}", x.value),
+            };
             let _ = writeln!(o, "  {what:<22} {value:>12}  layer {}", x.layer);
         }
     }

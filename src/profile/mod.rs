@@ -122,6 +122,14 @@ pub struct Projector {
     /// (profiles written before the key existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub psf_sigma_px: Option<Positive>,
+    /// The light engine's wavelength, nm, when the machine has a choice (the SLA
+    /// control-file export writes it; without it, the schema's default 365 nm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wavelength_nm: Option<u32>,
+    /// The light engine's power setting, 0 to 1000 (the control-file export writes it;
+    /// without it, the schema's default 100).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub power_setting: Option<u32>,
 }
 
 /// The smallest pixel on the build plane a profile may give, mm (1 µm).

@@ -55,7 +55,7 @@ impl Override {
 
     /// Sets the value in `table` (a profile as TOML), creating missing sections; an error
     /// says why the key cannot be there.
-    fn apply(&self, table: &mut toml::Table) -> std::result::Result<(), String> {
+    pub(crate) fn apply(&self, table: &mut toml::Table) -> std::result::Result<(), String> {
         let parts: Vec<&str> = self.key.split('.').map(str::trim).collect();
         let mut here = table
             .entry(parts[0].to_string())

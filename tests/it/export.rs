@@ -574,3 +574,117 @@ fn masks_are_written_up_to_their_iend_chunk_and_outputs_are_bounded() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(names(&d), ["a.sl1", "b.sl1"]);
 }
+
+#[test]
+fn a_control_file_for_a_described_printer_names_its_engine_and_is_refused_when_it_cannot_run() {
+    let dir = tempdir("export-hardware");
+    let hw = fixture("sla_control/hardware_config_example.json");
+    let hw = hw.to_str().unwrap();
+    let part = fixture("cube10.stl");
+    let part = part.to_str().unwrap();
+    // The default projector's 1024 × 768 images on visitech (2560 × 1600): refused, nothing
+    // written.
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            part,
+            "--scale",
+            "0.3",
+            "-o",
+            "no.zip",
+            "--format",
+            "sla-control",
+            "--machine",
+            hw,
+        ],
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("visitech.resolution") && err.contains("cannot run this job"),
+        "{err}"
+    );
+    assert!(!dir.join("no.zip").exists());
+    // A 2560 × 1600 projector: the engine and its first LED named, the stage within the
+    // build platform's limits, the file valid for that printer.
+    let fits = [
+        "--set",
+        "projector.0.width_px=2560",
+        "--set",
+        "projector.0.height_px=1600",
+        "--set",
+        "projector.0.power_setting=250",
+    ];
+    let mut args = vec![
+        "slice",
+        part,
+        "--scale",
+        "0.3",
+        "-p",
+        "bottom-up",
+        "-o",
+        "hw.zip",
+        "--format",
+        "sla-control",
+        "--machine",
+        hw,
+        "--json",
+    ];
+    args.extend(fits);
+    let o = run_in(&dir, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(warnings_of(&v, "export.control-assumed").is_empty(), "{v}");
+    let settings: serde_json::Value =
+        serde_json::from_slice(&zip_entries(&dir.join("hw.zip"))[0].1).unwrap();
+    let image = &settings["Default layer settings"]["Image settings"];
+    assert_eq!(
+        (
+            &image["Light engine"],
+            &image["Light engine wavelength (nm)"],
+            &image["Light engine power setting"]
+        ),
+        (&"visitech".into(), &405.into(), &250.into())
+    );
+    let o = run_in(&dir, &["run", "hw.zip", "--machine", hw]);
+    assert!(o.status.success(), "{}", stdout(&o));
+    // export --machine: the same names; a job the printer cannot run (the default
+    // projector's size) refused.
+    let o = run_in(
+        &dir,
+        &[
+            "export",
+            "hw.zip",
+            "-o",
+            "again.zip",
+            "--format",
+            "sla-control",
+            "--machine",
+            hw,
+            "-q",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    slice(
+        &dir,
+        "cube10.stl",
+        &["--scale", "0.3", "-o", "small.dmdjob"],
+    );
+    let o = run_in(
+        &dir,
+        &[
+            "export",
+            "small.dmdjob",
+            "-o",
+            "small.zip",
+            "--format",
+            "sla-control",
+            "--machine",
+            hw,
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("visitech.resolution"), "{}", stderr(&o));
+    assert!(!dir.join("small.zip").exists());
+}

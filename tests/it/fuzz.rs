@@ -17,8 +17,13 @@
 //! and zip it again validly. The SL1 seeds are the fixtures with their displays shrunk 8
 //! times in pixels (same settings, same code paths, a fraction of the time).
 //!
+//! The `nanodlp` target does the same with a plate (the first SL1 seed exported), and
+//! `hardware` reads the SLA control-file standard's hardware description (JSON values
+//! replaced, bytes mutated) and checks a job against it; every `control` input is
+//! validated against the standard's schema first.
+//!
 //! CI runs 10⁴ inputs per target (seconds) and fewer for the archive targets (1500, 150,
-//! 800, 150), which add 12 to 22 s in all in a debug build on 2 cores shared with other
+//! 800, 150, 150) and `hardware` (2000, 7 s), which add 12 to 22 s in all in a debug build on 2 cores shared with other
 //! builds (three runs; one: 4.9, 5.6, 3.0 and 3.2 s). A long run
 //! (docs/BENCHMARKS.md, "Fuzzing"):
 //!
@@ -99,6 +104,45 @@ fn archive(b: &[u8]) -> bool {
     dmdsl::exec::run(&path, &dmdsl::exec::RunOptions::default()).is_ok()
 }
 
+/// The SLA control-file standard's hardware description: read, its machine made for the
+/// default profile's record and the standard's example's requests checked against it.
+fn hardware(b: &[u8]) -> bool {
+    use dmdsl::formats::control::hardware::Hardware;
+    let Ok(v) = serde_json::from_slice::<serde_json::Value>(b) else {
+        return false;
+    };
+    static MACHINE: std::sync::OnceLock<dmdsl::bundle::Machine> = std::sync::OnceLock::new();
+    let m = MACHINE.get_or_init(|| {
+        let mut m = dmdsl::bundle::Machine::of(&Profile::default_profile());
+        m.projector[0].calibration = None;
+        m
+    });
+    Hardware::from_json(Path::new("fuzz.json"), &v).is_ok_and(|h| {
+        let _ = h.machine(m);
+        let r = dmdsl::formats::Request {
+            layer: 0,
+            at: String::new(),
+            file: "a.png".into(),
+            engine: "visitech".into(),
+            wavelength_nm: Some(405),
+            offset_um: [2500.0, -1.0],
+            gray_correction: true,
+            size_px: Some((2560, 1600)),
+        };
+        let _ = h.check(&[r], true);
+        let _ = h.check_projectors(m);
+        true
+    })
+}
+
+/// A JSON input: one of its values replaced (`json_mutated`), or bytes mutated.
+fn json_or_bytes(rng: &mut Rng, seed: &[u8], other: &[u8]) -> Vec<u8> {
+    match rng.below(4) {
+        0 => bytes_mutated(rng, seed, other),
+        _ => json_mutated(rng, seed).unwrap_or_else(|| bytes_mutated(rng, seed, other)),
+    }
+}
+
 /// SL1 archive `bytes` with its display `f` times smaller in pixels: every PNG shrunk,
 /// `display_pixels_x`/`_y` divided (rounded up), the rest as PrusaSlicer wrote it. A
 /// replay of the fixtures' full displays takes about a second in a debug build; the
@@ -150,22 +194,28 @@ fn shrunk_sl1(bytes: &[u8], f: u32) -> Vec<u8> {
 
 /// The job archive `bytes` exported as a zipped bundle (`dmdsl export`).
 fn as_zipped_bundle(bytes: &[u8]) -> Vec<u8> {
+    exported(bytes, dmdsl::formats::Format::DmdjobZip)
+}
+
+/// The job archive `bytes` exported as a NanoDLP plate.
+fn as_plate(bytes: &[u8]) -> Vec<u8> {
+    exported(bytes, dmdsl::formats::Format::Nanodlp)
+}
+
+/// The job archive `bytes` exported in `format`.
+fn exported(bytes: &[u8], format: dmdsl::formats::Format) -> Vec<u8> {
     // Tests run in parallel threads: a folder of this thread's, the same file names (the
     // manifest records the name).
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("fuzz-seed-{:?}", std::thread::current().id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let (from, to) = (dir.join("seed.sl1"), dir.join("seed.dmdjob.zip"));
+    let (from, to) = (
+        dir.join("seed.sl1"),
+        dir.join(format!("seed{}", format.extension())),
+    );
     std::fs::write(&from, bytes).unwrap();
     let job = dmdsl::formats::open(&from).unwrap();
-    dmdsl::formats::write(
-        dmdsl::formats::Format::DmdjobZip,
-        &job.manifest,
-        &*job.source,
-        &to,
-        None,
-    )
-    .unwrap();
+    dmdsl::formats::write(format, &job.manifest, &*job.source, &to, None).unwrap();
     std::fs::read(&to).unwrap()
 }
 
@@ -257,7 +307,9 @@ fn targets() -> Vec<Target> {
         as_zipped_bundle(&sl1[0]),
         as_zipped_bundle(&sl1[2]),
     ];
-    let all: Vec<Vec<u8>> = [&sl1[..], &control, &zipped].concat();
+    // A NanoDLP plate of small masks: the first shrunk SL1 exported as a plate.
+    let nanodlp = vec![as_plate(&sl1[0])];
+    let all: Vec<Vec<u8>> = [&sl1[..], &control, &zipped, &nanodlp].concat();
     // Each input of an archive target opens and replays a whole job: their counts keep
     // them to about 20 s in all in a debug build on 2 cores.
     let zips = |name, seeds, runs| Target {
@@ -286,6 +338,16 @@ fn targets() -> Vec<Target> {
         zips("sl1", sl1, 150),
         zips("control", control, 800),
         zips("zipped", zipped, 150),
+        zips("nanodlp", nanodlp, 150),
+        Target {
+            make: json_or_bytes,
+            runs: 2000,
+            ..plain(
+                "hardware",
+                hardware,
+                vec![read("sla_control/hardware_config_example.json")],
+            )
+        },
     ]
 }
 

@@ -276,6 +276,43 @@ fn inspect_reads_imported_jobs() {
         assert_eq!(code, 0, "{s}");
         assert_eq!(s["format"], format);
     }
+    // What the reader could not take as stated is in the summary, as `run` says it.
+    let p = fixture("sla_control/example.zip");
+    let (code, s) = json_run(&dir, &["inspect", p.to_str().unwrap()]);
+    assert_eq!(code, 0, "{s}");
+    let notes = s["notes"].to_string();
+    assert!(
+        notes.contains("Print on film") && notes.contains("no pixel size stated"),
+        "{s}"
+    );
+    let o = run_in(&dir, &["inspect", p.to_str().unwrap()]);
+    let out = stdout(&o);
+    assert!(
+        out.contains("note: not simulated: Squeeze out resin"),
+        "{out}"
+    );
+    // Without a pixel size the areas and the resin are counts of a stand-in pixel: not
+    // shown as measurements.
+    assert!(out.contains("resin not measured (no pixel size)"), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.contains("largest area") && l.contains("not measured")),
+        "{out}"
+    );
+    let o = run_in(
+        &dir,
+        &["inspect", fixture("control/channel.zip").to_str().unwrap()],
+    );
+    assert!(stdout(&o).contains("resin not measured"), "{}", stdout(&o));
+    let o = run_in(
+        &dir,
+        &["inspect", fixture("sl1/cube3mm.sl1").to_str().unwrap()],
+    );
+    assert!(
+        !stdout(&o).contains("not measured") && stdout(&o).contains(" ml"),
+        "{}",
+        stdout(&o)
+    );
 }
 
 /// Runs `dmdsl run FILE` on archive bytes `bytes` in a fresh directory and checks the
@@ -508,7 +545,7 @@ fn hostile_control_file_failing_the_schema() {
         &[
             "print_settings.json",
             "Distance up (mm)",
-            "not a positive number",
+            "\"far\" is not of type \"number\"",
         ],
     );
     refused(
@@ -575,4 +612,470 @@ fn problems_of_an_imported_job_are_violations() {
         .map(|v| (v["layer"].as_u64().unwrap(), v["kind"].as_str().unwrap()))
         .collect();
     assert_eq!(found, [(4, "mask-missing"), (7, "mask-format")], "{r}");
+}
+
+/// The archive `base` with its print settings edited by `edit` (entry order kept).
+fn control_edited(base: &Path, edit: &dyn Fn(&mut Value)) -> Vec<u8> {
+    let mut files = zip_entries(base);
+    let i = files
+        .iter()
+        .position(|(n, _)| n.ends_with(".json"))
+        .unwrap();
+    let mut v: Value = serde_json::from_slice(&files[i].1).unwrap();
+    edit(&mut v);
+    files[i].1 = serde_json::to_vec(&v).unwrap();
+    let e: Vec<(&str, &[u8], bool)> = files
+        .iter()
+        .map(|(n, b)| (n.as_str(), b.as_slice(), true))
+        .collect();
+    zip_of(&e)
+}
+
+#[test]
+fn control_files_breaking_the_schema_are_refused() {
+    // The reproducers: edits of channel.zip that the standard's schema (or its rules)
+    // refuse, each refused with one line naming the place.
+    let cases: Value =
+        serde_json::from_slice(&std::fs::read(fixture("control/schema_breaking.json")).unwrap())
+            .unwrap();
+    let cases = cases["cases"].as_array().unwrap();
+    assert!(cases.len() >= 16);
+    for c in cases {
+        let name = format!("schema-{}", c["name"].as_str().unwrap());
+        let path = c["path"].as_str().unwrap();
+        let bytes = control_edited(&fixture("control/channel.zip"), &|v| {
+            // A JSON pointer: `~1` is a `/` in a key, `~0` a `~`.
+            let (parent, key) = path.rsplit_once('/').unwrap();
+            let key = &key.replace("~1", "/").replace("~0", "~");
+            let parent = v.pointer_mut(parent).unwrap();
+            match parent {
+                Value::Array(a) => a[key.parse::<usize>().unwrap()] = c["value"].clone(),
+                p => p[key] = c["value"].clone(),
+            }
+        });
+        let says: Vec<&str> = c["says"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s.as_str().unwrap())
+            .collect();
+        let mut words = vec!["print_settings.json"];
+        words.extend(says);
+        refused(&name, &bytes, &words);
+    }
+}
+
+/// The standard's example and its printer (fixtures/sla_control, CC BY 4.0).
+fn example() -> (std::path::PathBuf, std::path::PathBuf) {
+    (
+        fixture("sla_control/example.zip"),
+        fixture("sla_control/hardware_config_example.json"),
+    )
+}
+
+/// Kinds and messages of a report's violations.
+fn found(r: &Value) -> Vec<(String, String)> {
+    r["violations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| {
+            (
+                v["kind"].as_str().unwrap().into(),
+                v["message"].as_str().unwrap().into(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_standards_example_runs_clean_on_what_it_states() {
+    let dir = tempdir("example");
+    let (zip, _) = example();
+    let (code, r) = json_run(&dir, &["run", zip.to_str().unwrap()]);
+    assert_eq!((code, found(&r)), (0, vec![]), "{r:.800}");
+    // What the file does not state is not checked, and the report says so.
+    let unchecked = r["unchecked"].to_string();
+    for k in [
+        "stage.max_speed_mm_s",
+        "stage.max_accel_mm_s2",
+        "stage.travel_max_mm",
+        "projector[].pixel_mm",
+    ] {
+        assert!(unchecked.contains(k), "{unchecked}");
+    }
+    let notes = r["notes"].to_string();
+    for w in [
+        "Print on film",
+        "Squeeze out resin",
+        "0 um layer",
+        "not measured",
+    ] {
+        assert!(notes.contains(w), "{notes}");
+    }
+    // Each image its own record: 1 + 2 (burn-in layer) + 3 × 2 (duplicated) + 2 (group) + 2.
+    assert_eq!(r["layers"], 12);
+    // The imported machine: an engine per light engine, offset and mirroring.
+    let job = dmdsl::formats::open(&zip).unwrap();
+    let names: Vec<&str> = job
+        .manifest
+        .machine
+        .projector
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "visitech",
+            "visitech at (0, 0) um, mirrored along its long axis",
+            "visitech at (2500, 0) um",
+            "wintech"
+        ]
+    );
+    let p = &job.manifest.machine.projector;
+    assert!(p[1].mirror_x && !p[1].mirror_y);
+    assert_eq!((p[2].offset_px, p[3].wavelength_nm), ([2500, 0], Some(365)));
+    // Given a pixel size, the same pixels measure: areas and offsets in mm.
+    let (code, r) = json_run(
+        &dir,
+        &[
+            "run",
+            zip.to_str().unwrap(),
+            "--set",
+            "projector.0.pixel_mm=0.0076",
+            "--set",
+            "projector.1.pixel_mm=0.0076",
+            "--set",
+            "projector.2.pixel_mm=0.0076",
+            "--set",
+            "projector.3.pixel_mm=0.0076",
+        ],
+    );
+    assert_eq!(code, 0, "{r:.600}");
+    assert!(
+        !r["unchecked"].to_string().contains("pixel_mm"),
+        "{}",
+        r["unchecked"]
+    );
+    // A limit given with --set is checked: the fast peel's 50 mm/s.
+    let (code, r) = json_run(
+        &dir,
+        &[
+            "run",
+            zip.to_str().unwrap(),
+            "--set",
+            "stage.max_speed_mm_s=30",
+        ],
+    );
+    assert_eq!(code, 1);
+    let f = found(&r);
+    assert!(
+        f.iter()
+            .all(|(k, m)| k == "speed" && m.contains("50 mm/s") && m.contains("30")),
+        "{f:?}"
+    );
+    // A DMD load time the file does not have is not held against its own timing.
+    let (code, r) = json_run(
+        &dir,
+        &["run", zip.to_str().unwrap(), "--set", "dmd.load_s=0.5"],
+    );
+    assert_eq!((code, found(&r)), (0, vec![]), "{r:.600}");
+    assert!(r["notes"].to_string().contains("estimate: not checked"));
+    assert!(r["total_s"].as_f64().unwrap() > r["estimate_s"].as_f64().unwrap() + 0.1);
+}
+
+#[test]
+fn the_standards_example_on_its_printer_reports_what_the_printer_cannot_do() {
+    let dir = tempdir("example-printer");
+    let (zip, hw) = example();
+    let run = |hw: &Path| {
+        json_run(
+            &dir,
+            &[
+                "run",
+                zip.to_str().unwrap(),
+                "--machine",
+                hw.to_str().unwrap(),
+            ],
+        )
+    };
+    let (code, r) = run(&hw);
+    assert_eq!(code, 1);
+    let f = found(&r);
+    let kinds: Vec<&str> = f.iter().map(|(k, _)| k.as_str()).collect();
+    // The fast peel (50 mm/s, 500 mm/s²) up and down, and wintech's image size.
+    assert_eq!(
+        kinds,
+        ["hardware", "speed", "accel", "speed", "accel"],
+        "{f:?}"
+    );
+    let size = &f[0].1;
+    for w in [
+        "layer 11",
+        "Layers[4].Image settings list[1]",
+        "slices/0005.png",
+        "2560 × 1600",
+        "wintech.resolution",
+    ] {
+        assert!(size.contains(w), "{size}");
+    }
+    assert!(
+        f[1].1.contains("galil.axes_speed.D") && f[2].1.contains("galil.axes_acceleration.D"),
+        "{f:?}"
+    );
+    assert_eq!(r["machine"]["profile"], "hardware_config_example.json");
+    // Edited printers: what each lacks is named with its key, layer and image.
+    let config: Value = serde_json::from_slice(&std::fs::read(&hw).unwrap()).unwrap();
+    // (name, the edit of the description, words the finding holds)
+    type Case<'a> = (&'a str, &'a dyn Fn(&mut Value), &'a [&'a str]);
+    let cases: [Case; 4] = [
+        (
+            "no-wintech",
+            &|c| c["light_engines"] = serde_json::json!(["visitech"]),
+            &[
+                "light engine 'wintech' is not on this printer",
+                "light_engines",
+                "slices/0005.png",
+            ],
+        ),
+        (
+            "no-405",
+            &|c| c["visitech"]["leds_nm"] = serde_json::json!([365]),
+            &[
+                "no 405 nm LED",
+                "visitech.leds_nm",
+                "slices/0004.png",
+                "layer 10",
+            ],
+        ),
+        (
+            "no-xy",
+            &|c| c["stages"]["xy_stage"] = "".into(),
+            &["needs an XY stage", "stages.xy_stage", "slices/0003a.png"],
+        ),
+        (
+            "no-gray",
+            &|c| c["visitech"]["grayscale_correction_image"] = serde_json::json!([]),
+            &[
+                "grayscale correction",
+                "visitech.grayscale_correction_image",
+                "slices/0002.png",
+            ],
+        ),
+    ];
+    for (name, edit, words) in cases {
+        let mut c = config.clone();
+        edit(&mut c);
+        let path = dir.join(format!("{name}.json"));
+        std::fs::write(&path, serde_json::to_vec(&c).unwrap()).unwrap();
+        let (code, r) = run(&path);
+        assert_eq!(code, 1, "{name}");
+        let hw: Vec<String> = found(&r)
+            .into_iter()
+            .filter(|(k, _)| k == "hardware")
+            .map(|(_, m)| m)
+            .collect();
+        assert!(
+            hw.iter().any(|m| words.iter().all(|w| m.contains(w))),
+            "{name}: {hw:?}"
+        );
+    }
+    // The printer the example fits: no finding, only the fast peel.
+    let mut c = config.clone();
+    c["wintech"]["resolution"] = serde_json::json!([2560, 1600]);
+    std::fs::write(dir.join("fits.json"), serde_json::to_vec(&c).unwrap()).unwrap();
+    let (_, r) = run(&dir.join("fits.json"));
+    assert!(found(&r).iter().all(|(k, _)| k != "hardware"), "{r:.600}");
+    // A malformed description: one line naming file and key, exit 2.
+    for (name, text, key) in [
+        (
+            "bad-axis",
+            r#"{"stages": {"bp_stage": "galil"}, "galil": {"default_axis": "D", "axes_travel": {"D": "far"}}}"#,
+            "galil.axes_travel.D",
+        ),
+        (
+            "bad-engine",
+            r#"{"stages": {"bp_stage": "g"}, "g": {"axes": ["Z"], "axes_travel": {"Z": 100}, "axes_ctspmm": {"Z": 1000}, "axes_speed": {"Z": 5}, "axes_acceleration": {"Z": 5}}, "light_engines": ["e"], "e": {"resolution": [1920]}}"#,
+            "e.resolution",
+        ),
+        ("not-json", "{", "not JSON"),
+    ] {
+        let path = dir.join(format!("{name}.json"));
+        std::fs::write(&path, text).unwrap();
+        let o = run_in(
+            &dir,
+            &[
+                "run",
+                zip.to_str().unwrap(),
+                "--machine",
+                path.to_str().unwrap(),
+            ],
+        );
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(
+            err.contains(&format!("{name}.json")) && err.contains(key),
+            "{name}: {err}"
+        );
+    }
+}
+
+#[test]
+fn sl1_files_keep_their_mirroring_and_state_their_resin() {
+    let dir = tempdir("sl1-mirror");
+    let part = fixture("cube10.stl");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            part.to_str().unwrap(),
+            "--scale",
+            "0.2",
+            "-q",
+            "-o",
+            "m.sl1",
+            "--set",
+            "projector.0.mirror_x=true",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job = dmdsl::formats::open(&dir.join("m.sl1")).unwrap();
+    assert!(job.manifest.machine.projector[0].mirror_x);
+    let used: f64 = ini_value(&dir.join("m.sl1"), "config.ini", "usedMaterial")
+        .parse()
+        .unwrap();
+    assert_eq!(job.manifest.totals.resin_volume_ml, used);
+    let (code, r) = json_run(&dir, &["run", "m.sl1"]);
+    assert_eq!((code, found(&r)), (0, vec![]), "{r:.600}");
+    let o = run_in(&dir, &["export", "m.sl1", "-o", "again.sl1", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        ini_value(
+            &dir.join("again.sl1"),
+            "prusaslicer.ini",
+            "display_mirror_x"
+        ),
+        "1"
+    );
+    // PrusaSlicer's own file: the area from the masks' half-lit pixels, the resin stated.
+    let path = fixture("sl1/cube3mm.sl1");
+    let job = dmdsl::formats::open(&path).unwrap();
+    let used: f64 = ini_value(&path, "config.ini", "usedMaterial")
+        .parse()
+        .unwrap();
+    assert_eq!(job.manifest.totals.resin_volume_ml, used);
+    assert!(job
+        .notes
+        .iter()
+        .any(|n| n.contains("layer areas are estimates")));
+}
+
+#[test]
+fn hostile_nanodlp_plates_are_one_line_and_exit_2() {
+    let dir = tempdir("hostile-nanodlp");
+    let part = fixture("cube10.stl");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            part.to_str().unwrap(),
+            "--scale",
+            "0.1",
+            "-q",
+            "-o",
+            "p.nanodlp",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let files = zip_entries(&dir.join("p.nanodlp"));
+    // An edit of one JSON entry's value (a JSON pointer), or an entry dropped.
+    let edited = |entry: &str, pointer: &str, value: Value| -> Vec<u8> {
+        let mut files = files.clone();
+        let f = files.iter_mut().find(|(n, _)| n == entry).unwrap();
+        let mut v: Value = serde_json::from_slice(&f.1).unwrap();
+        *v.pointer_mut(pointer).unwrap() = value;
+        f.1 = serde_json::to_vec(&v).unwrap();
+        let e: Vec<(&str, &[u8], bool)> = files
+            .iter()
+            .map(|(n, b)| (n.as_str(), b.as_slice(), true))
+            .collect();
+        zip_of(&e)
+    };
+    let cases: [(&str, &str, &str, Value, &[&str]); 8] = [
+        (
+            "cure-text",
+            "profile.json",
+            "/CureTime",
+            "abc".into(),
+            &["profile.json", "`CureTime`"],
+        ),
+        (
+            "cure-negative",
+            "profile.json",
+            "/CureTime",
+            (-5).into(),
+            &["`CureTime` is -5"],
+        ),
+        (
+            "cure-huge",
+            "profile.json",
+            "/CureTime",
+            1e308.into(),
+            &["`CureTime` is 1e308"],
+        ),
+        (
+            "depth-negative",
+            "profile.json",
+            "/Depth",
+            (-50).into(),
+            &["`Depth` is -50"],
+        ),
+        (
+            "speed-tiny",
+            "profile.json",
+            "/CustomValues/DmdslUpSpeed",
+            "1e-308".into(),
+            &["CustomValues.DmdslUpSpeed"],
+        ),
+        (
+            "layers-huge",
+            "plate.json",
+            "/LayersCount",
+            1e12.into(),
+            &["plate.json", "LayersCount"],
+        ),
+        (
+            "display-empty",
+            "options.json",
+            "/PWidth",
+            0.into(),
+            &["options.json", "PWidth"],
+        ),
+        (
+            "area-negative",
+            "info.json",
+            "/0/TotalSolidArea",
+            (-1).into(),
+            &["info.json", "layer 0", "TotalSolidArea"],
+        ),
+    ];
+    for (name, entry, pointer, value, words) in cases {
+        refused(
+            &format!("nanodlp-{name}"),
+            &edited(entry, pointer, value),
+            words,
+        );
+    }
+    // What NanoDLP's fields ask and dmdsl does not evaluate is said, not silent.
+    let plate = edited("profile.json", "/TransitionalLayer", 3.into());
+    std::fs::write(dir.join("fade.nanodlp"), plate).unwrap();
+    let (code, r) = json_run(&dir, &["run", "fade.nanodlp"]);
+    assert_eq!(code, 0, "{r:.400}");
+    assert!(
+        r["notes"].to_string().contains("TransitionalLayer 3"),
+        "{}",
+        r["notes"]
+    );
 }

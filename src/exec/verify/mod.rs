@@ -79,9 +79,10 @@ pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
 /// record places its pixels.
 ///
 /// A `native` job (a bundle dmdsl wrote, in either form) gives every layer its own mask
-/// file (`mask-shared` otherwise) and its settings must agree with its layers
-/// (`settings`); an imported job's layers may share an image (the SLA control file's
-/// duplications), and its settings are the importer's.
+/// file (`mask-shared` otherwise) and a mask for each projector, and its settings must
+/// agree with its layers (`settings`); an imported job's layers may share an image (the SLA
+/// control file's duplications), a layer record may show one projector's image (the
+/// control file exposes a layer's images in turn), and its settings are the importer's.
 pub fn verify_source(
     dir: &dyn BundleSource,
     manifest: &Manifest,
@@ -292,7 +293,9 @@ fn check_structure<'m>(
             }
             refs.push((i, m));
         }
-        if seen.len() < projectors {
+        // An imported job exposes one image at a time (the control file's images of a
+        // layer are exposed in turn): its records name one projector each.
+        if seen.len() < projectors && !(shared_masks && seen.len() == 1) {
             let msg = format!(
                 "layer {i} has masks for {} of the machine's {projectors} projector(s)",
                 seen.len()

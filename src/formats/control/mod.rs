@@ -12,11 +12,13 @@
 //! say of a job is `cannot_carry`'s.
 
 mod expr;
+pub mod hardware;
 pub mod read;
+mod schema;
 mod write;
 
 pub(crate) use read::{import, settings_entry};
-pub(crate) use write::write;
+pub(crate) use write::{position, write};
 
 use crate::bundle::Manifest;
 use crate::text::plural;
@@ -37,16 +39,16 @@ const WAVELENGTH_NM: i64 = 365;
 
 /// A layer's "Position settings", in mm and s (the keys are [`Position::to_json`]'s).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Position {
-    thickness_mm: f64,
-    up_mm: f64,
-    initial_s: f64,
-    up_speed: f64,
-    up_accel: f64,
-    up_wait_s: f64,
-    down_speed: f64,
-    down_accel: f64,
-    final_s: f64,
+pub(crate) struct Position {
+    pub(crate) thickness_mm: f64,
+    pub(crate) up_mm: f64,
+    pub(crate) initial_s: f64,
+    pub(crate) up_speed: f64,
+    pub(crate) up_accel: f64,
+    pub(crate) up_wait_s: f64,
+    pub(crate) down_speed: f64,
+    pub(crate) down_accel: f64,
+    pub(crate) final_s: f64,
 }
 
 impl Position {
@@ -94,17 +96,46 @@ fn n(v: f64) -> Value {
 }
 
 /// What a control file cannot carry of `m`, in the order the exporter reports it: the
-/// power and wavelength it assumes (always), layers whose steps are not the standard's
+/// power and wavelength it assumes for projectors that state none, the images of several
+/// projectors exposed one after another, layers whose steps are not the standard's
 /// sequence, exposures split to stay within the schema's limit.
 pub(crate) fn cannot_carry(m: &Manifest) -> Vec<Warning> {
-    let mut warnings = vec![Warning::new(
-        "export.control-assumed",
-        format!(
-            "the profile gives no light engine power setting or wavelength: the control file has the schema's defaults ({POWER_SETTING}, {WAVELENGTH_NM} nm)"
-        ),
-    )
-    .with("power_setting", POWER_SETTING)
-    .with("wavelength_nm", WAVELENGTH_NM)];
+    let mut warnings = Vec::new();
+    let projectors = &m.machine.projector;
+    let mut assumed = Vec::new();
+    if projectors.iter().any(|p| p.power_setting.is_none()) {
+        assumed.push(format!(
+            "light engine power setting {POWER_SETTING} (projector.N.power_setting)"
+        ));
+    }
+    if projectors.iter().any(|p| p.wavelength_nm.is_none()) {
+        assumed.push(format!(
+            "wavelength {WAVELENGTH_NM} nm (projector.N.wavelength_nm, or --machine HARDWARE.json)"
+        ));
+    }
+    if !assumed.is_empty() {
+        warnings.push(
+            Warning::new(
+                "export.control-assumed",
+                format!(
+                    "the machine does not state every projector's light engine settings: the control file has the schema's defaults for them, {}",
+                    assumed.join(", ")
+                ),
+            )
+            .with("power_setting", POWER_SETTING)
+            .with("wavelength_nm", WAVELENGTH_NM),
+        );
+    }
+    if projectors.len() > 1 {
+        let k = projectors.len() as u64;
+        warnings.push(
+            Warning::new(
+                "export.control-sequential",
+                format!("the control file exposes a layer's images one after another: the {k} projectors' images are exposed in turn, each for the layer's exposure (the same dose, {k} times the light-on time)"),
+            )
+            .with("projectors", k),
+        );
+    }
     let (mut misfits, mut splits) = (Vec::new(), 0u64);
     let stage = &m.machine.stage;
     let limits = (stage.max_speed_mm_s.get(), stage.max_accel_mm_s2.get());

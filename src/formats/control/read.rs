@@ -1,59 +1,50 @@
 //! Reading an SLA control-file zip as a job.
 //!
 //! ## What is read
-//! `Header` (`Schema version` 5.x.y, `Image directory`), `Default layer settings`
-//! (`Number of duplications`, `Position settings`, `Image settings`), `Named position
-//! settings`, `Named image settings`, `Named layer groups` and `Layers` (each item a layer
-//! or a `Using named layer group` call, with its `Number of duplications`). A layer's
-//! position setting is its own key, else that of its `Using named position settings`,
-//! else the default; an image's setting is its own key, else its `Using named image
-//! settings` (without one, the layer's `Using named default image settings`), else the
-//! default.
-//! Named settings may inherit from other named settings (a circle is an error). `${...}`
-//! expressions over `Variables` are evaluated first, as the standard's validator does
-//! (named layer groups with their call's variables; `expr.rs`). `Design` and
-//! `Special print techniques` are information only. A setting that is still not a
-//! number where a number is needed is an error naming the entry and the key. A job of more
-//! than [`MAX_LAYERS`] layer records (duplications and group calls counted) is refused
-//! before any is made, and so are
-//! settings whose expansion makes more than 64 MiB plus 16 times the entry's size (text
-//! interpolation and group calls repeat what they name).
+//! The settings are checked as the standard's validator checks them: named layer groups
+//! and `${...}` expressions over `Variables` expanded (`expr.rs`; a group's with its call's
+//! variables), then the whole object validated against the standard's schema
+//! (`schema.rs`), then what the schema cannot say: every named setting a layer or image
+//! uses exists, named settings inherit without a circle, the job has layers and at most
+//! [`MAX_LAYERS`] layer records (duplications counted, refused before any is made), the
+//! expansion makes at most 64 MiB plus 16 times the entry's size (text interpolation and
+//! group calls repeat what they name). A layer's position setting is its own key, else
+//! that of its `Using named position settings`, else the default; an image's setting is
+//! its own key, else its `Using named image settings` (without one, the layer's `Using
+//! named default image settings`), else the default.
 //!
 //! ## Steps
 //! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
 //! at the up speed and acceleration, `Up wait`, a move down to the layer's top (the
 //! previous top + `Layer thickness`) at the down speed and acceleration, then for each
 //! image `Wait before exposure`, the exposure, `Wait after exposure`, and last `Final
-//! wait`. A layer of several images becomes one layer record per image: the first with
-//! the layer's thickness and its position steps, each further image a record of
-//! thickness 0 at the same height (the standard's "0 um layer"), so every exposure keeps
-//! its own mask and time. The light engine's power, wavelength, focus, image offsets and
-//! mirroring and the special techniques are not simulated.
+//! wait`. The standard exposes a layer's images one after another: each image is a layer
+//! record of its own, the first with the layer's thickness and its position steps, each
+//! further one 0 µm thick at the same height (the standard's "0 um layer").
 //!
 //! ## The machine
-//! The standard does not give the pixel size: the projector is the first image's size in
-//! pixels with 7.6 µm pixels (the light engine of the BYU high-resolution printers the
-//! standard was written for); the stage travels 0–90 mm (the standard's build-platform
-//! limit) at up to 800 mm/min (the standard's limit; a faster move is a `speed`
-//! violation), accelerating as fast as the file asks, in 0.1 µm steps.
+//! Each light engine the images name (`Light engine`, also the older form `NAME (405 nm)`)
+//! at each image offset (`Image x/y offset (um)`) and mirroring (`Mirror image long/short
+//! axis`, the long axis being the image's longer side) is a projector, in the order the
+//! images first use them, with the wavelength and power setting they ask for and the size
+//! of the first image shown on it. The file states no pixel size (dmdsl's own export
+//! writes `pixel_mm P` in `Header.Comment`, read back here), no stage travel, speed or
+//! acceleration limit and no position resolution: those keys are `unstated` stand-ins
+//! (1 µm pixels, the job's own highest position and fastest moves, 0.1 µm steps), and no
+//! check is made against them. What is not simulated (special techniques) is a note of
+//! the job.
 
 use super::expr::{resolve, Budget};
 use super::Position;
 use crate::bundle::{Layer, Step};
 use crate::error::{Error, Result};
 use crate::formats::archive::read::Archive;
-use crate::formats::imported::{self, Grid, Implied, Imported};
-use crate::formats::{Format, Job};
+use crate::formats::imported::{self, Imported};
+use crate::formats::{Format, Job, Request};
 use serde_json::{Map, Value};
 
-/// Pixel size assumed for the images, mm.
-pub const PIXEL_MM: f64 = 0.0076;
-/// The build platform's speed limit in the standard (800 mm/min), mm/s.
-const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
-/// The build platform's highest position, mm.
-const TRAVEL_MAX_MM: f64 = 90.0;
-/// The least acceleration limit of the imported stage (the file's fastest if faster), mm/s².
-const MIN_ACCEL_MM_S2: f64 = 20.0;
+/// The pixel size of a file that states none, mm (a stand-in: `unstated`).
+const PIXEL_MM: f64 = 0.001;
 /// Most layer records (exposures, duplications counted) a job may have: the zip reader's
 /// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
 /// follow than layers it holds.
@@ -63,16 +54,19 @@ pub const MAX_LAYERS: u64 = 100_000;
 const EXPANSION_BYTES: u64 = 64 << 20;
 /// See [`EXPANSION_BYTES`].
 const EXPANSION_FACTOR: u64 = 16;
+/// The keys of the imported machine the file does not state.
+const UNSTATED: [&str; 4] = [
+    "stage.travel_max_mm",
+    "stage.max_speed_mm_s",
+    "stage.max_accel_mm_s2",
+    "stage.steps_per_mm",
+];
 
 /// The top-level `.json` entry that holds print settings (`Header` and `Default layer
 /// settings`), `print_settings.json` first. (The standard allows one JSON file at the
 /// top; [`import`] refuses an archive with more.)
 pub(crate) fn settings_entry(archive: &Archive) -> Option<String> {
-    let mut names: Vec<&String> = archive
-        .names()
-        .iter()
-        .filter(|n| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json"))
-        .collect();
+    let mut names: Vec<&String> = top_jsons(archive);
     names.sort_by_key(|n| n.as_str() != "print_settings.json");
     names
         .into_iter()
@@ -87,26 +81,29 @@ pub(crate) fn settings_entry(archive: &Archive) -> Option<String> {
         .cloned()
 }
 
-/// Settings keys of the top level (the schema's `additionalProperties: false`).
-const TOP_KEYS: &[&str] = &[
-    "Header",
-    "Design",
-    "Default layer settings",
-    "Variables",
-    "Named position settings",
-    "Named image settings",
-    "Named layer groups",
-    "Special print techniques",
-    "Layers",
-];
+/// The `.json` entries at the top of `archive`.
+fn top_jsons(archive: &Archive) -> Vec<&String> {
+    let json = |n: &&String| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json");
+    archive.names().iter().filter(json).collect()
+}
 
-/// One exposure of a layer.
+/// One exposure of a layer: its image and what it asks of the light engine.
 #[derive(Debug, Clone)]
 struct Image {
+    /// The entry in the archive.
     file: String,
     exposure_s: f64,
     before_s: f64,
     after_s: f64,
+    engine: String,
+    wavelength_nm: Option<u32>,
+    power: Option<u32>,
+    offset_um: [f64; 2],
+    /// `Mirror image long axis`, `Mirror image short axis`.
+    mirror: [bool; 2],
+    gray_correction: bool,
+    /// Where it is in the file: "Layers[3].Image settings list[1]".
+    at: String,
 }
 
 /// One layer as the file describes it (before duplication).
@@ -119,21 +116,49 @@ struct LayerSpec {
     at: String,
 }
 
-/// Reads the settings JSON with the keys and types this reader relies on checked.
+/// The special techniques of the standard that are not simulated, by name, with where
+/// they are asked for.
+type Techniques = Vec<(&'static str, String)>;
+
+/// Reads the settings JSON (validated against the schema, so its keys have their types).
 struct Reader<'a> {
     archive: &'a Archive,
     entry: &'a str,
     root: Map<String, Value>,
 }
 
+/// The range of a setting by the unit its key ends with: (unit, smallest when not 0,
+/// largest); the profile's ranges (`profile::UNIT_RANGES`) in the file's units.
+const RANGES: [(&str, f64, f64); 5] = [
+    ("(ms)", 0.0, 1e9),
+    ("(mm)", 0.0, 1e4),
+    ("(um)", 0.0, 1e7),
+    ("(mm/sec)", 1e-6, 1e4),
+    ("(mm/sec^2)", 1e-6, 1e6),
+];
+
+/// An object's entries (an empty map for anything else: the schema checked the types).
+fn obj(v: Option<&Value>) -> Map<String, Value> {
+    v.and_then(Value::as_object).cloned().unwrap_or_default()
+}
+
+/// The first of `maps` holding `key`.
+fn get<'v>(maps: &[&'v Map<String, Value>], key: &str) -> Option<&'v Value> {
+    maps.iter().find_map(|m| m.get(key))
+}
+
+/// True when `v.a.b` (a path of keys) is `true`.
+fn enabled(v: &Map<String, Value>, path: &[&str]) -> bool {
+    let mut at = v.get(path[0]);
+    for k in &path[1..] {
+        at = at.and_then(|x| x.get(k));
+    }
+    at == Some(&Value::Bool(true))
+}
+
 impl Reader<'_> {
     fn bad(&self, msg: String) -> Error {
         self.archive.error(Some(self.entry), msg)
-    }
-
-    fn object<'v>(&self, v: &'v Value, at: &str) -> Result<&'v Map<String, Value>> {
-        v.as_object()
-            .ok_or_else(|| self.bad(format!("{at} is not an object")))
     }
 
     /// Named settings `name` of `table`, merged with the named settings it inherits from
@@ -154,12 +179,12 @@ impl Reader<'_> {
                     chain.join(" -> ")
                 )));
             }
-            let v = self
+            let m = self
                 .root
                 .get(table)
                 .and_then(|t| t.get(&cur))
+                .and_then(Value::as_object)
                 .ok_or_else(|| self.bad(format!("{at}: `{cur}` is not in `{table}`")))?;
-            let m = self.object(v, &format!("{table}.{cur}"))?;
             for (k, v) in m {
                 out.entry(k.clone()).or_insert_with(|| v.clone());
             }
@@ -172,132 +197,115 @@ impl Reader<'_> {
         Ok(out)
     }
 
+    /// The named settings `key` of `m` names in `table`, or none.
+    fn uses(&self, m: &Map<String, Value>, key: &str, table: &str, at: &str) -> Result<Option<Map<String, Value>>> {
+        match m.get(key).and_then(Value::as_str) {
+            Some(n) if !n.is_empty() => self.named(table, n, at).map(Some),
+            _ => Ok(None),
+        }
+    }
+
     /// Setting `key` from the first of `maps` that has it, as a number ≥ 0 (> 0 when
-    /// `positive`).
-    fn num(
-        &self,
-        maps: &[&Map<String, Value>],
-        key: &str,
-        at: &str,
-        positive: bool,
-    ) -> Result<f64> {
-        let v = maps
-            .iter()
-            .find_map(|m| m.get(key))
+    /// `positive`; the schema allows 0 for speeds, which no move can have).
+    fn num(&self, maps: &[&Map<String, Value>], key: &str, at: &str, positive: bool) -> Result<f64> {
+        let v = get(maps, key)
             .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
-        match v.as_f64() {
-            Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => Ok(x),
-            _ => Err(self.bad(format!(
-                "{at}: `{key}` is {v}, not a {} number",
-                if positive { "positive" } else { "non-negative" }
-            ))),
+        let x = match v.as_f64() {
+            Some(x) if x.is_finite() && x >= 0.0 && (!positive || x > 0.0) => x,
+            _ => {
+                return Err(self.bad(format!(
+                    "{at}: `{key}` is {v}, not a {} number",
+                    if positive { "positive" } else { "non-negative" }
+                )))
+            }
+        };
+        // What the schema leaves unbounded, bounded by what a machine has (as a profile's
+        // keys are): a longer wait or move, or a slower one, never finishes a print.
+        let (lo, hi) = RANGES.iter().find(|(unit, ..)| key.ends_with(unit)).map_or((0.0, f64::MAX), |r| (r.1, r.2));
+        if x > hi || (x > 0.0 && x < lo) {
+            return Err(self.bad(format!("{at}: `{key}` is {v}, not what a machine has ({} to {hi:e})", if lo > 0.0 { format!("{lo:e}") } else { "0".into() })));
         }
+        Ok(x)
     }
 
-    fn string<'v>(&self, maps: &[&'v Map<String, Value>], key: &str, at: &str) -> Result<&'v str> {
-        let v = maps
-            .iter()
-            .find_map(|m| m.get(key))
-            .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
-        v.as_str()
-            .ok_or_else(|| self.bad(format!("{at}: `{key}` is {v}, not a string")))
-    }
-
-    fn copies(&self, m: &Map<String, Value>, at: &str) -> Result<Option<u64>> {
-        match m.get("Number of duplications") {
-            None => Ok(None),
-            Some(v) => match v.as_u64() {
-                Some(n) if n >= 1 => Ok(Some(n)),
-                _ => Err(self.bad(format!(
-                    "{at}: `Number of duplications` is {v}, not a whole number ≥ 1"
-                ))),
+    /// The image `own` of a layer at `at`, over the layer's named default image settings
+    /// `layer_img` and the defaults `dimg`; `dir` is the image directory.
+    fn image(&self, own: &Map<String, Value>, (layer_img, dimg): (&Map<String, Value>, &Map<String, Value>), dir: &str, at: &str, notes: &mut Techniques) -> Result<Image> {
+        // An image's own named settings replace the layer's named defaults.
+        let named = self.uses(own, "Using named image settings", "Named image settings", at)?;
+        let maps = [own, named.as_ref().unwrap_or(layer_img), dimg];
+        let ms = |key: &str| self.num(&maps, key, at, false).map(|v| v / 1000.0);
+        let text = |key: &str| get(&maps, key).and_then(Value::as_str).unwrap_or_default();
+        let int = |key: &str| get(&maps, key).and_then(Value::as_u64).map(|v| v as u32);
+        let flag = |key: &str| get(&maps, key) == Some(&Value::Bool(true));
+        let file = text("Image file");
+        if file.is_empty() {
+            return Err(self.bad(format!("{at}: no `Image file` (nor in the defaults)")));
+        }
+        // The older form names the wavelength with the engine: `visitech (405 nm)`.
+        let label = text("Light engine").trim();
+        let legacy = label.strip_suffix("nm)").and_then(|r| {
+            let (name, nm) = r.rsplit_once('(')?;
+            Some((name.trim(), nm.trim().parse::<u32>().ok()?))
+        });
+        let (engine, legacy_nm) = legacy.map_or((label, None), |(n, w)| (n, Some(w)));
+        let special = get(&maps, "Special image techniques").map(|v| obj(Some(v)));
+        for (name, path) in [
+            ("0 um layer", ["0 um layer", "Enable 0 um layer"]),
+            ("Print on film", ["Print on film", "Enable print on film"]),
+        ] {
+            if special.as_ref().is_some_and(|s| enabled(s, &path)) {
+                notes.push((name, at.to_string()));
+            }
+        }
+        let offset = |key: &str| get(&maps, key).and_then(Value::as_f64).unwrap_or(0.0);
+        Ok(Image {
+            file: match dir.trim_end_matches('/') {
+                "" | "." => file.to_string(),
+                d => format!("{d}/{file}"),
             },
-        }
+            exposure_s: ms("Layer exposure time (ms)")?,
+            before_s: ms("Wait before exposure (ms)")?,
+            after_s: ms("Wait after exposure (ms)")?,
+            engine: engine.to_string(),
+            wavelength_nm: int("Light engine wavelength (nm)").or(legacy_nm),
+            power: int("Light engine power setting"),
+            offset_um: [offset("Image x offset (um)"), offset("Image y offset (um)")],
+            mirror: [flag("Mirror image long axis"), flag("Mirror image short axis")],
+            gray_correction: flag("Do grayscale correction"),
+            at: at.to_string(),
+        })
     }
 
     /// The layer `layer` (a `LAYER_BASE` object) at `at`, with the defaults.
-    fn layer(&self, layer: &Map<String, Value>, at: &str, copies: u64) -> Result<LayerSpec> {
-        let defaults = self.object(
-            &self.root["Default layer settings"],
-            "`Default layer settings`",
-        )?;
-        let dpos = self.object(
-            defaults.get("Position settings").unwrap_or(&Value::Null),
-            "`Default layer settings.Position settings`",
-        )?;
-        let dimg = self.object(
-            defaults.get("Image settings").unwrap_or(&Value::Null),
-            "`Default layer settings.Image settings`",
-        )?;
-        let empty = Map::new();
-        let own_pos = match layer.get("Position settings") {
-            Some(v) => self.object(v, &format!("{at}.Position settings"))?,
-            None => &empty,
-        };
-        let named_pos = match own_pos
-            .get("Using named position settings")
-            .and_then(Value::as_str)
-        {
-            Some(n) if !n.is_empty() => self.named("Named position settings", n, at)?,
-            _ => Map::new(),
-        };
-        let pos = [own_pos, &named_pos, dpos];
-        let layer_img = match layer
-            .get("Using named default image settings")
-            .and_then(Value::as_str)
-        {
-            Some(n) if !n.is_empty() => self.named("Named image settings", n, at)?,
-            _ => Map::new(),
-        };
-        // No list, or an empty one: one exposure of the default image.
-        let list: Vec<&Map<String, Value>> = match layer.get("Image settings list") {
-            None => vec![&empty],
-            Some(Value::Array(a)) if a.is_empty() => vec![&empty],
-            Some(Value::Array(a)) => a
-                .iter()
-                .enumerate()
-                .map(|(k, v)| self.object(v, &format!("{at}.Image settings list[{k}]")))
-                .collect::<Result<_>>()?,
-            Some(v) => {
-                return Err(self.bad(format!("{at}: `Image settings list` is {v}, not a list")))
-            }
-        };
-        let dir = self.string(
-            &[self.object(&self.root["Header"], "`Header`")?],
-            "Image directory",
-            "Header",
-        )?;
-        let mut images = Vec::with_capacity(list.len());
-        for (k, own) in list.into_iter().enumerate() {
-            let at = format!("{at}.Image settings list[{k}]");
-            // An image's own named settings replace the layer's named defaults.
-            let named = match own
-                .get("Using named image settings")
-                .and_then(Value::as_str)
-            {
-                Some(n) if !n.is_empty() => self.named("Named image settings", n, &at)?,
-                _ => layer_img.clone(),
-            };
-            let maps = [own, &named, dimg];
-            let ms = self.num(&maps, "Layer exposure time (ms)", &at, false)?;
-            if ms > 10_000.0 {
-                return Err(self.bad(format!(
-                    "{at}: `Layer exposure time (ms)` is {ms}, above the schema's 10000"
-                )));
-            }
-            let file = self.string(&maps, "Image file", &at)?;
-            let rel = if dir.is_empty() || dir == "." {
-                file.to_string()
-            } else {
-                format!("{}/{file}", dir.trim_end_matches('/'))
-            };
-            images.push(Image {
-                file: rel,
-                exposure_s: ms / 1000.0,
-                before_s: self.num(&maps, "Wait before exposure (ms)", &at, false)? / 1000.0,
-                after_s: self.num(&maps, "Wait after exposure (ms)", &at, false)? / 1000.0,
-            });
+    fn layer(&self, layer: &Map<String, Value>, at: &str, copies: u64, notes: &mut Techniques) -> Result<LayerSpec> {
+        let defaults = obj(self.root.get("Default layer settings"));
+        let (dpos, dimg) = (obj(defaults.get("Position settings")), obj(defaults.get("Image settings")));
+        let own_pos = obj(layer.get("Position settings"));
+        let named_pos = self.uses(&own_pos, "Using named position settings", "Named position settings", at)?;
+        let named_pos = named_pos.unwrap_or_default();
+        let pos = [&own_pos, &named_pos, &dpos];
+        if get(&pos, "Special layer techniques").is_some_and(|v| enabled(&obj(Some(v)), &["Squeeze out resin", "Enable squeeze"])) {
+            notes.push(("Squeeze out resin", at.to_string()));
         }
+        let layer_img = self
+            .uses(layer, "Using named default image settings", "Named image settings", at)?
+            .unwrap_or_default();
+        let dir = obj(self.root.get("Header"));
+        let dir = dir.get("Image directory").and_then(Value::as_str).unwrap_or_default();
+        // No list, or an empty one: one exposure of the default image.
+        let list = match layer.get("Image settings list").and_then(Value::as_array) {
+            Some(a) if !a.is_empty() => a.iter().map(|v| obj(Some(v))).collect(),
+            _ => vec![Map::new()],
+        };
+        let images = list
+            .iter()
+            .enumerate()
+            .map(|(k, own)| {
+                let at = format!("{at}.Image settings list[{k}]");
+                self.image(own, (&layer_img, &dimg), dir, &at, notes)
+            })
+            .collect::<Result<_>>()?;
         Ok(LayerSpec {
             position: Position::read(|key, positive| self.num(&pos, key, at, positive))?,
             images,
@@ -306,30 +314,29 @@ impl Reader<'_> {
         })
     }
 
-    /// Every layer of the file in print order (named groups were expanded by [`expand`]).
-    fn layers(&self) -> Result<Vec<LayerSpec>> {
-        let defaults = self.object(
-            &self.root["Default layer settings"],
-            "`Default layer settings`",
-        )?;
-        let default_copies = self
-            .copies(defaults, "Default layer settings")?
-            .ok_or_else(|| {
-                self.bad("`Default layer settings` has no `Number of duplications`".into())
-            })?;
-        let items = match self.root.get("Layers") {
-            None => return Ok(Vec::new()),
-            Some(Value::Array(a)) => a,
-            Some(v) => return Err(self.bad(format!("`Layers` is {v}, not a list"))),
-        };
+    /// Every layer of the file in print order (named groups were expanded by [`expand`]),
+    /// and the special techniques they ask for.
+    fn layers(&self) -> Result<(Vec<LayerSpec>, Techniques)> {
+        let defaults = obj(self.root.get("Default layer settings"));
+        let copies_of = |m: &Map<String, Value>| m.get("Number of duplications").and_then(Value::as_u64);
+        let default_copies = copies_of(&defaults).unwrap_or(1);
+        let items = self.root.get("Layers").and_then(Value::as_array);
+        let mut notes = Vec::new();
         let mut out = Vec::new();
-        for (k, item) in items.iter().enumerate() {
-            let at = format!("Layers[{k}]");
-            let m = self.object(item, &at)?;
-            let copies = self.copies(m, &at)?.unwrap_or(default_copies);
-            out.push(self.layer(m, &at, copies)?);
+        for (k, item) in items.into_iter().flatten().enumerate() {
+            let m = obj(Some(item));
+            let copies = copies_of(&m).unwrap_or(default_copies);
+            out.push(self.layer(&m, &format!("Layers[{k}]"), copies, &mut notes)?);
         }
-        Ok(out)
+        Ok((out, notes))
+    }
+
+    /// The pixel size dmdsl's export states in `Header.Comment` (`pixel_mm P`).
+    fn pixel_mm(&self) -> Option<f64> {
+        let comment = self.root.get("Header")?.get("Comment")?.as_str()?;
+        let rest = &comment[comment.find("pixel_mm ")? + 9..];
+        let text = rest.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-')).next()?;
+        text.parse().ok().filter(|p: &f64| p.is_finite() && *p > 0.0)
     }
 }
 
@@ -410,51 +417,18 @@ fn expand(root: &mut Map<String, Value>, budget: &mut Budget) -> std::result::Re
     Ok(())
 }
 
-/// Checks the top level and the header: the keys and types this reader relies on.
-fn check_top(r: &Reader) -> Result<()> {
-    for k in r.root.keys() {
-        if !TOP_KEYS.contains(&k.as_str()) {
-            return Err(r.bad(format!(
-                "unknown top-level key `{k}` (schema v5 allows {})",
-                TOP_KEYS.join(", ")
-            )));
-        }
-    }
-    let header = r.object(&r.root["Header"], "`Header`")?;
-    let version = r.string(&[header], "Schema version", "Header")?;
-    let v5 = version.len() == 5 && {
-        let b = version.as_bytes();
-        b[0] == b'5'
-            && b[1] == b'.'
-            && b[2].is_ascii_digit()
-            && b[3] == b'.'
-            && b[4].is_ascii_digit()
-    };
-    if !v5 {
-        return Err(r.bad(format!(
-            "Header: `Schema version` is {version:?}; this reader reads schema 5.x.y"
-        )));
-    }
-    r.string(&[header], "Image directory", "Header")?;
-    Ok(())
-}
-
-/// The settings of `archive` (entry `entry`, the only JSON at the top), checked and with
-/// their `${...}` and layer groups expanded.
+/// The settings of `archive` (entry `entry`, the only JSON at the top), expanded and
+/// checked against the standard's schema.
 fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
-    let jsons: Vec<&str> = archive
-        .names()
-        .iter()
-        .filter(|n| !n.contains('/') && n.to_ascii_lowercase().ends_with(".json"))
-        .map(String::as_str)
-        .collect();
+    let jsons = top_jsons(archive);
     if jsons.len() > 1 {
+        let names: Vec<&str> = jsons.iter().map(|s| s.as_str()).collect();
         return Err(archive.error(
             None,
             format!(
                 "{} JSON files at the top ({}); the control-file standard allows one",
                 jsons.len(),
-                jsons.join(", ")
+                names.join(", ")
             ),
         ));
     }
@@ -468,10 +442,19 @@ fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
         entry,
         root,
     };
-    check_top(&r)?;
+    // The version first, as the standard's validator checks it: another major version
+    // is another schema.
+    let version = r.root.get("Header").and_then(|h| h.get("Schema version"));
+    if !version.and_then(Value::as_str).is_some_and(|v| v.starts_with("5.")) {
+        let v = version.map_or("none".into(), Value::to_string);
+        return Err(r.bad(format!("Header: `Schema version` is {v}; this reader reads schema 5.x.y")));
+    }
     let size = archive.get(entry)?.map_or(0, <[u8]>::len) as u64;
     let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
     expand(&mut r.root, &mut budget).map_err(|m| r.bad(m))?;
+    if let Some(problem) = super::schema::check(&Value::Object(r.root.clone())) {
+        return Err(r.bad(problem));
+    }
     Ok(r)
 }
 
@@ -488,9 +471,6 @@ struct Exposure<'a> {
 fn exposures<'a>(r: &Reader, specs: &'a [LayerSpec]) -> Result<Vec<Exposure<'a>>> {
     let mut exposures = Vec::new();
     for s in specs {
-        if s.images.is_empty() {
-            return Err(r.bad(format!("{}: the layer has no image", s.at)));
-        }
         let total = (s.images.len() as u64)
             .saturating_mul(s.copies)
             .saturating_add(exposures.len() as u64);
@@ -517,7 +497,6 @@ fn exposures<'a>(r: &Reader, specs: &'a [LayerSpec]) -> Result<Vec<Exposure<'a>>
     }
     Ok(exposures)
 }
-
 /// The steps of exposure `e` of a layer from `z` to `top` (module docs) and their time.
 fn steps(e: &Exposure, (z, top): (f64, f64), last_of_layer: bool) -> (Vec<Step>, f64) {
     let (s, p) = (e.spec, &e.spec.position);
@@ -558,10 +537,72 @@ fn steps(e: &Exposure, (z, top): (f64, f64), last_of_layer: bool) -> (Vec<Step>,
     (steps, time_s)
 }
 
+/// The projectors the exposures use: one per light engine, offset and mirroring, in the
+/// order of first use ([`Image`] and the module docs), and each exposure's projector.
+fn projectors(
+    exposures: &[Exposure],
+    sizes: &std::collections::HashMap<&str, imported::Image>,
+    pixel_mm: f64,
+) -> (Vec<crate::bundle::machine::Projector>, Vec<usize>) {
+    let mut keys: Vec<(&str, [f64; 2], [bool; 2])> = Vec::new();
+    let mut out: Vec<crate::bundle::machine::Projector> = Vec::new();
+    let mut of = Vec::with_capacity(exposures.len());
+    for e in exposures {
+        let i = e.image;
+        let key = (i.engine.as_str(), i.offset_um, i.mirror);
+        if let Some(k) = keys.iter().position(|k| *k == key) {
+            of.push(k);
+            continue;
+        }
+        let size = sizes[i.file.as_str()].1.map_or((1, 1), |(w, h, _)| (w, h));
+        // The engine's first placement is the engine; the others say how they differ.
+        let mut name = i.engine.clone();
+        if keys.iter().any(|k| k.0 == key.0) {
+            let [x, y] = i.offset_um;
+            name += &format!(" at ({x}, {y}) um");
+            for (on, axis) in i.mirror.iter().zip(["long", "short"]) {
+                if *on {
+                    name += &format!(", mirrored along its {axis} axis");
+                }
+            }
+        }
+        let mut p = imported::projector(&name, size, pixel_mm);
+        let px = |um: f64| (um / 1000.0 / pixel_mm).round().max(0.0) as u32;
+        p.offset_px = i.offset_um.map(px);
+        let long_x = size.0 >= size.1;
+        (p.mirror_x, p.mirror_y) = match long_x {
+            true => (i.mirror[0], i.mirror[1]),
+            false => (i.mirror[1], i.mirror[0]),
+        };
+        (p.wavelength_nm, p.power_setting) = (i.wavelength_nm, i.power);
+        of.push(out.len());
+        keys.push(key);
+        out.push(p);
+    }
+    (out, of)
+}
+
+/// The notes of what the file asks and the job does not simulate.
+fn not_simulated(techniques: &Techniques, vacuum: bool) -> Vec<String> {
+    let mut names: Vec<&str> = techniques.iter().map(|t| t.0).collect();
+    names.dedup();
+    let mut notes: Vec<String> = names
+        .iter()
+        .map(|name| {
+            let at: Vec<&str> = techniques.iter().filter(|t| t.0 == *name).map(|t| t.1.as_str()).collect();
+            format!("not simulated: {name} ({}{})", at[0], match at.len() { 1 => String::new(), k => format!(" and {} more", k - 1) })
+        })
+        .collect();
+    if vacuum {
+        notes.push("not simulated: Print under vacuum (Special print techniques)".into());
+    }
+    notes
+}
+
 /// Imports the control-file zip `archive` whose settings are entry `entry`.
 pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job> {
     let r = settings(&archive, entry)?;
-    let specs = r.layers()?;
+    let (specs, techniques) = r.layers()?;
     let exposures = exposures(&r, &specs)?;
     // Decode each distinct image once.
     let mut files: Vec<&str> = exposures.iter().map(|e| e.image.file.as_str()).collect();
@@ -572,64 +613,81 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         .copied()
         .zip(imported::images(&archive, &files))
         .collect();
-    let (w_px, h_px) = exposures
-        .iter()
-        .find_map(|e| images[e.image.file.as_str()].1.map(|(w, h, _)| (w, h)))
-        .ok_or_else(|| archive.error(None, "no image of the job is present and decodable"))?;
-    let grid = Grid {
-        height_px: h_px,
-        pixel_mm: PIXEL_MM,
-        pixel_area_mm2: PIXEL_MM * PIXEL_MM,
+    if images.values().all(|i| i.1.is_none()) {
+        return Err(archive.error(None, "no image of the job is present and decodable"));
+    }
+    let stated_pixel = r.pixel_mm();
+    let pixel_mm = stated_pixel.unwrap_or(PIXEL_MM);
+    let (projectors, of) = projectors(&exposures, &images, pixel_mm);
+    // The stand-ins of what the file does not state: the job's own extremes.
+    let (mut top, mut speed, mut accel, mut z) = (1.0f64, 1.0f64, 1.0f64, 0.0f64);
+    for e in exposures.iter().filter(|e| e.first) {
+        let p = &e.spec.position;
+        z += p.thickness_mm;
+        top = top.max(z + p.up_mm);
+        speed = speed.max(p.up_speed).max(p.down_speed);
+        accel = accel.max(p.up_accel).max(p.down_accel);
+    }
+    let mut unstated = UNSTATED.to_vec();
+    if stated_pixel.is_none() {
+        unstated.push("projector[].pixel_mm");
+    }
+    let design = |key: &str| {
+        let v = r.root.get("Design").and_then(|d| d.get(key));
+        v.and_then(Value::as_str).unwrap_or_default().to_string()
     };
+    let limits = (top.min(1e4), speed.min(1e4), accel.min(1e6), 10_000.0);
+    let name = ("sla-control-import".to_string(), design("Resin"));
+    let machine = imported::machine(name, limits, projectors, &unstated);
     let mut layers: Vec<Layer> = Vec::with_capacity(exposures.len());
-    let (mut z, mut max_accel) = (0.0f64, 1.0f64);
+    let mut requests = Vec::with_capacity(exposures.len());
+    let mut z = 0.0f64;
     for (i, e) in exposures.iter().enumerate() {
         let p = &e.spec.position;
         let thickness = if e.first { p.thickness_mm } else { 0.0 };
         let top = z + thickness;
         let last_of_layer = exposures.get(i + 1).is_none_or(|n| n.first);
         let (steps, time_s) = steps(e, (z, top), last_of_layer);
-        if e.first {
-            max_accel = max_accel.max(p.up_accel).max(p.down_accel);
-        }
         let file = e.image.file.as_str();
-        let place = (top, top - thickness / 2.0, thickness);
-        let image = (file, &images[file]);
-        layers.push(imported::layer(i, place, image, grid, steps, time_s));
+        let place = (i, (top, top - thickness / 2.0, thickness));
+        let image = &images[file];
+        let on = (&machine, of[i], pixel_mm * pixel_mm, None);
+        layers.push(imported::layer(place, (file, image), on, steps, time_s));
+        let im = e.image;
+        requests.push(Request {
+            layer: i,
+            at: im.at.clone(),
+            file: file.to_string(),
+            engine: im.engine.clone(),
+            wavelength_nm: im.wavelength_nm,
+            offset_um: im.offset_um,
+            gray_correction: im.gray_correction,
+            size_px: image.1.map(|(w, h, _)| (w, h)),
+        });
         z = top;
     }
     let nominal = specs
         .first()
         .map_or(0.01f64, |s| s.position.thickness_mm)
         .max(1e-4);
-    let design = |key: &str| {
-        let v = r.root.get("Design").and_then(|d| d.get(key));
-        v.and_then(Value::as_str).unwrap_or_default().to_string()
-    };
     let generator = match design("Slicer") {
         s if s.is_empty() => "SLA control file v5".to_string(),
         s => format!("SLA control file v5 ({s})"),
     };
+    let vacuum = enabled(&r.root, &["Special print techniques", "Print under vacuum", "Enable vacuum"]);
     let imported = Imported {
         format: Format::SlaControl,
         generator,
         sha256: sha256.into(),
-        machine: Implied {
-            name: "sla-control-import".into(),
-            resin: design("Resin"),
-            projector: "light-engine",
-            size_px: (w_px, h_px),
-            pixel_mm: PIXEL_MM,
-            travel_max_mm: TRAVEL_MAX_MM,
-            // The standard's build-platform limit: a move the file asks faster is a `speed`
-            // violation.
-            max_speed_mm_s: BP_MAX_SPEED_MM_S,
-            max_accel_mm_s2: max_accel.max(MIN_ACCEL_MM_S2),
-            steps_per_mm: 10_000f64.max(1.0 / nominal),
-        },
+        machine,
         layer_height_mm: nominal,
         layers,
         estimate: None,
+        resin_ml: None,
+        stated_areas: false,
+        requests,
+        vacuum,
+        notes: not_simulated(&techniques, vacuum),
     };
     imported.job(archive, (entry, "the machine it implies"))
 }
@@ -675,6 +733,8 @@ mod tests {
                 },
                 "Image settings": {
                     "Image file": "a.png", "Layer exposure time (ms)": 100,
+                    "Light engine": "e", "Light engine power setting": 100,
+                    "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
                     "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
                 }
             },

@@ -21,7 +21,7 @@ use std::sync::atomic::AtomicBool;
 /// The "Position settings" of one layer whose steps start at `from_mm`, and whether its
 /// steps fit the standard's sequence exactly (otherwise the nearest such sequence, moving
 /// at most at the stage's `(speed, acceleration)` limits).
-pub(super) fn position(layer: &Layer, from_mm: f64, limits: (f64, f64)) -> (Position, bool) {
+pub(crate) fn position(layer: &Layer, from_mm: f64, limits: (f64, f64)) -> (Position, bool) {
     let mut initial = 0.0;
     let mut up_wait = 0.0;
     let mut final_wait = 0.0;
@@ -140,12 +140,24 @@ fn entries(m: &Manifest) -> Vec<Entry<'_>> {
                     "Image file": image_name(&mask.file),
                     "Layer exposure time (ms)": t,
                 });
+                let o = img.as_object_mut().expect("object");
                 if several {
-                    let o = img.as_object_mut().expect("object");
                     o.insert("Light engine".into(), json!(p.name));
+                    o.insert("Light engine wavelength (nm)".into(), json!(p.wavelength_nm.unwrap_or(WAVELENGTH_NM as u32)));
+                    o.insert("Light engine power setting".into(), json!(p.power_setting.unwrap_or(POWER_SETTING as u32)));
                     let px = p.pixel_mm.get() * 1000.0;
                     o.insert("Image x offset (um)".into(), n(p.offset_px[0] as f64 * px));
                     o.insert("Image y offset (um)".into(), n(p.offset_px[1] as f64 * px));
+                }
+                // The long axis is the image's longer side (the reader's rule).
+                let (long, short) = match p.width_px >= p.height_px {
+                    true => (p.mirror_x, p.mirror_y),
+                    false => (p.mirror_y, p.mirror_x),
+                };
+                for (key, on) in [("Mirror image long axis", long), ("Mirror image short axis", short)] {
+                    if on {
+                        o.insert(key.into(), json!(true));
+                    }
                 }
                 list.push(img);
             }
@@ -176,12 +188,13 @@ pub(crate) fn write(
     let last = &entries[last_run].1;
     let default_pos = last["Position settings"].clone();
     let first_image = &last["Image settings list"][0];
+    let p0 = &m.machine.projector[0];
     let default_image = json!({
         "Image file": first_image["Image file"],
         "Layer exposure time (ms)": first_image["Layer exposure time (ms)"],
-        "Light engine": m.machine.projector[0].name,
-        "Light engine power setting": POWER_SETTING,
-        "Light engine wavelength (nm)": WAVELENGTH_NM,
+        "Light engine": p0.name,
+        "Light engine power setting": p0.power_setting.unwrap_or(POWER_SETTING as u32),
+        "Light engine wavelength (nm)": p0.wavelength_nm.unwrap_or(WAVELENGTH_NM as u32),
         "Relative focus position (um)": 0,
         "Wait before exposure (ms)": 0,
         "Wait after exposure (ms)": 0,
@@ -205,7 +218,11 @@ pub(crate) fn write(
         "Header": {
             "Schema version": SCHEMA_VERSION,
             "Image directory": IMAGES,
-            "Comment": format!("Written by dmdsl {} from the job's manifest (job.json).", env!("CARGO_PKG_VERSION")),
+            "Comment": format!(
+                "Written by dmdsl {} from the job's manifest (job.json); pixel_mm {}",
+                env!("CARGO_PKG_VERSION"),
+                p0.pixel_mm.get()
+            ),
         },
         "Design": {
             "STL file": m.source.file,

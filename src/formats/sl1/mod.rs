@@ -31,6 +31,7 @@ mod thumbnail;
 mod write;
 
 pub(crate) use read::import;
+pub(crate) use thumbnail::preview_png;
 pub(crate) use write::write;
 
 use super::Format;
@@ -69,11 +70,13 @@ pub(crate) fn holds(archive: &super::archive::read::Archive) -> bool {
     archive.contains(CONFIG) && archive.contains(PRUSASLICER)
 }
 
-/// Refuses a job of several projectors: an SL1 shows one image per layer.
-pub(crate) fn check_projectors(projectors: usize, out: &Path) -> Result<()> {
+/// Refuses a job of several projectors for `format` (SL1/SL1S, NanoDLP): it shows one
+/// image per layer.
+pub(crate) fn check_projectors(format: Format, projectors: usize, out: &Path) -> Result<()> {
     if projectors > 1 {
+        let name = if format == Format::Nanodlp { "NanoDLP plates" } else { "SL1/SL1S" };
         return Err(Error::Usage(format!(
-            "{}: SL1/SL1S carry one image per layer, but this job's machine has {projectors} projectors; export it as dmdjob-zip or sla-control instead",
+            "{}: {name} carry one image per layer, but this job's machine has {projectors} projectors; export it as dmdjob-zip or sla-control instead",
             out.display()
         )));
     }

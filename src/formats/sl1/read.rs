@@ -2,16 +2,19 @@
 //!
 //! The projector is the display as the masks show it (portrait displays store the image
 //! turned: `display_pixels_y` wide and `display_pixels_x` high), pixels
-//! `display_width / display_pixels_x` mm, no mirroring (the masks are taken as they are
-//! shown). Each layer becomes: a move of the tower to the layer's top (`(i + 1) ×
+//! `display_width / display_pixels_x` mm, mirrored as `display_mirror_x/y` say (the
+//! masks are stored mirrored, as dmdsl's export writes them). Each layer becomes: a move of the tower to the layer's top (`(i + 1) ×
 //! layerHeight`), a wait, and the exposure, so that the layer takes what PrusaSlicer 2.5's
 //! estimate gives it (the model of [`super`]). A layer the estimate gives a negative
 //! exposure is exposed for 0 s and its wait shortened by the rest, so the layer still
 //! takes what the estimate says.
 //!
-//! The layer's area is the mask's lit area (pixel values / 255 × pixel area); PrusaSlicer
-//! measures the polygons it rasterized, so a layer within a few pixels of the `area_fill`
-//! threshold may count fast here and slow there. The job's estimate
+//! The tilt counts a layer's area as the mask's coverage (pixel values / 255 × pixel
+//! area); PrusaSlicer measures the polygons it rasterized, so a layer within a few pixels
+//! of the `area_fill` threshold may count fast here and slow there. The layer record's
+//! area is the pixels lit at least half (light-compensated masks' grays are not
+//! coverage), the job's resin volume `usedMaterial`. The tower's speed, acceleration and
+//! resolution are the file's no more than the steps are: `unstated`. The job's estimate
 //! (`totals.print_time_s`) is the file's `printTime`, so the executor's estimate check
 //! compares the simulation with PrusaSlicer's own figure.
 //!
@@ -20,10 +23,10 @@
 //! whose mask is missing counts as fast).
 
 use super::{Model, PrintSpeed, Scheme, CONFIG, PRUSASLICER};
-use crate::bundle::{Layer, Step};
+use crate::bundle::{Layer, Machine, Step};
 use crate::error::Result;
 use crate::formats::archive::read::Archive;
-use crate::formats::imported::{self, Grid, Implied, Imported};
+use crate::formats::imported::{self, Imported};
 use crate::formats::{ForeignEstimate, Format, Job};
 use std::collections::BTreeMap;
 
@@ -82,6 +85,18 @@ impl<'a> Ini<'a> {
         }
     }
 
+    /// `0`/`1` (absent: 0).
+    fn flag(&self, key: &str) -> Result<bool> {
+        match self.opt_text(key).unwrap_or("0") {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            t => Err(self.archive.error(
+                Some(self.entry),
+                format!("`{key} = {t}` is neither 0 nor 1"),
+            )),
+        }
+    }
+
     fn opt_num(&self, key: &str, default: f64) -> Result<f64> {
         if self.values.contains_key(key) {
             self.num(key, false)
@@ -122,9 +137,11 @@ struct Settings {
     print_time_s: f64,
     /// PrusaSlicer's estimate.
     model: Model,
-    /// The images: their size and pixels.
+    /// The images: their size, the edge and area of a pixel (mm, mm²), mirroring.
     size_px: (u32, u32),
-    grid: Grid,
+    pixel_mm: f64,
+    pixel_area_mm2: f64,
+    mirror: (bool, bool),
     /// `max_print_height`, mm.
     max_height_mm: f64,
     /// `printerModel` (empty when absent).
@@ -180,11 +197,9 @@ fn settings(archive: &Archive, cfg: &Ini, ps: &Ini) -> Result<Settings> {
         print_time_s,
         model,
         size_px,
-        grid: Grid {
-            height_px: size_px.1,
-            pixel_mm: width_mm / px_x as f64,
-            pixel_area_mm2: (width_mm / px_x as f64) * (height_mm / px_y as f64),
-        },
+        pixel_mm: width_mm / px_x as f64,
+        pixel_area_mm2: (width_mm / px_x as f64) * (height_mm / px_y as f64),
+        mirror: (ps.flag("display_mirror_x")?, ps.flag("display_mirror_y")?),
         max_height_mm: ps.opt_num("max_print_height", 150.0)?,
         printer_model: cfg.opt_text("printerModel").unwrap_or_default().to_string(),
     })
@@ -222,7 +237,7 @@ fn image_names(archive: &Archive, job_dir: &str) -> Result<Vec<String>> {
 
 /// The layers of the images `names`: each a move of the tower, a wait and the exposure
 /// that take what PrusaSlicer's estimate gives the layer.
-fn layers(s: &Settings, archive: &Archive, names: &[String]) -> Vec<Layer> {
+fn layers(s: &Settings, archive: &Archive, names: &[String], machine: &Machine) -> Vec<Layer> {
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     let images = imported::images(archive, &refs);
     let layer_mm = s.model.layer_mm;
@@ -231,7 +246,7 @@ fn layers(s: &Settings, archive: &Archive, names: &[String]) -> Vec<Layer> {
     for (i, ((name, image), exp)) in refs.iter().zip(&images).zip(exposures).enumerate() {
         let area_mm2 = image
             .1
-            .map_or(0.0, |(_, _, f)| f.coverage_px * s.grid.pixel_area_mm2);
+            .map_or(0.0, |(_, _, f)| f.coverage_px * s.pixel_area_mm2);
         let (overhead, _fast) = s.model.overhead_s(area_mm2);
         let z = (i + 1) as f64 * layer_mm;
         let prev = i as f64 * layer_mm;
@@ -248,15 +263,9 @@ fn layers(s: &Settings, archive: &Archive, names: &[String]) -> Vec<Layer> {
             Step::Expose { s: exposure_s },
         ];
         let time_s = move_s + wait_s + exposure_s;
-        let place = (z, (i as f64 + 0.5) * layer_mm, layer_mm);
-        layers.push(imported::layer(
-            i,
-            place,
-            (name, image),
-            s.grid,
-            steps,
-            time_s,
-        ));
+        let place = (i, (z, (i as f64 + 0.5) * layer_mm, layer_mm));
+        let on = (machine, 0, s.pixel_area_mm2, None);
+        layers.push(imported::layer(place, (name, image), on, steps, time_s));
     }
     layers
 }
@@ -266,12 +275,29 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
     let cfg = Ini::parse(&archive, CONFIG)?;
     let ps = Ini::parse(&archive, PRUSASLICER)?;
     let s = settings(&archive, &cfg, &ps)?;
-    let layers = layers(&s, &archive, &image_names(&archive, &s.job_dir)?);
     let layer_mm = s.model.layer_mm;
+    let mut display = imported::projector("display", s.size_px, s.pixel_mm);
+    (display.mirror_x, display.mirror_y) = s.mirror;
+    let name = match s.printer_model.as_str() {
+        "" => "sl1-import".into(),
+        m => format!("sl1-import-{}", m.to_lowercase()),
+    };
+    let resin = cfg.opt_text("materialName").unwrap_or_default().into();
+    let tower = (
+        s.max_height_mm.max(layer_mm),
+        TOWER_SPEED_MM_S,
+        TOWER_ACCEL_MM_S2,
+        // 1 µm steps, or finer for layers thinner than that.
+        1000f64.max(1.0 / layer_mm),
+    );
+    let unstated = ["stage.max_speed_mm_s", "stage.max_accel_mm_s2", "stage.steps_per_mm"];
+    let machine = imported::machine((name, resin), tower, vec![display], &unstated);
+    let layers = layers(&s, &archive, &image_names(&archive, &s.job_dir)?, &machine);
     let sl1s = archive
         .path()
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("sl1s"));
+    let resin_ml = cfg.opt_text("usedMaterial").and_then(|t| t.parse::<f64>().ok());
     let imported = Imported {
         format: match s.printer_model == "SL1S" || sl1s {
             true => Format::Sl1s,
@@ -282,27 +308,18 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
             .unwrap_or("PrusaSlicer")
             .to_string(),
         sha256: sha256.into(),
-        machine: Implied {
-            name: match s.printer_model.as_str() {
-                "" => "sl1-import".into(),
-                m => format!("sl1-import-{}", m.to_lowercase()),
-            },
-            resin: cfg.opt_text("materialName").unwrap_or_default().into(),
-            projector: "display",
-            size_px: s.size_px,
-            pixel_mm: s.grid.pixel_mm,
-            travel_max_mm: s.max_height_mm.max(layer_mm),
-            max_speed_mm_s: TOWER_SPEED_MM_S,
-            max_accel_mm_s2: TOWER_ACCEL_MM_S2,
-            // 1 µm steps, or finer for layers thinner than that.
-            steps_per_mm: 1000f64.max(1.0 / layer_mm),
-        },
+        machine,
         layer_height_mm: layer_mm,
         layers,
         estimate: Some(ForeignEstimate {
             source: "PrusaSlicer printTime (config.ini)".into(),
             print_time_s: s.print_time_s,
         }),
+        resin_ml: resin_ml.filter(|v| v.is_finite() && *v >= 0.0),
+        stated_areas: false,
+        requests: Vec::new(),
+        vacuum: false,
+        notes: Vec::new(),
     };
     imported.job(archive, (PRUSASLICER, "the display and tower it describes"))
 }

@@ -73,15 +73,28 @@ pub(super) fn thumbnails(
     let small = image::imageops::resize(&square, sw, sh, image::imageops::FilterType::Triangle);
     Ok([(sw, sh, &small), (w, h, &wide)]
         .into_iter()
-        .map(|(w, h, rgb)| {
-            let rgba: Vec<u8> = rgb.pixels().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
-            let mut png = Vec::new();
-            image::codecs::png::PngEncoder::new(&mut png)
-                .write_image(&rgba, w, h, image::ExtendedColorType::Rgba8)
-                .expect("PNG encodes into memory");
-            (format!("thumbnail/thumbnail{w}x{h}.png"), png)
-        })
+        .map(|(w, h, rgb)| (format!("thumbnail/thumbnail{w}x{h}.png"), rgba_png(rgb)))
         .collect())
+}
+
+/// `rgb` as an RGBA PNG, opaque.
+fn rgba_png(rgb: &RgbImage) -> Vec<u8> {
+    let rgba: Vec<u8> = rgb.pixels().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&rgba, rgb.width(), rgb.height(), image::ExtendedColorType::Rgba8)
+        .expect("PNG encodes into memory");
+    png
+}
+
+/// The shaded picture of the part the job's masks build, `size` px, as an RGBA PNG (a
+/// NanoDLP plate's `3d.png`).
+pub(crate) fn preview_png(
+    manifest: &Manifest,
+    files: &dyn BundleSource,
+    (w, h): (u32, u32),
+) -> Result<Vec<u8>> {
+    Ok(rgba_png(&crate::picture::preview(&slabs(manifest), files, w, h)?))
 }
 
 #[cfg(test)]

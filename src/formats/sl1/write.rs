@@ -137,14 +137,7 @@ fn settings(format: Format, m: &Manifest, scheme: Scheme, job_dir: &str) -> (Str
 /// `fileCreationTimestamp`: now (or `SOURCE_DATE_EPOCH`, for reproducible files) as
 /// PrusaSlicer writes it, `2026-11-27 at 21:02:20 UTC`.
 fn timestamp() -> String {
-    let secs = std::env::var("SOURCE_DATE_EPOCH")
-        .ok()
-        .and_then(|s| s.trim().parse::<i64>().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs() as i64)
-        });
+    let secs = crate::formats::now_secs();
     let (days, rem) = (secs.div_euclid(86400), secs.rem_euclid(86400));
     // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
     let z = days + 719_468;
