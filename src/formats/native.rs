@@ -93,24 +93,36 @@ fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, F
         true => format!("masks/p{k}/{i:05}.png"),
         false => format!("masks/{i:05}.png"),
     };
-    let dark: Vec<_> = m.machine.projector.iter().map(|p| {
-        let png = dark_png(p.width_px, p.height_px);
-        (crate::digest::sha256_hex(&png), std::sync::Arc::new(png))
-    }).collect();
+    // Each projector's dark image, its hash and its pixel record (nothing lit).
+    let dark: Vec<_> = m
+        .machine
+        .projector
+        .iter()
+        .map(|p| {
+            let png = dark_png(p.width_px, p.height_px);
+            let zeros = vec![0u8; p.width_px as usize * p.height_px as usize];
+            let px = crate::bundle::MaskPixels::of_gray8(p.width_px, &zeros).placed(
+                [p.width_px, p.height_px],
+                p.offset_px,
+                [p.mirror_x, p.mirror_y],
+            );
+            (crate::digest::sha256_hex(&png), std::sync::Arc::new(png), px)
+        })
+        .collect();
     for l in &mut out.layers {
         let lit: Vec<u32> = l.masks.iter().map(|k| k.projector).collect();
         for k in &mut l.masks {
             let file = name(k.projector as usize, l.index);
             from.insert(file.clone(), From::File(std::mem::replace(&mut k.file, file)));
         }
-        for (k, (sha, png)) in dark.iter().enumerate().filter(|(k, _)| !lit.contains(&(*k as u32))) {
+        for (k, (sha, png, px)) in dark.iter().enumerate().filter(|(k, _)| !lit.contains(&(*k as u32))) {
             let file = name(k, l.index);
             from.insert(file.clone(), From::Made(png.clone()));
             l.masks.push(crate::bundle::MaskRef {
                 file,
                 sha256: sha.clone(),
                 projector: k as u32,
-                pixels: None,
+                pixels: Some(*px),
             });
         }
         l.masks.sort_by_key(|k| k.projector);

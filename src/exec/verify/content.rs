@@ -60,15 +60,16 @@ pub(super) struct ContentRule {
     /// a layer's masks may light less than its section, down to nothing.
     held_back: bool,
     /// The grays add up to the section's area exactly: coverage masks of one projector,
-    /// neither pre-warped nor moved by the cure correction.
+    /// neither pre-warped nor moved by the cure correction, in a job dmdsl sliced (an
+    /// imported job's areas are its importer's estimates).
     exact_area: bool,
     /// Binary masks of one projector without compensation: every lit pixel is 255.
     binary: bool,
 }
 
 impl ContentRule {
-    /// The rule for `manifest`'s masks shown by `machine`.
-    pub(super) fn of(manifest: &Manifest, machine: &Machine) -> ContentRule {
+    /// The rule for `manifest`'s masks shown by `machine`; `native`: a job dmdsl sliced.
+    pub(super) fn of(manifest: &Manifest, machine: &Machine, native: bool) -> ContentRule {
         let field = machine.field();
         let p = field.pixel_mm;
         let warp_mm = manifest
@@ -92,7 +93,7 @@ impl ContentRule {
                 .cure
                 .as_ref()
                 .is_some_and(|c| c.held_back_layers > 0),
-            exact_area: coverage && one && !corrected && s.distortion.is_none(),
+            exact_area: native && coverage && one && !corrected && s.distortion.is_none(),
             binary: s.binary && s.compensation == "off" && one,
         }
     }

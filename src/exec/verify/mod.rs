@@ -134,7 +134,7 @@ pub fn verify_source(
             slot.1.push(m);
         }
     }
-    let rule = ContentRule::of(manifest, machine);
+    let rule = ContentRule::of(manifest, machine, native);
     for (i, slot) in lit.iter().enumerate() {
         if let (Some((px, masks)), false) = (slot, incomplete.contains(&i)) {
             problems.extend(rule.check(dir, i, &manifest.layers[i], *px, masks));

@@ -30,6 +30,9 @@ use crate::formats::imported::{self, Imported};
 use crate::formats::{ForeignEstimate, Format, Job};
 use std::collections::BTreeMap;
 
+/// PrusaSlicer's `max_print_height` when a file does not give one, mm.
+pub(super) const DEFAULT_MAX_PRINT_HEIGHT_MM: f64 = 150.0;
+
 /// Tower speed and acceleration of the imported machine (the tower move is part of the
 /// per-layer time PrusaSlicer assumes; the wait makes up the rest).
 const TOWER_SPEED_MM_S: f64 = 10.0;
@@ -200,7 +203,7 @@ fn settings(archive: &Archive, cfg: &Ini, ps: &Ini) -> Result<Settings> {
         pixel_mm: width_mm / px_x as f64,
         pixel_area_mm2: (width_mm / px_x as f64) * (height_mm / px_y as f64),
         mirror: (ps.flag("display_mirror_x")?, ps.flag("display_mirror_y")?),
-        max_height_mm: ps.opt_num("max_print_height", 150.0)?,
+        max_height_mm: ps.opt_num("max_print_height", DEFAULT_MAX_PRINT_HEIGHT_MM)?,
         printer_model: cfg.opt_text("printerModel").unwrap_or_default().to_string(),
     })
 }

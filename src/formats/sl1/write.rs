@@ -114,7 +114,7 @@ fn settings(format: Format, m: &Manifest, scheme: Scheme, job_dir: &str) -> (Str
         ("initial_exposure_time", num(scheme.first_s)),
         ("initial_layer_height", num(h)),
         ("layer_height", num(h)),
-        ("max_print_height", num(machine.stage.travel_max_mm)),
+        ("max_print_height", num(max_print_height(machine))),
         (
             "output_filename_format",
             format!("[input_filename_base]{}", format.extension()),
@@ -163,6 +163,18 @@ fn ini<'a>(pairs: impl IntoIterator<Item = (&'a str, String)>) -> String {
         .into_iter()
         .map(|(k, v)| format!("{k} = {v}\n"))
         .collect()
+}
+
+
+/// The stage travel the file states: the machine's, or, when its record does not state one
+/// (a job imported from a file without it), PrusaSlicer's default of 150 mm where that is
+/// more than the stand-in.
+fn max_print_height(machine: &crate::bundle::Machine) -> f64 {
+    let travel = machine.stage.travel_max_mm;
+    match machine.states("stage.travel_max_mm") {
+        true => travel,
+        false => travel.max(super::read::DEFAULT_MAX_PRINT_HEIGHT_MM),
+    }
 }
 
 #[cfg(test)]
