@@ -51,7 +51,6 @@ mod png;
 mod polyfit;
 pub mod profile;
 pub mod raster;
-pub mod resin;
 pub mod round;
 pub mod slice;
 mod table;

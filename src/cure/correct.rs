@@ -13,10 +13,10 @@
 //! target dose for both.
 
 use super::segments::{Segment, Segments};
+use crate::cure::model::CureModel;
+use crate::cure::psf::{phi_inv, Psf};
 use crate::raster::Mask;
 use crate::raster::PixelBox;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{phi_inv, Psf};
 use crate::slice::Contour;
 
 /// The inward move of the edges that puts the cured edge on the section, px (negative:

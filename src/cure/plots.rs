@@ -3,10 +3,10 @@
 
 use super::predict::EdgeSample;
 use crate::bundle::Layer;
+use crate::cure::model::CureModel;
 use crate::plot::text::{TextStyle, LABEL, SMALL, TITLE};
 use crate::plot::{Canvas, Chart, Panel, Series, Style};
 use crate::raster::Mask;
-use crate::resin::dose::CureModel;
 use crate::slice::Contour;
 
 /// The per-layer chart of the predicted edge error (layers with a prediction).

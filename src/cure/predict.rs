@@ -11,9 +11,9 @@
 
 use super::segments::Segments;
 pub use crate::bundle::{FeatureBox, LayerCure};
+use crate::cure::model::CureModel;
+use crate::cure::psf::{AxisTable, Psf};
 use crate::raster::Mask;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{AxisTable, Psf};
 use crate::slice::Contour;
 
 /// Largest spacing of edge samples, pixels.

@@ -35,10 +35,10 @@
 use super::correct::{halfplane_coverage, nearest_edges};
 use super::segments::Segments;
 use crate::bundle::FeatureBox;
+use crate::cure::model::CureModel;
+use crate::cure::psf::{AxisTable, Psf};
 use crate::raster::Mask;
 use crate::raster::PixelBox;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{AxisTable, Psf};
 use crate::slice::{signed_area, Contour};
 
 /// The light a narrow feature is drawn to reach: T·(1 + `MARGIN`) (room for the 8-bit

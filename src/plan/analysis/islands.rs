@@ -1,15 +1,9 @@
 //! Islands: the connected regions of a layer's lit pixels that share no pixel with the
-//! layer below's (they would print onto nothing).
+//! layer below's (they would print onto nothing). The regions are
+//! [`crate::cure::islands::components`], the counter the cure check shares.
 
 use super::LitRuns;
-
-fn find(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        parent[i as usize] = parent[parent[i as usize] as usize];
-        i = parent[i as usize];
-    }
-    i
-}
+use crate::cure::islands::components;
 
 /// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
 /// with the lit pixels `prev` of the layer below.
@@ -17,70 +11,41 @@ pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
     count_islands(cur, prev)
 }
 
-/// The runs of `cur` that share no pixel with a run of `prev` in the same row (indexes
-/// into `cur.runs`, increasing), into `out`.
-fn unsupported_runs(cur: &LitRuns, prev: &LitRuns, out: &mut Vec<u32>) {
-    out.clear();
+/// Whether each run of `cur` shares a pixel with a run of `prev` in the same row, and
+/// whether any does not.
+fn supported_runs(cur: &LitRuns, prev: &LitRuns) -> (Vec<bool>, bool) {
     let (rc, rp) = (&cur.runs, &prev.runs);
     // Both sorted by row then column, and a row's runs are disjoint: one merge-walk.
     let mut j = 0;
-    for (i, r) in rc.iter().enumerate() {
-        // Skip the runs below that end before this one starts (in this row or earlier).
-        while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
-            j += 1;
-        }
-        if j == rp.len() || rp[j][0] != r[0] || rp[j][1] >= r[2] {
-            out.push(i as u32);
-        }
-    }
+    let mut all = true;
+    let on = rc
+        .iter()
+        .map(|r| {
+            // Skip the runs below that end before this one starts (in this row or earlier).
+            while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
+                j += 1;
+            }
+            let rests = j < rp.len() && rp[j][0] == r[0] && rp[j][1] < r[2];
+            all &= rests;
+            rests
+        })
+        .collect();
+    (on, !all)
 }
 
-/// [`islands`]. A region is supported when one of its runs is; so only the
-/// runs that rest on nothing (usually none, else a few along the layer's new parts) are
-/// joined into regions (union-find over them), each region marked supported when one of
-/// its runs touches a supported run in the row above or below.
+/// [`islands`]. Usually every run rests on a run below and there is no island; otherwise
+/// the runs' regions, each supported when one of its runs rests on the layer below.
 pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
-    // Empty (no allocation) in the usual case.
-    let mut unsup = Vec::new();
-    unsupported_runs(cur, prev, &mut unsup);
-    if unsup.is_empty() {
+    let (on, any_free) = supported_runs(cur, prev);
+    if !any_free {
         return 0;
     }
-    let rc = &cur.runs;
-    let u = &unsup[..];
-    let mut parent: Vec<u32> = (0..u.len() as u32).collect();
-    let mut supported = vec![false; u.len()];
-    for (a, &i) in u.iter().enumerate() {
-        let [row, s, e] = rc[i as usize];
-        for nrow in [row.checked_sub(1), Some(row + 1)].into_iter().flatten() {
-            // The runs of row `nrow` that share a column with `[s, e)`: sorted by row,
-            // then by start (and end: a row's runs are disjoint).
-            let mut k = rc.partition_point(|r| r[0] < nrow || (r[0] == nrow && r[2] <= s));
-            while k < rc.len() && rc[k][0] == nrow && rc[k][1] < e {
-                match u.binary_search(&(k as u32)) {
-                    Ok(b) => {
-                        let (x, y) = (find(&mut parent, a as u32), find(&mut parent, b as u32));
-                        if x != y {
-                            parent[x as usize] = y;
-                            supported[y as usize] |= supported[x as usize];
-                        }
-                    }
-                    Err(_) => {
-                        let x = find(&mut parent, a as u32);
-                        supported[x as usize] = true;
-                    }
-                }
-                k += 1;
-            }
-        }
+    let (region, n) = components(&cur.runs);
+    let mut supported = vec![false; n];
+    for (&g, &s) in region.iter().zip(&on) {
+        supported[g as usize] |= s;
     }
-    let mut n = 0;
-    for a in 0..u.len() as u32 {
-        if find(&mut parent, a) == a && !supported[a as usize] {
-            n += 1;
-        }
-    }
-    n
+    supported.iter().filter(|&&s| !s).count() as u32
 }
 
 #[cfg(test)]
@@ -126,118 +91,6 @@ mod tests {
         // A base covering less than half of every pixel it touches supports nothing.
         let thin = [rect(0.0, 0.0, 10.0, 0.4 * px)];
         assert_eq!(islands_of(&base, &thin), 1);
-    }
-
-    fn rows(r: &[[u32; 3]], out: &mut Vec<(u32, usize, usize)>) {
-        out.clear();
-        for (i, run) in r.iter().enumerate() {
-            match out.last_mut() {
-                Some(last) if last.0 == run[0] => last.2 = i + 1,
-                _ => out.push((run[0], i, i + 1)),
-            }
-        }
-    }
-
-    /// [`count_islands`] the direct way (without the shortcut of the unsupported runs): every run
-    /// joined into its region (union-find), a region supported when one of its runs
-    /// shares a pixel with a run below.
-    fn join_and_count(cur: &LitRuns, prev: &LitRuns) -> u32 {
-        let (rc, rp) = (&cur.runs, &prev.runs);
-        if rc.is_empty() {
-            return 0;
-        }
-        let (mut rows_c, mut rows_p) = (Vec::new(), Vec::new());
-        rows(rc, &mut rows_c);
-        rows(rp, &mut rows_p);
-        let mut parent: Vec<u32> = (0..rc.len() as u32).collect();
-        for w in rows_c.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            if b.0 != a.0 + 1 {
-                continue;
-            }
-            let (mut i, mut j) = (a.1, b.1);
-            while i < a.2 && j < b.2 {
-                if rc[i][1] < rc[j][2] && rc[j][1] < rc[i][2] {
-                    let (x, y) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
-                    parent[x as usize] = y;
-                }
-                if rc[i][2] < rc[j][2] {
-                    i += 1;
-                } else {
-                    j += 1;
-                }
-            }
-        }
-        let mut supported = vec![false; rc.len()];
-        let mut pi = 0;
-        for &(k, s, e) in &rows_c {
-            while pi < rows_p.len() && rows_p[pi].0 < k {
-                pi += 1;
-            }
-            if pi == rows_p.len() || rows_p[pi].0 != k {
-                continue;
-            }
-            let (_, ps, pe) = rows_p[pi];
-            let (mut i, mut j) = (s, ps);
-            while i < e && j < pe {
-                if rc[i][1] < rp[j][2] && rp[j][1] < rc[i][2] {
-                    let r = find(&mut parent, i as u32);
-                    supported[r as usize] = true;
-                }
-                if rc[i][2] < rp[j][2] {
-                    i += 1;
-                } else {
-                    j += 1;
-                }
-            }
-        }
-        let mut n = 0;
-        for i in 0..rc.len() as u32 {
-            if find(&mut parent, i) == i && !supported[i as usize] {
-                n += 1;
-            }
-        }
-        n
-    }
-
-    #[test]
-    fn supported_runs_shortcut_agrees_with_joining() {
-        // Random layers of scattered squares and rings over random layers below: when
-        // every run rests on a run below, joining finds no island either, and the count
-        // with the shortcut is the count without it.
-        let mut rnd = xorshift(0x1d5_0a7e_u64);
-        let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
-            let n = 1 + (rnd() * 5.0) as usize;
-            let mut v: Vec<Contour> = (0..n)
-                .map(|_| {
-                    let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 8.0);
-                    rect(x, y, x + w, y + 0.2 + rnd() * 8.0)
-                })
-                .collect();
-            if rnd() < 0.5 {
-                let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
-                v.push(ngon(cx, cy, r, 48, true));
-                v.push(ngon(cx, cy, r * 0.6, 48, false));
-            }
-            v
-        };
-        let (mut shortcut, mut islands) = (0, 0);
-        for _ in 0..200 {
-            let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
-            // Sometimes the layer below is the same or larger, so all runs rest on it.
-            let below = if rnd() < 0.3 { cur.clone() } else { below };
-            let (rc, rp) = (lit(&cur), lit(&below));
-            let joined = join_and_count(&rc, &rp);
-            let mut unsup = Vec::new();
-            unsupported_runs(&rc, &rp, &mut unsup);
-            if unsup.is_empty() {
-                assert_eq!(joined, 0);
-                shortcut += 1;
-            }
-            assert_eq!(count_islands(&rc, &rp), joined);
-            islands += joined;
-        }
-        assert!(shortcut > 40 && islands > 40, "{shortcut} {islands}");
     }
 
     #[test]
@@ -308,7 +161,6 @@ mod tests {
             }
             let (rc, rb) = (runs_of(&cur), runs_of(&below));
             assert_eq!(count_islands(&rc, &rb), want, "case {case}");
-            assert_eq!(join_and_count(&rc, &rb), want, "case {case}");
             total += want;
         }
         assert!(total > 300, "{total}");

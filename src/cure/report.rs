@@ -1,13 +1,12 @@
 //! The cure check's report: its types (`CureCheck`, one `LayerCureCheck` per layer,
 //! `Finding`s) and the job's figures from the layers' (`summarize`).
 
-use crate::bundle::Manifest;
-use crate::exec::report::{six, six_opt};
-use crate::resin::CureModel;
-use serde::Serialize;
-
+use super::check::{SUB, WORST_LAYERS};
 use super::engine::LayerOut;
-use super::{SUB, WORST_LAYERS};
+use super::CureModel;
+use crate::bundle::Manifest;
+use crate::round::{six, six_opt, six_pair};
+use serde::Serialize;
 
 /// Statistics of the absolute edge offset over layers, px.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
@@ -40,14 +39,6 @@ pub struct Finding {
     pub at_mm: [f64; 2],
 }
 
-fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> std::result::Result<S::Ok, S::Error> {
-    [
-        crate::round::decimals(v[0], 6),
-        crate::round::decimals(v[1], 6),
-    ]
-    .serialize(s)
-}
-
 /// One layer's cure, from its masks.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct LayerCureCheck {
@@ -57,7 +48,7 @@ pub struct LayerCureCheck {
     #[serde(serialize_with = "six")]
     pub section_mm2: f64,
     /// Cured area at mid-layer, mm² (samples where the layer's own light is at least
-    /// [`NEAR`](super::NEAR) of a full pixel's).
+    /// [`NEAR`](super::check::NEAR) of a full pixel's).
     #[serde(serialize_with = "six")]
     pub cured_mm2: f64,
     /// The drawn perimeter, mm (Σ|∇| of the relative irradiance).
@@ -141,7 +132,7 @@ pub struct CureCheck {
 }
 
 /// The job's figures from the layers'.
-pub(super) fn summarize(
+pub fn summarize(
     manifest: &Manifest,
     model: &CureModel,
     proj: &crate::profile::Projector,
