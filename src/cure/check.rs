@@ -44,15 +44,15 @@ pub(super) const CHUNK: usize = 8;
 /// Runs every layer of a `w`×`h` field through the engine, from the top layer down:
 /// `irradiance(i)` gives layer i's relative irradiance (called in parallel, a chunk of
 /// layers ahead of the recurrence), `ratio[i]` its dose ratio. `observe(i, engine)` is
-/// called right after layer i is evaluated (the engine then holds the light that reaches
-/// layer i's top, [`Engine::irradiance_at`] with [`Engine::track_irradiance`]).
+/// called right after layer i is evaluated, with its irradiance when `track` (the engine
+/// then holds the light that reaches layer i's top, [`Engine::irradiance`]).
 pub fn run_layers(
     model: &CureModel,
     (w, h): (usize, usize),
     ratio: &[f32],
     irradiance: &(dyn Fn(usize) -> Result<Irradiance> + Sync),
     track: bool,
-    observe: &mut (dyn FnMut(usize, &Engine) + Send),
+    observe: &mut (dyn FnMut(usize, &Engine, &Irradiance) + Send),
 ) -> Result<Vec<LayerOut>> {
     let n = ratio.len();
     let kernel = Kernel::new(w, h, model);
@@ -85,7 +85,7 @@ pub fn run_layers(
                     let i = hi - 1 - k;
                     let (irr, p) = &cur[k];
                     outs[i] = engine.layer(p, Some(&cur[k + 1].1), irr, ratio[i]);
-                    observe(i, &engine);
+                    observe(i, &engine, irr);
                 }
                 let last = cur.len() - 1;
                 for (_, p) in cur.drain(..last) {
@@ -96,7 +96,7 @@ pub fn run_layers(
         let next = next?;
         let (irr, p) = cur.last().expect("a chunk has a layer");
         outs[lo] = engine.layer(p, next.first().map(|n| &n.1), irr, ratio[lo]);
-        observe(lo, &engine);
+        observe(lo, &engine, irr);
         for (_, p) in cur.drain(..) {
             kernel.recycle(p);
         }

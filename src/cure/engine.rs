@@ -85,7 +85,7 @@ impl Engine {
         }
     }
 
-    /// Keeps the unblurred light of the layers above as well ([`Engine::irradiance_at`]).
+    /// Keeps the unblurred light of the layers above as well ([`Engine::irradiance`]).
     pub fn track_irradiance(&mut self, on: bool) {
         self.irr = if on {
             vec![0.0; self.w * self.h]
@@ -94,12 +94,12 @@ impl Engine {
         };
     }
 
-    /// The light that reaches the last layer's top from pixel (`c`, `r`) before the blur:
-    /// Σ_k q^k·r_{i+k}·I_{i+k}, in units of a full pixel of a normal layer (0 without
+    /// The light that reaches the last layer's top before the blur, per pixel (row-major,
+    /// the field's width) and the factor its values are to be multiplied by:
+    /// Σ_k q^k·r_{i+k}·I_{i+k}, in units of a full pixel of a normal layer (empty without
     /// [`Engine::track_irradiance`]). Its blur is the light the engine cures by.
-    #[inline]
-    pub fn irradiance_at(&self, c: usize, r: usize) -> f32 {
-        self.irr.get(r * self.w + c).map_or(0.0, |v| v * self.scale)
+    pub fn irradiance(&self) -> (&[f32], f32) {
+        (&self.irr, self.scale)
     }
 
     /// The field's size in pixels.

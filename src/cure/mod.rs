@@ -8,7 +8,8 @@
 //!   the top layer down with each layer's dose (`engine.rs`, driven by `check.rs`), its
 //!   islands (`islands.rs`, also the planner's counter), the job's figures (`report.rs`).
 //! * Against the exact sections (the slicer's): a section's edges with a grid index
-//!   (`segments.rs`), the cured edge along their normals (`predict.rs`), the XY
+//!   (`segments.rs`), the cured edge along their normals (`predict.rs`), each drawn
+//!   edge's move from the layer's dose and the layers above (`shift.rs`), the XY
 //!   correction of the coverage (`correct.rs`), narrow features drawn back and wider
 //!   until they cure (`widen.rs`), the flat features the Z correction drops
 //!   (`held_back.rs`), pictures (`plots.rs`).
@@ -28,6 +29,7 @@ pub mod predict;
 pub mod psf;
 pub mod report;
 pub mod segments;
+pub mod shift;
 pub mod widen;
 
 pub use check::run_layers;
@@ -37,7 +39,7 @@ pub use kernel::{Irradiance, Kernel, Prepared};
 #[cfg(test)]
 pub(crate) use model::test_model;
 pub use model::CureModel;
-pub use predict::{predict_layer, LayerCure};
+pub use predict::LayerCure;
 pub use psf::Psf;
 pub use report::{summarize, CureCheck, Finding, LayerCureCheck, OffsetStats, SlicerAgreement};
 

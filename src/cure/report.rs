@@ -69,7 +69,8 @@ pub struct LayerCureCheck {
     /// Deepest cure below the layer's bottom at its downward-facing pixels, mm.
     #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
     pub print_through_mm: Option<f64>,
-    /// The slicer's signed mean edge error of the layer (`layers[].cure.mean_px`).
+    /// The slicer's prediction of the layer's mean edge offset (`layers[].cure.offset_px`;
+    /// its signed mean edge error `mean_px` in bundles without it).
     #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
     pub slicer_mean_px: Option<f64>,
     /// `offset_px` − `slicer_mean_px`.
@@ -131,35 +132,18 @@ pub struct CureCheck {
     pub per_layer: Vec<LayerCureCheck>,
 }
 
-/// The job's figures from the layers'.
+/// The job's figures from the layers' (`outs`, in layer order), mask pixels mapped to
+/// the build plane by `to_mm`.
 pub fn summarize(
     manifest: &Manifest,
     model: &CureModel,
-    proj: &crate::profile::Projector,
+    to_mm: &dyn Fn([f64; 2]) -> [f64; 2],
     outs: Vec<LayerOut>,
 ) -> CureCheck {
     let p = model.pixel_mm;
     let sample_mm2 = p * p / (SUB * SUB) as f64;
     let c = manifest.cure.as_ref();
     let held = c.map_or(0, |c| c.held_back_layers);
-    // Mask pixel (column, row) in pixel units → build-plane mm.
-    let field_h = manifest.machine.field().height_px as f64;
-    let to_mm = |[u, v]: [f64; 2]| {
-        let u = if proj.mirror_x {
-            proj.width_px as f64 - u
-        } else {
-            u
-        };
-        let v = if proj.mirror_y {
-            proj.height_px as f64 - v
-        } else {
-            v
-        };
-        [
-            (proj.offset_px[0] as f64 + u) * p,
-            (field_h - proj.offset_px[1] as f64 - v) * p,
-        ]
-    };
     let mut per_layer = Vec::with_capacity(outs.len());
     let mut findings = Vec::new();
     let mut agree = SlicerAgreement::default();
@@ -193,7 +177,7 @@ pub fn summarize(
         let slicer = l.cure.as_ref();
         let diff = slicer
             .filter(|_| o.perimeter_px > 0.0)
-            .map(|s| offset_px - s.mean_px);
+            .map(|s| offset_px - s.offset_px.unwrap_or(s.mean_px));
         if let Some(s) = slicer {
             any_slicer = true;
             if (s.vanished == 0) != o.vanished.is_empty() {
@@ -218,7 +202,7 @@ pub fn summarize(
             vanished: o.vanished.len(),
             merged: o.merged.len(),
             print_through_mm: o.print_through_mm,
-            slicer_mean_px: slicer.map(|s| s.mean_px),
+            slicer_mean_px: slicer.map(|s| s.offset_px.unwrap_or(s.mean_px)),
             slicer_diff_px: diff,
         });
     }

@@ -8,6 +8,7 @@ use crate::bundle::{BundleSource, Manifest, MANIFEST};
 pub use crate::cure::CureCheck;
 use crate::cure::{CureModel, Irradiance};
 use crate::error::{Error, Result};
+use crate::profile::Projector;
 use image::codecs::png::PngDecoder;
 use image::ImageDecoder;
 
@@ -52,33 +53,46 @@ pub fn ratios(manifest: &Manifest) -> Vec<f32> {
         .collect()
 }
 
-/// The relative irradiance of layer `i`'s mask (its first) as `light` turns its grays,
-/// or an error naming the file (unreadable, or not the projector's size).
-pub fn layer_irradiance(
-    manifest: &Manifest,
+/// The relative irradiance of the mask `rel` of `source` as `light` turns its grays, or
+/// an error naming the file (unreadable, or not `size` pixels).
+pub fn irradiance_of(
     source: &dyn BundleSource,
+    rel: &str,
+    (w, h): (usize, usize),
     light: &Light,
-    i: usize,
 ) -> Result<Irradiance> {
-    let proj = &manifest.machine.projector[0];
-    let (w, h) = (proj.width_px as usize, proj.height_px as usize);
-    let Some(m) = manifest.layers[i].masks.first() else {
-        return Ok(Irradiance::default());
-    };
     thread_local! {
         static MASK: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
     }
     let mut px = MASK.with(|b| std::mem::take(&mut *b.borrow_mut()));
-    let (mw, mh) = decode_into(source, &m.file, &mut px)?;
+    let (mw, mh) = decode_into(source, rel, &mut px)?;
     if (mw, mh) != (w, h) {
         return Err(Error::Bundle {
-            path: source.shown(&m.file),
+            path: source.shown(rel),
             msg: format!("mask is {mw}x{mh}, the projector {w}x{h}"),
         });
     }
     let irr = light.irradiance(w, h, &px);
     MASK.with(|b| *b.borrow_mut() = px);
     Ok(irr)
+}
+
+/// Mask pixel coordinates (column, row, in pixel units) of projector `p` → build-plane
+/// mm, on a field `field_h` rows high of `pixel_mm` pixels (mirroring undone, offset
+/// added, rows from the top).
+pub fn to_build_plane(p: &Projector, pixel_mm: f64, field_h: f64) -> impl Fn([f64; 2]) -> [f64; 2] {
+    let (w, h) = (p.width_px as f64, p.height_px as f64);
+    let (ox, oy, mx, my) = (
+        p.offset_px[0] as f64,
+        p.offset_px[1] as f64,
+        p.mirror_x,
+        p.mirror_y,
+    );
+    move |[u, v]| {
+        let u = if mx { w - u } else { u };
+        let v = if my { h - v } else { v };
+        [(ox + u) * pixel_mm, (field_h - oy - v) * pixel_mm]
+    }
 }
 
 /// The cure of every layer of the job whose files `source` reads, from its masks (see the
@@ -89,16 +103,22 @@ pub fn check(
     model: &CureModel,
 ) -> Result<CureCheck> {
     let proj = &manifest.machine.projector[0];
+    let size = (proj.width_px as usize, proj.height_px as usize);
     let light = Light::of(manifest, source)?;
     let outs = crate::cure::run_layers(
         model,
-        (proj.width_px as usize, proj.height_px as usize),
+        size,
         &ratios(manifest),
-        &|i| layer_irradiance(manifest, source, &light, i),
+        &|i| match manifest.layers[i].masks.first() {
+            Some(m) => irradiance_of(source, &m.file, size, &light),
+            None => Ok(Irradiance::default()),
+        },
         false,
-        &mut |_, _| {},
+        &mut |_, _, _| {},
     )?;
-    Ok(crate::cure::summarize(manifest, model, proj, outs))
+    let field_h = manifest.machine.field().height_px as f64;
+    let to_mm = to_build_plane(proj, model.pixel_mm, field_h);
+    Ok(crate::cure::summarize(manifest, model, &to_mm, outs))
 }
 
 /// How a mask's gray turns into relative irradiance.
@@ -115,15 +135,20 @@ pub enum Light {
 }
 
 impl Light {
-    /// How `manifest`'s masks turn into relative irradiance, or an error naming the gray
-    /// map and what is wrong.
-    pub fn of(manifest: &Manifest, source: &dyn BundleSource) -> Result<Light> {
+    /// g/255: masks of relative irradiance (uncompensated coverage).
+    pub fn linear() -> Light {
         let mut linear = [0f32; 256];
         for (g, v) in linear.iter_mut().enumerate() {
             *v = g as f32 / 255.0;
         }
+        Light::Linear(linear)
+    }
+
+    /// How `manifest`'s masks turn into relative irradiance, or an error naming the gray
+    /// map and what is wrong.
+    pub fn of(manifest: &Manifest, source: &dyn BundleSource) -> Result<Light> {
         let Some(o) = &manifest.optics else {
-            return Ok(Light::Linear(linear));
+            return Ok(Light::linear());
         };
         let bad = |msg: String| Error::Bundle {
             path: source.shown(&o.gray_map),

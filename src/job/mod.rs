@@ -103,8 +103,18 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         None => None,
     };
     let writer = open_bundle(&out, format, &profile, &setup)?;
-    let (sliced, gray_map) =
-        make_layers(&profile, &setup, &part, &writer, &control, cure.as_ref())?;
+    // Several projectors' masks do not show the field's light: its coverage is kept for
+    // the cure prediction.
+    let field = (cure.as_ref().is_some_and(|c| c.predicts()) && setup.tiler.is_some())
+        .then(|| Sink::memory(&out));
+    let (sliced, gray_map) = make_layers(
+        &profile,
+        &setup,
+        &part,
+        (&writer, field.as_ref()),
+        &control,
+        cure.as_ref(),
+    )?;
 
     let t_finish = Instant::now();
     let distortion_report = setup.correction.as_ref().map(Correction::report);
@@ -121,7 +131,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         &profile,
     )?;
     warnings.append(&mut optics.warnings);
-    warnings.extend(cure_records::warnings(&planned.layers));
+    let predicted_at = warnings.len();
     warnings.extend(cure.as_ref().and_then(|c| c.dropped_warning()));
     warnings.extend(cure.as_ref().and_then(|c| c.widened_warning()));
     let mut manifest = manifest::manifest(
@@ -132,7 +142,14 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion_report.clone(),
         warnings,
     );
-    manifest.cure = cure.as_ref().map(|c| c.record(&manifest.layers));
+    manifest.cure = cure.as_ref().map(|c| c.record());
+    if let Some(c) = cure.as_ref().filter(|c| c.predicts()) {
+        let warp = setup.correction.as_ref().map(|w| (w, part.path));
+        let field = field.as_ref().map(|f| f as &dyn bundle::BundleSource);
+        c.predict(&mut manifest, &writer, field, &part.mesh, warp)?;
+        let w = cure_records::warnings(&manifest.layers);
+        manifest.warnings.splice(predicted_at..predicted_at, w);
+    }
     if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
         return Err(Error::Job {
             path: part.path.into(),
@@ -160,13 +177,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
             .input
             .file_stem()
             .map_or("part".into(), |s| s.to_string_lossy());
-        c.write_plots(
-            dir,
-            &stem,
-            &manifest,
-            &part.mesh,
-            &Rasterizer::new(profile.field()),
-        )?;
+        c.write_plots(dir, &stem, &manifest)?;
     }
     if let Some(m) = made_plots {
         m.keep();
@@ -326,7 +337,7 @@ fn make_layers(
     profile: &Profile,
     setup: &SetUp,
     part: &PlacedPart,
-    writer: &Sink,
+    (writer, field_store): (&Sink, Option<&Sink>),
     control: &Control,
     cure: Option<&cure_records::CureJob>,
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
@@ -348,6 +359,7 @@ fn make_layers(
         binary: profile.slicing.binary,
         px_area_mm2: field.pixel_mm * field.pixel_mm,
         cure,
+        field: field_store,
     };
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {

@@ -4,7 +4,7 @@
 //! written masks (compensation off: the mask's values are the relative irradiance).
 
 use crate::common::*;
-use crate::cure::{threshold, Oracle, P, ROWS};
+use crate::cure::{mid_threshold as threshold, Oracle, P, ROWS};
 use serde_json::Value;
 use std::path::Path;
 
@@ -32,15 +32,11 @@ fn slice(dir: &Path, model: &Path, out: &str, correction: &str) -> Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
-/// The oracle's largest light on a 0.05 px grid over the field pixel box [u0, u1] × [v0,
-/// v1] of layer `layer`'s mask.
+/// The oracle's largest light (of the layer and the layers above, at the layer's top) on
+/// a 0.05 px grid over the field pixel box [u0, u1] × [v0, v1] of layer `layer`.
 fn peak(b: &Path, layer: usize, u: [f64; 2], v: [f64; 2]) -> f64 {
-    let (w, h, data) = read_gray(&b.join(format!("masks/{layer:05}.png")));
-    let oracle = Oracle {
-        data,
-        w: w as i64,
-        h: h as i64,
-    };
+    let job: Value = serde_json::from_slice(&std::fs::read(b.join("job.json")).unwrap()).unwrap();
+    let oracle = Oracle::of_layer(b, &job, layer);
     let n = |a: [f64; 2]| ((a[1] - a[0]) / 0.05).round() as usize;
     let mut best = 0.0f64;
     for i in 0..=n(u) {
