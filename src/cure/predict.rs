@@ -150,10 +150,12 @@ pub fn light<T: Copy + Into<f32>>(
 
 /// The edge samples of a layer whose section is `contours` (build-plane mm, on a field
 /// `height_px` rows high) where the resin at a point of the layer's mid-plane cures where
-/// `margin` is at least 0 (its light less the threshold).
+/// both of `margin`'s values are at least 0: the light less the threshold, and the layer's
+/// own light less the least that makes it the layer's edge. A feature whose inside the
+/// layer does not light (held back) does not vanish: it is not drawn.
 pub fn edge_samples(
     model: &CureModel,
-    margin: &dyn Fn([f64; 2]) -> f64,
+    margin: &dyn Fn([f64; 2]) -> [f64; 2],
     height_px: f64,
     contours: &[Contour],
 ) -> Vec<EdgeSample> {
@@ -222,11 +224,16 @@ pub fn edge_samples(
             let w_out = segs.ray(p, nrm, 2.0 * search, idx).unwrap_or(f64::INFINITY);
             let a = (0.5 * w_in).min(search);
             let b = (0.5 * w_out).min(search);
-            let at = |s: f64| margin([p[0] + s * nrm[0], p[1] + s * nrm[1]]);
-            let (fa, fb) = (at(-a), at(b));
-            let vanishes = fa < 0.0;
+            let both = |s: f64| margin([p[0] + s * nrm[0], p[1] + s * nrm[1]]);
+            let at = |s: f64| {
+                let [l, own] = both(s);
+                l.min(own)
+            };
+            let inside = both(-a);
+            let (fa, fb) = (inside[0].min(inside[1]), at(b));
+            let vanishes = fa < 0.0 && inside[1] >= 0.0;
             let merges = fb >= 0.0;
-            let error_px = (!vanishes && !merges).then(|| root(&at, -a, b, fa, fb));
+            let error_px = (fa >= 0.0 && !merges).then(|| root(&at, -a, b, fa, fb));
             out.push(EdgeSample {
                 at: p,
                 normal: nrm,

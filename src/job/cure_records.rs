@@ -787,11 +787,11 @@ impl LayerLight {
         let margin = |p: [f64; 2]| {
             let at = [p[0] - c0 as f64, p[1] - r0 as f64];
             let a = predict::light(&self.light, (c1 - c0).max(1), &psf, &table, at) - mid;
-            if a < 0.0 || self.own.is_empty() {
-                return a;
+            if self.own.is_empty() {
+                return [a, -near];
             }
             let at = [p[0] - o0 as f64, p[1] - o1 as f64];
-            a.min(predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near)
+            [a, predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near]
         };
         let samples = predict::edge_samples(m, &margin, self.height as f64, &self.framed);
         let (c, h) = predict::summarize(m, &samples, &self.drawn);
