@@ -12,7 +12,7 @@
 mod common;
 
 use dmdsl::cure::segments::Segments;
-use dmdsl::cure::shift::{Coverage, EdgeProfile, EdgeShifts, LookAhead, LOOK_AHEAD};
+use dmdsl::cure::shift::{wall_shifts, Coverage, EdgeProfile, EdgeShifts, LookAhead, LOOK_AHEAD};
 use dmdsl::cure::{self, CureModel, Psf};
 use dmdsl::profile::Profile;
 use dmdsl::raster::{PixelBox, Rasterizer, Scratch};
@@ -53,6 +53,7 @@ fn main() {
         let t_index = t.elapsed().as_secs_f64();
         let (mut t_cov, mut t_solve, mut t_cor) = (0.0, 0.0, 0.0);
         let mut range = (0.0f64, 0.0f64);
+        let walls = wall_shifts(&model, &edge, n, ratio);
         for (i, s) in sections.iter().enumerate() {
             let t = Instant::now();
             let mut m = raster.coverage(&s.contours, &mut scratch);
@@ -62,7 +63,7 @@ fn main() {
             let segs = Segments::simplified(&s.contours, p, h, 0.01);
             let upper: Vec<&Coverage> = covered[i + 1..].iter().take(LOOK_AHEAD).collect();
             let mut pairs = Vec::new();
-            let look = LookAhead::new(&model, (i, n), ratio, &upper, &mut pairs);
+            let look = LookAhead::new(&model, (i, n), (ratio, &walls), &upper, &mut pairs);
             let shifts = EdgeShifts::solve(&model, &edge, (&segs, &covered[i]), &look, 4.0);
             t_solve += t.elapsed().as_secs_f64();
             let (lo, hi) = shifts.range();

@@ -63,7 +63,7 @@ fn main() {
     );
 
     let trace = dir.join("trace.csv");
-    let m = sim::Machine::from_profile(&manifest.machine);
+    let m = sim::Machine::of(&manifest.machine);
     let mut rows = 0;
     let (med, min) = time(reps.min(5), || {
         let mut c = Checker::new(&manifest);

@@ -115,7 +115,7 @@ fn main() {
             let m = traster.coverage(&sec.contours, &mut tscratch);
             c += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            for k in 0..tiler.len() {
+            for k in 0..tiled.projector.len() {
                 std::hint::black_box(tiler.render(k, &m));
             }
             s += t.elapsed().as_secs_f64();

@@ -3,6 +3,9 @@
 //! Every error renders as one line that names the file (or profile, or bundle)
 //! and what is wrong with it. The binary maps them to exit codes with
 //! [`Error::exit_code`].
+//!
+//! Nothing panics on bad input; exit code 2 for usage and input errors, 130 for an interrupt
+//! (Ctrl-C, SIGTERM, SIGHUP).
 
 use std::path::PathBuf;
 
@@ -126,7 +129,7 @@ impl Error {
     }
 
     /// Process exit code for this error: 130 for an interrupt, 2 for everything else
-    /// (usage and input errors; see README "Exit codes").
+    /// (usage and input errors; docs/CLI.md, "Exit codes").
     pub fn exit_code(&self) -> i32 {
         match self {
             Error::Interrupted => 130,

@@ -1,16 +1,16 @@
 //! `dmdsl`: a build-job compiler and dry-run executor for DMD mask-projection
 //! stereolithography.
 //!
-//! The library follows the data (see `docs/ARCHITECTURE.md`):
-//! [`mesh`] (load, weld, validate) → [`slice`](mod@slice) (contours per layer) → [`raster`]
-//! (8-bit masks, light compensation from [`optics`], pre-warp and tiling from [`geometry`])
-//! → [`plan`] (exposure and stage steps) → [`bundle`] (the job bundle, written atomically),
-//! orchestrated by [`job`]. The executor ([`exec`]) reads only the bundle.
+//! The library follows the data (`docs/ARCHITECTURE.md`): load the mesh, place and slice
+//! it, rasterize every layer into masks (light compensation, cure correction, pre-warp and
+//! tiling), plan exposures and stage steps, and write the job; the executor reads only a
+//! job (in any form [`open`] reads), verifies and simulates it.
 //!
 //! # Using the library
 //!
 //! The two commands are one call each; the items re-exported here are what they take and
-//! return:
+//! return, with the job format ([`bundle`]: the manifest and its records) and the machine
+//! description ([`profile`]):
 //!
 //! ```no_run
 //! use dmdsl::{slice_to_bundle, run, Profile, RunOptions, SliceOptions};
@@ -23,47 +23,44 @@
 //! # }
 //! ```
 //!
-//! The stage modules stay public for programs that drive the stages themselves (the
-//! benchmarks and examples do), and so does [`plot`], whose pictures several of them return;
-//! the building blocks they share (PNG encoding, hashing, least squares, tables, reading
-//! input files) are private.
+//! [`open`] reads a job in any form `dmdsl run` reads and [`write()`] writes one in any
+//! [`Format`]; [`cli::main`] is the whole `dmdsl` program.
+//!
+//! The pipeline's stages are private to the crate. The Cargo feature `internals` makes them
+//! public for the project's own integration tests, benchmarks and examples, which drive
+//! them one by one; they are not a stable interface.
 #![warn(missing_docs)]
 
-pub mod archive;
+/// Declares modules that are private to the crate, or public with the `internals` feature.
+macro_rules! stages {
+    ($($name:ident),* $(,)?) => {$(
+        #[cfg(feature = "internals")]
+        pub mod $name;
+        #[cfg(not(feature = "internals"))]
+        pub(crate) mod $name;
+    )*};
+}
+
 pub mod bundle;
-pub mod cure;
-mod digest;
+pub mod cli;
 pub mod error;
-pub mod exec;
-pub mod export;
-pub mod geometry;
-pub mod import;
-mod input;
-pub mod inspect;
-pub mod job;
-pub mod mesh;
-pub mod motion;
-pub mod optics;
-pub mod output;
-pub mod plan;
-pub mod plot;
-mod png;
-mod polyfit;
 pub mod profile;
-pub mod raster;
-pub mod round;
-pub mod slice;
-mod table;
 #[cfg(test)]
 mod test_support;
-pub mod units;
-pub mod warning;
+
+stages!(
+    cure, digest, exec, formats, geometry, input, inspect, job, mesh, motion, optics, output,
+    picture, plan, plot, png, polyfit, raster, round, slice, table, text, units, warning,
+);
 
 pub use bundle::Manifest;
 pub use error::{Error, Result};
 pub use exec::report::Report;
-pub use exec::{run, RunOptions, Violation};
+pub use exec::sim::FaultKind;
+pub use exec::{run, Kind, RunOptions, Violation};
+pub use formats::{open, write, Format, Job};
 pub use job::{slice_to_bundle, SliceOptions, SliceSummary};
 pub use mesh::Mesh;
 pub use profile::Profile;
-pub use warning::{Severity, Warning};
+pub use units::{NonNegative, Positive};
+pub use warning::{Severity, Warning, CODES as WARNING_CODES};

@@ -2,6 +2,8 @@
 //! half a file: each is written to a hidden temporary sibling, `.NAME.tmp-PID`, and renamed
 //! over the destination once complete. Bundles, which are directories, have their own
 //! writer (`bundle::BundleWriter`).
+//!
+//! A reader sees the old file or the whole new one; a failed write leaves nothing.
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};

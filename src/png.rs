@@ -15,6 +15,9 @@
 //! adds its bytes to the Adler-32 from the source row's sums, so a repeating row costs
 //! less than scanning it; masks whose rows never repeat pay for the signature of each row.
 //! The output is a standard PNG that any decoder reads (tests decode it with `image`).
+//!
+//! Invariants: the bytes are deterministic and independent of the lit box the caller gives;
+//! a test pins the stream to an obvious bit-by-bit encoder of the same rule.
 
 use std::ops::Range;
 
@@ -478,6 +481,41 @@ fn emit_copy(bits: &mut Bits, mut k: usize, dist: (u32, u32)) {
     }
 }
 
+/// Codes one image row as runs: its filter byte and the zeros left of the box `c0..c1`,
+/// the box's bytes `row`, the zeros right of it (runs merge exactly as if the whole row
+/// had been scanned, so the stream does not depend on the box). Returns the row's
+/// [`signature`] when it has at least [`COPY_MIN_RUNS`] runs.
+#[inline(always)]
+fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Option<u64> {
+    // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
+    // whole row had been scanned, so the stream does not depend on the box.
+    runs.push(0, 1 + c0);
+    // The box's runs, and the value and length of its last one.
+    let (mut inbox, mut lv, mut lk) = (0usize, 0u8, 0usize);
+    let mut i = 0;
+    while i < row.len() {
+        let v = row[i];
+        let k = run_len(&row[i..], v);
+        runs.push(v, k);
+        (inbox, lv, lk) = (inbox + 1, v, k);
+        i += k;
+    }
+    if w > c1 {
+        runs.push(0, w - c1);
+    }
+    // The row's runs: the zeros up to the box, the box's, the zeros after it, less
+    // the zero runs of the box that merge with those.
+    let lead = row.first() == Some(&0);
+    let runs_in_row = 1 + inbox + (w > c1) as usize - lead as usize - (w > c1 && lv == 0) as usize;
+    (runs_in_row >= COPY_MIN_RUNS).then(|| {
+        signature(
+            runs_in_row,
+            1 + c0 + if lead { run_len(row, 0) } else { 0 },
+            1 + c1 - if lv == 0 { lk } else { 0 },
+        )
+    })
+}
+
 /// The zlib stream of the PNG scanlines (each row preceded by filter byte 0); row `r` of
 /// the image is `row_of(r)` (`w` bytes). Scanlines are coded as runs (a run goes on
 /// across row ends), except that a row with at least [`COPY_MIN_RUNS`] runs equal to one
@@ -563,38 +601,13 @@ fn zlib_rows<'a>(
             runs.k,
         );
         let adler = (runs.adler.a, runs.adler.b, runs.adler.pending);
-        // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
-        // whole row had been scanned, so the stream does not depend on the box.
-        runs.push(0, 1 + c0);
-        // The box's runs, and the value and length of its last one.
-        let (mut inbox, mut lv, mut lk) = (0usize, 0u8, 0usize);
-        let mut i = 0;
-        while i < row.len() {
-            let v = row[i];
-            let k = run_len(&row[i..], v);
-            runs.push(v, k);
-            (inbox, lv, lk) = (inbox + 1, v, k);
-            i += k;
-        }
-        if w > c1 {
-            runs.push(0, w - c1);
-        }
-        // The row's runs: the zeros up to the box, the box's, the zeros after it, less
-        // the zero runs of the box that merge with those.
-        let lead = row.first() == Some(&0);
-        let runs_in_row =
-            1 + inbox + (w > c1) as usize - lead as usize - (w > c1 && lv == 0) as usize;
+        let sig = push_row(&mut runs, row, w, c0, c1);
         delta[slot] = None;
         copied = false;
-        if runs_in_row < COPY_MIN_RUNS || max_back == 0 {
+        let Some(sig) = sig.filter(|_| max_back > 0) else {
             last[slot] = 0;
             continue;
-        }
-        let sig = signature(
-            runs_in_row,
-            1 + c0 + if lead { run_len(row, 0) } else { 0 },
-            1 + c1 - if lv == 0 { lk } else { 0 },
-        );
+        };
         // Most rows match none of the rows above: one test of all of them first (the
         // ring holds the rows r − 1 … r − COPY_ROWS, 0 for rows of zeros and before row 0).
         let seen = last.iter().fold(false, |a, &x| a | (x == sig));

@@ -20,6 +20,14 @@ pub use crate::png::PixelBox;
 use crate::profile::{Field, Projector};
 use crate::slice::Contour;
 
+mod accum;
+mod nonzero;
+mod scan;
+
+use accum::{line, zeroed_by_writes, Accum, BLOCK};
+pub use scan::map_words;
+use scan::{scan_runs, Mapped, Plain, ScanSpan};
+
 /// A grayscale image, row-major, top row first.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Mask {
@@ -42,12 +50,13 @@ impl Mask {
     }
 
     /// Value at (col, row).
-    #[inline]
+    #[cfg(test)]
     pub fn get(&self, col: u32, row: u32) -> u8 {
         self.data[row as usize * self.width as usize + col as usize]
     }
 
     /// Sum of values / 255: the lit area in pixels.
+    #[cfg(any(test, feature = "internals"))]
     pub fn lit_pixels(&self) -> f64 {
         self.lit_pixels_in(PixelBox::whole(self.width as usize, self.height as usize))
     }
@@ -81,6 +90,7 @@ pub struct LitRuns {
 impl LitRuns {
     /// The lit runs of coverage mask `m` inside its box `[r0, r1, c0, c1]` (a
     /// [`PixelBox`]'s rows `r0..r1` and columns `c0..c1`; zero outside).
+    #[cfg(test)]
     pub fn of_mask(m: &Mask, [r0, r1, c0, c1]: [usize; 4]) -> LitRuns {
         let mut l = LitRuns::default();
         l.scan_mask(m, PixelBox { r0, r1, c0, c1 });
@@ -268,27 +278,7 @@ impl Rasterizer {
             stride,
             words,
         };
-        let (mut r0, mut r1) = (h, 0usize);
-        let (mut c0, mut c1) = (w, 0usize);
-        for c in contours {
-            for i in 0..c.len() {
-                let (x0, y0) = self.px(c[i]);
-                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
-                // Clamp into the field: the planner guarantees parts fit, this only guards.
-                let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
-                let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
-                line(acc, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
-                // Clamped, so non-negative: `as usize` truncates = floors.
-                let ceil = |v: f64| {
-                    let t = v as usize;
-                    t + ((t as f64) < v) as usize
-                };
-                r0 = r0.min(y0.min(y1) as usize);
-                r1 = r1.max(ceil(y0.max(y1)));
-                c0 = c0.min(x0.min(x1) as usize);
-                c1 = c1.max(ceil(x0.max(x1)) + 1);
-            }
-        }
+        let [r0, r1, c0, c1] = self.accumulate(contours, acc);
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
@@ -363,94 +353,40 @@ impl Rasterizer {
         out
     }
 
-    /// Nonzero-winding coverage by analytic spans on [`SUBLINES`] sub-scanlines per pixel
-    /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for layers whose shells
-    /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
-    fn coverage_nonzero(&self, contours: &[Contour], out: &mut Mask) {
+    /// Adds every edge of `contours` to the accumulation buffer; returns the rows
+    /// `r0..r1` and columns `c0..c1` they touched (`c1` may be one past the field: edges
+    /// carry area one column past their rightmost pixel).
+    #[inline]
+    fn accumulate(&self, contours: &[Contour], acc: &mut Accum) -> [usize; 4] {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
-        // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding).
-        let mut edges: Vec<(f64, f64, f64, f64, i32)> = Vec::new();
+        let (mut r0, mut r1) = (h, 0usize);
+        let (mut c0, mut c1) = (w, 0usize);
         for c in contours {
             for i in 0..c.len() {
                 let (x0, y0) = self.px(c[i]);
                 let (x1, y1) = self.px(c[(i + 1) % c.len()]);
-                if y0 == y1 {
-                    continue;
-                }
-                let (dir, xa, ya, xb, yb) = if y0 < y1 {
-                    (1, x0, y0, x1, y1)
-                } else {
-                    (-1, x1, y1, x0, y0)
+                // Clamp into the field: the planner guarantees parts fit, this only guards.
+                let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
+                let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
+                line(acc, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
+                // Clamped, so non-negative: `as usize` truncates = floors.
+                let ceil = |v: f64| {
+                    let t = v as usize;
+                    t + ((t as f64) < v) as usize
                 };
-                edges.push((xa, (xb - xa) / (yb - ya), ya, yb, dir));
+                r0 = r0.min(y0.min(y1) as usize);
+                r1 = r1.max(ceil(y0.max(y1)));
+                c0 = c0.min(x0.min(x1) as usize);
+                c1 = c1.max(ceil(x0.max(x1)) + 1);
             }
         }
-        edges.sort_by(|a, b| a.2.total_cmp(&b.2));
-        out.data.fill(0);
-        let mut diff = vec![0.0f64; w + 2];
-        let mut cover = vec![0.0f64; w + 1];
-        let mut active: Vec<usize> = Vec::new();
-        let mut next = 0;
-        let mut xs: Vec<(f64, i32)> = Vec::new();
-        let r_first = edges.first().map_or(h, |e| e.2.floor().max(0.0) as usize);
-        let inv = 1.0 / SUBLINES as f64;
-        for r in r_first..h {
-            if next >= edges.len() && active.is_empty() {
-                break;
-            }
-            while next < edges.len() && edges[next].2 < (r + 1) as f64 {
-                active.push(next);
-                next += 1;
-            }
-            active.retain(|&e| edges[e].3 > r as f64);
-            if active.is_empty() {
-                continue;
-            }
-            cover.fill(0.0);
-            diff.fill(0.0);
-            for s in 0..SUBLINES {
-                let y = r as f64 + (s as f64 + 0.5) * inv;
-                xs.clear();
-                for &e in &active {
-                    let (x, k, ya, yb, d) = edges[e];
-                    if ya <= y && y < yb {
-                        xs.push(((x + k * (y - ya)).clamp(0.0, w as f64), d));
-                    }
-                }
-                xs.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let mut wind = 0;
-                for j in 0..xs.len() {
-                    let before = wind;
-                    wind += xs[j].1;
-                    if before == 0 && wind != 0 {
-                        // span starts at xs[j].0; find where it ends
-                        let xa = xs[j].0;
-                        let mut wk = wind;
-                        let mut xb = xa;
-                        for x in &xs[j + 1..] {
-                            wk += x.1;
-                            if wk == 0 {
-                                xb = x.0;
-                                break;
-                            }
-                        }
-                        add_span(&mut cover, &mut diff, xa, xb, inv);
-                    }
-                }
-            }
-            let dst = &mut out.data[r * w..(r + 1) * w];
-            let mut run = 0.0;
-            for (col, d) in dst.iter_mut().enumerate() {
-                run += diff[col];
-                let v = (cover[col] + run).clamp(0.0, 1.0);
-                *d = (v * 255.0 + 0.5) as u8;
-            }
-        }
+        [r0, r1, c0, c1]
     }
 
     /// Binary mask: 255 where the anti-aliased coverage is at least 50 % (value ≥ 128),
     /// else 0.
+    #[cfg(test)]
     pub fn binary(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
         self.render::<NoMap>(contours, scratch, true, None)
     }
@@ -539,407 +475,6 @@ impl CoverageMap for NoMap {
     }
 }
 
-/// How [`scan_runs`] writes runs of equal (thresholded) coverage into a mask row.
-trait Emit {
-    /// Per-row state.
-    type Row<'a>: Copy
-    where
-        Self: 'a;
-    fn row(&self, r: usize) -> Self::Row<'_>;
-    /// The area outside which lit pixels are reported.
-    fn area(&self) -> PixelBox;
-    /// Writes columns a..b of `dst` (zero there) for (thresholded) coverage `v` ≠ 0.
-    fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
-}
-
-/// The coverage itself (no map).
-struct Plain;
-
-impl Emit for Plain {
-    type Row<'a> = ();
-    #[inline(always)]
-    fn row(&self, _: usize) {}
-    fn area(&self) -> PixelBox {
-        PixelBox {
-            r0: 0,
-            r1: usize::MAX,
-            c0: 0,
-            c1: usize::MAX,
-        }
-    }
-    #[inline(always)]
-    fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
-        dst[a..b].fill(v);
-    }
-}
-
-/// Values through a [`CoverageMap`].
-struct Mapped<'m, M>(&'m M);
-
-impl<M: CoverageMap> Emit for Mapped<'_, M> {
-    type Row<'a>
-        = M::Row<'a>
-    where
-        Self: 'a;
-    #[inline(always)]
-    fn row(&self, r: usize) -> M::Row<'_> {
-        self.0.row(r)
-    }
-    fn area(&self) -> PixelBox {
-        self.0.area()
-    }
-    #[inline(always)]
-    fn fill(row: M::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8) {
-        M::fill(row, dst, a, b, v);
-    }
-}
-
-/// Maps coverage values `data` in place: 0 stays 0, 255 takes `full` (same index), others
-/// `edge(index, value)`. Eight bytes at a time: all-off words are skipped, all-on words
-/// copied from `full`, so away from edges eight pixels cost one word test (and a copy).
-#[inline(always)]
-pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
-    let n = data.len().min(full.len());
-    let (data, full) = (&mut data[..n], &full[..n]);
-    let rd = |d: &[u8], i: usize| u64::from_ne_bytes(d[i..i + 8].try_into().expect("8 bytes"));
-    let px = |d: &mut u8, f: u8, i: usize| {
-        *d = match *d {
-            0 => 0,
-            255 => f,
-            v => edge(i, v),
-        }
-    };
-    let mut i = 0;
-    while i + 8 <= n {
-        let w = rd(data, i);
-        if w == 0 {
-            i += 8;
-            while i + 8 <= n && rd(data, i) == 0 {
-                i += 8;
-            }
-        } else if w == u64::MAX {
-            data[i..i + 8].copy_from_slice(&full[i..i + 8]);
-            i += 8;
-            while i + 8 <= n && rd(data, i) == u64::MAX {
-                data[i..i + 8].copy_from_slice(&full[i..i + 8]);
-                i += 8;
-            }
-        } else {
-            for k in i..i + 8 {
-                px(&mut data[k], full[k], k);
-            }
-            i += 8;
-        }
-    }
-    for k in i..n {
-        px(&mut data[k], full[k], k);
-    }
-}
-
-/// The rows and columns the scans visit: rows r0..r1, columns c0..end.
-#[derive(Clone, Copy)]
-struct ScanSpan {
-    r0: usize,
-    r1: usize,
-    c0: usize,
-    end: usize,
-}
-
-/// The prefix-sum scan of the accumulation buffer: writes the coverage (thresholded when
-/// `BIN`) through `emit` (as is, or through a light-compensation map), clears the buffer
-/// and its block marks as it reads them, and returns the sum of the coverage values (before
-/// threshold) and the largest winding seen. Only the touched blocks are visited: between
-/// them every cell is zero and the value repeats. The value changes only at nonzero cells:
-/// the scan follows runs of equal coverage and writes each run once, when it ends (zero
-/// runs are left as they are), so a run of full coverage is one fill, or one copy from the
-/// map's full-coverage row. With `CHECK`, sets `outside` if a lit pixel lies outside
-/// `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it.
-#[inline(never)]
-fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
-    acc: &mut Accum,
-    data: &mut [u8],
-    w: usize,
-    ScanSpan { r0, r1, c0, end }: ScanSpan,
-    emit: E,
-    outside: &mut bool,
-    mut lit: Option<&mut LitRuns>,
-) -> (u64, f32) {
-    let PixelBox {
-        r0: ar0,
-        r1: ar1,
-        c0: ac0,
-        c1: ac1,
-    } = emit.area();
-    let (stride, words) = (acc.stride, acc.words);
-    let mut max_winding = 0.0f32;
-    let mut lit_sum = 0u64;
-    for r in r0..r1 {
-        let row = &mut acc.cells[r * stride..(r + 1) * stride];
-        let marks = &mut acc.touched[r * words..(r + 1) * words];
-        let mut sink = Runs::<E, BIN, CHECK> {
-            er: emit.row(r),
-            dst: &mut data[r * w..(r + 1) * w],
-            lit_sum: 0,
-            lo: usize::MAX,
-            hi: 0,
-        };
-        let mut sum = 0.0f32;
-        // The current run: columns start.. of coverage `val`.
-        let mut val = 0u8;
-        let mut start = c0;
-        // Where the lit run (coverage ≥ 50 %) being followed started.
-        let mut lit_from = 0u32;
-        for (wi, m) in marks.iter_mut().enumerate() {
-            let mut bits = std::mem::take(m);
-            while bits != 0 {
-                let b = wi * 64 + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
-                let from = bs.max(c0).min(end);
-                let to = be.min(end).max(from);
-                // Most cells of a touched block are zero: one vectorizable pass marks the
-                // nonzero ones, then only those are visited (in column order).
-                let mut nonzero = nonzero_cells(&row[bs..be]);
-                nonzero &= (1u64 << (to - bs)) - 1;
-                nonzero &= !((1u64 << (from - bs)) - 1);
-                while nonzero != 0 {
-                    let c = bs + nonzero.trailing_zeros() as usize;
-                    nonzero &= nonzero - 1;
-                    let a = row[c];
-                    sum += a;
-                    // Cleared as it is read: the buffer is all zeros after the scan.
-                    row[c] = 0.0;
-                    let v = sum.abs();
-                    max_winding = max_winding.max(v);
-                    let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
-                    if nv != val {
-                        sink.end(start, c, val);
-                        // Lit (≥ 128) on one side of c only: a lit run starts or ends.
-                        if (nv ^ val) & 0x80 != 0 {
-                            if let Some(l) = lit.as_deref_mut() {
-                                if nv >= 128 {
-                                    lit_from = c as u32;
-                                } else {
-                                    l.runs.push([r as u32, lit_from, c as u32]);
-                                }
-                            }
-                        }
-                        (start, val) = (c, nv);
-                    }
-                }
-                // Cells right of the field (edges carry area one column past their
-                // rightmost pixel): not part of the mask, just cleared.
-                row[to.max(bs)..be].fill(0.0);
-            }
-        }
-        if start < end {
-            sink.end(start, end, val);
-        }
-        // A lit run reaching the end of the row.
-        if val >= 128 {
-            if let Some(l) = lit.as_deref_mut() {
-                l.runs.push([r as u32, lit_from, end as u32]);
-            }
-        }
-        lit_sum += sink.lit_sum;
-        if CHECK && sink.lo < sink.hi {
-            *outside |= r < ar0 || r >= ar1 || sink.lo < ac0 || sink.hi > ac1;
-        }
-    }
-    (lit_sum, max_winding)
-}
-
-/// A zeroed buffer whose pages are first touched by writes. A fresh zeroed allocation is
-/// mapped lazily: reading a page first maps the shared zero page, and the write that
-/// follows must copy it and flush the other CPUs' TLBs (an inter-processor interrupt per
-/// page, costly in a VM) — what the accumulation's `+=` and the block marks' `|=` would
-/// do on their first pass. Written first, each page costs one plain fault.
-fn zeroed_by_writes<T: Copy + Default>(n: usize) -> Vec<T> {
-    let mut v = vec![T::default(); n];
-    let step = (4096 / std::mem::size_of::<T>().max(1)).max(1);
-    for i in (0..n).step_by(step) {
-        // SAFETY: i < n = v.len(); volatile, so the store of a value the allocation
-        // already holds is not left out.
-        unsafe { std::ptr::write_volatile(v.as_mut_ptr().add(i), T::default()) };
-    }
-    v
-}
-
-/// Bit i set where `cells[i]` (at most [`BLOCK`] cells) is nonzero. A whole block is one
-/// branch-free pass the compiler vectorizes.
-#[inline(always)]
-fn nonzero_cells(cells: &[f32]) -> u64 {
-    let mark = |m: u64, (i, &a): (usize, &f32)| m | (((a != 0.0) as u64) << i);
-    match <&[f32; BLOCK]>::try_from(cells) {
-        Ok(block) => block.iter().enumerate().fold(0, mark),
-        Err(_) => cells.iter().enumerate().fold(0, mark),
-    }
-}
-
-/// Where [`scan_runs`] puts the runs of one row.
-struct Runs<'a, E: Emit + 'a, const BIN: bool, const CHECK: bool> {
-    er: E::Row<'a>,
-    dst: &'a mut [u8],
-    /// Sum of the coverage values of the row.
-    lit_sum: u64,
-    /// Columns lo..hi hold the row's lit pixels (thresholded coverage above zero); kept
-    /// when `CHECK` (the lit box is not inside the map's area).
-    lo: usize,
-    hi: usize,
-}
-
-impl<E: Emit, const BIN: bool, const CHECK: bool> Runs<'_, E, BIN, CHECK> {
-    /// Columns a..b have coverage `v`.
-    #[inline(always)]
-    fn end(&mut self, a: usize, b: usize, v: u8) {
-        if v != 0 {
-            self.lit_sum += v as u64 * (b - a) as u64;
-            let t = match (BIN, v >= 128) {
-                (false, _) => v,
-                (true, true) => 255,
-                (true, false) => 0,
-            };
-            if t != 0 {
-                E::fill(self.er, self.dst, a, b, t);
-                if CHECK {
-                    self.lo = self.lo.min(a);
-                    self.hi = self.hi.max(b);
-                }
-            }
-        }
-    }
-}
-
-/// Accumulation cells per bit of [`Scratch::touched`].
-const BLOCK: usize = 32;
-
-/// The signed-area accumulation buffer of one field and its touched-block bitmap.
-struct Accum<'a> {
-    cells: &'a mut [f32],
-    touched: &'a mut [u64],
-    stride: usize,
-    /// Bitmap words per row.
-    words: usize,
-}
-
-impl Accum<'_> {
-    /// Marks cells `lo..=hi` of row `r` as written.
-    #[inline]
-    fn mark(&mut self, r: usize, lo: usize, hi: usize) {
-        let row = &mut self.touched[r * self.words..(r + 1) * self.words];
-        for b in lo / BLOCK..=hi / BLOCK {
-            row[b / 64] |= 1 << (b % 64);
-        }
-    }
-}
-
-/// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
-const SUBLINES: usize = 32;
-
-/// Adds the horizontal span [xa, xb) with weight `wgt` to a pixel row: partial end pixels
-/// go to `cover`, whole pixels between them to the difference array `diff`.
-fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
-    if xb <= xa {
-        return;
-    }
-    let ia = xa.floor() as usize;
-    let ib = xb.floor() as usize;
-    if ia == ib {
-        cover[ia] += (xb - xa) * wgt;
-        return;
-    }
-    cover[ia] += ((ia + 1) as f64 - xa) * wgt;
-    diff[ia + 1] += wgt;
-    diff[ib] -= wgt;
-    if ib < cover.len() {
-        cover[ib] += (xb - ib as f64) * wgt;
-    }
-}
-
-/// `v.floor()` for `0 ≤ v < 2²⁴` (or −0.0, giving +0.0): truncation is the floor there, and
-/// it is one instruction where `f32::floor` is a libm call (the baseline x86-64 target has
-/// no rounding instruction).
-#[inline(always)]
-fn floor_nn(v: f32) -> f32 {
-    (v as u32) as f32
-}
-
-/// `v.ceil()` for `0 ≤ v < 2²⁴` (or −0.0, giving +0.0), see [`floor_nn`].
-#[inline(always)]
-fn ceil_nn(v: f32) -> f32 {
-    let t = (v as u32) as f32;
-    if t < v {
-        t + 1.0
-    } else {
-        t
-    }
-}
-
-/// Adds the signed-area contribution of the line (x0,y0)→(x1,y1) (pixel units, y down)
-/// to the accumulation buffer: after a prefix sum along each row, every cell holds the
-/// winding-weighted area of its pixel inside the polygon.
-#[inline(always)]
-fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f32) {
-    let stride = accum.stride;
-    if y0 == y1 {
-        return;
-    }
-    let (dir, xa, ya, xb, yb) = if y0 < y1 {
-        (1.0f32, x0, y0, x1, y1)
-    } else {
-        (-1.0f32, x1, y1, x0, y0)
-    };
-    let dxdy = (xb - xa) / (yb - ya);
-    let mut x = xa;
-    let r_start = floor_nn(ya) as usize;
-    let r_end = (ceil_nn(yb) as usize).min(h);
-    for r in r_start..r_end {
-        let top = (r as f32).max(ya);
-        let bot = ((r + 1) as f32).min(yb);
-        let dy = bot - top;
-        if dy <= 0.0 {
-            continue;
-        }
-        let xn = if bot == yb { xb } else { x + dxdy * dy };
-        let d = dy * dir;
-        let base = r * stride;
-        let (lx, rx) = if x < xn { (x, xn) } else { (xn, x) };
-        let lf = floor_nn(lx);
-        let li = lf as usize;
-        let rc = ceil_nn(rx);
-        let ri = rc as usize;
-        accum.mark(r, li, ri.max(li + 1));
-        let acc = &mut *accum.cells;
-        if ri <= li + 1 {
-            // The line stays inside one pixel column on this row.
-            let mid = 0.5 * (x + xn) - lf;
-            acc[base + li] += d * (1.0 - mid);
-            acc[base + li + 1] += d * mid;
-        } else {
-            // Spans several columns: area left of the line in each column, trapezoid rule.
-            let inv = 1.0 / (rx - lx);
-            let f0 = lx - lf;
-            let a0 = 0.5 * inv * (1.0 - f0) * (1.0 - f0);
-            let f1 = rx - rc + 1.0;
-            let am = 0.5 * inv * f1 * f1;
-            acc[base + li] += d * a0;
-            if ri == li + 2 {
-                acc[base + li + 1] += d * (1.0 - a0 - am);
-            } else {
-                let a1 = inv * (1.5 - f0);
-                acc[base + li + 1] += d * (a1 - a0);
-                for c in li + 2..ri - 1 {
-                    acc[base + c] += d * inv;
-                }
-                let a2 = a1 + (ri - li - 3) as f32 * inv;
-                acc[base + ri - 1] += d * (1.0 - a2 - am);
-            }
-            acc[base + ri] += d * am;
-        }
-        x = xn;
-    }
-}
-
 /// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the
 /// field mask when the projector covers it exactly, unmirrored).
 pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::Cow<'a, Mask> {
@@ -971,44 +506,6 @@ pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::C
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn zeroed_by_writes_is_zeroed() {
-        for n in [0, 1, 1023, 1024, 1025, 5000] {
-            let a: Vec<f32> = zeroed_by_writes(n);
-            assert_eq!(a.len(), n);
-            assert!(a.iter().all(|&v| v.to_bits() == 0));
-            let b: Vec<u64> = zeroed_by_writes(n);
-            assert!(b.len() == n && b.iter().all(|&v| v == 0));
-        }
-    }
-
-    #[test]
-    fn floor_and_ceil_of_non_negative_floats() {
-        let mut vals = vec![
-            0.0f32,
-            -0.0,
-            0.5,
-            1.0,
-            1.5,
-            767.99994,
-            768.0,
-            1023.5,
-            16_777_215.0,
-        ];
-        let mut s = 0x9E37_79B9u32;
-        for _ in 0..10_000 {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            vals.push(f32::from_bits(s).abs().min(16_000_000.0));
-            vals.push((s % 2_000_000) as f32 / 1024.0);
-        }
-        for v in vals.into_iter().filter(|v| v.is_finite()) {
-            assert_eq!(floor_nn(v), v.floor() + 0.0, "{v}");
-            assert_eq!(ceil_nn(v), v.ceil() + 0.0, "{v}");
-        }
-    }
 
     fn field() -> Field {
         Field {

@@ -176,29 +176,6 @@ impl StageGrid {
     }
 }
 
-/// A number for a one-line message: up to 4 decimals without trailing zeros (`10`,
-/// `0.0013`), or scientific notation where that would print a long run of digits or
-/// nothing at all (`1.000e20`, `1.000e-7`); `-0` prints as `0`.
-///
-/// ```
-/// assert_eq!(dmdsl::round::for_message(10.0), "10");
-/// assert_eq!(dmdsl::round::for_message(0.00125), "0.0013");
-/// assert_eq!(dmdsl::round::for_message(1e20), "1.000e20");
-/// assert_eq!(dmdsl::round::for_message(-0.0), "0");
-/// ```
-pub fn for_message(v: f64) -> String {
-    if v != 0.0 && (v.abs() >= 1e6 || v.abs() < 1e-3) {
-        return format!("{v:.3e}");
-    }
-    let s = format!("{v:.4}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s == "-0" {
-        "0".into()
-    } else {
-        s.into()
-    }
-}
-
 /// Serializes a figure of a report to 6 decimals (1 µs, 1 nm, 1e-6 %): sums over a
 /// simulation carry floating-point noise in their last digits.
 pub fn six<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {

@@ -465,6 +465,7 @@ fn segments_cross(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
 
 /// Slices `mesh` (already placed on the build plane) into `n` layers of height `h` at
 /// once (tests and small jobs; the pipeline streams with [`Slicer`]).
+#[cfg(any(test, feature = "internals"))]
 pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
     let mut s = Slicer::new(mesh, h, n);
     let sections = s.window(0..n);

@@ -1,4 +1,7 @@
 //! Newtypes for physical quantities that must be finite and strictly positive.
+//!
+//! A deserialized quantity is finite and in its range, so code that holds one never checks
+//! it again.
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

@@ -53,8 +53,8 @@ pub struct Code {
 const fn code(
     code: &'static str,
     severity: Severity,
-    meaning: &'static str,
     fields: &'static str,
+    meaning: &'static str,
 ) -> Code {
     Code {
         code,
@@ -66,206 +66,76 @@ const fn code(
 
 use Severity::{Note, Warning as Warn};
 
-/// Every code this build can raise (documented in `docs/WARNINGS.md`, in this order).
+/// Every code this build can raise (documented in `docs/WARNINGS.md`, in this order): code,
+/// severity, figures and, on the next line, meaning.
+#[rustfmt::skip]
 pub const CODES: &[Code] = &[
-    code(
-        "mesh.open-edges",
-        Warn,
-        "the mesh has edges with one facet (holes); open section contours are closed or dropped by the repair rule",
-        "open_edges",
-    ),
-    code(
-        "mesh.nonmanifold-edges",
-        Warn,
-        "the mesh has edges shared by more than two facets",
-        "nonmanifold_edges",
-    ),
-    code(
-        "mesh.backwards-edges",
-        Warn,
-        "facets are inconsistently oriented; each contour takes the orientation most of its segments agree with",
-        "backwards_edges",
-    ),
-    code(
-        "mesh.degenerate-facets",
-        Note,
-        "facets with a repeated corner (removed) or zero area (kept); the solid is unchanged",
-        "degenerate_facets",
-    ),
-    code(
-        "mesh.inverted-normals",
-        Note,
-        "the normals point inwards (negative volume); the slicer flips the orientation",
-        "volume_mm3",
-    ),
-    code(
-        "slice.contours-repaired",
-        Warn,
-        "layers had open contours: chains were joined or closed, or dropped",
-        "layers, closed, dropped",
-    ),
-    code(
-        "distortion.extrapolated",
-        Warn,
-        "warped points lie outside the area the distortion table measured; their correction is extrapolated",
-        "points, table",
-    ),
-    code(
-        "plan.wait-capped",
-        Note,
-        "the thin-film leveling model asks a longer wait than the profile's recoat.wait_max_s on some layers; they wait the cap",
-        "layers, layers_total, wait_max_s, model_max_s, model_max_layer, flat_patch_mm",
-    ),
-    code(
-        "plan.travel-clamped",
-        Warn,
-        "lifts or dips were shortened to end at the top of the stage travel",
-        "moves, travel_max_mm",
-    ),
-    code(
-        "plan.beyond-lift-table",
-        Warn,
-        "slices have a max fill distance beyond the hybrid lift table; they use its last row's lift",
-        "slices, max_fill_distance_mm, table_max_mm, lift_mm",
-    ),
-    code(
-        "plan.unsupported-islands",
-        Warn,
-        "regions of a layer rest on nothing in the layer below and need supports",
-        "islands, layers, first_layer",
-    ),
-    code(
-        "exposure.implausible-dose",
-        Warn,
-        "the working curve asks more than 100 Ec to cure the layer and its overcure",
-        "thickness_mm, overcure_mm, depth_dp, dose_mj_cm2, resin",
-    ),
-    code(
-        "exposure.too-long",
-        Warn,
-        "the working-curve exposure is over 600 s per layer: check the calibration's units and the resin",
-        "exposure_s, target_irradiance_mw_cm2, ec_mj_cm2, resin",
-    ),
-    code(
-        "exposure.too-short",
-        Warn,
-        "the working-curve exposure is under 0.2 s per layer, shorter than the shutter can control",
-        "exposure_s, target_irradiance_mw_cm2, resin",
-    ),
-    code(
-        "exposure.not-positive",
-        Warn,
-        "the working-curve exposure is not a positive number; the profile's exposure is kept",
-        "exposure_s, kept_s",
-    ),
-    code(
-        "cure.features-vanish",
-        Warn,
-        "the cure model predicts that features of these layers cure nowhere (too narrow for the blur and dose); they will be missing from the part",
-        "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
-    ),
-    code(
-        "cure.features-widened",
-        Warn,
-        "the xy correction drew features too thin to cure wider (their uncorrected coverage, then up to 1 px outward) so that they cure: they come out at the smallest size the machine makes, larger than the part's",
-        "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
-    ),
-    code(
-        "cure.features-dropped",
-        Warn,
-        "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part",
-        "features, pixels, layers, first_layer, x_mm, y_mm, width_mm, height_mm, held_back_layers",
-    ),
-    code(
-        "cure.features-merge",
-        Warn,
-        "the cure model predicts that cure reaches across gaps of these layers (slots or holes narrower than the blur): neighbouring features join",
-        "contours, layers, first_layer",
-    ),
-    code(
-        "optics.outside-calibrated-area",
-        Warn,
-        "layers reach outside the calibrated area: compensation there extrapolates the calibration",
-        "layers, area_mm",
-    ),
-    code(
-        "optics.unreachable",
-        Warn,
-        "zones or pixels outside the calibrated area cannot reach the target irradiance even fully on",
-        "count, unit",
-    ),
-    code(
-        "calibrate.poor-fit",
-        Warn,
-        "the model P(x, y)·S(g) does not describe the measurements well (residual RMS over 3 %)",
-        "residual_rms_pct, degree, form",
-    ),
-    code(
-        "calibrate.low-grays-unmeasured",
-        Warn,
-        "zone compensation needs grays below the lowest measured one, where S is interpolated",
-        "lowest_gray, lowest_measured_gray",
-    ),
-    code(
-        "calibrate.spread-remains",
-        Warn,
-        "a compensation mode leaves a large predicted spread: the valid gray range cannot flatten the field",
-        "mode, after_zone_pct, after_pixel_pct",
-    ),
-    code(
-        "export.sl1-exposure",
-        Warn,
-        "SL1 exposes layers 0-2 for expTimeFirst and fades over numFade layers to expTime; layers whose exposure the scheme cannot give get the scheme's",
-        "layers, first_layer, job_s, sl1_s, max_difference_s",
-    ),
-    code(
-        "export.sl1-layer-thickness",
-        Warn,
-        "SL1 has one layer height; layers of another thickness are written at it",
-        "layers, layer_height_mm",
-    ),
-    code(
-        "export.sl1-continuous",
-        Warn,
-        "SL1 prints every layer stopped; continuous (swept) layers become stationary exposures of the same length",
-        "layers",
-    ),
-    code(
-        "export.sl1-steps",
-        Note,
-        "SL1 carries no stage steps: the printer tilts its vat between layers instead of the job's planned steps",
-        "steps, print_time_s",
-    ),
-    code(
-        "export.sl1-display",
-        Warn,
-        "the masks' size is not the display of the printer the file is named for: slicers and viewers open it, the printer refuses it",
-        "width_px, height_px, printer",
-    ),
-    code(
-        "export.control-assumed",
-        Note,
-        "the control file needs a light engine power setting and wavelength the profile does not give: the schema's defaults are written",
-        "power_setting, wavelength_nm",
-    ),
-    code(
-        "export.control-steps",
-        Warn,
-        "layers have steps the control file's move-away, move-back sequence cannot say (sweeps, several moves); they get the nearest such sequence",
-        "layers, first_layer",
-    ),
-    code(
-        "export.control-split-exposure",
-        Note,
-        "layers are exposed longer than the schema's 10 000 ms per image: each is exposed as several equal exposures of its image",
-        "layers, max_ms",
-    ),
-    code(
-        "bundle.uncoded",
-        Warn,
-        "a warning read from a version 1 bundle, which stored warnings as text without a code",
-        "",
-    ),
+    code("mesh.open-edges", Warn, "open_edges",
+        "the mesh has edges with one facet (holes); open section contours are closed or dropped by the repair rule"),
+    code("mesh.nonmanifold-edges", Warn, "nonmanifold_edges",
+        "the mesh has edges shared by more than two facets"),
+    code("mesh.backwards-edges", Warn, "backwards_edges",
+        "facets are inconsistently oriented; each contour takes the orientation most of its segments agree with"),
+    code("mesh.degenerate-facets", Note, "degenerate_facets",
+        "facets with a repeated corner (removed) or zero area (kept); the solid is unchanged"),
+    code("mesh.inverted-normals", Note, "volume_mm3",
+        "the normals point inwards (negative volume); the slicer flips the orientation"),
+    code("slice.contours-repaired", Warn, "layers, closed, dropped",
+        "layers had open contours: chains were joined or closed, or dropped"),
+    code("distortion.extrapolated", Warn, "points, table",
+        "warped points lie outside the area the distortion table measured; their correction is extrapolated"),
+    code("plan.wait-capped", Note, "layers, layers_total, wait_max_s, model_max_s, model_max_layer, flat_patch_mm",
+        "the thin-film leveling model asks a longer wait than the profile's recoat.wait_max_s on some layers; they wait the cap"),
+    code("plan.travel-clamped", Warn, "moves, travel_max_mm",
+        "lifts or dips were shortened to end at the top of the stage travel"),
+    code("plan.beyond-lift-table", Warn, "slices, max_fill_distance_mm, table_max_mm, lift_mm",
+        "slices have a max fill distance beyond the hybrid lift table; they use its last row's lift"),
+    code("plan.unsupported-islands", Warn, "islands, layers, first_layer",
+        "regions of a layer rest on nothing in the layer below and need supports"),
+    code("exposure.implausible-dose", Warn, "thickness_mm, overcure_mm, depth_dp, dose_mj_cm2, resin",
+        "the working curve asks more than 100 Ec to cure the layer and its overcure"),
+    code("exposure.too-long", Warn, "exposure_s, target_irradiance_mw_cm2, ec_mj_cm2, resin",
+        "the working-curve exposure is over 600 s per layer: check the calibration's units and the resin"),
+    code("exposure.too-short", Warn, "exposure_s, target_irradiance_mw_cm2, resin",
+        "the working-curve exposure is under 0.2 s per layer, shorter than the shutter can control"),
+    code("exposure.not-positive", Warn, "exposure_s, kept_s",
+        "the working-curve exposure is not a positive number; the profile's exposure is kept"),
+    code("cure.features-vanish", Warn, "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
+        "the cure model predicts that features of these layers cure nowhere (too narrow for the blur and dose); they will be missing from the part"),
+    code("cure.features-widened", Warn, "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
+        "the xy correction drew features too thin to cure wider (their uncorrected coverage, then up to 1 px outward) so that they cure: they come out at the smallest size the machine makes, larger than the part's"),
+    code("cure.features-dropped", Warn, "features, pixels, layers, first_layer, x_mm, y_mm, width_mm, height_mm, held_back_layers",
+        "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part"),
+    code("cure.features-merge", Warn, "contours, layers, first_layer",
+        "the cure model predicts that cure reaches across gaps of these layers (slots or holes narrower than the blur): neighbouring features join"),
+    code("optics.outside-calibrated-area", Warn, "layers, area_mm",
+        "layers reach outside the calibrated area: compensation there extrapolates the calibration"),
+    code("optics.unreachable", Warn, "count, unit",
+        "zones or pixels outside the calibrated area cannot reach the target irradiance even fully on"),
+    code("calibrate.poor-fit", Warn, "residual_rms_pct, degree, form",
+        "the model P(x, y)·S(g) does not describe the measurements well (residual RMS over 3 %)"),
+    code("calibrate.low-grays-unmeasured", Warn, "lowest_gray, lowest_measured_gray",
+        "zone compensation needs grays below the lowest measured one, where S is interpolated"),
+    code("calibrate.spread-remains", Warn, "mode, after_zone_pct, after_pixel_pct",
+        "a compensation mode leaves a large predicted spread: the valid gray range cannot flatten the field"),
+    code("export.sl1-exposure", Warn, "layers, first_layer, job_s, sl1_s, max_difference_s",
+        "SL1 exposes layers 0-2 for expTimeFirst and fades over numFade layers to expTime; layers whose exposure the scheme cannot give get the scheme's"),
+    code("export.sl1-layer-thickness", Warn, "layers, layer_height_mm",
+        "SL1 has one layer height; layers of another thickness are written at it"),
+    code("export.sl1-continuous", Warn, "layers",
+        "SL1 prints every layer stopped; continuous (swept) layers become stationary exposures of the same length"),
+    code("export.sl1-steps", Note, "steps, print_time_s",
+        "SL1 carries no stage steps: the printer tilts its vat between layers instead of the job's planned steps"),
+    code("export.sl1-display", Warn, "width_px, height_px, printer",
+        "the masks' size is not the display of the printer the file is named for: slicers and viewers open it, the printer refuses it"),
+    code("export.control-assumed", Note, "power_setting, wavelength_nm",
+        "the control file needs a light engine power setting and wavelength the profile does not give: the schema's defaults are written"),
+    code("export.control-steps", Warn, "layers, first_layer",
+        "layers have steps the control file's move-away, move-back sequence cannot say (sweeps, several moves); they get the nearest such sequence"),
+    code("export.control-split-exposure", Note, "layers, max_ms",
+        "layers are exposed longer than the schema's 10 000 ms per image: each is exposed as several equal exposures of its image"),
+    code("bundle.uncoded", Warn, "",
+        "a warning read from a version 1 bundle, which stored warnings as text without a code"),
 ];
 
 /// The registered code `code`, if any.
@@ -448,20 +318,6 @@ pub fn any_error(warnings: &[Warning]) -> bool {
     warnings.iter().any(|w| w.severity == Severity::Error)
 }
 
-/// `one` when `n` is 1, else `many` ("1 layer", "3 layers").
-pub fn plural<'a>(n: u64, one: &'a str, many: &'a str) -> &'a str {
-    if n == 1 {
-        one
-    } else {
-        many
-    }
-}
-
-/// `n` and the noun that goes with it: "1 layer", "2 layers".
-pub fn count(n: u64, one: &str, many: &str) -> String {
-    format!("{n} {}", plural(n, one, many))
-}
-
 impl std::fmt::Display for Warning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} [{}]", self.message, self.code)
@@ -502,73 +358,43 @@ mod tests {
             Warning::new("plan.unsupported-islands", "c"),
             Warning::new("plan.wait-capped", "d"),
         ];
-        let sev = |p: &Policy| -> Vec<(String, Severity)> {
-            p.apply(&ws)
-                .into_iter()
-                .map(|w| (w.code, w.severity))
-                .collect()
+        // The severity each of `ws` is reported with, in order ("-": left out).
+        let sev = |p: &Policy| -> Vec<String> {
+            let mut out = p.apply(&ws).into_iter().peekable();
+            let got: Vec<String> = (ws.iter())
+                .map(|w| match out.next_if(|o| o.code == w.code) {
+                    Some(o) => format!("{:?}", o.severity).to_lowercase(),
+                    None => "-".into(),
+                })
+                .collect();
+            assert!(out.next().is_none(), "reported in the order raised");
+            got
         };
-        let s = |c: &str, v: Severity| (c.to_string(), v);
         // No rules: as raised.
         assert_eq!(
             sev(&Policy::default()),
-            vec![
-                s("mesh.open-edges", Severity::Warning),
-                s("mesh.degenerate-facets", Severity::Note),
-                s("plan.unsupported-islands", Severity::Warning),
-                s("plan.wait-capped", Severity::Note)
-            ]
+            ["warning", "note", "warning", "note"]
         );
         // --deny-warnings: warnings fail, notes stay notes.
         let mut p = Policy::default();
         p.deny_warnings();
-        assert_eq!(
-            sev(&p),
-            vec![
-                s("mesh.open-edges", Severity::Error),
-                s("mesh.degenerate-facets", Severity::Note),
-                s("plan.unsupported-islands", Severity::Error),
-                s("plan.wait-capped", Severity::Note)
-            ]
-        );
+        assert_eq!(sev(&p), ["error", "note", "error", "note"]);
         // A code beats an area beats all, whatever the order; allow silences.
         p.add("plan.unsupported-islands=allow").unwrap();
         p.add("mesh=warn").unwrap();
         p.add("plan.wait-capped=error").unwrap();
-        assert_eq!(
-            sev(&p),
-            vec![
-                s("mesh.open-edges", Severity::Warning),
-                s("mesh.degenerate-facets", Severity::Note),
-                s("plan.wait-capped", Severity::Error)
-            ]
-        );
+        assert_eq!(sev(&p), ["warning", "note", "-", "error"]);
         assert!(any_error(&p.apply(&ws)));
         // Equally specific: the last rule wins; `mesh.*` is the area.
         let mut p = Policy::default();
         p.add("mesh.*=error").unwrap();
         p.add("mesh=allow").unwrap();
-        assert_eq!(
-            sev(&p),
-            vec![
-                s("plan.unsupported-islands", Severity::Warning),
-                s("plan.wait-capped", Severity::Note)
-            ]
-        );
+        assert_eq!(sev(&p), ["-", "-", "warning", "note"]);
         // Bad rules are one-line errors naming the rule.
-        let mut p = Policy::default();
-        assert!(p
-            .add("mesh.open-edge=error")
-            .unwrap_err()
-            .contains("unknown warning code \"mesh.open-edge\""));
-        assert!(p
-            .add("mesh.open-edges=fatal")
-            .unwrap_err()
-            .contains("unknown action"));
-        assert!(p
-            .add("mesh.open-edges")
-            .unwrap_err()
-            .contains("expected CODE="));
+        let err = |rule: &str| Policy::default().add(rule).unwrap_err();
+        assert!(err("mesh.open-edge=error").contains("unknown warning code \"mesh.open-edge\""));
+        assert!(err("mesh.open-edges=fatal").contains("unknown action"));
+        assert!(err("mesh.open-edges").contains("expected CODE="));
     }
 
     #[test]

@@ -17,7 +17,7 @@
 //!   `machine.dmd.load_s`, concurrently with the layer's first steps (light is off). An
 //!   `expose` or the first `sweep` of a run waits until the load is done.
 //! * `move {to_mm, speed_mm_s, accel_mm_s2}`: shutter closed, trapezoidal velocity profile
-//!   from rest to rest ([`crate::motion::move_time`]).
+//!   from rest to rest (`motion::move_time`).
 //! * `wait {s}`: nothing happens for `s` seconds.
 //! * `expose {s}`: stage still; the shutter opens (`shutter.open_s`, light not yet on),
 //!   light is on for exactly `s`, the shutter closes (`shutter.close_s`). Duration
@@ -32,25 +32,26 @@
 /// The hash the manifest records for every file (model, masks, gray maps, tables).
 pub use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
-use crate::profile::Profile;
 use crate::warning::Warning;
 use serde::{Deserialize, Deserializer, Serialize};
 use std::path::Path;
 
-mod format;
+pub mod machine;
 mod source;
 mod writer;
-pub use format::Format;
+pub use machine::Machine;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
+pub(crate) use writer::stale_siblings;
 pub use writer::{is_bundle, BundleWriter};
 
 /// Value of the manifest's `format` field.
 pub const FORMAT: &str = "dmdsl-job";
-/// Manifest version written by this build. Version 2 stores `warnings` as objects
-/// ([`Warning`]: code, severity, message, fields); version 1 stored them as text. Readers
-/// accept [`OLDEST_READ`]..=[`VERSION`]; a version 1 warning is read as code
-/// `bundle.uncoded` with its text as the message.
-pub const VERSION: u32 = 2;
+/// Manifest version written by this build. Version 3 records the machine as the job's own
+/// record ([`Machine`]); versions 1 and 2 embedded the whole resolved profile, of which a
+/// reader takes the record's keys (the same names), ignoring the rest. Version 1 stored
+/// `warnings` as text, read as code `bundle.uncoded` with the text as the message. Readers
+/// accept [`OLDEST_READ`]..=[`VERSION`] and hold what they read as this version.
+pub const VERSION: u32 = 3;
 /// Oldest manifest version this build reads.
 pub const OLDEST_READ: u32 = 1;
 /// File name of the manifest inside a bundle.
@@ -69,8 +70,8 @@ pub struct Manifest {
     pub source: Source,
     /// Job-level settings (what the command line chose on top of the profile).
     pub settings: Settings,
-    /// The fully resolved machine profile.
-    pub machine: Profile,
+    /// The machine the job runs on ([`Machine::of`] the profile it was sliced on).
+    pub machine: Machine,
     /// Totals over all layers.
     pub totals: Totals,
     /// Warnings raised while compiling the job (mesh defects, repairs, plan notes), each
@@ -627,10 +628,12 @@ impl Manifest {
                 })
             }
         }
-        serde_json::from_value(v).map_err(|e| Error::Bundle {
+        let mut m: Manifest = serde_json::from_value(v).map_err(|e| Error::Bundle {
             path,
             msg: format!("invalid manifest: {e}"),
-        })
+        })?;
+        m.version = VERSION;
+        Ok(m)
     }
 }
 
@@ -668,6 +671,25 @@ mod tests {
         );
         let e: Step = serde_json::from_str(r#"{"kind":"expose","s":8.0}"#).unwrap();
         assert_eq!(e, Step::Expose { s: 8.0 });
+    }
+
+    #[test]
+    fn a_version_2_manifest_reads_its_embedded_profile_as_the_record() {
+        let profile = crate::profile::Profile::resolve("tiled-2x1").unwrap();
+        let mut v = serde_json::to_value(crate::exec::testutil::two_layer_topdown()).unwrap();
+        v["version"] = 2.into();
+        v["machine"] = serde_json::to_value(&profile).unwrap();
+        let text = serde_json::to_vec(&v).unwrap();
+        let m = Manifest::from_json(&text, Path::new("job.json")).unwrap();
+        assert_eq!(m.machine, Machine::of(&profile));
+        assert_eq!(m.version, VERSION);
+        v["version"] = (VERSION + 1).into();
+        let text = serde_json::to_vec(&v).unwrap();
+        let e = Manifest::from_json(&text, Path::new("job.json")).unwrap_err();
+        assert!(
+            e.to_string().contains("this dmdsl reads versions 1 to 3"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -162,35 +162,43 @@ fn absent(p: &Path) -> bool {
     matches!(std::fs::symlink_metadata(p), Err(e) if e.kind() == std::io::ErrorKind::NotFound)
 }
 
-/// Cleans up after runs that were killed while writing the bundle `name` in `parent`
-/// (SIGKILL, an abort, a power cut): the staging directories `.NAME.tmp-PID` and
-/// `.NAME.tmp-PID.old` of processes that no longer run. First, if `dest` is missing and
-/// such an `.old` exists (the run died between moving the old bundle aside and moving the
-/// new one in), the `.old` is renamed back to `dest`. Only directories whose names match
-/// that pattern exactly are touched. Best effort: what cannot be removed stays.
-///
-/// Linux only (a process runs if `/proc/PID` exists); elsewhere nothing is removed.
-fn clean_stale(parent: &Path, name: &OsStr, dest: &Path) {
-    let Some(running) = process_runs() else {
-        return;
+/// What killed runs (SIGKILL, an abort, a power cut) left beside `dest` while writing it:
+/// the entries `.NAME.tmp-PID` and `.NAME.tmp-PID.old` whose process no longer runs, each
+/// with whether it is the `.old` form and its type. Only names of exactly that form count.
+/// Linux only (a process runs if `/proc/PID` exists); elsewhere none.
+pub(crate) fn stale_siblings(dest: &Path) -> Vec<(PathBuf, bool, std::fs::FileType)> {
+    let (Some(running), Some(name)) = (process_runs(), dest.file_name()) else {
+        return Vec::new();
+    };
+    let parent = match dest.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
     };
     let Ok(entries) = std::fs::read_dir(parent) else {
-        return;
+        return Vec::new();
     };
+    entries
+        .flatten()
+        .filter_map(|e| {
+            let (pid, old) = staging_pid(&e.file_name(), name)?;
+            let dead = pid != std::process::id() && !running(pid);
+            let kind = e.file_type().ok()?;
+            dead.then(|| (e.path(), old, kind))
+        })
+        .collect()
+}
+
+/// Cleans up after runs that were killed while writing the bundle `dest`: their staging
+/// directories ([`stale_siblings`]). First, if `dest` is missing and such an `.old` exists
+/// (the run died between moving the old bundle aside and moving the new one in), the
+/// `.old` is renamed back to `dest`. Best effort: what cannot be removed stays.
+fn clean_stale(dest: &Path) {
     let (mut staging, mut old) = (Vec::new(), Vec::new());
-    for e in entries.flatten() {
-        let Some((pid, is_old)) = staging_pid(&e.file_name(), name) else {
-            continue;
-        };
-        if pid == std::process::id() || running(pid) {
-            continue;
-        }
-        if e.file_type().is_ok_and(|t| t.is_dir()) {
-            if is_old {
-                old.push(e.path());
-            } else {
-                staging.push(e.path());
-            }
+    for (p, is_old, kind) in stale_siblings(dest) {
+        match (kind.is_dir(), is_old) {
+            (true, true) => old.push(p),
+            (true, false) => staging.push(p),
+            _ => {}
         }
     }
     old.sort();
@@ -335,7 +343,7 @@ impl BundleWriter {
                 msg: format!("parent directory {} does not exist", parent.display()),
             });
         }
-        clean_stale(&parent, name, dest);
+        clean_stale(dest);
         check_replaceable(dest)?;
         let staging = parent.join(staging_name(name, std::process::id()));
         if staging.exists() {

@@ -1,7 +1,7 @@
 //! `dmdsl calibrate`: fit the light calibration E = P(x, y)·S(g) to measurements.
 
+use crate::profile::{self, Profile};
 use clap::Args;
-use dmdsl::profile::{self, Profile};
 use std::path::PathBuf;
 
 pub(crate) const CALIBRATE_EXIT_HELP: &str = "Exit codes:
@@ -53,16 +53,16 @@ impl CalibrateArgs {
 
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
-    use dmdsl::optics::report::{self, CalibrateOptions};
+    use crate::optics::report::{self, CalibrateOptions};
     let policy = a.warnings.policy(&[])?;
     let field = Profile::resolve(&a.profile)?.field();
     let mut r = report::calibrate(&CalibrateOptions {
         input: a.input,
         output: a.output,
         units: if a.relative {
-            dmdsl::optics::Units::Relative
+            crate::optics::Units::Relative
         } else {
-            dmdsl::optics::Units::MwCm2
+            crate::optics::Units::MwCm2
         },
         zone_mm: a.zone_mm,
         extrapolate_mm: a.extrapolate_mm,
@@ -71,7 +71,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         plots: !a.no_plots,
     })?;
     r.warnings = policy.apply(&r.warnings);
-    let exit = if dmdsl::warning::any_error(&r.warnings) {
+    let exit = if crate::warning::any_error(&r.warnings) {
         1
     } else {
         0
@@ -81,7 +81,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         struct Out<'a> {
             ok: bool,
             #[serde(flatten)]
-            report: &'a dmdsl::optics::report::CalibrateReport,
+            report: &'a crate::optics::report::CalibrateReport,
         }
         super::print_json(&Out {
             ok: exit == 0,

@@ -1,8 +1,8 @@
 //! `dmdsl distortion`: fit a lens distortion table and report its quality.
 
+use crate::geometry::distortion::DistortionChoice;
+use crate::profile::{self, Profile};
 use clap::Args;
-use dmdsl::geometry::distortion::DistortionChoice;
-use dmdsl::profile::{self, Profile};
 use std::path::PathBuf;
 
 pub(crate) const DISTORTION_EXIT_HELP: &str = "Exit codes:
@@ -38,16 +38,16 @@ impl DistortionArgs {
 pub(crate) fn distortion(a: DistortionArgs, quiet: bool) -> anyhow::Result<u8> {
     let plot_format = a.plot.as_deref().map(super::picture_format).transpose()?;
     let mut profile = Profile::resolve(&a.profile)?;
-    let c = dmdsl::geometry::distortion::for_job(&DistortionChoice::Table(a.table), &mut profile)?
+    let c = crate::geometry::distortion::for_job(&DistortionChoice::Table(a.table), &mut profile)?
         .expect("a table was given");
     let report = c.report();
     let (_, _, map) = c.field_map(1.0);
-    let reachable = dmdsl::round::derived(
+    let reachable = crate::round::derived(
         map.iter().filter(|v| v.is_finite()).count() as f64 / map.len() as f64,
     );
     if let (Some(p), Some(format)) = (&a.plot, plot_format) {
         let bytes = c.plot().render().encode(format);
-        dmdsl::output::write_atomic(p, &bytes)?;
+        crate::output::write_atomic(p, &bytes)?;
     }
     if a.json {
         let v =

@@ -1,8 +1,8 @@
 //! `dmdsl export`: a job (any form `run` reads) into another form (one zip, Prusa SL1/SL1S, the SLA
 //! control-file standard); also the `--format` values `slice` shares.
 
+use crate::formats::Format;
 use clap::Args;
-use dmdsl::export::Format;
 use std::path::PathBuf;
 
 pub(crate) const EXPORT_HELP: &str = "Examples:
@@ -19,32 +19,11 @@ Exit codes:
        nothing was written
   130  interrupted: nothing was written";
 
-/// The `--format` values.
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub(crate) enum FormatArg {
-    /// The bundle directory: job.json and masks/*.png.
-    Dmdjob,
-    /// The bundle's files in one zip (job.json first, images stored).
-    DmdjobZip,
-    /// Prusa SL1 (PrusaSlicer 2.5's zip).
-    Sl1,
-    /// Prusa SL1S.
-    Sl1s,
-    /// The SLA 3D printer control-file standard, schema v5 (print_settings.json +
-    /// slices/).
-    SlaControl,
-}
-
-impl From<FormatArg> for Format {
-    fn from(f: FormatArg) -> Format {
-        match f {
-            FormatArg::Dmdjob => Format::Dmdjob,
-            FormatArg::DmdjobZip => Format::DmdjobZip,
-            FormatArg::Sl1 => Format::Sl1,
-            FormatArg::Sl1s => Format::Sl1s,
-            FormatArg::SlaControl => Format::SlaControl,
-        }
-    }
+/// The `--format` values: every [`Format`] by its name.
+pub(crate) fn formats() -> impl clap::builder::TypedValueParser<Value = Format> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let values = Format::ALL.map(|f| PossibleValue::new(f.name()).help(f.about()));
+    PossibleValuesParser::new(values).map(|s| Format::parse(&s).expect("a possible value"))
 }
 
 #[derive(Args)]
@@ -57,8 +36,8 @@ pub(crate) struct ExportArgs {
     #[arg(short, long, value_name = "FILE")]
     output: PathBuf,
     /// Form of the output [default: what the -o name says].
-    #[arg(long, value_enum, value_name = "FORMAT")]
-    format: Option<FormatArg>,
+    #[arg(long, value_name = "FORMAT", value_parser = formats())]
+    format: Option<Format>,
     /// Print a machine-readable summary on stdout (one JSON object).
     #[arg(long)]
     json: bool,
@@ -80,13 +59,19 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     super::interrupt::on_interrupt(cancel.clone());
     let policy = a.warnings.policy(&[])?;
-    let format = Format::for_output(a.format.map(Into::into), &a.output)?;
-    let (manifest, files) = dmdsl::export::open_bundle(&a.bundle)?;
-    dmdsl::export::check_fits(format, &manifest.machine, &a.output)?;
-    let warnings =
-        dmdsl::export::write(format, &manifest, files.as_ref(), &a.output, Some(&cancel))?;
+    let format = Format::for_output(a.format, &a.output)?;
+    let job = crate::formats::open(&a.bundle)?;
+    let manifest = &job.manifest;
+    crate::formats::check_fits(format, &manifest.machine, &a.output)?;
+    let warnings = crate::formats::write(
+        format,
+        manifest,
+        job.source.as_ref(),
+        &a.output,
+        Some(&cancel),
+    )?;
     let warnings = policy.apply(&warnings);
-    let failed = dmdsl::warning::any_error(&warnings);
+    let failed = crate::warning::any_error(&warnings);
     if a.json {
         super::print_json(&serde_json::json!({
             "ok": !failed,

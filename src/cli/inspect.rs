@@ -1,8 +1,8 @@
 //! `dmdsl inspect`: a bundle's summary and pictures.
 
+use crate::inspect::{self, sheet, Bundle};
+use crate::plot::Format;
 use clap::Args;
-use dmdsl::inspect::{self, sheet, Bundle};
-use dmdsl::plot::Format;
 use std::path::{Path, PathBuf};
 
 pub(crate) const INSPECT_EXIT_HELP: &str = "Exit codes:
@@ -48,7 +48,7 @@ impl InspectArgs {
 }
 
 /// The format of picture `p`, if one was asked for.
-fn format_of(p: &Option<PathBuf>) -> Result<Option<(PathBuf, Format)>, dmdsl::Error> {
+fn format_of(p: &Option<PathBuf>) -> Result<Option<(PathBuf, Format)>, crate::Error> {
     p.as_ref()
         .map(|p| super::picture_format(p).map(|f| (p.clone(), f)))
         .transpose()
@@ -60,10 +60,10 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
     let chart_out = format_of(&a.chart)?;
     let preview_out = format_of(&a.preview)?;
     if a.every.is_some() && sheet_out.is_none() {
-        return Err(dmdsl::Error::Usage("--every applies to --contact-sheet".into()).into());
+        return Err(crate::Error::Usage("--every applies to --contact-sheet".into()).into());
     }
     if a.layers.is_some() && sheet_out.is_none() && chart_out.is_none() {
-        return Err(dmdsl::Error::Usage(
+        return Err(crate::Error::Usage(
             "--layers applies to --contact-sheet and --chart; give one of them".into(),
         )
         .into());
@@ -73,7 +73,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
     let range = a
         .layers
         .as_deref()
-        .map(|s| dmdsl::exec::parse_layer_range(s, n))
+        .map(|s| crate::exec::parse_layer_range(s, n))
         .transpose()?;
     let mut summary = inspect::summarize(&a.bundle.display().to_string(), &b.manifest);
     summary.format = b.format.name().into();
@@ -88,7 +88,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
             (None, _) if layers.len() == n => "every layer".into(),
             (None, _) => "evenly spaced".into(),
         };
-        let c = sheet::contact_sheet(&b.name(), &b.manifest, b.masks.as_ref(), &layers, &how)?;
+        let c = sheet::contact_sheet(&b.name(), &b.manifest, b.files.as_ref(), &layers, &how)?;
         inspect::write_picture(path, &c, *format)?;
         written(path);
     }

@@ -17,7 +17,7 @@ pub(crate) fn man(a: ManArgs) -> anyhow::Result<u8> {
         Some(name) => {
             let names: Vec<&str> = top.get_subcommands().map(|c| c.get_name()).collect();
             let sub = top.find_subcommand(name).ok_or_else(|| {
-                dmdsl::Error::Usage(format!(
+                crate::Error::Usage(format!(
                     "man {name}: no such command (commands: {})",
                     names.join(", ")
                 ))

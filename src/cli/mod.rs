@@ -9,12 +9,15 @@ mod help;
 mod inspect;
 mod interrupt;
 mod man;
+mod process;
 mod profile;
 mod run;
 mod slice;
 
+pub use process::main;
+
+use crate::warning::{Policy, Warning};
 use clap::{Args, Parser, Subcommand};
-use dmdsl::warning::{Policy, Warning};
 use serde::Serialize;
 
 /// Version of the `--json` outputs' schemas (`docs/JSON.md`); every `--json` object carries
@@ -68,8 +71,8 @@ pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> Str
 
 /// The format a picture path asks for (`.png`, `.jpg`, `.jpeg`); anything else is a usage
 /// error naming the path and its extension.
-pub(crate) fn picture_format(path: &std::path::Path) -> Result<dmdsl::plot::Format, dmdsl::Error> {
-    dmdsl::plot::Format::from_path(path).map_err(dmdsl::Error::Usage)
+pub(crate) fn picture_format(path: &std::path::Path) -> Result<crate::plot::Format, crate::Error> {
+    crate::plot::Format::from_path(path).map_err(crate::Error::Usage)
 }
 
 /// The options that decide which warnings fail a command or are silenced.
@@ -88,7 +91,7 @@ pub(crate) struct WarningArgs {
 
 impl WarningArgs {
     /// The policy these options give, after `extra` rules (e.g. `--strict`'s).
-    pub(crate) fn policy(&self, extra: &[&str]) -> Result<Policy, dmdsl::Error> {
+    pub(crate) fn policy(&self, extra: &[&str]) -> Result<Policy, crate::Error> {
         let mut p = Policy::default();
         if self.deny_warnings {
             p.deny_warnings();
@@ -98,7 +101,7 @@ impl WarningArgs {
             .copied()
             .chain(self.warn.iter().map(String::as_str))
         {
-            p.add(r).map_err(dmdsl::Error::Usage)?;
+            p.add(r).map_err(crate::Error::Usage)?;
         }
         Ok(p)
     }
@@ -152,7 +155,7 @@ pub(crate) enum Cmd {
 /// Prints warnings on stderr, one line each: `dmdsl: warning: MESSAGE [CODE]` (or `note:`,
 /// `error:`), after `prefix` (e.g. the part's name when several are sliced).
 pub(crate) fn print_warnings(warnings: &[Warning], prefix: &str) {
-    use dmdsl::warning::Severity;
+    use crate::warning::Severity;
     for w in warnings {
         let label = match w.severity {
             Severity::Note => "note",

@@ -1,7 +1,7 @@
 //! `dmdsl profile show|list`: the built-in machine profiles.
 
+use crate::profile::{self, Profile};
 use clap::Subcommand;
-use dmdsl::profile::{self, Profile};
 
 #[derive(Subcommand)]
 pub(crate) enum ProfileCmd {

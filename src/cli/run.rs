@@ -59,14 +59,15 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
     let faults = a
         .fault
         .iter()
-        .map(|f| f.parse().map_err(dmdsl::Error::Usage))
+        .map(|f| f.parse().map_err(crate::Error::Usage))
         .collect::<Result<Vec<_>, _>>()?;
     let machine = a
         .machine
         .as_deref()
-        .map(dmdsl::profile::Profile::resolve)
-        .transpose()?;
-    let opts = dmdsl::exec::RunOptions {
+        .map(crate::profile::Profile::resolve)
+        .transpose()?
+        .map(|p| crate::bundle::Machine::of(&p));
+    let opts = crate::exec::RunOptions {
         faults,
         trace: a.trace,
         plot: a.plot,
@@ -74,11 +75,11 @@ pub(crate) fn run_bundle(a: RunArgs, quiet: bool) -> anyhow::Result<u8> {
         machine,
         cure: a.cure,
     };
-    let report = dmdsl::exec::run(&a.bundle, &opts)?;
+    let report = crate::exec::run(&a.bundle, &opts)?;
     if a.json {
         super::print_json(&report)?;
     } else if !quiet {
-        print!("{}", dmdsl::exec::report::render_human(&report));
+        print!("{}", crate::exec::report::render_human(&report));
     }
     Ok(if report.ok { 0 } else { 1 })
 }

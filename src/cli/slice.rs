@@ -1,12 +1,12 @@
 //! `dmdsl slice`: parts into job bundles, one after another.
 
+use crate::geometry::distortion::DistortionChoice;
+use crate::job::{self, PlacementMode, SliceOptions, SliceSummary, Transform};
+use crate::profile::{self, Override, Profile};
+use crate::text::hms;
+use crate::text::{count, plural};
+use crate::units::Positive;
 use clap::Args;
-use dmdsl::exec::report::hms;
-use dmdsl::geometry::distortion::DistortionChoice;
-use dmdsl::job::{self, PlacementMode, SliceOptions, SliceSummary, Transform};
-use dmdsl::profile::{self, Override, Profile};
-use dmdsl::units::Positive;
-use dmdsl::warning::count;
 use serde::Serialize;
 use std::io::{IsTerminal, Read, Write};
 use std::path::{Path, PathBuf};
@@ -98,9 +98,9 @@ pub(crate) struct SliceArgs {
     /// Form of the output [default: what the -o name says; a directory bundle]:
     /// dmdjob (directory), dmdjob-zip (the same files in one zip), sl1 / sl1s (Prusa
     /// SL1/SL1S, opened by PrusaSlicer and UVtools), sla-control (the SLA control-file
-    /// standard, schema v5). See README "Formats" for what each carries.
-    #[arg(long, value_enum, value_name = "FORMAT")]
-    format: Option<super::export::FormatArg>,
+    /// standard, schema v5). docs/FORMATS.md says what each carries.
+    #[arg(long, value_name = "FORMAT", value_parser = super::export::formats())]
+    format: Option<crate::formats::Format>,
     /// Machine profile: a built-in name or a TOML file.
     #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
     profile: String,
@@ -199,12 +199,12 @@ struct Job<'a> {
     binary: Option<bool>,
     transform: Transform,
     placement: PlacementMode,
-    optics: dmdsl::optics::OpticsOptions,
+    optics: crate::optics::OpticsOptions,
     distortion: DistortionChoice,
-    cure: dmdsl::job::CureOptions,
+    cure: crate::job::CureOptions,
     cancel: &'a AtomicBool,
     show_progress: bool,
-    format: Option<dmdsl::export::Format>,
+    format: Option<crate::formats::Format>,
 }
 
 impl Job<'_> {
@@ -215,7 +215,7 @@ impl Job<'_> {
         part: &Part,
         bytes: Option<&[u8]>,
         label: &str,
-    ) -> Result<SliceSummary, dmdsl::Error> {
+    ) -> Result<SliceSummary, crate::Error> {
         let progress = |done: usize, total: usize| {
             if done == total || done.is_multiple_of(16) {
                 let mut e = std::io::stderr().lock();
@@ -261,23 +261,23 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     let parts = parts(&a)?;
     let overrides = overrides(&a)?;
     let mut profile = Profile::resolve(&a.profile)?.with_overrides(&overrides)?;
-    dmdsl::optics::apply_calibration_args(&mut profile, &a.calibration)?;
-    let optics = dmdsl::optics::OpticsOptions {
+    crate::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    let optics = crate::optics::OpticsOptions {
         mode: a.compensation.map(|c| match c {
-            CompensationArg::Zone => dmdsl::optics::Mode::Zone,
-            CompensationArg::Pixel => dmdsl::optics::Mode::Pixel,
-            CompensationArg::Off => dmdsl::optics::Mode::Off,
+            CompensationArg::Zone => crate::optics::Mode::Zone,
+            CompensationArg::Pixel => crate::optics::Mode::Pixel,
+            CompensationArg::Off => crate::optics::Mode::Off,
         }),
         dither: match a.dither {
-            DitherArg::Auto => dmdsl::optics::Dither::Auto,
-            DitherArg::On => dmdsl::optics::Dither::On,
-            DitherArg::Off => dmdsl::optics::Dither::Off,
+            DitherArg::Auto => crate::optics::Dither::Auto,
+            DitherArg::On => crate::optics::Dither::On,
+            DitherArg::Off => crate::optics::Dither::Off,
         },
     };
     let layer_height_mm = match a.layer_height {
         None => None,
         Some(v) => Some(Positive::new(v).ok_or_else(|| {
-            dmdsl::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
+            crate::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
         })?),
     };
     let job = Job {
@@ -296,17 +296,17 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             Some(p) if p.as_os_str() == "off" => DistortionChoice::Off,
             Some(p) => DistortionChoice::Table(p.clone()),
         },
-        cure: dmdsl::job::CureOptions {
+        cure: crate::job::CureOptions {
             predict: a.cure.predict,
             correction: a.cure.cure_correction.map(|c| match c {
-                CureCorrectionArg::Xy => dmdsl::cure::Correction::Xy,
-                CureCorrectionArg::Xyz => dmdsl::cure::Correction::Xyz,
-                CureCorrectionArg::Off => dmdsl::cure::Correction::Off,
+                CureCorrectionArg::Xy => crate::cure::Correction::Xy,
+                CureCorrectionArg::Xyz => crate::cure::Correction::Xyz,
+                CureCorrectionArg::Off => crate::cure::Correction::Off,
             }),
             plots: a.cure.cure_plots.clone(),
         },
         cancel: &cancel,
-        format: a.format.map(Into::into),
+        format: a.format,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -316,7 +316,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         };
         let mut summary = job.slice(part, stdin.as_deref(), "")?;
         summary.warnings = policy.apply(&summary.warnings);
-        let failed = dmdsl::warning::any_error(&summary.warnings);
+        let failed = crate::warning::any_error(&summary.warnings);
         if a.json {
             let v = serde_json::json!({
                 "ok": !failed,
@@ -351,7 +351,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
 fn slice_each(
     job: &Job,
     parts: &[Part],
-    policy: &dmdsl::warning::Policy,
+    policy: &crate::warning::Policy,
     json: bool,
     quiet: bool,
 ) -> anyhow::Result<u8> {
@@ -359,14 +359,14 @@ fn slice_each(
     for (i, part) in parts.iter().enumerate() {
         let input = part.input.display().to_string();
         let result = if job.cancel.load(Ordering::Relaxed) {
-            Err(dmdsl::Error::Interrupted)
+            Err(crate::Error::Interrupted)
         } else {
             job.slice(part, None, &format!(" {input}"))
         };
         match result {
             Ok(mut summary) => {
                 summary.warnings = policy.apply(&summary.warnings);
-                let ok = !dmdsl::warning::any_error(&summary.warnings);
+                let ok = !crate::warning::any_error(&summary.warnings);
                 denied += usize::from(!ok);
                 if json {
                     print_line(&PartLine {
@@ -382,13 +382,13 @@ fn slice_each(
             }
             Err(e) => {
                 failed += 1;
-                let interrupted = matches!(e, dmdsl::Error::Interrupted);
+                let interrupted = matches!(e, crate::Error::Interrupted);
                 // An error names its file; the few that do not (an interrupt) get the part's.
                 let (file, message) = match e.file() {
                     Some(f) => (f, e.to_string()),
                     None => (input.clone(), format!("{input}: {e}")),
                 };
-                let message = crate::printable(&message);
+                let message = super::process::printable(&message);
                 eprintln!("dmdsl: error: {message}");
                 if json {
                     print_line(&PartLine {
@@ -407,9 +407,9 @@ fn slice_each(
                     let left = parts.len() - i - 1;
                     if left > 0 {
                         eprintln!(
-                            "dmdsl: the {left} {} after it {} not sliced",
-                            if left == 1 { "part" } else { "parts" },
-                            if left == 1 { "was" } else { "were" }
+                            "dmdsl: the {} after it {} not sliced",
+                            count(left as u64, "part", "parts"),
+                            plural(left as u64, "was", "were")
                         );
                     }
                     return Ok(130);
@@ -522,8 +522,8 @@ fn is_stdin(p: &Path) -> bool {
 }
 
 /// The parts and their bundles' paths; refuses what cannot work before anything is read.
-fn parts(a: &SliceArgs) -> Result<Vec<Part>, dmdsl::Error> {
-    let usage = |m: String| Err(dmdsl::Error::Usage(m));
+fn parts(a: &SliceArgs) -> Result<Vec<Part>, crate::Error> {
+    let usage = |m: String| Err(crate::Error::Usage(m));
     if a.output.as_deref().is_some_and(is_stdin) {
         return usage(
             "-o -: writing a bundle to stdout is not supported; give a directory path".into(),
@@ -591,13 +591,13 @@ fn bundle_path(part: &Part, a: &SliceArgs) -> PathBuf {
 /// The default output of part `input`: `<stem>` and the ending of `--format` (`.dmdjob`
 /// without it), in the current directory.
 fn default_output(input: &Path, a: &SliceArgs) -> PathBuf {
-    let format = a.format.map_or(dmdsl::export::Format::Dmdjob, Into::into);
+    let format = a.format.unwrap_or(crate::formats::Format::Dmdjob);
     job::default_output_as(input, format)
 }
 
 /// The profile changes asked for: every `--set` in order, then `--exposure` and
 /// `--bottom-layers`.
-fn overrides(a: &SliceArgs) -> Result<Vec<Override>, dmdsl::Error> {
+fn overrides(a: &SliceArgs) -> Result<Vec<Override>, crate::Error> {
     let mut o = a
         .set
         .iter()
@@ -610,7 +610,7 @@ fn overrides(a: &SliceArgs) -> Result<Vec<Override>, dmdsl::Error> {
             .ok()
             .filter(|v| v.is_finite() && *v > 0.0)
             .ok_or_else(|| {
-                dmdsl::Error::Usage(format!(
+                crate::Error::Usage(format!(
                     "--exposure must be a number of seconds > 0, got {t}"
                 ))
             })?;
@@ -622,7 +622,7 @@ fn overrides(a: &SliceArgs) -> Result<Vec<Override>, dmdsl::Error> {
     }
     if let Some(t) = &a.bottom_layers {
         let n = t.trim().parse::<u32>().map_err(|_| {
-            dmdsl::Error::Usage(format!(
+            crate::Error::Usage(format!(
                 "--bottom-layers must be a whole number >= 0, got {t}"
             ))
         })?;
@@ -646,11 +646,11 @@ fn numbers(text: &str, counts: &[usize], ok: impl Fn(f64) -> bool) -> Option<Vec
 }
 
 /// The scale and rotation of `--scale` and `--rotate`.
-fn transform(a: &SliceArgs) -> Result<Transform, dmdsl::Error> {
+fn transform(a: &SliceArgs) -> Result<Transform, crate::Error> {
     let mut t = Transform::IDENTITY;
     if let Some(s) = &a.scale {
         let v = numbers(s, &[1, 3], |x| x.is_finite() && x > 0.0).ok_or_else(|| {
-            dmdsl::Error::Usage(format!(
+            crate::Error::Usage(format!(
                 "--scale must be a factor > 0 or three, FX,FY,FZ, got {s}"
             ))
         })?;
@@ -662,7 +662,7 @@ fn transform(a: &SliceArgs) -> Result<Transform, dmdsl::Error> {
     }
     if let Some(r) = &a.rotate {
         let v = numbers(r, &[1, 3], f64::is_finite).ok_or_else(|| {
-            dmdsl::Error::Usage(format!(
+            crate::Error::Usage(format!(
                 "--rotate must be degrees about Z (DEG) or about X, Y and Z (X,Y,Z), got {r}"
             ))
         })?;
@@ -676,22 +676,22 @@ fn transform(a: &SliceArgs) -> Result<Transform, dmdsl::Error> {
 }
 
 /// The point of `--position X,Y`.
-fn position(text: &str) -> Result<[f64; 2], dmdsl::Error> {
+fn position(text: &str) -> Result<[f64; 2], crate::Error> {
     let v = numbers(text, &[2], f64::is_finite).ok_or_else(|| {
-        dmdsl::Error::Usage(format!(
+        crate::Error::Usage(format!(
             "--position must be X,Y in mm (where the part's centre goes on the build field), got {text}"
         ))
     })?;
     Ok([v[0], v[1]])
 }
 
-/// Reads an STL from standard input (at most [`dmdsl::mesh::MESH_MAX_BYTES`]). A reader
+/// Reads an STL from standard input (at most [`crate::mesh::MESH_MAX_BYTES`]). A reader
 /// thread reads it, so that an interrupt stops the command even while no data comes.
-fn read_stdin(cancel: &AtomicBool) -> Result<Vec<u8>, dmdsl::Error> {
+fn read_stdin(cancel: &AtomicBool) -> Result<Vec<u8>, crate::Error> {
     use std::sync::mpsc::{channel, RecvTimeoutError};
-    let max = dmdsl::mesh::MESH_MAX_BYTES;
+    let max = crate::mesh::MESH_MAX_BYTES;
     if std::io::stdin().is_terminal() {
-        return Err(dmdsl::Error::Usage(
+        return Err(crate::Error::Usage(
             "part - reads an STL from stdin, but stdin is a terminal: pipe or redirect a file into it (dmdsl slice - -o part.dmdjob < part.stl)".into(),
         ));
     }
@@ -707,19 +707,19 @@ fn read_stdin(cancel: &AtomicBool) -> Result<Vec<u8>, dmdsl::Error> {
     loop {
         match rx.recv_timeout(std::time::Duration::from_millis(50)) {
             Ok(Ok(bytes)) if bytes.len() as u64 > max => {
-                return Err(dmdsl::Error::input(
+                return Err(crate::Error::input(
                     STDIN_NAME,
                     format!("is more than the {max} bytes a mesh file may have"),
                 ))
             }
             Ok(Ok(bytes)) => return Ok(bytes),
-            Ok(Err(e)) => return Err(dmdsl::Error::io(STDIN_NAME, e)),
+            Ok(Err(e)) => return Err(crate::Error::io(STDIN_NAME, e)),
             Err(RecvTimeoutError::Timeout) if cancel.load(Ordering::Relaxed) => {
-                return Err(dmdsl::Error::Interrupted)
+                return Err(crate::Error::Interrupted)
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => {
-                return Err(dmdsl::Error::io(
+                return Err(crate::Error::io(
                     STDIN_NAME,
                     std::io::Error::other("the reader stopped"),
                 ))

@@ -4,7 +4,9 @@
 
 use super::check::{NEAR, SUB};
 use super::islands::{components, Run};
-use super::kernel::{Irradiance, Kernel, Prepared};
+use super::kernel::{Irradiance, Prepared};
+#[cfg(test)]
+use super::kernel::Kernel;
 use super::CureModel;
 
 /// The accumulation's pending decay factor below which it is applied to the buffer.
@@ -30,9 +32,9 @@ pub struct LayerOut {
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
 /// for a field of `w`×`h` pixels.
 pub struct Engine {
+    /// The field's pixels across and down.
     w: usize,
     h: usize,
-    model: CureModel,
     /// Samples across.
     sw: usize,
     q: f32,
@@ -67,7 +69,6 @@ impl Engine {
         Engine {
             w,
             h,
-            model: *model,
             sw: w * SUB,
             q: (-h_mm / model.dp_mm).exp() as f32,
             mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
@@ -105,16 +106,6 @@ impl Engine {
     /// The field's size in pixels.
     pub fn size(&self) -> (usize, usize) {
         (self.w, self.h)
-    }
-
-    /// The relative light at a layer's top at which its mid-plane cures.
-    pub fn mid_threshold(&self) -> f32 {
-        self.mid
-    }
-
-    /// The kernel that prepares the layers of this engine's field and model.
-    pub fn kernel(&self) -> Kernel {
-        Kernel::new(self.w, self.h, &self.model)
     }
 
     /// The accumulated light at sample (`x`, `y`) after the last layer.
@@ -585,8 +576,14 @@ mod tests {
 
     /// Runs a stack (bottom first) through the engine, top down; the layers' outputs
     /// bottom first.
-    fn run(e: &mut Engine, w: usize, h: usize, stack: &[(Vec<f32>, f32)]) -> Vec<LayerOut> {
-        let k = e.kernel();
+    fn run(
+        e: &mut Engine,
+        m: &CureModel,
+        w: usize,
+        h: usize,
+        stack: &[(Vec<f32>, f32)],
+    ) -> Vec<LayerOut> {
+        let k = Kernel::new(w, h, m);
         let irr: Vec<Prepared> = stack
             .iter()
             .map(|(img, r)| k.prepare(&Irradiance::from_image(w, h, img), *r))
@@ -633,7 +630,7 @@ mod tests {
             })
             .collect();
         let mut e = Engine::new(w, h, &m);
-        run(&mut e, w, h, &stack);
+        run(&mut e, &m, w, h, &stack);
         let psf = Psf { sigma_px: 0.5 };
         let q = (-m.layer_mm / m.dp_mm).exp();
         let mut worst = 0.0f64;
@@ -675,7 +672,7 @@ mod tests {
             m.sigma_px = sigma;
             let (w, h) = (48, 40);
             let mut e = Engine::new(w, h, &m);
-            let k = e.kernel();
+            let k = Kernel::new(w, h, &m);
             let mut checked = 0;
             for layer in 0..12 {
                 // Blobs of full and partial light, some reaching the field's edges.
@@ -727,7 +724,7 @@ mod tests {
         }
         let q = (-m.layer_mm / m.dp_mm).exp();
         let mut e = Engine::new(w, h, m);
-        let out = run(&mut e, w, h, &[(img, (1.0 / (1.0 - q)) as f32)]);
+        let out = run(&mut e, m, w, h, &[(img, (1.0 / (1.0 - q)) as f32)]);
         let o = &out[0];
         let s = side as f64 + 2.0 * phase as f64;
         assert!(
@@ -775,7 +772,7 @@ mod tests {
         let mut img = rect(w, h, [5, 5, 15, 15], 1.0);
         img[20 * w + 30] = 1.0;
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &[(img, 1.0)]);
+        let out = run(&mut e, &m, w, h, &[(img, 1.0)]);
         assert_eq!(out[0].islands, 2);
         assert_eq!(out[0].vanished.len(), 1);
         let (px, at) = out[0].vanished[0];
@@ -790,7 +787,7 @@ mod tests {
         }
         let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         assert_eq!(out[0].islands, 2);
         assert!(out[0].vanished.is_empty());
         assert_eq!(out[0].merged.len(), 1);
@@ -805,7 +802,7 @@ mod tests {
         }
         let stack: Vec<(Vec<f32>, f32)> = (0..30).map(|_| (img.clone(), 1.0)).collect();
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         assert!(out[0].merged.is_empty());
     }
 
@@ -820,7 +817,7 @@ mod tests {
         let mut stack: Vec<(Vec<f32>, f32)> = vec![(vec![0.0; w * h], 1.0)];
         stack.extend((0..200).map(|_| (lit.clone(), 1.0)));
         let mut e = Engine::new(w, h, &m);
-        let out = run(&mut e, w, h, &stack);
+        let out = run(&mut e, &m, w, h, &stack);
         let got = out[1].print_through_mm.unwrap();
         let want = m.print_through_mm(Some(199));
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");

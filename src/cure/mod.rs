@@ -34,14 +34,14 @@ pub mod widen;
 
 pub use check::run_layers;
 pub use correct::{correct_coverage, edge_shift_px};
-pub use engine::{Engine, LayerOut};
-pub use kernel::{Irradiance, Kernel, Prepared};
+pub use engine::Engine;
+pub use kernel::Irradiance;
 #[cfg(test)]
 pub(crate) use model::test_model;
 pub use model::CureModel;
 pub use predict::LayerCure;
 pub use psf::Psf;
-pub use report::{summarize, CureCheck, Finding, LayerCureCheck, OffsetStats, SlicerAgreement};
+pub use report::{summarize, CureCheck};
 
 use serde::{Deserialize, Serialize};
 

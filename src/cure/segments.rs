@@ -16,8 +16,6 @@ pub struct Segment {
     pub b: [f64; 2],
     /// Unit normal pointing out of the material.
     pub n: [f64; 2],
-    /// Index of its contour.
-    pub contour: u32,
 }
 
 /// A section's edges and the grid of cells they cross.
@@ -26,8 +24,6 @@ pub struct Segments {
     pub segs: Vec<Segment>,
     /// Index of each contour's first edge (and the total at the end).
     pub starts: Vec<usize>,
-    /// Whether each contour is an outer boundary (counter-clockwise in mm).
-    pub outer: Vec<bool>,
     origin: [f64; 2],
     cols: usize,
     rows: usize,
@@ -61,11 +57,9 @@ impl Segments {
         let px = |p: [f64; 2]| [p[0] * s, height_px - p[1] * s];
         let mut segs = Vec::new();
         let mut starts = Vec::with_capacity(contours.len() + 1);
-        let mut outer = Vec::with_capacity(contours.len());
         let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-        for (ci, c) in contours.iter().enumerate() {
+        for c in contours {
             starts.push(segs.len());
-            outer.push(crate::slice::signed_area(c) > 0.0);
             let kept = keep_points(c, tol_px * pixel_mm);
             let c: Vec<[f64; 2]> = match &kept {
                 Some(k) => k.iter().map(|&i| c[i]).collect(),
@@ -89,7 +83,6 @@ impl Segments {
                     a,
                     b,
                     n,
-                    contour: ci as u32,
                 });
             }
         }
@@ -101,7 +94,6 @@ impl Segments {
         Segments {
             segs,
             starts,
-            outer,
             origin: lo,
             cols: ((hi[0] - lo[0]) / CELL) as usize + 1,
             rows: ((hi[1] - lo[1]) / CELL) as usize + 1,
@@ -128,23 +120,6 @@ impl Segments {
         let c = ((u - self.origin[0]) / CELL).max(0.0) as usize;
         let r = ((v - self.origin[1]) / CELL).max(0.0) as usize;
         (c.min(self.cols - 1), r.min(self.rows - 1))
-    }
-
-    /// Calls `f` with the index of every edge that may come within `d` of `p` (each once
-    /// per cell it crosses: callers take minima).
-    pub fn near(&self, p: [f64; 2], d: f64, mut f: impl FnMut(usize)) {
-        if self.segs.is_empty() {
-            return;
-        }
-        let (c0, r0) = self.cell(p[0] - d, p[1] - d);
-        let (c1, r1) = self.cell(p[0] + d, p[1] + d);
-        for r in r0..=r1 {
-            for c in c0..=c1 {
-                for &i in &self.cells[r * self.cols + c] {
-                    f(i as usize);
-                }
-            }
-        }
     }
 
     /// Distance from `p` along the unit direction `dir` to the first edge other than
@@ -264,20 +239,6 @@ fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
         start = end;
     }
     Some(keep)
-}
-
-/// Distance from `p` to the segment `a`–`b`.
-pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let w = [p[0] - a[0], p[1] - a[1]];
-    let l2 = e[0] * e[0] + e[1] * e[1];
-    let t = if l2 > 0.0 {
-        ((w[0] * e[0] + w[1] * e[1]) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let (x, y) = (w[0] - t * e[0], w[1] - t * e[1]);
-    (x * x + y * y).sqrt()
 }
 
 #[cfg(test)]

@@ -403,6 +403,7 @@ pub struct EdgeShifts {
 
 impl EdgeShifts {
     /// The same move `shift` for every edge of `segs`.
+    #[cfg(test)]
     pub fn uniform(segs: &Segments, shift: f64) -> EdgeShifts {
         EdgeShifts {
             edge: vec![shift; segs.segs.len()],

@@ -8,7 +8,7 @@ use crate::bundle::{BundleSource, Manifest, MANIFEST};
 pub use crate::cure::CureCheck;
 use crate::cure::{CureModel, Irradiance};
 use crate::error::{Error, Result};
-use crate::profile::Projector;
+use crate::bundle::machine::Projector;
 use image::codecs::png::PngDecoder;
 use image::ImageDecoder;
 
@@ -292,7 +292,8 @@ mod tests {
             dropped: None,
         });
         assert_eq!(model_of(&man, &src).unwrap(), m);
-        man.machine = crate::profile::Profile::resolve("tiled-2x1").unwrap();
+        man.machine =
+            crate::bundle::Machine::of(&crate::profile::Profile::resolve("tiled-2x1").unwrap());
         let e = model_of(&man, &src).unwrap_err().to_string();
         assert!(
             e.contains("some.dmdjob") && e.contains("2 projectors"),

@@ -2,9 +2,9 @@
 //! lift stage, shutter and DMD.
 //!
 //! The executor reads only the bundle (`job.json` through [`crate::bundle::Manifest`] and
-//! the mask files); the machine comes from the resolved profile embedded in the manifest,
-//! or from the profile given as [`RunOptions::machine`] (`--machine`) to check the job
-//! against the machine it will run on.
+//! the mask files); the machine comes from the manifest's machine record
+//! ([`crate::bundle::Machine`]), or from the record given as [`RunOptions::machine`]
+//! (`--machine`, made from a profile) to check the job against the machine it will run on.
 //! It shares nothing with the slicer and the planner except the bundle format, the cure
 //! model's math of [`crate::cure`] and the pure trapezoid math of [`crate::motion`].
 //! Stages:
@@ -30,38 +30,23 @@ pub mod report;
 pub mod sim;
 pub mod trace;
 pub mod verify;
+mod violation;
 
+#[cfg(any(test, feature = "internals"))]
 pub mod testutil;
 
+use crate::bundle::Machine as MachineRecord;
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
 use crate::output::write_atomic;
 use crate::plot::Format;
-use crate::profile::Profile;
-use report::{LayerTiming, MachineCheck, MachineDifference, PlotCollector, Report, Stats, Timings};
-use serde::Serialize;
+use report::{LayerTiming, MachineCheck, PlotCollector, Report, Stats, Timings};
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// One thing wrong with a job: a verification problem, a broken invariant or a fault.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Violation {
-    /// Layer concerned (`None`: the whole job).
-    pub layer: Option<usize>,
-    /// Simulated time, s (for verification problems: when the layer starts).
-    #[serde(serialize_with = "report::six_opt")]
-    pub time_s: Option<f64>,
-    /// Machine-readable kind, e.g. `travel`, `mask-checksum`, `stall` (see docs/EXECUTOR.md).
-    pub kind: &'static str,
-    /// One line for people; names the file for mask problems.
-    pub message: String,
-    /// File concerned, relative to the bundle.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub file: Option<String>,
-}
+pub use violation::{Kind, Violation};
 
 /// What to do besides verifying and simulating.
 #[derive(Debug, Clone, Default)]
@@ -75,11 +60,11 @@ pub struct RunOptions {
     pub plot: Option<PathBuf>,
     /// Restrict the trace and the plot to these layers, e.g. "10..20" (inclusive).
     pub layers: Option<String>,
-    /// Check the job against this machine instead of the one the manifest embeds: its
-    /// stage, shutter and DMD are simulated, its projectors' sizes and placement verified
-    /// (`--machine`).
-    pub machine: Option<Profile>,
-    /// Predict what cures from the masks (`--cure`, [`cure`]): needs the manifest's `cure`
+    /// Check the job against this machine instead of the manifest's: its stage, shutter
+    /// and DMD are simulated, its projectors' sizes and placement verified (`--machine`:
+    /// [`MachineRecord::of`] a profile).
+    pub machine: Option<MachineRecord>,
+    /// Predict what cures from the masks (`--cure`, `exec::cure`): needs the manifest's `cure`
     /// record and one projector.
     pub cure: bool,
 }
@@ -117,7 +102,7 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 }
 
 /// Verifies and simulates the job at `path` — a bundle directory, a zipped bundle, an
-/// SL1/SL1S file or an SLA control-file zip ([`crate::import::open`]) — on the machine the
+/// SL1/SL1S file or an SLA control-file zip ([`crate::formats::open`]) — on the machine the
 /// manifest embeds (for an imported job, the machine the file implies) or on
 /// [`RunOptions::machine`].
 ///
@@ -126,8 +111,8 @@ pub fn parse_layer_range(s: &str, n: usize) -> Result<RangeInclusive<usize>> {
 /// Problems with the job itself are [`Violation`]s in the report.
 pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
     let t0 = Instant::now();
-    let job = crate::import::open(path)?;
-    let crate::import::Job {
+    let job = crate::formats::open(path)?;
+    let crate::formats::Job {
         format,
         manifest,
         source,
@@ -144,17 +129,20 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
 
     let t1 = Instant::now();
     let machine = opts.machine.as_ref().unwrap_or(&manifest.machine);
-    let imported = !matches!(
+    let native = matches!(
         format,
-        crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip
+        crate::formats::Format::Dmdjob | crate::formats::Format::DmdjobZip
     );
-    let verified = verify::verify_source(&*source, &manifest, machine, imported);
+    let verified = verify::verify_source(&*source, &manifest, machine, !native);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
     // The cure from the masks, once every mask and gray map read as recorded (a
     // `mask-content` problem does not stop it), under the job's own machine (its
     // exposure, calibration and projector).
-    let unreadable = verified.problems.iter().any(|p| p.kind != "mask-content");
+    let unreadable = verified
+        .problems
+        .iter()
+        .any(|p| p.kind != Kind::MaskContent);
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, &*source, model)?), None),
         Some(_) => (
@@ -181,12 +169,10 @@ pub fn run(path: &Path, opts: &RunOptions) -> Result<Report> {
         simulate_s,
         cure_s,
     };
-    let estimate_source = match (&estimate, format) {
+    let estimate_source = match (&estimate, native) {
         (Some(e), _) => e.source.clone(),
-        (None, crate::import::Format::Dmdjob | crate::import::Format::DmdjobZip) => {
-            "planner".into()
-        }
-        (None, _) => "import steps".into(),
+        (None, true) => "planner".into(),
+        (None, false) => "import steps".into(),
     };
     let mut report = report(
         (dir, format.name(), estimate_source),
@@ -210,7 +196,7 @@ type ReadBundle = (
     Option<MachineCheck>,
 );
 
-/// Checks the machine profile the job will be simulated on (the embedded one, or
+/// Checks the machine record the job will be simulated on (the manifest's, or
 /// `opts.machine`) and the options against it, and parses the layer range of the trace
 /// and the plot.
 fn check_options(
@@ -222,7 +208,7 @@ fn check_options(
         None => {
             manifest.machine.validate().map_err(|msg| Error::Bundle {
                 path: source.shown(MANIFEST),
-                msg: format!("machine profile: {msg}"),
+                msg: format!("machine: {msg}"),
             })?;
             None
         }
@@ -233,7 +219,7 @@ fn check_options(
             })?;
             Some(MachineCheck {
                 profile: p.name.clone(),
-                differences: machine_differences(&manifest.machine, p),
+                differences: manifest.machine.differences(p),
             })
         }
     };
@@ -241,10 +227,10 @@ fn check_options(
     for f in &opts.faults {
         if f.layer >= n {
             return Err(Error::Usage(format!(
-                "--fault {}@{}: the job has {n} {} (0..{})",
+                "--fault {}@{}: the job has {} (0..{})",
                 f.kind,
                 f.layer,
-                report::plural(n, "layer", "layers"),
+                crate::text::count(n as u64, "layer", "layers"),
                 n.saturating_sub(1)
             )));
         }
@@ -281,7 +267,7 @@ fn simulate_into_sinks(
     opts: &RunOptions,
     range: Option<RangeInclusive<usize>>,
 ) -> Result<Simulated> {
-    let machine = Machine::from_profile(&manifest.machine);
+    let machine = Machine::of(&manifest.machine);
     let mut trace = opts
         .trace
         .as_deref()
@@ -310,7 +296,7 @@ fn simulate_into_sinks(
         timeline.push(Violation {
             layer: Some(f.layer),
             time_s: Some(f.time_s),
-            kind: f.kind,
+            kind: f.kind.into(),
             message: f.message.clone(),
             file: None,
         });
@@ -324,16 +310,13 @@ fn simulate_into_sinks(
         t.finish()?;
     }
     if let (Some(p), Some(path)) = (plot, opts.plot.as_deref()) {
-        let title = format!(
-            "{}: stage position and light over time{}",
-            dir.file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            match &range {
-                Some(r) => format!(", layers {}–{}", r.start(), r.end()),
-                None => String::new(),
-            }
-        );
+        let name = dir
+            .file_name()
+            .map_or(String::new(), |s| s.to_string_lossy().into_owned());
+        let layers = range.map_or(String::new(), |r| {
+            format!(", layers {}–{}", r.start(), r.end())
+        });
+        let title = format!("{name}: stage position and light over time{layers}");
         let format = Format::from_path(path).map_err(Error::Usage)?;
         write_atomic(path, &p.render(&title).encode(format))?;
     }
@@ -375,7 +358,7 @@ fn report(
     let Simulated { outcome, stats, .. } = simulated;
     let mut counts = BTreeMap::new();
     for v in &violations {
-        *counts.entry(v.kind).or_insert(0) += 1;
+        *counts.entry(v.kind.name()).or_insert(0) += 1;
     }
     let per_layer = outcome
         .layers
@@ -428,96 +411,6 @@ fn report(
     }
 }
 
-/// What differs between the machine a job was compiled for (`job`) and `machine`, in the
-/// keys the executor uses: stage travel, home, limits and steps, shutter and DMD
-/// latencies, and each projector's size, pixel, offset and mirroring.
-pub fn machine_differences(job: &Profile, machine: &Profile) -> Vec<MachineDifference> {
-    let mut out = Vec::new();
-    let mut cmp = |key: String, a: String, b: String| {
-        if a != b {
-            out.push(MachineDifference {
-                key,
-                job: a,
-                machine: b,
-            });
-        }
-    };
-    let num = |v: f64| format!("{v}");
-    let (s, t) = (&job.stage, &machine.stage);
-    for (key, a, b) in [
-        ("stage.travel_min_mm", s.travel_min_mm, t.travel_min_mm),
-        ("stage.travel_max_mm", s.travel_max_mm, t.travel_max_mm),
-        ("stage.home_mm", s.home_mm, t.home_mm),
-        (
-            "stage.max_speed_mm_s",
-            s.max_speed_mm_s.get(),
-            t.max_speed_mm_s.get(),
-        ),
-        (
-            "stage.max_accel_mm_s2",
-            s.max_accel_mm_s2.get(),
-            t.max_accel_mm_s2.get(),
-        ),
-        (
-            "stage.steps_per_mm",
-            s.steps_per_mm.get(),
-            t.steps_per_mm.get(),
-        ),
-        (
-            "shutter.open_s",
-            job.shutter.open_s.get(),
-            machine.shutter.open_s.get(),
-        ),
-        (
-            "shutter.close_s",
-            job.shutter.close_s.get(),
-            machine.shutter.close_s.get(),
-        ),
-        ("dmd.load_s", job.dmd.load_s.get(), machine.dmd.load_s.get()),
-    ] {
-        cmp(key.into(), num(a), num(b));
-    }
-    cmp(
-        "projectors".into(),
-        job.projector.len().to_string(),
-        machine.projector.len().to_string(),
-    );
-    for (k, (a, b)) in job.projector.iter().zip(&machine.projector).enumerate() {
-        let key = |f: &str| format!("projector[{k}].{f}");
-        cmp(
-            key("width_px"),
-            a.width_px.to_string(),
-            b.width_px.to_string(),
-        );
-        cmp(
-            key("height_px"),
-            a.height_px.to_string(),
-            b.height_px.to_string(),
-        );
-        cmp(
-            key("pixel_mm"),
-            num(a.pixel_mm.get()),
-            num(b.pixel_mm.get()),
-        );
-        cmp(
-            key("offset_px"),
-            format!("{:?}", a.offset_px),
-            format!("{:?}", b.offset_px),
-        );
-        cmp(
-            key("mirror_x"),
-            a.mirror_x.to_string(),
-            b.mirror_x.to_string(),
-        );
-        cmp(
-            key("mirror_y"),
-            a.mirror_y.to_string(),
-            b.mirror_y.to_string(),
-        );
-    }
-    out
-}
-
 /// Simulates a manifest's steps without reading any mask: the invariants and timing checks
 /// of [`run`] (a broken step, a move outside the travel or faster than the stage, light
 /// while moving, an estimate off by more than 1 %, …), for a job before it is written.
@@ -548,32 +441,5 @@ mod tests {
             let e = parse_layer_range(bad, 10).unwrap_err().to_string();
             assert!(e.starts_with("--layers"), "{bad}: {e}");
         }
-    }
-
-    #[test]
-    fn machine_differences_name_key_and_both_values() {
-        let job = Profile::default_profile();
-        assert!(machine_differences(&job, &job).is_empty());
-        let mut real = job.clone();
-        real.stage.max_speed_mm_s = crate::units::Positive::new(2.5).unwrap();
-        real.projector[0].mirror_y = true;
-        real.name = "renamed".into();
-        real.description = "only the keys the executor uses count".into();
-        let d = machine_differences(&job, &real);
-        let got: Vec<(&str, &str, &str)> = d
-            .iter()
-            .map(|d| (d.key.as_str(), d.job.as_str(), d.machine.as_str()))
-            .collect();
-        assert_eq!(
-            got,
-            vec![
-                ("stage.max_speed_mm_s", "10", "2.5"),
-                ("projector[0].mirror_y", "false", "true"),
-            ]
-        );
-        let tiled = Profile::resolve("tiled-2x1").unwrap();
-        let d = machine_differences(&job, &tiled);
-        assert_eq!(d[0].key, "projectors");
-        assert_eq!((d[0].job.as_str(), d[0].machine.as_str()), ("1", "2"));
     }
 }

@@ -4,12 +4,13 @@
 use super::sim::{FaultEvent, Motion, SegKind, Segment, ShutterState, Sink};
 use super::Violation;
 use crate::plot::{Band, Canvas, Chart, Panel, Series, Style};
+use crate::text::{count, hms};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::ops::RangeInclusive;
 
-pub(crate) use crate::round::{six, six_opt, six_pair};
+pub(crate) use crate::round::{six, six_pair};
 
 /// Timing of one layer: simulated and estimated.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -34,15 +35,7 @@ pub struct LayerTiming {
 }
 
 /// One key in which the machine given with `--machine` differs from the job's.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct MachineDifference {
-    /// Dotted profile key, e.g. `stage.max_speed_mm_s`, `projector[1].offset_px`.
-    pub key: String,
-    /// Its value in the machine the manifest embeds.
-    pub job: String,
-    /// Its value in the given machine.
-    pub machine: String,
-}
+pub use crate::bundle::machine::Difference as MachineDifference;
 
 /// The machine a job was checked against with `--machine`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -54,7 +47,7 @@ pub struct MachineCheck {
 }
 
 /// " (FORMAT)" after a job's name in a summary, except for a bundle directory.
-pub fn shown_format(format: &str) -> String {
+fn shown_format(format: &str) -> String {
     if format == "dmdjob" {
         String::new()
     } else {
@@ -320,107 +313,81 @@ impl Sink for PlotCollector {
     }
 }
 
-/// `one` for 1, else `many`: "1 layer", "2 layers".
-pub fn plural<'a>(n: usize, one: &'a str, many: &'a str) -> &'a str {
-    if n == 1 {
-        one
-    } else {
-        many
-    }
-}
-
-/// "1h02m03s".
-pub fn hms(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
-}
-
 /// Most violations listed in the human summary.
 pub const LIST_MAX: usize = 20;
+
+/// "  ... and N more (--json lists all)" when a list names only `shown` of `total` items.
+fn and_more(total: usize, shown: usize) -> Option<String> {
+    let more = total.saturating_sub(shown);
+    (more > 0).then(|| format!("  ... and {more} more (--json lists all)"))
+}
 
 /// The human summary printed by `dmdsl run`.
 pub fn render_human(r: &Report) -> String {
     let mut o = String::new();
+    let layers = count(r.layers as u64, "layer", "layers");
+    let masks = count(r.masks_verified as u64, "mask", "masks");
     let _ = writeln!(
         o,
-        "{}{}: {} {}, {} {} checked",
+        "{}{}: {layers}, {masks} checked",
         r.bundle,
-        shown_format(r.format),
-        r.layers,
-        plural(r.layers, "layer", "layers"),
-        r.masks_verified,
-        plural(r.masks_verified, "mask", "masks")
+        shown_format(r.format)
     );
     if let Some(m) = &r.machine {
+        let name = &m.profile;
         if m.differences.is_empty() {
-            let _ = writeln!(
-                o,
-                "machine {} (--machine): the same stage, shutter, DMD and projectors as the job's",
-                m.profile
-            );
+            let _ = writeln!(o, "machine {name} (--machine): the same stage, shutter, DMD and projectors as the job's");
         } else {
-            let shown: Vec<String> = m
-                .differences
-                .iter()
-                .take(DIFFERENCES_SHOWN)
+            let shown = m.differences.iter().take(DIFFERENCES_SHOWN);
+            let shown: Vec<String> = shown
                 .map(|d| format!("{}: job {}, machine {}", d.key, d.job, d.machine))
                 .collect();
-            let more = m.differences.len().saturating_sub(DIFFERENCES_SHOWN);
+            let more = match m.differences.len().saturating_sub(DIFFERENCES_SHOWN) {
+                0 => String::new(),
+                k => format!(" (and {k} more, --json lists all)"),
+            };
             let _ = writeln!(
                 o,
-                "machine {} (--machine) differs from the job's: {}{}",
-                m.profile,
-                shown.join("; "),
-                if more > 0 {
-                    format!(" (and {more} more, --json lists all)")
-                } else {
-                    String::new()
-                }
+                "machine {name} (--machine) differs from the job's: {}{more}",
+                shown.join("; ")
             );
         }
     }
+    let estimate = match r.estimate_source.as_str() {
+        "planner" => "manifest estimate".to_string(),
+        other => format!("estimate, {other},"),
+    };
+    let (total, est, diff) = (r.total_s, r.estimate_s, r.estimate_diff_pct);
     let _ = writeln!(
         o,
-        "simulated {} ({:.2} s); {} {:.2} s ({:+.2} %)",
-        hms(r.total_s),
-        r.total_s,
-        match r.estimate_source.as_str() {
-            "planner" => "manifest estimate".to_string(),
-            other => format!("estimate, {other},"),
-        },
-        r.estimate_s,
-        r.estimate_diff_pct
+        "simulated {} ({total:.2} s); {estimate} {est:.2} s ({diff:+.2} %)",
+        hms(total)
     );
     let _ = writeln!(
         o,
         "light on {:.2} s (exposures {:.2} s), shutter open {:.2} s, waits {:.2} s, DMD load waits {:.2} s",
         r.light_on_s, r.exposure_s, r.shutter_open_s, r.wait_s, r.load_wait_s
     );
+    let ([lo, hi], travel, peak) = (r.stage_range_mm, r.stage_travel_mm, r.peak_speed_mm_s);
     let _ = writeln!(
         o,
-        "stage travel {:.1} mm within [{:.3}, {:.3}] mm, peak speed {:.3} mm/s",
-        r.stage_travel_mm, r.stage_range_mm[0], r.stage_range_mm[1], r.peak_speed_mm_s
+        "stage travel {travel:.1} mm within [{lo:.3}, {hi:.3}] mm, peak speed {peak:.3} mm/s"
     );
     if let Some(f) = &r.fault {
+        let (t, at) = (f.time_s, hms(f.time_s));
         let _ = writeln!(
             o,
-            "FAULT {} in layer {} at {:.3} s ({}), stage at {:.4} mm: {}",
-            f.kind,
-            f.layer,
-            f.time_s,
-            hms(f.time_s),
-            f.stage_mm,
-            f.message
+            "FAULT {} in layer {} at {t:.3} s ({at}), stage at {:.4} mm: {}",
+            f.kind, f.layer, f.stage_mm, f.message
         );
     }
     for u in &r.untriggered_faults {
-        let why = match &r.fault {
-            Some(f) => format!(
+        let why = r.fault.as_ref().map_or(String::new(), |f| {
+            format!(
                 " (the run ended at the {} fault in layer {})",
                 f.kind, f.layer
-            ),
-            None => String::new(),
-        };
+            )
+        });
         let _ = writeln!(o, "note: fault {u} never triggered{why}");
     }
     if r.violations.is_empty() {
@@ -442,12 +409,8 @@ pub fn render_human(r: &Report) -> String {
             let time = v.time_s.map_or(String::new(), |t| format!(" at {t:.3} s"));
             let _ = writeln!(o, "  {layer}{time}: {}: {}", v.kind, v.message);
         }
-        if r.violations.len() > LIST_MAX {
-            let _ = writeln!(
-                o,
-                "  ... and {} more (--json lists all)",
-                r.violations.len() - LIST_MAX
-            );
+        if let Some(more) = and_more(r.violations.len(), LIST_MAX) {
+            let _ = writeln!(o, "{more}");
         }
     }
     if let Some(c) = &r.cure {
@@ -468,34 +431,22 @@ fn render_cure(o: &mut String, c: &super::cure::CureCheck) {
     let pt = c
         .print_through_mm
         .map_or("none".to_string(), |t| format!("{t:.3} mm"));
+    let held = c.held_back_layers;
     let z = c.z_error_mm.map_or(String::new(), |z| {
-        format!(
-            " (Z error {z:+.3} mm, {} layers held back)",
-            c.held_back_layers
-        )
+        format!(" (Z error {z:+.3} mm, {held} layers held back)")
     });
     let _ = writeln!(
         o,
         "cure: edge offset {:+.2} px mean ({:.3} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
         c.signed_mean_px, c.signed_mean_mm, c.edge_offset_px.p95, c.vanished, c.merged
     );
-    if let Some(s) = &c.slicer {
-        if let Some(l) = s.max_diff_layer {
-            let _ = writeln!(
-                o,
-                "cure: against the slicer's prediction: largest difference {:.2} px (layer {l}) over {} layers{}",
-                s.max_diff_px,
-                s.layers,
-                if s.vanish_disagreements.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        "; vanishing islands differ in {} layers",
-                        s.vanish_disagreements.len()
-                    )
-                }
-            );
-        }
+    if let Some((s, l)) = c.slicer.as_ref().and_then(|s| Some((s, s.max_diff_layer?))) {
+        let islands = match s.vanish_disagreements.len() {
+            0 => String::new(),
+            k => format!("; vanishing islands differ in {k} layers"),
+        };
+        let (diff, layers) = (s.max_diff_px, s.layers);
+        let _ = writeln!(o, "cure: against the slicer's prediction: largest difference {diff:.2} px (layer {l}) over {layers} layers{islands}");
     }
     for f in c.findings.iter().take(FINDINGS_SHOWN) {
         let what = if f.kind == "vanished" {
@@ -503,17 +454,10 @@ fn render_cure(o: &mut String, c: &super::cure::CureCheck) {
         } else {
             format!("cured resin joins {} islands", f.islands)
         };
-        let _ = writeln!(
-            o,
-            "  layer {}: {what} at ({:.2}, {:.2}) mm",
-            f.layer, f.at_mm[0], f.at_mm[1]
-        );
+        let [x, y] = f.at_mm;
+        let _ = writeln!(o, "  layer {}: {what} at ({x:.2}, {y:.2}) mm", f.layer);
     }
-    if c.findings.len() > FINDINGS_SHOWN {
-        let _ = writeln!(
-            o,
-            "  ... and {} more (--json lists all)",
-            c.findings.len() - FINDINGS_SHOWN
-        );
+    if let Some(more) = and_more(c.findings.len(), FINDINGS_SHOWN) {
+        let _ = writeln!(o, "{more}");
     }
 }

@@ -68,7 +68,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             compensation: "off".into(),
             distortion: None,
         },
-        machine,
+        machine: Machine::of(&machine),
         totals: Totals {
             layers: layers.len() as u64,
             height_mm: layers.last().map_or(0.0, |l| l.z_mm),
@@ -104,20 +104,26 @@ impl Sink for Collect {
     }
 }
 
+/// A `move` step.
+pub fn move_to(to_mm: f64, speed_mm_s: f64, accel_mm_s2: f64) -> Step {
+    Step::Move {
+        to_mm,
+        speed_mm_s,
+        accel_mm_s2,
+    }
+}
+
+/// A `sweep` step.
+pub fn sweep_to(to_mm: f64, speed_mm_s: f64) -> Step {
+    Step::Sweep { to_mm, speed_mm_s }
+}
+
 /// Moves of the default top-down recoat for a layer at `z` (dip 5 mm at 2 mm/s, return
 /// at 1 mm/s, 50 mm/s²), a wait and an exposure.
 pub fn recoat_steps(z: f64, wait_s: f64, expose_s: f64) -> Vec<Step> {
     vec![
-        Step::Move {
-            to_mm: z + 5.0,
-            speed_mm_s: 2.0,
-            accel_mm_s2: 50.0,
-        },
-        Step::Move {
-            to_mm: z,
-            speed_mm_s: 1.0,
-            accel_mm_s2: 50.0,
-        },
+        move_to(z + 5.0, 2.0, 50.0),
+        move_to(z, 1.0, 50.0),
         Step::Wait { s: wait_s },
         Step::Expose { s: expose_s },
     ]
@@ -125,27 +131,20 @@ pub fn recoat_steps(z: f64, wait_s: f64, expose_s: f64) -> Vec<Step> {
 
 /// Two top-down layers of 0.5 mm: dip, return, wait 10 s, expose 16 s then 8 s.
 pub fn two_layer_topdown() -> Manifest {
-    manifest(
-        profile(),
-        vec![
-            layer(
-                0,
-                0.5,
-                0.5,
-                Mode::Layered,
-                16.0,
-                recoat_steps(0.5, 10.0, 16.0),
-                33.91,
-            ),
-            layer(
-                1,
-                1.0,
-                0.5,
-                Mode::Layered,
-                8.0,
-                recoat_steps(1.0, 10.0, 8.0),
-                25.91,
-            ),
-        ],
-    )
+    let l = |i: usize, exposure_s: f64, time_s: f64| {
+        let z = 0.5 * (i + 1) as f64;
+        let steps = recoat_steps(z, 10.0, exposure_s);
+        layer(i, z, 0.5, Mode::Layered, exposure_s, steps, time_s)
+    };
+    manifest(profile(), vec![l(0, 16.0, 33.91), l(1, 8.0, 25.91)])
+}
+
+/// Layers of one 0.1 mm sweep each at 0.05 mm/s (2 s of light), in `mode`, layer i
+/// estimated to take `times[i]`.
+pub fn sweep_layers(mode: Mode, times: &[f64]) -> Manifest {
+    let l = |(i, &t): (usize, &f64)| {
+        let z = 0.1 * (i + 1) as f64;
+        layer(i, z, 0.1, mode, 2.0, vec![sweep_to(z, 0.05)], t)
+    };
+    manifest(profile(), times.iter().enumerate().map(l).collect())
 }

@@ -163,11 +163,9 @@ mod tests {
     #[test]
     fn trace_rows_follow_the_timeline() {
         let m = two_layer_topdown();
-        let dir = std::env::temp_dir().join(format!("dmdsl-trace-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::test_support::scratch("trace", "rows");
         let path = dir.join("t.csv");
-        let mach = Machine::from_profile(&m.machine);
+        let mach = Machine::of(&m.machine);
         let mut all = TraceWriter::create(&path, None, mach).unwrap();
         let part_path = dir.join("l1.csv");
         let mut part = TraceWriter::create(&part_path, Some(1..=1), mach).unwrap();
@@ -207,21 +205,20 @@ mod tests {
             .lines()
             .skip(1)
             .all(|l| l.split(',').nth(6) == Some("1")));
-        assert_eq!(
-            std::fs::read_dir(&dir).unwrap().count(),
-            2,
-            "no temporaries left"
-        );
+        let names = crate::test_support::names(&dir);
+        assert_eq!(names, ["l1.csv", "t.csv"], "no temporaries left");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn an_unfinished_trace_leaves_nothing() {
-        let dir = std::env::temp_dir().join(format!("dmdsl-trace2-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        let w = TraceWriter::create(&dir.join("t.csv"), None, Machine::from_profile(&profile()))
-            .unwrap();
+        let dir = crate::test_support::scratch("trace", "unfinished");
+        let w = TraceWriter::create(
+            &dir.join("t.csv"),
+            None,
+            Machine::of(&crate::bundle::Machine::of(&profile())),
+        )
+        .unwrap();
         drop(w);
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
         let _ = std::fs::remove_dir_all(&dir);

@@ -149,6 +149,7 @@ impl Response {
     }
 
     /// R(g) = (g/255)^γ.
+    #[cfg(test)]
     pub fn gamma(gamma: f64) -> Option<Self> {
         Self::from_fn(|g| (g / 255.0).powf(gamma))
     }
@@ -190,6 +191,7 @@ impl Response {
     }
 
     /// Relative irradiance at `gray` (None if that level is not usable).
+    #[cfg(test)]
     pub fn irradiance(&self, gray: u8) -> Option<f64> {
         self.gray.binary_search(&gray).ok().map(|i| self.r[i])
     }

@@ -259,16 +259,6 @@ impl Tiler {
         out
     }
 
-    /// Number of projectors.
-    pub fn len(&self) -> usize {
-        self.tiles.len()
-    }
-
-    /// True when there are no projectors.
-    pub fn is_empty(&self) -> bool {
-        self.tiles.is_empty()
-    }
-
     /// Projector `k`'s gray mask of a field coverage mask.
     pub fn render(&self, k: usize, field: &Mask) -> Mask {
         if let Some(o) = self.optics.get(k) {

@@ -1,31 +1,27 @@
 //! `dmdsl inspect`: what a job bundle holds, in numbers and pictures, read from the bundle
 //! alone (`job.json` through [`crate::bundle::Manifest`] and the mask PNGs).
 //!
-//! - [`reader`]: opening a bundle; masks come through the [`MaskReader`] trait, so another
-//!   form of bundle only needs a reader.
+//! - [`Bundle`]: a job opened in any form [`crate::formats::open`] reads, its manifest
+//!   checked; its files through a [`BundleSource`].
 //! - [`summary`]: layers, height, time, resin, warnings by code, per-layer extremes.
 //! - [`sheet`]: the contact sheet of layer thumbnails.
 //! - [`chart`]: per-layer figures in stacked panels.
-//! - [`preview`](mod@preview): a shaded picture of the part built from the masks.
-//! - [`field`]: a layer's masks back on the build plane, cut to the part and shrunk.
+//! - [`preview()`]: a shaded picture of the part built from the masks (`crate::picture`).
 //!
 //! Like the executor it never uses the slicer or the planner.
 
 pub mod chart;
-pub mod field;
-pub mod preview;
-pub mod reader;
 pub mod sheet;
 pub mod summary;
 
-pub use preview::preview;
-pub use reader::{Bundle, DirMasks, MaskReader, SourceMasks};
-pub use summary::{summarize, Summary};
+pub use crate::picture::preview;
+pub use summary::summarize;
 
-use crate::error::Result;
+use crate::bundle::{BundleSource, Manifest, MANIFEST};
+use crate::error::{Error, Result};
 use crate::plot::text::{self, SMALL, TITLE};
 use crate::plot::{Canvas, Format};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Size of the `--preview` picture's image, px (a title band goes above it).
 pub const PREVIEW_SIZE: (u32, u32) = (960, 720);
@@ -33,7 +29,7 @@ pub const PREVIEW_SIZE: (u32, u32) = (960, 720);
 /// The `--preview` picture: [`preview()`] under a title saying what it shows.
 pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
     let (w, h) = PREVIEW_SIZE;
-    let img = preview(&b.manifest, b.masks.as_ref(), w, h)?;
+    let img = preview(&b.manifest, b.files.as_ref(), w, h)?;
     let m = &b.manifest;
     let title = format!(
         "{}: the part as its masks build it ({} layers, {:.2} mm tall)",
@@ -55,4 +51,59 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
 /// Writes `canvas` to `path` in `format`, through a temporary sibling renamed into place.
 pub fn write_picture(path: &Path, canvas: &Canvas, format: Format) -> Result<()> {
     crate::output::write_atomic(path, &canvas.encode(format))
+}
+
+/// A job opened for inspection.
+pub struct Bundle {
+    /// The job's path, as given.
+    pub path: PathBuf,
+    /// The form it came in (a bundle directory, a zipped bundle, an imported file).
+    pub format: crate::formats::Format,
+    /// Its manifest, checked.
+    pub manifest: Manifest,
+    /// Its files (masks, gray maps).
+    pub files: Box<dyn BundleSource>,
+}
+
+impl Bundle {
+    /// Opens the job at `path` in any form [`crate::formats::open`] reads (a bundle
+    /// directory, a zipped bundle, an SL1/SL1S file, an SLA control-file zip): reads and
+    /// checks its manifest, including its machine record and the projector of every mask.
+    pub fn open(path: &Path) -> Result<Bundle> {
+        let job = crate::formats::open(path)?;
+        let manifest = job.manifest;
+        let bad = |msg: String| Error::Bundle {
+            path: job.source.shown(MANIFEST),
+            msg,
+        };
+        manifest
+            .machine
+            .validate()
+            .map_err(|m| bad(format!("machine: {m}")))?;
+        let projectors = manifest.machine.projector.len();
+        for l in &manifest.layers {
+            for m in &l.masks {
+                if m.projector as usize >= projectors {
+                    return Err(bad(format!(
+                        "layer {}: mask {} is for projector {}, the machine has {projectors}",
+                        l.index, m.file, m.projector
+                    )));
+                }
+            }
+        }
+        Ok(Bundle {
+            path: path.into(),
+            format: job.format,
+            manifest,
+            files: job.source,
+        })
+    }
+
+    /// The bundle's name for titles: its file name (`part.dmdjob`).
+    pub fn name(&self) -> String {
+        self.path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| self.path.display().to_string())
+    }
 }

@@ -2,10 +2,10 @@
 //! black, as a projector shows them), cut to the part's footprint and labelled with the
 //! layer number and height.
 
-use super::field::{layer_cells, part_crop};
-use super::reader::MaskReader;
+use crate::bundle::BundleSource;
 use crate::bundle::Manifest;
 use crate::error::{Error, Result};
+use crate::picture::field::{layer_cells, part_crop};
 use crate::plot::text::{self, Align, TextStyle, INK, SMALL, TITLE};
 use crate::plot::Canvas;
 use image::GrayImage;
@@ -76,7 +76,7 @@ fn thumb_edge(n: usize) -> u32 {
 pub fn contact_sheet(
     name: &str,
     manifest: &Manifest,
-    masks: &dyn MaskReader,
+    masks: &dyn BundleSource,
     layers: &[usize],
     how: &str,
 ) -> Result<Canvas> {

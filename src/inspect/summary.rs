@@ -2,6 +2,7 @@
 //! per-layer extremes, from the manifest alone.
 
 use crate::bundle::{Layer, Manifest};
+use crate::text::hms;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -124,46 +125,26 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
     }
 }
 
-/// "1h02m03s".
-fn hms(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60)
-}
-
 /// The summary for people.
 pub fn render_human(s: &Summary) -> String {
     let mut o = String::new();
-    let _ = writeln!(
-        o,
-        "{}{}: {} layers of {} mm, {:.2} mm tall; sliced from {} for {}{}",
-        s.bundle,
-        if s.format == "dmdjob" {
-            String::new()
-        } else {
-            format!(" ({})", s.format)
-        },
-        s.layers,
-        s.layer_height_mm,
-        s.height_mm,
-        s.source,
-        s.profile,
-        if s.projectors > 1 {
-            format!(" ({} projectors)", s.projectors)
-        } else {
-            String::new()
-        }
-    );
-    let _ = writeln!(
-        o,
-        "estimated print time {} ({:.1} s), exposure {:.1} s, resin {:.2} ml{}",
-        hms(s.print_time_s),
-        s.print_time_s,
-        s.exposure_s,
-        s.resin_volume_ml,
-        s.continuous_layers.map_or(String::new(), |c| format!(
-            ", {c} layers printed continuously"
-        ))
-    );
+    let format = if s.format == "dmdjob" {
+        String::new()
+    } else {
+        format!(" ({})", s.format)
+    };
+    let projectors = match s.projectors {
+        0 | 1 => String::new(),
+        k => format!(" ({k} projectors)"),
+    };
+    let (n, h, tall) = (s.layers, s.layer_height_mm, s.height_mm);
+    let (source, profile) = (&s.source, &s.profile);
+    let _ = writeln!(o, "{}{format}: {n} layers of {h} mm, {tall:.2} mm tall; sliced from {source} for {profile}{projectors}", s.bundle);
+    let continuous = s.continuous_layers.map_or(String::new(), |c| {
+        format!(", {c} layers printed continuously")
+    });
+    let (t, exposure, resin) = (s.print_time_s, s.exposure_s, s.resin_volume_ml);
+    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, resin {resin:.2} ml{continuous}", hms(t));
     if s.warnings == 0 {
         let _ = writeln!(o, "warnings: none");
     } else {
@@ -176,34 +157,15 @@ pub fn render_human(s: &Summary) -> String {
     }
     if let Some(e) = &s.extremes {
         let rows = [
-            (
-                "largest area",
-                format!("{:.2} mm²", e.area_mm2.value),
-                e.area_mm2.layer,
-            ),
-            (
-                "longest exposure",
-                format!("{:.2} s", e.exposure_s.value),
-                e.exposure_s.layer,
-            ),
-            (
-                "largest fill distance",
-                format!("{:.3} mm", e.max_fill_distance_mm.value),
-                e.max_fill_distance_mm.layer,
-            ),
-            (
-                "most islands",
-                format!("{}", e.islands.value),
-                e.islands.layer,
-            ),
-            (
-                "longest layer time",
-                format!("{:.2} s", e.time_s.value),
-                e.time_s.layer,
-            ),
+            ("largest area", &e.area_mm2, 2, " mm²"),
+            ("longest exposure", &e.exposure_s, 2, " s"),
+            ("largest fill distance", &e.max_fill_distance_mm, 3, " mm"),
+            ("most islands", &e.islands, 0, ""),
+            ("longest layer time", &e.time_s, 2, " s"),
         ];
-        for (what, value, layer) in rows {
-            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {layer}");
+        for (what, x, decimals, unit) in rows {
+            let value = format!("{:.decimals$}{unit}", x.value);
+            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {}", x.layer);
         }
     }
     for p in &s.pictures {

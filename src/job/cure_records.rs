@@ -14,10 +14,12 @@ use crate::cure::{self, widen, Correction, CureModel, Irradiance};
 use crate::error::{Error, Result};
 use crate::geometry::distortion;
 use crate::optics::Compensator;
-use crate::profile::{Profile, Projector};
+use crate::bundle::machine::Projector;
+use crate::profile::Profile;
 use crate::raster::{Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section, Slicer};
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::Mutex;
@@ -801,7 +803,7 @@ impl LayerLight {
 
 /// The field of a machine as one projector (its pixels, unmirrored): the frame of the
 /// field's coverage masks.
-fn field_frame(machine: &Profile) -> Projector {
+fn field_frame(machine: &bundle::Machine) -> Projector {
     let f = machine.field();
     let mut p = machine.projector[0].clone();
     p.width_px = f.width_px;

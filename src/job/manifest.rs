@@ -170,7 +170,7 @@ pub(super) fn manifest(
             compensation: optics.compensation,
             distortion,
         },
-        machine: profile.clone(),
+        machine: bundle::Machine::of(profile),
         totals: planned.totals,
         warnings,
         layers: planned.layers,

@@ -28,14 +28,15 @@ mod placement;
 mod sink;
 
 pub use cure_records::CureOptions;
-pub use options::{default_output, default_output_as, SliceOptions, SliceSummary, Timings};
+pub use options::{default_output_as, SliceOptions, SliceSummary, Timings};
+#[cfg(any(test, feature = "internals"))]
 pub use pipeline::BLOCK;
-pub use placement::{place_mesh, placement, PlacementMode, Transform};
+pub use placement::{place_mesh, PlacementMode, Transform};
 
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
 use crate::error::{Error, Result};
-use crate::export::Format;
+use crate::formats::Format;
 use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
 use crate::mesh::{self, Mesh};
@@ -43,7 +44,8 @@ use crate::optics::JobOptics;
 use crate::profile::Profile;
 use crate::raster::{Mask, Rasterizer};
 use crate::slice::{SliceStats, Slicer};
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use layer::LayerContext;
 use manifest::PlacedPart;
 use mask_reuse::RecentPrismMasks;
@@ -94,7 +96,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         .clone()
         .unwrap_or_else(|| default_output_as(&opts.input, opts.format.unwrap_or(Format::Dmdjob)));
     let format = Format::for_output(opts.format, &out)?;
-    crate::export::check_fits(format, &profile, &out)?;
+    crate::formats::check_fits(format, &crate::bundle::Machine::of(&profile), &out)?;
     let made = MadeDirs::parents_of(&out)?;
     // The cure plots' directory (and its missing parents), made before slicing like the
     // bundle's parents, so that a path that cannot be a directory fails first.
@@ -167,7 +169,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         Sink::Dir(w) => (w.finish(&manifest)?, Vec::new()),
         Sink::Memory { out, kept } => {
             let files = MemoryFiles::new(&out, kept);
-            let w = crate::export::write(format, &manifest, &files, &out, opts.cancel)?;
+            let w = crate::formats::write(format, &manifest, &files, &out, opts.cancel)?;
             (out, w)
         }
     };

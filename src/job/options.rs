@@ -3,7 +3,7 @@
 use super::{PlacementMode, Transform};
 use crate::bundle::FitReport;
 use crate::bundle::Totals;
-use crate::export::Format;
+use crate::formats::Format;
 use crate::geometry::distortion::DistortionChoice;
 use crate::mesh::MeshReport;
 use crate::profile::Profile;
@@ -169,7 +169,3 @@ fn stem(input: &Path) -> String {
         .unwrap_or_else(|| "part".into())
 }
 
-/// Default bundle path for an input: `<stem>.dmdjob` in the current directory.
-pub fn default_output(input: &Path) -> PathBuf {
-    default_output_as(input, Format::Dmdjob)
-}

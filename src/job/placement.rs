@@ -3,8 +3,8 @@
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::profile::Profile;
-use crate::round::for_message;
 use crate::slice;
+use crate::text::number;
 use std::path::Path;
 
 /// Where the part goes on the build plane.
@@ -172,8 +172,8 @@ pub fn placement(
                     path: path.into(),
                     msg: format!(
                         "with --position {},{} the part spans x {x0:.3}..{x1:.3}, y {y0:.3}..{y1:.3} mm, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
-                        for_message(x),
-                        for_message(y)
+                        number(x),
+                        number(y)
                     ),
                 });
             }
@@ -237,9 +237,9 @@ pub fn place_mesh(
     if top.is_nan() || top > travel_max {
         return Err(job_error(format!(
             "part is {} mm tall, its top at {} mm, but the stage travels only to stage.travel_max_mm = {} mm",
-            for_message(tall),
-            for_message(top),
-            for_message(travel_max)
+            number(tall),
+            number(top),
+            number(travel_max)
         )));
     }
     let n = match slice::layer_count(top, h) {
@@ -247,16 +247,16 @@ pub fn place_mesh(
         _ => {
             return Err(job_error(format!(
                 "a part {} mm tall at {} mm layers needs more than {MAX_LAYERS} layers",
-                for_message(tall),
-                for_message(h)
+                number(tall),
+                number(h)
             )))
         }
     };
     if n == 0 {
         return Err(job_error(format!(
             "part is {} mm tall, less than one layer ({} mm): nothing to print",
-            for_message(tall),
-            for_message(h)
+            number(tall),
+            number(h)
         )));
     }
     Ok((t, n))

@@ -6,15 +6,21 @@
 //! and produces a [`MeshReport`] like admesh's. Defective meshes load with warnings;
 //! only files that hold no usable geometry are errors. [`binary_stl`] writes binary STL
 //! (for tests and tools that make meshes).
+//!
+//! Invariants: all coordinates are finite; triangles with a repeated vertex are removed;
+//! vertex and edge ids are in order of first appearance whatever the thread count; defects
+//! are reported, never fatal.
 
 mod obj;
 mod stl;
 
 pub use crate::input::MESH_MAX_BYTES;
+#[cfg(any(test, feature = "internals"))]
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
@@ -137,6 +143,7 @@ impl MeshReport {
 pub(crate) type Soup = Vec<[[f32; 3]; 3]>;
 
 /// Loads a mesh file (STL binary/ASCII or OBJ), welds and validates it.
+#[cfg(any(test, feature = "internals"))]
 pub fn load(path: &Path) -> Result<Mesh> {
     let bytes = crate::input::read_file(path, "mesh file", crate::input::MESH_MAX_BYTES)?;
     load_bytes(path, &bytes)

@@ -2,7 +2,7 @@
 
 use super::Soup;
 use crate::error::{Error, Result};
-use crate::warning::count;
+use crate::text::count;
 use std::path::Path;
 
 pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Soup> {

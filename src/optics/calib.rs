@@ -21,8 +21,9 @@ use super::{Calibration, FitSummary, Units};
 use crate::error::{Error, Result};
 use crate::polyfit::LeastSquares;
 use crate::table::{self, cell_error, Columns};
+use crate::text::count;
 use crate::units::{NonNegative, Positive};
-use crate::warning::{count, Warning};
+use crate::warning::Warning;
 use nalgebra::{DMatrix, DVector};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -106,6 +107,7 @@ fn readings(path: &Path, rows: Vec<table::Row<TableRow>>) -> Result<Vec<Reading>
 }
 
 /// Parses a measurement table. Errors name `path`, the line and the column.
+#[cfg(any(test, feature = "internals"))]
 pub fn parse_csv(text: &str, path: &Path) -> Result<Vec<Reading>> {
     readings(path, table::parse(path, text, &TABLE)?)
 }
@@ -483,7 +485,7 @@ impl<'a> Setup<'a> {
                 return Err(input_error(format!(
                     "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",
                     vals.len(),
-                    crate::warning::plural(vals.len() as u64, "value", "values")
+                    crate::text::plural(vals.len() as u64, "value", "values")
                 )));
             }
         }
@@ -750,6 +752,63 @@ fn response_through(grays: &[u8], s: &[f64], to_zero: bool) -> Response {
     }
 }
 
+/// The coefficients of P for a form whose S was divided by `s_top` (P times `s_top`).
+fn scaled_by(form: Form, mut coef: Vec<f64>, s_top: f64) -> Vec<f64> {
+    match form {
+        Form::Polynomial => coef.iter_mut().for_each(|c| *c *= s_top),
+        Form::Exponential => coef[0] += s_top.ln(),
+        Form::InverseSquare => coef.iter_mut().for_each(|c| *c /= s_top.sqrt()),
+    }
+    coef
+}
+
+/// `calibrate.poor-fit` when the residual RMS is above 3 %.
+fn poor_fit(rms: f64, degree: usize, form: Form) -> Option<Warning> {
+    (rms > 3.0).then(|| {
+        Warning::new(
+            "calibrate.poor-fit",
+            format!(
+                "residual RMS {rms:.2} %: the model P(x, y)·S(g) with a degree-{degree} {} P does not describe these measurements well",
+                form_name(form)
+            ),
+        )
+        .with("residual_rms_pct", rms)
+        .with("degree", degree as u64)
+        .with("form", form_name(form))
+    })
+}
+
+/// Each measured gray level's S (the first fit's below the valid range `lo`) and its
+/// readings divided by P.
+fn level_fits(
+    readings: &[Reading],
+    glist: &[u8],
+    lo: usize,
+    s: &[f64],
+    first: &FactorFit,
+    p_at: &dyn Fn(&Reading) -> f64,
+) -> Vec<LevelFit> {
+    let top = glist.len() - 1;
+    glist
+        .iter()
+        .enumerate()
+        .map(|(j, &g)| LevelFit {
+            gray: g,
+            s: if j >= lo {
+                s[j - lo]
+            } else {
+                first.s[j] / first.s[top]
+            },
+            valid: j >= lo,
+            points: readings
+                .iter()
+                .filter(|r| r.gray == g)
+                .map(|r| r.irradiance / p_at(r))
+                .collect(),
+        })
+        .collect()
+}
+
 /// Fits a calibration to `readings` (from `path`, named in errors).
 pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitResult> {
     let setup = Setup::new(readings, path, opts)?;
@@ -773,12 +832,7 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
     let second = fit_form(form, &rows.iter().collect::<Vec<_>>(), valid_n)
         .map_err(|c| setup.ill_conditioned(c))?;
     let s_top = second.s[valid_n - 1];
-    let mut coef: Vec<f64> = second.coef.clone();
-    match form {
-        Form::Polynomial => coef.iter_mut().for_each(|c| *c *= s_top),
-        Form::Exponential => coef[0] += s_top.ln(),
-        Form::InverseSquare => coef.iter_mut().for_each(|c| *c /= s_top.sqrt()),
-    }
+    let coef = scaled_by(form, second.coef.clone(), s_top);
     let s: Vec<f64> = second.s.iter().map(|v| v / s_top).collect();
     if s.windows(2).any(|w| w[1] <= w[0]) {
         return Err(setup.input_error(
@@ -796,41 +850,10 @@ pub fn fit(readings: &[Reading], path: &Path, opts: &FitOptions) -> Result<FitRe
 
     let used: Vec<&Reading> = readings.iter().filter(|r| r.gray >= glist[lo]).collect();
     let (rms, worst, worst_line) = residuals(&used, |r| p_at(r) * s_at(r));
-    let mut warnings = Vec::new();
-    if rms > 3.0 {
-        warnings.push(
-            Warning::new(
-                "calibrate.poor-fit",
-                format!(
-                    "residual RMS {rms:.2} %: the model P(x, y)·S(g) with a degree-{degree} {} P does not describe these measurements well",
-                    form_name(form)
-                ),
-            )
-            .with("residual_rms_pct", rms)
-            .with("degree", degree as u64)
-            .with("form", form_name(form)),
-        );
-    }
+    let warnings: Vec<Warning> = poor_fit(rms, degree, form).into_iter().collect();
 
     let zones = zone_fits(&used, s_at, p_xy);
-    let levels: Vec<LevelFit> = glist
-        .iter()
-        .enumerate()
-        .map(|(j, &g)| LevelFit {
-            gray: g,
-            s: if j >= lo {
-                s[j - lo]
-            } else {
-                first.s[j] / first.s[top]
-            },
-            valid: j >= lo,
-            points: readings
-                .iter()
-                .filter(|r| r.gray == g)
-                .map(|r| r.irradiance / p_at(r))
-                .collect(),
-        })
-        .collect();
+    let levels = level_fits(readings, glist, lo, &s, &first, &p_at);
     // S: the measured levels; when S falls all the way down the measured levels, it is
     // also interpolated to pixel value 0 (mirror off, no light).
     let response = response_through(&glist[lo..], &s, lo == 0 && glist[0] > 0);

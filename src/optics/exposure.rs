@@ -37,6 +37,7 @@ pub fn working_curve_s(resin: &Resin, e_mw_cm2: f64, thickness_mm: f64) -> f64 {
 }
 
 /// Cure depth (mm) of dose `dose_mj_cm2` in `resin` (0 below the critical energy).
+#[cfg(test)]
 pub fn cure_depth_mm(resin: &Resin, dose_mj_cm2: f64) -> f64 {
     (resin.dp_mm.get() * (dose_mj_cm2 / resin.ec_mj_cm2.get()).ln()).max(0.0)
 }

@@ -17,6 +17,14 @@
 //!
 //! Like every algorithm stage it returns values: the gray map and the manifest record go
 //! back to the job, which writes the bundle.
+//!
+//! Invariants: coverage 0 stays 0; a pixel gets the level nearest to coverage·E* in
+//! irradiance; S is strictly increasing on its valid range (enforced when a calibration is
+//! loaded); the output depends only on the input and the settings, never on the thread count
+//! (error diffusion is sequential within a layer); the compensation fused into the
+//! rasterizer's scan and applied to a finished mask give the same bytes; the set-up's sums of
+//! P equal adding P pixel by pixel in row-major order, bit for bit, whatever the order or
+//! vector width.
 
 pub mod calib;
 pub mod compensate;
@@ -32,14 +40,13 @@ pub(crate) mod synthetic;
 /// carries it).
 pub use crate::profile::calibration::{field, response, Calibration, FitSummary, Units};
 pub use compensate::Compensator;
-pub use field::{FieldModel, Poly};
-pub use response::{GrayVariable, Interpolation, Response};
 
 use crate::bundle::Optics;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
 use crate::raster::Mask;
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

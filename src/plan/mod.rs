@@ -11,6 +11,15 @@
 //!    layered, for the time comparison the hybrid method reports.
 //!
 //! The planner is pure: the same layers and profile give the same plan, bit for bit.
+//!
+//! Invariants: each layer's steps start where the previous layer left the stage and end with
+//! its `expose` or `sweep`; every position stays inside the stage travel and every speed at
+//! most the stage maximum; a continuous slice inside a run is one `sweep`; positions are
+//! rounded to whole stage steps before the estimate, so the estimate is that of the steps as
+//! written. The analysis depends only on the section and the layer below (for a section
+//! equal to the layer below's, on that layer's result), so bundles are byte-identical at any
+//! thread count; the max fill distance is a true inscribed radius within 0.02 mm of the
+//! exact value.
 
 pub mod analysis;
 mod steps;
@@ -21,7 +30,8 @@ pub use analysis::LayerAnalysis;
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
 use crate::round;
-use crate::warning::{plural, Warning};
+use crate::text::plural;
+use crate::warning::Warning;
 
 /// What the planner needs to know about one layer.
 #[derive(Debug, Clone, PartialEq)]

@@ -33,11 +33,13 @@ impl Canvas {
     }
 
     /// Width, px.
+    #[cfg(test)]
     pub fn width(&self) -> u32 {
         self.pm.width()
     }
 
     /// Height, px.
+    #[cfg(test)]
     pub fn height(&self) -> u32 {
         self.pm.height()
     }
@@ -191,6 +193,7 @@ impl Canvas {
     }
 
     /// The colour of pixel (x, y).
+    #[cfg(test)]
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
         let i = ((y * self.pm.width() + x) * 4) as usize;
         let d = &self.pm.data()[i..i + 3];

@@ -13,8 +13,6 @@ pub enum Style {
     Line,
     /// A dot at each point.
     Points,
-    /// Hold each y until the next x (a state over time).
-    Steps,
 }
 
 /// One data series.
@@ -26,7 +24,7 @@ pub struct Series {
     pub color: [u8; 3],
     /// Drawing style.
     pub style: Style,
-    /// (x, y) points, in x order for `Line` and `Steps`.
+    /// (x, y) points, in x order for `Line`.
     pub points: Vec<(f64, f64)>,
 }
 
@@ -360,16 +358,6 @@ fn draw_series(c: &mut Canvas, area: Area, xs: &Scale, ys: &Scale, s: &Series) {
             let v: Vec<(f32, f32)> = pts.iter().map(px).collect();
             c.polyline(&v, s.color, 1.6);
         }
-        Style::Steps => {
-            let mut v = Vec::with_capacity(pts.len() * 2);
-            for (i, p) in pts.iter().enumerate() {
-                if i > 0 {
-                    v.push((xs.px(p.0), ys.px(pts[i - 1].1)));
-                }
-                v.push(px(p));
-            }
-            c.polyline(&v, s.color, 1.6);
-        }
         Style::Points => {
             for p in &pts {
                 let (x, y) = px(p);
@@ -440,7 +428,7 @@ mod tests {
             vec![Series {
                 label: "stage".into(),
                 color: [200, 0, 0],
-                style: Style::Steps,
+                style: Style::Line,
                 points: (0..100).map(|i| (i as f64, (i % 10) as f64)).collect(),
             }],
             vec![Band {

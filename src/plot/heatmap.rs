@@ -103,7 +103,6 @@ impl Heatmap {
     pub fn render(&self) -> Canvas {
         let [lo, hi] = self.scale();
         let label_h = text::line_height(LABEL.size);
-        let small_h = text::line_height(SMALL.size);
         let cell_w = self.cell_px.max(1.0);
         let (cols, rows) = (self.cols.max(1), self.rows.max(1));
         let mm_w = (self.x_range[1] - self.x_range[0]).abs() / cols as f64;
@@ -200,7 +199,21 @@ impl Heatmap {
             LABEL.aligned(Align::Center),
         );
 
-        // The colour bar: the gradient, its ticks, its exact ends, the quantity.
+        self.draw_bar(&mut c, bar, [lo, hi], &bar_ticks, quantity_x, show_missing);
+        c
+    }
+
+    /// The colour bar: the gradient, its ticks, its exact ends, the quantity, and the
+    /// colour of missing cells when `show_missing`.
+    fn draw_bar(
+        &self,
+        c: &mut Canvas,
+        bar: Area,
+        [lo, hi]: [f64; 2],
+        bar_ticks: &axes::Ticks,
+        quantity_x: f32,
+        show_missing: bool,
+    ) {
         let steps = bar.h.round().max(1.0) as usize;
         // Top row: the colour of `hi`, bottom row: that of `lo`.
         for i in 0..steps {
@@ -214,6 +227,8 @@ impl Heatmap {
             px1: bar.y,
         };
         let lx = bar.right() + 8.0;
+        let small_h = text::line_height(SMALL.size);
+        let end_labels = [axes::value_label(lo), axes::value_label(hi)];
         for (v, label) in [(lo, &end_labels[0]), (hi, &end_labels[1])] {
             let y = bs.px(v);
             c.fill_rect(bar.right(), y.min(bar.bottom() - 1.0), 5.0, 1.0, INK, 255);
@@ -248,7 +263,6 @@ impl Heatmap {
                 SMALL.aligned(Align::Left),
             );
         }
-        c
     }
 
     /// Fills the cells (and writes their values when `annotate`).

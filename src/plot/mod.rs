@@ -13,6 +13,9 @@
 //!
 //! Every picture carries its own title and axis labels with units, so it reads without the
 //! command that wrote it.
+//!
+//! Legends sit outside the plot area; a heatmap's colour bar covers every value it shows; no
+//! file is read at run time (the font is compiled in).
 
 pub mod axes;
 pub mod canvas;
@@ -24,4 +27,6 @@ pub mod text;
 pub use canvas::Canvas;
 pub use chart::{Band, Chart, Panel, Series, Style};
 pub use format::Format;
-pub use heatmap::{colormap, Heatmap};
+pub use heatmap::Heatmap;
+#[cfg(any(test, feature = "internals"))]
+pub use heatmap::colormap;

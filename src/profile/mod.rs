@@ -3,8 +3,9 @@
 //!
 //! Profiles are TOML. Built-in profiles are compiled into the binary from `profiles/*.toml`;
 //! `--profile NAME|FILE` picks one. Every key is required and unknown keys are errors, so a
-//! typo never silently falls back to a default. The fully resolved profile is copied into
-//! every job manifest, which is how the executor learns the machine it simulates.
+//! typo never silently falls back to a default. A job records the keys of the resolved
+//! profile that say how it runs (`bundle::Machine`); the rest is the slicer's and the
+//! planner's.
 //!
 //! This module is the whole machine description and uses only leaf modules: the profile
 //! itself (here), the process sections (`[recoat]`, `[peel]`, `[hybrid]`: [`Recoat`],
@@ -124,7 +125,7 @@ pub struct Projector {
     pub calibration: Option<Calibration>,
     /// Standard deviation of the projector's point-spread function on the build plane,
     /// pixels (a Gaussian; docs/CURE.md). Without it the job predicts and corrects no cure
-    /// (profiles and bundles written before the key existed).
+    /// (profiles written before the key existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub psf_sigma_px: Option<Positive>,
 }
@@ -329,36 +330,9 @@ impl Profile {
         }
         let px = self.projector[0].pixel_mm.get();
         for p in &self.projector {
-            if p.width_px == 0 || p.height_px == 0 {
-                return Err(format!(
-                    "projector {}: width_px and height_px must be > 0",
-                    p.name
-                ));
-            }
-            if p.width_px > 16384 || p.height_px > 16384 {
-                return Err(format!("projector {}: resolution above 16384 px", p.name));
-            }
-            if !(PIXEL_MM_MIN..=PIXEL_MM_MAX).contains(&p.pixel_mm.get()) {
-                return Err(format!(
-                    "projector {}: pixel_mm = {:?} is not a pixel size on the build plane ({PIXEL_MM_MIN} to {PIXEL_MM_MAX} mm; was it given in µm?)",
-                    p.name,
-                    p.pixel_mm.get()
-                ));
-            }
-            for (k, (off, size)) in [(p.offset_px[0], p.width_px), (p.offset_px[1], p.height_px)]
-                .into_iter()
-                .enumerate()
-            {
-                if u64::from(off) + u64::from(size) > u64::from(FIELD_PX_MAX) {
-                    return Err(format!(
-                        "projector {}: offset_px[{k}] = {off} puts its pixels beyond the largest field ({FIELD_PX_MAX} px each way)",
-                        p.name
-                    ));
-                }
-            }
-            if (p.pixel_mm.get() - px).abs() > 1e-12 {
-                return Err("all projectors must have the same pixel_mm".into());
-            }
+            let size = (p.width_px, p.height_px);
+            check_projector(&p.name, size, p.pixel_mm.get(), p.offset_px)?;
+            check_same_pixel(p.pixel_mm.get(), px)?;
             if let Some(c) = &p.calibration {
                 p.check_calibration(c)?;
             }
@@ -380,19 +354,11 @@ impl Profile {
             return Err(format!(
                 "stage.steps_per_mm = {:?} gives steps of {} mm, coarser than the layer height ({:?} mm)",
                 s.steps_per_mm.get(),
-                crate::round::for_message(step_mm),
+                crate::text::number(step_mm),
                 self.slicing.layer_height_mm.get()
             ));
         }
-        if !(s.travel_min_mm.is_finite() && s.travel_max_mm.is_finite() && s.home_mm.is_finite()) {
-            return Err("stage travel and home must be finite numbers".into());
-        }
-        if s.travel_min_mm >= s.travel_max_mm {
-            return Err("stage.travel_min_mm must be below stage.travel_max_mm".into());
-        }
-        if s.home_mm < s.travel_min_mm || s.home_mm > s.travel_max_mm {
-            return Err("stage.home_mm must lie inside the stage travel".into());
-        }
+        check_travel(s.travel_min_mm, s.travel_max_mm, s.home_mm)?;
         if let Some(d) = &self.distortion {
             d.validate()?;
         }
@@ -404,24 +370,88 @@ impl Profile {
 
     /// The build field covered by the union of the projectors.
     pub fn field(&self) -> Field {
-        let w = self
-            .projector
-            .iter()
-            .map(|p| p.offset_px[0] + p.width_px)
-            .max()
-            .unwrap_or(0);
-        let h = self
-            .projector
-            .iter()
-            .map(|p| p.offset_px[1] + p.height_px)
-            .max()
-            .unwrap_or(0);
+        Field::spanning(
+            self.projector
+                .iter()
+                .map(|p| (p.offset_px, p.width_px, p.height_px)),
+            self.projector[0].pixel_mm.get(),
+        )
+    }
+}
+
+impl Field {
+    /// The field spanned by projectors of `(offset_px, width_px, height_px)` with pixels
+    /// `pixel_mm` wide.
+    pub fn spanning(
+        projectors: impl Iterator<Item = ([u32; 2], u32, u32)>,
+        pixel_mm: f64,
+    ) -> Field {
+        let (mut width_px, mut height_px) = (0, 0);
+        for ([x, y], w, h) in projectors {
+            width_px = width_px.max(x + w);
+            height_px = height_px.max(y + h);
+        }
         Field {
-            width_px: w,
-            height_px: h,
-            pixel_mm: self.projector[0].pixel_mm.get(),
+            width_px,
+            height_px,
+            pixel_mm,
         }
     }
+}
+
+/// Checks one projector's size, pixel and offset (a profile's, or a job's machine record's).
+pub(crate) fn check_projector(
+    name: &str,
+    (width_px, height_px): (u32, u32),
+    pixel_mm: f64,
+    offset_px: [u32; 2],
+) -> std::result::Result<(), String> {
+    if width_px == 0 || height_px == 0 {
+        return Err(format!(
+            "projector {name}: width_px and height_px must be > 0"
+        ));
+    }
+    if width_px > 16384 || height_px > 16384 {
+        return Err(format!("projector {name}: resolution above 16384 px"));
+    }
+    if !(PIXEL_MM_MIN..=PIXEL_MM_MAX).contains(&pixel_mm) {
+        return Err(format!(
+            "projector {name}: pixel_mm = {pixel_mm:?} is not a pixel size on the build plane ({PIXEL_MM_MIN} to {PIXEL_MM_MAX} mm; was it given in µm?)"
+        ));
+    }
+    for (k, (off, size)) in [(offset_px[0], width_px), (offset_px[1], height_px)]
+        .into_iter()
+        .enumerate()
+    {
+        if u64::from(off) + u64::from(size) > u64::from(FIELD_PX_MAX) {
+            return Err(format!(
+                "projector {name}: offset_px[{k}] = {off} puts its pixels beyond the largest field ({FIELD_PX_MAX} px each way)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that a projector's pixel is the first projector's.
+pub(crate) fn check_same_pixel(pixel_mm: f64, first_mm: f64) -> std::result::Result<(), String> {
+    if (pixel_mm - first_mm).abs() > 1e-12 {
+        return Err("all projectors must have the same pixel_mm".into());
+    }
+    Ok(())
+}
+
+/// Checks a stage's travel and home: finite, the travel's ends in order, home inside.
+pub(crate) fn check_travel(min: f64, max: f64, home: f64) -> std::result::Result<(), String> {
+    if !(min.is_finite() && max.is_finite() && home.is_finite()) {
+        return Err("stage travel and home must be finite numbers".into());
+    }
+    if min >= max {
+        return Err("stage.travel_min_mm must be below stage.travel_max_mm".into());
+    }
+    if home < min || home > max {
+        return Err("stage.home_mm must lie inside the stage travel".into());
+    }
+    Ok(())
 }
 
 /// Physical ranges of the quantities a profile holds, by the unit its key ends with (every
@@ -439,7 +469,10 @@ const UNIT_RANGES: [(&str, &str, f64, f64); 6] = [
 
 /// Checks every number of `v` (a profile as JSON) whose key names a unit in
 /// [`UNIT_RANGES`]; `path` is the dotted key of `v`.
-fn check_unit_ranges(v: &serde_json::Value, path: &str) -> std::result::Result<(), String> {
+pub(crate) fn check_unit_ranges(
+    v: &serde_json::Value,
+    path: &str,
+) -> std::result::Result<(), String> {
     use serde_json::Value;
     match v {
         Value::Object(m) => {

@@ -87,8 +87,8 @@ fn step<'v>(
             match part.parse::<usize>() {
                 Ok(i) if i < n => Ok(&mut a[i]),
                 _ => Err(format!(
-                    "`{path}` is a list of {n} {}; name one by its index, 0 to {}, as in {path}.0.{part}",
-                    if n == 1 { "entry" } else { "entries" },
+                    "`{path}` is a list of {}; name one by its index, 0 to {}, as in {path}.0.{part}",
+                    crate::text::count(n as u64, "entry", "entries"),
                     n.saturating_sub(1)
                 )),
             }

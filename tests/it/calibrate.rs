@@ -378,7 +378,7 @@ fn absolute_calibration_sets_exposure_from_the_working_curve() {
     let o = &job["optics"];
     assert_eq!(o["units"], "mW/cm2");
     let e = o["target_irradiance"].as_f64().unwrap();
-    let r = &job["machine"]["resin"];
+    let r = &serde_json::to_value(dmdsl::Profile::default_profile().resin).unwrap();
     let (ec, dp, oc) = (
         r["ec_mj_cm2"].as_f64().unwrap(),
         r["dp_mm"].as_f64().unwrap(),

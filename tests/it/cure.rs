@@ -333,7 +333,10 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     // The plot directory and its parents are made, as an output's are.
-    for name in ["cube10-cure-errors.png".to_string(), worst(&dir.join("plots/cure"))] {
+    for name in [
+        "cube10-cure-errors.png".to_string(),
+        worst(&dir.join("plots/cure")),
+    ] {
         let (w, h, _) = read_rgb_size(&dir.join("plots/cure").join(&name));
         assert!(w >= 900 && h >= 600, "{name}: {w} x {h}");
     }

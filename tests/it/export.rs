@@ -396,3 +396,36 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
         count(&fixture("sl1/cube1.sl1"))
     );
 }
+
+#[test]
+fn the_schemas_name_the_formats_the_code_has() {
+    let names: Vec<&str> = dmdsl::formats::Format::ALL.map(|f| f.name()).to_vec();
+    fn enums<'a>(v: &'a serde_json::Value, out: &mut Vec<&'a Vec<serde_json::Value>>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                if let Some(serde_json::Value::Array(e)) = m.get("enum") {
+                    out.push(e);
+                }
+                m.values().for_each(|x| enums(x, out));
+            }
+            serde_json::Value::Array(a) => a.iter().for_each(|x| enums(x, out)),
+            _ => {}
+        }
+    }
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/schemas");
+    let mut schemas = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let path = e.unwrap().path();
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        let mut found = Vec::new();
+        enums(&v, &mut found);
+        for e in found
+            .into_iter()
+            .filter(|e| e.contains(&"dmdjob-zip".into()))
+        {
+            assert_eq!(e, &names, "{}", path.display());
+            schemas += 1;
+        }
+    }
+    assert_eq!(schemas, 5);
+}

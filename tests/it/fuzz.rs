@@ -8,7 +8,7 @@
 //! `target/fuzz-crash-TARGET-N.bin`; a watchdog aborts the process, after writing the input
 //! the same way, when one execution takes longer than 10 s.
 //!
-//! The archive targets open a whole job as `dmdsl run` does (`import::open` on a scratch
+//! The archive targets open a whole job as `dmdsl run` does (`formats::open` on a scratch
 //! file, then `exec::run`: verification and simulation): `archive` mutates the bytes of
 //! the zips (most die at a CRC), `sl1`, `control` and `zipped` change a seed archive's
 //! entries by what they hold (settings values set to extreme numbers, huge counts or deep
@@ -87,7 +87,7 @@ fn manifest(b: &[u8]) -> bool {
 }
 
 /// A job archive (zipped bundle, SL1/SL1S, SLA control file) opened as a user's file is
-/// (`import::open` takes a path: the bytes go to a scratch file of this thread) and, when
+/// (`formats::open` takes a path: the bytes go to a scratch file of this thread) and, when
 /// it opens, replayed (`exec::run`: verification and simulation), so everything after the
 /// reader sees the content too.
 fn archive(b: &[u8]) -> bool {
@@ -157,9 +157,9 @@ fn as_zipped_bundle(bytes: &[u8]) -> Vec<u8> {
     std::fs::create_dir_all(&dir).unwrap();
     let (from, to) = (dir.join("seed.sl1"), dir.join("seed.dmdjob.zip"));
     std::fs::write(&from, bytes).unwrap();
-    let job = dmdsl::import::open(&from).unwrap();
-    dmdsl::export::write(
-        dmdsl::import::Format::DmdjobZip,
+    let job = dmdsl::formats::open(&from).unwrap();
+    dmdsl::formats::write(
+        dmdsl::formats::Format::DmdjobZip,
         &job.manifest,
         &*job.source,
         &to,

@@ -252,7 +252,7 @@ fn preview_shows_the_tower_on_the_right() {
     // (right end of the plate, 5 mm above it) standing taller on the picture than the
     // plate's left end.
     let bundle = dmdsl::inspect::Bundle::open(&b).unwrap();
-    let img = dmdsl::inspect::preview(&bundle.manifest, bundle.masks.as_ref(), 400, 300).unwrap();
+    let img = dmdsl::inspect::preview(&bundle.manifest, bundle.files.as_ref(), 400, 300).unwrap();
     assert_eq!(img.dimensions(), (400, 300));
     let part: Vec<(u32, u32)> = img
         .enumerate_pixels()

@@ -185,7 +185,8 @@ fn test_modules(code: &str) -> Vec<String> {
 /// The modules `text` (a crate root, comments stripped) declares: `mod name;`, with any
 /// visibility or attributes before it.
 fn declared_modules(text: &str) -> Vec<String> {
-    text.split([';', '{', '}'])
+    let mut out: Vec<String> = text
+        .split([';', '{', '}'])
         .filter_map(|stmt| {
             let words: Vec<&str> = stmt.split_whitespace().collect();
             match words.as_slice() {
@@ -193,7 +194,14 @@ fn declared_modules(text: &str) -> Vec<String> {
                 _ => None,
             }
         })
-        .collect()
+        .filter(|name| !name.is_empty())
+        .collect();
+    // The stage modules, declared through the crate's `stages!(a, b, …)` macro.
+    for list in text.split("stages!(").skip(1) {
+        let list = list.split(')').next().unwrap_or("");
+        out.extend(list.split(',').map(first_ident).filter(|n| !n.is_empty()));
+    }
+    out
 }
 
 /// The module path of a file under `src/` (`optics/calib.rs` → [optics, calib]); empty for

@@ -18,6 +18,7 @@ mod inspect;
 mod json;
 mod layers;
 mod plan;
+mod readme;
 mod replace;
 mod roundtrip;
 mod run;

@@ -113,11 +113,16 @@ fn lift(layer: &Value) -> f64 {
     top - f(&layer["z_mm"])
 }
 
+/// The built-in profile `job` was sliced on.
+fn profile_of(job: &Value) -> dmdsl::Profile {
+    dmdsl::Profile::resolve(job["machine"]["name"].as_str().unwrap()).unwrap()
+}
+
 /// The hybrid profile's bottom + transition layers (always layered) and bottom layers.
 fn hybrid_ramp(job: &Value) -> (usize, usize) {
-    let e = &job["machine"]["exposure"];
-    let b = e["bottom_layers"].as_u64().unwrap() as usize;
-    (b + e["transition_layers"].as_u64().unwrap() as usize, b)
+    let e = profile_of(job).exposure;
+    let b = e.bottom_layers as usize;
+    (b + e.transition_layers as usize, b)
 }
 
 /// What a layered slice after the ramp must lift, by the hybrid printing paper's table.
@@ -331,7 +336,7 @@ fn top_down_default_dips_and_waits_longer_over_wider_tops() {
     tris.extend(prism(&square(0.6), 0.4, 0.6));
     let dir = tempdir("plan-topdown");
     let (summary, job) = slice_json(&dir, "steps.stl", &tris, &[]);
-    let r = &job["machine"]["recoat"];
+    let r = &serde_json::to_value(profile_of(&job).recoat).unwrap();
     assert_eq!(r["wait_model"], "leveling");
     let ls = layers(&job);
     assert_eq!(ls.len(), 12);

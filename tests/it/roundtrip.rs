@@ -17,7 +17,7 @@ fn run_report(dir: &Path, file: &str) -> Value {
 /// The decoded first mask of every layer with a thickness (a control file's extra
 /// exposures of a layer are layers of thickness 0), in order.
 fn layer_pixels(path: &Path) -> Vec<Vec<u8>> {
-    let job = dmdsl::import::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let job = dmdsl::formats::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     job.manifest
         .layers
         .iter()

@@ -43,6 +43,44 @@ fn kinds(r: &Value) -> Vec<String> {
         .collect()
 }
 
+/// The violation kinds (`dmdsl::exec::Kind`) are exactly the enums of the report's schema
+/// (faults: the injected ones) and the table of `docs/EXECUTOR.md`, in their order and
+/// with their meanings.
+#[test]
+fn violation_kinds_are_the_schemas_and_the_docs() {
+    use dmdsl::exec::{sim::FaultKind, Kind};
+    let names = |ks: &[Kind]| Value::from(ks.iter().map(|k| k.name()).collect::<Vec<_>>());
+    let text = |f: &str| std::fs::read_to_string(root().join(f)).unwrap();
+    let schema: Value = serde_json::from_str(&text("docs/schemas/run-report.schema.json")).unwrap();
+    let p = &schema["properties"];
+    assert_eq!(
+        p["violations"]["items"]["properties"]["kind"]["enum"],
+        names(Kind::ALL)
+    );
+    let faults = FaultKind::ALL.map(Kind::from);
+    assert_eq!(
+        p["fault"]["oneOf"][1]["properties"]["kind"]["enum"],
+        names(&faults)
+    );
+    let doc = text("docs/EXECUTOR.md");
+    let section = doc
+        .split("\n## Invariants and violation kinds\n")
+        .nth(1)
+        .unwrap();
+    let section = section.split("\n## ").next().unwrap();
+    let rows: Vec<&str> = section.lines().filter(|l| l.starts_with("| `")).collect();
+    let want: Vec<String> = Kind::ALL
+        .iter()
+        .map(|k| format!("| `{}` | {} |", k.name(), k.meaning()))
+        .collect();
+    assert_eq!(
+        rows,
+        want,
+        "docs/EXECUTOR.md's table must be:\n{}",
+        want.join("\n")
+    );
+}
+
 #[test]
 fn fresh_bundle_replays_cleanly() {
     let (dir, b) = sliced("clean");
@@ -442,24 +480,38 @@ fn unreadable_bundles_and_bad_options_exit_2() {
 }
 
 #[test]
-fn version_1_bundle_with_text_warnings_still_runs() {
-    // Version 1 manifests stored warnings as text; `run` reads them (as code
-    // `bundle.uncoded`) and replays the job as before.
+fn version_1_and_2_bundles_still_run_and_export_as_version_3() {
+    // Versions 1 and 2 embedded the whole resolved profile as `machine`; the reader takes
+    // the machine record's keys from it. Version 1 stored warnings as text (read as code
+    // `bundle.uncoded`).
     let (dir, b) = sliced("v1");
     let mut j = job(&b);
-    assert_eq!(j["version"], 2);
-    j["version"] = 1.into();
-    j["warnings"] = serde_json::json!(["mesh has 3 open edges (holes)"]);
-    set_job(&b, &j);
-    let (code, r) = run_json(&dir, &[]);
-    assert_eq!(code, 0, "{r}");
-    assert_eq!(r["violations"].as_array().unwrap().len(), 0);
-    j["version"] = 3.into();
+    assert_eq!(j["version"], 3);
+    let record = j["machine"].clone();
+    assert!(record.get("recoat").is_none() && record.get("slicing").is_none());
+    j["machine"] = serde_json::to_value(dmdsl::Profile::default_profile()).unwrap();
+    for version in [2, 1] {
+        j["version"] = version.into();
+        if version == 1 {
+            j["warnings"] = serde_json::json!(["mesh has 3 open edges (holes)"]);
+        }
+        set_job(&b, &j);
+        let (code, r) = run_json(&dir, &[]);
+        assert_eq!(code, 0, "{r}");
+        assert_eq!(r["violations"].as_array().unwrap().len(), 0);
+    }
+    // What is read is held, and written, as the current version.
+    let o = run_in(&dir, &["export", "box.dmdjob", "-o", "new.dmdjob", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let new = job(&dir.join("new.dmdjob"));
+    assert_eq!((&new["version"], &new["machine"]), (&3.into(), &record));
+    assert_eq!(new["warnings"][0]["code"], "bundle.uncoded");
+    j["version"] = 4.into();
     set_job(&b, &j);
     let o = run_in(&dir, &["run", "box.dmdjob"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("unsupported version Some(3); this dmdsl reads versions 1 to 2"),
+        stderr(&o).contains("unsupported version Some(4); this dmdsl reads versions 1 to 3"),
         "{}",
         stderr(&o)
     );

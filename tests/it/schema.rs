@@ -683,7 +683,7 @@ fn outputs_made_wrong_on_purpose_are_rejected() {
         (
             "job.schema.json",
             &job,
-            |j| j["version"] = json!(3),
+            |j| j["version"] = json!(4),
             "not one of",
         ),
         (

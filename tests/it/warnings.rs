@@ -111,7 +111,7 @@ fn warnings_carry_codes_and_the_command_line_denies_or_allows_them() {
     let job: Value =
         serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();
     assert_eq!(job["warnings"], v["warnings"]);
-    assert_eq!(job["version"], 2);
+    assert_eq!(job["version"], 3);
 
     // --strict = -W mesh=error: the mesh warnings fail (exit 1, bundle written); the
     // manifest keeps what the compiler found.

@@ -5,6 +5,7 @@
 use super::steps::Simulation;
 use super::{SegKind, Segment, ShutterState};
 use crate::bundle::Step;
+use crate::text::fixed;
 use std::fmt;
 use std::str::FromStr;
 
@@ -30,14 +31,10 @@ impl FaultKind {
         FaultKind::MaskLoad,
     ];
 
-    /// Name on the command line and in reports.
+    /// Name on the command line and in reports: its violation kind's
+    /// ([`crate::exec::Kind`]).
     pub fn name(self) -> &'static str {
-        match self {
-            FaultKind::Stall => "stall",
-            FaultKind::Limit => "limit",
-            FaultKind::ShutterStuck => "shutter-stuck",
-            FaultKind::MaskLoad => "mask-load",
-        }
+        crate::exec::Kind::from(self).name()
     }
 }
 
@@ -75,18 +72,24 @@ impl FromStr for FaultSpec {
     }
 }
 
+impl serde::Serialize for FaultKind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
 /// A fault that happened during the run.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct FaultEvent {
     /// What failed.
-    pub kind: &'static str,
+    pub kind: FaultKind,
     /// Layer during which it happened.
     pub layer: usize,
     /// Time the firmware detected it, s.
-    #[serde(serialize_with = "crate::exec::report::six")]
+    #[serde(serialize_with = "crate::round::six")]
     pub time_s: f64,
     /// Where the stage stopped, mm.
-    #[serde(serialize_with = "crate::exec::report::six")]
+    #[serde(serialize_with = "crate::round::six")]
     pub stage_mm: f64,
     /// What happened and what the firmware did.
     pub message: String,
@@ -131,8 +134,8 @@ impl Simulation<'_, '_, '_> {
                 .any(|s| matches!(s, Step::Move { .. } | Step::Sweep { .. }));
             if !has_motion {
                 let msg = format!(
-                    "{kind} at the start of layer {i} (the layer has no move): stage stopped at {:.4} mm",
-                    self.pos
+                    "{kind} at the start of layer {i} (the layer has no move): stage stopped at {} mm",
+                    fixed(self.pos, 4)
                 );
                 self.abort(kind, self.t, msg, false);
                 return false;
@@ -168,24 +171,16 @@ impl Simulation<'_, '_, '_> {
             seg.shutter = ShutterState::Open;
             seg.light = true;
             seg.t1 = seg.t0 + close_s + load_s;
-            self.send(&seg);
-            self.record.light_s += seg.duration();
+            self.send_counted(&seg);
             self.t = seg.t1;
-            let msg = format!(
-                "shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {:.4} mm; layer {} got {:.3} s of extra light",
-                self.pos,
-                self.record.index,
-                seg.duration()
-            );
+            let (at, i, extra) = (fixed(self.pos, 4), self.record.index, seg.duration());
+            let msg = format!("shutter stuck open: still open {close_s:.3} s after the close command; DMD blanked {load_s:.3} s later, stage stopped at {at} mm; layer {i} got {extra:.3} s of extra light");
             self.abort(FaultKind::ShutterStuck, seg.t1, msg, false);
             return false;
         }
         match hit {
             None => {
-                self.send(&seg);
-                if seg.light {
-                    self.record.light_s += seg.duration();
-                }
+                self.send_counted(&seg);
                 self.t = seg.t1;
                 self.pos = seg.to_mm;
                 true
@@ -197,33 +192,34 @@ impl Simulation<'_, '_, '_> {
                 if started {
                     seg.to_mm = self.machine.quantize(seg.position_at(tf));
                     seg.t1 = tf;
-                    self.send(&seg);
-                    if seg.light {
-                        self.record.light_s += seg.duration();
-                    }
+                    self.send_counted(&seg);
                     self.pos = seg.to_mm;
                 }
                 self.t = tf;
                 let msg = match kind {
                     FaultKind::MaskLoad => self.mask_load_msg(),
                     FaultKind::Stall | FaultKind::Limit => {
-                        let what = if kind == FaultKind::Stall {
-                            "stage stalled"
-                        } else {
-                            "limit switch hit"
+                        let what = match kind {
+                            FaultKind::Stall => "stage stalled",
+                            _ => "limit switch hit",
                         };
-                        format!(
-                            "{what} at {:.4} mm during the {} to {target:.4} mm (step {}); shutter closed, stage stopped",
-                            self.pos,
-                            seg.kind.name(),
-                            seg.step.unwrap_or(0)
-                        )
+                        let (at, to) = (fixed(self.pos, 4), fixed(target, 4));
+                        let (during, step) = (seg.kind.name(), seg.step.unwrap_or(0));
+                        format!("{what} at {at} mm during the {during} to {to} mm (step {step}); shutter closed, stage stopped")
                     }
                     FaultKind::ShutterStuck => unreachable!("handled above"),
                 };
                 self.abort(kind, tf, msg, was_open);
                 false
             }
+        }
+    }
+
+    /// Hands `seg` to the sinks and adds its light to the layer's.
+    fn send_counted(&mut self, seg: &Segment) {
+        self.send(seg);
+        if seg.light {
+            self.record.light_s += seg.duration();
         }
     }
 
@@ -234,15 +230,12 @@ impl Simulation<'_, '_, '_> {
             .iter()
             .map(|m| m.file.as_str())
             .collect();
-        format!(
-            "DMD failed to load {}; shutter kept closed, stage stopped at {:.4} mm",
-            if files.is_empty() {
-                "the layer's mask".to_string()
-            } else {
-                files.join(", ")
-            },
-            self.pos
-        )
+        let masks = match files.len() {
+            0 => "the layer's mask".to_string(),
+            _ => files.join(", "),
+        };
+        let at = fixed(self.pos, 4);
+        format!("DMD failed to load {masks}; shutter kept closed, stage stopped at {at} mm")
     }
 
     /// Firmware reaction to a fault at time `tf`: close the shutter if it is (partly)
@@ -250,12 +243,8 @@ impl Simulation<'_, '_, '_> {
     pub(super) fn abort(&mut self, kind: FaultKind, tf: f64, message: String, shutter_open: bool) {
         self.t = tf;
         if kind != FaultKind::ShutterStuck && (self.run_open || shutter_open) {
-            let c = self.still_segment(
-                SegKind::Close,
-                None,
-                self.machine.close_s,
-                ShutterState::Closing,
-            );
+            let m = self.machine;
+            let c = self.still_segment(SegKind::Close, None, m.close_s, ShutterState::Closing);
             self.send(&c);
             self.t = c.t1;
         }
@@ -264,7 +253,7 @@ impl Simulation<'_, '_, '_> {
         self.record.completed = false;
         self.finish_layer();
         self.fault = Some(FaultEvent {
-            kind: kind.name(),
+            kind,
             layer: self.record.index,
             time_s: tf,
             stage_mm: self.pos,
@@ -275,7 +264,7 @@ impl Simulation<'_, '_, '_> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{close, layered, run_collecting, sweeps};
+    use super::super::test_support::{close, fault, layered, run_collecting, sweeps};
     use super::super::{Machine, SegKind};
     use super::*;
     use crate::bundle::Mode;
@@ -292,16 +281,11 @@ mod tests {
         for kind in [FaultKind::Stall, FaultKind::Limit] {
             let (o, c) = run_collecting(&layered(), &[FaultSpec { kind, layer: 1 }]);
             let f = o.fault.unwrap();
-            assert_eq!((f.kind, f.layer), (kind.name(), 1));
+            assert_eq!((f.kind, f.layer), (kind, 1));
             // Layer 1 starts at 33.91 s; its first move (0.5 → 6.0 mm) takes 2.79 s.
             assert!(close(f.time_s, 33.91 + 2.79 / 2.0));
-            let want = Machine::from_profile(&profile()).quantize(position_at(
-                0.5,
-                6.0,
-                2.0,
-                50.0,
-                2.79 / 2.0,
-            ));
+            let halfway = position_at(0.5, 6.0, 2.0, 50.0, 2.79 / 2.0);
+            let want = Machine::of(&crate::bundle::Machine::of(&profile())).quantize(halfway);
             assert!(close(f.stage_mm, want), "{} {want}", f.stage_mm);
             assert!(close(o.total_s, f.time_s));
             assert_eq!(o.layers.len(), 2);
@@ -312,13 +296,7 @@ mod tests {
 
     #[test]
     fn a_stall_during_a_sweep_closes_the_shutter() {
-        let (o, c) = run_collecting(
-            &sweeps(Mode::Continuous),
-            &[FaultSpec {
-                kind: FaultKind::Stall,
-                layer: 1,
-            }],
-        );
+        let (o, c) = run_collecting(&sweeps(Mode::Continuous), &[fault(FaultKind::Stall, 1)]);
         let f = o.fault.unwrap();
         assert!(close(f.time_s, 2.07 + 1.0));
         assert!(close(f.stage_mm, 0.15));
@@ -330,15 +308,9 @@ mod tests {
 
     #[test]
     fn a_failed_mask_load_stops_the_stage_with_the_shutter_closed() {
-        let (o, c) = run_collecting(
-            &layered(),
-            &[FaultSpec {
-                kind: FaultKind::MaskLoad,
-                layer: 1,
-            }],
-        );
+        let (o, c) = run_collecting(&layered(), &[fault(FaultKind::MaskLoad, 1)]);
         let f = o.fault.unwrap();
-        assert_eq!((f.kind, f.layer), ("mask-load", 1));
+        assert_eq!((f.kind, f.layer), (FaultKind::MaskLoad, 1));
         assert!(close(f.time_s, 33.91 + 0.02));
         // 0.02 s into a move accelerating at 50 mm/s²: 0.01 mm.
         assert!(close(f.stage_mm, 0.51));
@@ -349,24 +321,15 @@ mod tests {
 
     #[test]
     fn a_stuck_shutter_blanks_the_dmd_after_the_close_latency() {
-        let (o, c) = run_collecting(
-            &layered(),
-            &[FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 0,
-            }],
-        );
+        let (o, c) = run_collecting(&layered(), &[fault(FaultKind::ShutterStuck, 0)]);
         let f = o.fault.unwrap();
-        assert_eq!((f.kind, f.layer), ("shutter-stuck", 0));
+        assert_eq!((f.kind, f.layer), (FaultKind::ShutterStuck, 0));
         // Close commanded at 2.79 + 5.02 + 10 + 0.05 + 16 = 33.86 s, found stuck 0.05 s
         // later, DMD dark after its 0.02 s load.
         assert!(close(f.time_s, 33.93));
         assert!(close(o.layers[0].light_s, 16.07));
-        assert!(
-            f.message.contains("got 0.070 s of extra light"),
-            "{}",
-            f.message
-        );
+        let msg = &f.message;
+        assert!(msg.contains("got 0.070 s of extra light"), "{msg}");
         let last = c.segs.last().unwrap();
         assert_eq!(last.kind, SegKind::StuckOpen);
         assert!(close(o.total_s, 33.93));
@@ -377,76 +340,40 @@ mod tests {
         // A machine whose shutter closes at once (like the built-in bottom-up profile).
         let mut m = layered();
         m.machine.shutter.close_s = crate::units::NonNegative::new(0.0).unwrap();
-        let (o, _) = run_collecting(
-            &m,
-            &[FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 0,
-            }],
-        );
+        let (o, _) = run_collecting(&m, &[fault(FaultKind::ShutterStuck, 0)]);
         let f = o.fault.unwrap();
         assert!(close(o.layers[0].light_s, 16.02));
-        assert!(
-            f.message.contains("got 0.020 s of extra light"),
-            "{}",
-            f.message
-        );
+        let msg = &f.message;
+        assert!(msg.contains("got 0.020 s of extra light"), "{msg}");
     }
 
     #[test]
     fn untriggered_faults_are_listed() {
         // No shutter close at or after layer 0 of a job without light.
+        let wait = vec![Step::Wait { s: 1.0 }];
         let m = manifest(
             profile(),
-            vec![layer(
-                0,
-                0.5,
-                0.5,
-                Mode::Layered,
-                0.0,
-                vec![Step::Wait { s: 1.0 }],
-                1.0,
-            )],
+            vec![layer(0, 0.5, 0.5, Mode::Layered, 0.0, wait, 1.0)],
         );
-        let spec = FaultSpec {
-            kind: FaultKind::ShutterStuck,
-            layer: 0,
-        };
+        let spec = fault(FaultKind::ShutterStuck, 0);
         let (o, _) = run_collecting(&m, &[spec]);
         assert!(o.fault.is_none());
         assert_eq!(o.untriggered, vec![spec]);
         // A fault whose layer the run never reaches, after the one that ends it.
-        let stall = FaultSpec {
-            kind: FaultKind::Stall,
-            layer: 1,
-        };
-        let limit = FaultSpec {
-            kind: FaultKind::Limit,
-            layer: 0,
-        };
+        let stall = fault(FaultKind::Stall, 1);
+        let limit = fault(FaultKind::Limit, 0);
         let (o, _) = run_collecting(&layered(), &[stall, limit]);
-        assert_eq!(o.fault.unwrap().kind, "limit");
+        assert_eq!(o.fault.unwrap().kind, FaultKind::Limit);
         assert_eq!(o.untriggered, vec![stall]);
     }
 
     #[test]
     fn fault_specs_parse() {
         let f: FaultSpec = "shutter-stuck@12".parse().unwrap();
-        assert_eq!(
-            f,
-            FaultSpec {
-                kind: FaultKind::ShutterStuck,
-                layer: 12
-            }
-        );
-        assert!("stall"
-            .parse::<FaultSpec>()
-            .unwrap_err()
-            .contains("KIND@LAYER"));
-        assert!("jam@1"
-            .parse::<FaultSpec>()
-            .unwrap_err()
-            .contains("unknown kind"));
+        assert_eq!(f, fault(FaultKind::ShutterStuck, 12));
+        let err = |s: &str| s.parse::<FaultSpec>().unwrap_err();
+        assert!(err("stall").contains("KIND@LAYER"));
+        assert!(err("jam@1").contains("unknown kind"));
         assert!("limit@-1".parse::<FaultSpec>().is_err());
     }
 }

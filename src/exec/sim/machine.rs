@@ -1,9 +1,7 @@
-//! The machine the simulator drives, read from the manifest's resolved profile: stage
+//! The machine the simulator drives, read from the manifest's machine record: stage
 //! travel, speed and resolution, shutter latencies, DMD load time.
 
-use crate::profile::Profile;
-
-/// The simulated machine, taken from the manifest's resolved profile.
+/// The simulated machine, taken from the manifest's machine record.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Machine {
     /// Lowest allowed stage coordinate, mm.
@@ -27,8 +25,8 @@ pub struct Machine {
 }
 
 impl Machine {
-    /// The machine described by a (validated) profile.
-    pub fn from_profile(p: &Profile) -> Machine {
+    /// The machine of a (validated) machine record.
+    pub fn of(p: &crate::bundle::Machine) -> Machine {
         Machine {
             travel_min_mm: p.stage.travel_min_mm,
             travel_max_mm: p.stage.travel_max_mm,

@@ -111,7 +111,7 @@ pub fn simulate(manifest: &Manifest, faults: &[FaultSpec], sinks: &mut [&mut dyn
     if let Some(f) = &sim.fault {
         if let Some(i) = untriggered
             .iter()
-            .position(|s| s.kind.name() == f.kind && s.layer == f.layer)
+            .position(|s| s.kind == f.kind && s.layer == f.layer)
         {
             untriggered.remove(i);
         }

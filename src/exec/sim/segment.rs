@@ -156,24 +156,31 @@ impl Segment {
         }
     }
 
+    /// A trapezoidal move's peak speed (reached or not), acceleration, time to the peak
+    /// and total time; `None` for other motions.
+    fn trapezoid(&self) -> Option<(f64, f64, f64, f64)> {
+        let Motion::Trapezoid {
+            target_mm,
+            speed_mm_s: v,
+            accel_mm_s2: a,
+        } = self.motion
+        else {
+            return None;
+        };
+        let d = (target_mm - self.from_mm).abs();
+        let vp = if d >= v * v / a { v } else { (a * d).sqrt() };
+        Some((vp, a, vp / a, move_time(d, v, a)))
+    }
+
     /// Signed stage velocity at time `t` (the value from `t` on), mm/s.
     pub fn velocity_at(&self, t: f64) -> f64 {
         if t < self.t0 || t >= self.t1 {
             return 0.0;
         }
-        match self.motion {
-            Motion::Still => 0.0,
-            Motion::Constant { velocity_mm_s } => velocity_mm_s,
-            Motion::Trapezoid {
-                target_mm,
-                speed_mm_s: v,
-                accel_mm_s2: a,
-            } => {
-                let d = (target_mm - self.from_mm).abs();
+        match (self.motion, self.trapezoid()) {
+            (Motion::Constant { velocity_mm_s }, _) => velocity_mm_s,
+            (Motion::Trapezoid { target_mm, .. }, Some((vp, a, ta, total))) => {
                 let sign = if target_mm >= self.from_mm { 1.0 } else { -1.0 };
-                let total = move_time(d, v, a);
-                let vp = if d >= v * v / a { v } else { (a * d).sqrt() };
-                let ta = vp / a;
                 let tau = t - self.t0;
                 let speed = if tau < ta {
                     a * tau
@@ -184,25 +191,17 @@ impl Segment {
                 };
                 sign * speed + 0.0 // no negative zero
             }
+            _ => 0.0,
         }
     }
 
     /// Peak speed reached in the segment, mm/s.
     pub fn peak_speed(&self) -> f64 {
-        match self.motion {
-            Motion::Still => 0.0,
-            Motion::Constant { velocity_mm_s } => velocity_mm_s.abs(),
-            Motion::Trapezoid {
-                target_mm,
-                speed_mm_s: v,
-                accel_mm_s2: a,
-            } => {
-                let d = (target_mm - self.from_mm).abs();
-                let vp = if d >= v * v / a { v } else { (a * d).sqrt() };
-                // A move cut short by a fault may stop before reaching its peak.
-                let tau = self.t1 - self.t0;
-                vp.min(a * tau)
-            }
+        match (self.motion, self.trapezoid()) {
+            (Motion::Constant { velocity_mm_s }, _) => velocity_mm_s.abs(),
+            // A move cut short by a fault may stop before reaching its peak.
+            (_, Some((vp, a, ..))) => vp.min(a * (self.t1 - self.t0)),
+            _ => 0.0,
         }
     }
 
@@ -210,16 +209,7 @@ impl Segment {
     /// end of acceleration, start of deceleration), in order.
     pub fn phase_times(&self, out: &mut Vec<f64>) {
         out.push(self.t0);
-        if let Motion::Trapezoid {
-            target_mm,
-            speed_mm_s: v,
-            accel_mm_s2: a,
-        } = self.motion
-        {
-            let d = (target_mm - self.from_mm).abs();
-            let total = move_time(d, v, a);
-            let vp = if d >= v * v / a { v } else { (a * d).sqrt() };
-            let ta = vp / a;
+        if let Some((_, _, ta, total)) = self.trapezoid() {
             for tau in [ta, total - ta] {
                 let t = self.t0 + tau;
                 if t > *out.last().unwrap() && t < self.t1 {

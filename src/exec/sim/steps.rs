@@ -5,8 +5,9 @@
 use super::{FaultEvent, FaultKind, FaultSpec, LayerRecord, Machine, Sink};
 use super::{Motion, SegKind, Segment, ShutterState};
 use crate::bundle::{Manifest, Step};
-use crate::exec::Violation;
+use crate::exec::{Kind, Violation};
 use crate::motion::move_time;
+use crate::text::number;
 
 /// The state of one simulation run: the machine, the clock, the stage, the shutter of a
 /// sweep run, the faults and what was measured so far.
@@ -52,7 +53,7 @@ impl<'a, 's, 'k> Simulation<'a, 's, 'k> {
         faults: &[FaultSpec],
         sinks: &'s mut [&'k mut dyn Sink],
     ) -> Self {
-        let machine = Machine::from_profile(&manifest.machine);
+        let machine = Machine::of(&manifest.machine);
         Simulation {
             machine,
             manifest,
@@ -81,12 +82,13 @@ impl Simulation<'_, '_, '_> {
         }
     }
 
-    /// A segment of the current layer from now, `dur` long, with the stage still.
-    pub(super) fn still_segment(
+    /// A segment of the current layer from now, `dur` long, taking the stage to `to.0`
+    /// with motion `to.1`; light on while the shutter is open.
+    fn segment(
         &self,
-        kind: SegKind,
-        step: Option<usize>,
+        (kind, step): (SegKind, Option<usize>),
         dur: f64,
+        to: (f64, Motion),
         shutter: ShutterState,
     ) -> Segment {
         Segment {
@@ -96,12 +98,23 @@ impl Simulation<'_, '_, '_> {
             t0: self.t,
             t1: self.t + dur,
             from_mm: self.pos,
-            to_mm: self.pos,
-            motion: Motion::Still,
+            to_mm: to.0,
+            motion: to.1,
             shutter,
             light: shutter == ShutterState::Open,
             mask_ready_s: self.record.mask_ready_s,
         }
+    }
+
+    /// A segment of the current layer from now, `dur` long, with the stage still.
+    pub(super) fn still_segment(
+        &self,
+        kind: SegKind,
+        step: Option<usize>,
+        dur: f64,
+        shutter: ShutterState,
+    ) -> Segment {
+        self.segment((kind, step), dur, (self.pos, Motion::Still), shutter)
     }
 
     /// Homes the stage and simulates every layer, until the end or a fault.
@@ -156,33 +169,13 @@ impl Simulation<'_, '_, '_> {
             return false;
         }
         for (k, step) in steps.iter().enumerate() {
-            if self.run_open && !matches!(step, Step::Sweep { .. }) {
-                let c = self.still_segment(
-                    SegKind::Close,
-                    Some(k),
-                    self.machine.close_s,
-                    ShutterState::Closing,
-                );
-                self.run_open = false;
-                if !self.emit(c) {
-                    return false;
-                }
-            }
-            if !self.step(k, step) {
+            let ends_run = self.run_open && !matches!(step, Step::Sweep { .. });
+            if (ends_run && !self.end_sweep_run(Some(k))) || !self.step(k, step) {
                 return false;
             }
         }
-        if self.run_open && !next_sweeps {
-            let c = self.still_segment(
-                SegKind::Close,
-                None,
-                self.machine.close_s,
-                ShutterState::Closing,
-            );
-            self.run_open = false;
-            if !self.emit(c) {
-                return false;
-            }
+        if self.run_open && !next_sweeps && !self.end_sweep_run(None) {
+            return false;
         }
         if let Some(tf) = self.mask_load_fault_s {
             // The steps ended before the DMD reported the failed load.
@@ -202,6 +195,15 @@ impl Simulation<'_, '_, '_> {
         true
     }
 
+    /// Closes the shutter a sweep run kept open (before step `step`, or at the layer's
+    /// end); false if a fault ended the run.
+    fn end_sweep_run(&mut self, step: Option<usize>) -> bool {
+        let m = self.machine;
+        let c = self.still_segment(SegKind::Close, step, m.close_s, ShutterState::Closing);
+        self.run_open = false;
+        self.emit(c)
+    }
+
     /// Hands the current layer's record to every sink and keeps it.
     pub(super) fn finish_layer(&mut self) {
         let rec = self.record.clone();
@@ -216,7 +218,7 @@ impl Simulation<'_, '_, '_> {
         self.invalid_steps.push(Violation {
             layer: Some(self.record.index),
             time_s: Some(self.t),
-            kind: "invalid-step",
+            kind: Kind::InvalidStep,
             message: format!("layer {} step {k}: {msg}; step skipped", self.record.index),
             file: None,
         });
@@ -258,7 +260,10 @@ impl Simulation<'_, '_, '_> {
             self.report_invalid_step(
                 k,
                 format!(
-                    "move to {to_mm} mm at {speed_mm_s} mm/s, {accel_mm_s2} mm/s² cannot be executed (speed and acceleration must be > 0)"
+                    "move to {} mm at {} mm/s, {} mm/s² cannot be executed (speed and acceleration must be > 0)",
+                    number(to_mm),
+                    number(speed_mm_s),
+                    number(accel_mm_s2)
                 ),
             );
             return true;
@@ -268,30 +273,24 @@ impl Simulation<'_, '_, '_> {
         let exact_dur = move_time(to_mm - self.exact_mm, speed_mm_s, accel_mm_s2);
         self.record.quantization_s += (dur - exact_dur).abs();
         self.exact_mm = to_mm;
-        let seg = Segment {
-            kind: SegKind::Move,
-            layer: self.record.index,
-            step: Some(k),
-            t0: self.t,
-            t1: self.t + dur,
-            from_mm: self.pos,
-            to_mm: target,
-            motion: Motion::Trapezoid {
-                target_mm: target,
-                speed_mm_s,
-                accel_mm_s2,
-            },
-            shutter: ShutterState::Closed,
-            light: false,
-            mask_ready_s: self.record.mask_ready_s,
+        let motion = Motion::Trapezoid {
+            target_mm: target,
+            speed_mm_s,
+            accel_mm_s2,
         };
+        let seg = self.segment(
+            (SegKind::Move, Some(k)),
+            dur,
+            (target, motion),
+            ShutterState::Closed,
+        );
         self.emit(seg)
     }
 
     /// A `wait` step of `s` seconds.
     fn wait(&mut self, k: usize, s: f64) -> bool {
         if !(s.is_finite() && s >= 0.0) {
-            self.report_invalid_step(k, format!("wait of {s} s (must be >= 0)"));
+            self.report_invalid_step(k, format!("wait of {} s (must be >= 0)", number(s)));
             return true;
         }
         let w = self.still_segment(SegKind::Wait, Some(k), s, ShutterState::Closed);
@@ -301,7 +300,7 @@ impl Simulation<'_, '_, '_> {
     /// An `expose` step of `s` seconds: wait for the mask, open, light, close.
     fn expose(&mut self, k: usize, s: f64) -> bool {
         if !(s.is_finite() && s >= 0.0) {
-            self.report_invalid_step(k, format!("expose of {s} s (must be >= 0)"));
+            self.report_invalid_step(k, format!("expose of {} s (must be >= 0)", number(s)));
             return true;
         }
         if !self.wait_for_mask(k) {
@@ -326,7 +325,11 @@ impl Simulation<'_, '_, '_> {
         if !(speed_mm_s.is_finite() && speed_mm_s > 0.0 && to_mm.is_finite()) {
             self.report_invalid_step(
                 k,
-                format!("sweep to {to_mm} mm at {speed_mm_s} mm/s (speed must be > 0)"),
+                format!(
+                    "sweep to {} mm at {} mm/s (speed must be > 0)",
+                    number(to_mm),
+                    number(speed_mm_s)
+                ),
             );
             return true;
         }
@@ -352,21 +355,15 @@ impl Simulation<'_, '_, '_> {
         self.record.quantization_s += q;
         self.record.dose_quantization_s += q;
         self.exact_mm = to_mm;
-        let seg = Segment {
-            kind: SegKind::Sweep,
-            layer: self.record.index,
-            step: Some(k),
-            t0: self.t,
-            t1: self.t + dur,
-            from_mm: self.pos,
-            to_mm: target,
-            motion: Motion::Constant {
-                velocity_mm_s: speed_mm_s.copysign(dist),
-            },
-            shutter: ShutterState::Open,
-            light: true,
-            mask_ready_s: self.record.mask_ready_s,
+        let motion = Motion::Constant {
+            velocity_mm_s: speed_mm_s.copysign(dist),
         };
+        let seg = self.segment(
+            (SegKind::Sweep, Some(k)),
+            dur,
+            (target, motion),
+            ShutterState::Open,
+        );
         let ok = self.emit(seg);
         if ok {
             self.record.last_sweep_end_mm = Some(target);
@@ -414,56 +411,19 @@ mod tests {
         let mut p = profile();
         p.dmd.load_s = NonNegative::new(0.5).unwrap();
         p.stage.home_mm = 0.1;
-        let m = manifest(
-            p,
-            vec![
-                // At home already: waits the whole load.
-                layer(
-                    0,
-                    0.1,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![Step::Expose { s: 1.0 }],
-                    1.6,
-                ),
-                // 0.1 mm at 1 mm/s, 50 mm/s²: 0.04 + 0.08 = 0.12 s, then waits to 0.5 s.
-                layer(
-                    1,
-                    0.2,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![
-                        Step::Move {
-                            to_mm: 0.2,
-                            speed_mm_s: 1.0,
-                            accel_mm_s2: 50.0,
-                        },
-                        Step::Expose { s: 1.0 },
-                    ],
-                    1.6,
-                ),
-                // A 1 s wait hides the load.
-                layer(
-                    2,
-                    0.3,
-                    0.1,
-                    Mode::Layered,
-                    1.0,
-                    vec![
-                        Step::Wait { s: 1.0 },
-                        Step::Move {
-                            to_mm: 0.3,
-                            speed_mm_s: 1.0,
-                            accel_mm_s2: 50.0,
-                        },
-                        Step::Expose { s: 1.0 },
-                    ],
-                    2.22,
-                ),
-            ],
-        );
+        let expose = Step::Expose { s: 1.0 };
+        let steps = [
+            // At home already: waits the whole load.
+            vec![expose],
+            // 0.1 mm at 1 mm/s, 50 mm/s²: 0.04 + 0.08 = 0.12 s, then waits to 0.5 s.
+            vec![move_to(0.2, 1.0, 50.0), expose],
+            // A 1 s wait hides the load.
+            vec![Step::Wait { s: 1.0 }, move_to(0.3, 1.0, 50.0), expose],
+        ];
+        let (z, times) = ([0.1, 0.2, 0.3], [1.6, 1.6, 2.22]);
+        let layers = steps.into_iter().enumerate();
+        let layers = layers.map(|(i, st)| layer(i, z[i], 0.1, Mode::Layered, 1.0, st, times[i]));
+        let m = manifest(p, layers.collect());
         let (o, c) = run_collecting(&m, &[]);
         assert!(close(o.layers[0].time_s, 0.5 + 0.05 + 1.0 + 0.05));
         assert!(close(o.layers[1].time_s, 0.5 + 0.05 + 1.0 + 0.05));
@@ -506,10 +466,7 @@ mod tests {
     fn a_layer_without_steps_does_not_end_a_sweep_run() {
         let mut m = sweeps(Mode::Continuous);
         m.layers[1].steps.clear();
-        m.layers[2].steps = vec![Step::Sweep {
-            to_mm: 0.3,
-            speed_mm_s: 0.05,
-        }];
+        m.layers[2].steps = vec![sweep_to(0.3, 0.05)];
         let (o, c) = run_collecting(&m, &[]);
         assert!(close(o.layers[0].time_s, 2.07));
         assert_eq!(o.layers[1].time_s, 0.0);
@@ -520,25 +477,9 @@ mod tests {
 
     #[test]
     fn positions_are_quantized_to_steps() {
-        let m = manifest(
-            profile(),
-            vec![layer(
-                0,
-                0.1234,
-                0.1234,
-                Mode::Layered,
-                1.0,
-                vec![
-                    Step::Move {
-                        to_mm: 0.1234,
-                        speed_mm_s: 1.0,
-                        accel_mm_s2: 50.0,
-                    },
-                    Step::Expose { s: 1.0 },
-                ],
-                1.2,
-            )],
-        );
+        let steps = vec![move_to(0.1234, 1.0, 50.0), Step::Expose { s: 1.0 }];
+        let l = layer(0, 0.1234, 0.1234, Mode::Layered, 1.0, steps, 1.2);
+        let m = manifest(profile(), vec![l]);
         let (o, c) = run_collecting(&m, &[]);
         // 0.1234 mm × 800 = 98.72 steps → 99 steps = 0.12375 mm.
         let mv = c.segs.iter().find(|s| s.kind == SegKind::Move).unwrap();
@@ -551,19 +492,10 @@ mod tests {
     #[test]
     fn invalid_steps_are_reported_and_skipped() {
         let mut steps = recoat_steps(0.5, 1.0, 2.0);
-        steps.insert(
-            0,
-            Step::Move {
-                to_mm: 3.0,
-                speed_mm_s: 0.0,
-                accel_mm_s2: 50.0,
-            },
-        );
+        steps.insert(0, move_to(3.0, 0.0, 50.0));
         steps.push(Step::Wait { s: -1.0 });
-        let m = manifest(
-            profile(),
-            vec![layer(0, 0.5, 0.5, Mode::Layered, 2.0, steps, 10.91)],
-        );
+        let l = layer(0, 0.5, 0.5, Mode::Layered, 2.0, steps, 10.91);
+        let m = manifest(profile(), vec![l]);
         let (o, _) = run_collecting(&m, &[]);
         assert_eq!(o.invalid_steps.len(), 2);
         assert!(o.invalid_steps[0].message.contains("layer 0 step 0"));

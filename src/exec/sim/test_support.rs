@@ -1,8 +1,8 @@
 //! Jobs and a runner shared by the simulator's unit tests.
 
-use super::{simulate, FaultSpec, Outcome};
-use crate::bundle::{Manifest, Mode, Step};
-use crate::exec::testutil::{layer, manifest, profile, two_layer_topdown, Collect};
+use super::{simulate, FaultKind, FaultSpec, Outcome};
+use crate::bundle::{Manifest, Mode};
+use crate::exec::testutil::{sweep_layers, two_layer_topdown, Collect};
 
 /// Equal within 1e-9.
 pub(super) fn close(a: f64, b: f64) -> bool {
@@ -23,20 +23,10 @@ pub(super) fn run_collecting(m: &Manifest, faults: &[FaultSpec]) -> (Outcome, Co
 
 /// Three layers of one 0.1 mm sweep each at 0.05 mm/s, in `mode`.
 pub(super) fn sweeps(mode: Mode) -> Manifest {
-    let l = |i: usize, t: f64| {
-        let z = 0.1 * (i + 1) as f64;
-        layer(
-            i,
-            z,
-            0.1,
-            mode,
-            2.0,
-            vec![Step::Sweep {
-                to_mm: z,
-                speed_mm_s: 0.05,
-            }],
-            t,
-        )
-    };
-    manifest(profile(), vec![l(0, 2.07), l(1, 2.0), l(2, 2.05)])
+    sweep_layers(mode, &[2.07, 2.0, 2.05])
+}
+
+/// Fault `kind` injected at `layer`.
+pub(super) fn fault(kind: FaultKind, layer: usize) -> FaultSpec {
+    FaultSpec { kind, layer }
 }

@@ -232,8 +232,8 @@ fn check_agreement(table: &Table, cv: &[f64]) -> Result<()> {
         &table.origin,
         format!(
             "{} more than {MAX_POINT_ERROR_MM} mm from where the rest of the table predicts {}, worst {}: a mistyped, duplicated or mis-measured point",
-            if bad.len() == 1 { "1 point lies".to_string() } else { format!("{} points lie", bad.len()) },
-            if bad.len() == 1 { "it" } else { "them" },
+            crate::text::count(bad.len() as u64, "point lies", "points lie"),
+            crate::text::plural(bad.len() as u64, "it", "them"),
             worst.join(", ")
         ),
     ))

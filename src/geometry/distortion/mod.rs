@@ -35,8 +35,7 @@ mod tests;
 mod warp;
 
 pub use correction::Correction;
-pub use table::{Pair, Table, COLUMNS};
-pub use warp::{Unreachable, Warper};
+pub use table::Table;
 
 use crate::error::{Error, Result};
 use crate::profile::{DistortionConfig, Profile};

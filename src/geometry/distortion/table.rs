@@ -76,6 +76,7 @@ impl Table {
     }
 
     /// Parses CSV text; `path` names the file in errors.
+    #[cfg(any(test, feature = "internals"))]
     pub fn parse(path: &Path, text: &str) -> Result<Vec<Pair>> {
         let rows = table::parse::<TableRow>(path, text, &COLUMNS)?;
         Ok(rows.into_iter().map(Pair::from).collect())

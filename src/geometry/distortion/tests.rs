@@ -1,6 +1,7 @@
 //! Tests of the fit and the pre-warp on synthetic lenses (barrel or pincushion, keystone,
 //! local bumps, noise) whose forward map is known.
 
+use super::table::Pair;
 use super::warp::lerp;
 use super::*;
 

@@ -37,8 +37,6 @@ mod test_support;
 mod zone_mode;
 mod zones;
 
-pub use apply::CompRow;
-pub use zone_mode::MIX_TOLERANCE;
 
 // What the module takes from the rest of the crate; the submodules import it from here.
 use super::field::{FieldModel, Form};
@@ -119,14 +117,9 @@ impl Compensator {
         self.dither
     }
 
-    /// Number of layers passed to [`apply`](Self::apply) whose lit pixels reach outside the
-    /// calibrated area.
-    pub fn layers_outside(&self) -> u64 {
-        self.layers_outside.load(Ordering::Relaxed)
-    }
-
     /// S of pixel value `g` on the levels used (0 for values outside the valid range other
     /// than off).
+    #[cfg(test)]
     pub fn s_of_gray(&self, g: u8) -> f64 {
         let lv = &self.levels;
         let i = lv.gray.partition_point(|&x| x < g);
@@ -135,5 +128,12 @@ impl Compensator {
         } else {
             0.0
         }
+    }
+
+
+    /// Number of layers passed to [`apply`](Self::apply) whose lit pixels reach outside the
+    /// calibrated area.
+    pub fn layers_outside(&self) -> u64 {
+        self.layers_outside.load(Ordering::Relaxed)
     }
 }

@@ -1,7 +1,8 @@
 //! Calibrations, fields and random numbers shared by the module's unit tests.
 
 use super::super::field::{FieldModel, Form, Poly};
-use super::super::{Calibration, Interpolation, Response, Units};
+use super::super::response::{Interpolation, Response};
+use super::super::{Calibration, Units};
 use crate::profile::Field;
 use crate::units::{NonNegative, Positive};
 

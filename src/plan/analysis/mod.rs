@@ -53,8 +53,8 @@ mod fill_distance;
 mod islands;
 
 use collinear::simplify_section;
-pub use collinear::COLLINEAR_MM;
 use fill_distance::{fill_distance, SearchScratch};
+#[cfg(any(test, feature = "internals"))]
 pub use fill_distance::{max_fill_distance, max_fill_distance_with, Edges, COARSE_MM};
 use islands::count_islands;
 pub use islands::islands;
@@ -77,6 +77,7 @@ pub struct LayerAnalysis {
 /// Analyses one layer: `cur` its contours and `lit` its mask's lit pixels, `prev` the
 /// contours and lit pixels of the layer below (`None` for layer 0, which rests on the
 /// platform).
+#[cfg(any(test, feature = "internals"))]
 pub fn analyse(
     cur: &[Contour],
     lit: &LitRuns,
@@ -181,6 +182,7 @@ pub struct Analyser {
 
 impl Analyser {
     /// A new analyser.
+    #[cfg(any(test, feature = "internals"))]
     pub fn new() -> Analyser {
         Analyser::default()
     }
@@ -189,6 +191,7 @@ impl Analyser {
     /// below (`prev`: the contours and lit pixels of layer `index − 1`, `None` for layer
     /// 0). A layer equal to the layer below whose analysis this analyser does not have is
     /// analysed from its own contours, with no islands.
+    #[cfg(any(test, feature = "internals"))]
     pub fn analyse(
         &mut self,
         index: usize,

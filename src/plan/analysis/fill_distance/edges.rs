@@ -276,12 +276,8 @@ impl Edges {
         self.nodes.last().map(|n| (n.lo, n.hi))
     }
 
-    /// True when there are no edges.
-    pub fn is_empty(&self) -> bool {
-        self.segs.is_empty()
-    }
-
     /// Distance from `p` to the nearest edge.
+    #[cfg(test)]
     pub fn distance(&self, p: [f64; 2]) -> f64 {
         self.nearest(p, u32::MAX).0
     }
@@ -595,6 +591,7 @@ impl Edges {
     }
 
     /// Signed distance: positive inside, negative outside.
+    #[cfg(test)]
     pub fn signed_distance(&self, p: [f64; 2]) -> f64 {
         let d = self.distance(p);
         if self.inside(p) {

@@ -23,6 +23,7 @@ mod walls;
 use arcs::ArcCache;
 use cells::Queue;
 use coarsen::coarsen_section;
+#[cfg(any(test, feature = "internals"))]
 pub use coarsen::COARSE_MM;
 pub use edges::Edges;
 use search::search;
@@ -42,6 +43,7 @@ use search::search;
 /// = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most
 /// `r' + precision + δ ≤` [`PRECISION_MM`], so 0 is within the guarantee. Contours with
 /// nothing to leave out (`δ = 0`) are searched as they are.
+#[cfg(any(test, feature = "internals"))]
 pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
     fill_distance(contours, &mut SearchScratch::default())
 }
@@ -126,6 +128,7 @@ pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f6
 ///
 /// Everything depends only on the section's edges (no state carried between layers), so
 /// the result does not depend on threads or block boundaries.
+#[cfg(any(test, feature = "internals"))]
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     search(e, precision, &mut SearchScratch::default())
 }

@@ -1,6 +1,4 @@
-//! The SLA 3D printer control-file standard, schema v5 (3D-Printing-for-Microfluidics,
-//! `3D_printer_json_print_file`, CC BY 4.0): a zip with one print-settings JSON at the
-//! top (`print_settings.json`) and the images under its `Header."Image directory"`.
+//! Reading an SLA control-file zip as a job.
 //!
 //! ## What is read
 //! `Header` (`Schema version` 5.x.y, `Image directory`), `Default layer settings`
@@ -13,7 +11,7 @@
 //! default.
 //! Named settings may inherit from other named settings (a circle is an error). `${...}`
 //! expressions over `Variables` are evaluated first, as the standard's validator does
-//! (named layer groups with their call's variables; `src/import/expr.rs`). `Design` and
+//! (named layer groups with their call's variables; `expr.rs`). `Design` and
 //! `Special print techniques` are information only. A setting that is still not a
 //! number where a number is needed is an error naming the entry and the key. A job of more
 //! than [`MAX_LAYERS`] layer records (duplications and group calls counted) is refused
@@ -40,13 +38,12 @@
 //! violation), accelerating as fast as the file asks, in 0.1 µm steps.
 
 use super::expr::{resolve, Budget};
-use super::{bbox_mm, manifest_of, mask_figures, Format, Job, ManifestParts};
-use crate::archive::read::Archive;
-use crate::bundle::{Layer, MaskRef, MemSource, Mode, Step};
+use super::Position;
+use crate::bundle::{Layer, Step};
 use crate::error::{Error, Result};
-use crate::profile::Profile;
-use crate::units::{NonNegative, Positive};
-use rayon::prelude::*;
+use crate::formats::archive::read::Archive;
+use crate::formats::imported::{self, Grid, Implied, Imported};
+use crate::formats::{Format, Job};
 use serde_json::{Map, Value};
 
 /// Pixel size assumed for the images, mm.
@@ -55,6 +52,8 @@ pub const PIXEL_MM: f64 = 0.0076;
 const BP_MAX_SPEED_MM_S: f64 = 800.0 / 60.0;
 /// The build platform's highest position, mm.
 const TRAVEL_MAX_MM: f64 = 90.0;
+/// The least acceleration limit of the imported stage (the file's fastest if faster), mm/s².
+const MIN_ACCEL_MM_S2: f64 = 20.0;
 /// Most layer records (exposures, duplications counted) a job may have: the zip reader's
 /// bounds fit a job of 100,000 layers, and a count the file states is no cheaper to
 /// follow than layers it holds.
@@ -101,9 +100,6 @@ const TOP_KEYS: &[&str] = &[
     "Layers",
 ];
 
-/// An image's SHA-256 and, when it decodes, its size and figures.
-type ImageFigures = (String, Option<(u32, u32, super::MaskFigures)>);
-
 /// One exposure of a layer.
 #[derive(Debug, Clone)]
 struct Image {
@@ -116,15 +112,7 @@ struct Image {
 /// One layer as the file describes it (before duplication).
 #[derive(Debug, Clone)]
 struct LayerSpec {
-    thickness_mm: f64,
-    up_mm: f64,
-    initial_s: f64,
-    up_speed: f64,
-    up_accel: f64,
-    up_wait_s: f64,
-    down_speed: f64,
-    down_accel: f64,
-    final_s: f64,
+    position: Position,
     images: Vec<Image>,
     copies: u64,
     /// Where it is in the file, for messages: "Layers[3]".
@@ -310,17 +298,8 @@ impl Reader<'_> {
                 after_s: self.num(&maps, "Wait after exposure (ms)", &at, false)? / 1000.0,
             });
         }
-        let ms = |key: &str| self.num(&pos, key, at, false).map(|v| v / 1000.0);
         Ok(LayerSpec {
-            thickness_mm: self.num(&pos, "Layer thickness (um)", at, false)? / 1000.0,
-            up_mm: self.num(&pos, "Distance up (mm)", at, true)?,
-            initial_s: ms("Initial wait (ms)")?,
-            up_speed: self.num(&pos, "BP up speed (mm/sec)", at, true)?,
-            up_accel: self.num(&pos, "BP up acceleration (mm/sec^2)", at, true)?,
-            up_wait_s: ms("Up wait (ms)")?,
-            down_speed: self.num(&pos, "BP down speed (mm/sec)", at, true)?,
-            down_accel: self.num(&pos, "BP down acceleration (mm/sec^2)", at, true)?,
-            final_s: ms("Final wait (ms)")?,
+            position: Position::read(|key, positive| self.num(&pos, key, at, positive))?,
             images,
             copies,
             at: at.to_string(),
@@ -460,9 +439,9 @@ fn check_top(r: &Reader) -> Result<()> {
     Ok(())
 }
 
-/// Imports the control-file zip `archive` whose settings are entry `entry`.
-pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job> {
-    let path = archive.path().to_path_buf();
+/// The settings of `archive` (entry `entry`, the only JSON at the top), checked and with
+/// their `${...}` and layer groups expanded.
+fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
     let jsons: Vec<&str> = archive
         .names()
         .iter()
@@ -485,7 +464,7 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         Err(e) => return Err(archive.error(Some(entry), format!("invalid JSON: {e}"))),
     };
     let mut r = Reader {
-        archive: &archive,
+        archive,
         entry,
         root,
     };
@@ -493,15 +472,22 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     let size = archive.get(entry).map_or(0, <[u8]>::len) as u64;
     let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
     expand(&mut r.root, &mut budget).map_err(|m| r.bad(m))?;
-    let specs = r.layers()?;
-    // One record per exposure.
-    struct Exposure<'a> {
-        spec: &'a LayerSpec,
-        image: &'a Image,
-        first: bool,
-    }
+    Ok(r)
+}
+
+/// One exposure of the job: an image of a layer (each duplication counted).
+struct Exposure<'a> {
+    spec: &'a LayerSpec,
+    image: &'a Image,
+    /// The layer's first image (the one its position settings move the stage for).
+    first: bool,
+}
+
+/// Every exposure of the layers `specs`, refused before any is made when there are more
+/// than [`MAX_LAYERS`] or none.
+fn exposures<'a>(r: &Reader, specs: &'a [LayerSpec]) -> Result<Vec<Exposure<'a>>> {
     let mut exposures = Vec::new();
-    for s in &specs {
+    for s in specs {
         if s.images.is_empty() {
             return Err(r.bad(format!("{}: the layer has no image", s.at)));
         }
@@ -510,11 +496,10 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
             .saturating_add(exposures.len() as u64);
         if total > MAX_LAYERS {
             return Err(r.bad(format!(
-                "{}: {} duplications of {} {} make more than the {MAX_LAYERS} layer records a job may have",
+                "{}: {} duplications of {} make more than the {MAX_LAYERS} layer records a job may have",
                 s.at,
                 s.copies,
-                s.images.len(),
-                if s.images.len() == 1 { "image" } else { "images" }
+                crate::text::count(s.images.len() as u64, "image", "images")
             )));
         }
         for _ in 0..s.copies {
@@ -530,170 +515,123 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
     if exposures.is_empty() {
         return Err(r.bad("`Layers` is empty: the job has no layer".into()));
     }
+    Ok(exposures)
+}
+
+/// The steps of exposure `e` of a layer from `z` to `top` (module docs) and their time.
+fn steps(e: &Exposure, (z, top): (f64, f64), last_of_layer: bool) -> (Vec<Step>, f64) {
+    let (s, p) = (e.spec, &e.spec.position);
+    let mut steps = Vec::new();
+    let mut time_s = 0.0;
+    let wait = |steps: &mut Vec<Step>, t: &mut f64, s: f64| {
+        if s > 0.0 {
+            steps.push(Step::Wait { s });
+            *t += s;
+        }
+    };
+    if e.first {
+        wait(&mut steps, &mut time_s, p.initial_s);
+        let up = z + p.up_mm;
+        steps.push(Step::Move {
+            to_mm: up,
+            speed_mm_s: p.up_speed,
+            accel_mm_s2: p.up_accel,
+        });
+        time_s += crate::motion::move_time(p.up_mm, p.up_speed, p.up_accel);
+        wait(&mut steps, &mut time_s, p.up_wait_s);
+        steps.push(Step::Move {
+            to_mm: top,
+            speed_mm_s: p.down_speed,
+            accel_mm_s2: p.down_accel,
+        });
+        time_s += crate::motion::move_time(up - top, p.down_speed, p.down_accel);
+    }
+    wait(&mut steps, &mut time_s, e.image.before_s);
+    steps.push(Step::Expose {
+        s: e.image.exposure_s,
+    });
+    time_s += e.image.exposure_s;
+    wait(&mut steps, &mut time_s, e.image.after_s);
+    if last_of_layer {
+        wait(&mut steps, &mut time_s, s.position.final_s);
+    }
+    (steps, time_s)
+}
+
+/// Imports the control-file zip `archive` whose settings are entry `entry`.
+pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job> {
+    let r = settings(&archive, entry)?;
+    let specs = r.layers()?;
+    let exposures = exposures(&r, &specs)?;
     // Decode each distinct image once.
     let mut files: Vec<&str> = exposures.iter().map(|e| e.image.file.as_str()).collect();
     files.sort_unstable();
     files.dedup();
-    let figures: std::collections::HashMap<&str, ImageFigures> = files
-        .par_iter()
-        .map_init(Vec::new, |buf, f| {
-            let fig = archive
-                .get(f)
-                .map(|b| (crate::digest::sha256_hex(b), mask_figures(b, buf)));
-            (*f, fig.unwrap_or_default())
-        })
+    let images: std::collections::HashMap<&str, imported::Image> = files
+        .iter()
+        .copied()
+        .zip(imported::images(&archive, &files))
         .collect();
     let (w_px, h_px) = exposures
         .iter()
-        .find_map(|e| figures[e.image.file.as_str()].1.map(|(w, h, _)| (w, h)))
+        .find_map(|e| images[e.image.file.as_str()].1.map(|(w, h, _)| (w, h)))
         .ok_or_else(|| archive.error(None, "no image of the job is present and decodable"))?;
-    let px_area = PIXEL_MM * PIXEL_MM;
-    let mut layers = Vec::with_capacity(exposures.len());
-    let (mut z, mut max_speed, mut max_accel) = (0.0f64, 1.0f64, 1.0f64);
+    let grid = Grid {
+        height_px: h_px,
+        pixel_mm: PIXEL_MM,
+        pixel_area_mm2: PIXEL_MM * PIXEL_MM,
+    };
+    let mut layers: Vec<Layer> = Vec::with_capacity(exposures.len());
+    let (mut z, mut max_accel) = (0.0f64, 1.0f64);
     for (i, e) in exposures.iter().enumerate() {
-        let s = e.spec;
-        let mut steps = Vec::new();
-        let mut time_s = 0.0;
-        let wait = |steps: &mut Vec<Step>, t: &mut f64, s: f64| {
-            if s > 0.0 {
-                steps.push(Step::Wait { s });
-                *t += s;
-            }
-        };
-        let thickness = if e.first { s.thickness_mm } else { 0.0 };
+        let p = &e.spec.position;
+        let thickness = if e.first { p.thickness_mm } else { 0.0 };
         let top = z + thickness;
-        if e.first {
-            wait(&mut steps, &mut time_s, s.initial_s);
-            let up = z + s.up_mm;
-            steps.push(Step::Move {
-                to_mm: up,
-                speed_mm_s: s.up_speed,
-                accel_mm_s2: s.up_accel,
-            });
-            time_s += crate::motion::move_time(s.up_mm, s.up_speed, s.up_accel);
-            wait(&mut steps, &mut time_s, s.up_wait_s);
-            steps.push(Step::Move {
-                to_mm: top,
-                speed_mm_s: s.down_speed,
-                accel_mm_s2: s.down_accel,
-            });
-            time_s += crate::motion::move_time(up - top, s.down_speed, s.down_accel);
-            max_speed = max_speed.max(s.up_speed).max(s.down_speed);
-            max_accel = max_accel.max(s.up_accel).max(s.down_accel);
-        }
-        wait(&mut steps, &mut time_s, e.image.before_s);
-        steps.push(Step::Expose {
-            s: e.image.exposure_s,
-        });
-        time_s += e.image.exposure_s;
-        wait(&mut steps, &mut time_s, e.image.after_s);
         let last_of_layer = exposures.get(i + 1).is_none_or(|n| n.first);
-        if last_of_layer {
-            wait(&mut steps, &mut time_s, s.final_s);
+        let (steps, time_s) = steps(e, (z, top), last_of_layer);
+        if e.first {
+            max_accel = max_accel.max(p.up_accel).max(p.down_accel);
         }
-        let (sha, fig) = figures[e.image.file.as_str()].clone();
-        let fig = fig.map(|(_, _, f)| f);
-        layers.push(Layer {
-            cure: None,
-            index: i as u64,
-            z_mm: top,
-            slice_z_mm: top - thickness / 2.0,
-            thickness_mm: thickness,
-            mode: Mode::Layered,
-            exposure_s: e.image.exposure_s,
-            area_mm2: fig.map_or(0.0, |f| f.coverage_px * px_area),
-            max_fill_distance_mm: 0.0,
-            islands: 0,
-            bbox_mm: fig
-                .and_then(|f| f.lit_box)
-                .map(|b| bbox_mm(b, h_px, PIXEL_MM)),
-            masks: vec![MaskRef {
-                file: e.image.file.clone(),
-                sha256: sha,
-                projector: 0,
-            }],
-            steps,
-            time_s,
-        });
+        let file = e.image.file.as_str();
+        let place = (top, top - thickness / 2.0, thickness);
+        let image = (file, &images[file]);
+        layers.push(imported::layer(i, place, image, grid, steps, time_s));
         z = top;
     }
-    let nominal = specs.first().map_or(0.01, |s| s.thickness_mm).max(1e-4);
-    let machine = machine(w_px, h_px, nominal, max_speed, max_accel)
-        .map_err(|m| archive.error(Some(entry), format!("the machine it implies: {m}")))?;
-    let mut generator = "SLA control file v5".to_string();
-    if let Some(s) = r
-        .root
-        .get("Design")
-        .and_then(|d| d.get("Slicer"))
-        .and_then(Value::as_str)
-        .filter(|s| !s.is_empty())
-    {
-        generator = format!("{generator} ({s})");
-    }
-    let manifest = manifest_of(
-        &path,
-        ManifestParts {
-            generator,
-            sha256: sha256.into(),
-            machine,
-            layer_height_mm: nominal,
-            binary: false,
-            layers,
-            print_time_s: None,
-        },
-    );
-    Ok(Job {
-        source: Box::new(MemSource::new(&path, archive.into_files())),
-        path,
-        format: Format::SlaControl,
-        manifest,
-        estimate: None,
-    })
-}
-
-/// The machine a control file implies (module docs).
-fn machine(
-    w_px: u32,
-    h_px: u32,
-    layer_mm: f64,
-    speed: f64,
-    accel: f64,
-) -> std::result::Result<Profile, String> {
-    let pos = |v: f64, what: &str| {
-        Positive::new(v).ok_or_else(|| format!("{what} = {v} is not positive"))
+    let nominal = specs
+        .first()
+        .map_or(0.01f64, |s| s.position.thickness_mm)
+        .max(1e-4);
+    let design = |key: &str| {
+        let v = r.root.get("Design").and_then(|d| d.get(key));
+        v.and_then(Value::as_str).unwrap_or_default().to_string()
     };
-    let mut m = Profile::resolve("bottom-up").map_err(|e| e.to_string())?;
-    m.name = "sla-control-import".into();
-    m.description = format!(
-        "imported from an SLA control file: {w_px}x{h_px} px images, {PIXEL_MM} mm pixels assumed"
-    );
-    let p = &mut m.projector[0];
-    p.name = "light-engine".into();
-    p.width_px = w_px;
-    p.height_px = h_px;
-    p.pixel_mm = pos(PIXEL_MM, "pixel")?;
-    p.offset_px = [0, 0];
-    p.mirror_x = false;
-    p.mirror_y = false;
-    p.calibration = None;
-    m.projector.truncate(1);
-    m.slicing.layer_height_mm = pos(layer_mm, "layer thickness")?;
-    m.stage.travel_min_mm = 0.0;
-    m.stage.travel_max_mm = TRAVEL_MAX_MM;
-    m.stage.home_mm = 0.0;
-    // The standard's build-platform limit, 800 mm/min; moves the file asks faster than
-    // that are `speed` violations.
-    let _ = speed;
-    m.stage.max_speed_mm_s = pos(BP_MAX_SPEED_MM_S, "speed")?;
-    m.stage.max_accel_mm_s2 = pos(accel.max(m.stage.max_accel_mm_s2.get()), "acceleration")?;
-    m.stage.steps_per_mm = pos(10_000f64.max(1.0 / layer_mm), "steps")?;
-    m.shutter.open_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.shutter.close_s = NonNegative::new(0.0).ok_or("shutter")?;
-    m.dmd.load_s = NonNegative::new(0.0).ok_or("load")?;
-    m.distortion = None;
-    m.blend = None;
-    m.validate()?;
-    Ok(m)
+    let generator = match design("Slicer") {
+        s if s.is_empty() => "SLA control file v5".to_string(),
+        s => format!("SLA control file v5 ({s})"),
+    };
+    let imported = Imported {
+        format: Format::SlaControl,
+        generator,
+        sha256: sha256.into(),
+        machine: Implied {
+            name: "sla-control-import".into(),
+            resin: design("Resin"),
+            projector: "light-engine",
+            size_px: (w_px, h_px),
+            pixel_mm: PIXEL_MM,
+            travel_max_mm: TRAVEL_MAX_MM,
+            // The standard's build-platform limit: a move the file asks faster is a `speed`
+            // violation.
+            max_speed_mm_s: BP_MAX_SPEED_MM_S,
+            max_accel_mm_s2: max_accel.max(MIN_ACCEL_MM_S2),
+            steps_per_mm: 10_000f64.max(1.0 / nominal),
+        },
+        layer_height_mm: nominal,
+        layers,
+        estimate: None,
+    };
+    imported.job(archive, (entry, "the machine it implies"))
 }
 
 #[cfg(test)]
@@ -718,7 +656,8 @@ mod tests {
         let bytes = w.finish().unwrap().into_inner();
         let path = std::path::Path::new("job.zip");
         let archive =
-            crate::archive::read::read_zip_bytes(path, &bytes, &Default::default()).unwrap();
+            crate::formats::archive::read::read_zip_bytes(path, &bytes, &Default::default())
+                .unwrap();
         let entry = settings_entry(&archive).unwrap();
         import(archive, &entry, "0")
     }

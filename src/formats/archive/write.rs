@@ -131,41 +131,12 @@ impl<'a> ZipOut<'a> {
     }
 }
 
-/// Removes the temporary siblings `.NAME.tmp-PID` that killed runs (SIGKILL, a power cut)
-/// left for `dest`: only names of exactly that form whose process no longer runs (Linux:
-/// no `/proc/PID`; elsewhere nothing is removed). Best effort.
+/// Removes the temporary files `.NAME.tmp-PID` that killed runs (SIGKILL, a power cut)
+/// left for `dest` ([`crate::bundle::stale_siblings`]). Best effort.
 fn remove_stale(dest: &Path) {
-    if !cfg!(target_os = "linux") || !Path::new("/proc/self").exists() {
-        return;
-    }
-    let (Some(name), Some(parent)) = (dest.file_name(), dest.parent()) else {
-        return;
-    };
-    let parent = if parent.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        parent
-    };
-    let prefix = format!(".{}.tmp-", name.to_string_lossy());
-    let Ok(entries) = std::fs::read_dir(parent) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let entry = e.file_name();
-        let entry = entry.to_string_lossy();
-        let Some(digits) = entry.strip_prefix(&prefix) else {
-            continue;
-        };
-        let Ok(pid) = digits.parse::<u32>() else {
-            continue;
-        };
-        let runs = Path::new("/proc").join(pid.to_string()).exists();
-        if pid.to_string() == digits
-            && pid != std::process::id()
-            && !runs
-            && e.file_type().is_ok_and(|t| t.is_file())
-        {
-            let _ = std::fs::remove_file(e.path());
+    for (p, old, kind) in crate::bundle::stale_siblings(dest) {
+        if !old && kind.is_file() {
+            let _ = std::fs::remove_file(p);
         }
     }
 }

@@ -8,7 +8,7 @@
 //! about as thick as a cell is wide.
 
 use super::field::{layer_cells, part_crop};
-use super::reader::MaskReader;
+use crate::bundle::BundleSource;
 use crate::bundle::Manifest;
 use crate::error::Result;
 use crate::plot::Canvas;
@@ -134,7 +134,7 @@ impl Voxels {
 }
 
 /// Reads the layers into voxels.
-fn voxels(manifest: &Manifest, masks: &dyn MaskReader) -> Result<Voxels> {
+fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
     let crop = part_crop(manifest);
     let field = manifest.machine.field();
     let p = field.pixel_mm;
@@ -201,7 +201,7 @@ fn voxels(manifest: &Manifest, masks: &dyn MaskReader) -> Result<Voxels> {
 /// shaded, on its build plate. Errors: a mask that cannot be read.
 pub fn preview(
     manifest: &Manifest,
-    masks: &dyn MaskReader,
+    masks: &dyn BundleSource,
     width: u32,
     height: u32,
 ) -> Result<RgbImage> {

@@ -42,6 +42,19 @@ impl Format {
         }
     }
 
+    /// One line on what the format is (`--format`'s help).
+    pub fn about(self) -> &'static str {
+        match self {
+            Format::Dmdjob => "The bundle directory: job.json and masks/*.png",
+            Format::DmdjobZip => "The bundle's files in one zip (job.json first, images stored)",
+            Format::Sl1 => "Prusa SL1 (PrusaSlicer 2.5's zip)",
+            Format::Sl1s => "Prusa SL1S",
+            Format::SlaControl => {
+                "The SLA 3D printer control-file standard, schema v5 (print_settings.json + slices/)"
+            }
+        }
+    }
+
     /// The format named `name` (as [`Format::name`] gives it).
     pub fn parse(name: &str) -> Option<Format> {
         Format::ALL.into_iter().find(|f| f.name() == name)

@@ -93,140 +93,112 @@ pub fn looks_like_zip(bytes: &[u8]) -> bool {
     bytes.starts_with(b"PK\x03\x04") || bytes.starts_with(b"PK\x05\x06")
 }
 
-/// Reads the archive at `path` within `limits`.
-pub fn read_zip(path: &Path, limits: &Limits) -> Result<Archive> {
-    let bytes = crate::input::read_file(path, "archive", limits.max_archive_bytes)?;
-    read_zip_bytes(path, &bytes, limits)
-}
-
 /// Reads the archive whose bytes are `bytes` (`path` names it in messages).
 pub fn read_zip_bytes(path: &Path, bytes: &[u8], limits: &Limits) -> Result<Archive> {
-    let err = |entry: Option<&str>, msg: String| Error::Archive {
+    let mut archive = Archive {
         path: path.into(),
-        entry: entry.map(str::to_string),
-        msg,
+        ..Archive::default()
     };
     let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes))
-        .map_err(|e| err(None, format!("not a readable zip archive: {e}")))?;
+        .map_err(|e| archive.error(None, format!("not a readable zip archive: {e}")))?;
     if zip.len() > limits.max_entries {
-        return Err(err(
-            None,
-            format!(
-                "{} entries, more than the {} this reader accepts",
-                zip.len(),
-                limits.max_entries
-            ),
-        ));
+        let msg = format!(
+            "{} entries, more than the {} this reader accepts",
+            zip.len(),
+            limits.max_entries
+        );
+        return Err(archive.error(None, msg));
     }
     // The zip crate keeps one entry per name: a name listed twice shows in the central
     // directory itself.
     if let Some(dup) = duplicate_name(bytes, zip.len()) {
-        return Err(err(
-            Some(&dup),
-            "the name appears twice in the archive".into(),
-        ));
+        return Err(archive.error(Some(&dup), "the name appears twice in the archive"));
     }
-    // First pass over the central directory: names, kinds and declared sizes, before
-    // anything is inflated.
+    // Inflate each file, never past its declared size.
+    for (i, name, size) in declared(&archive, &mut zip, limits)? {
+        let at = Some(name.as_str());
+        let f = zip
+            .by_index(i)
+            .map_err(|e| archive.error(at, format!("cannot be read: {e}")))?;
+        // Grows as it is read: the declared size is not trusted for the allocation either.
+        let mut data = Vec::with_capacity(size.min(1 << 20) as usize);
+        // Reading to the end (one byte past the declared size at most) also checks the CRC.
+        f.take(size + 1)
+            .read_to_end(&mut data)
+            .map_err(|e| archive.error(at, format!("does not inflate: {e}")))?;
+        if data.len() as u64 != size {
+            let got = match data.len() as u64 > size {
+                true => format!("more than {size}"),
+                false => data.len().to_string(),
+            };
+            let msg = format!("inflates to {got} bytes, its header declares {size}");
+            return Err(archive.error(at, msg));
+        }
+        archive.names.push(name.clone());
+        archive.files.insert(name, data);
+    }
+    Ok(archive)
+}
+
+/// The files of `zip` (`archive` names it in errors) as (index, name, declared size), read
+/// from the central directory and checked (names, kinds, methods, declared sizes within
+/// `limits`) before anything is inflated.
+fn declared(
+    archive: &Archive,
+    zip: &mut zip::ZipArchive<std::io::Cursor<&[u8]>>,
+    limits: &Limits,
+) -> Result<Vec<(usize, String, u64)>> {
     let mut entries = Vec::with_capacity(zip.len());
     let mut seen = HashMap::with_capacity(zip.len());
     let mut total: u64 = 0;
     for i in 0..zip.len() {
         let f = zip
             .by_index_raw(i)
-            .map_err(|e| err(None, format!("entry {i} cannot be read: {e}")))?;
-        let name = match std::str::from_utf8(f.name_raw()) {
-            Ok(n) => n.to_string(),
-            Err(_) => {
-                let shown = String::from_utf8_lossy(f.name_raw()).into_owned();
-                return Err(err(Some(&shown), "name is not UTF-8".into()));
-            }
+            .map_err(|e| archive.error(None, format!("entry {i} cannot be read: {e}")))?;
+        let Ok(name) = std::str::from_utf8(f.name_raw()).map(str::to_string) else {
+            let shown = String::from_utf8_lossy(f.name_raw()).into_owned();
+            return Err(archive.error(Some(&shown), "name is not UTF-8"));
         };
-        let at = Some(name.as_str());
-        let is_dir = name.ends_with('/');
-        check_name(&name).map_err(|m| err(at, m))?;
-        let key = name.trim_end_matches('/').to_string();
-        if let Some(first) = seen.insert(key, i) {
-            return Err(err(
-                at,
-                format!("the name appears twice (entries {first} and {i})"),
-            ));
-        }
-        if f.encrypted() {
-            return Err(err(at, "entry is encrypted".into()));
-        }
-        if f.is_symlink() {
-            return Err(err(at, "entry is a symbolic link".into()));
+        let bad = |msg: String| archive.error(Some(&name), msg);
+        check_name(&name).map_err(bad)?;
+        if let Some(first) = seen.insert(name.trim_end_matches('/').to_string(), i) {
+            return Err(bad(format!(
+                "the name appears twice (entries {first} and {i})"
+            )));
         }
         let method = f.compression();
-        if !matches!(
+        let size = f.size();
+        total = total.saturating_add(size);
+        let problem = if f.encrypted() {
+            "entry is encrypted".into()
+        } else if f.is_symlink() {
+            "entry is a symbolic link".into()
+        } else if !matches!(
             method,
             zip::CompressionMethod::Stored | zip::CompressionMethod::Deflated
         ) {
-            return Err(err(
-                at,
-                format!("compression method {method} is not supported (stored or deflated only)"),
-            ));
+            format!("compression method {method} is not supported (stored or deflated only)")
+        } else if size > limits.max_entry_bytes {
+            format!(
+                "declared size {size} bytes is above the {} bytes an entry may hold",
+                limits.max_entry_bytes
+            )
+        } else if total > limits.max_total_bytes {
+            format!(
+                "the entries so far declare {total} bytes, above the {} bytes an archive may hold",
+                limits.max_total_bytes
+            )
+        } else {
+            String::new()
+        };
+        if !problem.is_empty() {
+            return Err(bad(problem));
         }
-        let size = f.size();
-        if size > limits.max_entry_bytes {
-            return Err(err(
-                at,
-                format!(
-                    "declared size {size} bytes is above the {} bytes an entry may hold",
-                    limits.max_entry_bytes
-                ),
-            ));
-        }
-        total = total.saturating_add(size);
-        if total > limits.max_total_bytes {
-            return Err(err(
-                at,
-                format!(
-                    "the entries so far declare {total} bytes, above the {} bytes an archive may hold",
-                    limits.max_total_bytes
-                ),
-            ));
-        }
-        if !is_dir {
+        if !name.ends_with('/') {
             entries.push((i, name, size));
         }
     }
-    // Second pass: inflate each file, never past its declared size.
-    let mut names = Vec::with_capacity(entries.len());
-    let mut files = HashMap::with_capacity(entries.len());
-    for (i, name, size) in entries {
-        let at = Some(name.as_str());
-        let f = zip
-            .by_index(i)
-            .map_err(|e| err(at, format!("cannot be read: {e}")))?;
-        // Grows as it is read: the declared size is not trusted for the allocation either.
-        let mut data = Vec::with_capacity(size.min(1 << 20) as usize);
-        // Reading to the end (one byte past the declared size at most) also checks the CRC.
-        f.take(size + 1)
-            .read_to_end(&mut data)
-            .map_err(|e| err(at, format!("does not inflate: {e}")))?;
-        if data.len() as u64 != size {
-            return Err(err(
-                at,
-                format!(
-                    "inflates to {} bytes, its header declares {size}",
-                    if data.len() as u64 > size {
-                        format!("more than {size}")
-                    } else {
-                        data.len().to_string()
-                    }
-                ),
-            ));
-        }
-        names.push(name.clone());
-        files.insert(name, data);
-    }
-    Ok(Archive {
-        path: path.into(),
-        names,
-        files,
-    })
+    Ok(entries)
 }
 
 /// A name the central directory of the zip `bytes` lists twice, when it lists more

@@ -2,7 +2,7 @@
 //! offset with its mirroring undone (overlaps add up), cut to the part's footprint and
 //! averaged over cells. The contact sheet's thumbnails and the preview's voxels are made so.
 
-use super::reader::MaskReader;
+use crate::bundle::BundleSource;
 use crate::bundle::Manifest;
 use crate::error::{Error, Result};
 
@@ -103,7 +103,7 @@ pub struct Cells {
 pub fn layer_cells(
     manifest: &Manifest,
     layer: usize,
-    masks: &dyn MaskReader,
+    masks: &dyn BundleSource,
     crop: Crop,
     width: u32,
     height: u32,
@@ -138,7 +138,7 @@ pub fn layer_cells(
                 ),
             });
         };
-        let img = masks.read_mask(&m.file)?;
+        let img = super::read_mask(masks, &m.file)?;
         if img.dimensions() != (p.width_px, p.height_px) {
             return Err(Error::Bundle {
                 path: masks.shown(&m.file),

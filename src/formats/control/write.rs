@@ -1,62 +1,27 @@
-//! The open SLA 3D printer control-file standard, schema v5 (public repository
-//! `3D-Printing-for-Microfluidics/3D_printer_json_print_file`; the schema is vendored as
-//! `fixtures/sla_control/schema_v5.json`): a zip of `print_settings.json` and the images
-//! under `slices/`.
-//!
-//! The mapping (docs/FORMATS.md has it in full):
+//! Writing a job as a control-file zip (docs/FORMATS.md has the mapping in full):
 //! - one `Layers` entry per run of identical consecutive layers ("Number of duplications":
 //!   same images, exposures, thickness and position settings); only the images an entry
 //!   names are in the zip;
-//! - "Position settings" from the layer's planned steps, which take the stage from where
-//!   the layer below left it to this layer's exposure: waits before the first move →
-//!   "Initial wait (ms)", the move away → "Distance up (mm)" (from the previous position),
-//!   "BP up speed/acceleration", waits between → "Up wait (ms)", the move back onto the
-//!   layer (up − thickness, as the standard's printer does it) → "BP down
-//!   speed/acceleration", waits after → "Final wait (ms)"; "Layer thickness (um)";
+//! - "Position settings" from the layer's planned steps ([`position`]), "Layer thickness
+//!   (um)" the layer's;
 //! - "Image settings list": one image per projector (its mask; with several projectors,
 //!   "Light engine" names it and "Image x/y offset (um)" place it), each exposed for the
 //!   layer's exposure; an exposure over the schema's 10 000 ms is split into equal
 //!   exposures of the same image.
 
-use crate::archive::write::{Method, ZipOut};
-use crate::bundle::BundleSource;
-use crate::bundle::{Layer, Manifest, Step};
+use super::WAVELENGTH_NM;
+use super::{n, Position, EXPOSURE_MAX_MS, IMAGES, POWER_SETTING, SCHEMA_VERSION, SETTINGS};
+use crate::bundle::{BundleSource, Layer, Manifest, Step};
 use crate::error::Result;
-use crate::warning::{plural, Warning};
+use crate::formats::archive::write::{Method, ZipOut};
 use serde_json::{json, Map, Value};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-/// The schema version written in the header.
-pub const SCHEMA_VERSION: &str = "5.0.0";
-/// The settings file's name in the zip.
-pub const SETTINGS: &str = "print_settings.json";
-/// The image directory in the zip.
-pub const IMAGES: &str = "slices";
-/// The longest exposure of one image the schema allows, ms.
-const EXPOSURE_MAX_MS: i64 = 10_000;
-/// The schema's defaults for what a dmdsl profile does not say.
-const POWER_SETTING: i64 = 100;
-const WAVELENGTH_NM: i64 = 365;
-
-/// A number as JSON: a whole number without a fraction.
-fn n(v: f64) -> Value {
-    let v = crate::round::derived(v);
-    if v.fract() == 0.0 && v.abs() < 1e15 {
-        json!(v as i64)
-    } else {
-        json!(v)
-    }
-}
-
-/// Milliseconds of `s` seconds (manifest times are whole milliseconds).
-fn ms(s: f64) -> f64 {
-    (s * 1000.0).round()
-}
-
-/// The "Position settings" of one layer and whether its steps fit the standard's
-/// sequence exactly.
-fn position(layer: &Layer, from_mm: f64, max_speed: f64, max_accel: f64) -> (Value, bool) {
+/// The "Position settings" of one layer whose steps start at `from_mm`, and whether its
+/// steps fit the standard's sequence exactly (otherwise the nearest such sequence, moving
+/// at most at the stage's `(speed, acceleration)` limits).
+pub(super) fn position(layer: &Layer, from_mm: f64, limits: (f64, f64)) -> (Position, bool) {
     let mut initial = 0.0;
     let mut up_wait = 0.0;
     let mut final_wait = 0.0;
@@ -101,24 +66,24 @@ fn position(layer: &Layer, from_mm: f64, max_speed: f64, max_accel: f64) -> (Val
     if (at - (from_mm + thickness)).abs() > 1e-6 || up.is_none() || down.is_none() || !exposed {
         fits = false;
     }
-    let (up_mm, up_speed, up_accel) = up.unwrap_or((thickness, max_speed, max_accel));
+    let (up_mm, up_speed, up_accel) = up.unwrap_or((thickness, limits.0, limits.1));
     let (down_speed, down_accel) = down.unwrap_or((up_speed, up_accel));
-    let v = json!({
-        "Layer thickness (um)": n(thickness * 1000.0),
-        "Distance up (mm)": n(up_mm.max(thickness)),
-        "Initial wait (ms)": n(ms(initial)),
-        "BP up speed (mm/sec)": n(up_speed),
-        "BP up acceleration (mm/sec^2)": n(up_accel),
-        "Up wait (ms)": n(ms(up_wait)),
-        "BP down speed (mm/sec)": n(down_speed),
-        "BP down acceleration (mm/sec^2)": n(down_accel),
-        "Final wait (ms)": n(ms(final_wait)),
-    });
-    (v, fits)
+    let p = Position {
+        thickness_mm: thickness,
+        up_mm: up_mm.max(thickness),
+        initial_s: initial,
+        up_speed,
+        up_accel,
+        up_wait_s: up_wait,
+        down_speed,
+        down_accel,
+        final_s: final_wait,
+    };
+    (p, fits)
 }
 
 /// The light time of a layer, ms: its exposure, or the time its sweeps show the mask.
-fn light_ms(layer: &Layer, from_mm: f64) -> i64 {
+pub(super) fn light_ms(layer: &Layer, from_mm: f64) -> i64 {
     let mut at = from_mm;
     let mut swept = 0.0;
     for s in &layer.steps {
@@ -132,12 +97,12 @@ fn light_ms(layer: &Layer, from_mm: f64) -> i64 {
         }
     }
     let s = if swept > 0.0 { swept } else { layer.exposure_s };
-    ms(s) as i64
+    (s * 1000.0).round() as i64
 }
 
 /// `total` ms as the fewest equal exposures of at most [`EXPOSURE_MAX_MS`] (whole ms, the
 /// remainder on the first ones).
-fn split(total: i64) -> Vec<i64> {
+pub(super) fn split(total: i64) -> Vec<i64> {
     let k = ((total + EXPOSURE_MAX_MS - 1) / EXPOSURE_MAX_MS).max(1);
     (0..k)
         .map(|i| total / k + i64::from(i < total % k))
@@ -149,34 +114,22 @@ fn image_name(mask: &str) -> &str {
     mask.strip_prefix("masks/").unwrap_or(mask)
 }
 
-/// Writes the job as a control-file zip at `out`; returns what it lost or assumed.
-pub(super) fn write(
-    m: &Manifest,
-    files: &dyn BundleSource,
-    out: &Path,
-    cancel: Option<&AtomicBool>,
-) -> Result<Vec<Warning>> {
+/// A layer's entry before runs of equal layers are merged: the key they are compared by,
+/// the entry and the images it needs.
+type Entry<'a> = (String, Map<String, Value>, Vec<&'a str>);
+
+/// One entry per layer of `m`.
+fn entries(m: &Manifest) -> Vec<Entry<'_>> {
     let machine = &m.machine;
     let several = machine.projector.len() > 1;
-    let (max_speed, max_accel) = (
-        machine.stage.max_speed_mm_s.get(),
-        machine.stage.max_accel_mm_s2.get(),
-    );
-    let mut at = machine.stage.home_mm;
-    let mut misfits = Vec::new();
-    let mut splits = 0u64;
-    // One entry per layer first: (key for duplicates, entry, images it needs).
-    let mut entries: Vec<(String, Map<String, Value>, Vec<&str>)> = Vec::new();
+    let stage = &machine.stage;
+    let limits = (stage.max_speed_mm_s.get(), stage.max_accel_mm_s2.get());
+    let mut at = stage.home_mm;
+    let mut entries = Vec::with_capacity(m.layers.len());
     for l in &m.layers {
-        let (pos, fits) = position(l, at, max_speed, max_accel);
-        if !fits {
-            misfits.push(l.index);
-        }
+        let pos = position(l, at, limits).0.to_json();
         at = l.z_mm;
         let parts = split(light_ms(l, at));
-        if parts.len() > 1 {
-            splits += 1;
-        }
         let mut images = Vec::new();
         let mut list = Vec::new();
         let mut key = format!("{pos}");
@@ -204,6 +157,17 @@ pub(super) fn write(
         e.insert("Image settings list".into(), Value::Array(list));
         entries.push((key, e, images));
     }
+    entries
+}
+
+/// Writes the job `m` (at least one layer) as a control-file zip at `out`.
+pub(crate) fn write(
+    m: &Manifest,
+    files: &dyn BundleSource,
+    out: &Path,
+    cancel: Option<&AtomicBool>,
+) -> Result<()> {
+    let entries = entries(m);
     // The defaults: the last run of layers' settings (its image is one the zip holds).
     let last_run = entries
         .iter()
@@ -211,11 +175,11 @@ pub(super) fn write(
         .map_or(0, |i| i + 1);
     let last = &entries[last_run].1;
     let default_pos = last["Position settings"].clone();
-    let first_image = last["Image settings list"][0].clone();
+    let first_image = &last["Image settings list"][0];
     let default_image = json!({
         "Image file": first_image["Image file"],
         "Layer exposure time (ms)": first_image["Layer exposure time (ms)"],
-        "Light engine": machine.projector[0].name,
+        "Light engine": m.machine.projector[0].name,
         "Light engine power setting": POWER_SETTING,
         "Light engine wavelength (nm)": WAVELENGTH_NM,
         "Relative focus position (um)": 0,
@@ -225,23 +189,17 @@ pub(super) fn write(
     // Runs of identical layers become one entry.
     let mut layers: Vec<Value> = Vec::new();
     let mut needed: Vec<&str> = Vec::new();
-    let mut i = 0;
-    while i < entries.len() {
-        let mut j = i + 1;
-        while j < entries.len() && entries[j].0 == entries[i].0 {
-            j += 1;
-        }
-        let (_, e, images) = &entries[i];
+    for run in entries.chunk_by(|a, b| a.0 == b.0) {
+        let (_, e, images) = &run[0];
         let mut e = e.clone();
         if e["Position settings"] == default_pos {
             e.remove("Position settings");
         }
-        if j - i > 1 {
-            e.insert("Number of duplications".into(), json!(j - i));
+        if run.len() > 1 {
+            e.insert("Number of duplications".into(), json!(run.len()));
         }
         layers.push(Value::Object(e));
         needed.extend(images.iter().copied());
-        i = j;
     }
     let settings = json!({
         "Header": {
@@ -251,8 +209,8 @@ pub(super) fn write(
         },
         "Design": {
             "STL file": m.source.file,
-            "Resin": machine.resin.name,
-            "3D printer": machine.name,
+            "Resin": m.machine.resin.name,
+            "3D printer": m.machine.name,
             "Slicer": format!("dmdsl {}", env!("CARGO_PKG_VERSION")),
         },
         "Default layer settings": {
@@ -262,42 +220,6 @@ pub(super) fn write(
         },
         "Layers": layers,
     });
-    let mut warnings = vec![Warning::new(
-        "export.control-assumed",
-        format!(
-            "the profile gives no light engine power setting or wavelength: the control file has the schema's defaults ({POWER_SETTING}, {WAVELENGTH_NM} nm)"
-        ),
-    )
-    .with("power_setting", POWER_SETTING)
-    .with("wavelength_nm", WAVELENGTH_NM)];
-    if let Some(&first) = misfits.first() {
-        let k = misfits.len() as u64;
-        warnings.push(
-            Warning::new(
-                "export.control-steps",
-                format!(
-                    "{k} {} steps the control file's move-away, move-back sequence cannot say (first: layer {first}); {} the nearest such sequence",
-                    plural(k, "layer has", "layers have"),
-                    plural(k, "it gets", "they get")
-                ),
-            )
-            .with("layers", k)
-            .with("first_layer", first),
-        );
-    }
-    if splits > 0 {
-        warnings.push(
-            Warning::new(
-                "export.control-split-exposure",
-                format!(
-                    "{splits} {} exposed longer than the schema's {EXPOSURE_MAX_MS} ms per image: each is exposed as several equal exposures of its image",
-                    plural(splits, "layer is", "layers are")
-                ),
-            )
-            .with("layers", splits)
-            .with("max_ms", EXPOSURE_MAX_MS),
-        );
-    }
     let mut text = serde_json::to_vec_pretty(&settings).expect("settings serialize");
     text.push(b'\n');
     let mut zip = ZipOut::create(out, cancel)?;
@@ -310,7 +232,7 @@ pub(super) fn write(
         }
     }
     zip.finish()?;
-    Ok(warnings)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -335,7 +257,7 @@ mod tests {
     fn a_dip_and_return_is_a_move_away_and_back() {
         // From 0.5 mm: dip to 6 mm at 2 mm/s, back to 1 mm at 1 mm/s, wait 10 s, expose.
         let mut l = crate::exec::testutil::two_layer_topdown().layers[1].clone();
-        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
+        let (pos, fits) = position(&l, 0.5, (10.0, 50.0));
         assert!(fits, "{l:?}");
         let want = json!({
             "Layer thickness (um)": 500, "Distance up (mm)": 5.5, "Initial wait (ms)": 0,
@@ -343,16 +265,16 @@ mod tests {
             "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 50,
             "Final wait (ms)": 10000
         });
-        assert_eq!(pos, want);
+        assert_eq!(pos.to_json(), want);
         // A layer that does not come back onto its thickness, or sweeps, does not fit.
-        assert!(!position(&l, 0.4, 10.0, 50.0).1);
+        assert!(!position(&l, 0.4, (10.0, 50.0)).1);
         l.steps = vec![Step::Sweep {
             to_mm: 1.0,
             speed_mm_s: 0.1,
         }];
-        let (pos, fits) = position(&l, 0.5, 10.0, 50.0);
+        let (pos, fits) = position(&l, 0.5, (10.0, 50.0));
         assert!(!fits);
-        assert!(pos["Distance up (mm)"].as_f64().unwrap() > 0.0);
+        assert!(pos.up_mm > 0.0);
         assert_eq!(light_ms(&l, 0.5), 5000);
     }
 }

@@ -1,13 +1,10 @@
 //! The preview pictures an SL1 carries (`thumbnail/thumbnail400x400.png`,
 //! `thumbnail/thumbnail800x480.png`): the shaded picture of the part its masks build
-//! ([`crate::inspect::preview()`]), as RGBA PNGs like PrusaSlicer's.
+//! ([`crate::picture::preview()`]), as RGBA PNGs like PrusaSlicer's.
 
-use crate::bundle::BundleSource;
-use crate::bundle::Manifest;
+use crate::bundle::{BundleSource, Manifest};
 use crate::error::Result;
-use crate::inspect::reader::{decode_mask, MaskReader};
-use image::{GrayImage, ImageEncoder, RgbImage};
-use std::path::PathBuf;
+use image::{ImageEncoder, RgbImage};
 
 /// The sizes PrusaSlicer writes for the SL1, px.
 pub(super) const SIZES: [(u32, u32); 2] = [(400, 400), (800, 480)];
@@ -19,8 +16,7 @@ const SLABS: usize = 48;
 /// `m` with its layers merged into at most [`SLABS`] slabs of consecutive layers: each the
 /// record of its middle layer, spanning the slab's height, with the slab's bounding box.
 fn slabs(m: &Manifest) -> Manifest {
-    let n = m.layers.len();
-    let k = n.div_ceil(SLABS).max(1);
+    let k = m.layers.len().div_ceil(SLABS).max(1);
     let layers = m
         .layers
         .chunks(k)
@@ -39,8 +35,11 @@ fn slabs(m: &Manifest) -> Manifest {
         })
         .collect();
     Manifest {
-        cure: None,
         layers,
+        cure: None,
+        warnings: Vec::new(),
+        optics: None,
+        projector_optics: Vec::new(),
         format: m.format.clone(),
         version: m.version,
         generator: m.generator.clone(),
@@ -48,22 +47,6 @@ fn slabs(m: &Manifest) -> Manifest {
         settings: m.settings.clone(),
         machine: m.machine.clone(),
         totals: m.totals.clone(),
-        warnings: Vec::new(),
-        optics: None,
-        projector_optics: Vec::new(),
-    }
-}
-
-/// The masks of a job, decoded from its files.
-struct Masks<'a>(&'a dyn BundleSource);
-
-impl MaskReader for Masks<'_> {
-    fn read_mask(&self, rel: &str) -> Result<GrayImage> {
-        decode_mask(&self.0.file(rel)?, &self.0.shown(rel))
-    }
-
-    fn shown(&self, rel: &str) -> PathBuf {
-        self.0.shown(rel)
     }
 }
 
@@ -74,10 +57,9 @@ pub(super) fn thumbnails(
     manifest: &Manifest,
     files: &dyn BundleSource,
 ) -> Result<Vec<(String, Vec<u8>)>> {
-    let masks = Masks(files);
     let thin = slabs(manifest);
     let (w, h) = SIZES[1];
-    let wide = crate::inspect::preview(&thin, &masks, w, h)?;
+    let wide = crate::picture::preview(&thin, files, w, h)?;
     let background = *wide.get_pixel(0, 0);
     let side = w.max(h);
     let mut square = RgbImage::from_pixel(side, side, background);
