@@ -62,9 +62,7 @@ mod tests {
 
     #[test]
     fn regular_files_only_and_within_the_bound() {
-        let dir = std::env::temp_dir().join(format!("dmdsl-input-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::test_support::scratch("input", "files");
         let f = dir.join("a.txt");
         std::fs::write(&f, "hello").unwrap();
         assert_eq!(read_file(&f, "table", 5).unwrap(), b"hello");

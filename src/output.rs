@@ -38,9 +38,7 @@ mod tests {
 
     #[test]
     fn writes_whole_files_and_leaves_nothing_on_failure() {
-        let dir = std::env::temp_dir().join(format!("dmdsl-output-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::test_support::scratch("output", "atomic");
         let p = dir.join("a.png");
         write_atomic(&p, b"one").unwrap();
         write_atomic(&p, b"two").unwrap();
@@ -48,12 +46,7 @@ mod tests {
         // A destination that cannot be replaced (a non-empty directory).
         std::fs::create_dir_all(dir.join("d.png/x")).unwrap();
         assert!(write_atomic(&dir.join("d.png"), b"x").is_err());
-        let mut names: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().into_string().unwrap())
-            .collect();
-        names.sort();
-        assert_eq!(names, ["a.png", "d.png"]);
+        assert_eq!(crate::test_support::names(&dir), ["a.png", "d.png"]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -1,23 +1,10 @@
 //! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
 //! deflate block whose back-references are runs (distance 1) and copies of one of the
-//! eight rows above.
+//! eight rows above (zone-compensated masks repeat rows, [`zlib_rows`]); the work grows with
+//! the number of runs, not of pixels (docs/ARCHITECTURE.md, `png`).
 //!
-//! Masks are mostly long runs of 0 and 255 with a thin band of anti-aliased edge values,
-//! so run-length coding gets most of the compression at a fraction of a general encoder's
-//! cost: runs are found eight bytes at a time and the zlib Adler-32 of a run is computed
-//! in closed form, so the work grows with the number of runs, not the number of pixels.
-//! Zone-compensated masks cross a zone boundary every 5 mm, so each row holds a run per
-//! zone, and the rows of a zone row repeat with a short period (mixing zones alternate
-//! two grays over the rows). A row of four or more runs equal to one of the eight rows
-//! above is therefore coded as a copy of it (rows compared by a signature, then their
-//! bytes), which makes zone-compensated masks much smaller than runs alone. After a
-//! copied row the next is compared with the rows above before it is scanned, and a copy
-//! adds its bytes to the Adler-32 from the source row's sums, so a repeating row costs
-//! less than scanning it; masks whose rows never repeat pay for the signature of each row.
-//! The output is a standard PNG that any decoder reads (tests decode it with `image`).
-//!
-//! Invariants: the bytes are deterministic and independent of the lit box the caller gives;
-//! a test pins the stream to an obvious bit-by-bit encoder of the same rule.
+//! Invariants: a standard PNG; the bytes are deterministic and independent of the lit box
+//! the caller gives; a test pins the stream to an obvious bit-by-bit encoder of the same rule.
 
 use std::ops::Range;
 
@@ -39,21 +26,18 @@ pub struct PixelBox {
 
 impl PixelBox {
     /// The box of no pixel.
-    pub const EMPTY: PixelBox = PixelBox {
-        r0: 0,
-        r1: 0,
-        c0: 0,
-        c1: 0,
-    };
+    pub const EMPTY: PixelBox = PixelBox::new(0, 0, 0, 0);
+    /// Every pixel of any image, for passes that clip the box to the image.
+    pub const ALL: PixelBox = PixelBox::new(0, usize::MAX, 0, usize::MAX);
+
+    /// Rows `r0..r1`, columns `c0..c1`.
+    pub const fn new(r0: usize, r1: usize, c0: usize, c1: usize) -> PixelBox {
+        PixelBox { r0, r1, c0, c1 }
+    }
 
     /// Every pixel of a `width × height` image.
     pub fn whole(width: usize, height: usize) -> PixelBox {
-        PixelBox {
-            r0: 0,
-            r1: height,
-            c0: 0,
-            c1: width,
-        }
+        PixelBox::new(0, height, 0, width)
     }
 
     /// The rows `r0..r1`.
@@ -69,12 +53,7 @@ impl PixelBox {
 
 /// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
 pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
-    encode_gray8_in(
-        width,
-        height,
-        data,
-        PixelBox::whole(width as usize, height as usize),
-    )
+    encode_gray8_in(width, height, data, PixelBox::ALL)
 }
 
 /// Like [`encode_gray8`] for a mask known to be zero outside `lit_box`: only the box is
@@ -88,12 +67,7 @@ pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) 
 /// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
 /// image in one piece (the same bytes).
 pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
-    encode_rows(
-        width,
-        height,
-        row,
-        PixelBox::whole(width as usize, height as usize),
-    )
+    encode_rows(width, height, row, PixelBox::ALL)
 }
 
 #[inline(always)]
@@ -142,6 +116,12 @@ struct Adler {
 }
 
 impl Adler {
+    /// The state before any byte.
+    const NEW: Adler = Adler {
+        a: 1,
+        b: 0,
+        pending: 0,
+    };
     /// Bytes between reductions modulo 65521: with a, b reduced below 2¹⁶ and at most
     /// `REDUCE + BIG` bytes since, a < 2³² and b < 2⁵⁵, so nothing overflows.
     const REDUCE: u32 = 1 << 22;
@@ -174,6 +154,14 @@ impl Adler {
         } % ADLER_MOD;
         self.b = (self.b + k_m * self.a + v * tri) % ADLER_MOD;
         self.a = (self.a + k_m * v) % ADLER_MOD;
+    }
+
+    /// Adds the bytes of a scanline from its [`AdlerDelta`].
+    fn add(&mut self, d: AdlerDelta) {
+        let (a, b) = (self.a % ADLER_MOD, self.b % ADLER_MOD);
+        self.a = (a + d.s1) % ADLER_MOD;
+        self.b = (b + d.len % ADLER_MOD * a + d.s2) % ADLER_MOD;
+        self.pending = 0;
     }
 }
 
@@ -209,15 +197,6 @@ impl AdlerDelta {
     }
 }
 
-impl Adler {
-    /// Adds the bytes of a scanline from its [`AdlerDelta`].
-    fn add(&mut self, d: AdlerDelta) {
-        let (a, b) = (self.a % ADLER_MOD, self.b % ADLER_MOD);
-        self.a = (a + d.s1) % ADLER_MOD;
-        self.b = (b + d.len % ADLER_MOD * a + d.s2) % ADLER_MOD;
-        self.pending = 0;
-    }
-}
 
 /// The deflate bit stream being written.
 struct Bits {
@@ -362,10 +341,9 @@ fn long_repeat(bits: &mut Bits, mut k: usize) {
     bits.repeat(k);
 }
 
-/// Length of the run of byte `v` starting at `s[0]`: compares eight bytes per step and
-/// finds the first different byte from the lowest set bit of the XOR. A plain loop (no
-/// unrolling, no bounds checks) keeps each step short and light on registers, which
-/// matters here, where the typical run is a few words long.
+/// Length of the run of byte `v` starting at `s[0]`: eight bytes per step, the first
+/// different byte from the lowest set bit of the XOR (a plain loop: the typical run is a
+/// few words long).
 #[inline(always)]
 fn run_len(s: &[u8], v: u8) -> usize {
     let pat = u64::from_ne_bytes([v; 8]);
@@ -415,26 +393,21 @@ impl Runs {
 }
 
 /// Rows with at least this many runs (of the scanline with its filter byte, equal
-/// neighbours merged) that equal one of the [`COPY_ROWS`] rows above are coded as a copy
-/// of the nearest such row. A copy costs 22 to 25 bits per 258 bytes (length 258 and a
-/// distance of one to eight rows), 88 to 100 bits for a 1024-pixel row; a run costs about
-/// 20 to 45 bits, so a row of four or more runs is cheaper copied (zone-compensated
-/// masks: a run per zone the row crosses), a row of zeros (52 bits) or of one lit run is
-/// not.
+/// neighbours merged) equal to one of the [`COPY_ROWS`] rows above are coded as a copy of
+/// the nearest one. A copy of a 1024-pixel row costs 88 to 100 bits, a run 20 to 45: a row
+/// of four or more runs is cheaper copied, a row of zeros (52 bits) or one lit run is not.
 const COPY_MIN_RUNS: usize = 4;
 
-/// How many rows above a row may be its copy's source. Zone-compensated masks repeat
-/// rows with a period of 1, 2, 4, … rows (mixing zones alternate two grays by an ordered
-/// dither over the rows: [`crate::optics::compensate`]). On `box` in zone mode 19 % of
-/// the lit rows equal the row above, 70 % one of the 2 rows above, 91 % of 4, 95 % of 8,
-/// and no more of 16.
+/// How many rows above a row may be its copy's source. Zone-compensated masks repeat rows
+/// with a period of 1, 2, 4, … (mixing zones' ordered dither, [`crate::optics::compensate`]):
+/// on `box` in zone mode 19 % of the lit rows equal the row above, 70 % one of the 2 above,
+/// 91 % of 4, 95 % of 8, and no more of 16.
 const COPY_ROWS: usize = 8;
 
-/// What rows are compared by before their bytes: the number of runs (equal neighbours
-/// merged, filter byte included) and where the lit part begins and ends (from the filter
-/// byte), 16 bits each (rows are copied only when `w + 1 ≤ 32768`); 0 for a row of zeros
-/// (one run, never copied). Equal rows have equal signatures, whatever box they were
-/// scanned in.
+/// What rows are compared by before their bytes: the number of runs and where the lit
+/// part begins and ends (from the filter byte), 16 bits each (rows are copied only when
+/// `w + 1 ≤ 32768`); 0 for a row of zeros. Equal rows have equal signatures, whatever box
+/// they were scanned in.
 #[inline(always)]
 fn signature(runs: usize, first: usize, end: usize) -> u64 {
     (runs as u64) << 32 | (first as u64) << 16 | end as u64
@@ -487,8 +460,6 @@ fn emit_copy(bits: &mut Bits, mut k: usize, dist: (u32, u32)) {
 /// [`signature`] when it has at least [`COPY_MIN_RUNS`] runs.
 #[inline(always)]
 fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Option<u64> {
-    // Zeros left of the box, the box, zeros right of it: runs merge exactly as if the
-    // whole row had been scanned, so the stream does not depend on the box.
     runs.push(0, 1 + c0);
     // The box's runs, and the value and length of its last one.
     let (mut inbox, mut lv, mut lk) = (0usize, 0u8, 0usize);
@@ -521,12 +492,10 @@ fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Opti
 /// across row ends), except that a row with at least [`COPY_MIN_RUNS`] runs equal to one
 /// of the [`COPY_ROWS`] rows above is a copy of the nearest such row.
 ///
-/// A row is coded as runs while it is scanned, with its [`signature`]. When the signature
-/// is that of one of the rows above and the bytes (in the box) are equal, the row's codes
-/// are taken back (the stream is cut back to where the row began) and the copy written
-/// instead. After a copy the next row is first compared with the rows above as it is
-/// (rows repeat in stretches), and copied without a scan when one is equal. A copy adds
-/// its bytes to the Adler-32 from its source row's [`AdlerDelta`].
+/// A row is coded as runs while it is scanned; when its [`signature`] and bytes equal a
+/// row above, its codes are taken back and the copy written instead. After a copy the
+/// next row is first compared with the rows above as it is (rows repeat in stretches). A
+/// copy adds its bytes to the Adler-32 from its source row's [`AdlerDelta`].
 #[inline(always)]
 fn zlib_rows<'a>(
     w: usize,
@@ -548,11 +517,7 @@ fn zlib_rows<'a>(
     bits.put(1, 2); // BTYPE = 01, fixed Huffman
     let mut runs = Runs {
         bits,
-        adler: Adler {
-            a: 1,
-            b: 0,
-            pending: 0,
-        },
+        adler: Adler::NEW,
         v: 0,
         k: 0,
     };
@@ -562,8 +527,7 @@ fn zlib_rows<'a>(
     let mut delta: [Option<AdlerDelta>; COPY_ROWS] = [None; COPY_ROWS];
     let max_back = COPY_ROWS.min(MAX_DISTANCE / (w + 1));
     // Whether the last row was a copy: then this row is first compared with the rows
-    // above of four or more runs as it is, and copied without a scan when one is equal
-    // (the same row the scan would find: the nearest equal one).
+    // above as it is (the scan would find the same row: the nearest equal one).
     let mut copied = false;
     for r in 0..h {
         let slot = r % COPY_ROWS;
@@ -655,57 +619,6 @@ mod tests {
         *state ^= *state >> 7;
         *state ^= *state << 17;
         *state
-    }
-
-    #[test]
-    fn round_trips_through_a_standard_decoder() {
-        let mut seed = 0x1234_5678_9abc_def0u64;
-        for (w, h) in [
-            (1, 1),
-            (3, 2),
-            (7, 5),
-            (1024, 768),
-            (1000, 13),
-            (259, 3),
-            (517, 2),
-        ] {
-            for pattern in 0..5 {
-                let mut d = vec![0u8; w * h];
-                match pattern {
-                    0 => {}
-                    1 => d.fill(255),
-                    2 => d.iter_mut().for_each(|v| *v = xorshift(&mut seed) as u8),
-                    3 => {
-                        // blobs with anti-aliased edges
-                        for (i, v) in d.iter_mut().enumerate() {
-                            let (x, y) = ((i % w) as f64, (i / w) as f64);
-                            let r = ((x - w as f64 / 2.0).powi(2) + (y - h as f64 / 2.0).powi(2))
-                                .sqrt();
-                            let c = (w.min(h) as f64 / 3.0 - r + 0.5).clamp(0.0, 1.0);
-                            *v = (c * 255.0).round() as u8;
-                        }
-                    }
-                    _ => {
-                        // random runs of random lengths, crossing rows
-                        let mut i = 0;
-                        while i < d.len() {
-                            let k = (xorshift(&mut seed) % 600) as usize + 1;
-                            let v = [0u8, 255, 7, 128][(xorshift(&mut seed) % 4) as usize];
-                            for x in d.iter_mut().skip(i).take(k) {
-                                *x = v;
-                            }
-                            i += k;
-                        }
-                    }
-                }
-                let png = encode_gray8(w as u32, h as u32, &d);
-                let by_rows = encode_gray8_rows(w as u32, h as u32, |r| &d[r * w..(r + 1) * w]);
-                assert!(by_rows == png, "{w}x{h} pattern {pattern}: by rows");
-                let (dw, dh, back) = decode(&png);
-                assert_eq!((dw, dh), (w as u32, h as u32));
-                assert!(back == d, "{w}x{h} pattern {pattern}");
-            }
-        }
     }
 
     /// The same stream written the slow, obvious way: raw scanlines, runs found byte by
@@ -809,45 +722,80 @@ mod tests {
         out
     }
 
-    #[test]
-    fn bytes_match_the_obvious_encoder() {
-        // Pins the exact stream (not just what a decoder reads back): masks are hashed
-        // into job.json, so a change of bytes is a change of output.
-        let mut seed = 0x0bad_5eed_1234_5678u64;
-        for (w, h) in [(1, 1), (9, 4), (300, 7), (1024, 40), (700, 600)] {
-            for pattern in 0..6 {
-                if pattern >= 4 {
-                    let d = repeated_rows(w, h, pattern == 5, &mut seed);
-                    let want = reference_png(w, h, &d);
-                    assert!(
-                        encode_gray8(w as u32, h as u32, &d) == want,
-                        "{w}x{h} {pattern}"
-                    );
-                    continue;
+    /// Test image `k` of `w × h`: 0 zeros, 1 full, 2 random bytes, 3 a disc with
+    /// anti-aliased edges, 4 runs (up to 600 long) of four values, 5 one value, 6 runs of
+    /// three values (some up to 3000 long), 7 and 8 runs of random bytes (some up to 300
+    /// long), 9 and 10 rows repeating rows above ([`repeated_rows`]). Runs cross rows.
+    fn image(w: usize, h: usize, k: usize, seed: &mut u64) -> Vec<u8> {
+        let mut d = vec![0u8; w * h];
+        let (mut i, n) = (0, d.len());
+        match k {
+            0 => {}
+            1 => d.fill(255),
+            2 => d.iter_mut().for_each(|v| *v = xorshift(seed) as u8),
+            3 => {
+                for (i, v) in d.iter_mut().enumerate() {
+                    let (x, y) = ((i % w) as f64, (i / w) as f64);
+                    let r = ((x - w as f64 / 2.0).powi(2) + (y - h as f64 / 2.0).powi(2)).sqrt();
+                    let c = (w.min(h) as f64 / 3.0 - r + 0.5).clamp(0.0, 1.0);
+                    *v = (c * 255.0).round() as u8;
                 }
-                let mut d = vec![0u8; w * h];
-                let mut i = 0;
-                while i < d.len() {
-                    let r = xorshift(&mut seed);
-                    let k = match (pattern, r % 4) {
-                        (0, _) => d.len(),
-                        (1, 0) => (r >> 8) as usize % 3000 + 1,
+            }
+            4 => {
+                while i < n {
+                    let k = (xorshift(seed) % 600) as usize + 1;
+                    let v = [0u8, 255, 7, 128][(xorshift(seed) % 4) as usize];
+                    d[i..(i + k).min(n)].fill(v);
+                    i += k;
+                }
+            }
+            5..=8 => {
+                while i < n {
+                    let r = xorshift(seed);
+                    let len = match (k, r % 4) {
+                        (5, _) => n,
+                        (6, 0) => (r >> 8) as usize % 3000 + 1,
                         (_, 0) => (r >> 8) as usize % 300 + 1,
                         _ => (r >> 8) as usize % 9 + 1,
                     };
-                    let v = match pattern {
-                        0 | 1 => [0u8, 255, 131][(r >> 40) as usize % 3],
+                    let v = match k {
+                        5 | 6 => [0u8, 255, 131][(r >> 40) as usize % 3],
                         _ => (r >> 40) as u8,
                     };
-                    let k = k.min(d.len() - i);
-                    d[i..i + k].fill(v);
-                    i += k;
+                    d[i..(i + len).min(n)].fill(v);
+                    i += len;
                 }
-                let want = reference_png(w, h, &d);
-                assert!(
-                    encode_gray8(w as u32, h as u32, &d) == want,
-                    "{w}x{h} {pattern}"
-                );
+            }
+            _ => return repeated_rows(w, h, k == 10, seed),
+        }
+        d
+    }
+
+    #[test]
+    fn bytes_match_the_obvious_encoder_and_decode() {
+        // Pins the exact stream (not just what a decoder reads back): masks are hashed
+        // into job.json, so a change of bytes is a change of output.
+        let mut seed = 0x0bad_5eed_1234_5678u64;
+        for (w, h) in [
+            (1, 1),
+            (3, 2),
+            (7, 5),
+            (9, 4),
+            (259, 3),
+            (300, 7),
+            (517, 2),
+            (1000, 13),
+            (1024, 40),
+            (700, 600),
+            (1024, 768),
+        ] {
+            for k in 0..11 {
+                let d = image(w, h, k, &mut seed);
+                let png = encode_gray8(w as u32, h as u32, &d);
+                assert!(png == reference_png(w, h, &d), "{w}x{h} image {k}");
+                let by_rows = encode_gray8_rows(w as u32, h as u32, |r| &d[r * w..(r + 1) * w]);
+                assert!(by_rows == png, "{w}x{h} image {k}: by rows");
+                assert!(decode(&png) == (w as u32, h as u32, d), "{w}x{h} image {k}");
             }
         }
     }
@@ -914,25 +862,15 @@ mod tests {
                 let png = encode_gray8(w as u32, h as u32, &d);
                 assert!(png == reference_png(w, h, &d), "{w}x{h} {zones}");
                 assert!(decode(&png).2 == d, "{w}x{h} {zones}");
-                // The box does not change the bytes.
-                let lit: Vec<usize> = (0..h)
-                    .filter(|&r| d[r * w..(r + 1) * w].iter().any(|&v| v != 0))
+                // The lit box does not change the bytes.
+                let lit: Vec<(usize, usize)> = (0..w * h)
+                    .filter(|&i| d[i] != 0)
+                    .map(|i| (i / w, i % w))
                     .collect();
-                if let (Some(&a), Some(&b)) = (lit.first(), lit.last()) {
-                    let cols = |r: usize| {
-                        let row = &d[r * w..(r + 1) * w];
-                        let first = row.iter().position(|&v| v != 0).unwrap_or(w);
-                        let last = row.iter().rposition(|&v| v != 0).map_or(0, |c| c + 1);
-                        (first, last)
-                    };
-                    let c0 = (a..=b).map(|r| cols(r).0).min().unwrap();
-                    let c1 = (a..=b).map(|r| cols(r).1).max().unwrap();
-                    let lit_box = PixelBox {
-                        r0: a,
-                        r1: b + 1,
-                        c0,
-                        c1,
-                    };
+                if let (Some(&(r0, _)), Some(&(r1, _))) = (lit.first(), lit.last()) {
+                    let c0 = lit.iter().map(|p| p.1).min().unwrap();
+                    let c1 = lit.iter().map(|p| p.1).max().unwrap() + 1;
+                    let lit_box = PixelBox::new(r0, r1 + 1, c0, c1);
                     let boxed = encode_gray8_in(w as u32, h as u32, &d, lit_box);
                     assert!(boxed == png, "{w}x{h} {zones}: boxed");
                 }
@@ -976,7 +914,7 @@ mod tests {
             [49, 121, 39, 261],
             [50, 120, 0, 300],
         ] {
-            let b = PixelBox { r0, r1, c0, c1 };
+            let b = PixelBox::new(r0, r1, c0, c1);
             assert_eq!(encode_gray8_in(w as u32, h as u32, &d, b), full, "{b:?}");
         }
     }
@@ -997,11 +935,7 @@ mod tests {
             a = (a + x as u64) % ADLER_MOD;
             b = (b + a) % ADLER_MOD;
         }
-        let mut ad = Adler {
-            a: 1,
-            b: 0,
-            pending: 0,
-        };
+        let mut ad = Adler::NEW;
         let mut i = 0;
         while i < data.len() {
             let k = run_len(&data[i..], data[i]);
@@ -1013,11 +947,7 @@ mod tests {
         // than one reduction period.
         let mut state = 0x2545_F491_4F6C_DD1D;
         let (mut a, mut b) = (1u64, 0u64);
-        let mut ad = Adler {
-            a: 1,
-            b: 0,
-            pending: 0,
-        };
+        let mut ad = Adler::NEW;
         let mut total = 0u64;
         while total < 12_000_000 {
             let r = xorshift(&mut state);

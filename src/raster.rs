@@ -10,11 +10,8 @@
 //!   redone with an exact-span nonzero-winding scanline fill on 32 sub-scanlines per row.
 //! * Binary masks (`--binary`) threshold that coverage at 50 %.
 //!
-//! Why not tiny-skia for masks: its anti-aliasing supersamples 4× (coverage quantized to
-//! 1/4 px), and its non-anti-aliased fill snaps edges to fixed point; measured against
-//! PrusaSlicer (docs/BENCHMARKS.md, "Mask agreement") both disagree on ~10× more pixels
-//! than the exact coverage does. tiny-skia draws the plots (`plot`) and serves as
-//! the reference renderer in `benches/raster.rs`.
+//! Why not tiny-skia: docs/ARCHITECTURE.md (it is the reference renderer of
+//! `benches/raster.rs`).
 
 pub use crate::png::PixelBox;
 use crate::profile::{Field, Projector};
@@ -26,7 +23,7 @@ mod scan;
 
 use accum::{line, zeroed_by_writes, Accum, BLOCK};
 pub use scan::map_words;
-use scan::{scan_runs, Mapped, Plain, ScanSpan};
+use scan::{scan_runs, Mapped, Plain};
 
 /// A grayscale image, row-major, top row first.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -64,17 +61,7 @@ impl Mask {
     /// Like [`lit_pixels`](Self::lit_pixels) when the mask is known to be zero outside
     /// `lit_box` (e.g. [`Scratch::lit_box`]): visits only that box.
     pub fn lit_pixels_in(&self, lit_box: PixelBox) -> f64 {
-        let PixelBox { r0, r1, c0, c1 } = lit_box;
-        let w = self.width as usize;
-        let mut sum = 0u64;
-        for r in r0..r1 {
-            // u32 partial sums per row vectorize well; a row cannot overflow them.
-            sum += self.data[r * w + c0..r * w + c1]
-                .iter()
-                .map(|&v| v as u32)
-                .sum::<u32>() as u64;
-        }
-        sum as f64 / 255.0
+        box_sum(self, lit_box) as f64 / 255.0
     }
 }
 
@@ -240,11 +227,10 @@ impl Rasterizer {
     /// The mask of a layer as it is written: coverage, thresholded at 50 % when `binary`
     /// (as [`threshold`] does), then mapped through `map` (light compensation) when given.
     ///
-    /// The map is applied by the scan itself, where it writes each value (one pass over the
-    /// lit box instead of two), unless [`CoverageMap::fusable`] declines the layer or its
-    /// shells overlap (nonzero fallback): then the finished (thresholded) coverage mask goes
-    /// through [`CoverageMap::apply`]. Either way the bytes are the same. The lit area
-    /// ([`Scratch::lit_pixels`]) is always that of the coverage, before threshold and map.
+    /// The scan applies the map as it writes each value, unless the map is not
+    /// [`CoverageMap::fusable`] or the shells overlap (nonzero fallback): then the finished
+    /// (thresholded) coverage goes through [`CoverageMap::apply`], with the same bytes. The
+    /// lit area ([`Scratch::lit_pixels`]) is that of the coverage, before threshold and map.
     #[inline(never)]
     pub fn render<M: CoverageMap>(
         &self,
@@ -282,50 +268,31 @@ impl Rasterizer {
         let r1 = r1.min(h);
         let c1 = c1.min(w + 1);
         debug_assert!(c1 < stride);
-        let lit = PixelBox {
-            r0,
-            r1,
-            c0,
-            c1: c1.min(w),
-        };
+        let lit = PixelBox::new(r0, r1, c0, c1.min(w));
         scratch.lit = lit;
-        let fused = map.filter(|m| m.fusable(lit));
-        let span = ScanSpan {
-            r0,
-            r1,
-            c0,
-            end: c1.min(w),
-        };
+        let fused = map.filter(|m| m.fusable());
         let mut outside = false;
         let runs = scratch.record_runs.then_some(&mut scratch.lit_runs);
+        // The scan for each emitter, threshold (`BIN`) and outside check (`CHECK`).
+        macro_rules! scan {
+            ($emit:expr, $bin:literal, $check:literal) => {
+                scan_runs::<_, $bin, $check>(acc, &mut out.data, w, lit, $emit, &mut outside, runs)
+            };
+        }
         let (lit_sum, max_winding) = match (fused, binary) {
             (Some(m), binary) => {
                 // Whether the scan must look for lit pixels outside the map's area.
                 let area = m.area();
                 let check = r0 < area.r0 || r1 > area.r1 || c0 < area.c0 || c1.min(w) > area.c1;
-                let data = &mut out.data;
-                let o = &mut outside;
                 match (binary, check) {
-                    (false, false) => {
-                        scan_runs::<_, false, false>(acc, data, w, span, Mapped(m), o, runs)
-                    }
-                    (false, true) => {
-                        scan_runs::<_, false, true>(acc, data, w, span, Mapped(m), o, runs)
-                    }
-                    (true, false) => {
-                        scan_runs::<_, true, false>(acc, data, w, span, Mapped(m), o, runs)
-                    }
-                    (true, true) => {
-                        scan_runs::<_, true, true>(acc, data, w, span, Mapped(m), o, runs)
-                    }
+                    (false, false) => scan!(Mapped(m), false, false),
+                    (false, true) => scan!(Mapped(m), false, true),
+                    (true, false) => scan!(Mapped(m), true, false),
+                    (true, true) => scan!(Mapped(m), true, true),
                 }
             }
-            (None, false) => {
-                scan_runs::<_, false, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
-            }
-            (None, true) => {
-                scan_runs::<_, true, false>(acc, &mut out.data, w, span, Plain, &mut outside, runs)
-            }
+            (None, false) => scan!(Plain, false, false),
+            (None, true) => scan!(Plain, true, false),
         };
         scratch.lit_sum = Some(lit_sum);
         let mut mapped = fused.is_some();
@@ -394,9 +361,7 @@ impl Rasterizer {
 
 /// Thresholds a coverage mask at 50 % in place: values ≥ 128 become 255, others 0.
 pub fn threshold(m: &mut Mask) {
-    for v in &mut m.data {
-        *v = if *v >= 128 { 255 } else { 0 };
-    }
+    threshold_in(m, PixelBox::whole(m.width as usize, m.height as usize));
 }
 
 /// Thresholds the box `lit_box` of a mask at 50 % in place (the mask is zero outside it).
@@ -410,7 +375,8 @@ fn threshold_in(m: &mut Mask, lit_box: PixelBox) {
     }
 }
 
-/// Sum of a mask's values inside `b`.
+/// Sum of a mask's values inside `b` (u32 partial sums per row vectorize well; a row
+/// cannot overflow them).
 fn box_sum(m: &Mask, b: PixelBox) -> u64 {
     let PixelBox { r0, r1, c0, c1 } = b;
     let w = m.width as usize;
@@ -428,10 +394,9 @@ fn box_sum(m: &Mask, b: PixelBox) -> u64 {
 /// writes the mask ([`Rasterizer::render`]): light compensation
 /// ([`crate::optics::Compensator`]). Coverage 0 always stays 0.
 pub trait CoverageMap {
-    /// Whether the scan may apply the map to a layer whose lit pixels all lie in
-    /// `lit_box`; if not, [`apply`](Self::apply) maps the finished mask (e.g. when the map
-    /// must look at the coverage of other pixels first).
-    fn fusable(&self, lit_box: PixelBox) -> bool;
+    /// Whether the scan may apply the map as it writes; if not, [`apply`](Self::apply) maps
+    /// the finished mask (e.g. when the map must look at the coverage of other pixels first).
+    fn fusable(&self) -> bool;
     /// The map's area: the scan reports through [`lit_outside`](Self::lit_outside) a layer
     /// it mapped that has a lit pixel (coverage, thresholded when binary, above zero)
     /// outside it.
@@ -456,7 +421,7 @@ pub trait CoverageMap {
 enum NoMap {}
 
 impl CoverageMap for NoMap {
-    fn fusable(&self, _: PixelBox) -> bool {
+    fn fusable(&self) -> bool {
         match *self {}
     }
     fn area(&self) -> PixelBox {
@@ -475,18 +440,19 @@ impl CoverageMap for NoMap {
     }
 }
 
+/// Whether projector `p` shows a `width × height` field as it is: it covers it exactly,
+/// unmirrored.
+pub fn shows_as_is(p: &Projector, width: u32, height: u32) -> bool {
+    let unmirrored = !p.mirror_x && !p.mirror_y;
+    p.offset_px == [0, 0] && (p.width_px, p.height_px) == (width, height) && unmirrored
+}
+
 /// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the
 /// field mask when the projector covers it exactly, unmirrored).
 pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::Cow<'a, Mask> {
     let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
     let (w, h) = (p.width_px as usize, p.height_px as usize);
-    if ox == 0
-        && oy == 0
-        && w == field_mask.width as usize
-        && h == field_mask.height as usize
-        && !p.mirror_x
-        && !p.mirror_y
-    {
+    if shows_as_is(p, field_mask.width, field_mask.height) {
         return std::borrow::Cow::Borrowed(field_mask);
     }
     let fw = field_mask.width as usize;

@@ -2,31 +2,28 @@
 //! closed, oriented contours.
 //!
 //! Layer `i` of height `h` is cut by the plane `z = (i + 0.5)·h`; a partial top layer is
-//! dropped (PrusaSlicer's rule). A vertex is "below" a plane when `z <= Z` and "above" when
-//! `z > Z`: the solid is treated as the half-open slab `z_min <= Z < z_max`, so a vertex
-//! lying exactly on a plane never produces duplicate or missing points, a bottom face
-//! lying on a plane is part of the section and a top face lying on a plane is not.
+//! dropped (PrusaSlicer's rule). A vertex is "below" a plane when `z <= Z`, "above" when
+//! `z > Z` (the solid is the half-open slab `z_min <= Z < z_max`): a vertex on a plane
+//! gives no duplicate or missing point, a bottom face on a plane is part of the section and
+//! a top face on a plane is not.
 //!
-//! Each triangle that straddles a plane yields one segment from the point on its
-//! "down" edge (above→below in the triangle's winding) to the point on its "up" edge,
-//! which orients outer contours counter-clockwise seen from +Z. The two end points are
-//! identified by mesh edge ids, and segments are chained through those ids, never
-//! through rounded coordinates. Intersection points are computed from the edge's
-//! endpoints in canonical (vertex id) order, so the two triangles sharing an edge agree
-//! on the point bit for bit.
+//! A triangle straddling a plane gives one segment from the point on its "down" edge
+//! (above→below in its winding) to the point on its "up" edge, so outer contours run
+//! counter-clockwise seen from +Z. End points are identified by mesh edge ids and chained
+//! through them, never through rounded coordinates; each is computed from its edge's end
+//! points in vertex id order, so the two triangles of an edge agree bit for bit.
 //!
 //! ## Repair rule for broken meshes
-//! 1. A segment whose facet is flipped is still chained through its edge ids; each
-//!    closed loop takes the orientation most of its segments agree with.
-//! 2. Chains that do not close (holes in the surface) are repaired greedily: a chain's end
-//!    is joined to the nearest end of another open chain if that is within [`MAX_GAP_MM`]
-//!    and nearer than the chain's own start; otherwise the chain is closed with a straight
-//!    edge back to its own start, unless that edge is longer than [`MAX_GAP_MM`] and
-//!    crosses another contour of the layer (or the chain itself): such a chain is
-//!    dropped, as are chains of fewer than three points or no area. Joined, closed and dropped chains are counted in [`SliceStats`] and
-//!    reported as warnings.
-//! 3. The sections are filled with the nonzero winding rule, so overlapping and
-//!    touching shells union.
+//! 1. A flipped facet's segment is still chained through its edge ids; each closed loop
+//!    takes the orientation most of its segments agree with.
+//! 2. Open chains (holes in the surface) are repaired greedily: a chain's end is joined to
+//!    the nearest end of another open chain within [`MAX_GAP_MM`] and nearer than its own
+//!    start; otherwise it is closed by a straight edge back to its start, unless that edge
+//!    is longer than [`MAX_GAP_MM`] and crosses another contour of the layer (or the chain
+//!    itself). Such chains are dropped, as are chains of fewer than three points or no
+//!    area; joined, closed and dropped chains are counted in [`SliceStats`] and reported.
+//! 3. The sections are filled with the nonzero winding rule, so overlapping and touching
+//!    shells union.
 
 use crate::mesh::Mesh;
 use rayon::prelude::*;
@@ -286,6 +283,24 @@ fn chain(segs: &[Seg]) -> Section {
         }
         None
     };
+    // The next segment of a chain at `node`, marked used: one leaving it the way the
+    // chain runs (`fwd`: from its start edge), else one leaving it the other way (a
+    // flipped facet). Its other end's point and edge, and its vote for the orientation.
+    let step = |node: u32, fwd: bool, used: &mut [bool]| {
+        for from_start in [fwd, !fwd] {
+            if let Some(s) = find(if from_start { &starts } else { &ends }, used, node) {
+                used[s as usize] = true;
+                let sg = segs[s as usize];
+                let vote = if from_start == fwd { 1 } else { -1 };
+                return Some(if from_start {
+                    (sg.q, sg.to_edge, vote)
+                } else {
+                    (sg.p, sg.from_edge, vote)
+                });
+            }
+        }
+        None
+    };
 
     let mut section = Section::default();
     let mut open: Vec<Contour> = Vec::new();
@@ -301,21 +316,11 @@ fn chain(segs: &[Seg]) -> Section {
         let mut node = first.to_edge;
         let mut closed = node == start_node;
         while !closed {
-            if let Some(s) = find(&starts, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                pts.push(sg.q);
-                node = sg.to_edge;
-                agree += 1;
-            } else if let Some(s) = find(&ends, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                pts.push(sg.p);
-                node = sg.from_edge;
-                agree -= 1;
-            } else {
+            let Some((p, next, vote)) = step(node, true, &mut used) else {
                 break;
-            }
+            };
+            pts.push(p);
+            (node, agree) = (next, agree + vote);
             closed = node == start_node;
         }
         if closed {
@@ -329,22 +334,9 @@ fn chain(segs: &[Seg]) -> Section {
         // Open: extend backwards from the start node too.
         let mut back: Vec<[f64; 2]> = Vec::new();
         let mut node = start_node;
-        loop {
-            if let Some(s) = find(&ends, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                back.push(sg.p);
-                node = sg.from_edge;
-                agree += 1;
-            } else if let Some(s) = find(&starts, &used, node) {
-                used[s as usize] = true;
-                let sg = segs[s as usize];
-                back.push(sg.q);
-                node = sg.to_edge;
-                agree -= 1;
-            } else {
-                break;
-            }
+        while let Some((p, next, vote)) = step(node, false, &mut used) {
+            back.push(p);
+            (node, agree) = (next, agree + vote);
         }
         back.reverse();
         back.extend(pts);
@@ -386,46 +378,38 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
             let end = *open[i].last().unwrap();
             // Candidates: own start, other chains' starts (appended), other chains' ends
             // (appended reversed: a flipped piece).
-            let d_self = dist2(end, open[i][0]);
-            let mut best: Option<(f64, usize, bool)> = Some((d_self, i, false));
+            let mut best = (dist2(end, open[i][0]), i, false);
             for (j, c) in open.iter().enumerate() {
                 if j == i || !alive[j] {
                     continue;
                 }
-                let ds = dist2(end, c[0]);
-                if ds <= max2 && best.is_none_or(|b| ds < b.0) {
-                    best = Some((ds, j, false));
-                }
-                let de = dist2(end, *c.last().unwrap());
-                if de <= max2 && best.is_none_or(|b| de < b.0) {
-                    best = Some((de, j, true));
+                for (d, rev) in [(dist2(end, c[0]), false), (dist2(end, *c.last().unwrap()), true)] {
+                    if d <= max2 && d < best.0 {
+                        best = (d, j, rev);
+                    }
                 }
             }
-            match best {
-                Some((d2, j, _)) if j == i => {
-                    let crossing =
-                        d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
-                    let mut pts = std::mem::take(&mut open[i]);
-                    finish_loop(&mut pts, false);
-                    alive[i] = false;
-                    if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
-                        section.contours.push(pts);
-                        section.joined_chains += 1;
-                    } else {
-                        section.dropped_chains += 1;
-                    }
-                    break;
+            let (d2, j, rev) = best;
+            if j != i {
+                let mut other = std::mem::take(&mut open[j]);
+                alive[j] = false;
+                if rev {
+                    other.reverse();
                 }
-                Some((_, j, rev)) => {
-                    let mut other = std::mem::take(&mut open[j]);
-                    alive[j] = false;
-                    if rev {
-                        other.reverse();
-                    }
-                    open[i].extend(other);
-                }
-                None => unreachable!("own start is always a candidate"),
+                open[i].extend(other);
+                continue;
             }
+            let crossing = d2 > max2 && closing_edge_crosses(&open, &alive, i, &section.contours);
+            let mut pts = std::mem::take(&mut open[i]);
+            finish_loop(&mut pts, false);
+            alive[i] = false;
+            if !crossing && pts.len() >= 3 && signed_area(&pts).abs() > 1e-12 {
+                section.contours.push(pts);
+                section.joined_chains += 1;
+            } else {
+                section.dropped_chains += 1;
+            }
+            break;
         }
     }
 }

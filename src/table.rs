@@ -3,11 +3,11 @@
 //!
 //! Accepted: a UTF-8 byte order mark, `#` comments (whole lines or after the data), blank
 //! lines, CRLF line ends, spaces around fields, quoted fields. The header row names the
-//! columns in any order; where the columns are [`Columns::header_optional`] a table may
-//! start with data instead, its columns then in the canonical order. Rows are read by the
-//! `csv` crate and deserialized with serde into the caller's row type, whose fields are
-//! the column names; a cell that is a number must be a finite one. Every error is one line naming the file, the line and, for a bad
-//! value, the column: `meas.csv: line 14, column irradiance_mw_cm2: "abc" is not a number`.
+//! columns in any order, or, where [`Columns::header_optional`], may be left out (the
+//! columns then in the canonical order). Rows are deserialized with serde into the caller's
+//! row type; a cell that is a number must be a finite one. Every error is one line naming
+//! the file, the line and, for a bad value, the column:
+//! `meas.csv: line 14, column irradiance_mw_cm2: "abc" is not a number`.
 
 use crate::error::{Error, Result};
 use serde::de::DeserializeOwned;

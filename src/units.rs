@@ -21,86 +21,59 @@ use std::fmt;
 #[serde(try_from = "f64", into = "f64")]
 pub struct Positive(f64);
 
-impl Positive {
-    /// Wraps `v` if it is finite and > 0.
-    pub fn new(v: f64) -> Option<Self> {
-        (v.is_finite() && v > 0.0).then_some(Positive(v))
-    }
-
-    /// The wrapped value.
-    #[inline]
-    pub fn get(self) -> f64 {
-        self.0
-    }
-}
-
-impl TryFrom<f64> for Positive {
-    type Error = String;
-    fn try_from(v: f64) -> Result<Self, String> {
-        Positive::new(v).ok_or_else(|| format!("must be a finite number > 0, got {v}"))
-    }
-}
-
-impl From<Positive> for f64 {
-    fn from(p: Positive) -> f64 {
-        p.0
-    }
-}
-
-impl fmt::Debug for Positive {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt::Debug::fmt(&self.0, f)
-    }
-}
-
-impl fmt::Display for Positive {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt::Display::fmt(&self.0, f)
-    }
-}
-
 /// A finite, non-negative `f64` (a wait, a latency, an overcure that may be zero).
 #[derive(Clone, Copy, PartialEq, PartialOrd, Default, Serialize, Deserialize)]
 #[serde(try_from = "f64", into = "f64")]
 pub struct NonNegative(f64);
 
-impl NonNegative {
-    /// Wraps `v` if it is finite and >= 0.
-    pub fn new(v: f64) -> Option<Self> {
-        (v.is_finite() && v >= 0.0).then_some(NonNegative(v))
-    }
+/// The methods and conversions of the checked newtype `$t`: `v` is kept when it is finite
+/// and `$ok(v)` (in words, `$rule`); `Debug` and `Display` show the bare number.
+macro_rules! checked_f64 {
+    ($t:ident, $ok:expr, $rule:literal) => {
+        impl $t {
+            #[doc = concat!("Wraps `v` if it is finite and ", $rule, ".")]
+            pub fn new(v: f64) -> Option<Self> {
+                let ok: fn(f64) -> bool = $ok;
+                (v.is_finite() && ok(v)).then_some($t(v))
+            }
 
-    /// The wrapped value.
-    #[inline]
-    pub fn get(self) -> f64 {
-        self.0
-    }
+            /// The wrapped value.
+            #[inline]
+            pub fn get(self) -> f64 {
+                self.0
+            }
+        }
+
+        impl TryFrom<f64> for $t {
+            type Error = String;
+            fn try_from(v: f64) -> Result<Self, String> {
+                let msg = || format!(concat!("must be a finite number ", $rule, ", got {}"), v);
+                $t::new(v).ok_or_else(msg)
+            }
+        }
+
+        impl From<$t> for f64 {
+            fn from(p: $t) -> f64 {
+                p.0
+            }
+        }
+
+        impl fmt::Debug for $t {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                fmt::Debug::fmt(&self.0, f)
+            }
+        }
+
+        impl fmt::Display for $t {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                fmt::Display::fmt(&self.0, f)
+            }
+        }
+    };
 }
 
-impl TryFrom<f64> for NonNegative {
-    type Error = String;
-    fn try_from(v: f64) -> Result<Self, String> {
-        NonNegative::new(v).ok_or_else(|| format!("must be a finite number >= 0, got {v}"))
-    }
-}
-
-impl From<NonNegative> for f64 {
-    fn from(p: NonNegative) -> f64 {
-        p.0
-    }
-}
-
-impl fmt::Debug for NonNegative {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt::Debug::fmt(&self.0, f)
-    }
-}
-
-impl fmt::Display for NonNegative {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        fmt::Display::fmt(&self.0, f)
-    }
-}
+checked_f64!(Positive, |v| v > 0.0, "> 0");
+checked_f64!(NonNegative, |v| v >= 0.0, ">= 0");
 
 #[cfg(test)]
 mod tests {

@@ -39,43 +39,37 @@ pub(crate) struct CalibrateArgs {
     no_plots: bool,
     /// Print a machine-readable report on stdout.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     #[command(flatten)]
     warnings: super::WarningArgs,
-}
-
-impl CalibrateArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
 }
 
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     use crate::optics::report::{self, CalibrateOptions};
+    use crate::optics::{calib::FitOptions, Units};
     let policy = a.warnings.policy(&[])?;
     let field = Profile::resolve(&a.profile)?.field();
-    let mut r = report::calibrate(&CalibrateOptions {
-        input: a.input,
-        output: a.output,
+    let fit = FitOptions {
         units: if a.relative {
-            crate::optics::Units::Relative
+            Units::Relative
         } else {
-            crate::optics::Units::MwCm2
+            Units::MwCm2
         },
         zone_mm: a.zone_mm,
         extrapolate_mm: a.extrapolate_mm,
-        field,
+        field_mm: (field.width_mm(), field.height_mm()),
         degree: a.degree,
+    };
+    let mut r = report::calibrate(&CalibrateOptions {
+        input: a.input,
+        output: a.output,
+        fit,
+        field,
         plots: !a.no_plots,
     })?;
     r.warnings = policy.apply(&r.warnings);
-    let exit = if crate::warning::any_error(&r.warnings) {
-        1
-    } else {
-        0
-    };
+    let exit = u8::from(crate::warning::any_error(&r.warnings));
     if a.json {
         #[derive(serde::Serialize)]
         struct Out<'a> {
@@ -93,11 +87,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         return Ok(exit);
     }
     super::print_warnings(&r.warnings, "");
-    let u = if r.units == "relative" {
-        ""
-    } else {
-        " mW/cm²"
-    };
+    let u = if a.relative { "" } else { " mW/cm²" };
     println!(
         "{}: {} zones x {} gray levels ({} readings); residual RMS {:.2} %, max {:.2} % (line {})",
         r.calibration.display(),

@@ -24,14 +24,7 @@ pub(crate) struct DistortionArgs {
     plot: Option<PathBuf>,
     /// Print the fit report as JSON on stdout.
     #[arg(long)]
-    json: bool,
-}
-
-impl DistortionArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
+    pub(crate) json: bool,
 }
 
 /// Runs `dmdsl distortion`.

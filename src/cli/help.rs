@@ -2,7 +2,7 @@
 //! apply to that command (each command file keeps its own exit-code text).
 
 /// After `dmdsl --help`.
-pub(crate) const TOP_EXAMPLES: &str = "Examples:
+pub(crate) const TOP: &str = "Examples:
   dmdsl slice part.stl                     # writes part.dmdjob/ (masks + job.json)
   dmdsl run part.dmdjob                    # dry run: verify masks, replay on a simulated machine
   dmdsl profile list                       # the built-in machine profiles
@@ -15,25 +15,29 @@ pub(crate) const TOP_EXIT: &str = "Exit codes (each command's --help says what t
   2    usage or input error
   130  interrupted (Ctrl-C, SIGTERM or SIGHUP)";
 
-const SLICE_EXAMPLES: &str = "Examples:
+/// After `dmdsl slice --help`, before its exit codes.
+pub(crate) const SLICE: &str = "Examples:
   dmdsl slice part.stl                                  # part.dmdjob, default profile
   dmdsl slice part.stl -p bottom-up --layer-height 0.1 -o job.dmdjob
   dmdsl slice part.stl -o part.sl1                      # one file: .dmdjob.zip, .sl1, .sl1s
   dmdsl slice part.stl --json --deny-warnings > summary.json   # CI: exit 1 on a warning";
 
-const RUN_EXAMPLES: &str = "Examples:
+/// After `dmdsl run --help`, before its exit codes.
+pub(crate) const RUN: &str = "Examples:
   dmdsl run part.dmdjob                                 # summary; exit 1 on any violation
   dmdsl run part.dmdjob --json > report.json
   dmdsl run part.dmdjob --trace t.csv --plot p.png --layers 10..20 --fault stall@12
   dmdsl run part.sl1        # also part.dmdjob.zip, .sl1s, an SLA control-file .zip";
 
-const CALIBRATE_EXAMPLES: &str = "Examples:
+/// After `dmdsl calibrate --help`, before its exit codes.
+pub(crate) const CALIBRATE: &str = "Examples:
   dmdsl calibrate readings.csv -o cal.toml               # fit, plots beside cal.toml
   dmdsl calibrate readings.csv -o cal.toml --relative    # meter in arbitrary units
   dmdsl calibrate readings.csv -o cal.toml --json --no-plots
   dmdsl slice part.stl --calibration cal.toml            # then compensate a job with it";
 
-const DISTORTION_EXAMPLES: &str = "Examples:
+/// After `dmdsl distortion --help`, before its exit codes.
+pub(crate) const DISTORTION: &str = "Examples:
   dmdsl distortion lens.csv                             # fit report
   dmdsl distortion lens.csv --plot correction.png
   dmdsl distortion lens.csv --json
@@ -70,31 +74,6 @@ Exit codes:
   2    usage error (unknown command)";
 
 /// `examples`, a blank line, then `exit`.
-fn join(examples: &str, exit: &str) -> String {
+pub(crate) fn join(examples: &str, exit: &str) -> String {
     format!("{examples}\n\n{exit}")
-}
-
-/// After `dmdsl --help`.
-pub(crate) fn for_top() -> String {
-    join(TOP_EXAMPLES, TOP_EXIT)
-}
-
-/// After `dmdsl slice --help`.
-pub(crate) fn for_slice() -> String {
-    join(SLICE_EXAMPLES, super::slice::SLICE_EXIT_HELP)
-}
-
-/// After `dmdsl run --help`.
-pub(crate) fn for_run() -> String {
-    join(RUN_EXAMPLES, super::run::RUN_EXIT_HELP)
-}
-
-/// After `dmdsl calibrate --help`.
-pub(crate) fn for_calibrate() -> String {
-    join(CALIBRATE_EXAMPLES, super::calibrate::CALIBRATE_EXIT_HELP)
-}
-
-/// After `dmdsl distortion --help`.
-pub(crate) fn for_distortion() -> String {
-    join(DISTORTION_EXAMPLES, super::distortion::DISTORTION_EXIT_HELP)
 }

@@ -20,7 +20,7 @@ pub(crate) struct InspectArgs {
     bundle: PathBuf,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     /// Write a contact sheet: a grid of layer thumbnails (about 48 layers evenly spaced,
     /// or as --every and --layers choose).
     #[arg(long, value_name = "FILE.png")]
@@ -38,13 +38,6 @@ pub(crate) struct InspectArgs {
     /// Contact sheet and chart: only layers A..B (inclusive, 0-based; also A.., ..B, A).
     #[arg(long, value_name = "A..B")]
     layers: Option<String>,
-}
-
-impl InspectArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
 }
 
 /// The format of picture `p`, if one was asked for.

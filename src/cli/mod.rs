@@ -42,31 +42,34 @@ pub(crate) fn print_json<T: Serialize>(body: &T) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What failed, in a `--json` object's `error`: the error's code, its file and message.
+#[derive(Serialize)]
+pub(crate) struct Failure<'a> {
+    pub(crate) code: &'a str,
+    pub(crate) file: Option<String>,
+    pub(crate) message: &'a str,
+}
+
 /// The JSON object of a failure: `{schema_version, ok: false, error: {code, file,
 /// message}}` (one line).
 pub(crate) fn error_json(code: &str, file: Option<String>, message: &str) -> String {
-    #[derive(Serialize)]
-    struct Failure<'a> {
-        code: &'a str,
-        file: Option<String>,
-        message: &'a str,
-    }
     #[derive(Serialize)]
     struct Out<'a> {
         schema_version: u32,
         ok: bool,
         error: Failure<'a>,
     }
-    serde_json::to_string(&Out {
+    let error = Failure {
+        code,
+        file,
+        message,
+    };
+    let out = Out {
         schema_version: SCHEMA_VERSION,
         ok: false,
-        error: Failure {
-            code,
-            file,
-            message,
-        },
-    })
-    .expect("serializes")
+        error,
+    };
+    serde_json::to_string(&out).expect("serializes")
 }
 
 /// The format a picture path asks for (`.png`, `.jpg`, `.jpeg`); anything else is a usage
@@ -109,7 +112,7 @@ impl WarningArgs {
 
 /// Build-job compiler for DMD mask-projection stereolithography.
 #[derive(Parser)]
-#[command(name = "dmdsl", version, about, after_help = help::for_top())]
+#[command(name = "dmdsl", version, about, after_help = help::join(help::TOP, help::TOP_EXIT))]
 pub(crate) struct Cli {
     /// Print nothing but errors.
     #[arg(short, long, global = true)]
@@ -121,20 +124,20 @@ pub(crate) struct Cli {
 #[derive(Subcommand)]
 pub(crate) enum Cmd {
     /// Slice parts (STL or OBJ) into job bundles of mask PNGs and a manifest, one each.
-    #[command(after_help = help::for_slice())]
+    #[command(after_help = help::join(help::SLICE, slice::SLICE_EXIT_HELP))]
     Slice(slice::SliceArgs),
     /// Show or list machine profiles.
     #[command(subcommand, after_help = help::PROFILE)]
     Profile(profile::ProfileCmd),
     /// Dry-run a job bundle: verify its masks, replay its steps on a simulated stage,
     /// shutter and DMD, and report the time and every violation.
-    #[command(after_help = help::for_run())]
+    #[command(after_help = help::join(help::RUN, run::RUN_EXIT_HELP))]
     Run(run::RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
-    #[command(after_help = help::for_calibrate())]
+    #[command(after_help = help::join(help::CALIBRATE, calibrate::CALIBRATE_EXIT_HELP))]
     Calibrate(calibrate::CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
-    #[command(after_help = help::for_distortion())]
+    #[command(after_help = help::join(help::DISTORTION, distortion::DISTORTION_EXIT_HELP))]
     Distortion(distortion::DistortionArgs),
     /// Write a job bundle in another form: one zip, Prusa SL1/SL1S, or the SLA
     /// control-file standard.
@@ -170,11 +173,11 @@ impl Cli {
     /// True when the command was asked for `--json` output.
     pub(crate) fn json(&self) -> bool {
         match &self.cmd {
-            Cmd::Slice(a) => a.json(),
+            Cmd::Slice(a) => a.json,
             Cmd::Run(a) => a.json(),
-            Cmd::Calibrate(a) => a.json(),
-            Cmd::Distortion(a) => a.json(),
-            Cmd::Inspect(a) => a.json(),
+            Cmd::Calibrate(a) => a.json,
+            Cmd::Distortion(a) => a.json,
+            Cmd::Inspect(a) => a.json,
             Cmd::Export(a) => a.json(),
             Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) => false,
         }

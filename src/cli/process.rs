@@ -13,15 +13,10 @@ use std::process::ExitCode;
 /// is complete, so this never leaves anything half-written.
 #[cfg(unix)]
 fn default_sigpipe() {
-    unsafe extern "C" {
-        fn signal(signum: i32, handler: usize) -> usize;
-    }
-    const SIGPIPE: i32 = 13;
-    const SIG_DFL: usize = 0;
     // SAFETY: called once at start-up, before any other thread exists; SIG_DFL is a valid
     // disposition for SIGPIPE.
     unsafe {
-        signal(SIGPIPE, SIG_DFL);
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 
@@ -39,16 +34,13 @@ pub fn main() -> ExitCode {
     match super::run(cli) {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
-            let (code, file, exit) = match e.downcast_ref::<crate::Error>() {
-                Some(d) => (d.code(), d.file(), d.exit_code() as u8),
-                None => ("internal", None, 2),
-            };
             // The library's errors are complete one-line messages (their sources are
             // already in the text), so print them without the cause chain.
-            let message = printable(&match e.downcast_ref::<crate::Error>() {
-                Some(d) => d.to_string(),
-                None => format!("{e:#}"),
-            });
+            let (code, file, exit, message) = match e.downcast_ref::<crate::Error>() {
+                Some(d) => (d.code(), d.file(), d.exit_code() as u8, d.to_string()),
+                None => ("internal", None, 2, format!("{e:#}")),
+            };
+            let message = printable(&message);
             eprintln!("dmdsl: error: {message}");
             if json {
                 println!("{}", super::error_json(code, file, &message));

@@ -167,7 +167,7 @@ pub(crate) struct SliceArgs {
     /// Print a machine-readable summary on stdout: one JSON object for one part; for
     /// several, one line per part (JSON Lines).
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     /// Lens distortion correction table (CSV x_mm,y_mm,seen_x_mm,seen_y_mm), or `off` to
     /// ignore the profile's [distortion] (default: the profile's, if any).
     #[arg(long, value_name = "TABLE.csv|off")]
@@ -176,13 +176,6 @@ pub(crate) struct SliceArgs {
     cure: Box<CureArgs>,
     #[command(flatten)]
     warnings: super::WarningArgs,
-}
-
-impl SliceArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
 }
 
 /// A part to slice and where its bundle goes (`None`: the default, `<stem>.dmdjob` in the
@@ -310,10 +303,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
-        let stdin = match is_stdin(&a.inputs[0]) {
-            true => Some(read_stdin(&cancel)?),
-            false => None,
-        };
+        let stdin = is_stdin(&a.inputs[0])
+            .then(|| read_stdin(&cancel))
+            .transpose()?;
         let mut summary = job.slice(part, stdin.as_deref(), "")?;
         summary.warnings = policy.apply(&summary.warnings);
         let failed = crate::warning::any_error(&summary.warnings);
@@ -334,13 +326,10 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         } else if !quiet {
             print_summary(&summary, "");
         }
-        if failed {
-            if !quiet && !a.json {
-                eprintln!("dmdsl: warnings denied (see the error lines above); exit code 1");
-            }
-            return Ok(1);
+        if failed && !quiet && !a.json {
+            eprintln!("dmdsl: warnings denied (see the error lines above); exit code 1");
         }
-        return Ok(0);
+        return Ok(u8::from(failed));
     }
     slice_each(&job, &parts, &policy, a.json, quiet)
 }
@@ -396,10 +385,10 @@ fn slice_each(
                         ok: false,
                         input,
                         summary: None,
-                        error: Some(Failure {
+                        error: Some(super::Failure {
                             code: e.code(),
-                            file,
-                            message,
+                            file: Some(file),
+                            message: &message,
                         }),
                     })?;
                 }
@@ -455,15 +444,7 @@ struct PartLine<'a> {
     #[serde(flatten)]
     summary: Option<&'a SliceSummary>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    error: Option<Failure>,
-}
-
-/// Why a part failed.
-#[derive(Serialize)]
-struct Failure {
-    code: &'static str,
-    file: String,
-    message: String,
+    error: Option<super::Failure<'a>>,
 }
 
 /// Prints `line` as one line of JSON on stdout.

@@ -1,18 +1,11 @@
-//! Edge blending across projector overlaps, in irradiance.
+//! Edge blending across projector overlaps, in irradiance (docs/GEOMETRY.md, "Blending").
 //!
 //! Where projectors overlap, each shows a share of the light so that the shares sum to one
-//! **in irradiance** (Zhang et al. 2024: without blending the overlap gets ~2× dose; halving
-//! gray levels does not halve the light because gray → irradiance is nonlinear). A
-//! share is turned into a gray level through that projector's response curve last
-//! ([`Response::inverse_lut`]).
-//!
-//! A [`BlendCurve`] (the profile's `[blend]`) is an edge ramp `F(t)`, `t` = distance from the projector's edge into
-//! the overlap divided by the overlap width (0 at the edge, 1 where the overlap ends), F(0)
-//! ≈ 0, F(1) = 1. For every field pixel each projector's raw weight is the product of its
-//! ramps towards each overlapped side, and the weights are normalized by their sum, so they
-//! sum to one exactly wherever at least one projector shines ([`weight_maps`]). For the
-//! symmetric curves (raised cosine, smoothstep, linear) F(t) + F(1 − t) = 1 already and the
-//! normalization changes nothing across a simple seam.
+//! **in irradiance** (without blending the overlap gets ~2× dose, and halving gray levels
+//! does not halve the light: gray → irradiance is nonlinear). A share becomes a gray level
+//! through the projector's response last ([`Response::inverse_lut`]). Each projector's raw
+//! weight at a pixel is the product of its [`BlendCurve`] ramps towards each overlapped
+//! side, divided by the sum over the projectors there ([`weight_maps`]).
 
 use crate::profile::BlendCurve;
 
@@ -30,6 +23,10 @@ pub struct Rect {
 }
 
 impl Rect {
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        ((self.x1 - self.x0) as usize, (self.y1 - self.y0) as usize)
+    }
     fn overlaps_rows(&self, o: &Rect) -> bool {
         self.y0 < o.y1 && o.y0 < self.y1
     }
@@ -94,8 +91,7 @@ pub fn weight_maps(rects: &[Rect], curve: &BlendCurve) -> Vec<Vec<f32>> {
         .iter()
         .enumerate()
         .map(|(k, a)| {
-            let w = (a.x1 - a.x0) as usize;
-            let h = (a.y1 - a.y0) as usize;
+            let (w, h) = a.size();
             let mut out = vec![1.0f32; w * h];
             if *curve == BlendCurve::None {
                 return out;
@@ -220,6 +216,10 @@ impl Response {
 mod tests {
     use super::*;
 
+    fn rect(x0: u32, y0: u32, x1: u32, y1: u32) -> Rect {
+        Rect { x0, y0, x1, y1 }
+    }
+
     const CURVES: [BlendCurve; 3] = [
         BlendCurve::RaisedCosine,
         BlendCurve::Smoothstep,
@@ -230,18 +230,8 @@ mod tests {
     fn two_by_one_seam_weights() {
         // tiled-2x1: 1024-wide projectors, the second at column 992 (32 px overlap).
         let rects = [
-            Rect {
-                x0: 0,
-                y0: 0,
-                x1: 1024,
-                y1: 768,
-            },
-            Rect {
-                x0: 992,
-                y0: 0,
-                x1: 2016,
-                y1: 768,
-            },
+            rect(0, 0, 1024, 768),
+            rect(992, 0, 2016, 768),
         ];
         assert_eq!(overlap_widths(&rects, 0), [0, 32, 0, 0]);
         assert_eq!(overlap_widths(&rects, 1), [32, 0, 0, 0]);
@@ -276,30 +266,10 @@ mod tests {
     fn four_projector_corner_sums_to_one() {
         // 2x2 with a 20 px overlap both ways: the corner is covered four times.
         let rects = [
-            Rect {
-                x0: 0,
-                y0: 0,
-                x1: 100,
-                y1: 80,
-            },
-            Rect {
-                x0: 80,
-                y0: 0,
-                x1: 180,
-                y1: 80,
-            },
-            Rect {
-                x0: 0,
-                y0: 60,
-                x1: 100,
-                y1: 140,
-            },
-            Rect {
-                x0: 80,
-                y0: 60,
-                x1: 180,
-                y1: 140,
-            },
+            rect(0, 0, 100, 80),
+            rect(80, 0, 180, 80),
+            rect(0, 60, 100, 140),
+            rect(80, 60, 180, 140),
         ];
         for curve in [BlendCurve::RaisedCosine, BlendCurve::eehm()] {
             let w = weight_maps(&rects, &curve);

@@ -1,20 +1,13 @@
-//! Multi-projector tiling: one field coverage mask → one gray mask per projector.
+//! Multi-projector tiling: one field coverage mask → one gray mask per projector
+//! (docs/GEOMETRY.md, "Tiling").
 //!
-//! Built once per job: for every projector a per-pixel factor `f` (its irradiance share from
-//! [`blend::weight_maps`], times any compensation gain, ≤ 1) in fixed point, and a LUT that
-//! turns an irradiance fraction into a gray level through that projector's response
-//! ([`Response::inverse_lut`]). Per layer and projector each pixel costs one multiply, one
-//! shift and one table look-up: `gray = lut[(coverage · F + 2¹⁵) >> 16]` with
-//! `F = round(f · 16 · 2¹⁶)`, since the LUT has 255 · 16 steps (coverage 255 × share 1 →
-//! the last entry). Black pixels are skipped. Mirror flags are applied last.
-//!
-//! With light compensation (zone or pixel, [`crate::optics`]) every projector of a tiled
-//! profile needs its own `[projector.calibration]`. Each gets a
-//! [`Compensator`] over its own pixels and calibration, all with
-//! one common target irradiance E* (the lowest of the targets the projectors would choose
-//! alone), so the field is flat across the seam. A layer's projector view is then
-//! `coverage × share` (rounded to 8 bits), compensated: each projector delivers its share of
-//! E* through its own P(x, y)·S(g).
+//! Built once per job: per projector a fixed-point factor `F = round(f · 16 · 2¹⁶)` per
+//! pixel (`f` its irradiance share from [`blend::weight_maps`], times any gain ≤ 1) and a
+//! LUT from irradiance fraction to gray through its response ([`Response::inverse_lut`]).
+//! A pixel of coverage `v` becomes `lut[(v · F + 2¹⁵) >> 16]`; mirror flags apply last.
+//! With light compensation every projector has its own [`Compensator`], all with one
+//! common target irradiance E* (the lowest each would choose alone), so the field is flat
+//! across the seam.
 
 use super::blend::{self, Rect, Response, LUT_STEPS};
 use crate::bundle::Optics;
@@ -137,22 +130,20 @@ impl Tiler {
                 return Err(perr(format!("two projectors are named {:?}", p.name)));
             }
         }
-        let mut responses = Vec::with_capacity(n);
-        for p in ps {
-            responses.push(match &p.calibration {
-                None => Response::linear(),
-                Some(c) => {
-                    let lv = c.response.levels();
-                    let pairs: Vec<(u8, f64)> = lv.gray.iter().copied().zip(lv.s).collect();
-                    Response::from_levels(&pairs).ok_or_else(|| {
-                        perr(format!(
-                            "projector {} calibration: the response has no usable gray levels",
-                            p.name
-                        ))
-                    })?
-                }
-            });
-        }
+        let response = |p: &Projector| {
+            let Some(c) = &p.calibration else {
+                return Ok(Response::linear());
+            };
+            let lv = c.response.levels();
+            let pairs: Vec<(u8, f64)> = lv.gray.iter().copied().zip(lv.s).collect();
+            Response::from_levels(&pairs).ok_or_else(|| {
+                perr(format!(
+                    "projector {} calibration: the response has no usable gray levels",
+                    p.name
+                ))
+            })
+        };
+        let responses = ps.iter().map(response).collect::<Result<Vec<_>>>()?;
         let curve = profile.blend.unwrap_or_default();
         let mut tiler = Tiler::new(ps, &curve, &responses, &vec![None; n]);
         let calibrated = ps.iter().filter(|p| p.calibration.is_some()).count();
@@ -265,10 +256,7 @@ impl Tiler {
             return self.render_compensated(k, o, field);
         }
         let t = &self.tiles[k];
-        let (w, h) = (
-            (t.rect.x1 - t.rect.x0) as usize,
-            (t.rect.y1 - t.rect.y0) as usize,
-        );
+        let (w, h) = t.rect.size();
         let fw = field.width as usize;
         let mut out = Mask::zeros(w as u32, h as u32);
         let lut = &t.lut[..];
@@ -312,10 +300,7 @@ impl Tiler {
     /// Compensated path: crop, scale by the share (8-bit), compensate, mirror.
     fn render_compensated(&self, k: usize, o: &JobOptics, field: &Mask) -> Mask {
         let t = &self.tiles[k];
-        let (w, h) = (
-            (t.rect.x1 - t.rect.x0) as usize,
-            (t.rect.y1 - t.rect.y0) as usize,
-        );
+        let (w, h) = t.rect.size();
         let fw = field.width as usize;
         let mut out = Mask::zeros(w as u32, h as u32);
         for r in 0..h {
@@ -367,19 +352,19 @@ mod tests {
         vec![p, q]
     }
 
+    /// Both projectors' masks of a full field of `w` columns.
+    fn full(t: &Tiler, w: u32) -> (Mask, Mask) {
+        let mut field = Mask::zeros(w, 4);
+        field.data.fill(255);
+        (t.render(0, &field), t.render(1, &field))
+    }
+
     #[test]
     fn full_plate_sums_to_255_across_the_seam() {
         let ps = two(64, 16);
-        let t = Tiler::new(
-            &ps,
-            &BlendCurve::RaisedCosine,
-            &[Response::linear(), Response::linear()],
-            &[None, None],
-        );
-        let mut field = Mask::zeros(112, 4);
-        field.data.fill(255);
-        let a = t.render(0, &field);
-        let b = t.render(1, &field);
+        let lin = [Response::linear(), Response::linear()];
+        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin, &[None, None]);
+        let (a, b) = full(&t, 112);
         for c in 0..112u32 {
             let va = if c < 64 { a.get(c, 2) as i32 } else { 0 };
             let vb = if c >= 48 { b.get(c - 48, 2) as i32 } else { 0 };
@@ -388,25 +373,17 @@ mod tests {
         assert_eq!(a.get(0, 0), 255);
         assert_eq!(b.get(63, 0), 255);
         // Coverage scales the shares: a half-covered field gives half the gray.
+        let mut field = Mask::zeros(112, 4);
         field.data.fill(128);
-        let a = t.render(0, &field);
-        assert_eq!(a.get(10, 1), 128);
+        assert_eq!(t.render(0, &field).get(10, 1), 128);
     }
 
     #[test]
     fn nonlinear_response_gray_gives_the_irradiance_share() {
         let ps = two(64, 16);
         let g = Response::gamma(2.2).unwrap();
-        let t = Tiler::new(
-            &ps,
-            &BlendCurve::Smoothstep,
-            &[g.clone(), g.clone()],
-            &[None, None],
-        );
-        let mut field = Mask::zeros(112, 4);
-        field.data.fill(255);
-        let a = t.render(0, &field);
-        let b = t.render(1, &field);
+        let t = Tiler::new(&ps, &BlendCurve::Smoothstep, &[g.clone(), g.clone()], &[None, None]);
+        let (a, b) = full(&t, 112);
         for c in 48..64u32 {
             let e = g.irradiance(a.get(c, 0)).unwrap() + g.irradiance(b.get(c - 48, 0)).unwrap();
             assert!((e - 1.0).abs() < 0.02, "col {c}: {e}");
@@ -422,12 +399,8 @@ mod tests {
         ps[1].mirror_x = true;
         ps[1].offset_px = [8, 0];
         let gain = vec![0.5f32; 32];
-        let t = Tiler::new(
-            &ps,
-            &BlendCurve::RaisedCosine,
-            &[Response::linear(), Response::linear()],
-            &[Some(gain), None],
-        );
+        let lin = [Response::linear(), Response::linear()];
+        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin, &[Some(gain), None]);
         let mut field = Mask::zeros(16, 4);
         for c in 0..16 {
             field.data[c] = (c * 10) as u8;

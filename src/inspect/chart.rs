@@ -7,8 +7,9 @@ use std::ops::RangeInclusive;
 
 /// Colour of the panels' lines.
 const LINE: [u8; 3] = [31, 100, 180];
-/// Colour of the shading of continuously printed layers.
+/// Colour and legend of the shading of continuously printed layers.
 const CONTINUOUS: [u8; 3] = [44, 160, 44];
+const CONTINUOUS_LABEL: &str = "printed continuously (stage sweeping)";
 
 /// The chart of the layers in `range` (all if `None`) of the bundle named `name`.
 pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive<usize>>) -> Chart {
@@ -18,17 +19,12 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         _ => &manifest.layers,
     };
     // Each layer's value held over its width on the x axis (layer i spans i ± 0.5).
-    let series = |f: &dyn Fn(&Layer) -> f64| Series {
-        label: String::new(),
-        color: LINE,
-        style: Style::Line,
-        points: layers
-            .iter()
-            .flat_map(|l| {
-                let (x, v) = (l.index as f64, f(l));
-                [(x - 0.5, v), (x + 0.5, v)]
-            })
-            .collect(),
+    let series = |f: &dyn Fn(&Layer) -> f64| {
+        let points = layers.iter().flat_map(|l| {
+            let (x, v) = (l.index as f64, f(l));
+            [(x - 0.5, v), (x + 0.5, v)]
+        });
+        Series::new("", LINE, Style::Line, points.collect())
     };
     // Continuous (swept) layers of a hybrid job, shaded in every panel.
     let mut bands = Vec::new();
@@ -36,12 +32,7 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         let x = l.index as f64;
         match bands.last_mut() {
             Some(Band { x1, .. }) if (*x1 - (x - 0.5)).abs() < 1e-9 => *x1 = x + 0.5,
-            _ => bands.push(Band {
-                x0: x - 0.5,
-                x1: x + 0.5,
-                color: CONTINUOUS,
-                label: "printed continuously (stage sweeping)".into(),
-            }),
+            _ => bands.push(Band::new(x - 0.5, x + 0.5, CONTINUOUS, CONTINUOUS_LABEL)),
         }
     }
     let panel = |y_label: &str, s: Series| Panel {

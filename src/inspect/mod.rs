@@ -1,14 +1,7 @@
-//! `dmdsl inspect`: what a job bundle holds, in numbers and pictures, read from the bundle
-//! alone (`job.json` through [`crate::bundle::Manifest`] and the mask PNGs).
-//!
-//! - [`Bundle`]: a job opened in any form [`crate::formats::open`] reads, its manifest
-//!   checked; its files through a [`BundleSource`].
-//! - [`summary`]: layers, height, time, resin, warnings by code, per-layer extremes.
-//! - [`sheet`]: the contact sheet of layer thumbnails.
-//! - [`chart`]: per-layer figures in stacked panels.
-//! - [`preview()`]: a shaded picture of the part built from the masks (`crate::picture`).
-//!
-//! Like the executor it never uses the slicer or the planner.
+//! `dmdsl inspect`: what a job holds, in numbers ([`summary`]) and pictures ([`sheet`],
+//! [`chart`], [`preview()`]), read from the job alone ([`Bundle`]: any form
+//! [`crate::formats::open`] reads, its files through a [`BundleSource`]); like the executor
+//! it never uses the slicer or the planner.
 
 pub mod chart;
 pub mod sheet;

@@ -1,15 +1,12 @@
-//! Loading, welding and validating triangle meshes.
-//!
-//! [`load`] reads binary or ASCII STL (told apart by content and size, not by a leading
-//! `solid`) or OBJ (through tobj, triangulated), welds corners with bit-identical
-//! coordinates into shared vertices, builds the edge table the slicer chains through,
-//! and produces a [`MeshReport`] like admesh's. Defective meshes load with warnings;
-//! only files that hold no usable geometry are errors. [`binary_stl`] writes binary STL
-//! (for tests and tools that make meshes).
+//! Loading, welding and validating triangle meshes: [`load`] reads binary or ASCII STL
+//! (told apart by content and size, not by a leading `solid`) or OBJ (through tobj,
+//! triangulated), welds corners with bit-identical coordinates into shared vertices, builds
+//! the edge table the slicer chains through and a [`MeshReport`] like admesh's.
+//! [`binary_stl`] writes binary STL (for tests and tools that make meshes).
 //!
 //! Invariants: all coordinates are finite; triangles with a repeated vertex are removed;
 //! vertex and edge ids are in order of first appearance whatever the thread count; defects
-//! are reported, never fatal.
+//! are reported as warnings, never fatal (only a file with no usable geometry is an error).
 
 mod obj;
 mod stl;
@@ -19,7 +16,7 @@ pub use crate::input::MESH_MAX_BYTES;
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
-use crate::text::plural;
+use crate::text::count;
 use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -71,61 +68,34 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// The warnings for the defects found (empty for a clean mesh).
+    /// The warnings for the defects found (empty for a clean mesh). A count's figure is
+    /// named after its code (`mesh.open-edges`: `open_edges`).
     pub fn warnings(&self) -> Vec<Warning> {
-        let mut w = Vec::new();
-        if self.open_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.open-edges",
-                    format!(
-                        "mesh has {} open {} (holes); open section contours are closed or dropped",
-                        self.open_edges,
-                        plural(self.open_edges, "edge", "edges")
-                    ),
-                )
-                .with("open_edges", self.open_edges),
-            );
-        }
-        if self.nonmanifold_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.nonmanifold-edges",
-                    format!(
-                        "mesh has {} non-manifold {}",
-                        self.nonmanifold_edges,
-                        plural(self.nonmanifold_edges, "edge", "edges")
-                    ),
-                )
-                .with("nonmanifold_edges", self.nonmanifold_edges),
-            );
-        }
-        if self.backwards_edges > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.backwards-edges",
-                    format!(
-                        "mesh has {} backwards {} (inconsistently oriented facets); contours are oriented by majority",
-                        self.backwards_edges,
-                        plural(self.backwards_edges, "edge", "edges")
-                    ),
-                )
-                .with("backwards_edges", self.backwards_edges),
-            );
-        }
-        if self.degenerate_triangles > 0 {
-            w.push(
-                Warning::new(
-                    "mesh.degenerate-facets",
-                    format!(
-                        "mesh has {} degenerate {}",
-                        self.degenerate_triangles,
-                        plural(self.degenerate_triangles, "triangle", "triangles")
-                    ),
-                )
-                .with("degenerate_facets", self.degenerate_triangles),
-            );
-        }
+        let counts = [
+            (
+                "mesh.open-edges",
+                self.open_edges,
+                "open edge",
+                " (holes); open section contours are closed or dropped",
+            ),
+            ("mesh.nonmanifold-edges", self.nonmanifold_edges, "non-manifold edge", ""),
+            (
+                "mesh.backwards-edges",
+                self.backwards_edges,
+                "backwards edge",
+                " (inconsistently oriented facets); contours are oriented by majority",
+            ),
+            ("mesh.degenerate-facets", self.degenerate_triangles, "degenerate triangle", ""),
+        ];
+        let mut w: Vec<Warning> = counts
+            .into_iter()
+            .filter(|c| c.1 > 0)
+            .map(|(code, n, what, more)| {
+                let many = count(n, what, &format!("{what}s"));
+                Warning::new(code, format!("mesh has {many}{more}"))
+                    .with(&code[5..].replace('-', "_"), n)
+            })
+            .collect();
         if self.volume_mm3 < 0.0 {
             w.push(
                 Warning::new(
@@ -372,20 +342,9 @@ impl Mesh {
             first_face,
         } = edge_table(&triangles, vertices.len());
         let edge_count = faces.len();
-        let mut open = 0;
-        let mut nonmanifold = 0;
-        let mut backwards = 0;
-        for e in 0..edge_count {
-            match faces[e] {
-                1 => open += 1,
-                2 => {
-                    if fwd[e] != 1 {
-                        backwards += 1
-                    }
-                }
-                _ => nonmanifold += 1,
-            }
-        }
+        let open = faces.iter().filter(|&&n| n == 1).count() as u64;
+        let backwards = faces.iter().zip(&fwd).filter(|&(&n, &f)| n == 2 && f != 1).count() as u64;
+        let nonmanifold = faces.iter().filter(|&&n| !(1..=2).contains(&n)).count() as u64;
 
         // Shells: union-find over triangles sharing an edge.
         let mut parent: Vec<u32> = (0..triangles.len() as u32).collect();
@@ -486,32 +445,17 @@ impl Mesh {
 /// An outward-facing cube of edge `s` with its lowest corner at `at` (for unit tests).
 #[cfg(test)]
 pub(crate) fn cube_soup(s: f32, at: [f32; 3]) -> Soup {
-    let p = |x: f32, y: f32, z: f32| [at[0] + x * s, at[1] + y * s, at[2] + z * s];
-    let v = [
-        p(0., 0., 0.),
-        p(1., 0., 0.),
-        p(1., 1., 0.),
-        p(0., 1., 0.),
-        p(0., 0., 1.),
-        p(1., 0., 1.),
-        p(1., 1., 1.),
-        p(0., 1., 1.),
+    // Corners 0..8 as bits x, y, z (in the order 0, x, xy, y, then z above them).
+    const CORNERS: [u8; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+    const FACES: [usize; 36] = [
+        0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4, 1, 2, 6, 1, 6, 5, 2, 3, 7, 2, 7, 6,
+        3, 0, 4, 3, 4, 7,
     ];
-    let f = [
-        [0, 2, 1],
-        [0, 3, 2],
-        [4, 5, 6],
-        [4, 6, 7],
-        [0, 1, 5],
-        [0, 5, 4],
-        [1, 2, 6],
-        [1, 6, 5],
-        [2, 3, 7],
-        [2, 7, 6],
-        [3, 0, 4],
-        [3, 4, 7],
-    ];
-    f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect()
+    let v = CORNERS.map(|b| [0, 1, 2].map(|k| at[k] + f32::from(b >> k & 1) * s));
+    FACES
+        .chunks(3)
+        .map(|t| [v[t[0]], v[t[1]], v[t[2]]])
+        .collect()
 }
 
 #[cfg(test)]

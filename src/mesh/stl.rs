@@ -24,43 +24,33 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
     if looks_ascii {
         return Ok((parse_ascii(path, b)?, "stl-ascii"));
     }
-    match declared {
-        Some(n) => {
-            let need = 84 + 50 * n;
-            if need > b.len() as u64 {
-                Err(Error::input(
-                    path,
-                    format!(
-                        "truncated or not an STL: binary header declares {} ({need} bytes) but the file has {}",
-                        count(n, "triangle", "triangles"),
-                        count(b.len() as u64, "byte", "bytes")
-                    ),
-                ))
-            } else {
-                // Trailing bytes after the declared triangles: some exporters pad files.
-                let extra = b.len() as u64 - need;
-                if extra >= 50 {
-                    Err(Error::input(
-                        path,
-                        format!(
-                            "not a valid STL: binary header declares {} ({need} bytes) but the file has {} bytes",
-                            count(n, "triangle", "triangles"),
-                            b.len()
-                        ),
-                    ))
-                } else {
-                    Ok((parse_binary(b, n as usize), "stl-binary"))
-                }
-            }
-        }
-        None => Err(Error::input(
+    let Some(n) = declared else {
+        return Err(Error::input(
             path,
             format!(
                 "not an STL file: {} is too short for binary STL and it is not ASCII STL",
                 count(b.len() as u64, "byte", "bytes")
             ),
-        )),
+        ));
+    };
+    // Up to 49 bytes after the declared triangles: some exporters pad files.
+    let need = 84 + 50 * n;
+    if need <= b.len() as u64 && b.len() as u64 - need < 50 {
+        return Ok((parse_binary(b, n as usize), "stl-binary"));
     }
+    let what = if need > b.len() as u64 {
+        "truncated or not an STL"
+    } else {
+        "not a valid STL"
+    };
+    Err(Error::input(
+        path,
+        format!(
+            "{what}: binary header declares {} ({need} bytes) but the file has {}",
+            count(n, "triangle", "triangles"),
+            count(b.len() as u64, "byte", "bytes")
+        ),
+    ))
 }
 
 /// Encodes `triangles` as a binary STL: an 80-byte header of zeros, the count, and per
@@ -131,97 +121,65 @@ impl<'a> Tokens<'a> {
     }
 }
 
-fn parse_ascii(path: &Path, b: &[u8]) -> Result<Soup> {
+fn parse_ascii<'a>(path: &Path, b: &'a [u8]) -> Result<Soup> {
     let mut tk = Tokens {
         text: b,
         pos: 0,
         line: 1,
     };
+    let expected = |(t, l): (&[u8], usize), what: &str| {
+        let t = String::from_utf8_lossy(t);
+        Error::input(path, format!("line {l}: expected {what}, found '{t}'"))
+    };
+    // The next token, which a solid or a facet that has begun must have.
+    let next = |tk: &mut Tokens<'a>| {
+        tk.next().ok_or_else(|| {
+            let msg = format!("ASCII STL ends inside a facet or solid (last line {})", tk.line);
+            Error::input(path, msg)
+        })
+    };
+    let word = |tk: &mut Tokens<'a>, w: &str| match next(tk)? {
+        (t, _) if t.eq_ignore_ascii_case(w.as_bytes()) => Ok(()),
+        tok => Err(expected(tok, &format!("'{w}'"))),
+    };
+    let number = |tk: &mut Tokens<'a>| {
+        let tok = next(tk)?;
+        let n = std::str::from_utf8(tok.0).ok().and_then(|s| s.parse::<f32>().ok());
+        n.ok_or_else(|| expected(tok, "a number"))
+    };
     let mut soup = Vec::new();
-    let err = |line: usize, msg: String| Error::input(path, format!("line {line}: {msg}"));
-    let eof = |line: usize| {
-        Error::input(
-            path,
-            format!("ASCII STL ends inside a facet or solid (last line {line})"),
-        )
-    };
-    let expect = |tk: &mut Tokens, word: &str| -> Result<()> {
-        match tk.next() {
-            Some((t, _)) if t.eq_ignore_ascii_case(word.as_bytes()) => Ok(()),
-            Some((t, l)) => Err(err(
-                l,
-                format!("expected '{word}', found '{}'", String::from_utf8_lossy(t)),
-            )),
-            None => Err(eof(tk.line)),
-        }
-    };
-    let number = |tk: &mut Tokens| -> Result<f32> {
-        match tk.next() {
-            Some((t, l)) => std::str::from_utf8(t)
-                .ok()
-                .and_then(|s| s.parse::<f32>().ok())
-                .ok_or_else(|| {
-                    err(
-                        l,
-                        format!("expected a number, found '{}'", String::from_utf8_lossy(t)),
-                    )
-                }),
-            None => Err(eof(tk.line)),
-        }
-    };
     let mut solids = 0;
-    loop {
-        match tk.next() {
-            None => break,
-            Some((t, _)) if t.eq_ignore_ascii_case(b"solid") => {
-                solids += 1;
-                tk.skip_line(); // solid name
-                loop {
-                    match tk.next() {
-                        None => return Err(eof(tk.line)),
-                        Some((t, _)) if t.eq_ignore_ascii_case(b"endsolid") => {
-                            tk.skip_line();
-                            break;
-                        }
-                        Some((t, _)) if t.eq_ignore_ascii_case(b"facet") => {
-                            expect(&mut tk, "normal")?;
-                            for _ in 0..3 {
-                                number(&mut tk)?;
-                            }
-                            expect(&mut tk, "outer")?;
-                            expect(&mut tk, "loop")?;
-                            let mut tri = [[0f32; 3]; 3];
-                            for v in &mut tri {
-                                expect(&mut tk, "vertex")?;
-                                for c in v.iter_mut() {
-                                    *c = number(&mut tk)?;
-                                }
-                            }
-                            expect(&mut tk, "endloop")?;
-                            expect(&mut tk, "endfacet")?;
-                            soup.push(tri);
-                        }
-                        Some((t, l)) => {
-                            return Err(err(
-                                l,
-                                format!(
-                                    "expected 'facet' or 'endsolid', found '{}'",
-                                    String::from_utf8_lossy(t)
-                                ),
-                            ))
-                        }
-                    }
+    while let Some((t, l)) = tk.next() {
+        if !t.eq_ignore_ascii_case(b"solid") {
+            return Err(expected((&t[..t.len().min(40)], l), "'solid'"));
+        }
+        solids += 1;
+        tk.skip_line(); // solid name
+        loop {
+            let tok = next(&mut tk)?;
+            if tok.0.eq_ignore_ascii_case(b"endsolid") {
+                tk.skip_line();
+                break;
+            }
+            if !tok.0.eq_ignore_ascii_case(b"facet") {
+                return Err(expected(tok, "'facet' or 'endsolid'"));
+            }
+            word(&mut tk, "normal")?;
+            for _ in 0..3 {
+                number(&mut tk)?;
+            }
+            word(&mut tk, "outer")?;
+            word(&mut tk, "loop")?;
+            let mut tri = [[0f32; 3]; 3];
+            for v in &mut tri {
+                word(&mut tk, "vertex")?;
+                for c in v.iter_mut() {
+                    *c = number(&mut tk)?;
                 }
             }
-            Some((t, l)) => {
-                return Err(err(
-                    l,
-                    format!(
-                        "expected 'solid', found '{}'",
-                        String::from_utf8_lossy(&t[..t.len().min(40)])
-                    ),
-                ))
-            }
+            word(&mut tk, "endloop")?;
+            word(&mut tk, "endfacet")?;
+            soup.push(tri);
         }
     }
     if solids == 0 {

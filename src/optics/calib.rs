@@ -1,19 +1,9 @@
-//! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements.
-//!
-//! Input: a CSV table with the header `x_mm,y_mm,gray,irradiance_mw_cm2` (any column order;
-//! `#` comments and blank lines ignored; read by `table`): a zone centre in build-plane mm (origin at
-//! the field's bottom-left corner), the pixel value shown there (255 = fully on) and the
-//! measured irradiance. Any grid of zones, any set of gray levels, repeated readings.
-//!
-//! Method (docs/CALIBRATION.md): the model is bilinear in the cubic's 10 coefficients and
-//! one free value s_j per measured gray level, so it is fitted by alternating least
-//! squares on relative residuals (radiometer noise is proportional to the reading):
-//! with s fixed the coefficients solve a 10-unknown linear least-squares problem (QR of
-//! the column-scaled design matrix, `polyfit`, whose condition number is checked); with P fixed each
-//! s_j has a closed form. The valid gray range is the run of levels, from the brightest
-//! down, over which s keeps falling; P is then refitted on those levels only, s is
-//! normalised to 1 at the brightest level (so P is the full-on irradiance) and S(g) is the
-//! monotone cubic (PCHIP) through the (g_j, s_j).
+//! Fitting E(x, y, g) = P(x, y)·S(g) to irradiance measurements (docs/CALIBRATION.md):
+//! alternating least squares on relative residuals, the valid gray range from the first
+//! pass's S, P's form and degree by cross-validation over zones, S normalised to 1 at the
+//! brightest valid level (so P is the full-on irradiance). Input: a CSV table
+//! `x_mm,y_mm,gray,irradiance_mw_cm2` (read by `table`) of zone centres in build-plane mm,
+//! pixel values shown there (255 = fully on) and readings, in any grid and order.
 
 use super::field::{FieldModel, Form, Poly, MAX_DEGREE};
 use super::response::{Interpolation, Response};
@@ -79,21 +69,12 @@ fn readings(path: &Path, rows: Vec<table::Row<TableRow>>) -> Result<Vec<Reading>
     rows.into_iter()
         .map(|table::Row { line, value: r }| {
             let (g, e) = (r.gray, r.irradiance_mw_cm2);
+            let bad = |column, msg: String| Err(cell_error(path, line, column, msg));
             if !(0.0..=255.0).contains(&g) || g.fract() != 0.0 {
-                return Err(cell_error(
-                    path,
-                    line,
-                    "gray",
-                    format!("{g} is not an integer pixel value 0..255"),
-                ));
+                return bad("gray", format!("{g} is not an integer pixel value 0..255"));
             }
             if e <= 0.0 {
-                return Err(cell_error(
-                    path,
-                    line,
-                    "irradiance_mw_cm2",
-                    format!("must be > 0, got {e}"),
-                ));
+                return bad("irradiance_mw_cm2", format!("must be > 0, got {e}"));
             }
             Ok(Reading {
                 line,
@@ -202,9 +183,22 @@ struct FactorFit {
 impl FactorFit {
     /// P at basis values `phi`.
     fn p_at(&self, phi: &[f64]) -> f64 {
-        let q: f64 = phi.iter().zip(&self.coef).map(|(a, b)| a * b).sum();
-        self.form.apply(1.0, q)
+        p_of(self.form, &self.coef, phi)
     }
+}
+
+/// P of `form` with coefficients `coef` at basis values `phi`.
+fn p_of(form: Form, coef: &[f64], phi: &[f64]) -> f64 {
+    form.apply(1.0, phi.iter().zip(coef).map(|(a, b)| a * b).sum::<f64>())
+}
+
+/// Divides each column of `a` by `norm` of its norm; returns the divisors.
+fn scale_columns(a: &mut DMatrix<f64>, norm: impl Fn(f64) -> f64) -> Vec<f64> {
+    let norms: Vec<f64> = (0..a.ncols()).map(|t| norm(a.column(t).norm())).collect();
+    for (t, &nt) in norms.iter().enumerate() {
+        a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
+    }
+    norms
 }
 
 /// Fits `form` to `rows`: alternating least squares for a polynomial or inverse-square P,
@@ -233,24 +227,14 @@ fn log_linear_fit(rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFi
         }
         b[k] = r.e.ln();
     }
-    let norms: Vec<f64> = (0..cols).map(|t| a.column(t).norm()).collect();
+    let norms = scale_columns(&mut a, |n| n);
     if norms.contains(&0.0) {
         return Err(f64::INFINITY);
     }
-    for (t, &nt) in norms.iter().enumerate() {
-        a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
-    }
     let (x, condition) = solve_scaled(&a, &b, true)?;
     let coef = (0..m).map(|t| x[t] / norms[t]).collect();
-    let s = (0..nlev)
-        .map(|j| {
-            if j + 1 < nlev {
-                (x[m + j] / norms[m + j]).exp()
-            } else {
-                1.0
-            }
-        })
-        .collect();
+    let mut s: Vec<f64> = (m..cols).map(|t| (x[t] / norms[t]).exp()).collect();
+    s.push(1.0);
     Ok(FactorFit {
         form: Form::Exponential,
         coef,
@@ -323,30 +307,18 @@ fn alternating_least_squares(
                 a[(k, t)] = f * r.phi[t];
             }
         }
-        let norms: Vec<f64> = (0..m).map(|t| a.column(t).norm().max(1e-300)).collect();
-        for (t, &nt) in norms.iter().enumerate() {
-            a.column_mut(t).iter_mut().for_each(|v| *v /= nt);
-        }
-        let x = solve_scaled(&a, &b, iter == 0)?;
+        let norms = scale_columns(&mut a, |n| n.max(1e-300));
+        let (x, cond) = solve_scaled(&a, &b, iter == 0)?;
         if iter == 0 {
-            condition = x.1;
+            condition = cond;
         }
-        let x = x.0;
         for t in 0..m {
             coef[t] = x[t] / norms[t];
         }
         // s-step: s_j = Σ r / Σ r², r = P / E.
         let mut num = vec![0.0; nlev];
         let mut den = vec![0.0; nlev];
-        let ps: Vec<f64> = rows
-            .iter()
-            .map(|r| {
-                form.apply(
-                    1.0,
-                    r.phi.iter().zip(&coef).map(|(a, b)| a * b).sum::<f64>(),
-                )
-            })
-            .collect();
+        let ps: Vec<f64> = rows.iter().map(|r| p_of(form, &coef, &r.phi)).collect();
         for (r, &p) in rows.iter().zip(&ps) {
             let q = p / r.e;
             num[r.level] += q;
@@ -442,6 +414,7 @@ impl<'a> Setup<'a> {
             *v = i;
         }
         let npos = pos.len();
+        let positions = count(npos as u64, "distinct zone position", "distinct zone positions");
         let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
         // Without several grays nothing else can be fitted: say so first.
         if grays.len() < 3 {
@@ -450,8 +423,7 @@ impl<'a> Setup<'a> {
         let min_terms = Poly::terms(3);
         if npos < min_terms {
             return Err(input_error(format!(
-                "only {}; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones",
-                count(npos as u64, "distinct zone position", "distinct zone positions")
+                "only {positions}; the cubic P(x, y) has {min_terms} terms and needs at least {min_terms} zones"
             )));
         }
         if let Some(d) = opts.degree {
@@ -462,12 +434,7 @@ impl<'a> Setup<'a> {
             }
             if npos < Poly::terms(d) {
                 return Err(input_error(format!(
-                    "only {}; a degree-{d} P(x, y) has {} terms",
-                    count(
-                        npos as u64,
-                        "distinct zone position",
-                        "distinct zone positions"
-                    ),
+                    "only {positions}; a degree-{d} P(x, y) has {} terms",
                     Poly::terms(d)
                 )));
             }
@@ -738,17 +705,14 @@ fn response_through(grays: &[u8], s: &[f64], to_zero: bool) -> Response {
         points.push([0.0, 0.0]);
     }
     points.extend(grays.iter().zip(s).map(|(&g, &v)| [g as f64, v]));
-    let spline = Response::Table {
-        interpolation: Interpolation::Spline,
+    let table = |interpolation| Response::Table {
+        interpolation,
         points: points.clone(),
     };
-    if spline.validate().is_ok() {
-        spline
-    } else {
-        Response::Table {
-            interpolation: Interpolation::Pchip,
-            points,
-        }
+    let spline = table(Interpolation::Spline);
+    match spline.validate() {
+        Ok(()) => spline,
+        Err(_) => table(Interpolation::Pchip),
     }
 }
 

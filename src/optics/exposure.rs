@@ -1,17 +1,9 @@
-//! Layer exposure from the flattened irradiance.
-//!
-//! * Absolute calibration (mW/cm²): the working curve (Jacobs) gives the time that cures
-//!   the layer plus the overcure at the target irradiance E*:
-//!   t = (Ec / E*)·exp((Δz + overcure) / Dp). It replaces the profile's `exposure.layer_s`;
-//!   `bottom_s` keeps its ratio to `layer_s` (the bottom-layer factor), and the transition
-//!   layers ramp between them as without calibration
-//!   ([`crate::profile::Exposure::layer_exposure_s`]).
-//! * Relative calibration (such as Xu et al. 2010's published fit): irradiance is known only up to a
-//!   factor, so the profile's fixed exposure is taken as the exposure at E*; the profile is
-//!   left unchanged and no dose can be stated.
-//!
-//! The planner keeps calling [`crate::profile::Exposure::layer_exposure_s`] on the resolved
-//! profile: [`resolve`] is applied to the job's copy of the profile before planning.
+//! Layer exposure from the flattened irradiance (docs/CALIBRATION.md, "Exposure"): for an
+//! absolute calibration the working curve (Jacobs) at the target irradiance E* replaces the
+//! profile's `exposure.layer_s` (`bottom_s` keeps its ratio to it); a relative one (such as
+//! Xu et al. 2010's published fit) takes the profile's exposure as the exposure at E*, with
+//! no dose. [`resolve`] changes the job's copy of the profile before planning, so the
+//! planner keeps calling [`crate::profile::Exposure::layer_exposure_s`].
 
 use super::Units;
 use crate::profile::{Profile, Resin};

@@ -1,38 +1,19 @@
-//! Light-uniformity calibration and compensation (method in docs/CALIBRATION.md).
-//!
-//! A DMD field is not evenly lit. Following Xu et al. 2010 the irradiance on the build
-//! plane is modelled as E(x, y, g) = P(x, y)·S(g): a field factor P (a bivariate
-//! polynomial, [`field::FieldModel`]) times a gray response S (monotone on its valid gray
-//! range, [`response::Response`]). The model a projector carries ([`Calibration`]) is part
-//! of the machine description ([`crate::profile::calibration`]); this stage fits and
-//! applies it:
-//!
-//! * [`calib`]: reads a measurement table (CSV) and fits P and S ([`calib::fit`]);
-//!   `dmdsl calibrate` writes the result as a calibration file (TOML).
-//! * [`compensate`]: per job, precomputes lookup tables once (one 256-entry table per zone,
-//!   or a per-pixel gray map) and turns each layer's coverage mask into grays in place:
-//!   a pixel of coverage c gets the level g with S(g)·P nearest to c·E*, where E* is the
-//!   highest irradiance every point of the calibrated area can reach.
-//! * [`exposure`]: the layer exposure rule (working curve for absolute calibrations).
-//!
-//! Like every algorithm stage it returns values: the gray map and the manifest record go
-//! back to the job, which writes the bundle.
+//! Light-uniformity calibration and compensation (docs/CALIBRATION.md): the irradiance is
+//! modelled as E(x, y, g) = P(x, y)·S(g) ([`Calibration`], part of the machine description);
+//! [`calib`] fits it (`dmdsl calibrate`, with [`report`] and [`plots`]), [`compensate`]
+//! turns each layer's coverage into grays with it, [`exposure`] gives the layer exposure.
+//! It returns values (the gray map, the manifest record); the job writes the bundle.
 //!
 //! Invariants: coverage 0 stays 0; a pixel gets the level nearest to coverage·E* in
 //! irradiance; S is strictly increasing on its valid range (enforced when a calibration is
-//! loaded); the output depends only on the input and the settings, never on the thread count
-//! (error diffusion is sequential within a layer); the compensation fused into the
-//! rasterizer's scan and applied to a finished mask give the same bytes; the set-up's sums of
-//! P equal adding P pixel by pixel in row-major order, bit for bit, whatever the order or
-//! vector width.
+//! loaded); the output depends only on the input and the settings, never on the thread
+//! count.
 
 pub mod calib;
 pub mod compensate;
 pub mod exposure;
 pub mod plots;
 pub mod report;
-#[cfg(test)]
-mod sweep;
 #[cfg(test)]
 pub(crate) mod synthetic;
 
@@ -77,9 +58,9 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Dither {
-    /// Zone mode: a zone whose nearest gray misses the target by more than
-    /// [`compensate::MIX_TOLERANCE`] mixes the two grays around its target (ordered 8×8
-    /// pattern); every other zone keeps one gray. Pixel mode: no dithering.
+    /// Zone mode: a zone whose nearest gray misses the target by more than 0.75 %
+    /// (`MIX_TOLERANCE`) mixes the two grays around its target in whole rows; every other
+    /// zone keeps one gray. Pixel mode: no dithering.
     #[default]
     Auto,
     /// Zone mode: every zone mixes the two grays around its target. Pixel mode:
@@ -248,13 +229,9 @@ impl JobOptics {
     pub fn finish_with(&self, (file, gray_map_sha256): (String, String)) -> (Optics, Vec<Warning>) {
         let c = &self.compensator;
         let pr = &c.prediction;
-        let (zc, zr) = pr.zone_grid;
-        let zone_grays = if c.mode() == Mode::Zone {
-            (0..zr)
-                .map(|r| pr.zone_gray[r * zc..(r + 1) * zc].to_vec())
-                .collect()
-        } else {
-            Vec::new()
+        let zone_grays = match c.mode() {
+            Mode::Zone => pr.zone_gray.chunks(pr.zone_grid.0).map(<[u8]>::to_vec).collect(),
+            _ => Vec::new(),
         };
         let mut warnings = self.exposure.warnings.clone();
         let [x0, y0, x1, y1] = self.calibration.field.area_mm;

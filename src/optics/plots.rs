@@ -87,7 +87,10 @@ fn spread_pct(v: &[f64]) -> f64 {
     (hi - lo) / (f.iter().sum::<f64>() / f.len() as f64) * 100.0
 }
 
-/// The plot files (path, PNG bytes) for a fit, named after `out` (the calibration file).
+/// The plot files (path, PNG bytes) for a fit, named after `out` (the calibration file):
+/// measured and fitted full-on irradiance per zone (on one scale), both after zone
+/// compensation (% of target; the fitted spread over the zones inside the calibrated
+/// area), the zone grays and the response S(g).
 pub fn calibration_plots(
     out: &Path,
     fit: &FitResult,
@@ -95,38 +98,90 @@ pub fn calibration_plots(
     pixel: &Compensator,
 ) -> Vec<(PathBuf, Vec<u8>)> {
     let z = ZoneValues::new(fit, zone);
-    let (lo, hi) = range(
-        &z.measured
-            .iter()
-            .chain(&z.fitted)
-            .copied()
-            .collect::<Vec<_>>(),
-    );
-    vec![
-        (sibling(out, "measured"), measured_heatmap(&z, lo, hi)),
-        (sibling(out, "fitted"), fitted_heatmap(&z, zone, lo, hi)),
+    let pr = &zone.prediction;
+    let (lo, hi) = range(&[z.measured.clone(), z.fitted.clone()].concat());
+    let irradiance = irradiance_label(z.units);
+    let compensated = "irradiance (% of the target E*)";
+    let inside: Vec<f64> = (z.fitted_after.iter().zip(&pr.zone_inside))
+        .map(|(&x, &ins)| if ins { x } else { f64::NAN })
+        .collect();
+    let grays = pr.zone_gray.iter().map(|&g| g as f64).collect();
+    let gray_range = [fit.calibration.response.valid_gray()[0] as f64, 255.0];
+    let maps = [
         (
-            sibling(out, "measured-compensated"),
-            measured_compensated_heatmap(&z),
-        ),
-        (
-            sibling(out, "fitted-compensated"),
-            fitted_compensated_heatmap(&z, zone),
-        ),
-        (
-            sibling(out, "zone-grays"),
-            zone_grays_heatmap(&z, fit, zone),
-        ),
-        (
-            sibling(out, "response"),
-            response_chart(
-                fit,
-                zone.prediction.s_max,
-                pixel.prediction.spreads.after_pixel_pct,
+            "measured",
+            format!(
+                "Measured irradiance per zone at the brightest valid gray: spread {:.1} %",
+                spread_pct(&z.measured)
             ),
+            irradiance,
+            z.measured.clone(),
+            [lo, hi],
+            "not measured",
         ),
-    ]
+        (
+            "fitted",
+            format!(
+                "Fitted irradiance P(x, y) · S at the brightest valid gray, zone means: spread {:.1} %",
+                pr.spreads.before_zone_pct
+            ),
+            irradiance,
+            z.fitted.clone(),
+            [lo, hi],
+            "",
+        ),
+        (
+            "measured-compensated",
+            format!(
+                "Measured × S(zone gray): irradiance after zone compensation, spread {:.2} %",
+                spread_pct(&z.measured_after)
+            ),
+            compensated,
+            z.measured_after.clone(),
+            COMPENSATED_BAND_PCT,
+            "not measured",
+        ),
+        (
+            "fitted-compensated",
+            format!(
+                "Fitted irradiance after zone compensation: spread {:.2} % inside the calibrated area",
+                spread_pct(&inside)
+            ),
+            compensated,
+            z.fitted_after.clone(),
+            COMPENSATED_BAND_PCT,
+            "",
+        ),
+        (
+            "zone-grays",
+            format!(
+                "Zone grays: the pixel value of a fully covered pixel, {} mm zones",
+                z.zone_mm
+            ),
+            "pixel value (255 = mirror fully on)",
+            grays,
+            gray_range,
+            "",
+        ),
+    ];
+    let mut files: Vec<(PathBuf, Vec<u8>)> = maps
+        .into_iter()
+        .map(|(suffix, title, quantity, values, range, missing)| {
+            let png = zone_heatmap(&z, title, quantity, values, range, missing);
+            (sibling(out, suffix), png)
+        })
+        .collect();
+    let response = response_chart(fit, pr.s_max, pixel.prediction.spreads.after_pixel_pct);
+    files.push((sibling(out, "response"), response));
+    files
 }
+
+/// Colours of the response chart: readings, excluded levels, the measured and the
+/// interpolated gray ranges.
+const GRAY: [u8; 3] = [170, 170, 170];
+const ORANGE: [u8; 3] = [255, 127, 14];
+const GREEN: [u8; 3] = [44, 160, 44];
+const PEACH: [u8; 3] = [255, 187, 120];
 
 /// The colour scale of the compensated heatmaps, % of target.
 const COMPENSATED_BAND_PCT: [f64; 2] = [97.0, 103.0];
@@ -182,12 +237,11 @@ impl ZoneValues {
             })
             .collect();
         let fitted: Vec<f64> = (0..nz).map(|i| pr.zone_p[i] * s_max).collect();
-        // After zone compensation: each zone at its gray.
-        // Effective S of each zone (a mixing zone's mean of its two grays).
-        let gray_s: Vec<f64> = (0..nz).map(|i| pr.zone_after[i] / pr.zone_p[i]).collect();
+        // After zone compensation: each zone at the effective S of its gray (a mixing
+        // zone's mean of its two grays).
         let pct = |v: f64| v / target * 100.0;
         let measured_after: Vec<f64> = (0..nz)
-            .map(|i| pct(measured[i] / s_max * gray_s[i]))
+            .map(|i| pct(measured[i] / s_max * (pr.zone_after[i] / pr.zone_p[i])))
             .collect();
         let fitted_after: Vec<f64> = pr.zone_after.iter().map(|&v| pct(v)).collect();
         ZoneValues {
@@ -201,92 +255,6 @@ impl ZoneValues {
             fitted_after,
         }
     }
-}
-
-/// Measured full-on irradiance per zone, on the scale `lo..hi` shared with the fit.
-fn measured_heatmap(z: &ZoneValues, lo: f64, hi: f64) -> Vec<u8> {
-    zone_heatmap(
-        z,
-        format!(
-            "Measured irradiance per zone at the brightest valid gray: spread {:.1} %",
-            spread_pct(&z.measured)
-        ),
-        irradiance_label(z.units),
-        z.measured.clone(),
-        [lo, hi],
-        "not measured",
-    )
-}
-
-/// Fitted full-on irradiance per zone, on the scale `lo..hi` shared with the measurements.
-fn fitted_heatmap(z: &ZoneValues, zone: &Compensator, lo: f64, hi: f64) -> Vec<u8> {
-    zone_heatmap(
-        z,
-        format!(
-            "Fitted irradiance P(x, y) · S at the brightest valid gray, zone means: spread {:.1} %",
-            zone.prediction.spreads.before_zone_pct
-        ),
-        irradiance_label(z.units),
-        z.fitted.clone(),
-        [lo, hi],
-        "",
-    )
-}
-
-/// Measured irradiance after zone compensation, % of target.
-fn measured_compensated_heatmap(z: &ZoneValues) -> Vec<u8> {
-    zone_heatmap(
-        z,
-        format!(
-            "Measured × S(zone gray): irradiance after zone compensation, spread {:.2} %",
-            spread_pct(&z.measured_after)
-        ),
-        "irradiance (% of the target E*)",
-        z.measured_after.clone(),
-        COMPENSATED_BAND_PCT,
-        "not measured",
-    )
-}
-
-/// Predicted irradiance after zone compensation, % of target; the spread in the title is
-/// over the zones whose centre is inside the calibrated area.
-fn fitted_compensated_heatmap(z: &ZoneValues, zone: &Compensator) -> Vec<u8> {
-    let inside: Vec<f64> = z
-        .fitted_after
-        .iter()
-        .zip(&zone.prediction.zone_inside)
-        .map(|(&x, &ins)| if ins { x } else { f64::NAN })
-        .collect();
-    zone_heatmap(
-        z,
-        format!(
-            "Fitted irradiance after zone compensation: spread {:.2} % inside the calibrated area",
-            spread_pct(&inside)
-        ),
-        "irradiance (% of the target E*)",
-        z.fitted_after.clone(),
-        COMPENSATED_BAND_PCT,
-        "",
-    )
-}
-
-/// The gray of each zone at full coverage, on the valid gray range.
-fn zone_grays_heatmap(z: &ZoneValues, fit: &FitResult, zone: &Compensator) -> Vec<u8> {
-    zone_heatmap(
-        z,
-        format!(
-            "Zone grays: the pixel value of a fully covered pixel, {} mm zones",
-            z.zone_mm
-        ),
-        "pixel value (255 = mirror fully on)",
-        zone.prediction
-            .zone_gray
-            .iter()
-            .map(|&g| g as f64)
-            .collect(),
-        [fit.calibration.response.valid_gray()[0] as f64, 255.0],
-        "",
-    )
 }
 
 /// S(g): the fitted curve over the valid range, the level values, the individual readings
@@ -311,47 +279,17 @@ fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8>
         }
     }
     let mut series = vec![
-        Series {
-            label: "readings ÷ fitted P(x, y)".into(),
-            color: [170, 170, 170],
-            style: Style::Points,
-            points: readings,
-        },
-        Series {
-            label: "S(g), fitted".into(),
-            color: [31, 119, 180],
-            style: Style::Line,
-            points: curve,
-        },
-        Series {
-            label: "level values".into(),
-            color: [214, 39, 40],
-            style: Style::Points,
-            points: valid_pts,
-        },
+        Series::new("readings ÷ fitted P(x, y)", GRAY, Style::Points, readings),
+        Series::new("S(g), fitted", [31, 119, 180], Style::Line, curve),
+        Series::new("level values", [214, 39, 40], Style::Points, valid_pts),
     ];
     if !excluded_pts.is_empty() {
-        series.push(Series {
-            label: "excluded levels".into(),
-            color: [255, 127, 14],
-            style: Style::Points,
-            points: excluded_pts,
-        });
+        series.push(Series::new("excluded levels", ORANGE, Style::Points, excluded_pts));
     }
-    let [mlo, mhi] = cal.fit.as_ref().map_or([glo, ghi], |f| f.measured_gray);
-    let mut bands = vec![Band {
-        x0: mlo as f64,
-        x1: mhi as f64,
-        color: [44, 160, 44],
-        label: "measured gray range (S monotone)".into(),
-    }];
-    if glo < mlo {
-        bands.push(Band {
-            x0: glo as f64,
-            x1: mlo as f64,
-            color: [255, 187, 120],
-            label: "interpolated down to S(0) = 0".into(),
-        });
+    let [mlo, mhi] = (cal.fit.as_ref().map_or([glo, ghi], |f| f.measured_gray)).map(f64::from);
+    let mut bands = vec![Band::new(mlo, mhi, GREEN, "measured gray range (S monotone)")];
+    if f64::from(glo) < mlo {
+        bands.push(Band::new(glo.into(), mlo, PEACH, "interpolated down to S(0) = 0"));
     }
     Chart {
         title: format!(

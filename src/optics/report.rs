@@ -1,7 +1,7 @@
 //! The `dmdsl calibrate` command: fit, predict, write the calibration file and its plots.
 
 use super::calib::{self, FitOptions, FitResult};
-use super::{Calibration, Compensator, Dither, Mode, Units};
+use super::{Calibration, Compensator, Dither, Mode};
 use crate::bundle::Spreads;
 use crate::error::{Error, Result};
 use crate::profile::Field;
@@ -16,16 +16,10 @@ pub struct CalibrateOptions {
     pub input: PathBuf,
     /// Calibration TOML to write; plots go next to it.
     pub output: PathBuf,
-    /// Units of the irradiance column.
-    pub units: Units,
-    /// Compensation zone edge, mm.
-    pub zone_mm: f64,
-    /// Extrapolation distance beyond the calibrated area, mm.
-    pub extrapolate_mm: f64,
-    /// Field the predictions are made for.
+    /// The fit's options.
+    pub fit: FitOptions,
+    /// Field the predictions are made for (the fit's `field_mm`).
     pub field: Field,
-    /// Degree of P (`None`: chosen by cross-validation).
-    pub degree: Option<usize>,
     /// Write PNG plots.
     pub plots: bool,
 }
@@ -161,24 +155,16 @@ fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
                 .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })
         .collect::<Result<_>>()?;
-    let cleanup = |upto: usize| {
-        for t in &tmp[..upto] {
-            let _ = std::fs::remove_file(t);
-        }
+    // Removes the temporary files left (those not written yet or renamed already are gone).
+    let fail = |path: &Path, e| {
+        tmp.iter().for_each(|t| drop(std::fs::remove_file(t)));
+        Error::io(path, e)
     };
-    for (i, ((_, bytes), t)) in files.iter().zip(&tmp).enumerate() {
-        if let Err(e) = std::fs::write(t, bytes) {
-            cleanup(i + 1);
-            return Err(Error::io(t, e));
-        }
+    for ((_, bytes), t) in files.iter().zip(&tmp) {
+        std::fs::write(t, bytes).map_err(|e| fail(t, e))?;
     }
-    for (i, ((p, _), t)) in files.iter().zip(&tmp).enumerate() {
-        if let Err(e) = std::fs::rename(t, p) {
-            for t2 in &tmp[i..] {
-                let _ = std::fs::remove_file(t2);
-            }
-            return Err(Error::io(p, e));
-        }
+    for ((p, _), t) in files.iter().zip(&tmp) {
+        std::fs::rename(t, p).map_err(|e| fail(p, e))?;
     }
     Ok(())
 }
@@ -201,17 +187,7 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
         }
     }
     let readings = calib::read_csv(&opts.input)?;
-    let fit: FitResult = calib::fit(
-        &readings,
-        &opts.input,
-        &FitOptions {
-            units: opts.units,
-            zone_mm: opts.zone_mm,
-            extrapolate_mm: opts.extrapolate_mm,
-            field_mm: (opts.field.width_mm(), opts.field.height_mm()),
-            degree: opts.degree,
-        },
-    )?;
+    let fit: FitResult = calib::fit(&readings, &opts.input, &opts.fit)?;
     let cal = &fit.calibration;
     let wrap = |m: String| Error::input(&opts.input, m);
     let zone = Compensator::new(cal, &opts.field, Mode::Zone, Dither::Auto).map_err(wrap)?;

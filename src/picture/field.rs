@@ -47,36 +47,25 @@ pub fn part_crop(manifest: &Manifest) -> Crop {
         x1: field.width_px,
         y1: field.height_px,
     };
-    let mut b = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for l in &manifest.layers {
-        if let Some([lo, hi]) = l.bbox_mm {
-            b = [
-                b[0].min(lo[0]),
-                b[1].min(lo[1]),
-                b[2].max(hi[0]),
-                b[3].max(hi[1]),
-            ];
-        }
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for [l, h] in manifest.layers.iter().filter_map(|l| l.bbox_mm) {
+        lo = [lo[0].min(l[0]), lo[1].min(l[1])];
+        hi = [hi[0].max(h[0]), hi[1].max(h[1])];
     }
-    if !(b[0].is_finite() && b[2] >= b[0] && b[3] >= b[1]) || field.pixel_mm <= 0.0 {
+    if !(lo[0].is_finite() && hi[0] >= lo[0] && hi[1] >= lo[1]) || field.pixel_mm <= 0.0 {
         return whole;
     }
-    let m = ((b[2] - b[0]).max(b[3] - b[1]) * MARGIN_SHARE).max(MARGIN_MIN_MM);
+    let m = ((hi[0] - lo[0]).max(hi[1] - lo[1]) * MARGIN_SHARE).max(MARGIN_MIN_MM);
     let p = field.pixel_mm;
     let (w, h) = (field.width_px as f64, field.height_px as f64);
     let col = |x: f64| (x / p).clamp(0.0, w);
     // Build-plane y up, rows down: row = H − y/p.
     let row = |y: f64| (h - y / p).clamp(0.0, h);
     let c = Crop {
-        x0: col(b[0] - m).floor() as u32,
-        x1: col(b[2] + m).ceil() as u32,
-        y0: row(b[3] + m).floor() as u32,
-        y1: row(b[1] - m).ceil() as u32,
+        x0: col(lo[0] - m).floor() as u32,
+        x1: col(hi[0] + m).ceil() as u32,
+        y0: row(hi[1] + m).floor() as u32,
+        y1: row(lo[1] - m).ceil() as u32,
     };
     if c.x1 <= c.x0 || c.y1 <= c.y0 {
         whole

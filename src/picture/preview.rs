@@ -1,11 +1,7 @@
-//! A shaded picture of the part as the masks build it: the lit pixels of the layers stacked
-//! into voxels and seen from the front right, above, with light from the upper left and
-//! farther surfaces darker. It is the picture a person recognises the part by (and the
-//! thumbnail a bundle can carry).
-//!
-//! Fast for long jobs: the masks are shrunk first (about [`XY_CELLS`] cells across the
-//! part's footprint) and only about [`Z_SLABS`] layers are read, one per slab of layers
-//! about as thick as a cell is wide.
+//! A shaded picture of the part as the masks build it (and the thumbnail a bundle can
+//! carry): the lit pixels of about [`Z_SLABS`] layers, shrunk to about [`XY_CELLS`] cells
+//! across, stacked into voxels and seen from the front right, above (docs/ARCHITECTURE.md,
+//! "Inspection").
 
 use super::field::{layer_cells, part_crop};
 use crate::bundle::BundleSource;
@@ -140,10 +136,8 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
     let p = field.pixel_mm;
     let longer = crop.width().max(crop.height()) as f64;
     let scale = (XY_CELLS as f64 / longer).min(1.0);
-    let want = (
-        ((crop.width() as f64 * scale).round() as u32).max(1),
-        ((crop.height() as f64 * scale).round() as u32).max(1),
-    );
+    let cells = |px: u32| ((px as f64 * scale).round() as u32).max(1);
+    let want = (cells(crop.width()), cells(crop.height()));
     let layers = &manifest.layers;
     let n = layers.len();
     let height = layers.last().map_or(0.0, |l| l.z_mm);
@@ -164,11 +158,8 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
             Ok((c.width, c.height, occ))
         })
         .collect::<Result<_>>()?;
-    let (nx, ny) = planes
-        .first()
-        .map_or((want.0 as usize, want.1 as usize), |p| {
-            (p.0 as usize, p.1 as usize)
-        });
+    let (nx, ny) = planes.first().map_or(want, |p| (p.0, p.1));
+    let (nx, ny) = (nx as usize, ny as usize);
     // Cells come row 0 at the top (back of the field); voxels count y from the front.
     let mut occ = vec![0u8; nx * ny * nz];
     for (z, (_, _, plane)) in planes.iter().enumerate() {
@@ -211,15 +202,18 @@ pub fn preview(
     let top = v.slabs.last().map_or(1.0, |s| s[1]).max(1e-3);
     let (x0, y0) = (v.origin[0], v.origin[1]);
     let (x1, y1) = (x0 + v.nx as f64 * v.cell[0], y0 + v.ny as f64 * v.cell[1]);
-    // Fit the box of plate and part into the picture with a margin.
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
-    for &x in &[x0, x1] {
-        for &y in &[y0, y1] {
-            for &z in &[0.0, top] {
+    // Fit the box of plate and part into the picture with a margin; its depths scale the
+    // shading.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    let mut depths = [f64::INFINITY, f64::NEG_INFINITY];
+    for x in [x0, x1] {
+        for y in [y0, y1] {
+            for z in [0.0, top] {
                 let q = [dot([x, y, z], view.right), dot([x, y, z], view.up)];
                 lo = [lo[0].min(q[0]), lo[1].min(q[1])];
                 hi = [hi[0].max(q[0]), hi[1].max(q[1])];
+                let d = dot([x, y, z], view.toward);
+                depths = [depths[0].min(d), depths[1].max(d)];
             }
         }
     }
@@ -239,22 +233,15 @@ pub fn preview(
     draw_plate(&mut canvas, &to_px, [x0, y0, x1, y1]);
     let mut img = canvas.to_rgb();
 
-    let light = normalized([
-        -0.35 * view.right[0] + 0.55 * view.up[0] + 0.75 * view.toward[0],
-        -0.35 * view.right[1] + 0.55 * view.up[1] + 0.75 * view.toward[1],
-        -0.35 * view.right[2] + 0.55 * view.up[2] + 0.75 * view.toward[2],
-    ]);
-    let depth_of = |q: V3| dot(q, view.toward);
-    let mut depths = [f64::INFINITY, f64::NEG_INFINITY];
-    for &x in &[x0, x1] {
-        for &y in &[y0, y1] {
-            for &z in &[0.0, top] {
-                let d = depth_of([x, y, z]);
-                depths = [depths[0].min(d), depths[1].max(d)];
-            }
-        }
-    }
+    let light = normalized(std::array::from_fn(|k| {
+        -0.35 * view.right[k] + 0.55 * view.up[k] + 0.75 * view.toward[k]
+    }));
     let mut zbuf = vec![f64::NEG_INFINITY; (width * height) as usize];
+    // The pixels a voxel centred on `c` covers, `r` each way (at least one).
+    let pixels = |c: f64, r: f64| {
+        let a = (c - r).round();
+        (a as i64, (c + r).round().max(a + 1.0) as i64)
+    };
     let (w, h) = (width as i64, height as i64);
     for z in 0..v.nz {
         let [zb, zt] = v.slabs[z];
@@ -281,19 +268,13 @@ pub fn preview(
                 let n = v.normal(xi, yi, zi, dz);
                 let diffuse = dot(n, light).max(0.0);
                 let facing = dot(n, view.toward).max(0.0);
-                let depth = depth_of(q);
+                let depth = dot(q, view.toward);
                 let near = (depth - depths[0]) / (depths[1] - depths[0]).max(1e-9);
                 let shade = (0.34 + 0.56 * diffuse + 0.10 * facing) * (0.75 + 0.25 * near);
                 let color = PART.map(|c| (c as f64 * shade * 1.25).round().clamp(0.0, 255.0) as u8);
                 let (px, py) = to_px(q);
-                let (ax, bx) = (
-                    (px - hw).round() as i64,
-                    (px + hw).round().max((px - hw).round() + 1.0) as i64,
-                );
-                let (ay, by) = (
-                    (py - hh).round() as i64,
-                    (py + hh).round().max((py - hh).round() + 1.0) as i64,
-                );
+                let (ax, bx) = pixels(px, hw);
+                let (ay, by) = pixels(py, hh);
                 for sy in ay.max(0)..by.min(h) {
                     for sx in ax.max(0)..bx.min(w) {
                         let i = (sy * w + sx) as usize;
@@ -316,16 +297,8 @@ fn draw_plate(c: &mut Canvas, to_px: &dyn Fn(V3) -> (f64, f64), b: [f64; 4]) {
         let (px, py) = to_px([x, y, 0.0]);
         (px as f32, py as f32)
     };
-    c.polygon(
-        &[
-            corner(x0, y0),
-            corner(x1, y0),
-            corner(x1, y1),
-            corner(x0, y1),
-        ],
-        PLATE,
-        255,
-    );
+    let corners = [corner(x0, y0), corner(x1, y0), corner(x1, y1), corner(x0, y1)];
+    c.polygon(&corners, PLATE, 255);
     let mut x = (x0 / 10.0).ceil() * 10.0;
     while x < x1 {
         c.polyline(&[corner(x, y0), corner(x, y1)], PLATE_LINE, 1.0);
@@ -336,15 +309,5 @@ fn draw_plate(c: &mut Canvas, to_px: &dyn Fn(V3) -> (f64, f64), b: [f64; 4]) {
         c.polyline(&[corner(x0, y), corner(x1, y)], PLATE_LINE, 1.0);
         y += 10.0;
     }
-    c.polyline(
-        &[
-            corner(x0, y0),
-            corner(x1, y0),
-            corner(x1, y1),
-            corner(x0, y1),
-            corner(x0, y0),
-        ],
-        PLATE_LINE,
-        1.5,
-    );
+    c.polyline(&[&corners[..], &corners[..1]].concat(), PLATE_LINE, 1.5);
 }

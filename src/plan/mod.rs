@@ -1,25 +1,16 @@
-//! Process planning: per-layer analysis, exposure and the machine steps of each layer.
-//!
-//! Stages (see `docs/PLANNING.md`):
-//! 1. [`analysis`] (run per layer inside the slicing workers): max fill distance
-//!    (DisMax-Min of the hybrid continuous/layered method, the largest inscribed circle of
-//!    the exact contours), unsupported islands, bounding box.
-//! 2. [`plan`]: per process (the profile's process sections, [`crate::profile::Recoat`],
-//!    [`crate::profile::Peel`], [`crate::profile::Hybrid`]) the mode, exposure and step
-//!    list of each layer (`steps`), then the time estimate under the bundle's timing
-//!    contract ([`timing`]). For the hybrid process it also plans the same job all
-//!    layered, for the time comparison the hybrid method reports.
+//! Process planning (docs/PLANNING.md): the per-layer [`analysis`] (run inside the slicing
+//! workers: max fill distance, unsupported islands, bounding box), then [`plan`]: per
+//! process (the profile's [`crate::profile::Recoat`], [`crate::profile::Peel`] or
+//! [`crate::profile::Hybrid`] section) each layer's mode, exposure and steps (`steps`) and
+//! the time estimate ([`timing`]); for the hybrid process also the job planned all
+//! layered, for the time comparison the hybrid method reports.
 //!
 //! The planner is pure: the same layers and profile give the same plan, bit for bit.
-//!
 //! Invariants: each layer's steps start where the previous layer left the stage and end with
 //! its `expose` or `sweep`; every position stays inside the stage travel and every speed at
 //! most the stage maximum; a continuous slice inside a run is one `sweep`; positions are
 //! rounded to whole stage steps before the estimate, so the estimate is that of the steps as
-//! written. The analysis depends only on the section and the layer below (for a section
-//! equal to the layer below's, on that layer's result), so bundles are byte-identical at any
-//! thread count; the max fill distance is a true inscribed radius within 0.02 mm of the
-//! exact value.
+//! written.
 
 pub mod analysis;
 mod steps;
@@ -101,27 +92,9 @@ fn build(
 ) -> (Vec<LayerPlan>, f64) {
     let lim = steps::Limits::of(profile);
     let mut plans = match profile.process {
-        Process::TopDown => {
-            let r = profile
-                .recoat
-                .as_ref()
-                .expect("validated: top-down has [recoat]");
-            steps::top_down(profile, r, &lim, layers, notes)
-        }
-        Process::BottomUp => {
-            let k = profile
-                .peel
-                .as_ref()
-                .expect("validated: bottom-up has [peel]");
-            steps::bottom_up(profile, k, &lim, layers, notes)
-        }
-        Process::Hybrid => {
-            let h = profile
-                .hybrid
-                .as_ref()
-                .expect("validated: hybrid has [hybrid]");
-            steps::hybrid(profile, h, &lim, layers, force_layered, notes)
-        }
+        Process::TopDown => steps::top_down(profile, &lim, layers, notes),
+        Process::BottomUp => steps::bottom_up(profile, &lim, layers, notes),
+        Process::Hybrid => steps::hybrid(profile, &lim, layers, force_layered, notes),
     };
     let lists: Vec<&[Step]> = plans.iter().map(|p| p.steps.as_slice()).collect();
     let times = timing::Timing::of(profile).layer_times(&lists);

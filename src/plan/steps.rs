@@ -1,18 +1,14 @@
-//! Step lists per process. Stage coordinate `to_mm` = platform distance from the exposure
-//! plane; layer i is exposed at its `z_mm` ((i + 1)·thickness for a uniform job). Each
-//! layer's steps start where the previous layer's steps left the stage and end with its
-//! exposure (layered: `expose`; continuous: a `sweep` to its `z_mm`). Lifts and dips that
-//! prepare a layer belong to that layer; their height is the highest `to_mm` of the layer
-//! minus the layer's exposure position.
-//!
-//! Every number a step holds is rounded as it is made (`crate::round`): targets to a whole
-//! number of stage steps, waits and exposures to 1 ms, speeds derived from an area to 6
-//! significant digits. The time estimate is then computed from the rounded steps, which
-//! are exactly what the manifest records and the executor replays.
+//! Step lists per process (docs/PLANNING.md, "Stage coordinate and steps" and
+//! "Processes"). `to_mm` is the platform's distance from the exposure plane; a layer's
+//! steps start where the previous layer's left the stage and end with its `expose` or its
+//! `sweep` to its `z_mm`; a lift or dip belongs to the layer it prepares. Every number is
+//! rounded as it is made (`crate::round`: targets to whole stage steps, waits and
+//! exposures to 1 ms, speeds derived from an area to 6 significant digits), so the
+//! estimate is that of the steps the manifest records.
 
 use super::{LayerInfo, LayerPlan, Notes};
 use crate::bundle::{Mode, Step};
-use crate::profile::{Hybrid, Peel, Profile, Recoat, WaitModel};
+use crate::profile::{Profile, WaitModel};
 use crate::round::{self, StageGrid};
 
 /// Stage limits the steps must respect, and the stage's grid.
@@ -74,11 +70,11 @@ fn layered(exposure_s: f64, steps: Vec<Step>) -> LayerPlan {
 /// Top-down natural-leveling recoat: dip, return, wait for leveling, expose.
 pub(super) fn top_down(
     p: &Profile,
-    r: &Recoat,
     lim: &Limits,
     layers: &[LayerInfo],
     notes: &mut Notes,
 ) -> Vec<LayerPlan> {
+    let r = p.recoat.as_ref().expect("validated: top-down has [recoat]");
     let mu = p.resin.viscosity_pa_s.get();
     layers
         .iter()
@@ -110,11 +106,11 @@ pub(super) fn top_down(
 /// Generic bottom-up peel: (wait after cure), two-stage lift, wait, retract, wait, expose.
 pub(super) fn bottom_up(
     p: &Profile,
-    k: &Peel,
     lim: &Limits,
     layers: &[LayerInfo],
     notes: &mut Notes,
 ) -> Vec<LayerPlan> {
+    let k = p.peel.as_ref().expect("validated: bottom-up has [peel]");
     let bottom = p.exposure.bottom_layers as usize;
     let mut out = Vec::with_capacity(layers.len());
     for (i, l) in layers.iter().enumerate() {
@@ -148,12 +144,12 @@ pub(super) fn bottom_up(
 /// Hybrid continuous/layered. `force_layered`: plan every slice layered (the comparison plan).
 pub(super) fn hybrid(
     p: &Profile,
-    h: &Hybrid,
     lim: &Limits,
     layers: &[LayerInfo],
     force_layered: bool,
     notes: &mut Notes,
 ) -> Vec<LayerPlan> {
+    let h = p.hybrid.as_ref().expect("validated: hybrid has [hybrid]");
     let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
     let v = h.continuous_speed_mm_s.get();
     let mut out: Vec<LayerPlan> = Vec::with_capacity(layers.len());

@@ -20,6 +20,11 @@ fn info(i: usize, h: f64, area: f64, fill: f64) -> LayerInfo {
     }
 }
 
+/// `n` layers of height `h`, layer `i` of area and max fill distance `f(i)`.
+fn layers_of(n: usize, h: f64, f: impl Fn(usize) -> (f64, f64)) -> Vec<LayerInfo> {
+    (0..n).map(|i| info(i, h, f(i).0, f(i).1)).collect()
+}
+
 fn top(steps: &[Step]) -> f64 {
     steps
         .iter()
@@ -40,7 +45,7 @@ fn top_down_dips_returns_waits_exposes() {
     let p = Profile::default_profile();
     let r = p.recoat.clone().unwrap();
     let h = 0.05;
-    let layers: Vec<LayerInfo> = (0..4).map(|i| info(i, h, 50.0, 0.5 + i as f64)).collect();
+    let layers = layers_of(4, h, |i| (50.0, 0.5 + i as f64));
     let plan = plan(&p, &layers).unwrap();
     for (l, lp) in layers.iter().zip(&plan.layers) {
         assert_eq!(lp.mode, Mode::Layered);
@@ -88,11 +93,7 @@ fn bottom_up_two_stage_lift_scales_with_area() {
     let h = 0.05;
     let b = p.exposure.bottom_layers as usize;
     let areas = [300.0, 300.0, 300.0, 300.0, 100.0, 100.0, 800.0, 800.0, 10.0];
-    let layers: Vec<LayerInfo> = areas
-        .iter()
-        .enumerate()
-        .map(|(i, &a)| info(i, h, a, 3.0))
-        .collect();
+    let layers = layers_of(areas.len(), h, |i| (areas[i], 3.0));
     let plan = plan(&p, &layers).unwrap();
     assert!(matches!(plan.layers[0].steps[0], Step::Move { to_mm, .. } if to_mm == h));
     for i in 1..layers.len() {
@@ -138,11 +139,7 @@ fn hybrid_modes_lifts_and_sweeps() {
     // tolerance), 7.5 (4 mm), 7.53 (8 mm), 1.0 ×2 (continuous), 31 (beyond table: 8 mm).
     let mut fills = vec![7.5; first_free];
     fills.extend([1.0, 2.0, 2.5, 5.0, 2.52, 7.5, 7.53, 1.0, 1.0, 31.0]);
-    let layers: Vec<LayerInfo> = fills
-        .iter()
-        .enumerate()
-        .map(|(i, &f)| info(i, h, 100.0, f))
-        .collect();
+    let layers = layers_of(fills.len(), h, |i| (100.0, fills[i]));
     let plan = plan(&p, &layers).unwrap();
     let modes: Vec<Mode> = plan.layers.iter().map(|l| l.mode).collect();
     use Mode::{Continuous as C, Layered as L};
@@ -205,14 +202,14 @@ fn hybrid_modes_lifts_and_sweeps() {
 fn out_of_travel_is_an_error_and_long_lifts_are_clamped() {
     let mut p = Profile::resolve("hybrid-bottomup").unwrap();
     p.stage.travel_max_mm = 1.5;
-    let layers: Vec<LayerInfo> = (0..10).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
+    let layers = layers_of(10, 0.1, |_| (400.0, 10.0));
     let plan = plan(&p, &layers).unwrap();
     assert!(plan.layers.iter().all(|l| top(&l.steps) <= 1.5));
     assert!(plan
         .warnings
         .iter()
         .any(|w| w.code == "plan.travel-clamped" && w.message.contains("shortened")));
-    let layers: Vec<LayerInfo> = (0..20).map(|i| info(i, 0.1, 400.0, 10.0)).collect();
+    let layers = layers_of(20, 0.1, |_| (400.0, 10.0));
     let e = super::plan(&p, &layers).unwrap_err();
     assert!(
         e.contains("layer 15") && e.contains("outside the stage travel"),
@@ -277,9 +274,7 @@ fn estimate_matches_an_independent_replay() {
     for name in crate::profile::builtin_names() {
         let p = Profile::resolve(name).unwrap();
         let h = p.slicing.layer_height_mm.get();
-        let layers: Vec<LayerInfo> = (0..40)
-            .map(|i| info(i, h, 20.0 * (i % 7) as f64, [1.0, 3.0, 6.0, 9.0][i / 10]))
-            .collect();
+        let layers = layers_of(40, h, |i| (20.0 * (i % 7) as f64, [1.0, 3.0, 6.0, 9.0][i / 10]));
         let plan = plan(&p, &layers).unwrap();
         let r = replay(&p, &plan.layers);
         // The estimate is the replay of the steps as written, to 1 ms.
@@ -298,9 +293,7 @@ fn steps_hold_whole_stage_steps_and_whole_milliseconds() {
         let p = Profile::resolve(name).unwrap();
         let grid = StageGrid::new(p.stage.steps_per_mm.get());
         let h = p.slicing.layer_height_mm.get();
-        let layers: Vec<LayerInfo> = (0..40)
-            .map(|i| info(i, h, 17.3 * (i % 7) as f64 + 0.123, 0.37 * i as f64))
-            .collect();
+        let layers = layers_of(40, h, |i| (17.3 * (i % 7) as f64 + 0.123, 0.37 * i as f64));
         let plan = plan(&p, &layers).unwrap();
         for lp in &plan.layers {
             for s in &lp.steps {
@@ -330,9 +323,7 @@ fn a_layer_height_of_a_half_step_keeps_sweep_runs_unbroken() {
     let p = Profile::resolve("hybrid-bottomup").unwrap();
     let h = 0.051875;
     let first_free = (p.exposure.bottom_layers + p.exposure.transition_layers) as usize;
-    let layers: Vec<LayerInfo> = (0..first_free + 60)
-        .map(|i| info(i, h, 10.0, 1.0))
-        .collect();
+    let layers = layers_of(first_free + 60, h, |_| (10.0, 1.0));
     let plan = plan(&p, &layers).unwrap();
     let grid = StageGrid::new(800.0);
     let mut light = 0.0;

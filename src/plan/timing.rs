@@ -1,17 +1,8 @@
 //! The plan's time estimate, under the "step semantics and timing contract" of
-//! [`crate::bundle`] (the executor simulates the same rules independently):
-//!
-//! * the job starts with the stage at `stage.home_mm`, shutter closed;
-//! * each layer's DMD load (`dmd.load_s`) runs concurrently with the layer's first steps;
-//!   an `expose`, or the first `sweep` of a run, starts no earlier than `load_s` after the
-//!   layer's start;
-//! * `move`: trapezoidal profile from rest to rest ([`move_time`]);
-//! * `wait {s}`: `s`;
-//! * `expose {s}`: `shutter.open_s + s + shutter.close_s`;
-//! * `sweep`: consecutive sweeps (across layers) form one run: the shutter opens before the
-//!   run's first sweep (`open_s`) and closes after its last (`close_s`, counted in the layer
-//!   of that last sweep); a sweep lasts `|to_mm − from| / speed_mm_s`; masks inside a run
-//!   are preloaded (no load wait).
+//! [`crate::bundle`] (the executor simulates the same rules independently): the job starts
+//! at `stage.home_mm`; an `expose`, or the first `sweep` of a run, waits for the layer's
+//! DMD load; consecutive sweeps form one run, the shutter opening before its first and
+//! closing after its last (counted in that layer).
 
 use crate::bundle::Step;
 use crate::motion::move_time;

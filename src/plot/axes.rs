@@ -27,6 +27,10 @@ pub struct Area {
 }
 
 impl Area {
+    /// The rectangle of width `w` and height `h` whose top-left corner is (x, y).
+    pub fn new(x: f32, y: f32, w: f32, h: f32) -> Area {
+        Area { x, y, w, h }
+    }
     /// Right edge.
     pub fn right(&self) -> f32 {
         self.x + self.w
@@ -52,6 +56,11 @@ pub struct Scale {
 }
 
 impl Scale {
+    /// The map of `lo..hi` to `px0..px1`.
+    pub fn new(lo: f64, hi: f64, px0: f32, px1: f32) -> Scale {
+        Scale { lo, hi, px0, px1 }
+    }
+
     /// The pixel of value `v`.
     pub fn px(&self, v: f64) -> f32 {
         let span = self.hi - self.lo;

@@ -19,16 +19,22 @@ fn paint(c: [u8; 3], alpha: u8, anti_alias: bool) -> Paint<'static> {
     p
 }
 
+/// The path through `pts` (at least one), closed when `close`.
+fn path(pts: &[(f32, f32)], close: bool) -> Option<tiny_skia::Path> {
+    let mut pb = PathBuilder::new();
+    pb.move_to(pts[0].0, pts[0].1);
+    pts[1..].iter().for_each(|p| pb.line_to(p.0, p.1));
+    if close {
+        pb.close();
+    }
+    pb.finish()
+}
+
 impl Canvas {
-    /// A `width` × `height` canvas (at least 1 × 1) filled with `background`.
-    pub fn new(width: u32, height: u32, background: [u8; 3]) -> Canvas {
+    /// A `width` × `height` canvas (at least 1 × 1) filled with background colour `bg`.
+    pub fn new(width: u32, height: u32, bg: [u8; 3]) -> Canvas {
         let mut pm = Pixmap::new(width.max(1), height.max(1)).expect("canvas size is valid");
-        pm.fill(Color::from_rgba8(
-            background[0],
-            background[1],
-            background[2],
-            255,
-        ));
+        pm.fill(Color::from_rgba8(bg[0], bg[1], bg[2], 255));
         Canvas { pm }
     }
 
@@ -60,12 +66,7 @@ impl Canvas {
         if pts.len() < 2 {
             return;
         }
-        let mut pb = PathBuilder::new();
-        pb.move_to(pts[0].0, pts[0].1);
-        for p in &pts[1..] {
-            pb.line_to(p.0, p.1);
-        }
-        if let Some(path) = pb.finish() {
+        if let Some(path) = path(pts, false) {
             let st = Stroke {
                 width,
                 ..Stroke::default()
@@ -98,13 +99,7 @@ impl Canvas {
         if pts.len() < 3 {
             return;
         }
-        let mut pb = PathBuilder::new();
-        pb.move_to(pts[0].0, pts[0].1);
-        for p in &pts[1..] {
-            pb.line_to(p.0, p.1);
-        }
-        pb.close();
-        if let Some(path) = pb.finish() {
+        if let Some(path) = path(pts, true) {
             self.pm.fill_path(
                 &path,
                 &paint(color, alpha, true),

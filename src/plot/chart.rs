@@ -28,6 +28,19 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
+impl Series {
+    /// A series labelled `label` (empty: not in the legend).
+    pub fn new(label: &str, color: [u8; 3], style: Style, points: Vec<(f64, f64)>) -> Series {
+        let label = label.into();
+        Series {
+            label,
+            color,
+            style,
+            points,
+        }
+    }
+}
+
 /// A shaded x range (e.g. "light on", "valid gray range"). Ranges narrower than a pixel
 /// column shade it in proportion to the part of it they cover, so thousands of short
 /// ranges read as a density.
@@ -41,6 +54,19 @@ pub struct Band {
     pub color: [u8; 3],
     /// Legend text (empty: no legend entry; one entry per distinct text).
     pub label: String,
+}
+
+impl Band {
+    /// The range `x0..x1` labelled `label` (empty: no legend entry).
+    pub fn new(x0: f64, x1: f64, color: [u8; 3], label: &str) -> Band {
+        let label = label.into();
+        Band {
+            x0,
+            x1,
+            color,
+            label,
+        }
+    }
 }
 
 /// One panel: a y axis with its label (quantity and unit) and what is drawn against it.
@@ -116,26 +142,11 @@ impl Chart {
         let bottom = h - (axes::x_labels_height() + 6.0 + label_h + PAD);
         let panel_h = ((bottom - top - PANEL_GAP * (n - 1.0)) / n).max(20.0);
 
-        let xs = Scale {
-            lo: x_range.0,
-            hi: x_range.1,
-            px0: ml,
-            px1: ml + plot_w,
-        };
+        let xs = Scale::new(x_range.0, x_range.1, ml, ml + plot_w);
         let x_ticks = axes::ticks(x_range.0, x_range.1, (plot_w / 110.0) as usize, false);
         for (k, p) in self.panels.iter().enumerate() {
-            let area = Area {
-                x: ml,
-                y: top + k as f32 * (panel_h + PANEL_GAP),
-                w: plot_w,
-                h: panel_h,
-            };
-            let ys = Scale {
-                lo: y_ranges[k].0,
-                hi: y_ranges[k].1,
-                px0: area.bottom(),
-                px1: area.y,
-            };
+            let area = Area::new(ml, top + k as f32 * (panel_h + PANEL_GAP), plot_w, panel_h);
+            let ys = Scale::new(y_ranges[k].0, y_ranges[k].1, area.bottom(), area.y);
             draw_bands(&mut c, area, &xs, &p.bands);
             let last = k + 1 == self.panels.len();
             let marks = |labels| axes::Marks { grid: true, labels };
@@ -424,19 +435,10 @@ mod tests {
 
     #[test]
     fn chart_draws_series_in_its_colour() {
+        let points = (0..100).map(|i| (i as f64, (i % 10) as f64)).collect();
         let c = one_panel(
-            vec![Series {
-                label: "stage".into(),
-                color: [200, 0, 0],
-                style: Style::Line,
-                points: (0..100).map(|i| (i as f64, (i % 10) as f64)).collect(),
-            }],
-            vec![Band {
-                x0: 10.0,
-                x1: 20.0,
-                color: [0, 0, 255],
-                label: "shutter open".into(),
-            }],
+            vec![Series::new("stage", [200, 0, 0], Style::Line, points)],
+            vec![Band::new(10.0, 20.0, [0, 0, 255], "shutter open")],
         )
         .render()
         .to_rgb();
@@ -454,15 +456,8 @@ mod tests {
     fn the_legend_stays_out_of_the_plot_area() {
         // Data filling the whole plot area: the legend's text must not be drawn over it.
         let pts: Vec<(f64, f64)> = (0..=200).map(|i| (i as f64, 10.0)).collect();
-        let ch = one_panel(
-            vec![Series {
-                label: "a long legend entry for the series".into(),
-                color: [200, 0, 0],
-                style: Style::Line,
-                points: pts,
-            }],
-            vec![],
-        );
+        let label = "a long legend entry for the series";
+        let ch = one_panel(vec![Series::new(label, [200, 0, 0], Style::Line, pts)], vec![]);
         let mut probe = Canvas::new(640, 360, [255; 3]);
         let below = ch.legend(&mut probe, 0.0, 100.0, 600.0, false);
         assert!(below > 100.0);
@@ -491,22 +486,10 @@ mod tests {
     fn thin_bands_shade_by_coverage() {
         // 1000 bands each a tenth of a column: light shading, not a solid block.
         let bands = (0..1000)
-            .map(|i| Band {
-                x0: i as f64,
-                x1: i as f64 + 0.1,
-                color: [0, 0, 255],
-                label: String::new(),
-            })
+            .map(|i| Band::new(i as f64, i as f64 + 0.1, [0, 0, 255], ""))
             .collect();
-        let ch = one_panel(
-            vec![Series {
-                label: String::new(),
-                color: [0, 0, 0],
-                style: Style::Line,
-                points: vec![(0.0, 0.0), (1000.0, 0.0)],
-            }],
-            bands,
-        );
+        let line = vec![(0.0, 0.0), (1000.0, 0.0)];
+        let ch = one_panel(vec![Series::new("", [0, 0, 0], Style::Line, line)], bands);
         let img = ch.render().to_rgb();
         let p = img.get_pixel(320, 100);
         assert!(p[0] > 200 && p[0] < 255, "{p:?}");

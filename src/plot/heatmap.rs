@@ -114,33 +114,16 @@ impl Heatmap {
         };
         let (map_w, map_h) = (cols as f32 * cell_w, rows as f32 * cell_h);
 
-        let y_ticks = axes::ticks(
-            self.y_range[0],
-            self.y_range[1],
-            (map_h / 70.0).max(2.0) as usize,
-            false,
-        );
-        let x_ticks = axes::ticks(
-            self.x_range[0],
-            self.x_range[1],
-            (map_w / 70.0).max(2.0) as usize,
-            false,
-        );
+        // About one tick per 70 px of the map.
+        let ticks = |[lo, hi]: [f64; 2], px: f32| {
+            axes::ticks(lo, hi, (px / 70.0).max(2.0) as usize, false)
+        };
+        let (x_ticks, y_ticks) = (ticks(self.x_range, map_w), ticks(self.y_range, map_h));
         let bar_ticks = axes::ticks(lo, hi, 6, false);
         let ml = PAD + label_h + 8.0 + axes::y_labels_width(&y_ticks);
         let top = PAD + text::line_height(TITLE.size) + 14.0;
-        let area = Area {
-            x: ml,
-            y: top,
-            w: map_w,
-            h: map_h,
-        };
-        let bar = Area {
-            x: area.right() + 26.0,
-            y: top,
-            w: BAR_W,
-            h: map_h.max(160.0),
-        };
+        let area = Area::new(ml, top, map_w, map_h);
+        let bar = Area::new(area.right() + 26.0, top, BAR_W, map_h.max(160.0));
         let end_labels = [axes::value_label(lo), axes::value_label(hi)];
         let bar_label_w = bar_ticks
             .values
@@ -166,18 +149,8 @@ impl Heatmap {
         c.text(PAD, PAD, &self.title, TITLE);
 
         self.draw_cells(&mut c, area, cell_w, cell_h);
-        let xs = Scale {
-            lo: self.x_range[0],
-            hi: self.x_range[1],
-            px0: area.x,
-            px1: area.right(),
-        };
-        let ys = Scale {
-            lo: self.y_range[0],
-            hi: self.y_range[1],
-            px0: area.bottom(),
-            px1: area.y,
-        };
+        let xs = Scale::new(self.x_range[0], self.x_range[1], area.x, area.right());
+        let ys = Scale::new(self.y_range[0], self.y_range[1], area.bottom(), area.y);
         // Grid lines would cross the cells: only tick marks and labels, then the frame.
         let marks = axes::Marks {
             grid: false,
@@ -220,12 +193,7 @@ impl Heatmap {
             let t = 1.0 - i as f64 / (steps - 1).max(1) as f64;
             c.fill_rect(bar.x, bar.y + i as f32, bar.w, 1.0, colormap(t), 255);
         }
-        let bs = Scale {
-            lo,
-            hi,
-            px0: bar.bottom(),
-            px1: bar.y,
-        };
+        let bs = Scale::new(lo, hi, bar.bottom(), bar.y);
         let lx = bar.right() + 8.0;
         let small_h = text::line_height(SMALL.size);
         let end_labels = [axes::value_label(lo), axes::value_label(hi)];
@@ -267,18 +235,14 @@ impl Heatmap {
 
     /// Fills the cells (and writes their values when `annotate`).
     fn draw_cells(&self, c: &mut Canvas, area: Area, cell_w: f32, cell_h: f32) {
+        // The cells' edges, whole pixels.
+        let xs: Vec<f32> = (0..=self.cols).map(|k| (area.x + k as f32 * cell_w).round()).collect();
+        let ys: Vec<f32> = (0..=self.rows).map(|k| (area.y + k as f32 * cell_h).round()).collect();
         for r in 0..self.rows {
-            let (y0, y1) = (
-                (area.y + r as f32 * cell_h).round(),
-                (area.y + (r + 1) as f32 * cell_h).round(),
-            );
+            let (y0, y1) = (ys[r], ys[r + 1]);
             for col in 0..self.cols {
-                let (x0, x1) = (
-                    (area.x + col as f32 * cell_w).round(),
-                    (area.x + (col + 1) as f32 * cell_w).round(),
-                );
-                let v = self.values.get(r * self.cols + col).copied();
-                let v = v.unwrap_or(f64::NAN);
+                let (x0, x1) = (xs[col], xs[col + 1]);
+                let v = self.values.get(r * self.cols + col).copied().unwrap_or(f64::NAN);
                 let color = self.color_of(v);
                 c.fill_rect(x0, y0, x1 - x0, y1 - y0, color, 255);
                 if self.annotate && v.is_finite() {

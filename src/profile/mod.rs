@@ -1,18 +1,11 @@
 //! Machine profiles: the projector(s), stage, shutter, DMD, exposure, resin and process
-//! settings a job is compiled for.
-//!
-//! Profiles are TOML. Built-in profiles are compiled into the binary from `profiles/*.toml`;
-//! `--profile NAME|FILE` picks one. Every key is required and unknown keys are errors, so a
-//! typo never silently falls back to a default. A job records the keys of the resolved
-//! profile that say how it runs (`bundle::Machine`); the rest is the slicer's and the
-//! planner's.
-//!
-//! This module is the whole machine description and uses only leaf modules: the profile
-//! itself (here), the process sections (`[recoat]`, `[peel]`, `[hybrid]`: [`Recoat`],
-//! [`Peel`], [`Hybrid`]), the lens correction table ([`DistortionConfig`]), the overlap
-//! ramp ([`BlendCurve`]) and the light calibration a projector carries ([`calibration`]).
-//! [`Override`] changes single keys of a resolved profile (`slice --set`).
-//! The algorithms that use them (`plan`, `geometry`, `optics`) sit above it.
+//! settings a job is compiled for, as TOML (built-ins compiled in from `profiles/*.toml`).
+//! Every key is required and unknown keys are errors, so a typo never falls back to a
+//! default. Besides the profile itself: the process sections ([`Recoat`], [`Peel`],
+//! [`Hybrid`]), the lens correction table ([`DistortionConfig`]), the overlap ramp
+//! ([`BlendCurve`]), a projector's light [`calibration`] and single-key changes
+//! ([`Override`], `slice --set`). Uses only leaf modules; a job records the keys it runs by
+//! (`bundle::Machine`).
 
 mod blend;
 pub mod calibration;
@@ -31,18 +24,19 @@ use crate::units::{NonNegative, Positive};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// The built-in profiles' TOML sources, `profiles/NAME.toml`, by name.
+macro_rules! builtin {
+    ($($name:literal),*) => {
+        [$(($name, include_str!(concat!("../../profiles/", $name, ".toml")))),*]
+    };
+}
+
 /// Built-in profiles: (name, TOML source).
-pub const BUILTIN: &[(&str, &str)] = &[
-    (
-        "xu2010-topdown",
-        include_str!("../../profiles/xu2010-topdown.toml"),
-    ),
-    (
-        "hybrid-bottomup",
-        include_str!("../../profiles/hybrid-bottomup.toml"),
-    ),
-    ("bottom-up", include_str!("../../profiles/bottom-up.toml")),
-    ("tiled-2x1", include_str!("../../profiles/tiled-2x1.toml")),
+pub const BUILTIN: &[(&str, &str)] = &builtin![
+    "xu2010-topdown",
+    "hybrid-bottomup",
+    "bottom-up",
+    "tiled-2x1"
 ];
 
 /// Name of the profile used when `--profile` is not given.

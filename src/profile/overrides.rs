@@ -37,16 +37,15 @@ impl Override {
     /// taken as a string, so `--set resin.name=My resin` needs no quotes.
     pub fn parse_set(arg: &str) -> Result<Override> {
         let label = format!("--set {arg}");
-        let (key, text) = arg.split_once('=').ok_or_else(|| {
-            Error::Usage(format!(
-                "{label}: expected section.key=value (e.g. --set exposure.layer_s=6)"
-            ))
-        })?;
+        let usage = || {
+            let msg =
+                format!("{label}: expected section.key=value (e.g. --set exposure.layer_s=6)");
+            Error::Usage(msg)
+        };
+        let (key, text) = arg.split_once('=').ok_or_else(usage)?;
         let key = key.trim();
-        if key.is_empty() || key.split('.').any(|s| s.trim().is_empty()) {
-            return Err(Error::Usage(format!(
-                "{label}: expected section.key=value (e.g. --set exposure.layer_s=6)"
-            )));
+        if key.split('.').any(|s| s.trim().is_empty()) {
+            return Err(usage());
         }
         let text = text.trim();
         let value = toml::Value::deserialize(toml::de::ValueDeserializer::new(text))

@@ -48,13 +48,9 @@ pub struct Recoat {
 impl Recoat {
     /// Thin-film leveling time constant, s, of a film `film_mm` thick over a flat top whose
     /// largest inscribed radius is `fill_mm`, for a resin of viscosity `viscosity_pa_s`:
-    ///
-    /// τ = 3μ / (h³ k² (ρg + σk²)),  k = 2π/λ,  λ = 4·fill_mm
-    ///
-    /// (lubrication theory: a surface disturbance of wavenumber k on a film of thickness h
-    /// decays as exp(−t/τ); gravity drives long waves, surface tension short ones). The
-    /// slowest disturbance that fits the flat top has half a wavelength across its widest
-    /// inscribed circle, λ = 2·(2·fill_mm). Returns 0 when there is no flat top.
+    /// τ = 3μ / (h³ k² (ρg + σk²)), k = 2π/λ, λ = 4·fill_mm (lubrication theory: the
+    /// slowest disturbance that fits the flat top; docs/PLANNING.md, "Top-down natural
+    /// leveling"). 0 when there is no flat top.
     pub fn leveling_time_s(&self, fill_mm: f64, film_mm: f64, viscosity_pa_s: f64) -> f64 {
         if fill_mm <= 0.0 || film_mm <= 0.0 {
             return 0.0;
@@ -221,24 +217,21 @@ pub fn validate(p: &Profile) -> Result<(), String> {
             Ok(())
         }
     };
-    let (need, present) = match p.process {
-        Process::TopDown => ("recoat", p.recoat.is_some()),
-        Process::BottomUp => ("peel", p.peel.is_some()),
-        Process::Hybrid => ("hybrid", p.hybrid.is_some()),
-    };
-    let process = match p.process {
-        Process::TopDown => "top-down",
-        Process::BottomUp => "bottom-up",
-        Process::Hybrid => "hybrid",
-    };
-    if !present {
-        return Err(format!("process \"{process}\" needs a [{need}] section"));
-    }
-    for (name, there) in [
+    let sections = [
         ("recoat", p.recoat.is_some()),
         ("peel", p.peel.is_some()),
         ("hybrid", p.hybrid.is_some()),
-    ] {
+    ];
+    let (process, k) = match p.process {
+        Process::TopDown => ("top-down", 0),
+        Process::BottomUp => ("bottom-up", 1),
+        Process::Hybrid => ("hybrid", 2),
+    };
+    let need = sections[k].0;
+    if !sections[k].1 {
+        return Err(format!("process \"{process}\" needs a [{need}] section"));
+    }
+    for (name, there) in sections {
         if there && name != need {
             return Err(format!(
                 "[{name}] is not used by process \"{process}\" (it uses [{need}]); remove it"

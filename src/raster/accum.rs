@@ -2,11 +2,9 @@
 //! to the cells of the rows it crosses; a prefix sum along a row ([`super::scan`]) gives each
 //! pixel its exact coverage.
 
-/// A zeroed buffer whose pages are first touched by writes. A fresh zeroed allocation is
-/// mapped lazily: reading a page first maps the shared zero page, and the write that
-/// follows must copy it and flush the other CPUs' TLBs (an inter-processor interrupt per
-/// page, costly in a VM) — what the accumulation's `+=` and the block marks' `|=` would
-/// do on their first pass. Written first, each page costs one plain fault.
+/// A zeroed buffer whose pages are first touched by writes (a first read would map the
+/// shared zero page, and the write after it would flush the other CPUs' TLBs: see
+/// docs/ARCHITECTURE.md, `raster`).
 pub(super) fn zeroed_by_writes<T: Copy + Default>(n: usize) -> Vec<T> {
     let mut v = vec![T::default(); n];
     let step = (4096 / std::mem::size_of::<T>().max(1)).max(1);

@@ -25,12 +25,7 @@ impl Emit for Plain {
     #[inline(always)]
     fn row(&self, _: usize) {}
     fn area(&self) -> PixelBox {
-        PixelBox {
-            r0: 0,
-            r1: usize::MAX,
-            c0: 0,
-            c1: usize::MAX,
-        }
+        PixelBox::ALL
     }
     #[inline(always)]
     fn fill(_: (), dst: &mut [u8], a: usize, b: usize, v: u8) {
@@ -101,40 +96,25 @@ pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
     }
 }
 
-/// The rows and columns the scans visit: rows r0..r1, columns c0..end.
-#[derive(Clone, Copy)]
-pub(super) struct ScanSpan {
-    pub(super) r0: usize,
-    pub(super) r1: usize,
-    pub(super) c0: usize,
-    pub(super) end: usize,
-}
-
-/// The prefix-sum scan of the accumulation buffer: writes the coverage (thresholded when
-/// `BIN`) through `emit` (as is, or through a light-compensation map), clears the buffer
-/// and its block marks as it reads them, and returns the sum of the coverage values (before
-/// threshold) and the largest winding seen. Only the touched blocks are visited: between
-/// them every cell is zero and the value repeats. The value changes only at nonzero cells:
-/// the scan follows runs of equal coverage and writes each run once, when it ends (zero
-/// runs are left as they are), so a run of full coverage is one fill, or one copy from the
-/// map's full-coverage row. With `CHECK`, sets `outside` if a lit pixel lies outside
-/// `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it.
+/// The prefix-sum scan of the accumulation buffer over the pixels of `span`: writes the
+/// coverage (thresholded when `BIN`) through `emit`, clears the buffer and its block marks
+/// as it reads them, and returns the sum of the coverage values (before threshold) and the
+/// largest winding seen. Only the touched blocks are visited (between them every cell is
+/// zero and the value repeats), and each run of equal coverage is written once, when it
+/// ends (zero runs are left as they are). With `CHECK`, sets `outside` if a lit pixel lies
+/// outside `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it.
 #[inline(never)]
 pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,
     data: &mut [u8],
     w: usize,
-    ScanSpan { r0, r1, c0, end }: ScanSpan,
+    span: PixelBox,
     emit: E,
     outside: &mut bool,
     mut lit: Option<&mut LitRuns>,
 ) -> (u64, f32) {
-    let PixelBox {
-        r0: ar0,
-        r1: ar1,
-        c0: ac0,
-        c1: ac1,
-    } = emit.area();
+    let PixelBox { r0, r1, c0, c1: end } = span;
+    let area = emit.area();
     let (stride, words) = (acc.stride, acc.words);
     let mut max_winding = 0.0f32;
     let mut lit_sum = 0u64;
@@ -208,7 +188,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         }
         lit_sum += sink.lit_sum;
         if CHECK && sink.lo < sink.hi {
-            *outside |= r < ar0 || r >= ar1 || sink.lo < ac0 || sink.hi > ac1;
+            *outside |= r < area.r0 || r >= area.r1 || sink.lo < area.c0 || sink.hi > area.c1;
         }
     }
     (lit_sum, max_winding)

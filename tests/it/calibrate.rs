@@ -4,10 +4,8 @@
 //! decoded and the TRUE irradiance P·S of every pixel is evaluated.
 
 use crate::common::*;
-#[path = "../../src/optics/synthetic.rs"]
-mod synthetic;
+use crate::synthetic::*;
 use std::path::{Path, PathBuf};
-use synthetic::*;
 
 const PX: f64 = 0.0634765625;
 const W: usize = 1024;

@@ -4,6 +4,7 @@
 
 mod batch;
 mod calibrate;
+mod calibrate_sweep;
 mod common;
 mod cure;
 mod cure_dropped;
@@ -25,4 +26,5 @@ mod run;
 mod run_cure;
 mod schema;
 mod slice;
+mod synthetic;
 mod warnings;

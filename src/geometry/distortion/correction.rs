@@ -5,7 +5,7 @@
 use super::polynomial::PolyMap;
 use super::residual::{self, Tri};
 use super::table::{Pair, Table};
-use super::warp::{ring_area, Warper};
+use super::warp::Warper;
 use super::{MIN_POINTS, SAG_PX};
 use crate::bundle::FitReport;
 use crate::error::{Error, Result};
@@ -62,7 +62,7 @@ impl Correction {
         check_agreement(table, &cv)?;
         let report = fit_report(table, &poly, kappa, &resid, &cv);
         let mut hull = residual::hull(&tri);
-        if ring_area(&hull) < 0.0 {
+        if crate::slice::signed_area(&hull) < 0.0 {
             hull.reverse();
         }
         let curv = poly.curvature_bound(field_mm);

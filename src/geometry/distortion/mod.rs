@@ -1,29 +1,15 @@
-//! Distortion pre-warp from a measured correction table.
+//! Distortion pre-warp from a measured correction table (docs/GEOMETRY.md, "Distortion
+//! correction").
 //!
-//! A table row `x_mm,y_mm,seen_x_mm,seen_y_mm` says: light the *uncorrected* projector aimed
-//! at build-plane point (x, y) (mm from the field's bottom-left corner, +x right, +y up)
-//! actually landed at (seen_x, seen_y). Read backwards, every row is a sample of the
-//! correction we need, the map G from a wanted build-plane point to the point the projector
-//! must aim at: G(seen) = (x, y). So G is fitted directly from the scattered pairs, no
-//! inversion needed:
-//!
-//! 1. A least-squares polynomial in the normalized seen coordinates, total degree 1..=5,
-//!    degree chosen by leave-one-out cross-validation (closed form from the hat matrix):
-//!    this averages measurement noise (the `polynomial` file).
-//! 2. Plus `κ ×` a natural-neighbour interpolant (spade, Sibson weights) of the polynomial's
-//!    residuals at the table points: it captures assembly errors no low-order formula
-//!    describes (Yu et al.). κ ∈ [0, 1] minimizes the leave-one-out error of the combined
-//!    model, so pure noise gets κ ≈ 0 (not passed through) and real structure κ ≈ 1.
-//!    Outside the convex hull of the seen points the residual of the nearest hull point is
-//!    used (continuous; counted as extrapolated and warned about).
-//!
-//! Section contours are pre-warped vertex by vertex before rasterizing; each edge is first
-//! cut into pieces of at most [`SEG_MM`] and then split at midpoints until the warped
-//! midpoint lies within 0.05 px of the chord (the sag bound). A warped point outside the
-//! projector's field is a target the projector cannot reach: an error naming the point.
-//!
-//! Files: `table` (the measured pairs), `polynomial` (the smooth part), `residual` (the
-//! interpolant), `correction` (the fit and its report), `warp` (the pre-warp), `plot`.
+//! A table row `x_mm,y_mm,seen_x_mm,seen_y_mm` says: light the uncorrected projector aimed
+//! at build-plane point (x, y) landed at (seen_x, seen_y). Read backwards, every row samples
+//! the correction G (wanted point → point to aim at): G(seen) = (x, y), fitted directly as
+//! a least-squares polynomial (degree by leave-one-out, `polynomial`) plus `κ ×` a
+//! natural-neighbour interpolant of its residuals (`residual`; κ by leave-one-out, so pure
+//! noise gets κ ≈ 0), in `correction`. Section contours are pre-warped vertex by vertex,
+//! edges cut into pieces of at most [`SEG_MM`] and split until the warped polyline is
+//! within [`SAG_PX`] of the warped curve (`warp`); a warped point outside the projector's
+//! field is an error naming it. `table` reads the measured pairs, `plot` draws the map.
 
 mod correction;
 mod plot;

@@ -141,24 +141,17 @@ mod tests {
         assert_eq!((ok[1].aim, ok[1].line), ([5.0, 6.0], 5));
         let no_header = Table::parse(p, "1,2,3,4\n").unwrap();
         assert_eq!(no_header[0].seen, [3.0, 4.0]);
-        let e = Table::parse(p, "1,2,3,4\n1,2,3\n").unwrap_err().to_string();
+        let err = |text| Table::parse(p, text).unwrap_err().to_string();
         assert_eq!(
-            e,
+            err("1,2,3,4\n1,2,3\n"),
             "t.csv: line 2: expected 4 columns (x_mm,y_mm,seen_x_mm,seen_y_mm), found 3"
         );
-        let e = Table::parse(p, "1,2,3,4\n1,2,x,4\n")
-            .unwrap_err()
-            .to_string();
+        let e = err("1,2,3,4\n1,2,x,4\n");
         assert_eq!(e, "t.csv: line 2, column seen_x_mm: \"x\" is not a number");
-        let e = Table::parse(p, "a,b,c,d\n").unwrap_err().to_string();
+        let e = err("a,b,c,d\n");
         assert!(e.starts_with("t.csv: line 1: unknown column \"a\""), "{e}");
-        let e = Table::parse(p, "1,2,3,4\n1,2,inf,4\n")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("line 2, column seen_x_mm: \"inf\" is not a finite"),
-            "{e}"
-        );
+        let e = err("1,2,3,4\n1,2,inf,4\n");
+        assert!(e.contains("line 2, column seen_x_mm: \"inf\" is not a finite"), "{e}");
     }
 
     #[test]

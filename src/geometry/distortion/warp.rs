@@ -161,18 +161,6 @@ impl Warper<'_> {
     }
 }
 
-/// Signed area of a closed polygon (CCW positive).
-pub(super) fn ring_area(p: &[[f64; 2]]) -> f64 {
-    let n = p.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (p[i], p[(i + 1) % n]);
-            a[0] * b[1] - b[0] * a[1]
-        })
-        .sum::<f64>()
-        / 2.0
-}
-
 /// Point in (or on) a CCW convex polygon.
 fn inside_convex(hull: &[[f64; 2]], q: [f64; 2]) -> bool {
     let n = hull.len();

@@ -14,13 +14,9 @@ impl Compensator {
     }
 
     /// [`apply`](Self::apply) for a mask known to be zero outside `lit_box` (e.g.
-    /// [`crate::raster::Scratch::lit_box`]).
-    ///
-    /// One pass over the box, row by row and zone segment by zone segment, eight pixels
-    /// at a time: all-off words are skipped, all-on words take the precomputed full gray
-    /// (zone mode: the zone's gray for this row; pixel mode: the per-pixel gray map), other
-    /// words go pixel by pixel (zone mode: the 256-entry table of the zone for this row,
-    /// lower or upper gray; pixel mode: a search from the full-coverage level).
+    /// [`crate::raster::Scratch::lit_box`]): one pass over the box, eight pixels at a time
+    /// ([`map_words`]): full coverage takes the gray map, other coverage the zone's table
+    /// for the row (zone mode) or a search from the full-coverage level (pixel mode).
     ///
     /// Returns whether the layer reaches outside the calibrated area (it is then counted
     /// in [`layers_outside`](Self::layers_outside)).
@@ -31,25 +27,12 @@ impl Compensator {
             "mask size differs from the field"
         );
         let w = self.w;
-        let PixelBox {
-            r0: br0,
-            r1: br1,
-            c0: bc0,
-            c1: bc1,
-        } = lit_box;
-        let (br1, bc1) = (br1.min(self.h), bc1.min(w));
+        let (br0, bc0) = (lit_box.r0, lit_box.c0);
+        let (br1, bc1) = (lit_box.r1.min(self.h), lit_box.c1.min(w));
         if br0 >= br1 || bc0 >= bc1 {
             return false;
         }
-        let outside = self.lit_outside(
-            m,
-            PixelBox {
-                r0: br0,
-                r1: br1,
-                c0: bc0,
-                c1: bc1,
-            },
-        );
+        let outside = self.lit_outside(m, PixelBox::new(br0, br1, bc0, bc1));
         if outside {
             self.layers_outside.fetch_add(1, Ordering::Relaxed);
         }
@@ -80,22 +63,15 @@ impl Compensator {
     /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
     /// part of the box outside it is scanned; usually there is none).
     fn lit_outside(&self, m: &Mask, lit_box: PixelBox) -> bool {
-        let PixelBox { r0, r1, c0, c1 } = lit_box;
-        let w = self.w;
-        let PixelBox {
-            r0: ir0,
-            r1: ir1,
-            c0: ic0,
-            c1: ic1,
-        } = self.calibrated;
+        let (PixelBox { r0, r1, c0, c1 }, cal, w) = (lit_box, self.calibrated, self.w);
         let any = |r: usize, a: usize, b: usize| {
             a < b && m.data[r * w + a..r * w + b].iter().any(|&v| v != 0)
         };
         (r0..r1).any(|r| {
-            if r < ir0 || r >= ir1 {
+            if r < cal.r0 || r >= cal.r1 {
                 any(r, c0, c1)
             } else {
-                any(r, c0, c1.min(ic0)) || any(r, c0.max(ic1), c1)
+                any(r, c0, c1.min(cal.c0)) || any(r, c0.max(cal.c1), c1)
             }
         })
     }
@@ -139,15 +115,12 @@ pub struct CompRow<'a> {
 }
 
 /// The rasterizer applies the compensation while it writes a layer's mask
-/// ([`crate::raster::Rasterizer::render`]), with the same values as
-/// [`Compensator::apply_in`]: full coverage takes the gray map, other coverage the zone's
-/// table (zone mode) or a search from the pixel's full-coverage level (pixel mode); the
-/// scan reports layers lit outside the calibrated area (on the coverage, as
-/// [`apply_in`](Compensator::apply_in) counts them). Not fused (the rasterizer calls
-/// [`apply_in`](Compensator::apply_in) on the finished coverage): error diffusion (pixel
-/// mode, `--dither on`), which reads the neighbours' coverage.
+/// ([`crate::raster::Rasterizer::render`]), with the values of [`Compensator::apply_in`],
+/// and reports layers lit outside the calibrated area as it counts them. Not fused (the
+/// finished coverage goes through `apply_in`): error diffusion (pixel mode, `--dither
+/// on`), which reads the neighbours' coverage.
 impl crate::raster::CoverageMap for Compensator {
-    fn fusable(&self, _: PixelBox) -> bool {
+    fn fusable(&self) -> bool {
         !(self.mode == Mode::Pixel && self.dither == Dither::On)
     }
 
@@ -225,7 +198,7 @@ impl crate::raster::CoverageMap for Compensator {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{response_s as s, rng, setup, small_setup};
+    use super::super::test_support::{response_s as s, rng, setup, small_setup, MODES};
     use super::*;
 
     #[test]
@@ -298,13 +271,7 @@ mod tests {
                 shapes
             })
             .collect();
-        for (mode, dither) in [
-            (Mode::Zone, Dither::Auto),
-            (Mode::Zone, Dither::On),
-            (Mode::Zone, Dither::Off),
-            (Mode::Pixel, Dither::Off),
-            (Mode::Pixel, Dither::On),
-        ] {
+        for (mode, dither) in MODES {
             for binary in [false, true] {
                 let fused = Compensator::new(&cal, &field, mode, dither).unwrap();
                 let reference = Compensator::new(&cal, &field, mode, dither).unwrap();
@@ -322,7 +289,7 @@ mod tests {
                     let what = format!("{mode:?} {dither:?} binary {binary} case {case}");
                     assert!(got == want, "{what}: masks differ");
                     assert_eq!(s_fused.lit_pixels(&got), area, "{what}: lit area");
-                    in_scan += fused.fusable(lit) as usize;
+                    in_scan += fused.fusable() as usize;
                     s_fused.recycle(got);
                     s_ref.recycle(want);
                 }

@@ -38,19 +38,11 @@ pub(super) fn field_sums(
     field_sums_with(avx2, src, w, zones, inside)
 }
 
-/// The set-up's pass over P (`w` values per row from `src`): the sum of P over every zone
-/// of `zones` and over the calibrated area `inside`, and
-/// per row and zone segment of that area the sum and extremes of P (for the per-pixel
-/// spreads).
-///
-/// The sums add f32 values in f64. When every such sum is exact ([`sums_are_exact`],
-/// checked on the field's extremes: true for any real calibration) the order of the
-/// additions does not matter (the zone sums are those of adding the values one by one in
-/// row-major order, bit for bit): the top and bottom halves of the field are then summed
-/// side by side (rayon) and their sums added, the values four or eight at a time;
-/// otherwise a second pass adds them one by one in row-major order. `avx2` (only where
-/// the CPU has it): the same operations on wider vectors (no fused multiply-add), so the
-/// same bits.
+/// The set-up's pass over P (`w` values per row from `src`) over the zones of `zones` and
+/// the calibrated area `inside` ([`FieldSums`]): the sums are those of adding the values
+/// one by one in row-major order, bit for bit. When every sum is exact ([`sums_are_exact`])
+/// the two halves of the field are summed side by side, several values at a time (`avx2`:
+/// the same operations on wider vectors); otherwise a second pass adds them one by one.
 pub(super) fn field_sums_with(
     avx2: bool,
     src: &mut FieldSource,
@@ -255,8 +247,8 @@ pub(super) fn sums_are_exact(lo: f32, hi: f32, n: usize) -> bool {
 mod tests {
     use super::*;
     use crate::optics::compensate::field_rows::{pixel_p, FieldRows};
-    use crate::optics::compensate::test_support::{random_field, rng};
-    use crate::optics::compensate::{Field, Form};
+    use crate::optics::compensate::test_support::{self, random_field, rng};
+    use crate::optics::compensate::Form;
     use crate::optics::field::Poly;
 
     #[test]
@@ -272,11 +264,7 @@ mod tests {
                 fm.form = Form::Exponential;
                 fm.coefficients = Poly::from_terms(1, &[0.0, 40.0, 0.0]);
             }
-            let field = Field {
-                width_px: 83,
-                height_px: 61,
-                pixel_mm: 0.53,
-            };
+            let field = test_support::field(83, 61, 0.53);
             let (w, h) = (83usize, 61usize);
             let pp = pixel_p(&fm, &field);
             let (lo, hi) = min_max(&pp);
@@ -288,26 +276,13 @@ mod tests {
             let zones = ZoneGrid::new(&field, 5.0);
             let (zone_of_col, zone_of_row, zcols) = (&zones.of_col, &zones.of_row, zones.cols);
             let segs = &zones.segments;
-            let inside = PixelBox {
-                r0: 3,
-                r1: 55,
-                c0: 5,
-                c1: 71,
-            };
-            let mut results = vec![field_sums_with(
-                false,
-                &mut FieldSource::Rows(FieldRows::new(&fm, &field)),
-                w,
-                &zones,
-                inside,
-            )];
-            results.push(field_sums(&mut FieldSource::Field(&pp), w, &zones, inside));
-            results.push(field_sums(
-                &mut FieldSource::Rows(FieldRows::new(&fm, &field)),
-                w,
-                &zones,
-                inside,
-            ));
+            let inside = PixelBox::new(3, 55, 5, 71);
+            let rows = || FieldSource::Rows(FieldRows::new(&fm, &field));
+            let results = [
+                field_sums_with(false, &mut rows(), w, &zones, inside),
+                field_sums(&mut FieldSource::Field(&pp), w, &zones, inside),
+                field_sums(&mut rows(), w, &zones, inside),
+            ];
             let nz = zcols * (*zone_of_row.iter().max().unwrap() as usize + 1);
             let (mut zs, mut zn, mut ins) = (vec![0f64; nz], vec![0usize; nz], 0.0f64);
             for (i, &v) in pp.iter().enumerate() {

@@ -8,12 +8,10 @@ use super::kernels::horner_avx2;
 use super::kernels::horner_f32;
 use super::{Field, FieldModel, Form};
 
-/// P at the pixel centres of the field, one row at a time (no w × h buffer). Inside the
-/// polynomial's rectangle: Horner in u with the row's coefficients (in f64, rounded to f32,
-/// times the scale in f32); elsewhere [`FieldModel::eval`] rounded to f32 (its linear
-/// continuation from the polynomial's value and gradient at the nearest point of the
-/// rectangle, computed once per column for the rows above and below it, once per row
-/// for the columns left and right of it).
+/// P at the pixel centres of the field, one row at a time (no w × h buffer): inside the
+/// polynomial's rectangle Horner in u with the row's coefficients (in f64, rounded to f32,
+/// times the scale in f32), elsewhere [`FieldModel::eval`] rounded to f32 (its linear
+/// continuation, from gradients computed once per column or per row).
 #[derive(Clone)]
 pub(super) struct FieldRows<'a> {
     fm: &'a FieldModel,
@@ -192,7 +190,7 @@ impl FieldSource<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optics::compensate::test_support::{random_field, rng};
+    use crate::optics::compensate::test_support::{self, random_field, rng};
 
     /// P at a pixel centre as the set-up defines it: inside the polynomial's rectangle
     /// Horner in u (f64) rounded to f32 and scaled in f32, elsewhere `eval` rounded to f32.
@@ -226,11 +224,7 @@ mod tests {
         let mut rnd = rng(0x9e37_79b9_7f4a_7c15);
         for case in 0..36 {
             let fm = random_field(&mut rnd, case);
-            let field = Field {
-                width_px: 61 + (case as u32 % 5) * 7,
-                height_px: 47,
-                pixel_mm: 0.73,
-            };
+            let field = test_support::field(61 + (case as u32 % 5) * 7, 47, 0.73);
             let (w, h) = (field.width_px as usize, field.height_px as usize);
             let mut rows = FieldRows::new(&fm, &field);
             let (mut a, mut b) = (vec![0f32; w], vec![0f32; w]);

@@ -7,9 +7,8 @@ use super::zones::ZoneGrid;
 use super::{Compensator, Mask};
 
 /// The full-coverage gray of every pixel as distinct rows (`w` bytes each) and the index
-/// of each image row's: in zone mode a row is one gray per zone segment, so rows repeat
-/// (about 15 distinct rows per zone row, instead of a w × h map to allocate and fill); in
-/// pixel mode every row is its own.
+/// of each image row's (zone mode: about 15 distinct rows per zone row; pixel mode: every
+/// row its own).
 #[derive(Debug)]
 pub(super) struct GrayMap {
     pub(super) rows: Vec<u8>,
@@ -107,13 +106,8 @@ impl Compensator {
         p: &crate::profile::Projector,
         png: impl Fn(&Mask) -> Vec<u8>,
     ) -> Vec<u8> {
-        let identity = p.offset_px == [0, 0]
-            && p.width_px as usize == self.w
-            && p.height_px as usize == self.h
-            && !p.mirror_x
-            && !p.mirror_y;
-        if identity {
-            let (w, h) = (self.w as u32, self.h as u32);
+        let (w, h) = (self.w as u32, self.h as u32);
+        if crate::raster::shows_as_is(p, w, h) {
             crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
         } else {
             let m = self.gray_map();
@@ -124,8 +118,8 @@ impl Compensator {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::small_setup;
-    use super::super::{Dither, Mode};
+    use super::super::test_support::{small_setup, MODES};
+    use super::super::Mode;
     use super::*;
 
     #[test]
@@ -136,12 +130,7 @@ mod tests {
         // `encode_gray8` of the map, also as mirrored projectors see it.
         let (cal, field) = small_setup();
         let (w, h) = (200usize, 150usize);
-        for (mode, dither) in [
-            (Mode::Zone, Dither::Auto),
-            (Mode::Zone, Dither::On),
-            (Mode::Zone, Dither::Off),
-            (Mode::Pixel, Dither::Off),
-        ] {
+        for (mode, dither) in MODES.into_iter().take(4) {
             let c = Compensator::new(&cal, &field, mode, dither).unwrap();
             let map = c.gray_map();
             if mode == Mode::Zone {

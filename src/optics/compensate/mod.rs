@@ -1,27 +1,13 @@
-//! Applying a calibration: coverage → gray, per zone or per pixel.
+//! Applying a calibration: coverage → gray, per zone or per pixel (docs/CALIBRATION.md,
+//! "Compensation"). A pixel of coverage c = v/255 gets the 8-bit level whose S·P is nearest
+//! to c·E*, with P the zone's mean (zone mode) or the pixel's own (pixel mode).
 //!
-//! Everything that depends only on the calibration and the field is computed once per job
-//! in [`Compensator::new`]: P at every pixel centre, the target E*, and either one
-//! 256-entry lookup table per zone (zone mode, the per-zone compensation of Xu et al.
-//! 2010, Chinese J. Lasers 37(7)) or the full-coverage gray, its level index and E*/P per
-//! pixel (pixel mode). The rasterizer then applies it while it writes each layer's mask
-//! (the compensator is its [`crate::raster::CoverageMap`], see
-//! [`crate::raster::Rasterizer::render`]), or [`Compensator::apply`] rewrites a finished
-//! coverage mask in place, touching only lit pixels; both give the same bytes:
-//!
-//! * coverage c = v/255 of a pixel asks for irradiance c·E*; the pixel gets the 8-bit level
-//!   whose S·P is nearest to it (so an anti-aliased edge pixel gets S⁻¹(c·E*/P), never
-//!   c × the full gray);
-//! * zone mode uses P averaged over the zone (one gray per zone for full coverage);
-//! * pixel mode uses P at the pixel centre; with dithering, the quantization error (in
-//!   irradiance) is diffused to the lit neighbours (Floyd–Steinberg, serpentine), row by
-//!   row within the layer, so the output does not depend on the thread count.
-//!
-//! The parts (private modules): `setup` reads P (`field_rows`) in one pass over the field
-//! (`field_pass`, with the vector kernels of `kernels`) over the zone grid (`zones`),
-//! measures the spreads (`spread`) and builds the tables of `zone_mode` or `pixel_mode`
-//! and the gray map (`gray_map`); `apply` and `dither` turn each layer's coverage into
-//! grays.
+//! [`Compensator::new`] computes once per job what depends only on the calibration and the
+//! field (`setup`: P from `field_rows` in one pass over the field, `field_pass` with the
+//! vector `kernels`, over the `zones`; the `spread`s; the tables of `zone_mode` or
+//! `pixel_mode` and the `gray_map`). The rasterizer applies it while it writes a mask (the
+//! compensator is its [`crate::raster::CoverageMap`]) or [`Compensator::apply`] rewrites a
+//! finished coverage mask (`apply`, `dither`); both give the same bytes.
 
 mod apply;
 mod dither;
@@ -36,7 +22,6 @@ mod spread;
 mod test_support;
 mod zone_mode;
 mod zones;
-
 
 // What the module takes from the rest of the crate; the submodules import it from here.
 use super::field::{FieldModel, Form};
@@ -129,7 +114,6 @@ impl Compensator {
             0.0
         }
     }
-
 
     /// Number of layers passed to [`apply`](Self::apply) whose lit pixels reach outside the
     /// calibrated area.

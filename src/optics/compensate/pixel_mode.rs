@@ -3,9 +3,8 @@
 
 use super::gray_map::GrayMap;
 use super::setup::{FieldSurvey, ModePrediction};
-use super::spread::{spread, Spread};
+use super::spread::{zone_spread, Spread};
 use super::Levels;
-use crate::png::PixelBox;
 
 /// Pixel mode's per-pixel tables (row-major, top row first).
 #[derive(Debug, Default)]
@@ -16,35 +15,23 @@ pub(super) struct PixelTables {
     pub(super) target_over_p: Vec<f32>,
 }
 
-/// What pixel mode's set-up gives.
-pub(super) struct PixelSetUp {
-    pub(super) tables: PixelTables,
-    pub(super) gray_map: GrayMap,
-    pub(super) prediction: ModePrediction,
-}
-
-impl PixelSetUp {
-    /// Pixel mode's tables and prediction for `survey` on the levels `lv`, with P at every
+/// Pixel mode's tables, gray map and prediction for `survey` on the levels `lv`, with P at every
     /// pixel centre `pp` (row-major) and the target `forced_target` or, by default, the
-    /// highest irradiance every pixel of the calibrated area can reach.
-    ///
-    /// Row by row: E*/P (divisions, vectorized), the nearest level searched from the
-    /// previous pixel's, then per zone P · S(level) added pixel by pixel in row-major
-    /// order (a zone's pixels in a row are one segment) and, over the calibrated area, the
-    /// spread after, also in row-major order. The gray sums are exact in any order.
-    pub(super) fn new(
-        survey: &FieldSurvey,
-        lv: &Levels,
-        pp: &[f32],
-        forced_target: Option<f64>,
-    ) -> PixelSetUp {
+/// highest irradiance every pixel of the calibrated area can reach.
+///
+/// Row by row: E*/P (divisions, vectorized), the nearest level searched from the
+/// previous pixel's, then per zone P · S(level) added pixel by pixel in row-major
+/// order (a zone's pixels in a row are one segment) and, over the calibrated area, the
+/// spread after, also in row-major order. The gray sums are exact in any order.
+pub(super) fn set_up(
+    survey: &FieldSurvey,
+    lv: &Levels,
+    pp: &[f32],
+    forced_target: Option<f64>,
+) -> (PixelTables, GrayMap, ModePrediction) {
         let zones = &survey.zones;
-        let (w, h, nz, zcols) = (
-            zones.of_col.len(),
-            zones.of_row.len(),
-            zones.count(),
-            zones.cols,
-        );
+        let (w, h) = (zones.of_col.len(), zones.of_row.len());
+        let (nz, zcols) = (zones.count(), zones.cols);
         let s_max = lv.s_max();
         let target = forced_target.unwrap_or(smallest_inside_p(survey) * s_max);
         let mut unreachable = 0;
@@ -56,12 +43,7 @@ impl PixelSetUp {
         let mut zg = vec![0u64; nz];
         let mut after_px = Spread::new();
         let mut ti_row = vec![0f64; w];
-        let PixelBox {
-            r0: ir0,
-            r1: ir1,
-            c0: ic0,
-            c1: ic1,
-        } = survey.inside;
+        let inside = survey.inside;
         for r in 0..h {
             let base = r * w;
             let prow = &pp[base..base + w];
@@ -87,11 +69,11 @@ impl PixelSetUp {
                 trow[c] = ti as f32;
             }
             let zr = zones.of_row[r] as usize * zcols;
-            let inside_row = (ir0..ir1).contains(&r);
+            let inside_row = inside.rows().contains(&r);
             for &(zc, a, b) in &zones.segments {
                 let (ia, ib) = if inside_row {
-                    let ia = a.max(ic0).min(b);
-                    (ia, b.min(ic1).max(ia))
+                    let ia = a.max(inside.c0).min(b);
+                    (ia, b.min(inside.c1).max(ia))
                 } else {
                     (b, b)
                 };
@@ -112,25 +94,21 @@ impl PixelSetUp {
         let zone_gray = (0..nz)
             .map(|z| (zg[z] as f64 / zcnt[z].max(1) as f64).round() as u8)
             .collect();
-        let zone_inside = &survey.zone_inside;
-        let after_zone = spread((0..nz).filter(|&z| zone_inside[z]).map(|z| zone_after[z]));
-        PixelSetUp {
-            tables: PixelTables {
-                full_idx,
-                target_over_p: t,
-            },
-            gray_map: GrayMap::per_pixel(full, h),
-            prediction: ModePrediction {
-                target,
-                zone_gray,
-                zone_after,
-                after_zone_pct: after_zone,
-                after_pixel_pct: after_px.pct(),
-                unreachable,
-                mixed_zones: 0,
-            },
-        }
-    }
+        let after_zone = zone_spread(&survey.zone_inside, |z| zone_after[z]);
+        let tables = PixelTables {
+            full_idx,
+            target_over_p: t,
+        };
+        let prediction = ModePrediction {
+            target,
+            zone_gray,
+            zone_after,
+            after_zone_pct: after_zone,
+            after_pixel_pct: after_px.pct(),
+            unreachable,
+            mixed_zones: 0,
+        };
+        (tables, GrayMap::per_pixel(full, h), prediction)
 }
 
 /// The smallest P of the calibrated area: of its row segments' smallest.

@@ -4,63 +4,42 @@
 
 use super::field_pass::{field_sums, FieldSums};
 use super::field_rows::{pixel_p, FieldRows, FieldSource};
-use super::gray_map::GrayMap;
-use super::pixel_mode::{PixelSetUp, PixelTables};
-use super::spread::{pixel_spread, spread};
-use super::zone_mode::{ZoneSetUp, ZoneTables};
+use super::pixel_mode::{self, PixelTables};
+use super::spread::{pixel_spread, zone_spread};
+use super::zone_mode::{self, ZoneTables};
 use super::zones::ZoneGrid;
 use super::{Calibration, Compensator, Dither, Field, FieldModel, Mode, Prediction, Spreads};
 use crate::png::PixelBox;
 use std::sync::atomic::AtomicU64;
 
-/// The pixels whose centres lie in the calibrated area.
-struct CalibratedArea {
-    pixels: PixelBox,
-}
-
-impl CalibratedArea {
-    /// The calibrated area of `fm` in the pixels of `field`; fails if it holds no pixel
-    /// centre.
-    fn of(fm: &FieldModel, field: &Field) -> Result<CalibratedArea, String> {
-        let (w, h) = (field.width_px as usize, field.height_px as usize);
-        let p = field.pixel_mm;
-        let [ax0, ay0, ax1, ay1] = fm.area_mm;
-        let cols: Vec<usize> = (0..w)
-            .filter(|&c| {
-                let x = (c as f64 + 0.5) * p;
-                x >= ax0 && x <= ax1
-            })
-            .collect();
-        let rows: Vec<usize> = (0..h)
-            .filter(|&r| {
-                let y = (h as f64 - r as f64 - 0.5) * p;
-                y >= ay0 && y <= ay1
-            })
-            .collect();
-        let (Some(&c0), Some(&c1), Some(&r0), Some(&r1)) =
-            (cols.first(), cols.last(), rows.first(), rows.last())
-        else {
-            return Err(format!(
-                "the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm contains no pixel of the {:.3} x {:.3} mm field",
-                field.width_mm(),
-                field.height_mm()
-            ));
-        };
-        Ok(CalibratedArea {
-            pixels: PixelBox {
-                r0,
-                r1: r1 + 1,
-                c0,
-                c1: c1 + 1,
-            },
+/// The pixels of `field` whose centres lie in the calibrated area of `fm`; fails if there
+/// is none.
+fn calibrated_pixels(fm: &FieldModel, field: &Field) -> Result<PixelBox, String> {
+    let (w, h) = (field.width_px as usize, field.height_px as usize);
+    let p = field.pixel_mm;
+    let [ax0, ay0, ax1, ay1] = fm.area_mm;
+    let cols: Vec<usize> = (0..w)
+        .filter(|&c| {
+            let x = (c as f64 + 0.5) * p;
+            x >= ax0 && x <= ax1
         })
-    }
-
-    /// Number of pixels.
-    fn pixel_count(&self) -> usize {
-        let PixelBox { r0, r1, c0, c1 } = self.pixels;
-        (c1 - c0) * (r1 - r0)
-    }
+        .collect();
+    let rows: Vec<usize> = (0..h)
+        .filter(|&r| {
+            let y = (h as f64 - r as f64 - 0.5) * p;
+            y >= ay0 && y <= ay1
+        })
+        .collect();
+    let (Some(&c0), Some(&c1), Some(&r0), Some(&r1)) =
+        (cols.first(), cols.last(), rows.first(), rows.last())
+    else {
+        return Err(format!(
+            "the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm contains no pixel of the {:.3} x {:.3} mm field",
+            field.width_mm(),
+            field.height_mm()
+        ));
+    };
+    Ok(PixelBox::new(r0, r1 + 1, c0, c1 + 1))
 }
 
 /// What the pass over the field found, which both modes' tables start from.
@@ -116,14 +95,6 @@ pub(super) struct ModePrediction {
     pub(super) mixed_zones: u64,
 }
 
-/// A mode's tables: zone mode fills the zone tables, pixel mode the pixel tables.
-struct ModeTables {
-    zone: ZoneTables,
-    pixel: PixelTables,
-    gray_map: GrayMap,
-    prediction: ModePrediction,
-}
-
 impl Compensator {
     /// Precomputes the tables of `mode` (zone or pixel) for calibration `cal` over `field`.
     ///
@@ -153,51 +124,38 @@ impl Compensator {
         let fm = &cal.field;
         let levels = cal.response.levels();
         let s_max = levels.s_max();
-        let area = CalibratedArea::of(fm, field)?;
-
+        let area = calibrated_pixels(fm, field)?;
         // P: pixel mode keeps it for the whole field (its per-pixel tables need it); zone
-        // mode evaluates it row by row in its one pass over the field (no w × h buffer to
-        // allocate and fill).
-        let pp = if mode == Mode::Pixel {
-            pixel_p(fm, field)
-        } else {
-            Vec::new()
+        // mode evaluates it row by row in its one pass over the field (no w × h buffer).
+        let pp = match mode {
+            Mode::Pixel => pixel_p(fm, field),
+            _ => Vec::new(),
         };
-        let mut src = if pp.is_empty() {
-            FieldSource::Rows(FieldRows::new(fm, field))
-        } else {
-            FieldSource::Field(&pp)
+        let mut src = match mode {
+            Mode::Pixel => FieldSource::Field(&pp),
+            _ => FieldSource::Rows(FieldRows::new(fm, field)),
         };
         debug_assert!(source_matches_model(&mut src, fm, field));
-        let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area.pixels);
-        let tables = match mode {
+        let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area);
+        let (zone_tables, pixel_tables, gray_map, after) = match mode {
             Mode::Zone => {
-                let Some(z) = ZoneSetUp::new(&survey, &levels, dither, forced_target) else {
+                let Some((t, g, p)) = zone_mode::set_up(&survey, &levels, dither, forced_target)
+                else {
                     let [ax0, ay0, ax1, ay1] = fm.area_mm;
                     return Err(format!(
                         "no {} mm zone of the field has its centre in the calibrated area {ax0}..{ax1} x {ay0}..{ay1} mm",
                         cal.zone_mm.get()
                     ));
                 };
-                ModeTables {
-                    zone: z.tables,
-                    pixel: PixelTables::default(),
-                    gray_map: z.gray_map,
-                    prediction: z.prediction,
-                }
+                (t, PixelTables::default(), g, p)
             }
             Mode::Pixel => {
-                let p = PixelSetUp::new(&survey, &levels, &pp, forced_target);
-                ModeTables {
-                    zone: ZoneTables::default(),
-                    pixel: p.tables,
-                    gray_map: p.gray_map,
-                    prediction: p.prediction,
-                }
+                let (t, g, p) = pixel_mode::set_up(&survey, &levels, &pp, forced_target);
+                (ZoneTables::default(), t, g, p)
             }
             Mode::Off => unreachable!(),
         };
-        let prediction = predict(&survey, &area, s_max, tables.prediction);
+        let prediction = predict(&survey, area, s_max, after);
         Ok(Compensator {
             mode,
             dither,
@@ -205,10 +163,10 @@ impl Compensator {
             h,
             levels,
             zones: survey.zones,
-            zone_tables: tables.zone,
-            pixel_tables: tables.pixel,
-            gray_map: tables.gray_map,
-            calibrated: area.pixels,
+            zone_tables,
+            pixel_tables,
+            gray_map,
+            calibrated: area,
             layers_outside: AtomicU64::new(0),
             prediction,
         })
@@ -228,23 +186,15 @@ fn source_matches_model(src: &mut FieldSource, fm: &FieldModel, field: &Field) -
 
 /// The whole prediction: the field before compensation (from `survey` over `area`; the
 /// brightest valid gray gives `s_max`) and what the mode's tables give (`after`).
-fn predict(
-    survey: &FieldSurvey,
-    area: &CalibratedArea,
-    s_max: f64,
-    after: ModePrediction,
-) -> Prediction {
+fn predict(survey: &FieldSurvey, area: PixelBox, s_max: f64, after: ModePrediction) -> Prediction {
+    let area_pixels = (area.r1 - area.r0) * (area.c1 - area.c0);
     let zones = &survey.zones;
     let (zone_p, zone_inside) = (&survey.zone_p, &survey.zone_inside);
-    let before_zone = spread(
-        (0..zones.count())
-            .filter(|&z| zone_inside[z])
-            .map(|z| zone_p[z] * s_max),
-    );
+    let before_zone = zone_spread(zone_inside, |z| zone_p[z] * s_max);
     let before_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |_, _| s_max);
     Prediction {
         target: after.target,
-        mean: survey.sums.inside_sum / area.pixel_count() as f64 * s_max,
+        mean: survey.sums.inside_sum / area_pixels as f64 * s_max,
         s_max,
         zone_grid: (zones.cols, zones.rows),
         zone_p: zone_p.clone(),
@@ -258,7 +208,7 @@ fn predict(
             after_pixel_pct: after.after_pixel_pct,
         },
         zones_outside: zone_inside.iter().filter(|&&b| !b).count() as u64,
-        pixels_outside: (zones.of_col.len() * zones.of_row.len() - area.pixel_count()) as u64,
+        pixels_outside: (zones.of_col.len() * zones.of_row.len() - area_pixels) as u64,
         unreachable: after.unreachable,
         mixed_zones: after.mixed_zones,
     }
@@ -267,7 +217,7 @@ fn predict(
 #[cfg(test)]
 mod tests {
     use super::super::spread::Spread;
-    use super::super::test_support::setup;
+    use super::super::test_support::{self, setup, MODES};
     use super::*;
 
     #[test]
@@ -300,11 +250,7 @@ mod tests {
         // fall inside pixel columns): exactly, except the per-pixel spreads' means, which
         // the set-up takes from exact sums (one rounding instead of one per pixel).
         let (mut cal, _) = setup();
-        let field = Field {
-            width_px: 57,
-            height_px: 43,
-            pixel_mm: 0.7,
-        };
+        let field = test_support::field(57, 43, 0.7);
         for area in [[0.0, 0.0, 40.0, 30.0], [3.5, 2.2, 33.0, 27.5]] {
             cal.field.area_mm = area;
             let pp = pixel_p(&cal.field, &field);
@@ -314,12 +260,7 @@ mod tests {
                 let (x, y) = (x * p, y * p);
                 x >= area[0] && x <= area[2] && y >= area[1] && y <= area[3]
             };
-            for (mode, dither) in [
-                (Mode::Zone, Dither::Auto),
-                (Mode::Zone, Dither::On),
-                (Mode::Zone, Dither::Off),
-                (Mode::Pixel, Dither::Off),
-            ] {
+            for (mode, dither) in MODES.into_iter().take(4) {
                 let c = Compensator::new(&cal, &field, mode, dither).unwrap();
                 let pr = &c.prediction;
                 let what = format!("{area:?} {mode:?} {dither:?}");
@@ -334,13 +275,18 @@ mod tests {
                 assert_eq!(pr.mean, sum / n as f64 * pr.s_max, "{what}");
                 let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
                 assert!(close(pr.spreads.before_pixel_pct, before.pct()), "{what}");
-                // Zone means: the sums of P added one by one in row-major order.
-                let (mut zs, mut zn) = (vec![0f64; pr.zone_p.len()], vec![0usize; pr.zone_p.len()]);
+                // Zone means before and (pixel mode) after: P and P · S(gray) added pixel by
+                // pixel in row-major order.
+                let nz = pr.zone_p.len();
+                let (mut zs, mut zn, mut za) = (vec![0f64; nz], vec![0usize; nz], vec![0f64; nz]);
                 for (i, &v) in pp.iter().enumerate() {
                     let z = c.zones.of_row[i / w] as usize * c.zones.cols
                         + c.zones.of_col[i % w] as usize;
                     zs[z] += v as f64;
                     zn[z] += 1;
+                    if mode == Mode::Pixel {
+                        za[z] += v as f64 * c.levels.s[c.pixel_tables.full_idx[i] as usize];
+                    }
                 }
                 for (z, &pz) in pr.zone_p.iter().enumerate() {
                     let want = if zn[z] > 0 {
@@ -351,13 +297,6 @@ mod tests {
                     assert_eq!(pz.to_bits(), want.to_bits(), "{what} zone {z}");
                 }
                 if mode == Mode::Pixel {
-                    // Zone means after: P · S(gray) added pixel by pixel in row-major order.
-                    let mut za = vec![0f64; pr.zone_p.len()];
-                    for (i, &v) in pp.iter().enumerate() {
-                        let z = c.zones.of_row[i / w] as usize * c.zones.cols
-                            + c.zones.of_col[i % w] as usize;
-                        za[z] += v as f64 * c.levels.s[c.pixel_tables.full_idx[i] as usize];
-                    }
                     for (z, &a) in pr.zone_after.iter().enumerate() {
                         let want = za[z] / zn[z].max(1) as f64;
                         assert_eq!(a.to_bits(), want.to_bits(), "{what} zone {z}");

@@ -54,10 +54,10 @@ impl Spread {
     }
 }
 
-/// The spread of `v`, %.
-pub(super) fn spread(v: impl Iterator<Item = f64>) -> f64 {
+/// The spread of `v(z)` over the zones `z` with `inside[z]`, %.
+pub(super) fn zone_spread(inside: &[bool], v: impl Fn(usize) -> f64) -> f64 {
     let mut s = Spread::new();
-    v.for_each(|x| s.add(x));
+    (0..inside.len()).filter(|&z| inside[z]).for_each(|z| s.add(v(z)));
     s.pct()
 }
 

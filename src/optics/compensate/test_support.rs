@@ -2,9 +2,19 @@
 
 use super::super::field::{FieldModel, Form, Poly};
 use super::super::response::{Interpolation, Response};
-use super::super::{Calibration, Units};
+use super::super::{Calibration, Dither, Mode, Units};
 use crate::profile::Field;
 use crate::units::{NonNegative, Positive};
+
+/// Every compensation mode with every dithering that applies to it; pixel mode with error
+/// diffusion last (its plate is not the gray map).
+pub(super) const MODES: [(Mode, Dither); 5] = [
+    (Mode::Zone, Dither::Auto),
+    (Mode::Zone, Dither::On),
+    (Mode::Zone, Dither::Off),
+    (Mode::Pixel, Dither::Off),
+    (Mode::Pixel, Dither::On),
+];
 
 /// A 40 × 30 mm field of 1 mm pixels; P = 1 + x/40 (x in mm), S(g) = (g/255)²
 /// ([`response_s`]) measured 50..255 and anchored at 0.
@@ -37,12 +47,16 @@ pub(super) fn setup() -> (Calibration, Field) {
         fit: None,
     };
     cal.validate().unwrap();
-    let field = Field {
-        width_px: 40,
-        height_px: 30,
-        pixel_mm: 1.0,
-    };
-    (cal, field)
+    (cal, field(40, 30, 1.0))
+}
+
+/// A field of `w` × `h` pixels of `pixel_mm`.
+pub(super) fn field(w: u32, h: u32, pixel_mm: f64) -> Field {
+    Field {
+        width_px: w,
+        height_px: h,
+        pixel_mm,
+    }
 }
 
 /// [`setup`]'s calibration measured on 40 × 26 mm only, over a 40 × 30 mm field of
@@ -50,12 +64,7 @@ pub(super) fn setup() -> (Calibration, Field) {
 pub(super) fn small_setup() -> (Calibration, Field) {
     let (mut cal, _) = setup();
     cal.field.area_mm = [0.0, 0.0, 40.0, 26.0];
-    let field = Field {
-        width_px: 200,
-        height_px: 150,
-        pixel_mm: 0.2,
-    };
-    (cal, field)
+    (cal, field(200, 150, 0.2))
 }
 
 /// S(g) of [`setup`]'s calibration.

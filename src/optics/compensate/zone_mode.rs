@@ -5,7 +5,7 @@
 
 use super::gray_map::GrayMap;
 use super::setup::{FieldSurvey, ModePrediction};
-use super::spread::{pixel_spread, spread};
+use super::spread::{pixel_spread, zone_spread};
 use super::zones::ZoneGrid;
 use super::{Dither, Levels};
 
@@ -14,9 +14,8 @@ use super::{Dither, Levels};
 pub const MIX_TOLERANCE: f64 = 0.0075;
 
 /// Whether row `r` of a mixing zone shows the upper of its two grays, for a mix of `k`
-/// sixty-fourths: the 6-bit bit-reversal of r mod 64 (a 1-D ordered dither) is below
-/// `k`. Any 8 consecutive rows hold k/64 of them to within 1/8, any 64 exactly. Whole
-/// rows (not a checkerboard) keep the masks run-length friendly.
+/// sixty-fourths: the 6-bit bit-reversal of r mod 64 is below `k` (any 8 consecutive rows
+/// hold k/64 of them to within 1/8, any 64 exactly).
 #[inline]
 pub(super) fn upper_row(r: usize, k: u8) -> bool {
     (((r & 63) as u8).reverse_bits() >> 2) < k
@@ -60,13 +59,6 @@ impl ZoneTables {
     }
 }
 
-/// What zone mode's set-up gives.
-pub(super) struct ZoneSetUp {
-    pub(super) tables: ZoneTables,
-    pub(super) gray_map: GrayMap,
-    pub(super) prediction: ModePrediction,
-}
-
 /// Each zone's coverage → gray table (entry 255 still the nearest gray) and
 /// full-coverage gray, with what they predict ([`zone_grays`]).
 struct ZoneGrays {
@@ -78,16 +70,15 @@ struct ZoneGrays {
     mixed: u64,
 }
 
-impl ZoneSetUp {
-    /// Zone mode's tables and prediction for `survey` on the levels `lv`, with the target
-    /// `forced_target` or chosen here. `None` when no zone has its centre in the
-    /// calibrated area.
-    pub(super) fn new(
-        survey: &FieldSurvey,
-        lv: &Levels,
-        dither: Dither,
-        forced_target: Option<f64>,
-    ) -> Option<ZoneSetUp> {
+/// Zone mode's tables, gray map and prediction for `survey` on the levels `lv`, with the
+/// target `forced_target` or chosen here. `None` when no zone has its centre in the
+/// calibrated area.
+pub(super) fn set_up(
+    survey: &FieldSurvey,
+    lv: &Levels,
+    dither: Dither,
+    forced_target: Option<f64>,
+) -> Option<(ZoneTables, GrayMap, ModePrediction)> {
         let target = zone_target(survey, lv, dither, forced_target)?;
         let grays = zone_grays(&survey.zone_p, lv, target, dither);
         let zones = &survey.zones;
@@ -102,13 +93,7 @@ impl ZoneSetUp {
                 }
             })
             .collect();
-        let zone_inside = &survey.zone_inside;
-        let zone_after = &grays.zone_after;
-        let after_zone = spread(
-            (0..zones.count())
-                .filter(|&z| zone_inside[z])
-                .map(|z| zone_after[z]),
-        );
+        let after_zone = zone_spread(&survey.zone_inside, |z| grays.zone_after[z]);
         // Per-pixel prediction: each row of a zone shows one gray.
         let s_by_gray = s_of_gray(lv);
         let after_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |r, zc| {
@@ -116,20 +101,16 @@ impl ZoneSetUp {
         });
         let tables = ZoneTables::new(&grays, zones);
         let gray_map = GrayMap::of_zone_tables(&tables, zones);
-        Some(ZoneSetUp {
-            tables,
-            gray_map,
-            prediction: ModePrediction {
-                target,
-                zone_gray,
-                zone_after: grays.zone_after,
-                after_zone_pct: after_zone,
-                after_pixel_pct: after_pixel,
-                unreachable: grays.unreachable,
-                mixed_zones: grays.mixed,
-            },
-        })
-    }
+        let prediction = ModePrediction {
+            target,
+            zone_gray,
+            zone_after: grays.zone_after,
+            after_zone_pct: after_zone,
+            after_pixel_pct: after_pixel,
+            unreachable: grays.unreachable,
+            mixed_zones: grays.mixed,
+        };
+        Some((tables, gray_map, prediction))
 }
 
 /// S of each gray on the levels `lv` (0 for grays that are not levels).
@@ -166,11 +147,9 @@ fn zone_target(
     })
 }
 
-/// The zone-mode target: among targets within 3 % of `emax` (the highest every inside
-/// zone can reach; about one gray step), the centre of the narrowest irradiance window
-/// that holds one achievable full-coverage value P̄·S(level) of every inside zone. One
-/// gray per zone cannot do better than that window's width; nearest rounding to `emax`
-/// alone can be up to one gray step worse. Falls back to `emax`.
+/// The zone-mode target (docs/CALIBRATION.md): the centre of the narrowest irradiance window
+/// within 3 % of `emax` (the highest every inside zone can reach) that holds one achievable
+/// value P̄·S(level) of every inside zone; `emax` if there is none.
 fn best_window(lv: &Levels, zone_p: &[f64], inside: &[bool], emax: f64) -> f64 {
     let zones: Vec<usize> = (0..zone_p.len()).filter(|&z| inside[z]).collect();
     let (lo_b, hi_b) = (emax * 0.97, emax * 1.03);

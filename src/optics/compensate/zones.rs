@@ -28,12 +28,8 @@ pub(super) struct ZoneGrid {
 impl ZoneGrid {
     /// The zones of `field` for `zone_mm` squares.
     pub(super) fn new(field: &Field, zone_mm: f64) -> ZoneGrid {
-        let (w, h, p) = (
-            field.width_px as usize,
-            field.height_px as usize,
-            field.pixel_mm,
-        );
-        let zmm = zone_mm;
+        let (w, h) = (field.width_px as usize, field.height_px as usize);
+        let (p, zmm) = (field.pixel_mm, zone_mm);
         let cols = ((field.width_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
         let rows = ((field.height_mm() / zmm) - 1e-9).ceil().max(1.0) as usize;
         let of_col: Vec<u16> = (0..w)

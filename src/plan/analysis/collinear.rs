@@ -4,11 +4,9 @@
 use crate::slice::Contour;
 
 /// Points closer than this to the segment joining their neighbours are left out of the
-/// analysed section, mm. The slicer cuts every triangle edge crossing the layer, so a
-/// straight wall made of several triangles gives points on the line between its corners
-/// that slide along it from layer to layer: without them, consecutive sections of a
-/// prism are equal and their analysis is done once. Moving the boundary by at most this
-/// much moves a fill distance by at most as much.
+/// analysed section, mm: the slicer's points on a straight wall slide along it from layer
+/// to layer, and without them consecutive sections of a prism are equal (analysed once).
+/// Moving the boundary by at most this much moves a fill distance by at most as much.
 pub const COLLINEAR_MM: f64 = 1e-9;
 
 /// At most this many consecutive points are left out (each left-out point is checked

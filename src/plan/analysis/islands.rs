@@ -51,7 +51,7 @@ pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::analysis::test_support::{lit, ngon, rect, xorshift};
+    use crate::plan::analysis::test_support::{lit, rect, ring, scattered, xorshift};
     use crate::slice::Contour;
 
     /// [`islands`] of two sections.
@@ -70,14 +70,11 @@ mod tests {
         // Nothing below at all.
         assert_eq!(islands_of(&two, &[]), 2);
         // A ring counts once, and rests on a base touching only part of it.
-        let ring = [
-            ngon(40.0, 30.0, 10.0, 64, true),
-            ngon(40.0, 30.0, 8.0, 64, false),
-        ];
-        assert_eq!(islands_of(&ring, &[]), 1);
-        assert_eq!(islands_of(&ring, &[rect(48.0, 28.0, 52.0, 32.0)]), 0);
+        let section = ring([40.0, 30.0], 10.0, 8.0, 64);
+        assert_eq!(islands_of(&section, &[]), 1);
+        assert_eq!(islands_of(&section, &[rect(48.0, 28.0, 52.0, 32.0)]), 0);
         // A base inside the ring's hole does not support it.
-        assert_eq!(islands_of(&ring, &[rect(38.0, 28.0, 42.0, 32.0)]), 1);
+        assert_eq!(islands_of(&section, &[rect(38.0, 28.0, 42.0, 32.0)]), 1);
         assert_eq!(islands_of(&[], &base), 0);
         // Pixels, not contours: a region lighting no pixel is no island, and regions that
         // touch only at a corner are two (4-connected).
@@ -93,74 +90,116 @@ mod tests {
         assert_eq!(islands_of(&base, &thin), 1);
     }
 
+    /// The islands of the `w × h` pixel grid `cur` (row-major) over `below` by a flood
+    /// fill: a 4-connected region of lit pixels counts when none of them is lit below.
+    fn flood_islands(cur: &[bool], below: &[bool], w: usize, h: usize) -> u32 {
+        let mut seen = vec![false; w * h];
+        let mut n = 0;
+        for s in 0..w * h {
+            if !cur[s] || seen[s] {
+                continue;
+            }
+            seen[s] = true;
+            let (mut stack, mut rests) = (vec![s], false);
+            while let Some(k) = stack.pop() {
+                rests |= below[k];
+                let (r, c) = (k / w, k % w);
+                let nb = [
+                    (r > 0).then(|| k - w),
+                    (r + 1 < h).then(|| k + w),
+                    (c > 0).then(|| k - 1),
+                    (c + 1 < w).then(|| k + 1),
+                ];
+                for q in nb.into_iter().flatten() {
+                    if cur[q] && !seen[q] {
+                        seen[q] = true;
+                        stack.push(q);
+                    }
+                }
+            }
+            n += u32::from(!rests);
+        }
+        n
+    }
+
+    /// The lit runs of the `w × h` grid `g`, and back.
+    fn runs_of(g: &[bool], w: usize) -> LitRuns {
+        let mut l = LitRuns::default();
+        for (r, row) in g.chunks(w).enumerate() {
+            let mut c = 0;
+            while c < w {
+                let s = c;
+                while c < w && row[c] {
+                    c += 1;
+                }
+                if c > s {
+                    l.runs.push([r as u32, s as u32, c as u32]);
+                }
+                c += 1;
+            }
+        }
+        l
+    }
+    fn grid_of(l: &LitRuns, w: usize, h: usize) -> Vec<bool> {
+        let mut g = vec![false; w * h];
+        for &[r, s, e] in &l.runs {
+            g[r as usize * w + s as usize..r as usize * w + e as usize].fill(true);
+        }
+        g
+    }
+
+    #[test]
+    fn supported_runs_shortcut_agrees_with_a_flood_fill() {
+        // Random layers of scattered squares and rings over random layers below: when
+        // every run rests on a run below there is no island, and the count with the
+        // shortcut is that of a flood fill of the pixels.
+        let mut rnd = xorshift(0x1d5_0a7e_u64);
+        let layer = |rnd: &mut dyn FnMut() -> f64| -> Vec<Contour> {
+            let mut v = scattered(rnd, 5.0, 8.0);
+            if rnd() < 0.5 {
+                let (cx, cy, r) = (5.0 + rnd() * 10.0, 5.0 + rnd() * 10.0, 2.0 + rnd() * 4.0);
+                v.extend(ring([cx, cy], r, r * 0.6, 48));
+            }
+            v
+        };
+        let (mut shortcut, mut found) = (0, 0);
+        for _ in 0..200 {
+            let (cur, below) = (layer(&mut rnd), layer(&mut rnd));
+            // Sometimes the layer below is the same or larger, so all runs rest on it.
+            let below = if rnd() < 0.3 { cur.clone() } else { below };
+            let (rc, rp) = (lit(&cur), lit(&below));
+            // The field's rows and columns the layers reach.
+            let (w, h) = rc.runs.iter().chain(&rp.runs).fold((0, 0), |(w, h), r| {
+                (w.max(r[2] as usize), h.max(r[0] as usize + 1))
+            });
+            let want = flood_islands(&grid_of(&rc, w, h), &grid_of(&rp, w, h), w, h);
+            if !supported_runs(&rc, &rp).1 {
+                assert_eq!(want, 0);
+                shortcut += 1;
+            }
+            assert_eq!(islands(&rc, &rp), want);
+            found += want;
+        }
+        assert!(shortcut > 40 && found > 40, "{shortcut} {found}");
+    }
+
     #[test]
     fn islands_match_a_pixel_flood_fill() {
         // Random pixel grids (lit with probability 0.3–0.7, so regions of every shape:
         // U-shapes resting by one arm, regions touching the layer below in one pixel)
         // over random grids below: the count from the unsupported runs against a flood
-        // fill of the pixels and against joining every run.
+        // fill of the pixels.
         let mut rnd = xorshift(0x15_1a_2d_u64);
         let (w, h) = (23usize, 17usize);
-        let runs_of = |g: &[bool]| {
-            let mut l = LitRuns::default();
-            for r in 0..h {
-                let mut c = 0;
-                while c < w {
-                    if g[r * w + c] {
-                        let s = c;
-                        while c < w && g[r * w + c] {
-                            c += 1;
-                        }
-                        l.runs.push([r as u32, s as u32, c as u32]);
-                    } else {
-                        c += 1;
-                    }
-                }
-            }
-            l
-        };
         let mut total = 0;
         for case in 0..300 {
             let (pc, pb) = (0.3 + 0.4 * rnd(), 0.1 + 0.6 * rnd());
             let cur: Vec<bool> = (0..w * h).map(|_| rnd() < pc).collect();
             let below: Vec<bool> = (0..w * h).map(|_| rnd() < pb).collect();
-            // Flood fill of the lit pixels; a region is an island when none of its pixels
-            // is lit below.
-            let mut seen = vec![false; w * h];
-            let mut want = 0;
-            for s in 0..w * h {
-                if !cur[s] || seen[s] {
-                    continue;
-                }
-                seen[s] = true;
-                let (mut stack, mut rests) = (vec![s], false);
-                while let Some(k) = stack.pop() {
-                    rests |= below[k];
-                    let (r, c) = (k / w, k % w);
-                    let mut nb = Vec::new();
-                    if r > 0 {
-                        nb.push(k - w);
-                    }
-                    if r + 1 < h {
-                        nb.push(k + w);
-                    }
-                    if c > 0 {
-                        nb.push(k - 1);
-                    }
-                    if c + 1 < w {
-                        nb.push(k + 1);
-                    }
-                    for q in nb {
-                        if cur[q] && !seen[q] {
-                            seen[q] = true;
-                            stack.push(q);
-                        }
-                    }
-                }
-                want += u32::from(!rests);
-            }
-            let (rc, rb) = (runs_of(&cur), runs_of(&below));
-            assert_eq!(count_islands(&rc, &rb), want, "case {case}");
+            let want = flood_islands(&cur, &below, w, h);
+            let (rc, rb) = (runs_of(&cur, w), runs_of(&below, w));
+            assert_eq!(grid_of(&rc, w, h), cur);
+            assert_eq!(islands(&rc, &rb), want, "case {case}");
             total += want;
         }
         assert!(total > 300, "{total}");

@@ -1,45 +1,22 @@
-//! Per-layer analysis: the max fill distance (DisMax-Min, in Li, Wu, Cui, Yang and Zhao:
-//! model-guided hybrid continuous/layered DLP printing on a fluorinated-oil interface), the
-//! unsupported islands and the bounding box of each layer. The fill distance and the box
-//! are computed from the exact section contours (mm), not from the pixels (a pixel is
-//! 0.063 mm; the fill distance must be right to ±0.02 mm); the islands from the pixels the
-//! masks light.
+//! Per-layer analysis (docs/PLANNING.md): the max fill distance (DisMax-Min of Li et al.)
+//! and the bounding box from the exact section contours (mm: a pixel is 0.063 mm, the fill
+//! distance must be right to ±0.02 mm), the unsupported islands from the pixels the mask
+//! lights.
 //!
-//! * **Max fill distance** = the radius of the largest circle inside the section = the
-//!   largest, over all points inside, of the distance to the nearest boundary point. It is
-//!   found with a best-first subdivision of the section's bounding box ("pole of
-//!   inaccessibility", see [`max_fill_distance_with`]): every cell is scored by the exact
-//!   signed distance of its centre to the contour edges (a bounding-volume hierarchy over
-//!   the edges for the distance, a band index for the nonzero-winding inside test), and
-//!   cells whose upper bound cannot beat the best centre by more than [`PRECISION_MM`] are
-//!   dropped. The result is a true inscribed radius, never more than the exact value and
-//!   never less by more than [`PRECISION_MM`]; a final local polish usually brings it
-//!   much closer (in the unit tests: within 0.001 mm on squares, rectangles, regular
-//!   polygons and an L-shape). The search runs on coarse contours: without the points
-//!   within [`COARSE_MM`] of the segment replacing them, at a precision tightened by twice
-//!   the boundary's move (see [`max_fill_distance`]).
-//! * **Islands** = connected regions of the layer's lit pixels that do not overlap the
-//!   layer below's (they would print onto nothing). The pixels are those the masks light:
-//!   coverage of at least 50 % ([`crate::raster::LitRuns`], kept by the rasterizer as it
-//!   draws the mask, so no second scan of the contours). Regions are 4-connected: runs of
-//!   adjacent rows sharing a column. A region is supported when one of its runs shares a
-//!   pixel with a run of the layer below (when every run does, the usual case, no region
-//!   is unsupported and the runs are not joined into regions at all). Layer 0 rests on the
-//!   platform: it has no islands. Features that light no pixel are not counted (they do
-//!   not print).
+//! * **Max fill distance**: the radius of the largest circle inside the section, found by
+//!   a best-first cell search ([`max_fill_distance_with`], `fill_distance/`): a true
+//!   inscribed radius, never less than the exact value by more than [`PRECISION_MM`].
+//! * **Islands**: 4-connected regions of the lit pixels (coverage ≥ 50 %, the
+//!   [`crate::raster::LitRuns`] the rasterizer keeps as it draws the mask) that share no
+//!   pixel with the layer below's (`islands.rs`). Layer 0 rests on the platform; features
+//!   that light no pixel do not print and are not counted.
 //! * **Bounding box** of the contour points, mm, `[[x_min, y_min], [x_max, y_max]]`.
 //!
 //! A layer whose section equals the layer below's once collinear points are left out (a
-//! prism: see [`COLLINEAR_MM`]) takes the layer below's analysis with no islands instead
-//! of being analysed again ([`Analyser`]).
-//!
-//! Overlapping shells (sections filled by the nonzero rule) are not merged first: an edge
-//! of one shell lying inside another still counts as boundary, so the max fill distance of
-//! such a section is a lower bound.
-//!
-//! Files: this one holds the per-layer driver ([`Analyser`]); `collinear.rs` leaves out
-//! collinear points, `islands.rs` counts the islands and `fill_distance/` searches the
-//! largest inscribed circle.
+//! prism: [`COLLINEAR_MM`], `collinear.rs`) takes the layer below's analysis with no
+//! islands instead of being analysed again ([`Analyser`]). Overlapping shells are not
+//! merged first: an edge of one inside another counts as boundary, so the max fill
+//! distance of such a section is a lower bound.
 
 // A `bench-no-analysis` build skips the search (and the rasterizer keeps no lit runs):
 // their state goes unused.
@@ -56,7 +33,6 @@ use collinear::simplify_section;
 use fill_distance::{fill_distance, SearchScratch};
 #[cfg(any(test, feature = "internals"))]
 pub use fill_distance::{max_fill_distance, max_fill_distance_with, Edges, COARSE_MM};
-use islands::count_islands;
 pub use islands::islands;
 
 /// Guaranteed accuracy of [`max_fill_distance`], mm: the result lies in
@@ -158,15 +134,11 @@ struct BelowComparison {
     same: bool,
 }
 
-/// Analyses consecutive layers. A worker handling a block of consecutive layers keeps one:
-/// it keeps the lit pixels (for the islands) of the layer below, and a layer whose section
-/// equals the layer below's (a prism: see [`COLLINEAR_MM`]) takes that layer's analysis,
-/// with no islands, instead of being analysed again.
-///
-/// So a layer's analysis is: the layer below's, with no islands, when the two sections are
-/// equal without their collinear points; otherwise that of its own contours (the fill
-/// distance and bounding box of `cur`, the islands of its lit pixels over those below). It
-/// never depends on the order of the calls or on where blocks start.
+/// Analyses consecutive layers; a worker keeps one for its block of layers. A layer's
+/// analysis is the layer below's, with no islands, when the two sections are equal
+/// without their collinear points; otherwise that of its own contours (the fill distance
+/// and bounding box of `cur`, the islands of its lit pixels over those below). It never
+/// depends on the order of the calls or on where blocks start.
 #[derive(Debug, Default)]
 pub struct Analyser {
     last: Option<LastLayer>,
@@ -325,7 +297,7 @@ impl Analyser {
             None => Some(0),
             Some(_) => below
                 .filter(|l| l.runs)
-                .map(|_| count_islands(lit, &self.last_runs)),
+                .map(|_| islands(lit, &self.last_runs)),
         };
         let fill = self.fill(cur);
         let a = LayerAnalysis {
@@ -378,17 +350,13 @@ pub fn bbox(contours: &[Contour]) -> Option<[[f64; 2]; 2]> {
     let mut b = [first, first];
     // Plain comparisons (`f64::min` also orders NaNs, which contours do not have).
     for p in it {
-        if p[0] < b[0][0] {
-            b[0][0] = p[0];
-        }
-        if p[1] < b[0][1] {
-            b[0][1] = p[1];
-        }
-        if p[0] > b[1][0] {
-            b[1][0] = p[0];
-        }
-        if p[1] > b[1][1] {
-            b[1][1] = p[1];
+        for k in 0..2 {
+            if p[k] < b[0][k] {
+                b[0][k] = p[k];
+            }
+            if p[k] > b[1][k] {
+                b[1][k] = p[k];
+            }
         }
     }
     Some(b)
@@ -443,21 +411,10 @@ mod tests {
 
     #[test]
     fn analyser_buffers_never_change_results() {
-        // Random layers of scattered squares (some overlapping: several runs per row),
-        // analysed in and out of order by one analyser (every reuse and recycling path),
+        // Random layers of scattered rectangles, analysed in and out of order by one analyser (every reuse and recycling path),
         // must give what a fresh analysis gives.
         let mut rnd = xorshift(0x5eed_1a7e_u64);
-        let layers: Vec<Vec<Contour>> = (0..12)
-            .map(|_| {
-                let n = 1 + (rnd() * 6.0) as usize;
-                (0..n)
-                    .map(|_| {
-                        let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * 6.0);
-                        rect(x, y, x + w, y + 0.2 + rnd() * 6.0)
-                    })
-                    .collect()
-            })
-            .collect();
+        let layers: Vec<Vec<Contour>> = (0..12).map(|_| scattered(&mut rnd, 6.0, 6.0)).collect();
         let lits: Vec<LitRuns> = layers.iter().map(|l| lit(l)).collect();
         let below = |i: usize| i.checked_sub(1).map(|j| (layers[j].as_slice(), &lits[j]));
         let fresh = |i: usize| analyse(&layers[i], &lits[i], below(i));

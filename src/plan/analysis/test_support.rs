@@ -9,12 +9,12 @@ pub(super) fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
     vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
 }
 
-pub(super) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
+/// The closed contour through `f(a)` for `n` angles `a` evenly spaced over a turn
+/// (counter-clockwise, or reversed).
+pub(super) fn closed(n: usize, ccw: bool, f: impl FnMut(f64) -> [f64; 2]) -> Contour {
     let mut c: Contour = (0..n)
-        .map(|i| {
-            let a = std::f64::consts::TAU * i as f64 / n as f64;
-            [cx + r * a.cos(), cy + r * a.sin()]
-        })
+        .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
+        .map(f)
         .collect();
     if !ccw {
         c.reverse();
@@ -22,18 +22,45 @@ pub(super) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
     c
 }
 
+pub(super) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
+    closed(n, ccw, |a| [cx + r * a.cos(), cy + r * a.sin()])
+}
+
+/// A ring of `n`-gons around `c`: the outer counter-clockwise, the hole clockwise.
+pub(super) fn ring(c: [f64; 2], outer: f64, inner: f64, n: usize) -> Vec<Contour> {
+    vec![ngon(c[0], c[1], outer, n, true), ngon(c[0], c[1], inner, n, false)]
+}
+
 /// An ellipse of half-axes `a` and `b` around the origin, 400 points.
 pub(super) fn ellipse(a: f64, b: f64, ccw: bool) -> Contour {
-    let mut c: Contour = (0..400)
-        .map(|i| {
-            let t = std::f64::consts::TAU * i as f64 / 400.0;
-            [a * t.cos(), b * t.sin()]
+    closed(400, ccw, |t| [a * t.cos(), b * t.sin()])
+}
+
+/// A star-shaped polygon of `n` points around `c`, each at a radius drawn from `rnd` in
+/// `[r0, r1)`.
+pub(super) fn star(
+    rnd: &mut dyn FnMut() -> f64,
+    c: [f64; 2],
+    (r0, r1): (f64, f64),
+    n: usize,
+    ccw: bool,
+) -> Contour {
+    closed(n, ccw, |a| {
+        let r = r0 + (r1 - r0) * rnd();
+        [c[0] + r * a.cos(), c[1] + r * a.sin()]
+    })
+}
+
+/// Between 1 and `n` rectangles scattered over 20 mm, sides from 0.2 mm to
+/// `0.2 + side` mm (some overlapping: several runs per row).
+pub(super) fn scattered(rnd: &mut dyn FnMut() -> f64, n: f64, side: f64) -> Vec<Contour> {
+    let n = 1 + (rnd() * n) as usize;
+    (0..n)
+        .map(|_| {
+            let (x, y, w) = (rnd() * 20.0, rnd() * 20.0, 0.2 + rnd() * side);
+            rect(x, y, x + w, y + 0.2 + rnd() * side)
         })
-        .collect();
-    if !ccw {
-        c.reverse();
-    }
-    c
+        .collect()
 }
 
 /// The lit pixels of a section on the default profile's field, as the slicer's

@@ -351,6 +351,21 @@ impl FieldModel {
 mod tests {
     use super::*;
 
+    /// P on the area [0, 0, 60, 40] mm, extrapolated 5 mm, from its origin, length unit,
+    /// scale, form and polynomial.
+    fn model(origin_mm: [f64; 2], unit: f64, scale: f64, form: Form, q: Poly) -> FieldModel {
+        FieldModel {
+            origin_mm,
+            length_unit_mm: Positive::new(unit).unwrap(),
+            scale: Positive::new(scale).unwrap(),
+            form,
+            coefficients: q,
+            area_mm: [0.0, 0.0, 60.0, 40.0],
+            polynomial_area_mm: None,
+            extrapolate_mm: NonNegative::new(5.0).unwrap(),
+        }
+    }
+
     #[test]
     fn names_round_trip_and_a_cubic_evaluates() {
         // Every name of a cubic, each with its own coefficient (the published cubic of
@@ -395,16 +410,8 @@ mod tests {
     #[test]
     fn inverse_square_form_is_the_cos4_law_and_must_not_cross_zero() {
         // cos⁴θ = (1 + r²/f²)⁻² = 1 / (1 + u² + v²)² with u, v in units of f.
-        let mut fm = FieldModel {
-            origin_mm: [30.0, 20.0],
-            length_unit_mm: Positive::new(50.0).unwrap(),
-            scale: Positive::new(2.0).unwrap(),
-            form: Form::InverseSquare,
-            coefficients: Poly::from_terms(2, &[1.0, 0.0, 0.0, 1.0, 0.0, 1.0]),
-            area_mm: [0.0, 0.0, 60.0, 40.0],
-            polynomial_area_mm: None,
-            extrapolate_mm: NonNegative::new(5.0).unwrap(),
-        };
+        let q = Poly::from_terms(2, &[1.0, 0.0, 0.0, 1.0, 0.0, 1.0]);
+        let mut fm = model([30.0, 20.0], 50.0, 2.0, Form::InverseSquare, q);
         for (x, y) in [(30.0, 20.0), (0.0, 0.0), (55.0, 12.0)] {
             let r2: f64 = (x - 30.0f64).powi(2) + (y - 20.0f64).powi(2);
             let want = 2.0 * (1.0 + r2 / 2500.0).powi(-2);
@@ -425,16 +432,8 @@ mod tests {
     #[test]
     fn validation_names_the_first_sample_where_p_is_not_positive() {
         // P = 1 − 0.2·u with u = x/10 mm: zero at x = 50 mm.
-        let mut fm = FieldModel {
-            origin_mm: [0.0, 0.0],
-            length_unit_mm: Positive::new(10.0).unwrap(),
-            scale: Positive::new(1.0).unwrap(),
-            form: Form::Polynomial,
-            coefficients: Poly::from_terms(1, &[1.0, -0.2, 0.0]),
-            area_mm: [0.0, 0.0, 60.0, 40.0],
-            polynomial_area_mm: None,
-            extrapolate_mm: NonNegative::new(5.0).unwrap(),
-        };
+        let q = Poly::from_terms(1, &[1.0, -0.2, 0.0]);
+        let mut fm = model([0.0, 0.0], 10.0, 1.0, Form::Polynomial, q);
         // The first sample (x outer, y inner, 0.5 mm apart) where eval is not positive.
         let first_bad = |fm: &FieldModel| {
             (0..=120).find_map(|i| {

@@ -109,15 +109,8 @@ impl Calibration {
 
     /// Parses and validates calibration TOML; `path` names the file in errors.
     pub fn from_toml(src: &str, path: &Path) -> Result<Calibration> {
-        let c: Calibration = toml::from_str(src).map_err(|e| {
-            Error::input(
-                path,
-                e.to_string()
-                    .split_whitespace()
-                    .collect::<Vec<_>>()
-                    .join(" "),
-            )
-        })?;
+        let c: Calibration =
+            toml::from_str(src).map_err(|e| Error::input(path, super::one_line(&e.to_string())))?;
         c.validate().map_err(|m| Error::input(path, m))?;
         Ok(c)
     }

@@ -1,22 +1,12 @@
 //! The gray response S(g): relative irradiance as a function of the pixel value g shown by
-//! a mirror (255 = fully on), and its inverse on the 8-bit levels.
-//!
-//! Two representations are stored in calibration files:
-//! * `polynomial`: a polynomial in the pixel value (`variable = "pixel"`) or in the
-//!   attenuation z = 255 − pixel value (`variable = "attenuation"`, the reading of Xu et
-//!   al. 2010), valid on an explicit gray range over which it must be strictly increasing
-//!   in g;
-//! * `table`: points (g, S) strictly increasing in both, joined by a not-a-knot cubic
-//!   spline (`interpolation = "spline"`, exact for cubic responses such as that of Xu et
-//!   al. 2010) or by a monotone cubic (`"pchip"`, Fritsch–Carlson), valid from the first to the
-//!   last point. This is what `dmdsl calibrate` writes (spline when it is monotone on the
-//!   measured range, else PCHIP). Its first point may be [0, 0] (mirror off, no light):
-//!   then S between 0 and the next point is a monotone cubic from (0, 0) that meets the
-//!   curve with the three-point end slope of the measured points (limited to 3× the
-//!   secant from 0).
-//!
-//! Outside its valid range S is never used, with one exception: pixel value 0 (mirror off)
-//! delivers no light, S(0) = 0, unless the valid range itself starts at 0.
+//! a mirror (255 = fully on), and its inverse on the 8-bit levels (docs/CALIBRATION.md,
+//! "Model"). Stored as a polynomial in the pixel value or the attenuation 255 − g on an
+//! explicit valid range, or as a table of points joined by a not-a-knot spline or a
+//! monotone PCHIP, valid from its first point to its last; a table's first point may be
+//! [0, 0] (mirror off), S below the next point then a monotone cubic from (0, 0) meeting
+//! the curve with the measured points' three-point end slope (at most 3× the secant).
+//! Outside its valid range S is never used, except that pixel value 0 (mirror off) gives
+//! S(0) = 0.
 
 use serde::{Deserialize, Serialize};
 
@@ -197,15 +187,10 @@ impl Response {
                 points,
             } => {
                 let anchored = points.len() >= 3 && points[0] == [0.0, 0.0];
-                let pts: Vec<[f64; 2]> = if anchored {
-                    points[1..].to_vec()
-                } else {
-                    points.clone()
-                };
+                let pts = points[usize::from(anchored)..].to_vec();
                 let measured = match interpolation {
                     Interpolation::Spline => {
-                        let m = spline_second_derivatives(&pts);
-                        MeasuredCurve::Spline(pts.clone(), m)
+                        MeasuredCurve::Spline(pts.clone(), spline_second_derivatives(&pts))
                     }
                     Interpolation::Pchip => MeasuredCurve::Pchip(pts.clone()),
                 };
@@ -375,19 +360,16 @@ pub fn pchip_eval(pts: &[[f64; 2]], x: f64) -> f64 {
     }
     let x = x.clamp(pts[0][0], pts[n - 1][0]);
     let k = (pts.partition_point(|p| p[0] <= x)).clamp(1, n - 1) - 1;
-    let d0 = pchip_slope(pts, k);
-    let d1 = pchip_slope(pts, k + 1);
-    let (x0, y0) = (pts[k][0], pts[k][1]);
-    let (x1, y1) = (pts[k + 1][0], pts[k + 1][1]);
-    let h = x1 - x0;
-    let t = (x - x0) / h;
-    let t2 = t * t;
-    let t3 = t2 * t;
-    let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
-    let h10 = t3 - 2.0 * t2 + t;
-    let h01 = -2.0 * t3 + 3.0 * t2;
-    let h11 = t3 - t2;
-    h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+    let (d0, d1) = (pchip_slope(pts, k), pchip_slope(pts, k + 1));
+    hermite(
+        pts[k][0],
+        pts[k][1],
+        d0,
+        pts[k + 1][0],
+        pts[k + 1][1],
+        d1,
+        x,
+    )
 }
 
 /// PCHIP derivative at node `k`.
@@ -499,24 +481,25 @@ mod tests {
         }
     }
 
+    fn table(interpolation: Interpolation, points: Vec<[f64; 2]>) -> Response {
+        Response::Table {
+            interpolation,
+            points,
+        }
+    }
+
     #[test]
     fn table_validation() {
-        let bad = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.5], [200.0, 0.4]],
-        };
+        let bad = table(Interpolation::Pchip, vec![[100.0, 0.5], [200.0, 0.4]]);
         assert!(bad.validate().is_err());
-        let good = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.2], [180.0, 0.5], [255.0, 1.0]],
-        };
+        let good = table(
+            Interpolation::Pchip,
+            vec![[100.0, 0.2], [180.0, 0.5], [255.0, 1.0]],
+        );
         good.validate().unwrap();
         assert_eq!(good.valid_gray(), [100, 255]);
-        let zero_inside = Response::Table {
-            interpolation: Interpolation::Pchip,
-            points: vec![[100.0, 0.2], [180.0, 0.0], [255.0, 1.0]],
-        };
-        assert!(zero_inside.validate().is_err());
+        let zero_inside = vec![[100.0, 0.2], [180.0, 0.0], [255.0, 1.0]];
+        assert!(table(Interpolation::Pchip, zero_inside).validate().is_err());
     }
 
     #[test]
@@ -530,10 +513,7 @@ mod tests {
             .collect();
         let mut with0 = vec![[0.0, 0.0]];
         with0.extend(pts.iter().copied());
-        let r = Response::Table {
-            interpolation: Interpolation::Spline,
-            points: with0,
-        };
+        let r = table(Interpolation::Spline, with0);
         r.validate().unwrap();
         let c = r.curve();
         for g in 135..=255 {
@@ -551,11 +531,7 @@ mod tests {
         let gam = |g: f64| (g / 255.0).powf(2.2);
         let mut p = vec![[0.0, 0.0]];
         p.extend([135.0, 155.0, 175.0, 195.0, 215.0, 235.0, 255.0].map(|g| [g, gam(g)]));
-        let c = Response::Table {
-            interpolation: Interpolation::Spline,
-            points: p,
-        }
-        .curve();
+        let c = table(Interpolation::Spline, p).curve();
         assert!((c.eval(100.0) / gam(100.0) - 1.0).abs() < 0.01);
         for g in 135..=255 {
             assert!(

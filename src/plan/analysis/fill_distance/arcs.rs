@@ -24,15 +24,12 @@ const ARC_BAND_MARGIN_MM: f64 = 1e-9;
 const ARC_CACHE_SIZE: usize = 8;
 
 /// A stretch of a contour, the points `back` to `fwd` (consecutive indexes), seen from a
-/// centre `o`: every point of it (its edges included) lies at a distance in the band
-/// `[lo, hi]` from `o`, and all of it lies in the open half-plane `{y : w·(y − o) > 0}`,
-/// where the angle around `o` is continuous and compared by cross products. So it goes
-/// through every ray from `o` between its ends' rays, and the ray through any point `x`
-/// between them meets the stretch at a distance in `[lo, hi]` from `o`: that bounds the
-/// depth of `x` by `ρ(x) − lo` beyond the band (`ρ` the distance to `o`), `hi − ρ(x)`
-/// before it, `hi − lo` in it. A curved wall (a hole's, a ring's) is seen from its
-/// centre of curvature, so the band is thin however long the stretch; a straight wall
-/// from a point [`STRAIGHT_WALL_RADIUS_MM`] away.
+/// centre `o`: all of it lies at distances in `[lo, hi]` from `o` and in the open
+/// half-plane `{y : w·(y − o) > 0}`. The ray from `o` through any point `x` between its
+/// ends' rays meets it, which bounds the depth of `x` by `ρ(x) − lo` beyond the band (`ρ`
+/// the distance to `o`), `hi − ρ(x)` before it, `hi − lo` in it (docs/PLANNING.md, "Wall
+/// covers"). A curved wall is seen from its centre of curvature, so the band is thin
+/// however long the stretch; a straight wall from [`STRAIGHT_WALL_RADIUS_MM`] away.
 #[derive(Debug, Clone, Copy)]
 struct Arc {
     o: [f64; 2],
@@ -127,12 +124,10 @@ fn clamp_to(c: [f64; 2], h: f64, o: [f64; 2]) -> [f64; 2] {
 }
 
 /// The largest value over the square `[c ± h]` (corners `cs`) of the depth bound of `a`
-/// (`beyond`: the side away from its centre, `ρ − lo`, convex: largest at a corner; else
-/// `hi − ρ`, largest at the square's point nearest `o`, `near` away), and of the mean of
-/// it and `b`'s (`b` wholly on side `b_beyond`, its `near`): `ρ_A − ρ_B ≤ |o_A − o_B|` and
-/// `ρ ≥ w·(x − o)` for a unit `w` (towards the square's centre) leave a constant or a
-/// convex function. Between the two walls of a ring (concentric circles) the mean is the
-/// ring's half-width over the whole square.
+/// (`beyond`: the side away from its centre, `ρ − lo`, largest at a corner; else `hi − ρ`,
+/// largest at the square's point nearest `o`, `near` away), and of the mean of it and
+/// `b`'s (`b` wholly on side `b_beyond`): with `ρ_A − ρ_B ≤ |o_A − o_B|` and `ρ ≥ w·(x − o)`
+/// the mean is a constant or a convex function; between a ring's walls, its half-width.
 fn arc_bound(
     (c, cs): ([f64; 2], &[[f64; 2]; 4]),
     (a, beyond, a_near): (&Arc, bool, f64),
@@ -440,17 +435,12 @@ impl Edges {
 
     /// Whether no point of the square `[c ± h]` inside the section is deeper than `t`
     /// (its centre must be inside the section), shown from its walls seen as [`Arc`]s:
-    /// every edge meeting the square must belong to the stretch of one arc `A` (through
-    /// such an edge, or through `hints[0]`, the edge nearest to the centre, when none
-    /// does), so the square falls into `A`'s band, the part before it (a disc: convex,
-    /// one piece, holding the square's point nearest `A`'s centre) and the part beyond it
-    /// (each of its pieces holds a corner: a piece of a square outside a disc reaches the
-    /// square's boundary, whose parts outside the disc each hold a corner). No edge meets
-    /// those parts, so one inside test settles each piece (none when no edge meets the
-    /// square: it is all inside). The band's depth is at most its width; a part inside
-    /// the section is bounded by `A`, or by the mean of `A` and a second arc through the
-    /// other hint ([`arc_bound`]). Arcs come from `cache` when one holds the square.
-    /// `false` means not shown.
+    /// every edge meeting the square must be in the stretch of one arc `A` (through such
+    /// an edge, or through `hints[0]`, the edge nearest to the centre), so the square
+    /// falls into `A`'s band (depth at most its width), the part before it and the part
+    /// beyond it, which no edge meets: one inside test settles each piece. An inside part
+    /// is bounded by `A`, or by the mean of `A` and an arc through the other hint
+    /// ([`arc_bound`]; docs/PLANNING.md, "Wall covers"). `false` means not shown.
     pub(super) fn arcs_cover(
         &self,
         c: [f64; 2],
@@ -525,60 +515,26 @@ impl Edges {
         }
         true
     }
-}
 
-impl Edges {
     /// An edge whose bounding box meets the square `[c ± h]` and that is none of `arcs`'
     /// stretches' (`u32::MAX` when the index is too deep to tell), or `None` when every
     /// edge meeting the square is one of theirs.
     fn stray(&self, c: [f64; 2], h: f64, arcs: &[&Arc]) -> Option<u32> {
-        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let k = stack[sp] as usize;
-            let n = &self.nodes[k];
-            if !(n.lo[0] <= hi[0] && n.hi[0] >= lo[0] && n.lo[1] <= hi[1] && n.hi[1] >= lo[1])
-                || arcs.iter().any(|a| a.has_span(self.spans[k]))
-            {
-                continue;
-            }
-            if n.count > 0 {
-                let f = n.first;
-                for v in f..f + n.count {
-                    if self.seg_meets(v, lo, hi) && !arcs.iter().any(|a| a.has(v)) {
-                        return Some(v);
-                    }
-                }
-            } else {
-                if sp + 2 > stack.len() {
-                    return Some(u32::MAX);
-                }
-                stack[sp] = n.first;
-                stack[sp + 1] = n.first + 1;
-                sp += 2;
-            }
-        }
-        None
+        let skip = |k: usize| arcs.iter().any(|a| a.has_span(self.spans[k]));
+        let stray = |v: u32| (!arcs.iter().any(|a| a.has(v))).then_some(v);
+        self.walk_square(c, h, skip, stray).unwrap_or(Some(u32::MAX))
     }
 
     /// Whether no point of the square `[c ± h]` is deeper than `t`, shown from two walls
     /// crossing it seen as [`Arc`]s, one inside the other (a ring's): `A` through `near`
     /// and `B` through an edge meeting the square that is not `A`'s; every edge meeting
-    /// the square must be one of theirs. With `I` the inner arc and `O` the outer one, the
-    /// bands must be nested with room to spare, `lo_O − hi_I > |o_I − o_O|`: then `O`'s
-    /// stretch lies beyond `I`'s band and `I`'s before `O`'s, and the square falls into
-    /// five parts: before `I`'s band (a disc's piece: convex, no edge meets it, one inside
-    /// test at its point nearest `o_I`), `I`'s band (depth at most its width), between the
-    /// bands, `O`'s band, and beyond `O`'s band (no edge meets it; each piece holds a
-    /// corner: one inside test at each such corner). Between the bands no inside test is
-    /// needed: a point there is beyond `I` and before `O`, so [`arc_bound`]'s mean bounds
-    /// its depth whether it is inside the section or not (outside, the depth is negative).
-    /// Unlike [`Edges::arcs_cover`], the centre need not be inside the section, and the
-    /// square may be larger than `t`: a cell straddling a thin ring. `false` means not
-    /// shown.
+    /// the square must be one of theirs, and the bands nested with room to spare,
+    /// `lo_O − hi_I > |o_I − o_O|` (`I` the inner arc, `O` the outer). The square falls into
+    /// five parts: before `I`'s band (one inside test), `I`'s band, between the bands
+    /// ([`arc_bound`]'s mean holds there inside the section or not: no test), `O`'s band
+    /// and beyond it (an inside test at each corner there). Unlike [`Edges::arcs_cover`],
+    /// the centre may be outside and the square larger than `t`: a cell straddling a thin
+    /// ring (docs/PLANNING.md, "Wall covers"). `false` means not shown.
     pub(super) fn ring_cover(
         &self,
         c: [f64; 2],
@@ -648,6 +604,15 @@ mod tests {
     use crate::plan::analysis::test_support::*;
     use crate::slice::Contour;
 
+    /// The hints the search gives: the edge nearest to `c` and the one nearest to the
+    /// mirror of that edge's point through `c`.
+    fn hints(e: &Edges, c: [f64; 2]) -> [u32; 2] {
+        let near = e.nearest(c, u32::MAX).1;
+        let q = e.closest_point(near, c);
+        let far = e.nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX);
+        [near, far.1]
+    }
+
     /// Sections with curved walls: rings (concentric, off-centre, coarse and fine), a
     /// ring cut into quarters (straight and curved walls), an elliptic ring (walls that
     /// are no circles), a disc and a wavy blob.
@@ -665,13 +630,10 @@ mod tests {
         out.push(cross_cut_pieces(12.0, 7.0, 1.5, 240));
         out.push(vec![ellipse(12.0, 8.0, true), ellipse(9.0, 5.0, false)]);
         out.push(vec![ngon(1.0, -2.0, 6.0, 300, true)]);
-        out.push(vec![(0..500)
-            .map(|i| {
-                let t = std::f64::consts::TAU * i as f64 / 500.0;
-                let r = 8.0 + 1.5 * (5.0 * t).sin();
-                [r * t.cos(), r * t.sin()]
-            })
-            .collect()]);
+        out.push(vec![closed(500, true, |t| {
+            let r = 8.0 + 1.5 * (5.0 * t).sin();
+            [r * t.cos(), r * t.sin()]
+        })]);
         out
     }
 
@@ -707,17 +669,11 @@ mod tests {
                     }
                 }
                 let t = m - 0.02 + 0.1 * rnd();
-                // The hints: the nearest edge and the one nearest the mirror of its point.
-                let near = e.nearest(c, u32::MAX).1;
-                let q = e.closest_point(near, c);
-                let far = e
-                    .nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX)
-                    .1;
                 if rnd() < 0.2 {
                     cache.clear();
                 }
                 tried += 1;
-                if !e.arcs_cover(c, h, t, [near, far], &mut cache) {
+                if !e.arcs_cover(c, h, t, hints(&e, c), &mut cache) {
                     continue;
                 }
                 dropped += 1;
@@ -813,11 +769,8 @@ mod tests {
     fn ring_cover_drops_cells_across_a_thin_ring_and_no_deeper() {
         // A ring between circles of radius 10 and 10.1 (depth 0.05 at most): cells larger
         // than the ring, straddling it, centres inside and outside the section.
-        let ring = vec![
-            ngon(0.0, 0.0, 10.1, 720, true),
-            ngon(0.0, 0.0, 10.0, 720, false),
-        ];
-        let e = Edges::new(&ring);
+        let section = ring([0.0, 0.0], 10.1, 10.0, 720);
+        let e = Edges::new(&section);
         let mut cache = ArcCache::default();
         for (c, h) in [([10.05, 0.0], 1.0), ([0.3, -9.5], 1.5), ([7.0, 7.3], 0.5)] {
             let near = e.nearest(c, u32::MAX).1;
@@ -842,20 +795,9 @@ mod tests {
         // A ring between circles of radius 10 and 14 (depth 2 at most; the polygons'
         // edges make it a little less): a cell on its middle circle, larger than the
         // discs around wall points cover, and a cell across its inner wall.
-        let ring = vec![
-            ngon(0.0, 0.0, 14.0, 720, true),
-            ngon(0.0, 0.0, 10.0, 720, false),
-        ];
-        let e = Edges::new(&ring);
-        let hints = |c: [f64; 2]| {
-            let near = e.nearest(c, u32::MAX).1;
-            let q = e.closest_point(near, c);
-            [
-                near,
-                e.nearest([2.0 * c[0] - q[0], 2.0 * c[1] - q[1]], u32::MAX)
-                    .1,
-            ]
-        };
+        let section = ring([0.0, 0.0], 14.0, 10.0, 720);
+        let e = Edges::new(&section);
+        let hints = |c: [f64; 2]| hints(&e, c);
         let mut cache = ArcCache::default();
         for c in [[12.0, 0.3], [0.5, -12.0], [8.4, 8.6]] {
             assert!(e.arcs_cover(c, 0.9, 2.001, hints(c), &mut cache), "{c:?}");

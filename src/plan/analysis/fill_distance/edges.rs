@@ -605,7 +605,7 @@ impl Edges {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::analysis::test_support::{rect, xorshift};
+    use crate::plan::analysis::test_support::{rect, star, xorshift};
     use crate::plan::analysis::{max_fill_distance_with, PRECISION_MM};
 
     #[test]
@@ -654,15 +654,7 @@ mod tests {
             for _ in 0..1 + case % 4 {
                 let (cx, cy) = (rnd() * 20.0, rnd() * 20.0);
                 let n = 3 + (rnd() * 60.0) as usize;
-                contours.push(
-                    (0..n)
-                        .map(|i| {
-                            let a = std::f64::consts::TAU * i as f64 / n as f64;
-                            let r = 0.1 + 6.0 * rnd();
-                            [cx + r * a.cos(), cy + r * a.sin()]
-                        })
-                        .collect(),
-                );
+                contours.push(star(&mut rnd, [cx, cy], (0.1, 6.1), n, true));
             }
             if case % 5 == 0 {
                 contours.push(rect(0.0, 0.0, 30.0, 0.5));

@@ -32,102 +32,43 @@ use search::search;
 /// The radius is a true inscribed radius and within [`PRECISION_MM`] of the largest one.
 /// An empty section gives `(0, [0, 0])`.
 ///
-/// The search ([`max_fill_distance_with`]) runs on the contours without the points within
-/// [`COARSE_MM`] of the segment that replaces them (most of the points a fine mesh puts on
-/// gently curved walls), which moves the boundary by at most `δ ≤` [`COARSE_MM`], the
-/// largest distance of a left-out point. It runs at precision [`PRECISION_MM`] − 2δ and
-/// finds a centre `c` at depth `r'` on the coarse contours; the result is `max(r' − δ, 0)`.
-/// When `r' > δ` the circle of radius `r' − δ` around `c` lies inside the section (`c` is
-/// farther than `δ` from the coarse boundary, so on the same side of both boundaries), and
-/// `r' − δ ≥ (largest on the coarse contours − precision) − δ ≥ largest − 2δ − precision
-/// = largest − PRECISION_MM`; when `r' ≤ δ`, the largest is at most
-/// `r' + precision + δ ≤` [`PRECISION_MM`], so 0 is within the guarantee. Contours with
-/// nothing to leave out (`δ = 0`) are searched as they are.
+/// The search runs on the contours without the points within [`COARSE_MM`] of the segment
+/// that replaces them, which moves the boundary by `δ ≤` [`COARSE_MM`]: at precision
+/// [`PRECISION_MM`] − 2δ, its depth lowered by δ (docs/PLANNING.md, "Coarse contours").
 #[cfg(any(test, feature = "internals"))]
 pub fn max_fill_distance(contours: &[Contour]) -> (f64, [f64; 2]) {
     fill_distance(contours, &mut SearchScratch::default())
-}
-
-/// [`max_fill_distance`] of a section from its coarsened contours `coarse` (moved by at
-/// most `dev` from the section's), with buffers `sc`.
-fn search_coarse(coarse: &[Contour], dev: f64, sc: &mut SearchScratch) -> (f64, [f64; 2]) {
-    let (r, c) = search(&Edges::new(coarse), PRECISION_MM - 2.0 * dev, sc);
-    ((r - dev).max(0.0), c)
 }
 
 /// [`max_fill_distance`] with buffers `sc`.
 pub(super) fn fill_distance(contours: &[Contour], sc: &mut SearchScratch) -> (f64, [f64; 2]) {
     let mut coarse = std::mem::take(&mut sc.coarse);
     let dev = coarsen_section(contours, &mut coarse);
-    let r = search_coarse(&coarse, dev, sc);
+    let (r, c) = search(&Edges::new(&coarse), PRECISION_MM - 2.0 * dev, sc);
     sc.coarse = coarse;
-    r
+    ((r - dev).max(0.0), c)
 }
 
 /// [`max_fill_distance`] on indexed edges with a chosen precision, mm.
 ///
 /// Best-first search over square cells ordered by an upper bound of the signed distance
-/// inside them; `T` below is the best centre depth so far plus `precision`, and a cell is
-/// dropped as soon as it is shown to hold no point deeper than `T`. When the first
-/// `SEED_AFTER_CELLS` cells have found no centre inside the section (a thin one), the best
-/// depth starts from points on a few walls' inward normals (`Edges::ridge_probe`).
-/// Popping a cell of half-size `h`:
-/// 1. its parent's boundary points (below) still cover it at radius `T` (only tried when
-///    `T` has grown since it was queued: they did not cover it then): dropped without a
-///    search;
-/// 2. the parent's nearest and far-wall edges, each followed along its contour to the
-///    points nearest this centre (`Edges::descend`, a local minimum): their distance `u`
-///    bounds the centre's depth from above (they are boundary), so `u + h·√2 ≤ T` drops
-///    the cell without a search. If `u ≤` the best depth the centre cannot improve the
-///    best, so its exact distance is not needed: the cover test of step 4 with these two
-///    walls' points drops it without a search when it can, and otherwise it is split as in
-///    step 5 with these walls (key `u + h·√2`), also without a search, for at most
-///    3 generations in a row (followed walls can miss a nearer third wall).
-///    A centre outside the section (inside test) has a negative depth, so the cell is
-///    dropped when `h·√2 ≤ T`;
-/// 3. the centre's exact signed distance `d` and nearest edge (bounding-volume hierarchy,
-///    seeded with the nearer of the walls of step 2; band-indexed nonzero-winding inside
-///    test);
-///    `d + h·√2 ≤ T` (1-Lipschitz): dropped;
-/// 4. inside the section: a few boundary points — the nearest point `q`, the nearest
-///    boundary point behind the centre (the other wall of a ridge; its search starts from
-///    the far wall of step 2) and, on the contours of both, the points about `0.6·h` away
-///    on either side. If discs of radius `T` around them cover the cell (`points_exceed`)
-///    it is dropped. This is what keeps long ridges (walls of constant thickness, rings)
-///    from being subdivided down to the precision. When they do not, a cell small enough
-///    (`COVER_MORE_MAX_SIZE`) gets up to `MAX_EXTRA_COVER_POINTS` more points, each the
-///    boundary point nearest to a point the test found uncovered (a third wall at a peak, a
-///    wall point between the samples: `cover_more`), and is tested again (the walls-only
-///    test of step 2 likewise); otherwise a ridge probe (half-way between the two walls)
-///    may raise the best;
-/// 5. a cell of half-size between `1.5·T` and 1 mm whose walls are thin (the edges
-///    meeting it form at most two runs, each close to a line over the cell) is dropped
-///    when the walls bound every part of it inside the section by `T`
-///    (`Edges::walls_cover`): cells across a thin ring stick out of it on both sides, and
-///    no discs around wall points cover them;
-/// 6. a cell of half-size between `8·precision` and `T` (a larger one wholly inside the
-///    section is deeper than `T`) is dropped when its walls, seen as arcs of circles
-///    around their centres of curvature, show it shallow (`Edges::arcs_cover`): between
-///    the two walls of a ring the mean of their bounds is the ring's half-width over the
-///    whole cell, however long the ring; tried while it pays (`COVER_TRIAL_TRIES`);
-/// 7. a cell of half-size at least `8·precision` that is larger than `T` or whose centre
-///    is outside the section is dropped when it straddles a ring whose two walls, seen as
-///    arcs, show it shallow (`Edges::ring_cover`): a thin ring's cells stick out of it on
-///    both sides, however large; tried while it pays, and on every `RING_PROBE_EVERY`-th
-///    cell;
-/// 8. the four children are tested against the same points at once, and only those not
-///    covered are queued, with the parent's Lipschitz bound (or the far-corner distance to
-///    `q` or the far-wall point, if smaller) as their key; a child holding an uncovered
-///    point the cell's own test found (`Witnesses`) is queued without a test.
+/// inside them: with `T` the best centre depth so far plus `precision`, a cell is dropped
+/// once shown to hold no point deeper than `T`, and the search ends when the largest bound
+/// left is within `precision` of the best depth; a local pattern search then polishes the
+/// best centre, moving only to deeper points. A popped cell goes through these steps
+/// (`search.rs`; the method, and why each drop is exact: docs/PLANNING.md, "The search"
+/// and "Wall covers"):
+/// 1. its parent's boundary points, tried again once `T` has grown;
+/// 2. its parent's walls followed along their contours (`Edges::descend`);
+/// 3. the centre's exact signed distance (edge hierarchy, band-indexed inside test);
+/// 4. the cover by discs around boundary points near the centre (completed in small cells
+///    by the boundary points nearest to uncovered points), then a ridge probe;
+/// 5. to 7. the straight-wall, arc and ring covers (`Edges::walls_cover`,
+///    `Edges::arcs_cover`, `Edges::ring_cover`);
+/// 8. the split into the children the cell's points do not cover.
 ///
-/// The search ends when the largest key left is within `precision` of the best depth.
-/// The best centre found is finally polished by a local pattern search on the exact
-/// distance (it only ever moves to a deeper point; trial points closer than the current
-/// depth to a recently nearest edge are rejected without a search), so typical results
-/// are much closer than the guaranteed precision.
-///
-/// Everything depends only on the section's edges (no state carried between layers), so
-/// the result does not depend on threads or block boundaries.
+/// Everything depends only on the section's edges, so the result does not depend on
+/// threads or block boundaries.
 #[cfg(any(test, feature = "internals"))]
 pub fn max_fill_distance_with(e: &Edges, precision: f64) -> (f64, [f64; 2]) {
     search(e, precision, &mut SearchScratch::default())
@@ -181,11 +122,8 @@ mod tests {
         assert!((v - exact).abs() <= 0.001, "{v} vs {exact}");
         // Ring: outer r 10, inner r 8 (hole clockwise). The wall is 2 mm: radius 1 mm up to
         // the polygon's chord error.
-        let ring = [
-            ngon(0.0, 0.0, 10.0, 256, true),
-            ngon(0.0, 0.0, 8.0, 256, false),
-        ];
-        let v = mfd(&ring);
+        let section = ring([0.0, 0.0], 10.0, 8.0, 256);
+        let v = mfd(&section);
         assert!((v - 1.0).abs() <= 0.001, "{v}");
         // L-shape: the circle touches x = 0, y = 0 and the reflex corner (10, 10):
         // r = 10·(2 − √2).
@@ -229,13 +167,7 @@ mod tests {
         let mut rnd = xorshift(0x9e3779b97f4a7c15);
         for _ in 0..6 {
             let n = 5 + (rnd() * 20.0) as usize;
-            let c: Contour = (0..n)
-                .map(|i| {
-                    let a = std::f64::consts::TAU * i as f64 / n as f64;
-                    let r = 3.0 + 7.0 * rnd();
-                    [r * a.cos(), r * a.sin()]
-                })
-                .collect();
+            let c = star(&mut rnd, [0.0, 0.0], (3.0, 10.0), n, true);
             let e = Edges::new(std::slice::from_ref(&c));
             let (v, _) = max_fill_distance_with(&e, PRECISION_MM);
             let brute = brute_max(&e, [-10.0, -10.0], 0.05, (400, 400), 5, 0.002, 30);
@@ -291,25 +223,15 @@ mod tests {
         // A random star with a random star-shaped hole (and a second part), the kind of
         // section where the far wall and the contour neighbours come from other contours.
         let mut rnd = xorshift(0x853c49e6748fea9b);
-        let star = |rnd: &mut dyn FnMut() -> f64, c: [f64; 2], r0: f64, r1: f64, ccw: bool| {
+        let mut part = |c: [f64; 2], r: (f64, f64), ccw: bool| {
             let n = 8 + (rnd() * 40.0) as usize;
-            let mut v: Contour = (0..n)
-                .map(|i| {
-                    let a = std::f64::consts::TAU * i as f64 / n as f64;
-                    let r = r0 + (r1 - r0) * rnd();
-                    [c[0] + r * a.cos(), c[1] + r * a.sin()]
-                })
-                .collect();
-            if !ccw {
-                v.reverse();
-            }
-            v
+            star(&mut rnd, c, r, n, ccw)
         };
         for _ in 0..4 {
             let contours = vec![
-                star(&mut rnd, [0.0, 0.0], 7.0, 10.0, true),
-                star(&mut rnd, [0.5, -0.5], 2.0, 5.0, false),
-                star(&mut rnd, [14.0, 0.0], 1.0, 3.0, true),
+                part([0.0, 0.0], (7.0, 10.0), true),
+                part([0.5, -0.5], (2.0, 5.0), false),
+                part([14.0, 0.0], (1.0, 3.0), true),
             ];
             let e = Edges::new(&contours);
             let (v, centre) = max_fill_distance_with(&e, PRECISION_MM);

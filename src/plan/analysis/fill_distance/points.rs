@@ -11,14 +11,6 @@ pub(super) const MAX_EXTRA_COVER_POINTS: usize = 3;
 /// Most points of a cover test: the six wall points and the [`MAX_EXTRA_COVER_POINTS`] ones.
 pub(super) const MAX_COVER_POINTS: usize = 6 + MAX_EXTRA_COVER_POINTS;
 
-/// Whether some point of the square `[c ± h]` is farther than `sqrt(t2)` from every point
-/// of `q` (at most [`MAX_COVER_POINTS`] points). When it is not, no point of the square is
-/// farther than `sqrt(t2)` from the boundary the points lie on: the square is covered by
-/// discs of radius `sqrt(t2)` around boundary points. Decided by [`exceeds`].
-pub(super) fn points_exceed(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> bool {
-    exceeds(c, h, q, t2).0
-}
-
 /// [`uncovered`], but only after [`exceeds`] (cheaper when the square is covered) has
 /// found the square not covered. A corner (or centre) [`exceeds`] found far from every
 /// point is the point [`uncovered`] gives (the same points left out, the same candidates
@@ -47,8 +39,9 @@ enum CoverOutcome {
 }
 
 /// [`cover_test`]: whether some point of the square `[c ± h]` is farther than `sqrt(t2)`
-/// from every point of `q` and, when that was found on an edge or at a corner, such a
-/// point.
+/// from every point of `q` (at most [`MAX_COVER_POINTS`]) and, when that was found on an
+/// edge or at a corner, such a point. When none is, the discs of radius `sqrt(t2)` around
+/// the points cover the square: around boundary points, no point of it is deeper.
 pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Option<[f64; 2]>) {
     match cover_test(c, h, q, t2) {
         CoverOutcome::Covered => (false, None),
@@ -57,19 +50,13 @@ pub(super) fn exceeds(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> (bool, Op
     }
 }
 
-/// [`points_exceed`] from the union of the discs itself, in `O(n²)` instead of the
-/// `O(n³)` candidates of [`uncovered`], with a witness when one comes cheaply.
-///
-/// The closed discs of radius `t` around the points cover the square if and only if
-/// (up to ties) they cover its four edges and every point where two of their circles
-/// cross inside the square lies strictly inside a third disc: a part of the square
-/// left uncovered either reaches an edge, or is a hole bounded by arcs of at least two
-/// circles (a bounded region outside a disc cannot be bounded by that circle alone),
-/// whose corners are crossings of two circles that no third disc holds. An edge is
-/// covered when the discs' chords on its line cover it (a sweep over at most
-/// [`MAX_COVER_POINTS`] intervals). Returns what decided it, the tests made in this order:
-/// a disc holding the square, the centre when no disc meets it, the corners, the edges,
-/// the crossings.
+/// [`exceeds`] from the union of the discs itself, in `O(n²)` instead of the
+/// `O(n³)` candidates of [`uncovered`], with a witness when one comes cheaply: the discs
+/// cover the square if and only if (up to ties) their chords cover its four edges and
+/// every crossing of two circles inside it lies strictly inside a third disc
+/// (docs/PLANNING.md, "The search", step 4). Returns what decided it, the tests made in
+/// this order: a disc holding the square, the centre when no disc meets it, the corners,
+/// the edges (a sweep over the chords), the crossings.
 fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> CoverOutcome {
     let mut p = [[0.0f64; 2]; MAX_COVER_POINTS];
     let mut n = 0;
@@ -182,7 +169,7 @@ fn cover_test(c: [f64; 2], h: f64, q: &[[f64; 2]], t2: f64) -> CoverOutcome {
     CoverOutcome::Covered
 }
 
-/// [`points_exceed`] with a witness: a point of the square `[c ± h]` farther than
+/// [`exceeds`] with a witness: a point of the square `[c ± h]` farther than
 /// `sqrt(t2)` from every point of `q` (at most [`MAX_COVER_POINTS`] points), or `None` when the
 /// discs of radius `sqrt(t2)` around the points cover the square.
 ///
@@ -311,8 +298,22 @@ mod tests {
     use super::*;
     use crate::plan::analysis::test_support::xorshift;
 
+    /// The largest squared distance from a point of a `(steps + 1)²` grid over the square
+    /// `[c ± h]` to its nearest point of `q`.
+    fn grid_max2(q: &[[f64; 2]], c: [f64; 2], h: f64, steps: usize) -> f64 {
+        let step = 2.0 * h / steps as f64;
+        let mut max: f64 = 0.0;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                let x = [c[0] - h + step * i as f64, c[1] - h + step * j as f64];
+                max = max.max(q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min));
+            }
+        }
+        max
+    }
+
     #[test]
-    fn points_exceed_matches_a_grid() {
+    fn exceeds_matches_a_grid() {
         // Random point sets and squares: the decision must agree with the largest
         // min-distance found on a fine grid of the square, away from the threshold.
         let mut rnd = xorshift(0x2545f4914f6cdd1d);
@@ -324,22 +325,14 @@ mod tests {
                 .collect();
             let c = [rnd() - 0.5, rnd() - 0.5];
             let h = 0.1 + rnd();
-            let steps = 60;
-            let step = 2.0 * h / steps as f64;
-            let mut grid_max: f64 = 0.0;
-            for i in 0..=steps {
-                for j in 0..=steps {
-                    let x = [c[0] - h + step * i as f64, c[1] - h + step * j as f64];
-                    let m = q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min);
-                    grid_max = grid_max.max(m.sqrt());
-                }
-            }
+            let step = 2.0 * h / 60.0;
+            let grid_max = grid_max2(&q, c, h, 60).sqrt();
             // The true maximum is in [grid_max, grid_max + step].
             let t = grid_max * (0.5 + rnd());
             if (t - grid_max).abs() < 2.0 * step {
                 continue;
             }
-            let exceed = points_exceed(c, h, &q, t * t);
+            let exceed = exceeds(c, h, &q, t * t).0;
             assert_eq!(exceed, grid_max > t, "{q:?} {c:?} {h} {t} {grid_max}");
             decided[exceed as usize] += 1;
         }
@@ -422,15 +415,8 @@ mod tests {
                     seen[1] += 1;
                 }
                 None => {
-                    let steps = 40;
-                    let step = 2.0 * h / steps as f64;
-                    for i in 0..=steps {
-                        for j in 0..=steps {
-                            let x = [c[0] - h + step * i as f64, c[1] - h + step * j as f64];
-                            let m = q.iter().map(|&p| d2(x, p)).fold(f64::INFINITY, f64::min);
-                            assert!(m <= t * t * (1.0 + 1e-9), "{x:?} uncovered: {q:?} {t}");
-                        }
-                    }
+                    let m = grid_max2(&q, c, h, 40);
+                    assert!(m <= t * t * (1.0 + 1e-9), "uncovered: {q:?} {c:?} {h} {t}");
                     seen[0] += 1;
                 }
             }

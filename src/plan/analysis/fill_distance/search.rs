@@ -1,72 +1,62 @@
 //! The best-first search for the largest inscribed circle of a section (its steps are
 //! those of [`max_fill_distance_with`](super::max_fill_distance_with)) and the final
-//! polish of the best centre.
+//! polish of the best centre. The thresholds below decide only how much work a search
+//! does, never what it guarantees.
 
 use super::arcs::ArcCache;
 use super::cells::{Cell, Queue};
 use super::edges::{seg_d2, Edges};
 use super::plane::d2;
 use super::points::{
-    exceeds, points_exceed, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
+    exceeds, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
 };
 use super::SearchScratch;
 
 /// Most generations in a row of cells split with the walls followed from their parent's,
-/// without a search: the followed walls may miss a nearer third wall, which loosens the
-/// children's bounds until a search finds it.
+/// without a search (the followed walls may miss a nearer third wall).
 const MAX_FOLLOWED_GENERATIONS: u8 = 3;
 
 /// How far along its walls a cell's cover points stand (at least) from the walls' points
-/// nearest to its centre, in cell half-sizes: far enough apart for the discs around them to
-/// cover the cell along the walls.
+/// nearest to its centre, in cell half-sizes.
 const WALL_POINT_SPACING: f64 = 0.6;
 
 /// Cells whose failed cover test is completed by [`Search::cover_more`]:
-/// `(h·√2)² ≤ COVER_MORE_MAX_SIZE · T · precision`. Larger cells are rarely covered (their
-/// uncovered points are deeper than `T`): they are split at once.
+/// `(h·√2)² ≤ COVER_MORE_MAX_SIZE · T · precision`; larger ones are split at once.
 const COVER_MORE_MAX_SIZE: f64 = 32.0;
 
-/// After its first `SEED_AFTER_CELLS` cells with no centre inside the section, a search
-/// takes the best of [`Edges::ridge_probe`] on [`SEED_PROBES`] edges spread over the
-/// contours as the depth to beat: a thin section (a ring's first layers) has few cells
-/// whose centre is inside it, and until one is found every cell is split. Sections that
-/// find a centre inside among their first cells are not seeded (the probes would cost them
-/// more than they save).
+/// After its first `SEED_AFTER_CELLS` cells with no centre inside the section (a thin
+/// section, whose cells would all be split), a search takes the best of
+/// [`Edges::ridge_probe`] on [`SEED_PROBES`] edges spread over the contours as the depth
+/// to beat.
 const SEED_AFTER_CELLS: usize = 4;
 
 /// Edges whose inward normals seed a search: see [`SEED_AFTER_CELLS`].
 const SEED_PROBES: usize = 2;
 
 /// Cells tried by [`Edges::walls_cover`]: half-size above this many times the depth to
-/// beat (smaller ones are covered by discs around their walls' points as cheaply) and at
-/// most [`WALLS_MAX_HALF_SIZE_MM`]. The test pays on thin walls, such as thin rings.
+/// beat (smaller ones are covered by discs around wall points as cheaply) and at most
+/// [`WALLS_MAX_HALF_SIZE_MM`] (walls curve too much over larger cells to be lines).
 const WALLS_MIN_HALF_SIZE: f64 = 1.5;
 
-/// Largest half-size of the cells tried by [`Edges::walls_cover`], mm: walls curve too
-/// much over larger cells to be seen as lines (see [`WALLS_MIN_HALF_SIZE`]).
+/// See [`WALLS_MIN_HALF_SIZE`], mm.
 const WALLS_MAX_HALF_SIZE_MM: f64 = 1.0;
 
-/// Cells tried by [`Edges::arcs_cover`] and [`Edges::ring_cover`]: half-size at least this
-/// many times the precision (smaller ones are covered by discs around their walls' points
-/// as cheaply). The arc cover is tried below the depth to beat only (larger cells are
-/// seldom shown shallow by it), the ring cover on larger cells or cells whose centre is
-/// outside the section.
+/// Cells tried by [`Edges::arcs_cover`] (below the depth to beat) and
+/// [`Edges::ring_cover`] (above it, or centre outside): half-size at least this many times
+/// the precision.
 const ARCS_MIN_HALF_SIZE: f64 = 8.0;
 
-/// A search tries [`Edges::arcs_cover`] (and [`Edges::ring_cover`]) on its first
+/// A search tries [`Edges::arcs_cover`] and [`Edges::ring_cover`] on its first
 /// `COVER_TRIAL_TRIES` cells, then only while at least one try in [`COVER_TRIES_PER_HIT`]
-/// has dropped its cell: on sections whose walls are not round (a bunny, a gear) the arcs
-/// rarely show anything, and a failed try costs about as much as a cell's own tests.
+/// drops its cell (on walls that are not round a failed try costs about a cell's tests).
 const COVER_TRIAL_TRIES: usize = 2;
 
-/// A search stops trying a cover once it has made more than this many tries per cell the
-/// cover dropped: see [`COVER_TRIAL_TRIES`].
+/// See [`COVER_TRIAL_TRIES`].
 const COVER_TRIES_PER_HIT: usize = 4;
 
-/// [`Edges::ring_cover`] is tried as [`Edges::arcs_cover`] is ([`COVER_TRIAL_TRIES`],
-/// [`COVER_TRIES_PER_HIT`]), and also on every `RING_PROBE_EVERY`-th cell it could be tried
-/// on once that has stopped: a search's first cells are large and seldom dropped, and
-/// without these probes one failed start would stop the tries for the whole search.
+/// [`Edges::ring_cover`] is also tried on every `RING_PROBE_EVERY`-th cell it could be
+/// tried on once its tries have stopped paying (one failed start would stop them for the
+/// whole search).
 const RING_PROBE_EVERY: usize = 8;
 
 /// The deepest point found so far: its depth (signed distance to the boundary) and its
@@ -213,13 +203,7 @@ pub(super) fn search(e: &Edges, precision: f64, sc: &mut SearchScratch) -> (f64,
     if best.depth <= 0.0 {
         return (0.0, best.centre);
     }
-    let (c, d, _) = polish(
-        e,
-        (best.centre, best.depth, best.near),
-        precision,
-        precision / 16.0,
-        64,
-    );
+    let (c, d) = polish(e, (best.centre, best.depth, best.near), precision);
     (d, c)
 }
 
@@ -232,6 +216,18 @@ fn far_corner(c: [f64; 2], h: f64, q: [f64; 2]) -> f64 {
 }
 
 impl Search<'_> {
+    /// Keeps `centre` (at `depth`, nearest edge `near`) as the best when it is deeper.
+    #[inline]
+    fn raise(&mut self, centre: [f64; 2], depth: f64, near: u32) {
+        if depth > self.best.depth {
+            self.best = Best {
+                centre,
+                depth,
+                near,
+            };
+        }
+    }
+
     /// Queues the square cells of side `size` (the box's smaller side) that cover the box
     /// from `lo` of width `w` and height `h`.
     fn queue_grid(&mut self, lo: [f64; 2], (w, h): (f64, f64), size: f64) {
@@ -297,13 +293,7 @@ impl Search<'_> {
         for k in 0..SEED_PROBES {
             let v = (k * e.segs.len() / SEED_PROBES) as u32;
             if let Some((p, d, near)) = e.ridge_probe(v, self.precision, size) {
-                if d > self.best.depth {
-                    self.best = Best {
-                        centre: p,
-                        depth: d,
-                        near,
-                    };
-                }
+                self.raise(p, d, near);
             }
         }
     }
@@ -316,7 +306,7 @@ impl Search<'_> {
         let t = self.best.depth + self.precision;
         if c.pts != u32::MAX && t > 0.0 && self.best.depth > c.best {
             let (p, n) = &self.arena[c.pts as usize];
-            return !points_exceed(c.c, c.h, &p[..*n as usize], t * t);
+            return !exceeds(c.c, c.h, &p[..*n as usize], t * t).0;
         }
         false
     }
@@ -419,13 +409,7 @@ impl Search<'_> {
         } else {
             -d
         };
-        if d > self.best.depth {
-            self.best = Best {
-                centre: c.c,
-                depth: d,
-                near,
-            };
-        }
+        self.raise(c.c, d, near);
         let lip = d + reach;
         if lip - self.best.depth <= self.precision {
             return None;
@@ -489,11 +473,10 @@ impl Search<'_> {
         behind
     }
 
-    /// Ridge probe: half-way between the two walls along the line through `q` (the
-    /// boundary point nearest to the centre, on edge `near`; `d` away) and the centre is
-    /// (for parallel walls exactly) the deepest point nearby; it keeps the best depth close
-    /// to a ridge's height so ridge cells can be pruned. `(q2, i2)`: the boundary point
-    /// behind the centre and its edge.
+    /// Ridge probe: the point half-way between the two walls on the line through the
+    /// centre and `q` (its nearest boundary point, on edge `near`, `d` away), the deepest
+    /// point nearby for parallel walls, raises the best so ridge cells can be pruned.
+    /// `(q2, i2)`: the boundary point behind the centre and its edge.
     #[inline]
     fn probe_ridge(&mut self, c: &Cell, d: f64, q: [f64; 2], near: u32, (q2, i2): ([f64; 2], u32)) {
         let e = self.e;
@@ -510,11 +493,7 @@ impl Search<'_> {
             if self.best.depth < 0.0 || start.0 > self.best.depth * self.best.depth {
                 let (dp, np) = e.nearest_from(p, start);
                 if dp > self.best.depth && e.inside(p) {
-                    self.best = Best {
-                        centre: p,
-                        depth: dp,
-                        near: np,
-                    };
+                    self.raise(p, dp, np);
                 }
             }
         }
@@ -551,15 +530,11 @@ impl Search<'_> {
     }
 
     /// Completes a cover test that failed at the uncovered point `x` of the square `sq` =
-    /// `(centre, half-size)`: adds the boundary point nearest to `x` after the points of
-    /// `pts` and tries again, at most [`MAX_EXTRA_COVER_POINTS`] times; returns whether the
-    /// square is now covered at radius `T` = best depth + precision. The nearest point is
-    /// first looked for by following the cell's `walls` (edges, `u32::MAX`: none) along
-    /// their contours to `x` ([`Edges::descend`]); only when that point is farther than `T`
-    /// is the exact nearest edge searched. Every point added is a boundary point, so a
-    /// cover stays a proof. If `x` is inside the section and deeper than `T`, it becomes
-    /// the best centre (and the square cannot be covered). The uncovered points found go to
-    /// `wit`.
+    /// `(centre, half-size)`: adds the boundary point nearest to `x` (found by following
+    /// the cell's `walls` to `x`, searched only when that one is farther than `T`) after
+    /// `pts`' own and tries again, at most [`MAX_EXTRA_COVER_POINTS`] times; returns whether
+    /// the square is now covered at `T`. An `x` inside the section and deeper than `T`
+    /// becomes the best centre. The uncovered points found go to `wit`.
     fn cover_more(
         &mut self,
         sq: ([f64; 2], f64),
@@ -589,11 +564,7 @@ impl Search<'_> {
             };
             if dx > t {
                 if e.inside(x) {
-                    self.best = Best {
-                        centre: x,
-                        depth: dx,
-                        near: ix,
-                    };
+                    self.raise(x, dx, ix);
                 }
                 return false;
             }
@@ -684,7 +655,7 @@ impl Search<'_> {
                 // A child holding an uncovered point of the cell's test is not covered
                 // by the same points.
                 if !wit.uncover(cc, qh, &pts[..n], t * t)
-                    && !points_exceed(cc, qh, &pts[..n], t * t)
+                    && !exceeds(cc, qh, &pts[..n], t * t).0
                 {
                     continue;
                 }
@@ -712,15 +683,13 @@ impl Search<'_> {
 
 /// Local pattern search from `c` (depth `d`, nearest edge `near`): tries steps in 8
 /// directions, keeps going in a direction while it gains (doubling the step), halves the
-/// step when no direction gains, from `precision` down to `precision / 16`; moves only
-/// to deeper points, so the result stays a true inscribed radius.
+/// step when no direction gains, from `precision` down to `precision / 16`, for at most 64
+/// trial points; moves only to deeper points, so the result stays a true inscribed radius.
 fn polish(
     e: &Edges,
     (mut c, mut d, mut near): ([f64; 2], f64, u32),
-    first_step: f64,
-    last_step: f64,
-    max_evals: usize,
-) -> ([f64; 2], f64, u32) {
+    precision: f64,
+) -> ([f64; 2], f64) {
     const S: f64 = std::f64::consts::FRAC_1_SQRT_2;
     const DIRS: [[f64; 2]; 8] = [
         [1.0, 0.0],
@@ -732,7 +701,7 @@ fn polish(
         [0.0, -1.0],
         [S, -S],
     ];
-    let mut step = first_step;
+    let (mut step, last_step, max_evals) = (precision, precision / 16.0, 64);
     let mut k0 = 0;
     let mut evals = 0;
     // Edges recently nearest: a point closer to one of them than `d` cannot be deeper,
@@ -773,5 +742,5 @@ fn polish(
             step /= 2.0;
         }
     }
-    (c, d, near)
+    (c, d)
 }

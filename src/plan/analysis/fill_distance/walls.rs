@@ -1,7 +1,7 @@
 //! The wall cover: a cell across thin walls is dropped when the walls crossing it, each
 //! close to a line over the cell, bound the depth of every part of it inside the section.
 
-use super::plane::corners;
+use super::plane::{corners, unit};
 use super::Edges;
 
 /// Most edges meeting a cell that [`Edges::crossing`] lists: the wall and arc covers give up
@@ -116,6 +116,49 @@ impl ConvexPolygon {
 const WALL_BAND_MARGIN_MM: f64 = 1e-9;
 
 impl Edges {
+    /// Walks, depth first, the edges whose bounding boxes meet the square `[c ± h]`,
+    /// giving each to `f` until it returns a value; the subtrees of the nodes `skip`
+    /// refuses (by index) are left out. `Err(())` when the hierarchy is too deep to walk.
+    pub(super) fn walk_square<T>(
+        &self,
+        c: [f64; 2],
+        h: f64,
+        skip: impl Fn(usize) -> bool,
+        mut f: impl FnMut(u32) -> Option<T>,
+    ) -> Result<Option<T>, ()> {
+        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
+        let mut stack: [u32; 64] = [0; 64];
+        stack[0] = (self.nodes.len() - 1) as u32;
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let k = stack[sp] as usize;
+            let n = &self.nodes[k];
+            if !(n.lo[0] <= hi[0] && n.hi[0] >= lo[0] && n.lo[1] <= hi[1] && n.hi[1] >= lo[1])
+                || skip(k)
+            {
+                continue;
+            }
+            if n.count > 0 {
+                for v in n.first..n.first + n.count {
+                    if self.seg_meets(v, lo, hi) {
+                        if let Some(r) = f(v) {
+                            return Ok(Some(r));
+                        }
+                    }
+                }
+            } else {
+                if sp + 2 > stack.len() {
+                    return Err(());
+                }
+                stack[sp] = n.first;
+                stack[sp + 1] = n.first + 1;
+                sp += 2;
+            }
+        }
+        Ok(None)
+    }
+
     /// Edges whose bounding boxes meet the square `[c ± h]`, into `out`; `None` when there
     /// are more than [`MAX_CROSSING_EDGES`].
     pub(super) fn crossing(
@@ -124,41 +167,16 @@ impl Edges {
         h: f64,
         out: &mut [u32; MAX_CROSSING_EDGES],
     ) -> Option<usize> {
-        let (lo, hi) = ([c[0] - h, c[1] - h], [c[0] + h, c[1] + h]);
-        let meets = |a: [f64; 2], b: [f64; 2]| {
-            a[0] <= hi[0] && b[0] >= lo[0] && a[1] <= hi[1] && b[1] >= lo[1]
-        };
         let mut m = 0;
-        let mut stack: [u32; 64] = [0; 64];
-        stack[0] = (self.nodes.len() - 1) as u32;
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let n = &self.nodes[stack[sp] as usize];
-            if !meets(n.lo, n.hi) {
-                continue;
+        let walk = self.walk_square(c, h, |_| false, |v| {
+            if m == MAX_CROSSING_EDGES {
+                return Some(());
             }
-            if n.count > 0 {
-                let f = n.first as usize;
-                for v in f..f + n.count as usize {
-                    if self.seg_meets(v as u32, lo, hi) {
-                        if m == MAX_CROSSING_EDGES {
-                            return None;
-                        }
-                        out[m] = v as u32;
-                        m += 1;
-                    }
-                }
-            } else {
-                if sp + 2 > stack.len() {
-                    return None;
-                }
-                stack[sp] = n.first;
-                stack[sp + 1] = n.first + 1;
-                sp += 2;
-            }
-        }
-        Some(m)
+            out[m] = v;
+            m += 1;
+            None
+        });
+        matches!(walk, Ok(None)).then_some(m)
     }
 
     /// Whether the bounding box of edge `v` meets the box `[lo, hi]`.
@@ -198,11 +216,7 @@ impl Edges {
         let corners = ConvexPolygon::square(c, h);
         // Projections on the line from `a` along the unit vector `u`: of the corners, and
         // whether the points from `back` to `fwd` cover them.
-        let frame = |a: [f64; 2], b: [f64; 2]| {
-            let d = [b[0] - a[0], b[1] - a[1]];
-            let l = (d[0] * d[0] + d[1] * d[1]).sqrt();
-            (l > 0.0 && l.is_finite()).then(|| (a, [d[0] / l, d[1] / l]))
-        };
+        let frame = |a: [f64; 2], b: [f64; 2]| unit([b[0] - a[0], b[1] - a[1]]).map(|u| (a, u));
         let proj =
             |(a, u): ([f64; 2], [f64; 2]), x: [f64; 2]| u[0] * (x[0] - a[0]) + u[1] * (x[1] - a[1]);
         let span = |f: ([f64; 2], [f64; 2])| {
@@ -214,19 +228,25 @@ impl Edges {
                     (m.min(t), n.max(t))
                 })
         };
+        // The ranges of the points `from` to `to` along the line `f` and across it.
+        let extent = |f: ([f64; 2], [f64; 2]), from: u32, to: u32| {
+            let n = [-f.1[1], f.1[0]];
+            let (mut t, mut l) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+            let mut k = from;
+            loop {
+                let x = self.vert(k);
+                let (a, b) = (proj(f, x), n[0] * (x[0] - f.0[0]) + n[1] * (x[1] - f.0[1]));
+                (t, l) = ([t[0].min(a), t[1].max(a)], [l[0].min(b), l[1].max(b)]);
+                if k == to {
+                    return (t, l);
+                }
+                k = self.next[k as usize];
+            }
+        };
         // First pass: along the line through the run's ends (the edge's, for one edge).
         let f = frame(self.vert(first), self.vert(end))?;
         let (q_lo, q_hi) = span(f);
-        let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut k = first;
-        loop {
-            let t = proj(f, self.vert(k));
-            (t_lo, t_hi) = (t_lo.min(t), t_hi.max(t));
-            if k == end {
-                break;
-            }
-            k = self.next[k as usize];
-        }
+        let ([mut t_lo, mut t_hi], _) = extent(f, first, end);
         let (mut back, mut fwd) = (first, end);
         let mut steps = 0;
         while t_lo > q_lo {
@@ -251,20 +271,7 @@ impl Edges {
         let f = frame(self.vert(back), self.vert(fwd))?;
         let (q_lo, q_hi) = span(f);
         let n = [-f.1[1], f.1[0]];
-        let (mut t_lo, mut t_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let (mut l_lo, mut l_hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut k = back;
-        loop {
-            let x = self.vert(k);
-            let t = proj(f, x);
-            let l = n[0] * (x[0] - f.0[0]) + n[1] * (x[1] - f.0[1]);
-            (t_lo, t_hi) = (t_lo.min(t), t_hi.max(t));
-            (l_lo, l_hi) = (l_lo.min(l), l_hi.max(l));
-            if k == fwd {
-                break;
-            }
-            k = self.next[k as usize];
-        }
+        let ([t_lo, t_hi], [l_lo, l_hi]) = extent(f, back, fwd);
         if t_lo > q_lo || t_hi < q_hi {
             return None;
         }
@@ -278,17 +285,13 @@ impl Edges {
     }
 
     /// Whether no point of the square `[c ± h]` inside the section is deeper than `t`,
-    /// shown from the walls crossing it: when the edges meeting the square form at most
-    /// two runs of consecutive edges, each close to a line over the square ([`Wall`]),
-    /// the square falls into the walls' bands (depth at most twice the band's half-width),
-    /// the part beyond each wall and the part between them (or on either side of a single
-    /// wall). No edge meets those parts, so each is wholly inside or wholly outside the
-    /// section (one inside test); an inside part is bounded by the walls' depth bounds,
-    /// convex, so by their largest value at the part's corners (between two walls, their
-    /// mean: the smaller is at most the mean). `false` means not shown.
-    ///
-    /// This drops cells that straddle a wall thinner than the cell (a thin ring's cells
-    /// stick out of it on both sides, so discs around wall points cannot cover them).
+    /// shown from the walls crossing it: the edges meeting the square must form at most
+    /// two runs of consecutive edges, each close to a line over the square ([`Wall`]).
+    /// The square then falls into the walls' bands (depth at most twice a band's
+    /// half-width) and parts no edge meets, each wholly inside or outside the section (one
+    /// inside test) and bounded by the walls' convex bounds at its corners
+    /// (docs/PLANNING.md, "Wall covers"). This drops cells across a wall thinner than
+    /// themselves, which no discs around wall points cover. `false` means not shown.
     pub(super) fn walls_cover(&self, c: [f64; 2], h: f64, t: f64, hints: [u32; 2]) -> bool {
         let mut es = [0u32; MAX_CROSSING_EDGES];
         let Some(m) = self.crossing(c, h, &mut es) else {
@@ -445,10 +448,7 @@ mod tests {
         for _ in 0..6 {
             let (r, w) = (2.0 + 10.0 * rnd(), 0.01 + 0.3 * rnd());
             let n = 64 + (600.0 * rnd()) as usize;
-            out.push(vec![
-                ngon(0.0, 0.0, r + w, n, true),
-                ngon(0.0, 0.0, r, n, false),
-            ]);
+            out.push(ring([0.0, 0.0], r + w, r, n));
         }
         out.push(cross_cut_pieces(6.0, 5.9, 0.05, 200));
         let a = rnd();
@@ -498,11 +498,8 @@ mod tests {
     fn walls_cover_drops_cells_across_a_thin_ring_and_no_deeper() {
         // A ring 0.04 mm wide (depth 0.02): a cell of half-size 0.2 across it holds no
         // point deeper than 0.04, but points deeper than 0.015.
-        let ring = vec![
-            ngon(0.0, 0.0, 11.29, 1440, true),
-            ngon(0.0, 0.0, 11.25, 1440, false),
-        ];
-        let e = Edges::new(&ring);
+        let section = ring([0.0, 0.0], 11.29, 11.25, 1440);
+        let e = Edges::new(&section);
         let c = [11.27, 0.05];
         assert!(e.walls_cover(c, 0.2, 0.04, [u32::MAX; 2]));
         assert!(!e.walls_cover(c, 0.2, 0.015, [u32::MAX; 2]));
@@ -513,11 +510,8 @@ mod tests {
         assert!(!Edges::new(&disc).walls_cover([0.0, 0.0], 0.5, 0.01, [u32::MAX; 2]));
         // The search keeps the guarantee on such rings.
         for w in [0.03, 0.05, 0.2] {
-            let ring = vec![
-                ngon(0.0, 0.0, 11.25 + w, 1440, true),
-                ngon(0.0, 0.0, 11.25, 1440, false),
-            ];
-            let r = max_fill_distance(&ring).0;
+            let section = ring([0.0, 0.0], 11.25 + w, 11.25, 1440);
+            let r = max_fill_distance(&section).0;
             // The regular polygons' ring is a little narrower than w where their edges
             // are (their apothems differ from their radii by the same factor).
             let exact = 0.5 * w * (std::f64::consts::PI / 1440.0).cos();

@@ -1,15 +1,14 @@
-//! Synthetic held-out calibration sets (tests only): known P and S, 1.5 % noise at the
-//! 13 × 9 zone centres and 7 gray levels, fitted by [`fit`], then a plate covering the
-//! field is compensated and the TRUE irradiance P·S of every pixel is judged (zone-mean and
-//! per-pixel spread over the calibrated area), as the acceptance does.
-//! `cargo test --release --lib optics::sweep::sweep_report -- --ignored --nocapture`
+//! The synthetic held-out calibration sweep, through the library's stages: known P and S,
+//! 1.5 % noise at the 13 × 9 zone centres and 7 gray levels, fitted by [`fit`], then a
+//! plate covering the field is compensated and the TRUE irradiance P·S of every pixel is
+//! judged (zone-mean and per-pixel spread over the calibrated area).
+//! `cargo test --release --test it calibrate_sweep::sweep_report -- --ignored --nocapture`
 //! prints the full table (docs/CALIBRATION.md).
 
-use super::calib::{fit, FitOptions, Reading};
-use super::synthetic::*;
-use super::{Calibration, Dither, Mode, Units};
-use crate::optics::Compensator;
-use crate::profile::Field;
+use crate::synthetic::*;
+use dmdsl::optics::calib::{fit, FitOptions, Reading};
+use dmdsl::optics::{Calibration, Compensator, Dither, Mode, Units};
+use dmdsl::profile::Field;
 use std::path::Path;
 
 /// A lens-like field that none of the fitted forms matches exactly: cos³-type falloff
@@ -74,7 +73,7 @@ fn judge(mask: &[u8], f: &Field, p: FieldFn, s: ResponseFn) -> (f64, f64) {
 
 /// The plate mask: every pixel fully covered.
 fn plate(c: &Compensator, f: &Field) -> Vec<u8> {
-    let mut m = crate::raster::Mask {
+    let mut m = dmdsl::raster::Mask {
         width: f.width_px,
         height: f.height_px,
         data: vec![255; (f.width_px * f.height_px) as usize],
