@@ -207,36 +207,7 @@ pub fn summarize(
         });
     }
     let checked: Vec<&LayerCureCheck> = per_layer.iter().filter(|l| l.perimeter_mm > 0.0).collect();
-    let total: f64 = checked.iter().map(|l| l.perimeter_mm).sum();
-    let mut edge = OffsetStats::default();
-    let mut signed = 0.0;
-    if total > 0.0 {
-        edge.mean = checked
-            .iter()
-            .map(|l| l.perimeter_mm * l.offset_px.abs())
-            .sum::<f64>()
-            / total;
-        signed = checked
-            .iter()
-            .map(|l| l.perimeter_mm * l.offset_px)
-            .sum::<f64>()
-            / total;
-        let mut by: Vec<(f64, f64)> = checked
-            .iter()
-            .map(|l| (l.offset_px.abs(), l.perimeter_mm))
-            .collect();
-        by.sort_by(|a, b| a.0.total_cmp(&b.0));
-        edge.max = by.last().map_or(0.0, |b| b.0);
-        let mut cum = 0.0;
-        edge.p95 = edge.max;
-        for (a, wgt) in by {
-            cum += wgt;
-            if cum >= 0.95 * total {
-                edge.p95 = a;
-                break;
-            }
-        }
-    }
+    let (edge, signed) = offset_stats(&checked);
     let mut worst: Vec<&LayerCureCheck> = checked.clone();
     worst.sort_by(|a, b| {
         b.offset_px
@@ -267,4 +238,40 @@ pub fn summarize(
         findings,
         per_layer,
     }
+}
+
+/// The absolute per-layer offsets of `checked` weighted by their perimeters (mean, p95,
+/// largest) and their signed mean.
+fn offset_stats(checked: &[&LayerCureCheck]) -> (OffsetStats, f64) {
+    let total: f64 = checked.iter().map(|l| l.perimeter_mm).sum();
+    let mut edge = OffsetStats::default();
+    let mut signed = 0.0;
+    if total > 0.0 {
+        edge.mean = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px.abs())
+            .sum::<f64>()
+            / total;
+        signed = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px)
+            .sum::<f64>()
+            / total;
+        let mut by: Vec<(f64, f64)> = checked
+            .iter()
+            .map(|l| (l.offset_px.abs(), l.perimeter_mm))
+            .collect();
+        by.sort_by(|a, b| a.0.total_cmp(&b.0));
+        edge.max = by.last().map_or(0.0, |b| b.0);
+        let mut cum = 0.0;
+        edge.p95 = edge.max;
+        for (a, wgt) in by {
+            cum += wgt;
+            if cum >= 0.95 * total {
+                edge.p95 = a;
+                break;
+            }
+        }
+    }
+    (edge, signed)
 }

@@ -326,14 +326,7 @@ impl CureJob {
         // The runs of lit layers ending in this layer (the top) or the one below end where
         // this layer's exact coverage is unlit: taken before the correction changes it.
         let mut ends_here = (held > 0 && top).then(|| DroppedScan::new(&m, lit, |_, _| false));
-        let here: Vec<bool> = if held > 0 && !lower.is_empty() {
-            let w = m.width as usize;
-            lit.rows()
-                .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let here = lit_pixels_of(&m, lit, held > 0 && !lower.is_empty());
         let lit_here = |c: usize, r: usize| {
             lit.rows().contains(&r)
                 && lit.cols().contains(&c)
@@ -698,6 +691,18 @@ impl CureJob {
             }),
         }
     }
+}
+
+/// Whether each pixel of `m` inside `lit` (row-major) is lit (coverage ≥ 50 %); empty
+/// unless `wanted`.
+fn lit_pixels_of(m: &Mask, lit: PixelBox, wanted: bool) -> Vec<bool> {
+    if !wanted {
+        return Vec::new();
+    }
+    let w = m.width as usize;
+    lit.rows()
+        .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
+        .collect()
 }
 
 /// The file of layer `i`'s field coverage in the store of a job of several projectors.

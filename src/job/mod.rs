@@ -146,21 +146,10 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     );
     manifest.cure = cure.as_ref().map(|c| c.record());
     if let Some(c) = cure.as_ref().filter(|c| c.predicts()) {
-        let warp = setup.correction.as_ref().map(|w| (w, part.path));
-        let field = field.as_ref().map(|f| f as &dyn bundle::BundleSource);
-        c.predict(&mut manifest, &writer, field, &part.mesh, warp)?;
-        let w = cure_records::warnings(&manifest.layers);
-        manifest.warnings.splice(predicted_at..predicted_at, w);
+        let files = (&writer, field.as_ref());
+        predict(c, &mut manifest, files, &part, &setup, predicted_at)?;
     }
-    if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
-        return Err(Error::Job {
-            path: part.path.into(),
-            msg: match manifest.layers.len() {
-                1 => "nothing to print: the only layer has no closed section (an open surface or a part of zero volume)".into(),
-                n => format!("nothing to print: none of the {n} layers has a closed section (an open surface or a part of zero volume)"),
-            },
-        });
-    }
+    something_to_print(&manifest, part.path)?;
     replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);
@@ -174,16 +163,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
     };
     made.keep();
-    if let (Some(c), Some(dir)) = (cure.as_ref(), opts.cure.plots.as_deref()) {
-        let stem = opts
-            .input
-            .file_stem()
-            .map_or("part".into(), |s| s.to_string_lossy());
-        c.write_plots(dir, &stem, &manifest)?;
-    }
-    if let Some(m) = made_plots {
-        m.keep();
-    }
+    cure_plots(cure.as_ref(), opts, &manifest, made_plots)?;
     let mut warnings = manifest.warnings;
     warnings.extend(export_warnings);
     let finish_s = t_finish.elapsed().as_secs_f64();
@@ -206,6 +186,59 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion: distortion_report,
         cure: manifest.cure,
     })
+}
+
+/// The cure prediction's pictures (`--cure-plots`) of the job `manifest`, into the
+/// directory `made` made for them.
+fn cure_plots(
+    cure: Option<&cure_records::CureJob>,
+    opts: &SliceOptions,
+    manifest: &bundle::Manifest,
+    made: Option<MadeDirs>,
+) -> Result<()> {
+    if let (Some(c), Some(dir)) = (cure, opts.cure.plots.as_deref()) {
+        let stem = opts
+            .input
+            .file_stem()
+            .map_or("part".into(), |s| s.to_string_lossy());
+        c.write_plots(dir, &stem, manifest)?;
+    }
+    if let Some(m) = made {
+        m.keep();
+    }
+    Ok(())
+}
+
+/// The cure of the job's masks (`files`: the bundle's, and the field's coverage of a job
+/// of several projectors) into `manifest`, its warnings at `at` among the manifest's.
+fn predict(
+    cure: &cure_records::CureJob,
+    manifest: &mut bundle::Manifest,
+    (writer, field): (&Sink, Option<&Sink>),
+    part: &PlacedPart,
+    setup: &SetUp,
+    at: usize,
+) -> Result<()> {
+    let warp = setup.correction.as_ref().map(|w| (w, part.path));
+    let field = field.map(|f| f as &dyn bundle::BundleSource);
+    cure.predict(manifest, writer, field, &part.mesh, warp)?;
+    let w = cure_records::warnings(&manifest.layers);
+    manifest.warnings.splice(at..at, w);
+    Ok(())
+}
+
+/// An error naming the model `path` when no layer of `manifest` has a closed section.
+fn something_to_print(manifest: &bundle::Manifest, path: &Path) -> Result<()> {
+    if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
+        return Err(Error::Job {
+            path: path.into(),
+            msg: match manifest.layers.len() {
+                1 => "nothing to print: the only layer has no closed section (an open surface or a part of zero volume)".into(),
+                n => format!("nothing to print: none of the {n} layers has a closed section (an open surface or a part of zero volume)"),
+            },
+        });
+    }
+    Ok(())
 }
 
 /// A job dmdsl writes replays clean in `dmdsl run`: the planned steps are simulated
