@@ -1,18 +1,21 @@
-//! The cure model's cost per layer on real sections: drawing the coverage, the XY
-//! correction of its edges, and the prediction of the cured edge.
+//! The cure correction's cost per layer on real sections: drawing the coverage, solving
+//! the drawn edges' moves from the layers above, and moving them.
 //!
 //! `cargo bench --bench cure -- [MODEL.stl ...]` (default: fixtures/bunny00.stl). For every
-//! layer (0.05 mm, default profile) it draws the coverage (the rasterizer), corrects it
-//! (`cure::correct_coverage`) and predicts its cure (`cure::predict_layer`), one thread,
-//! and prints the time per layer of each with the prediction's edge errors. Whole-job
-//! ratios (`slice` with and without the correction) are in docs/BENCHMARKS.md.
+//! layer (0.05 mm, default profile, one thread) it draws the coverage (the rasterizer),
+//! draws every section's coverage once (as the layers below look at them), solves its edges'
+//! moves from its dose and the sections of the layers above (`cure::shift`) and corrects
+//! the coverage (`cure::correct_coverage`), and prints the time per layer of each with the
+//! moves' range. Whole-job ratios are in docs/BENCHMARKS.md.
 
 #[path = "../examples/common/mod.rs"]
 mod common;
 
-use dmdsl::cure::{self, CureModel};
+use dmdsl::cure::segments::Segments;
+use dmdsl::cure::shift::{wall_shifts, Coverage, EdgeProfile, EdgeShifts, LookAhead, LOOK_AHEAD};
+use dmdsl::cure::{self, CureModel, Psf};
 use dmdsl::profile::Profile;
-use dmdsl::raster::{Rasterizer, Scratch};
+use dmdsl::raster::{PixelBox, Rasterizer, Scratch};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -23,43 +26,70 @@ fn main() {
     }
     let profile = Profile::default_profile();
     let model = CureModel::from_profile(&profile).expect("the default profile has a PSF");
-    let shift = cure::edge_shift_px(&model);
-    let raster = Rasterizer::new(profile.field());
-    println!("| model | layers | coverage ms/layer | correction ms/layer | prediction ms/layer | edge error mean / p95 px |");
-    println!("|---|---:|---:|---:|---:|---:|");
+    let field = profile.field();
+    let (p, h) = (field.pixel_mm, field.height_px as f64);
+    let edge = EdgeProfile::new(&Psf {
+        sigma_px: model.sigma_px,
+    });
+    let raster = Rasterizer::new(field);
+    let ratio = |k: usize| profile.exposure.layer_exposure_s(k) / profile.exposure.layer_s.get();
+    println!("| model | layers | coverage ms/layer | sections covered ms/layer | moves solved ms/layer | correction ms/layer | moves px (least, most) |");
+    println!("|---|---:|---:|---:|---:|---:|---:|");
     for path in models {
         let (mesh, n) = common::placed(&path, &profile, 0.05);
         let sections = dmdsl::slice::slice(&mesh, 0.05, n).0;
         let mut scratch = Scratch::default();
-        let (mut t_cov, mut t_cor, mut t_pre) = (0.0, 0.0, 0.0);
-        let mut hist = cure::predict::Histogram::default();
-        let mut sum = (0.0, 0u64);
-        for s in &sections {
+        // Every section's coverage, as the layers below look at it.
+        let t = Instant::now();
+        let covered: Vec<Coverage> = sections
+            .iter()
+            .map(|s| {
+                let m = raster.coverage(&s.contours, &mut scratch);
+                let c = Coverage::of(&m, scratch.lit_box());
+                scratch.recycle(m);
+                c
+            })
+            .collect();
+        let t_index = t.elapsed().as_secs_f64();
+        let (mut t_cov, mut t_solve, mut t_cor) = (0.0, 0.0, 0.0);
+        let mut range = (0.0f64, 0.0f64);
+        let walls = wall_shifts(&model, &edge, n, ratio);
+        for (i, s) in sections.iter().enumerate() {
             let t = Instant::now();
             let mut m = raster.coverage(&s.contours, &mut scratch);
             t_cov += t.elapsed().as_secs_f64();
             let lit = scratch.lit_box();
             let t = Instant::now();
-            cure::correct_coverage(&mut m, lit, &s.contours, model.pixel_mm, shift);
-            t_cor += t.elapsed().as_secs_f64();
+            let segs = Segments::simplified(&s.contours, p, h, 0.01);
+            let upper: Vec<&Coverage> = covered[i + 1..].iter().take(LOOK_AHEAD).collect();
+            let mut pairs = Vec::new();
+            let look = LookAhead::new(&model, (i, n), (ratio, &walls), &upper, &mut pairs);
+            let shifts = EdgeShifts::solve(&model, &edge, (&segs, &covered[i]), &look, 4.0);
+            t_solve += t.elapsed().as_secs_f64();
+            let (lo, hi) = shifts.range();
+            range = (range.0.min(lo), range.1.max(hi));
             let t = Instant::now();
-            let (c, h) = cure::predict_layer(&model, &m, &s.contours);
-            t_pre += t.elapsed().as_secs_f64();
-            hist.merge(&h);
-            sum.0 += c.abs_mean_px * c.samples as f64;
-            sum.1 += c.samples;
+            let all = PixelBox {
+                r0: 0,
+                r1: m.height as usize,
+                c0: 0,
+                c1: m.width as usize,
+            };
+            cure::correct_coverage(&mut m, lit, &segs, &shifts, all);
+            t_cor += t.elapsed().as_secs_f64();
             scratch.recycle(m);
         }
         let k = sections.len().max(1) as f64 * 1e-3;
         println!(
-            "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} / {:.2} |",
+            "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.2}, {:.2} |",
             path.file_name().unwrap().to_string_lossy(),
             sections.len(),
             t_cov / k,
+            t_index / k,
+            t_solve / k,
             t_cor / k,
-            t_pre / k,
-            sum.0 / sum.1.max(1) as f64,
-            hist.quantile(0.95)
+            range.0,
+            range.1
         );
     }
 }

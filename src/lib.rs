@@ -50,7 +50,7 @@ mod test_support;
 
 stages!(
     cure, digest, exec, formats, geometry, input, inspect, job, mesh, motion, optics, output,
-    picture, plan, plot, png, polyfit, raster, resin, round, slice, table, text, units, warning,
+    picture, plan, plot, png, polyfit, raster, round, slice, table, text, units, warning,
 );
 
 pub use bundle::Manifest;

@@ -47,7 +47,7 @@ impl Mask {
     }
 
     /// Value at (col, row).
-    #[inline]
+    #[cfg(test)]
     pub fn get(&self, col: u32, row: u32) -> u8 {
         self.data[row as usize * self.width as usize + col as usize]
     }

@@ -176,6 +176,25 @@ impl StageGrid {
     }
 }
 
+/// Serializes a figure of a report to 6 decimals (1 µs, 1 nm, 1e-6 %): sums over a
+/// simulation carry floating-point noise in their last digits.
+pub fn six<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(decimals(*v, 6))
+}
+
+/// [`six`] for an optional figure.
+pub fn six_opt<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match v {
+        Some(v) => six(v, s),
+        None => s.serialize_none(),
+    }
+}
+
+/// [`six`] for a pair of figures.
+pub fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> Result<S::Ok, S::Error> {
+    serde::Serialize::serialize(&[decimals(v[0], 6), decimals(v[1], 6)], s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

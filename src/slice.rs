@@ -111,6 +111,8 @@ pub struct Slicer<'m> {
     order: Vec<u32>,
     next: usize,
     active: Vec<u32>,
+    /// The lowest plane of the previous window.
+    z_lo: f64,
     /// Repair counts over the windows sliced so far.
     pub stats: SliceStats,
 }
@@ -146,11 +148,13 @@ impl<'m> Slicer<'m> {
             order,
             next: 0,
             active: Vec::new(),
+            z_lo: f64::NEG_INFINITY,
             stats: SliceStats::default(),
         }
     }
 
-    /// Sections of layers `range` (must follow the previous call's range).
+    /// Sections of layers `range`: cheapest after the previous call's range (a range
+    /// below it finds the active triangles again from the lowest).
     pub fn window(&mut self, range: std::ops::Range<usize>) -> Vec<Section> {
         let range = range.start..range.end.min(self.n);
         if range.is_empty() {
@@ -158,6 +162,12 @@ impl<'m> Slicer<'m> {
         }
         let z_lo = plane_z(range.start, self.h);
         let z_hi = plane_z(range.end - 1, self.h);
+        if z_lo < self.z_lo {
+            // Below the previous range: triangles it dropped may reach this one.
+            self.next = 0;
+            self.active.clear();
+        }
+        self.z_lo = z_lo;
         while self.next < self.order.len() && self.zmin[self.order[self.next] as usize] <= z_hi {
             self.active.push(self.order[self.next]);
             self.next += 1;
@@ -557,6 +567,12 @@ mod tests {
         assert_eq!(all.len(), win.len());
         for (x, y) in all.iter().zip(&win) {
             assert_eq!(x.contours, y.contours);
+        }
+        // From the top down, as the cure prediction cuts them.
+        for a in (0..40).step_by(7).rev() {
+            for (k, y) in s.window(a..a + 7).iter().enumerate() {
+                assert_eq!(all[a + k].contours, y.contours, "layer {}", a + k);
+            }
         }
     }
 }

@@ -183,6 +183,14 @@ pub struct CurePrediction {
     pub merged: u64,
     /// The layers with the largest mean absolute edge error, worst first (at most 5).
     pub worst_layers: Vec<u64>,
+    /// The per-layer edge offsets from the cured area (`layers[].cure.offset_px`), their
+    /// absolute values weighted by the drawn perimeter, px: as `dmdsl run --cure`'s
+    /// `edge_offset_px`.
+    #[serde(default)]
+    pub edge_offset_px: EdgeError,
+    /// Their signed mean, px (as `dmdsl run --cure`'s `signed_mean_px`).
+    #[serde(default)]
+    pub signed_offset_px: f64,
 }
 
 /// Statistics of the absolute edge error.
@@ -217,6 +225,10 @@ pub struct LayerCure {
     /// of the drawn section; absent when nothing vanishes).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vanished_at: Option<FeatureBox>,
+    /// Mean edge offset from the cured area, px: (cured − section area) / drawn perimeter,
+    /// as `dmdsl run --cure` computes it (`per_layer[].offset_px`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset_px: Option<f64>,
 }
 
 /// Who wrote the bundle.

@@ -1,32 +1,28 @@
-//! XY correction: move every edge of the drawn section by the offset that puts the
-//! predicted cured edge at mid-layer on the section's edge.
+//! XY correction: move each drawn edge of a section by its own shift ([`EdgeShifts`],
+//! from the layer's dose and the layers above, `shift.rs`), so the cured edge at the
+//! layer's mid-plane lands on the section's edge.
 //!
-//! Across a straight anti-aliased edge the light is close to Φ(−s/σₑ) at signed distance
-//! s outside it, σₑ = √(σ² + 1/12) ([`Psf::sigma_edge_px`]), so the cured edge lies at
-//! s* = −σₑ·Φ⁻¹(T) for the mid-layer threshold T ([`CureModel::edge_threshold`]). The
-//! correction draws the section moved inward by s* (outward where s* < 0): a pixel within
-//! reach of an edge gets its exact coverage changed by the difference between the
-//! coverages of the pixel by the edge's half-plane moved and not moved
-//! ([`halfplane_coverage`]). Straight edges are then drawn exactly moved; pixels farther
-//! than the move from every edge keep their exact coverage, so interiors stay flat. The
-//! light compensation maps the corrected coverage to grays as it maps any coverage: one
-//! target dose for both.
+//! A pixel within reach of an edge gets its exact coverage changed by the difference
+//! between the coverages of the pixel by its nearest edge's half-plane moved and not
+//! moved ([`halfplane_coverage`]). Straight edges are then drawn exactly moved; pixels farther than the move from every
+//! edge keep their exact coverage, so interiors stay flat. The light compensation maps the
+//! corrected coverage to grays as it maps any coverage: one target dose for both.
 
-use super::segments::{Segment, Segments};
+use super::segments::Segments;
+use super::shift::{EdgeProfile, EdgeShifts};
+use crate::cure::model::CureModel;
+use crate::cure::psf::Psf;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{phi_inv, Psf};
-use crate::slice::Contour;
 
-/// The inward move of the edges that puts the cured edge on the section, px (negative:
-/// outward).
+/// The inward move of a prism's edges (every layer above lit alike, the normal dose)
+/// that puts the cured edge on the section, px (negative: outward): the pixel-phase
+/// averaged growth at the prism's threshold ([`EdgeProfile::growth`]).
 pub fn edge_shift_px(model: &CureModel) -> f64 {
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
-    let t = model.edge_threshold().clamp(1e-9, 1.0 - 1e-9);
-    -psf.sigma_edge_px() * phi_inv(t)
+    EdgeProfile::new(&psf).growth(model.edge_threshold())
 }
 
 /// Area of the unit pixel centred at the origin on the side `n·p ≤ u` of a line with
@@ -57,29 +53,36 @@ pub fn halfplane_coverage(n: [f64; 2], u: f64) -> f64 {
     }
 }
 
-/// Moves the edges of the coverage mask `mask` (values = coverage × 255, zero outside
-/// `lit`) of the section `contours` (build-plane mm) inward by `shift_px`; only pixels
-/// inside `lit` change. Returns the number of pixels changed.
+/// Moves the edges `segs` (a section's, [`Segments::simplified`]) of the coverage mask
+/// `mask` (values = coverage × 255, zero outside `lit`) inward by `shifts` (outward where
+/// negative); only pixels inside `lit` change, and only pixels inside `within` gain
+/// coverage. A pixel takes the move of the nearest edge among those whose move reaches
+/// it. Returns the number of pixels changed.
 pub fn correct_coverage(
     mask: &mut Mask,
     lit: PixelBox,
-    contours: &[Contour],
-    pixel_mm: f64,
-    shift_px: f64,
+    segs: &Segments,
+    shifts: &EdgeShifts,
+    within: PixelBox,
 ) -> usize {
-    if shift_px == 0.0 || lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
+    let (out, inward) = shifts.range();
+    if (out == 0.0 && inward == 0.0) || lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
         return 0;
     }
-    // Edges of fine meshes simplified within 0.01 px: the same correction, fewer edges.
-    let segs = Segments::simplified(contours, pixel_mm, mask.height as f64, 0.01);
-    let reach = std::f64::consts::FRAC_1_SQRT_2 + shift_px.abs();
+    // Each edge reaches the pixels its move can change.
+    let reach = |i: usize| std::f64::consts::FRAC_1_SQRT_2 + shifts.of_edge(i).abs();
     let w = mask.width as usize;
     let mut changed = 0;
-    nearest_edges(&segs, lit, reach, |r, c, s| {
+    nearest_edges(segs, lit, reach, |r, c, i| {
+        let s = &segs.segs[i];
         let p = [c as f64 + 0.5, r as f64 + 0.5];
         // Signed distance of the centre outside the edge's line.
         let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
-        let delta = halfplane_coverage(s.n, -(sd + shift_px)) - halfplane_coverage(s.n, -sd);
+        let shift = shifts.of_edge(i);
+        let delta = halfplane_coverage(s.n, -(sd + shift)) - halfplane_coverage(s.n, -sd);
+        if delta > 0.0 && !(within.rows().contains(&r) && within.cols().contains(&c)) {
+            return;
+        }
         let m = r * w + c;
         let v = (mask.data[m] as f64 + 255.0 * delta)
             .round()
@@ -93,13 +96,13 @@ pub fn correct_coverage(
 }
 
 /// Calls `f(row, column, edge)` for every pixel of the box `lit` whose centre lies within
-/// `reach` px of an edge of `segs`, with its nearest edge; only the pixels some edge comes
-/// near are visited.
+/// `reach_of(edge)` px of an edge of `segs`, with the nearest of those edges' index; only
+/// the pixels some edge comes near are visited.
 pub(super) fn nearest_edges(
     segs: &Segments,
     lit: PixelBox,
-    reach: f64,
-    mut f: impl FnMut(usize, usize, &Segment),
+    reach_of: impl Fn(usize) -> f64,
+    mut f: impl FnMut(usize, usize, usize),
 ) {
     let bw = lit.c1 - lit.c0;
     BAND.with(|band| {
@@ -107,8 +110,9 @@ pub(super) fn nearest_edges(
         band.prepare(bw * (lit.r1 - lit.r0));
         // Nearest edge of each pixel of the box within reach: distance and edge. Only
         // the pixels some edge comes near are visited, and only they are reset after.
-        let r2 = reach * reach;
         for (i, s) in segs.segs.iter().enumerate() {
+            let reach = reach_of(i);
+            let r2 = reach * reach;
             let (a, b) = (s.a, s.b);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let l2 = dx * dx + dy * dy;
@@ -148,7 +152,7 @@ pub(super) fn nearest_edges(
         for &k in &band.touched {
             let (_, i) = band.best[k as usize];
             let (r, c) = (k as usize / bw, k as usize % bw);
-            f(r + lit.r0, c + lit.c0, &segs.segs[i as usize]);
+            f(r + lit.r0, c + lit.c0, i as usize);
         }
         band.reset();
     })
@@ -243,7 +247,15 @@ mod tests {
         let mut scratch = Scratch::default();
         let mut m = raster.coverage(&rect(x0, y0, x1, y1), &mut scratch);
         let lit = scratch.lit_box();
-        let changed = correct_coverage(&mut m, lit, &rect(x0, y0, x1, y1), p, d);
+        let segs = Segments::simplified(&rect(x0, y0, x1, y1), p, m.height as f64, 0.01);
+        let shifts = EdgeShifts::uniform(&segs, d);
+        let all = PixelBox {
+            r0: 0,
+            r1: m.height as usize,
+            c0: 0,
+            c1: m.width as usize,
+        };
+        let changed = correct_coverage(&mut m, lit, &segs, &shifts, all);
         assert!(changed > 100, "{changed}");
         let mut s2 = Scratch::default();
         let want = raster.coverage(

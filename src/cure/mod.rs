@@ -1,25 +1,47 @@
-//! What cures, not only what is drawn: the cure model (docs/CURE.md), the prediction of
-//! each layer's cured edge against its exact section, and the correction of the masks
-//! for the projector's blur and the light that reaches through later layers.
+//! What cures, not only what is drawn (docs/CURE.md): one cure model and one engine,
+//! below both the slicer (`job`, which corrects its masks with it and predicts their cure)
+//! and the executor (`exec`, whose `run --cure` evaluates a bundle's masks with it).
 //!
-//! The model itself (the Gaussian point-spread function, the dose convention, Beer–Lambert
-//! in depth) is [`crate::resin`], which the executor shares. Files: `segments.rs` (a section's
-//! edges in pixels, with a grid index), `predict.rs` (cured edges and their errors),
-//! `correct.rs` (the XY correction of the coverage), `widen.rs` (narrow features the
-//! correction would starve, drawn back and wider until they cure), `held_back.rs` (the flat
-//! features the Z correction drops). Like every algorithm stage it takes
-//! inputs and returns values; `job` records them.
+//! * The model: the Gaussian point-spread function (`psf.rs`), the dose convention,
+//!   Beer–Lambert in depth and Jacobs' working curve (`model.rs`).
+//! * The engine: every layer's relative irradiance blurred (`kernel.rs`) and summed from
+//!   the top layer down with each layer's dose (`engine.rs`, driven by `check.rs`), its
+//!   islands (`islands.rs`, also the planner's counter), the job's figures (`report.rs`).
+//! * Against the exact sections (the slicer's): a section's edges with a grid index
+//!   (`segments.rs`), the cured edge along their normals (`predict.rs`), each drawn
+//!   edge's move from the layer's dose and the layers above (`shift.rs`), the XY
+//!   correction of the coverage (`correct.rs`), narrow features drawn back and wider
+//!   until they cure (`widen.rs`), the flat features the Z correction drops
+//!   (`held_back.rs`), pictures (`plots.rs`).
+//!
+//! Like every algorithm stage it takes inputs and returns values; `job` and `exec` read
+//! and record them.
 
+pub mod check;
 pub mod correct;
+pub mod engine;
 pub mod held_back;
+pub mod islands;
+pub mod kernel;
+pub mod model;
 pub mod plots;
 pub mod predict;
+pub mod psf;
+pub mod report;
 pub mod segments;
+pub mod shift;
 pub mod widen;
 
-pub use crate::resin::CureModel;
+pub use check::run_layers;
 pub use correct::{correct_coverage, edge_shift_px};
-pub use predict::{predict_layer, LayerCure};
+pub use engine::Engine;
+pub use kernel::Irradiance;
+#[cfg(test)]
+pub(crate) use model::test_model;
+pub use model::CureModel;
+pub use predict::LayerCure;
+pub use psf::Psf;
+pub use report::{summarize, CureCheck};
 
 use serde::{Deserialize, Serialize};
 

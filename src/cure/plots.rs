@@ -2,11 +2,11 @@
 //! outline over its section and mask.
 
 use super::predict::EdgeSample;
+use super::Irradiance;
 use crate::bundle::Layer;
+use crate::cure::model::CureModel;
 use crate::plot::text::{TextStyle, LABEL, SMALL, TITLE};
 use crate::plot::{Canvas, Chart, Panel, Series, Style};
-use crate::raster::Mask;
-use crate::resin::dose::CureModel;
 use crate::slice::Contour;
 
 /// The per-layer chart of the predicted edge error (layers with a prediction).
@@ -65,7 +65,7 @@ const ZOOM: f64 = 8.0;
 pub fn outline_picture(
     model: &CureModel,
     index: usize,
-    mask: &Mask,
+    (irradiance, (mw, mh)): (&Irradiance, (usize, usize)),
     contours: &[Contour],
     samples: &[EdgeSample],
 ) -> Canvas {
@@ -77,9 +77,7 @@ pub fn outline_picture(
             e(a).total_cmp(&e(b))
         })
         .or(samples.first());
-    let centre = worst.map_or([mask.width as f64 / 2.0, mask.height as f64 / 2.0], |s| {
-        s.at
-    });
+    let centre = worst.map_or([mw as f64 / 2.0, mh as f64 / 2.0], |s| s.at);
     let u0 = (centre[0] - VIEW_PX / 2.0).floor().max(0.0);
     let v0 = (centre[1] - VIEW_PX * 0.375).floor().max(0.0);
     let (vw, vh) = (VIEW_PX, VIEW_PX * 0.75);
@@ -87,11 +85,12 @@ pub fn outline_picture(
     let (w, h) = ((vw * ZOOM) as u32, (vh * ZOOM + top + 30.0) as u32);
     let mut c = Canvas::new(w, h, [255; 3]);
     let to = |u: f64, v: f64| (((u - u0) * ZOOM) as f32, ((v - v0) * ZOOM + top) as f32);
-    for row in v0 as u32..((v0 + vh) as u32).min(mask.height) {
-        for col in u0 as u32..((u0 + vw) as u32).min(mask.width) {
-            let g = mask.get(col, row);
-            if g > 0 {
-                let shade = 255 - (g as u32 * 150 / 255) as u8;
+    let [c0, r0, c1, r1] = irradiance.bbox;
+    for row in (v0 as usize).max(r0)..((v0 + vh) as usize).min(r1) {
+        for col in (u0 as usize).max(c0)..((u0 + vw) as usize).min(c1) {
+            let g = irradiance.data[(row - r0) * (c1 - c0) + col - c0].clamp(0.0, 1.0);
+            if g > 0.0 {
+                let shade = 255 - (g * 150.0) as u8;
                 let (x, y) = to(col as f64, row as f64);
                 c.fill_rect(x, y, ZOOM as f32, ZOOM as f32, [shade; 3], 255);
             }
@@ -111,7 +110,7 @@ pub fn outline_picture(
     for ct in contours {
         let mut pts: Vec<(f32, f32)> = ct
             .iter()
-            .map(|p| to(p[0] * s, mask.height as f64 - p[1] * s))
+            .map(|p| to(p[0] * s, mh as f64 - p[1] * s))
             .collect();
         if let Some(&p) = pts.first() {
             pts.push(p);
@@ -131,9 +130,9 @@ pub fn outline_picture(
         12.0,
         38.0,
         &format!(
-            "PSF σ = {} px, threshold {:.3} of a full pixel's light; view {} × {} px of {:.4} mm, around the largest counted error",
+            "PSF σ = {} px; the mid-plane cures at {:.3} of a full pixel's light, its layer's and the layers above's; view {} × {} px of {:.4} mm, around the largest counted error",
             model.sigma_px,
-            model.edge_threshold(),
+            model.threshold(0.5 * model.layer_mm, Some(0)),
             vw,
             vh,
             model.pixel_mm

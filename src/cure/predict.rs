@@ -1,19 +1,20 @@
-//! Prediction: where a layer's cured edge lies, compared with the exact section.
+//! Where a layer's cured edge lies, compared with its exact section.
 //!
-//! The mask's values are the relative irradiance of each pixel (coverage × 255 before
-//! light compensation, which maps them to the grays that deliver that irradiance: see
-//! docs/CURE.md). The light at a point is the sum over pixels of value/255 × the pixel's
-//! box convolved with the PSF ([`Psf::axis_weight`] per axis), over the pixels within
-//! the PSF's reach. Along the section's outward normal at sample points spaced at most
-//! [`SPACING_PX`] apart on every edge, the cured edge is where that light crosses the
-//! model's mid-layer threshold ([`CureModel::edge_threshold`]); its signed distance from
-//! the section's edge (positive: the part grows) is the sample's edge error.
+//! The light at a point is the sum over pixels of their relative irradiance × the pixel's
+//! box convolved with the PSF ([`Psf::axis_weight`] per axis), over the pixels within the
+//! PSF's reach ([`light`]); for a layer's cure the pixels hold the light of the layer and
+//! of every layer above it, each weighted by its dose and its depth
+//! ([`super::Engine::irradiance`]). Along the section's outward normal at sample
+//! points spaced at most [`SPACING_PX`] apart on every edge, the cured edge is where that
+//! light crosses the mid-plane's threshold (as far as the layer's own light reaches: as
+//! for the cured area of [`super::check`], resin cured farther out by the layers above
+//! alone is their print-through); its signed distance from the section's edge (positive:
+//! the part grows) is the sample's edge error ([`edge_samples`]).
 
 use super::segments::Segments;
 pub use crate::bundle::{FeatureBox, LayerCure};
-use crate::raster::Mask;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{AxisTable, Psf};
+use crate::cure::model::CureModel;
+use crate::cure::psf::{AxisTable, Psf};
 use crate::slice::Contour;
 
 /// Largest spacing of edge samples, pixels.
@@ -102,11 +103,18 @@ impl Histogram {
     }
 }
 
-/// Light (relative irradiance) of `mask` at field pixel coordinates `p`, the pixels
-/// within the PSF's reach summed, through the tabulated axis weights of `table`.
-pub fn light(mask: &Mask, psf: &Psf, table: &AxisTable, p: [f64; 2]) -> f64 {
+/// The light at pixel coordinates `p` of an image `w` wide (`px.len() / w` rows) whose
+/// pixels hold `T` (relative irradiance × a factor: 255 for a mask), the pixels within
+/// the PSF's reach summed through the tabulated axis weights of `table`.
+pub fn light<T: Copy + Into<f32>>(
+    px: &[T],
+    w: usize,
+    psf: &Psf,
+    table: &AxisTable,
+    p: [f64; 2],
+) -> f64 {
     let reach = psf.reach_px();
-    let (w, h) = (mask.width as i64, mask.height as i64);
+    let (w, h) = (w as i64, (px.len() / w) as i64);
     // ⌊x⌋ without libm's `floor`.
     let floor = |x: f64| {
         let t = x as i64;
@@ -126,25 +134,35 @@ pub fn light(mask: &Mask, psf: &Psf, table: &AxisTable, p: [f64; 2]) -> f64 {
     }
     let mut sum = 0.0;
     for r in r0..=r1 {
-        let row = &mask.data[(r as usize) * w as usize + c0 as usize..][..nc];
-        if row.iter().all(|&v| v == 0) {
+        let row = &px[(r as usize) * w as usize + c0 as usize..][..nc];
+        if row.iter().all(|&v| v.into() == 0.0) {
             continue;
         }
-        let acc: f64 = row.iter().zip(&wx).map(|(&v, &x)| v as f64 * x).sum();
+        let acc: f64 = row
+            .iter()
+            .zip(&wx)
+            .map(|(&v, &x)| v.into() as f64 * x)
+            .sum();
         sum += acc * table.weight(p[1] - r as f64);
     }
-    sum / 255.0
+    sum
 }
 
-/// The edge samples of a layer whose mask (relative irradiance × 255, field size) is
-/// `mask` and whose section is `contours` (build-plane mm).
-pub fn edge_samples(model: &CureModel, mask: &Mask, contours: &[Contour]) -> Vec<EdgeSample> {
+/// The edge samples of a layer whose section is `contours` (build-plane mm, on a field
+/// `height_px` rows high) where the resin at a point of the layer's mid-plane cures where
+/// both of `margin`'s values are at least 0: the light less the threshold, and the layer's
+/// own light less the least that makes it the layer's edge. A feature whose inside the
+/// layer does not light (held back) does not vanish: it is not drawn.
+pub fn edge_samples(
+    model: &CureModel,
+    margin: &dyn Fn([f64; 2]) -> [f64; 2],
+    height_px: f64,
+    contours: &[Contour],
+) -> Vec<EdgeSample> {
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
-    let table = AxisTable::new(&psf);
-    let segs = Segments::new(contours, model.pixel_mm, mask.height as f64);
-    let t = model.edge_threshold();
+    let segs = Segments::new(contours, model.pixel_mm, height_px);
     // Far enough for the cured edge of any sensible model (the light falls from 1 to 0
     // within a pixel and the PSF's reach on either side).
     let search = psf.reach_px() + 2.0;
@@ -206,11 +224,16 @@ pub fn edge_samples(model: &CureModel, mask: &Mask, contours: &[Contour]) -> Vec
             let w_out = segs.ray(p, nrm, 2.0 * search, idx).unwrap_or(f64::INFINITY);
             let a = (0.5 * w_in).min(search);
             let b = (0.5 * w_out).min(search);
-            let at = |s: f64| light(mask, &psf, &table, [p[0] + s * nrm[0], p[1] + s * nrm[1]]) - t;
-            let (fa, fb) = (at(-a), at(b));
-            let vanishes = fa < 0.0;
+            let both = |s: f64| margin([p[0] + s * nrm[0], p[1] + s * nrm[1]]);
+            let at = |s: f64| {
+                let [l, own] = both(s);
+                l.min(own)
+            };
+            let inside = both(-a);
+            let (fa, fb) = (inside[0].min(inside[1]), at(b));
+            let vanishes = fa < 0.0 && inside[1] >= 0.0;
             let merges = fb >= 0.0;
-            let error_px = (!vanishes && !merges).then(|| root(&at, -a, b, fa, fb));
+            let error_px = (fa >= 0.0 && !merges).then(|| root(&at, -a, b, fa, fb));
             out.push(EdgeSample {
                 at: p,
                 normal: nrm,
@@ -255,12 +278,17 @@ fn root(f: &impl Fn(f64) -> f64, mut a: f64, mut b: f64, mut fa: f64, mut fb: f6
     0.5 * (a + b)
 }
 
-/// The layer's figures from its samples.
+/// The layer's figures from its samples of the section `contours`, with the first
+/// vanished feature's bounding box.
 pub fn summarize(
     model: &CureModel,
     samples: &[EdgeSample],
-    outer: &[bool],
+    contours: &[Contour],
 ) -> (LayerCure, Histogram) {
+    let outer: Vec<bool> = contours
+        .iter()
+        .map(|c| crate::slice::signed_area(c) > 0.0)
+        .collect();
     let mut hist = Histogram::default();
     let (mut n, mut sum, mut abs, mut max) = (0u64, 0.0, 0.0, 0.0f64);
     for s in samples.iter().filter(|s| s.counted(model.sigma_px)) {
@@ -271,7 +299,7 @@ pub fn summarize(
         max = max.max(e.abs());
         hist.add(e.abs());
     }
-    let vanished = vanished_contours(samples, outer).len() as u32;
+    let vanished = vanished_contours(samples, &outer);
     let mut merged = vec![false; outer.len()];
     for s in samples {
         merged[s.contour as usize] |= s.merges;
@@ -282,9 +310,10 @@ pub fn summarize(
         abs_mean_px: if n > 0 { abs / n as f64 } else { 0.0 },
         p95_px: hist.quantile(0.95),
         max_px: max,
-        vanished,
+        vanished: vanished.len() as u32,
         merged: merged.iter().filter(|&&m| m).count() as u32,
-        vanished_at: None,
+        vanished_at: vanished.first().map(|&c| contour_box(&contours[c])),
+        offset_px: None,
     };
     (cure, hist)
 }
@@ -320,23 +349,4 @@ pub fn contour_box(contour: &Contour) -> FeatureBox {
         width_mm: r(hi[0] - lo[0]),
         height_mm: r(hi[1] - lo[1]),
     }
-}
-
-/// Predicts a layer's cure: [`edge_samples`] summarized, with the first vanished feature's
-/// bounding box.
-pub fn predict_layer(
-    model: &CureModel,
-    mask: &Mask,
-    contours: &[Contour],
-) -> (LayerCure, Histogram) {
-    let samples = edge_samples(model, mask, contours);
-    let outer: Vec<bool> = contours
-        .iter()
-        .map(|c| crate::slice::signed_area(c) > 0.0)
-        .collect();
-    let (mut cure, hist) = summarize(model, &samples, &outer);
-    cure.vanished_at = vanished_contours(&samples, &outer)
-        .first()
-        .map(|&c| contour_box(&contours[c]));
-    (cure, hist)
 }

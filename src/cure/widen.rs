@@ -35,10 +35,10 @@
 use super::correct::{halfplane_coverage, nearest_edges};
 use super::segments::Segments;
 use crate::bundle::FeatureBox;
+use crate::cure::model::CureModel;
+use crate::cure::psf::{AxisTable, Psf};
 use crate::raster::Mask;
 use crate::raster::PixelBox;
-use crate::resin::dose::CureModel;
-use crate::resin::psf::{AxisTable, Psf};
 use crate::slice::{signed_area, Contour};
 
 /// The light a narrow feature is drawn to reach: T·(1 + `MARGIN`) (room for the 8-bit
@@ -205,8 +205,11 @@ impl Uncorrected {
 /// Draws the small `features` of the section `contours` whose predicted peak light in
 /// the corrected coverage `mask` (lit box `lit`) is below T·(1 + [`MARGIN`]) back to
 /// their uncorrected coverage (`saved`, from [`Uncorrected::take`]) and then wider, as
-/// the module describes. A feature `saved` finds held back ([`Uncorrected::held_back`])
-/// is left as it is.
+/// the module describes; T = `threshold`, the layer's own light at which a feature that
+/// the layers above repeat cures. A feature `saved` finds held back
+/// ([`Uncorrected::held_back`]) is left as it is. `shift_px`: the correction's largest
+/// inward move.
+#[allow(clippy::too_many_arguments)]
 pub fn widen(
     model: &CureModel,
     mask: &mut Mask,
@@ -215,12 +218,13 @@ pub fn widen(
     features: &[SmallFeature],
     saved: &Uncorrected,
     shift_px: f64,
+    threshold: f64,
 ) -> Widening {
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
     let table = AxisTable::new(&psf);
-    let t = model.edge_threshold();
+    let t = threshold;
     let goal = t * (1.0 + MARGIN);
     let w = mask.width as usize;
     let mut out = Widening {
@@ -239,13 +243,19 @@ pub fn widen(
         // The pixels near the feature's edges: index in the mask, in the box, the edge's
         // normal and the centre's signed distance outside its line.
         let mut band: Vec<(usize, usize, [f64; 2], f64)> = Vec::new();
-        nearest_edges(&segs, *nb, reach, |r, c, s| {
-            let sd = (c as f64 + 0.5 - s.a[0]) * s.n[0] + (r as f64 + 0.5 - s.a[1]) * s.n[1];
-            let j = (r - nb.r0) * (nb.c1 - nb.c0) + (c - nb.c0);
-            if within.rows().contains(&r) && within.cols().contains(&c) {
-                band.push((r * w + c, j, s.n, sd));
-            }
-        });
+        nearest_edges(
+            &segs,
+            *nb,
+            |_| reach,
+            |r, c, i| {
+                let s = &segs.segs[i];
+                let sd = (c as f64 + 0.5 - s.a[0]) * s.n[0] + (r as f64 + 0.5 - s.a[1]) * s.n[1];
+                let j = (r - nb.r0) * (nb.c1 - nb.c0) + (c - nb.c0);
+                if within.rows().contains(&r) && within.cols().contains(&c) {
+                    band.push((r * w + c, j, s.n, sd));
+                }
+            },
+        );
         let probes: Vec<[f64; 2]> = band
             .iter()
             .filter(|b| b.3 < 0.75)
@@ -311,7 +321,7 @@ pub fn widen(
 /// (build-plane mm) on a field `height_px` rows high: the most a widened feature may
 /// light (the executor checks that a mask lights nothing more than 1 px outside the
 /// section's box, which the record holds rounded to 1 µm).
-fn within_section_box(contours: &[Contour], pixel_mm: f64, height_px: f64) -> PixelBox {
+pub fn within_section_box(contours: &[Contour], pixel_mm: f64, height_px: f64) -> PixelBox {
     let mut b = [
         f64::INFINITY,
         f64::INFINITY,
@@ -347,7 +357,8 @@ pub const BOX_SLACK_PX: f64 = 0.95;
 /// The largest light over `probes` (field pixel coordinates), refined around the best one
 /// by steps of 1/4, 1/8 and 1/16 px in the 8 directions.
 fn peak_light(mask: &Mask, psf: &Psf, table: &AxisTable, probes: &[[f64; 2]]) -> f64 {
-    let light = |p: [f64; 2]| super::predict::light(mask, psf, table, p);
+    let w = mask.width as usize;
+    let light = |p: [f64; 2]| super::predict::light(&mask.data, w, psf, table, p) / 255.0;
     let (mut best, mut at) = (f64::NEG_INFINITY, [0.0; 2]);
     for &p in probes {
         let l = light(p);
@@ -452,9 +463,12 @@ mod tests {
         let h = m.height as f64;
         let small = small_features(&model, section, h, shift);
         let saved = Uncorrected::take(&m, &small, shift);
-        super::super::correct_coverage(&mut m, lit, section, model.pixel_mm, shift);
+        let segs = Segments::simplified(section, model.pixel_mm, h, 0.01);
+        let shifts = super::super::shift::EdgeShifts::uniform(&segs, shift);
+        super::super::correct_coverage(&mut m, lit, &segs, &shifts, lit);
         let plain = m.clone();
-        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift);
+        let t = model.edge_threshold();
+        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift, t);
         (plain, m, wd, model)
     }
 
@@ -472,7 +486,10 @@ mod tests {
         for i in 0..=nu {
             for j in 0..=nv {
                 let p = [u[0] + 0.05 * i as f64, v[0] + 0.05 * j as f64];
-                best = best.max(super::super::predict::light(m, &psf, &table, p));
+                best = best.max(
+                    super::super::predict::light(&m.data, m.width as usize, &psf, &table, p)
+                        / 255.0,
+                );
             }
         }
         best

@@ -6,7 +6,7 @@
 //! ([`crate::bundle::Machine`]), or from the record given as [`RunOptions::machine`]
 //! (`--machine`, made from a profile) to check the job against the machine it will run on.
 //! It shares nothing with the slicer and the planner except the bundle format, the cure
-//! model's math of [`crate::resin`] and the pure trapezoid math of [`crate::motion`].
+//! model's math of [`crate::cure`] and the pure trapezoid math of [`crate::motion`].
 //! Stages:
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
@@ -17,7 +17,7 @@
 //! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
 //!    [`trace::TraceWriter`] (`--trace`), [`report::PlotCollector`] (`--plot`).
 //! 4. With `--cure`, [`cure`]: what cures, predicted from the masks alone (the model of
-//!    [`crate::resin`]), once the masks verified; information, never a violation.
+//!    [`crate::cure`]), once the masks verified; information, never a violation.
 //! 5. [`report::Report`]: the summary, `--json`, exit status.
 //!
 //! [`testutil`] builds manifests by hand for the executor's tests and benchmarks.

@@ -10,28 +10,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::ops::RangeInclusive;
 
-/// Serializes a figure of the report to 6 decimals (1 µs, 1 nm, 1e-6 %): sums over the
-/// simulation carry floating-point noise in their last digits.
-pub fn six<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_f64(crate::round::decimals(*v, 6))
-}
-
-/// [`six`] for an optional figure.
-pub fn six_opt<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
-    match v {
-        Some(v) => six(v, s),
-        None => s.serialize_none(),
-    }
-}
-
-/// [`six`] for a pair of figures.
-fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> Result<S::Ok, S::Error> {
-    [
-        crate::round::decimals(v[0], 6),
-        crate::round::decimals(v[1], 6),
-    ]
-    .serialize(s)
-}
+pub(crate) use crate::round::{six, six_pair};
 
 /// Timing of one layer: simulated and estimated.
 #[derive(Debug, Clone, PartialEq, Serialize)]

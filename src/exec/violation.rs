@@ -15,7 +15,7 @@ pub struct Violation {
     /// Layer concerned (`None`: the whole job).
     pub layer: Option<usize>,
     /// Simulated time, s (for verification problems: when the layer starts).
-    #[serde(serialize_with = "super::report::six_opt")]
+    #[serde(serialize_with = "crate::round::six_opt")]
     pub time_s: Option<f64>,
     /// What is wrong, written as its name.
     pub kind: Kind,

@@ -2,18 +2,26 @@
 //! edge errors of all layers, and the manifest's record and warnings.
 
 use crate::bundle::{
-    self, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
+    self, BundleSource, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
+    Manifest,
 };
 use crate::cure::held_back::{Dropped, DroppedScan};
-use crate::cure::predict::Histogram;
-use crate::cure::{self, widen, Correction, CureModel};
+use crate::cure::predict::{self, EdgeSample, Histogram};
+use crate::cure::psf::{AxisTable, Psf};
+use crate::cure::segments::Segments;
+use crate::cure::shift::Coverage;
+use crate::cure::{self, widen, Correction, CureModel, Irradiance};
 use crate::error::{Error, Result};
+use crate::geometry::distortion;
 use crate::optics::Compensator;
+use crate::bundle::machine::Projector;
 use crate::profile::Profile;
-use crate::raster::{Mask, Rasterizer, Scratch};
-use crate::slice::Contour;
+use crate::raster::{Mask, PixelBox, Rasterizer, Scratch};
+use crate::slice::{Contour, Section, Slicer};
 use crate::text::plural;
 use crate::warning::Warning;
+use rayon::prelude::*;
+use std::path::Path;
 use std::sync::Mutex;
 
 /// What a job asks of the cure model.
@@ -32,19 +40,41 @@ pub struct CureOptions {
 /// The cure model of one job.
 pub(super) struct CureJob {
     model: CureModel,
+    /// The pixel-phase averaged light across a drawn edge.
+    profile: cure::shift::EdgeProfile,
+    /// The exposures of the layers (bottom layers' longer), for their doses.
+    exposure: crate::profile::Exposure,
+    /// The moves of a straight wall's edges, layer by layer (`cure::shift::wall_shifts`;
+    /// made for the job's layer count at the first correction).
+    walls: std::sync::OnceLock<Vec<f64>>,
+    /// The field's rows.
+    model_height_px: f64,
     correction: Correction,
     shift_px: f64,
     /// Layers a downward-facing surface is held back by (`xyz`).
     held_back: usize,
     predict: bool,
-    /// Absolute edge errors of every layer (sums: the same in any order).
-    hist: Mutex<Histogram>,
+    /// The layer with the largest mean absolute edge error the prediction found, for its
+    /// picture (`--cure-plots`).
+    worst: Mutex<Option<WorstLayer>>,
     /// The flat features the Z correction drops, over the layers drawn so far (sums and
     /// the lowest layer's first feature: the same in any order).
     dropped: Mutex<DroppedFeatures>,
     /// The narrow features drawn wider, over the layers drawn so far (sums and the lowest
     /// layer's first feature: the same in any order).
     widened: Mutex<WidenedFeatures>,
+}
+
+/// The layer with the largest mean absolute edge error: what its picture shows, in the
+/// frame of its masks' pixels.
+struct WorstLayer {
+    index: usize,
+    abs_mean_px: f64,
+    /// The layer's own irradiance and the field's size.
+    irradiance: Irradiance,
+    size: (usize, usize),
+    contours: Vec<Contour>,
+    samples: Vec<EdgeSample>,
 }
 
 /// The narrow features the XY correction drew wider, over a job's layers.
@@ -54,6 +84,20 @@ struct WidenedFeatures {
     layers: u64,
     first_layer: Option<u64>,
     first: Option<FeatureBox>,
+}
+
+/// Points along a drawn contour at which its edges' moves are solved, px apart at most.
+const SHIFT_SPACING_PX: f64 = 8.0;
+
+/// A layer's XY correction: its drawn section's edges and their moves.
+pub(super) struct LayerCorrection {
+    /// The drawn section's edges (simplified within 0.01 px).
+    pub segs: Segments,
+    /// Their moves.
+    pub shifts: cure::shift::EdgeShifts,
+    /// The layer's own light at which a feature that the layers above repeat cures (the
+    /// narrow features' widening aims at it).
+    pub threshold: f64,
 }
 
 /// The narrow features of one layer the XY correction drew wider so they cure.
@@ -71,10 +115,6 @@ pub(super) struct CureDrawn {
     pub lit_pixels: f64,
     /// Whether the compensation found the layer lit outside its calibrated area.
     pub outside: bool,
-    /// The prediction (`--predict`).
-    pub cure: Option<LayerCure>,
-    /// Its absolute edge errors.
-    pub hist: Histogram,
     /// The flat features the Z correction drops whose runs of lit layers end in the layer
     /// below (`(1, …)`) or, for the job's top layer, in this one (`(0, …)`); only those
     /// with pixels.
@@ -145,11 +185,17 @@ impl CureJob {
         };
         Ok(Some(CureJob {
             model,
+            profile: cure::shift::EdgeProfile::new(&cure::Psf {
+                sigma_px: model.sigma_px,
+            }),
+            exposure: profile.exposure.clone(),
+            walls: std::sync::OnceLock::new(),
+            model_height_px: profile.field().height_px as f64,
             correction,
             shift_px,
             held_back,
             predict: opts.predict,
-            hist: Mutex::new(Histogram::default()),
+            worst: Mutex::new(None),
             dropped: Mutex::new(DroppedFeatures::default()),
             widened: Mutex::new(WidenedFeatures::default()),
         }))
@@ -157,12 +203,82 @@ impl CureJob {
 
     /// Whether layers are drawn through [`CureJob::draw`].
     pub fn active(&self) -> bool {
-        self.shift_px != 0.0 || self.predict || self.held_back > 0
+        self.corrects() || self.held_back > 0
+    }
+
+    /// Whether the masks' edges are moved (`xy`, `xyz`).
+    pub fn corrects(&self) -> bool {
+        self.correction != Correction::Off
+    }
+
+    /// The dose of layer `k` against a normal layer's (the profile's exposure schedule:
+    /// bottom and transition layers; a continuous layer's sweep is not known before it is
+    /// planned).
+    fn ratio(&self, k: usize) -> f64 {
+        self.exposure.layer_exposure_s(k) / self.exposure.layer_s.get()
+    }
+
+    /// Layer `index`'s correction (`None` with `off`): the edges of its drawn `section`
+    /// (`own`: its coverage), their moves from its dose and from the layers above, `upper`
+    /// (their sections' coverage, nearest first, at most [`cure::shift::LOOK_AHEAD`]),
+    /// `above` layers in all up to the job's top.
+    pub fn correction_of(
+        &self,
+        index: usize,
+        above: usize,
+        section: &[Contour],
+        own: &Coverage,
+        upper: &[&Coverage],
+    ) -> Option<LayerCorrection> {
+        if !self.corrects() {
+            return None;
+        }
+        let h = self.model_height_px;
+        let segs = Segments::simplified(section, self.model.pixel_mm, h, 0.01);
+        let mut pairs = Vec::new();
+        let layers = index + above + 1;
+        let walls = self.walls.get_or_init(|| {
+            cure::shift::wall_shifts(&self.model, &self.profile, layers, |k| self.ratio(k))
+        });
+        let look = cure::shift::LookAhead::new(
+            &self.model,
+            (index, layers),
+            (|k| self.ratio(k), walls),
+            upper,
+            &mut pairs,
+        );
+        let shifts = cure::shift::EdgeShifts::solve(
+            &self.model,
+            &self.profile,
+            (&segs, own),
+            &look,
+            SHIFT_SPACING_PX,
+        );
+        let all = look.total();
+        Some(LayerCorrection {
+            segs,
+            shifts,
+            threshold: self.model.threshold(0.5 * self.model.layer_mm, Some(0)) / all,
+        })
+    }
+
+    /// Whether the job's cure is predicted (`--predict`).
+    pub fn predicts(&self) -> bool {
+        self.predict
     }
 
     /// Layers a downward-facing surface is held back by (0 unless `xyz`).
     pub fn held_back(&self) -> usize {
         self.held_back
+    }
+
+    /// Sections above a layer that its correction looks at (0 with `off`).
+    pub fn upper_layers(&self) -> usize {
+        if self.corrects() {
+            cure::shift::LOOK_AHEAD
+        } else {
+            0
+        }
     }
 
     /// Sections below a layer that [`CureJob::draw`] takes: the held-back layers and one
@@ -178,8 +294,8 @@ impl CureJob {
     /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
     /// the layers below, nearest first: a downward-facing surface is drawn only from its
     /// held-back layers on; narrow features the correction starves are then drawn back and
-    /// wider, `cure::widen`), predicts its cure (`--predict`), then thresholds (`binary`)
-    /// and compensates (`comp`) it in place. With `xyz` it also finds the flat features
+    /// wider, `cure::widen`), then thresholds (`binary`) and compensates (`comp`) it in
+    /// place. With `xyz` it also finds the flat features
     /// the correction drops whose runs of lit layers end in the layer below (from
     /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
     /// this one.
@@ -188,28 +304,29 @@ impl CureJob {
         &self,
         raster: &Rasterizer,
         section: &[Contour],
+        coverage: Option<(Mask, PixelBox)>,
+        corr: Option<&LayerCorrection>,
         lower: &[&[Contour]],
         top: bool,
         scratch: &mut Scratch,
         binary: bool,
         comp: Option<&Compensator>,
     ) -> (Mask, CureDrawn) {
-        let mut m = raster.render::<Compensator>(section, scratch, false, None);
-        let lit = scratch.lit_box();
+        // The coverage (drawn already for the correction, else here).
+        let (mut m, lit) = match coverage {
+            Some(c) => c,
+            None => {
+                let m = raster.render::<Compensator>(section, scratch, false, None);
+                (m, scratch.lit_box())
+            }
+        };
         // The record's area is the section's, as drawn before the correction.
         let lit_pixels = scratch.lit_pixels(&m);
         let held = self.held_back;
         // The runs of lit layers ending in this layer (the top) or the one below end where
         // this layer's exact coverage is unlit: taken before the correction changes it.
         let mut ends_here = (held > 0 && top).then(|| DroppedScan::new(&m, lit, |_, _| false));
-        let here: Vec<bool> = if held > 0 && !lower.is_empty() {
-            let w = m.width as usize;
-            lit.rows()
-                .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let here = lit_pixels_of(&m, lit, held > 0 && !lower.is_empty());
         let lit_here = |c: usize, r: usize| {
             lit.rows().contains(&r)
                 && lit.cols().contains(&c)
@@ -217,15 +334,15 @@ impl CureJob {
         };
         // Small features (geometry only) and their uncorrected coverage, for the narrow
         // ones the correction would starve.
-        let small = if self.shift_px != 0.0 {
-            widen::small_features(&self.model, section, m.height as f64, self.shift_px)
-        } else {
-            Vec::new()
+        let inward = corr.map_or(0.0, |c| c.shifts.range().1);
+        let small = match corr {
+            Some(_) => widen::small_features(&self.model, section, m.height as f64, inward),
+            None => Vec::new(),
         };
-        let mut saved =
-            (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, self.shift_px));
-        if self.shift_px != 0.0 {
-            cure::correct_coverage(&mut m, lit, section, self.model.pixel_mm, self.shift_px);
+        let mut saved = (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, inward));
+        if let Some(c) = corr {
+            let within = widen::within_section_box(section, self.model.pixel_mm, m.height as f64);
+            cure::correct_coverage(&mut m, lit, &c.segs, &c.shifts, within);
         }
         let mut ends_below: Option<DroppedScan> = None;
         if !lower.is_empty() {
@@ -262,7 +379,7 @@ impl CureJob {
         // Narrow features widened until they cure; with xyz not those the held-back layers
         // take more than half of (a held-back surface stays held back).
         let mut drawn_lit = lit;
-        let widened = saved.and_then(|saved| {
+        let widened = saved.zip(corr).and_then(|(saved, c)| {
             let wd = widen::widen(
                 &self.model,
                 &mut m,
@@ -270,7 +387,8 @@ impl CureJob {
                 section,
                 &small,
                 &saved,
-                self.shift_px,
+                inward,
+                c.threshold,
             );
             if wd.lit != lit {
                 scratch.grow_lit_box(wd.lit);
@@ -289,28 +407,12 @@ impl CureJob {
         if binary {
             crate::raster::threshold(&mut m);
         }
-        let (cure, hist) = if self.predict {
-            let (c, h) = cure::predict_layer(&self.model, &m, section);
-            let r = crate::round::derived;
-            let c = LayerCure {
-                mean_px: r(c.mean_px),
-                abs_mean_px: r(c.abs_mean_px),
-                p95_px: r(c.p95_px),
-                max_px: r(c.max_px),
-                ..c
-            };
-            (Some(c), h)
-        } else {
-            (None, Histogram::default())
-        };
         let outside = comp.is_some_and(|c| c.apply_in(&mut m, drawn_lit));
         (
             m,
             CureDrawn {
                 lit_pixels,
                 outside,
-                cure,
-                hist,
                 dropped,
                 widened,
             },
@@ -409,15 +511,12 @@ impl CureJob {
 
     /// Writes the prediction's pictures into `dir`: `<stem>-cure-errors.png` (per-layer
     /// chart) and `<stem>-cure-layer-<N>.png`, layer N (the worst by mean absolute error)
-    /// drawn again (without the distortion pre-warp) with its predicted cured outline.
-    /// Returns the files written.
+    /// in its masks' pixels with its predicted cured outline. Returns the files written.
     pub fn write_plots(
         &self,
-        dir: &std::path::Path,
+        dir: &Path,
         stem: &str,
         manifest: &bundle::Manifest,
-        mesh: &crate::mesh::Mesh,
-        raster: &Rasterizer,
     ) -> Result<Vec<std::path::PathBuf>> {
         use crate::plot::Format;
         let mut out = Vec::new();
@@ -425,96 +524,152 @@ impl CureJob {
         let p = dir.join(format!("{stem}-cure-errors.png"));
         crate::output::write_atomic(&p, &chart.encode(Format::Png))?;
         out.push(p);
-        let worst = manifest
-            .cure
-            .as_ref()
-            .and_then(|c| c.predicted.as_ref())
-            .and_then(|p| p.worst_layers.first().copied());
-        if let Some(i) = worst.map(|i| i as usize) {
-            let n = manifest.layers.len();
-            let section = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
-                .window(i..i + 1)
-                .pop()
-                .unwrap_or_default();
-            let mut scratch = Scratch::default();
-            let window = crate::slice::Slicer::new(mesh, self.model.layer_mm, n)
-                .window(i.saturating_sub(self.lower_layers())..i);
-            let lower: Vec<&[Contour]> = window.iter().rev().map(|s| &s.contours[..]).collect();
-            let (mask, _) = self.draw(
-                raster,
-                &section.contours,
-                &lower,
-                false,
-                &mut scratch,
-                false,
-                None,
+        let worst = self.worst.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(w) = worst.as_ref().filter(|w| w.abs_mean_px > 0.0) {
+            let pic = cure::plots::outline_picture(
+                &self.model,
+                w.index,
+                (&w.irradiance, w.size),
+                &w.contours,
+                &w.samples,
             );
-            let samples = cure::predict::edge_samples(&self.model, &mask, &section.contours);
-            let pic =
-                cure::plots::outline_picture(&self.model, i, &mask, &section.contours, &samples);
-            let p = dir.join(format!("{stem}-cure-layer-{i:05}.png"));
+            let p = dir.join(format!("{stem}-cure-layer-{:05}.png", w.index));
             crate::output::write_atomic(&p, &pic.encode(Format::Png))?;
             out.push(p);
         }
         Ok(out)
     }
 
-    /// Counts a layer's edge errors into the job's.
-    pub fn count(&self, hist: &Histogram) {
-        self.hist
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .merge(hist);
+    /// The cure prediction (`--predict`) of the planned job `manifest` from the masks it
+    /// wrote (`files`; for several projectors `field`, the field's coverage masks): the
+    /// engine of `dmdsl run --cure` from the top layer down, each layer's cured edge also
+    /// compared along its exact section's normals (re-cut from `mesh`, pre-warped by
+    /// `warp`). Fills `layers[].cure` and `cure.predicted`.
+    pub fn predict(
+        &self,
+        manifest: &mut Manifest,
+        files: &dyn BundleSource,
+        field: Option<&dyn BundleSource>,
+        mesh: &crate::mesh::Mesh,
+        warp: Option<(&distortion::Correction, &Path)>,
+    ) -> Result<()> {
+        let m = self.model;
+        let n = manifest.layers.len();
+        let (frame, light, source): (Projector, _, &dyn BundleSource) = match field {
+            Some(f) => (
+                field_frame(&manifest.machine),
+                crate::exec::cure::Light::linear(),
+                f,
+            ),
+            None => (
+                manifest.machine.projector[0].clone(),
+                crate::exec::cure::Light::of(manifest, files)?,
+                files,
+            ),
+        };
+        let (w, h) = (frame.width_px as usize, frame.height_px as usize);
+        let field_h = manifest.machine.field().height_px as f64;
+        let mut slicer = Slicer::new(mesh, m.layer_mm, n);
+        let mut window: (usize, Vec<Section>) = (n, Vec::new());
+        let mut layers: Vec<Option<(LayerCure, Histogram)>> = vec![None; n];
+        let mut failed: Option<Error> = None;
+        let mut worst: Option<WorstLayer> = None;
+        let mut batch: Vec<LayerLight> = Vec::new();
+        let mut observe = |i: usize, e: &cure::Engine, irr: &Irradiance| {
+            if failed.is_some() {
+                return;
+            }
+            if i < window.0 {
+                let lo = (i + 1).saturating_sub(PREDICT_WINDOW);
+                window = (lo, slicer.window(lo..i + 1));
+            }
+            let section = &window.1[i - window.0].contours;
+            let drawn = match warp {
+                Some((c, model)) => match c.warp_section(section, model, i) {
+                    Ok(d) => d,
+                    Err(err) => {
+                        failed = Some(err);
+                        return;
+                    }
+                },
+                None => section.clone(),
+            };
+            let framed = in_frame(&drawn, &frame, m.pixel_mm, field_h);
+            batch.push(LayerLight::take(i, e, irr, (drawn, framed), &m));
+            // The layers' samples in parallel, a batch at a time.
+            if batch.len() == PREDICT_BATCH || i == 0 {
+                let done: Vec<_> = batch.par_iter().map(|l| l.samples(&m)).collect();
+                for (l, (c, hist, samples)) in batch.drain(..).zip(done) {
+                    let abs = crate::round::derived(c.abs_mean_px);
+                    if c.samples > 0 && worst.as_ref().is_none_or(|w| abs >= w.abs_mean_px) {
+                        worst = Some(WorstLayer {
+                            index: l.index,
+                            abs_mean_px: abs,
+                            irradiance: l.own,
+                            size: (w, h),
+                            contours: l.framed,
+                            samples,
+                        });
+                    }
+                    layers[l.index] = Some((c, hist));
+                }
+            }
+        };
+        let ratios = crate::exec::cure::ratios(manifest);
+        let outs = cure::run_layers(
+            &m,
+            (w, h),
+            &ratios,
+            &|i| {
+                let file = match field {
+                    Some(_) => field_file(i),
+                    None => match manifest.layers[i].masks.first() {
+                        Some(m) => m.file.clone(),
+                        None => return Ok(Irradiance::default()),
+                    },
+                };
+                crate::exec::cure::irradiance_of(source, &file, (w, h), &light)
+            },
+            true,
+            &mut observe,
+        )?;
+        if let Some(err) = failed {
+            return Err(err);
+        }
+        let to_mm = crate::exec::cure::to_build_plane(&frame, m.pixel_mm, field_h);
+        let check = cure::summarize(manifest, &m, &to_mm, outs);
+        let r = crate::round::derived;
+        let mut hist = Histogram::default();
+        for ((l, c), o) in manifest.layers.iter_mut().zip(layers).zip(&check.per_layer) {
+            let (c, h) = c.unwrap_or_default();
+            hist.merge(&h);
+            l.cure = Some(LayerCure {
+                mean_px: r(c.mean_px),
+                abs_mean_px: r(c.abs_mean_px),
+                p95_px: r(c.p95_px),
+                max_px: r(c.max_px),
+                offset_px: (o.perimeter_mm > 0.0).then(|| r(o.offset_px)),
+                ..c
+            });
+        }
+        let mut p = prediction(&manifest.layers, &hist, m.pixel_mm);
+        p.edge_offset_px = EdgeError {
+            mean: r(check.edge_offset_px.mean),
+            p95: r(check.edge_offset_px.p95),
+            max: r(check.edge_offset_px.max),
+        };
+        p.signed_offset_px = r(check.signed_mean_px);
+        if let Some(c) = manifest.cure.as_mut() {
+            c.predicted = Some(p);
+        }
+        *self.worst.lock().unwrap_or_else(|p| p.into_inner()) = worst;
+        Ok(())
     }
 
-    /// The manifest's record, from the layers' predictions.
-    pub fn record(&self, layers: &[Layer]) -> bundle::Cure {
+    /// The manifest's record (without the prediction, [`CureJob::predict`]'s).
+    pub fn record(&self) -> bundle::Cure {
         let m = &self.model;
         let r = crate::round::derived;
-        let predicted = self.predict.then(|| {
-            let hist = self.hist.lock().unwrap_or_else(|p| p.into_inner());
-            let cures: Vec<(u64, &LayerCure)> = layers
-                .iter()
-                .filter_map(|l| l.cure.as_ref().map(|c| (l.index, c)))
-                .collect();
-            let n: u64 = cures.iter().map(|(_, c)| c.samples).sum();
-            let w = |f: fn(&LayerCure) -> f64| {
-                if n == 0 {
-                    0.0
-                } else {
-                    cures
-                        .iter()
-                        .map(|(_, c)| f(c) * c.samples as f64)
-                        .sum::<f64>()
-                        / n as f64
-                }
-            };
-            let px = EdgeError {
-                mean: r(w(|c| c.abs_mean_px)),
-                p95: r(hist.quantile(0.95)),
-                max: r(cures.iter().map(|(_, c)| c.max_px).fold(0.0, f64::max)),
-            };
-            let mm = EdgeError {
-                mean: r(px.mean * m.pixel_mm),
-                p95: r(px.p95 * m.pixel_mm),
-                max: r(px.max * m.pixel_mm),
-            };
-            let mut worst: Vec<(u64, f64)> = cures
-                .iter()
-                .filter(|(_, c)| c.samples > 0)
-                .map(|(i, c)| (*i, c.abs_mean_px))
-                .collect();
-            worst.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-            CurePrediction {
-                samples: n,
-                edge_error_px: px,
-                edge_error_mm: mm,
-                signed_mean_px: r(w(|c| c.mean_px)),
-                vanished: cures.iter().map(|(_, c)| c.vanished as u64).sum(),
-                merged: cures.iter().map(|(_, c)| c.merged as u64).sum(),
-                worst_layers: worst.iter().take(5).map(|w| w.0).collect(),
-            }
-        });
         bundle::Cure {
             psf_sigma_px: m.sigma_px,
             pixel_mm: m.pixel_mm,
@@ -527,7 +682,7 @@ impl CureJob {
             shift_px: r(self.shift_px),
             print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
             held_back_layers: self.held_back as u32,
-            predicted,
+            predicted: None,
             dropped: (self.held_back > 0).then(|| {
                 self.dropped
                     .lock()
@@ -535,6 +690,204 @@ impl CureJob {
                     .clone()
             }),
         }
+    }
+}
+
+/// Whether each pixel of `m` inside `lit` (row-major) is lit (coverage ≥ 50 %); empty
+/// unless `wanted`.
+fn lit_pixels_of(m: &Mask, lit: PixelBox, wanted: bool) -> Vec<bool> {
+    if !wanted {
+        return Vec::new();
+    }
+    let w = m.width as usize;
+    lit.rows()
+        .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
+        .collect()
+}
+
+/// The file of layer `i`'s field coverage in the store of a job of several projectors.
+pub(super) fn field_file(i: usize) -> String {
+    format!("field/{i:05}.png")
+}
+
+/// Sections cut at a time for the prediction (from the top layer down).
+const PREDICT_WINDOW: usize = 32;
+/// Layers whose edges the prediction samples together.
+const PREDICT_BATCH: usize = 8;
+
+/// A layer's light as the prediction samples it, around its section: the light that
+/// reaches its top (its own and the layers above's, the engine's) and its own.
+struct LayerLight {
+    index: usize,
+    /// The section (build-plane mm) and the same in the frame of the masks.
+    drawn: Vec<Contour>,
+    framed: Vec<Contour>,
+    /// The pixel box `[c0, r0, c1, r1]` of `light` in the masks' frame.
+    bbox: [usize; 4],
+    light: Vec<f32>,
+    own: Irradiance,
+    height: usize,
+}
+
+impl LayerLight {
+    /// The light of layer `index` from the engine `e` (which has just evaluated it) and
+    /// its own irradiance `own`, around its section.
+    fn take(
+        index: usize,
+        e: &cure::Engine,
+        own: &Irradiance,
+        (drawn, framed): (Vec<Contour>, Vec<Contour>),
+        m: &CureModel,
+    ) -> LayerLight {
+        let (w, h) = e.size();
+        // The samples search 4σ + 2 px from the edge and the light there sums 4σ + 1 px.
+        let pad = 2.0 * (4.0 * m.sigma_px + 2.0) + 2.0;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for q in framed.iter().flatten() {
+            let p = [q[0] / m.pixel_mm, h as f64 - q[1] / m.pixel_mm];
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let cut = |x: f64, n: usize| (x.max(0.0) as usize).min(n);
+        let bbox = if lo[0] <= hi[0] {
+            [
+                cut(lo[0] - pad, w),
+                cut(lo[1] - pad, h),
+                cut(hi[0] + pad + 1.0, w),
+                cut(hi[1] + pad + 1.0, h),
+            ]
+        } else {
+            [0; 4]
+        };
+        let (px, scale) = e.irradiance();
+        let mut light = Vec::with_capacity((bbox[2] - bbox[0]) * (bbox[3] - bbox[1]));
+        for r in bbox[1]..bbox[3] {
+            light.extend(
+                px[r * w + bbox[0]..r * w + bbox[2]]
+                    .iter()
+                    .map(|v| v * scale),
+            );
+        }
+        LayerLight {
+            index,
+            drawn,
+            framed,
+            bbox,
+            light,
+            own: own.clone(),
+            height: h,
+        }
+    }
+
+    /// The layer's edge samples and figures.
+    fn samples(&self, m: &CureModel) -> (LayerCure, Histogram, Vec<EdgeSample>) {
+        let psf = Psf {
+            sigma_px: m.sigma_px,
+        };
+        let table = AxisTable::new(&psf);
+        let mid = m.threshold(0.5 * m.layer_mm, Some(0));
+        let [c0, r0, c1, _] = self.bbox;
+        let [o0, o1, o2, _] = self.own.bbox;
+        let near = cure::check::NEAR as f64;
+        let margin = |p: [f64; 2]| {
+            let at = [p[0] - c0 as f64, p[1] - r0 as f64];
+            let a = predict::light(&self.light, (c1 - c0).max(1), &psf, &table, at) - mid;
+            if self.own.is_empty() {
+                return [a, -near];
+            }
+            let at = [p[0] - o0 as f64, p[1] - o1 as f64];
+            [a, predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near]
+        };
+        let samples = predict::edge_samples(m, &margin, self.height as f64, &self.framed);
+        let (c, h) = predict::summarize(m, &samples, &self.drawn);
+        (c, h, samples)
+    }
+}
+
+/// The field of a machine as one projector (its pixels, unmirrored): the frame of the
+/// field's coverage masks.
+fn field_frame(machine: &bundle::Machine) -> Projector {
+    let f = machine.field();
+    let mut p = machine.projector[0].clone();
+    p.width_px = f.width_px;
+    p.height_px = f.height_px;
+    p.offset_px = [0, 0];
+    p.mirror_x = false;
+    p.mirror_y = false;
+    p
+}
+
+/// `contours` (build-plane mm, on a field `field_h` rows high of `pixel_mm` pixels) in
+/// the frame of projector `p`'s pixels, as mm of a field of its size: its offset taken
+/// off and its mirroring applied (the contours reversed where that turns them over).
+fn in_frame(contours: &[Contour], p: &Projector, pixel_mm: f64, field_h: f64) -> Vec<Contour> {
+    let (w, h) = (p.width_px as f64, p.height_px as f64);
+    let (ox, oy) = (p.offset_px[0] as f64, p.offset_px[1] as f64);
+    let map = |q: &[f64; 2]| {
+        let (u, v) = (q[0] / pixel_mm - ox, field_h - q[1] / pixel_mm - oy);
+        let u = if p.mirror_x { w - u } else { u };
+        let v = if p.mirror_y { h - v } else { v };
+        [u * pixel_mm, (h - v) * pixel_mm]
+    };
+    contours
+        .iter()
+        .map(|c| {
+            let mut c: Contour = c.iter().map(map).collect();
+            if p.mirror_x != p.mirror_y {
+                c.reverse();
+            }
+            c
+        })
+        .collect()
+}
+
+/// The job's prediction from its layers' (`layers[].cure`) and their absolute edge
+/// errors `hist`.
+fn prediction(layers: &[Layer], hist: &Histogram, pixel_mm: f64) -> CurePrediction {
+    let r = crate::round::derived;
+    let cures: Vec<(u64, &LayerCure)> = layers
+        .iter()
+        .filter_map(|l| l.cure.as_ref().map(|c| (l.index, c)))
+        .collect();
+    let n: u64 = cures.iter().map(|(_, c)| c.samples).sum();
+    let w = |f: fn(&LayerCure) -> f64| {
+        if n == 0 {
+            0.0
+        } else {
+            cures
+                .iter()
+                .map(|(_, c)| f(c) * c.samples as f64)
+                .sum::<f64>()
+                / n as f64
+        }
+    };
+    let px = EdgeError {
+        mean: r(w(|c| c.abs_mean_px)),
+        p95: r(hist.quantile(0.95)),
+        max: r(cures.iter().map(|(_, c)| c.max_px).fold(0.0, f64::max)),
+    };
+    let mm = EdgeError {
+        mean: r(px.mean * pixel_mm),
+        p95: r(px.p95 * pixel_mm),
+        max: r(px.max * pixel_mm),
+    };
+    let mut worst: Vec<(u64, f64)> = cures
+        .iter()
+        .filter(|(_, c)| c.samples > 0)
+        .map(|(i, c)| (*i, c.abs_mean_px))
+        .collect();
+    worst.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    CurePrediction {
+        samples: n,
+        edge_error_px: px,
+        edge_error_mm: mm,
+        signed_mean_px: r(w(|c| c.mean_px)),
+        vanished: cures.iter().map(|(_, c)| c.vanished as u64).sum(),
+        merged: cures.iter().map(|(_, c)| c.merged as u64).sum(),
+        worst_layers: worst.iter().take(5).map(|w| w.0).collect(),
+        ..CurePrediction::default()
     }
 }
 

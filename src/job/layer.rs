@@ -2,16 +2,19 @@
 //! see [`mask_reuse`](super::mask_reuse)), their files, and the layer's analysis.
 
 use super::clock::ThreadClock;
+use super::cure_records::LayerCorrection;
 use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
+use super::pipeline::Cut;
 use super::sink::Sink;
 use crate::bundle::{self, MaskPixels, MaskRef};
+use crate::cure::shift::Coverage;
 use crate::error::Result;
 use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
 use crate::optics::JobOptics;
 use crate::plan::analysis::{Analysed, Analyser, LitRuns};
 use crate::profile::Profile;
-use crate::raster::{projector_view, Rasterizer, Scratch};
+use crate::raster::{projector_view, Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section};
 use std::borrow::Cow;
 use std::path::Path;
@@ -42,6 +45,9 @@ pub(super) struct LayerContext<'a> {
     pub px_area_mm2: f64,
     /// The cure model's correction and prediction, if the machine has a PSF.
     pub cure: Option<&'a super::cure_records::CureJob>,
+    /// Where the field's coverage masks go for the cure prediction of a job of several
+    /// projectors (`--predict`; their masks do not show the field's light).
+    pub field: Option<&'a Sink>,
 }
 
 impl LayerContext<'_> {
@@ -61,14 +67,19 @@ pub(super) struct LayerInput<'a> {
     pub index: usize,
     /// Its section.
     pub section: &'a Section,
+    /// Its section and coverage as the layers below look at them.
+    pub cut: &'a Cut,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
     pub below: Option<&'a Section>,
     /// The sections of the layers below, nearest first, one more than the cure correction
     /// holds downward-facing surfaces back by (`--cure-correction xyz`, see
     /// `CureJob::lower_layers`; else empty).
     pub lower: Vec<&'a Section>,
-    /// Whether it is the job's last layer.
-    pub top: bool,
+    /// The sections of the layers above, nearest first, that the cure correction looks at
+    /// (`CureJob::upper_layers`; else empty).
+    pub upper: Vec<&'a Cut>,
+    /// Layers above it up to the job's top.
+    pub above: usize,
 }
 
 /// What a worker made of one layer.
@@ -84,8 +95,6 @@ pub(super) struct LayerOutput {
     /// The layer's lit pixels, kept where another block needs them: for its own islands
     /// ([`Analysed::NeedsBelow`]) or those of the next layer (the last layer of a block).
     pub runs: Option<LitRuns>,
-    /// The predicted cure (`--predict`).
-    pub cure: Option<bundle::LayerCure>,
 }
 
 /// What a block's worker carries from one layer to the next.
@@ -95,6 +104,32 @@ pub(super) struct BlockWorker {
     pub analyser: Analyser,
     /// The masks of the previous layer.
     previous: Option<PreviousLayerMasks>,
+}
+
+/// A layer's section as it is drawn: without collinear points when it equals the layer
+/// below's, pre-warped, and its cure correction.
+struct Drawing {
+    /// The section (before the pre-warp).
+    section: Vec<Contour>,
+    /// The pre-warped section and its area's scale, with a distortion correction.
+    warped: Option<(Vec<Contour>, f64)>,
+    /// The section's coverage (drawn ahead of the masks for the XY correction) and its
+    /// lit box.
+    coverage: Option<(Mask, PixelBox)>,
+    /// The XY correction.
+    corr: Option<LayerCorrection>,
+}
+
+impl Drawing {
+    /// The section the masks are drawn from.
+    fn drawn(&self) -> &[Contour] {
+        self.warped.as_ref().map_or(&self.section, |w| &w.0)
+    }
+
+    /// What equal masks must also share: the correction's moves.
+    fn shifts(&self) -> &[f64] {
+        self.corr.as_ref().map_or(&[], |c| &c.shifts.values)
+    }
 }
 
 /// Where a layer's masks came from.
@@ -126,9 +161,18 @@ pub(super) fn layer_masks(
     let mut analysis_s = clock.elapsed_s();
     // Held back surfaces depend on the layers below: equal sections may not share masks.
     let reuse = ctx.cure.is_none_or(|c| c.held_back() == 0);
-    let (drawn, origin) = match reusable(ctx, worker, i, same && reuse) {
-        Some(reused) => reused,
-        None => (draw(ctx, worker, scratch, layer, same)?, Origin::Drawn),
+    let mut drawing = drawing(ctx, worker, scratch, layer, same)?;
+    let (drawn, origin) = match reusable(ctx, worker, i, same && reuse, &drawing) {
+        Some(reused) => {
+            if let Some((m, _)) = drawing.coverage.take() {
+                scratch.recycle(m);
+            }
+            reused
+        }
+        None => (
+            draw(ctx, scratch, layer, &mut drawing, same)?,
+            Origin::Drawn,
+        ),
     };
     if drawn.outside && origin != Origin::Drawn {
         if let Some(o) = ctx.optics {
@@ -138,12 +182,6 @@ pub(super) fn layer_masks(
     }
     let masks = write_masks(ctx, &drawn, i)?;
     let area_mm2 = drawn.area_mm2;
-    let cure = drawn.cure.as_ref().map(|(c, hist)| {
-        if let Some(job) = ctx.cure {
-            job.count(hist);
-        }
-        c.clone()
-    });
     if let Some(job) = ctx.cure {
         job.count_dropped(i, &drawn.dropped);
         job.count_widened(i, drawn.widened);
@@ -170,81 +208,148 @@ pub(super) fn layer_masks(
         analysis_s,
         masks,
         runs,
-        cure,
     })
 }
 
-/// Masks drawn already for layer `i`'s section, when it equals (`same`) the layer below's:
-/// this worker's for the layer below, or any worker's for a recent equal section.
+/// Masks drawn already for layer `i`'s section, when it equals (`same`) the layer below's
+/// and is corrected alike: this worker's for the layer below, or any worker's for a
+/// recent equal section.
 fn reusable(
     ctx: &LayerContext,
     worker: &mut BlockWorker,
     i: usize,
     same: bool,
+    drawing: &Drawing,
 ) -> Option<(Arc<DrawnMasks>, Origin)> {
-    if let Some(m) = worker.previous.take().and_then(|p| p.serving(i, same)) {
+    let shifts = drawing.shifts();
+    if let Some(m) = worker
+        .previous
+        .take()
+        .and_then(|p| p.serving(i, same, shifts))
+    {
         return Some((m, Origin::PreviousLayer));
     }
     let recent = ctx.recent.filter(|_| same)?;
-    let m = recent.get(worker.analyser.simplified_section())?;
+    let m = recent.get(&drawing.section, shifts)?;
     Some((m, Origin::Recent))
 }
 
-/// Draws layer `layer`'s masks: from its section without collinear points when it equals
-/// the layer below's (`same`; then they are offered to the recent prism masks), else from
-/// its own section.
-fn draw(
+/// Layer `layer`'s section as it is drawn: without collinear points when it equals the
+/// layer below's (`same`), else its own; pre-warped; and its cure correction, which looks
+/// at the layers above (their edges kept in `worker` for the block's next layers).
+fn drawing(
     ctx: &LayerContext,
     worker: &BlockWorker,
     scratch: &mut Scratch,
     layer: &LayerInput,
     same: bool,
-) -> Result<Arc<DrawnMasks>> {
+) -> Result<Drawing> {
     let i = layer.index;
-    let section: &[Contour] = if same {
-        worker.analyser.simplified_section()
+    let section = if same {
+        worker.analyser.simplified_section().to_vec()
     } else {
-        &layer.section.contours
+        layer.section.contours.clone()
     };
     // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
-    let (warped, area_scale) = match ctx.correction {
-        Some(c) => {
-            let w = c.warp_section(section, ctx.model, i)?;
-            let s = distortion::area_scale(section, &w);
-            (Some(w), s)
-        }
-        None => (None, 1.0),
+    let warp = |c: &[Contour], k: usize| match ctx.correction {
+        Some(w) => w.warp_section(c, ctx.model, k).map(Some),
+        None => Ok(None),
     };
+    let warped = warp(&section, i)?.map(|w| {
+        let s = distortion::area_scale(&section, &w);
+        (w, s)
+    });
+    let Some(job) = ctx.cure.filter(|c| c.corrects()) else {
+        return Ok(Drawing {
+            section,
+            warped,
+            coverage: None,
+            corr: None,
+        });
+    };
+    // The layers above's coverage (each drawn once, by whoever needs it first).
+    let upper = layer
+        .upper
+        .iter()
+        .enumerate()
+        .map(|(d, c)| {
+            c.coverage(|| {
+                let s = warp(&c.section.contours, i + 1 + d)?;
+                let m = ctx
+                    .raster
+                    .coverage(s.as_deref().unwrap_or(&c.section.contours), scratch);
+                let cov = Coverage::of(&m, scratch.lit_box());
+                scratch.recycle(m);
+                Ok(cov)
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let drawn = warped.as_ref().map_or(&section, |w| &w.0);
+    let m = ctx
+        .raster
+        .render::<crate::optics::Compensator>(drawn, scratch, false, None);
+    let lit = scratch.lit_box();
+    let own = Coverage::of(&m, lit);
+    let refs: Vec<&Coverage> = upper.iter().map(|c| &**c).collect();
+    let corr = job.correction_of(i, layer.above, drawn, &own, &refs);
+    for c in &layer.upper {
+        c.release();
+    }
+    // The section as cut (not one without its collinear points) is what the layers below
+    // look at.
+    if !same {
+        layer.cut.offer(|| own);
+    }
+    Ok(Drawing {
+        section,
+        warped,
+        coverage: Some((m, lit)),
+        corr,
+    })
+}
+
+/// Draws layer `layer`'s masks from `drawing`; when the layer equals the layer below's
+/// (`same`) they are offered to the recent prism masks.
+fn draw(
+    ctx: &LayerContext,
+    scratch: &mut Scratch,
+    layer: &LayerInput,
+    drawing: &mut Drawing,
+    same: bool,
+) -> Result<Arc<DrawnMasks>> {
+    let area_scale = drawing.warped.as_ref().map_or(1.0, |w| w.1);
     // Coverage (thresholded when binary), compensated while it is drawn: coverage → gray
     // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
     let comp = ctx.optics.map(|o| &o.compensator);
-    let drawn_section = warped.as_deref().unwrap_or(section);
-    let (field_mask, lit_pixels, outside, cure, dropped, widened) =
-        match ctx.cure.filter(|c| c.active()) {
-            // The cure correction and prediction work on the coverage (the relative irradiance
-            // the compensation then delivers): drawn, corrected and predicted, then thresholded
-            // and compensated.
-            Some(job) => {
-                let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
-                let (m, c) = job.draw(
-                    ctx.raster,
-                    drawn_section,
-                    &lower,
-                    layer.top,
-                    scratch,
-                    ctx.binary,
-                    comp,
-                );
-                let cure = c.cure.map(|p| (p, c.hist));
-                (m, c.lit_pixels, c.outside, cure, c.dropped, c.widened)
-            }
-            None => {
-                let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
-                let lit = scratch.lit_pixels(&m);
-                let outside = comp.is_some() && scratch.reported_outside();
-                (m, lit, outside, None, Vec::new(), None)
-            }
-        };
+    let coverage = drawing.coverage.take();
+    let drawn_section = drawing.drawn();
+    let (field_mask, lit_pixels, outside, dropped, widened) = match ctx.cure.filter(|c| c.active())
+    {
+        // The cure correction works on the coverage (the relative irradiance the
+        // compensation then delivers): drawn and corrected, then thresholded and
+        // compensated.
+        Some(job) => {
+            let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+            let (m, c) = job.draw(
+                ctx.raster,
+                drawn_section,
+                coverage,
+                drawing.corr.as_ref(),
+                &lower,
+                layer.above == 0,
+                scratch,
+                ctx.binary,
+                comp,
+            );
+            (m, c.lit_pixels, c.outside, c.dropped, c.widened)
+        }
+        None => {
+            let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
+            let lit = scratch.lit_pixels(&m);
+            let outside = comp.is_some() && scratch.reported_outside();
+            (m, lit, outside, Vec::new(), None)
+        }
+    };
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {
@@ -272,6 +377,8 @@ fn draw(
         let sha = bundle::sha256_hex(&png);
         pngs.push((png, sha, k as u32, pixels));
     }
+    // Several projectors: the field's coverage for the cure prediction.
+    let field = ctx.field.map(|_| super::encode_png(&field_mask));
     scratch.recycle(field_mask);
     let recent = ctx
         .recent
@@ -279,7 +386,8 @@ fn draw(
     let masks = Arc::new(DrawnMasks {
         outside,
         area_mm2,
-        cure,
+        field,
+        shifts: drawing.shifts().to_vec(),
         dropped,
         widened,
         pngs,
@@ -290,7 +398,7 @@ fn draw(
         },
     });
     if let Some(recent) = recent {
-        recent.put(section, &masks);
+        recent.put(&drawing.section, &masks);
     }
     Ok(masks)
 }
@@ -307,6 +415,9 @@ fn write_masks(ctx: &LayerContext, drawn: &DrawnMasks, i: usize) -> Result<Vec<M
             projector: *projector,
             pixels: Some(*pixels),
         });
+    }
+    if let (Some(store), Some(png)) = (ctx.field, &drawn.field) {
+        store.write_file(&super::cure_records::field_file(i), png)?;
     }
     Ok(masks)
 }

@@ -96,7 +96,7 @@ pub(super) fn plan_layers(
             masks: o.masks,
             steps: p.steps,
             time_s: p.time_s,
-            cure: o.cure,
+            cure: None,
         });
     }
     let totals = Totals {

@@ -21,8 +21,11 @@ pub(super) struct DrawnMasks {
     pub outside: bool,
     /// Lit area, mm².
     pub area_mm2: f64,
-    /// The predicted cure and its edge errors (`--predict`).
-    pub cure: Option<(crate::bundle::LayerCure, crate::cure::predict::Histogram)>,
+    /// The cure correction's moves of the edges they were drawn with (empty without).
+    pub shifts: Vec<f64>,
+    /// The field's coverage mask as a PNG, for the cure prediction of a job of several
+    /// projectors (`--predict`).
+    pub field: Option<Vec<u8>>,
     /// The flat features the Z correction drops, found while drawing them (empty unless
     /// `xyz`, where masks are not reused).
     pub dropped: Vec<(usize, super::cure_records::LayerDropped)>,
@@ -48,9 +51,14 @@ pub(super) struct PreviousLayerMasks {
 }
 
 impl PreviousLayerMasks {
-    /// The masks, if they serve layer `index`, equal (`same`) to the layer below.
-    pub fn serving(self, index: usize, same: bool) -> Option<Arc<DrawnMasks>> {
-        (same && self.simplified && self.index + 1 == index).then_some(self.masks)
+    /// The masks, if they serve layer `index`, equal (`same`) to the layer below and
+    /// corrected with the moves `shifts`.
+    pub fn serving(self, index: usize, same: bool, shifts: &[f64]) -> Option<Arc<DrawnMasks>> {
+        (same
+            && self.simplified
+            && self.index + 1 == index
+            && same_shifts(&self.masks.shifts, shifts))
+        .then_some(self.masks)
     }
 }
 
@@ -77,20 +85,28 @@ fn same_bits(a: &[Contour], b: &[Contour]) -> bool {
         })
 }
 
+/// Whether two corrections' moves are the same, bit for bit.
+fn same_shifts(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
 impl RecentPrismMasks {
-    /// The masks drawn from `section`, if kept.
-    pub fn get(&self, section: &[Contour]) -> Option<Arc<DrawnMasks>> {
+    /// The masks drawn from `section` corrected with the moves `shifts`, if kept.
+    pub fn get(&self, section: &[Contour], shifts: &[f64]) -> Option<Arc<DrawnMasks>> {
         let v = self.0.lock().ok()?;
         v.iter()
             .rev()
-            .find(|(s, _)| same_bits(s, section))
+            .find(|(s, m)| same_bits(s, section) && same_shifts(&m.shifts, shifts))
             .map(|(_, m)| Arc::clone(m))
     }
 
-    /// Keeps the masks drawn from `section` (unless that section is kept already).
+    /// Keeps the masks drawn from `section` (unless that section, corrected alike, is
+    /// kept already).
     pub fn put(&self, section: &[Contour], masks: &Arc<DrawnMasks>) {
         if let Ok(mut v) = self.0.lock() {
-            if v.iter().any(|(s, _)| same_bits(s, section)) {
+            if v.iter()
+                .any(|(s, m)| same_bits(s, section) && same_shifts(&m.shifts, &masks.shifts))
+            {
                 return;
             }
             if v.len() >= RECENT_PRISM_MASKS {
@@ -109,7 +125,8 @@ mod tests {
         Arc::new(DrawnMasks {
             outside: tag % 2 == 1,
             area_mm2: tag as f64,
-            cure: None,
+            shifts: Vec::new(),
+            field: None,
             dropped: Vec::new(),
             widened: None,
             pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0, Default::default())],
@@ -143,21 +160,24 @@ mod tests {
     #[test]
     fn finds_the_same_section_keeps_a_few_and_drops_the_oldest() {
         let cache = RecentPrismMasks::default();
-        assert!(cache.get(&square(0.0)).is_none());
+        assert!(cache.get(&square(0.0), &[]).is_none());
         cache.put(&square(0.0), &masks(0));
-        let got = cache.get(&square(0.0)).expect("hit");
+        let got = cache.get(&square(0.0), &[]).expect("hit");
         assert_eq!((got.area_mm2, got.outside), (0.0, false));
-        assert!(cache.get(&square(0.5)).is_none());
+        assert!(cache.get(&square(0.5), &[]).is_none());
         // A second put of the same section keeps the first entry (same bytes anyway).
         cache.put(&square(0.0), &masks(9));
-        assert_eq!(cache.get(&square(0.0)).unwrap().area_mm2, 0.0);
+        assert_eq!(cache.get(&square(0.0), &[]).unwrap().area_mm2, 0.0);
         for k in 1..=RECENT_PRISM_MASKS as u8 {
             cache.put(&square(k as f64), &masks(k));
         }
         assert_eq!(cache.0.lock().unwrap().len(), RECENT_PRISM_MASKS);
-        assert!(cache.get(&square(0.0)).is_none(), "the oldest is dropped");
+        assert!(
+            cache.get(&square(0.0), &[]).is_none(),
+            "the oldest is dropped"
+        );
         for k in 1..=RECENT_PRISM_MASKS as u8 {
-            let m = cache.get(&square(k as f64)).expect("kept");
+            let m = cache.get(&square(k as f64), &[]).expect("kept");
             assert_eq!(m.pngs[0].0, vec![k; 3]);
             assert_eq!(m.outside, k % 2 == 1);
         }
@@ -170,12 +190,18 @@ mod tests {
             simplified,
             masks: masks(1),
         };
-        assert!(prev(true).serving(5, true).is_some());
+        assert!(prev(true).serving(5, true, &[]).is_some());
         assert!(
-            prev(true).serving(5, false).is_none(),
+            prev(true).serving(5, false, &[]).is_none(),
             "unlike the layer below"
         );
-        assert!(prev(true).serving(6, true).is_none(), "not the layer below");
-        assert!(prev(false).serving(5, true).is_none(), "drawn unsimplified");
+        assert!(
+            prev(true).serving(6, true, &[]).is_none(),
+            "not the layer below"
+        );
+        assert!(
+            prev(false).serving(5, true, &[]).is_none(),
+            "drawn unsimplified"
+        );
     }
 }

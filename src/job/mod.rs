@@ -105,8 +105,18 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         None => None,
     };
     let writer = open_bundle(&out, format, &profile, &setup)?;
-    let (sliced, gray_map) =
-        make_layers(&profile, &setup, &part, &writer, &control, cure.as_ref())?;
+    // Several projectors' masks do not show the field's light: its coverage is kept for
+    // the cure prediction.
+    let field = (cure.as_ref().is_some_and(|c| c.predicts()) && setup.tiler.is_some())
+        .then(|| Sink::memory(&out));
+    let (sliced, gray_map) = make_layers(
+        &profile,
+        &setup,
+        &part,
+        (&writer, field.as_ref()),
+        &control,
+        cure.as_ref(),
+    )?;
 
     let t_finish = Instant::now();
     let distortion_report = setup.correction.as_ref().map(Correction::report);
@@ -123,7 +133,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         &profile,
     )?;
     warnings.append(&mut optics.warnings);
-    warnings.extend(cure_records::warnings(&planned.layers));
+    let predicted_at = warnings.len();
     warnings.extend(cure.as_ref().and_then(|c| c.dropped_warning()));
     warnings.extend(cure.as_ref().and_then(|c| c.widened_warning()));
     let mut manifest = manifest::manifest(
@@ -134,16 +144,12 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion_report.clone(),
         warnings,
     );
-    manifest.cure = cure.as_ref().map(|c| c.record(&manifest.layers));
-    if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
-        return Err(Error::Job {
-            path: part.path.into(),
-            msg: match manifest.layers.len() {
-                1 => "nothing to print: the only layer has no closed section (an open surface or a part of zero volume)".into(),
-                n => format!("nothing to print: none of the {n} layers has a closed section (an open surface or a part of zero volume)"),
-            },
-        });
+    manifest.cure = cure.as_ref().map(|c| c.record());
+    if let Some(c) = cure.as_ref().filter(|c| c.predicts()) {
+        let files = (&writer, field.as_ref());
+        predict(c, &mut manifest, files, &part, &setup, predicted_at)?;
     }
+    something_to_print(&manifest, part.path)?;
     replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);
@@ -157,22 +163,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         }
     };
     made.keep();
-    if let (Some(c), Some(dir)) = (cure.as_ref(), opts.cure.plots.as_deref()) {
-        let stem = opts
-            .input
-            .file_stem()
-            .map_or("part".into(), |s| s.to_string_lossy());
-        c.write_plots(
-            dir,
-            &stem,
-            &manifest,
-            &part.mesh,
-            &Rasterizer::new(profile.field()),
-        )?;
-    }
-    if let Some(m) = made_plots {
-        m.keep();
-    }
+    cure_plots(cure.as_ref(), opts, &manifest, made_plots)?;
     let mut warnings = manifest.warnings;
     warnings.extend(export_warnings);
     let finish_s = t_finish.elapsed().as_secs_f64();
@@ -195,6 +186,59 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion: distortion_report,
         cure: manifest.cure,
     })
+}
+
+/// The cure prediction's pictures (`--cure-plots`) of the job `manifest`, into the
+/// directory `made` made for them.
+fn cure_plots(
+    cure: Option<&cure_records::CureJob>,
+    opts: &SliceOptions,
+    manifest: &bundle::Manifest,
+    made: Option<MadeDirs>,
+) -> Result<()> {
+    if let (Some(c), Some(dir)) = (cure, opts.cure.plots.as_deref()) {
+        let stem = opts
+            .input
+            .file_stem()
+            .map_or("part".into(), |s| s.to_string_lossy());
+        c.write_plots(dir, &stem, manifest)?;
+    }
+    if let Some(m) = made {
+        m.keep();
+    }
+    Ok(())
+}
+
+/// The cure of the job's masks (`files`: the bundle's, and the field's coverage of a job
+/// of several projectors) into `manifest`, its warnings at `at` among the manifest's.
+fn predict(
+    cure: &cure_records::CureJob,
+    manifest: &mut bundle::Manifest,
+    (writer, field): (&Sink, Option<&Sink>),
+    part: &PlacedPart,
+    setup: &SetUp,
+    at: usize,
+) -> Result<()> {
+    let warp = setup.correction.as_ref().map(|w| (w, part.path));
+    let field = field.map(|f| f as &dyn bundle::BundleSource);
+    cure.predict(manifest, writer, field, &part.mesh, warp)?;
+    let w = cure_records::warnings(&manifest.layers);
+    manifest.warnings.splice(at..at, w);
+    Ok(())
+}
+
+/// An error naming the model `path` when no layer of `manifest` has a closed section.
+fn something_to_print(manifest: &bundle::Manifest, path: &Path) -> Result<()> {
+    if manifest.layers.iter().all(|l| l.area_mm2 <= 0.0) {
+        return Err(Error::Job {
+            path: path.into(),
+            msg: match manifest.layers.len() {
+                1 => "nothing to print: the only layer has no closed section (an open surface or a part of zero volume)".into(),
+                n => format!("nothing to print: none of the {n} layers has a closed section (an open surface or a part of zero volume)"),
+            },
+        });
+    }
+    Ok(())
 }
 
 /// A job dmdsl writes replays clean in `dmdsl run`: the planned steps are simulated
@@ -328,7 +372,7 @@ fn make_layers(
     profile: &Profile,
     setup: &SetUp,
     part: &PlacedPart,
-    writer: &Sink,
+    (writer, field_store): (&Sink, Option<&Sink>),
     control: &Control,
     cure: Option<&cure_records::CureJob>,
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
@@ -350,6 +394,7 @@ fn make_layers(
         binary: profile.slicing.binary,
         px_area_mm2: field.pixel_mm * field.pixel_mm,
         cure,
+        field: field_store,
     };
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {

@@ -17,6 +17,7 @@
 //! output never depends on which worker made it or when.
 
 use super::layer::{layer_masks, BlockWorker, LayerContext, LayerInput, LayerOutput};
+use crate::cure::shift::Coverage;
 use crate::error::{Error, Result};
 use crate::raster::Scratch;
 use crate::slice::{Section, SliceStats, Slicer};
@@ -35,6 +36,59 @@ pub const BLOCK: usize = 8;
 /// Layers sliced but not yet made into masks before the slicer waits (bounds memory: at
 /// most this plus one window are held).
 const MAX_AHEAD: usize = 3 * WINDOW;
+
+/// A layer's section as the slicer cut it, and its coverage while the cure correction of
+/// the layers below it still looks at it: drawn by whichever needs it first (a layer
+/// below, or the layer itself when it draws this very section), dropped when the last
+/// layer below that looks at it is done. So each section is drawn about once for the
+/// look-ahead, and only the coverage of the layers in work is kept.
+pub(super) struct Cut {
+    /// The section.
+    pub section: Section,
+    /// Its coverage (pre-warped with a distortion correction), and how many layers below
+    /// will still look at it.
+    coverage: Mutex<(Option<Arc<Coverage>>, usize)>,
+}
+
+impl Cut {
+    fn new(section: Section, users: usize) -> Cut {
+        Cut {
+            section,
+            coverage: Mutex::new((None, users)),
+        }
+    }
+
+    /// The coverage, made by `make` unless a layer made it already.
+    pub fn coverage(&self, make: impl FnOnce() -> Result<Coverage>) -> Result<Arc<Coverage>> {
+        let mut g = lock(&self.coverage);
+        if let Some(c) = &g.0 {
+            return Ok(Arc::clone(c));
+        }
+        let c = Arc::new(make()?);
+        if g.1 > 1 {
+            g.0 = Some(Arc::clone(&c));
+        }
+        Ok(c)
+    }
+
+    /// Offers the coverage the layer made of its own section, while a layer below will
+    /// still look at it.
+    pub fn offer(&self, make: impl FnOnce() -> Coverage) {
+        let mut g = lock(&self.coverage);
+        if g.0.is_none() && g.1 > 0 {
+            g.0 = Some(Arc::new(make()));
+        }
+    }
+
+    /// A layer below is done looking at it.
+    pub fn release(&self) {
+        let mut g = lock(&self.coverage);
+        g.1 = g.1.saturating_sub(1);
+        if g.1 == 0 {
+            g.0 = None;
+        }
+    }
+}
 
 /// How the caller follows and stops a job.
 pub(super) struct Control<'a> {
@@ -88,6 +142,7 @@ pub(super) fn run<'a>(
         slicer,
         next: 0,
         prev: None,
+        waiting: Vec::new(),
         slice_s: 0.0,
     };
     rayon::scope(|scope| {
@@ -159,19 +214,29 @@ struct Cursor<'a> {
     /// First layer of the next window.
     next: usize,
     /// The last window cut (its last section is the layer below the next window's first).
-    prev: Option<Arc<Vec<Section>>>,
+    prev: Option<Arc<Vec<Cut>>>,
+    /// The last window's blocks whose layers look at sections of the next window (the cure
+    /// correction's layers above), spawned once it is cut.
+    waiting: Vec<Block>,
     /// Time spent cutting, s.
     slice_s: f64,
 }
 
 impl Cursor<'_> {
     /// Cuts the next window.
-    fn cut(&mut self) -> Arc<Vec<Section>> {
+    fn cut(&mut self, ahead: usize) -> Arc<Vec<Cut>> {
         let t = Instant::now();
         let sections = self.slicer.window(self.next..self.next + WINDOW);
         self.slice_s += t.elapsed().as_secs_f64();
+        let start = self.next;
         self.next += WINDOW;
-        Arc::new(sections)
+        Arc::new(
+            sections
+                .into_iter()
+                .enumerate()
+                .map(|(k, section)| Cut::new(section, ahead.min(start + k)))
+                .collect(),
+        )
     }
 }
 
@@ -242,17 +307,29 @@ fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: C
             None => return,
         };
         let start = cursor.next;
-        let sections = cursor.cut();
+        let ahead = p.ctx.cure.map_or(0, |c| c.upper_layers());
+        let sections = cursor.cut(ahead);
         let m = sections.len();
         p.backlog.enter(m);
+        // The last window's blocks that waited for this one's sections.
+        for mut block in cursor.waiting.drain(..) {
+            block.next = Some(Arc::clone(&sections));
+            scope.spawn(move |scope| run_block(scope, p, block));
+        }
         for b in 0..m.div_ceil(BLOCK) {
             let block = Block {
                 start,
                 sections: Arc::clone(&sections),
                 prev: cursor.prev.clone(),
+                next: None,
                 ks: b * BLOCK..((b + 1) * BLOCK).min(m),
             };
-            scope.spawn(move |scope| run_block(scope, p, block));
+            // Waits while its last layer's look-ahead reaches the next window.
+            if block.ks.end - 1 + ahead >= m && start + m < p.layers {
+                cursor.waiting.push(block);
+            } else {
+                scope.spawn(move |scope| run_block(scope, p, block));
+            }
         }
         cursor.prev = Some(sections);
     }
@@ -263,9 +340,11 @@ struct Block {
     /// The window's first layer.
     start: usize,
     /// The window's sections.
-    sections: Arc<Vec<Section>>,
+    sections: Arc<Vec<Cut>>,
     /// The window below's sections.
-    prev: Option<Arc<Vec<Section>>>,
+    prev: Option<Arc<Vec<Cut>>>,
+    /// The window above's sections, where the block's layers look at them.
+    next: Option<Arc<Vec<Cut>>>,
     /// The block's layers, as indices into `sections`.
     ks: Range<usize>,
 }
@@ -298,13 +377,16 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
         let index = block.start + k;
         let layer = LayerInput {
             index,
-            section: &sections[k],
+            section: &sections[k].section,
+            cut: &sections[k],
             below: match k {
                 0 => block.prev.as_ref().and_then(|w| w.last()),
                 _ => Some(&sections[k - 1]),
-            },
+            }
+            .map(|c| &c.section),
             lower: lower_sections(block, k, p.ctx.cure.map_or(0, |c| c.lower_layers())),
-            top: index + 1 == p.layers,
+            upper: upper_sections(block, k, p.ctx.cure.map_or(0, |c| c.upper_layers())),
+            above: p.layers - 1 - index,
         };
         let mut out = layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?;
         // The next block's first layer counts its islands over these.
@@ -325,11 +407,25 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
 fn lower_sections(block: &Block, k: usize, m: usize) -> Vec<&Section> {
     (1..=m)
         .map_while(|d| match k.checked_sub(d) {
-            Some(j) => Some(&block.sections[j]),
+            Some(j) => Some(&block.sections[j].section),
             None => block
                 .prev
                 .as_ref()
-                .and_then(|w| w.len().checked_sub(d - k).map(|j| &w[j])),
+                .and_then(|w| w.len().checked_sub(d - k).map(|j| &w[j].section)),
+        })
+        .collect()
+}
+
+/// The sections of the `m` layers above layer `k` of `block`'s window (nearest first;
+/// fewer near the job's top), from the window and the window above (so `m` ≤ [`WINDOW`]).
+fn upper_sections(block: &Block, k: usize, m: usize) -> Vec<&Cut> {
+    (1..=m)
+        .map_while(|d| match block.sections.get(k + d) {
+            Some(s) => Some(s),
+            None => block
+                .next
+                .as_ref()
+                .and_then(|w| w.get(k + d - block.sections.len())),
         })
         .collect()
 }

@@ -70,7 +70,50 @@ impl Sink {
     }
 }
 
+impl BundleSource for Sink {
+    /// A file written so far (the cure prediction reads the masks back).
+    fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
+        match self {
+            Sink::Dir(w) => crate::bundle::DirSource::new(w.staging_dir())
+                .read(rel)
+                .map(|b| Cow::Owned(b.into_owned())),
+            Sink::Memory { kept, .. } => {
+                let mut k = kept.lock().unwrap_or_else(|e| e.into_inner());
+                k.read(rel).map(Cow::Owned)
+            }
+        }
+    }
+
+    fn shown(&self, rel: &str) -> PathBuf {
+        match self {
+            Sink::Dir(w) => w.staging_dir().join(rel),
+            Sink::Memory { out, .. } => out.join(rel),
+        }
+    }
+}
+
 impl Kept {
+    /// The bytes of file `rel`.
+    fn read(&mut self, rel: &str) -> std::io::Result<Vec<u8>> {
+        match self.files.get(rel) {
+            Some(Stored::Memory(b)) => Ok(b.clone()),
+            Some(&Stored::Spilled(at, n)) => {
+                let f = self
+                    .spill
+                    .as_mut()
+                    .expect("spilled files have a spill file");
+                let mut buf = vec![0; n as usize];
+                f.seek(SeekFrom::Start(at))
+                    .and_then(|_| f.read_exact(&mut buf))?;
+                Ok(buf)
+            }
+            None => Err(std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("{rel} was not made"),
+            )),
+        }
+    }
+
     /// Keeps `bytes` as file `rel`: in memory while under `budget`, else in the spill file
     /// (created beside `out` and, on Unix, unlinked at once).
     fn put(&mut self, out: &Path, rel: &str, bytes: &[u8], budget: u64) -> Result<()> {
@@ -125,42 +168,23 @@ fn spill_file(out: &Path) -> Result<File> {
 /// The files a [`Sink::Memory`] kept, read back for the exporter.
 pub(super) struct MemoryFiles {
     out: PathBuf,
-    files: HashMap<String, Stored>,
-    spill: Option<Mutex<File>>,
+    kept: Mutex<Kept>,
 }
 
 impl MemoryFiles {
     /// The files `kept` for the output `out`.
     pub(super) fn new(out: &Path, kept: Mutex<Kept>) -> MemoryFiles {
-        let k = kept.into_inner().unwrap_or_else(|e| e.into_inner());
         MemoryFiles {
             out: out.into(),
-            files: k.files,
-            spill: k.spill.map(Mutex::new),
+            kept,
         }
     }
 }
 
 impl BundleSource for MemoryFiles {
     fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
-        match self.files.get(rel) {
-            Some(Stored::Memory(b)) => Ok(Cow::Borrowed(b.as_slice())),
-            Some(&Stored::Spilled(at, n)) => {
-                let spill = self
-                    .spill
-                    .as_ref()
-                    .expect("spilled files have a spill file");
-                let mut f = spill.lock().unwrap_or_else(|e| e.into_inner());
-                let mut buf = vec![0; n as usize];
-                f.seek(SeekFrom::Start(at))
-                    .and_then(|_| f.read_exact(&mut buf))?;
-                Ok(Cow::Owned(buf))
-            }
-            None => Err(std::io::Error::new(
-                std::io::ErrorKind::NotFound,
-                format!("{rel} was not made"),
-            )),
-        }
+        let mut k = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        k.read(rel).map(Cow::Owned)
     }
 
     fn shown(&self, rel: &str) -> PathBuf {

@@ -20,25 +20,68 @@ const DP: f64 = 0.15;
 const OVERCURE: f64 = 0.03;
 pub(crate) const H: f64 = 0.05;
 
-/// The mid-layer threshold of the model, written out: a wall's own layer and every layer
-/// above light it alike; D₀ = Ec·exp((h + overcure)/Dp) at a full pixel.
+/// The prism's mid-layer threshold of the model, written out: a wall's own layer and
+/// every layer above light it alike; D₀ = Ec·exp((h + overcure)/Dp) at a full pixel.
 pub(crate) fn threshold() -> f64 {
     (-(H / 2.0 + OVERCURE) / DP).exp() * (1.0 - (-H / DP).exp())
 }
 
-/// The brute-force evaluation of the model on one written mask (compensation off: the
-/// mask's values are the relative irradiance).
+/// The light (of a full pixel of a normal layer's, its own and the layers above's) at
+/// which a layer's mid-plane cures: Ec/D₀·exp(h/(2Dp)).
+pub(crate) fn mid_threshold() -> f64 {
+    (-(H / 2.0 + OVERCURE) / DP).exp()
+}
+
+/// A layer's own light below which resin cured at its mid-plane is the layers above's
+/// print-through, not its edge (docs/CURE.md).
+const NEAR: f64 = 0.01;
+
+/// The brute-force evaluation of the model on a layer of a written bundle (compensation
+/// off: the masks' values are the relative irradiance): every lit pixel of the layer's
+/// mask and of the masks above it, each weighted by its exposure and its depth.
 pub(crate) struct Oracle {
-    pub(crate) data: Vec<u8>,
+    /// Σ_k q^k·r_{i+k}·(mask value / 255) per pixel: the light that reaches the layer's
+    /// top before the blur.
+    pub(crate) data: Vec<f64>,
+    /// The layer's own mask / 255.
+    pub(crate) own: Vec<f64>,
     pub(crate) w: i64,
     pub(crate) h: i64,
 }
 
 impl Oracle {
-    /// Relative light at field pixel coordinates (u, v): every lit pixel within 12σ (the
-    /// rest is below e⁻⁷² of a pixel's light), 4 × 4 point sources each.
+    /// Layer `i` of the bundle `dir` whose manifest is `job`: its mask and the masks of
+    /// up to 40 layers above it (q⁴⁰ ≈ 10⁻⁶), each weighted by q^k and its exposure
+    /// against a normal layer's (the last layer's: the default profile's are normal).
+    pub(crate) fn of_layer(dir: &Path, job: &Value, i: usize) -> Oracle {
+        let layers = job["layers"].as_array().unwrap();
+        let normal = layers.last().unwrap()["exposure_s"].as_f64().unwrap();
+        let q = (-H / DP).exp();
+        let mut oracle = Oracle {
+            data: Vec::new(),
+            own: Vec::new(),
+            w: 0,
+            h: 0,
+        };
+        for (k, l) in layers.iter().enumerate().skip(i).take(40) {
+            let (w, h, px) = read_gray(&dir.join(l["masks"][0]["file"].as_str().unwrap()));
+            if k == i {
+                oracle.own = px.iter().map(|&v| v as f64 / 255.0).collect();
+                oracle.data = vec![0.0; px.len()];
+                (oracle.w, oracle.h) = (w as i64, h as i64);
+            }
+            let wk = q.powi((k - i) as i32) * l["exposure_s"].as_f64().unwrap() / normal;
+            for (d, &v) in oracle.data.iter_mut().zip(&px) {
+                *d += wk * v as f64 / 255.0;
+            }
+        }
+        oracle
+    }
+
+    /// The light of `px` at field pixel coordinates (u, v): every lit pixel within 12σ
+    /// (the rest is below e⁻⁷² of a pixel's light), 4 × 4 point sources each.
     #[inline]
-    pub(crate) fn light(&self, u: f64, v: f64) -> f64 {
+    fn sum(&self, px: &[f64], u: f64, v: f64) -> f64 {
         let r = (12.0 * SIGMA).ceil() as i64 + 1;
         let (cu, cv) = (u.floor() as i64, v.floor() as i64);
         let mut sum = 0.0;
@@ -46,8 +89,8 @@ impl Oracle {
         let norm = 1.0 / (2.0 * std::f64::consts::PI * SIGMA * SIGMA) / (k * k) as f64;
         for row in (cv - r).max(0)..=(cv + r).min(self.h - 1) {
             for col in (cu - r).max(0)..=(cu + r).min(self.w - 1) {
-                let val = self.data[(row * self.w + col) as usize];
-                if val == 0 {
+                let val = px[(row * self.w + col) as usize];
+                if val == 0.0 {
                     continue;
                 }
                 let mut s = 0.0;
@@ -58,20 +101,35 @@ impl Oracle {
                         s += (-(x * x + y * y) / (2.0 * SIGMA * SIGMA)).exp();
                     }
                 }
-                sum += s * norm * val as f64 / 255.0;
+                sum += s * norm * val;
             }
         }
         sum
     }
 
+    /// The light that reaches the layer's top at (u, v), of a full pixel of a normal
+    /// layer's.
+    pub(crate) fn light(&self, u: f64, v: f64) -> f64 {
+        self.sum(&self.data, u, v)
+    }
+
+    /// Whether the layer's mid-plane cures at (u, v) as its edge (its own light at least
+    /// [`NEAR`]), by how much: the smaller margin.
+    fn margin(&self, u: f64, v: f64) -> f64 {
+        let a = self.light(u, v) - mid_threshold();
+        if a < 0.0 {
+            return a;
+        }
+        a.min(self.sum(&self.own, u, v) - NEAR)
+    }
+
     /// Signed distance (px, along the outward normal `n`) from the exact edge point `p`
-    /// (build-plane mm) to the cured edge: the light's crossing of the threshold nearest
-    /// the edge, on a 0.05 px grid from −2 to 2 px, refined by bisection.
+    /// (build-plane mm) to the cured edge: the crossing nearest the edge, on a 0.05 px
+    /// grid from −2 to 2 px, refined by bisection.
     pub(crate) fn cured_edge(&self, p: [f64; 2], n: [f64; 2]) -> Option<f64> {
         let (u, v) = (p[0] / P, ROWS - p[1] / P);
         let (nu, nv) = (n[0], -n[1]);
-        let t = threshold();
-        let f = |s: f64| self.light(u + s * nu, v + s * nv) - t;
+        let f = |s: f64| self.margin(u + s * nu, v + s * nv);
         let steps: Vec<f64> = (0..=80).map(|i| -2.0 + 0.05 * i as f64).collect();
         let vals: Vec<f64> = steps.iter().map(|&s| f(s)).collect();
         let mut best: Option<(f64, f64)> = None;
@@ -142,8 +200,9 @@ fn edge_points() -> Vec<([f64; 2], [f64; 2])> {
 }
 
 /// Slices the feature part (compensation off: the mask's values are the relative
-/// irradiance) and returns the summary and the oracle's errors on its middle layer.
-fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>) {
+/// irradiance) and returns the summary, the oracle's errors on its middle layer and the
+/// report's mean absolute error there.
+fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>, f64) {
     let f = fixture("features.stl");
     let o = run_in(
         dir,
@@ -163,12 +222,9 @@ fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>) {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: Value = serde_json::from_slice(&o.stdout).unwrap();
-    let (w, h, data) = read_gray(&dir.join(out).join("masks/00003.png"));
-    let oracle = Oracle {
-        data,
-        w: w as i64,
-        h: h as i64,
-    };
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join(out).join("job.json")).unwrap()).unwrap();
+    let oracle = Oracle::of_layer(&dir.join(out), &job, 3);
     let errors = edge_points()
         .into_iter()
         .map(|(p, n)| {
@@ -177,7 +233,8 @@ fn sliced(dir: &Path, out: &str, correction: &str) -> (Value, Vec<f64>) {
                 .unwrap_or_else(|| panic!("{out}: no cured edge near {p:?}"))
         })
         .collect();
-    (summary, errors)
+    let report = job["layers"][3]["cure"]["abs_mean_px"].as_f64().unwrap();
+    (summary, errors, report)
 }
 
 /// Mean and 95th percentile of the absolute errors, and their signed mean.
@@ -193,46 +250,41 @@ pub(crate) fn stats(e: &[f64]) -> (f64, f64, f64) {
 #[test]
 fn correction_puts_the_cured_edge_on_the_section_and_the_report_shows_the_error() {
     let dir = tempdir("cure-features");
-    // Without correction: the blurred edge cures where a wall's accumulated dose reaches
-    // Ec, outside the section (threshold below one half).
-    let (off, e_off) = sliced(&dir, "off.dmdjob", "off");
-    let (mean, p95, signed) = stats(&e_off);
+    // Without correction: the blurred edge cures where the dose of the layer and the
+    // layers above reaches Ec at its mid-plane, outside the section.
+    let (off, e_off, rmean) = sliced(&dir, "off.dmdjob", "off");
+    let (mean, _, signed) = stats(&e_off);
     assert!(threshold() < 0.5);
     assert!(
-        mean > 0.4 && signed > 0.4,
+        mean > 0.3 && signed > 0.3,
         "oracle without correction: {mean} {signed}"
     );
-    let rep = &off["cure"]["predicted"];
     assert_eq!(off["cure"]["correction"], "off");
-    let rmean = rep["edge_error_px"]["mean"].as_f64().unwrap();
-    let rp95 = rep["edge_error_px"]["p95"].as_f64().unwrap();
     // The report shows the error the correction removes, as the oracle finds it.
     assert!(
         (rmean - mean).abs() < 0.05,
         "report {rmean} vs oracle {mean}"
     );
-    assert!(
-        (rp95 - p95).abs() < 0.15,
-        "report p95 {rp95} vs oracle {p95}"
-    );
+    let rep = &off["cure"]["predicted"];
     assert_eq!(rep["vanished"], 0);
     assert_eq!(rep["merged"], 0);
 
     // With the default correction (xy): within 0.25 px mean and 0.5 px p95, by the
-    // oracle and by the report.
-    let (xy, e_xy) = sliced(&dir, "xy.dmdjob", "xy");
-    let (mean, p95, _) = stats(&e_xy);
+    // oracle and by the report (every layer: the bottom ones at twice the exposure, the
+    // top ones with fewer layers above).
+    let (xy, e_xy, rmean) = sliced(&dir, "xy.dmdjob", "xy");
+    let (mean, p95, signed) = stats(&e_xy);
     assert!(
-        mean <= 0.25 && p95 <= 0.5,
-        "oracle with correction: {mean} {p95}"
+        mean <= 0.25 && p95 <= 0.5 && signed.abs() <= 0.1,
+        "oracle with correction: {mean} {p95} {signed}"
     );
     let rep = &xy["cure"]["predicted"];
     assert_eq!(xy["cure"]["correction"], "xy");
-    let rmean = rep["edge_error_px"]["mean"].as_f64().unwrap();
-    let rp95 = rep["edge_error_px"]["p95"].as_f64().unwrap();
+    let jmean = rep["edge_error_px"]["mean"].as_f64().unwrap();
+    let jp95 = rep["edge_error_px"]["p95"].as_f64().unwrap();
     assert!(
-        rmean <= 0.25 && rp95 <= 0.5,
-        "report with correction: {rmean} {rp95}"
+        jmean <= 0.25 && jp95 <= 0.5,
+        "report with correction: {jmean} {jp95}"
     );
     assert!(
         (rmean - mean).abs() < 0.05,
@@ -256,6 +308,14 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
     assert_eq!(job["cure"]["correction"], "xy");
     assert!(job["cure"].get("predicted").is_none());
     // The pictures: the per-layer chart and the worst layer's outline.
+    let worst = |dir: &Path| {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .find(|n| n.starts_with("cube10-cure-layer-"))
+            .expect("the worst layer's picture")
+    };
     let o = run_in(
         &dir,
         &[
@@ -273,8 +333,11 @@ fn the_default_profile_corrects_by_default_and_old_profiles_do_not() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     // The plot directory and its parents are made, as an output's are.
-    for name in ["cube10-cure-errors.png", "cube10-cure-layer-00000.png"] {
-        let (w, h, _) = read_rgb_size(&dir.join("plots/cure").join(name));
+    for name in [
+        "cube10-cure-errors.png".to_string(),
+        worst(&dir.join("plots/cure")),
+    ] {
+        let (w, h, _) = read_rgb_size(&dir.join("plots/cure").join(&name));
         assert!(w >= 900 && h >= 600, "{name}: {w} x {h}");
     }
     // A profile without psf_sigma_px (written before the key existed) loads, and its jobs

@@ -275,14 +275,10 @@ fn samples(tris: &[[V3; 3]], z: f64, spacing: f64) -> Vec<([f64; 2], [f64; 2])> 
     out
 }
 
-/// The oracle's edge errors (px) at `points` on the mask `mask`, on every core.
-fn oracle_errors(mask: &Path, points: &[([f64; 2], [f64; 2])]) -> Vec<f64> {
-    let (w, h, data) = read_gray(mask);
-    let oracle = Oracle {
-        data,
-        w: w as i64,
-        h: h as i64,
-    };
+/// The oracle's edge errors (px) at `points` of layer `i` of the bundle `dir` (its
+/// manifest `job`), on every core.
+fn oracle_errors(dir: &Path, job: &Value, i: usize, points: &[([f64; 2], [f64; 2])]) -> Vec<f64> {
+    let oracle = Oracle::of_layer(dir, job, i);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let chunk = points.len().div_ceil(threads).max(1);
     std::thread::scope(|sc| {
@@ -294,7 +290,7 @@ fn oracle_errors(mask: &Path, points: &[([f64; 2], [f64; 2])]) -> Vec<f64> {
                     part.iter()
                         .map(|&(p, n)| {
                             oracle.cured_edge(p, n).unwrap_or_else(|| {
-                                panic!("{}: no cured edge near {p:?}", mask.display())
+                                panic!("{}: layer {i}: no cured edge near {p:?}", dir.display())
                             })
                         })
                         .collect::<Vec<f64>>()
@@ -365,8 +361,7 @@ fn measure(
         let z = (i as f64 + 0.5) * H;
         assert!((l["slice_z_mm"].as_f64().unwrap() - z).abs() < 1e-9);
         let points = samples(&tris, z, spacing);
-        let mask = dir.join(&out).join(l["masks"][0]["file"].as_str().unwrap());
-        errors.extend(oracle_errors(&mask, &points));
+        errors.extend(oracle_errors(&dir.join(&out), &job, i, &points));
         let n = l["cure"]["samples"].as_u64().unwrap();
         rep_sum += n as f64 * l["cure"]["abs_mean_px"].as_f64().unwrap();
         rep_n += n;

@@ -86,10 +86,10 @@ pub struct FaultEvent {
     /// Layer during which it happened.
     pub layer: usize,
     /// Time the firmware detected it, s.
-    #[serde(serialize_with = "crate::exec::report::six")]
+    #[serde(serialize_with = "crate::round::six")]
     pub time_s: f64,
     /// Where the stage stopped, mm.
-    #[serde(serialize_with = "crate::exec::report::six")]
+    #[serde(serialize_with = "crate::round::six")]
     pub stage_mm: f64,
     /// What happened and what the firmware did.
     pub message: String,

@@ -1,76 +1,51 @@
 //! Islands: the connected regions of a layer's lit pixels that share no pixel with the
-//! layer below's (they would print onto nothing).
+//! layer below's (they would print onto nothing). The regions are
+//! [`crate::cure::islands::components`], the counter the cure check shares.
 
 use super::LitRuns;
+use crate::cure::islands::components;
 
-fn find(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        parent[i as usize] = parent[parent[i as usize] as usize];
-        i = parent[i as usize];
-    }
-    i
+/// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
+/// with the lit pixels `prev` of the layer below.
+pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+    count_islands(cur, prev)
 }
 
-/// The runs of `cur` that share no pixel with a run of `prev` in the same row (indexes
-/// into `cur.runs`, increasing), into `out`.
-fn unsupported_runs(cur: &LitRuns, prev: &LitRuns, out: &mut Vec<u32>) {
-    out.clear();
+/// Whether each run of `cur` shares a pixel with a run of `prev` in the same row, and
+/// whether any does not.
+fn supported_runs(cur: &LitRuns, prev: &LitRuns) -> (Vec<bool>, bool) {
     let (rc, rp) = (&cur.runs, &prev.runs);
     // Both sorted by row then column, and a row's runs are disjoint: one merge-walk.
     let mut j = 0;
-    for (i, r) in rc.iter().enumerate() {
-        // Skip the runs below that end before this one starts (in this row or earlier).
-        while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
-            j += 1;
-        }
-        if j == rp.len() || rp[j][0] != r[0] || rp[j][1] >= r[2] {
-            out.push(i as u32);
-        }
-    }
+    let mut all = true;
+    let on = rc
+        .iter()
+        .map(|r| {
+            // Skip the runs below that end before this one starts (in this row or earlier).
+            while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
+                j += 1;
+            }
+            let rests = j < rp.len() && rp[j][0] == r[0] && rp[j][1] < r[2];
+            all &= rests;
+            rests
+        })
+        .collect();
+    (on, !all)
 }
 
-/// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
-/// with the lit pixels `prev` of the layer below. A region is supported when one of its
-/// runs is; so only the runs that rest on nothing (usually none, else a few along the
-/// layer's new parts) are joined into regions (union-find over them), each region marked
-/// supported when one of its runs touches a supported run in the row above or below.
-pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
-    // Empty (no allocation) in the usual case.
-    let mut unsup = Vec::new();
-    unsupported_runs(cur, prev, &mut unsup);
-    if unsup.is_empty() {
+/// [`islands`]. Usually every run rests on a run below and there is no island; otherwise
+/// the runs' regions, each supported when one of its runs rests on the layer below.
+pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+    let (on, any_free) = supported_runs(cur, prev);
+    if !any_free {
         return 0;
     }
-    let rc = &cur.runs;
-    let u = &unsup[..];
-    let mut parent: Vec<u32> = (0..u.len() as u32).collect();
-    let mut supported = vec![false; u.len()];
-    for (a, &i) in u.iter().enumerate() {
-        let [row, s, e] = rc[i as usize];
-        for nrow in [row.checked_sub(1), Some(row + 1)].into_iter().flatten() {
-            // The runs of row `nrow` that share a column with `[s, e)`: sorted by row,
-            // then by start (and end: a row's runs are disjoint).
-            let mut k = rc.partition_point(|r| r[0] < nrow || (r[0] == nrow && r[2] <= s));
-            while k < rc.len() && rc[k][0] == nrow && rc[k][1] < e {
-                match u.binary_search(&(k as u32)) {
-                    Ok(b) => {
-                        let (x, y) = (find(&mut parent, a as u32), find(&mut parent, b as u32));
-                        if x != y {
-                            parent[x as usize] = y;
-                            supported[y as usize] |= supported[x as usize];
-                        }
-                    }
-                    Err(_) => {
-                        let x = find(&mut parent, a as u32);
-                        supported[x as usize] = true;
-                    }
-                }
-                k += 1;
-            }
-        }
+    let (region, n) = components(&cur.runs);
+    let mut supported = vec![false; n];
+    for (&g, &s) in region.iter().zip(&on) {
+        supported[g as usize] |= s;
     }
-    let roots = (0..u.len() as u32).filter(|&a| find(&mut parent, a) == a);
-    roots.filter(|&a| !supported[a as usize]).count() as u32
+    supported.iter().filter(|&&s| !s).count() as u32
 }
 
 #[cfg(test)]
@@ -198,9 +173,7 @@ mod tests {
                 (w.max(r[2] as usize), h.max(r[0] as usize + 1))
             });
             let want = flood_islands(&grid_of(&rc, w, h), &grid_of(&rp, w, h), w, h);
-            let mut unsup = Vec::new();
-            unsupported_runs(&rc, &rp, &mut unsup);
-            if unsup.is_empty() {
+            if !supported_runs(&rc, &rp).1 {
                 assert_eq!(want, 0);
                 shortcut += 1;
             }

@@ -2,11 +2,12 @@
 //! field-sized buffer (A_i = r_i·L_i + q·A_{i+1}), each layer's cured samples, the
 //! islands that vanish or merge, and the print-through below downward-facing pixels.
 
-use crate::resin::CureModel;
-
-use super::islands::{connect, Run};
-use super::kernel::Prepared;
-use super::{NEAR, SUB};
+use super::check::{NEAR, SUB};
+use super::islands::{components, Run};
+use super::kernel::{Irradiance, Prepared};
+#[cfg(test)]
+use super::kernel::Kernel;
+use super::CureModel;
 
 /// The accumulation's pending decay factor below which it is applied to the buffer.
 const RENORMALIZE: f32 = 1e-20;
@@ -31,6 +32,9 @@ pub struct LayerOut {
 /// The sequential part of the check: the accumulation buffer and the scratch buffers,
 /// for a field of `w`×`h` pixels.
 pub struct Engine {
+    /// The field's pixels across and down.
+    w: usize,
+    h: usize,
     /// Samples across.
     sw: usize,
     q: f32,
@@ -51,6 +55,11 @@ pub struct Engine {
     runs: Vec<Run>,
     rows: Vec<u32>,
     intervals: Vec<(u32, u32)>,
+    /// With [`Engine::track_irradiance`]: Σ_k q^k·r_{i+k}·I_{i+k} per pixel (× `scale`),
+    /// the unblurred light that reaches the last layer's top; empty otherwise.
+    irr: Vec<f32>,
+    /// The pixel box where `irr` may be nonzero.
+    irr_box: Option<[usize; 4]>,
 }
 
 impl Engine {
@@ -58,6 +67,8 @@ impl Engine {
     pub fn new(w: usize, h: usize, model: &CureModel) -> Engine {
         let h_mm = model.layer_mm;
         Engine {
+            w,
+            h,
             sw: w * SUB,
             q: (-h_mm / model.dp_mm).exp() as f32,
             mid: model.threshold(0.5 * h_mm, Some(0)) as f32,
@@ -70,7 +81,31 @@ impl Engine {
             runs: Vec::new(),
             rows: Vec::new(),
             intervals: Vec::new(),
+            irr: Vec::new(),
+            irr_box: None,
         }
+    }
+
+    /// Keeps the unblurred light of the layers above as well ([`Engine::irradiance`]).
+    pub fn track_irradiance(&mut self, on: bool) {
+        self.irr = if on {
+            vec![0.0; self.w * self.h]
+        } else {
+            Vec::new()
+        };
+    }
+
+    /// The light that reaches the last layer's top before the blur, per pixel (row-major,
+    /// the field's width) and the factor its values are to be multiplied by:
+    /// Σ_k q^k·r_{i+k}·I_{i+k}, in units of a full pixel of a normal layer (empty without
+    /// [`Engine::track_irradiance`]). Its blur is the light the engine cures by.
+    pub fn irradiance(&self) -> (&[f32], f32) {
+        (&self.irr, self.scale)
+    }
+
+    /// The field's size in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.w, self.h)
     }
 
     /// The accumulated light at sample (`x`, `y`) after the last layer.
@@ -82,37 +117,64 @@ impl Engine {
     /// Adds layer `cur` (light scaled by `ratio`) on top of the layers processed so far
     /// (the ones above it) and evaluates its cure; `below` is the layer under it (`None`
     /// for the first layer, which rests on the platform).
-    pub fn layer(&mut self, cur: &Prepared, below: Option<&Prepared>, ratio: f32) -> LayerOut {
+    /// `irr` is the layer's irradiance, read only with [`Engine::track_irradiance`].
+    pub fn layer(
+        &mut self,
+        cur: &Prepared,
+        below: Option<&Prepared>,
+        irr: &Irradiance,
+        ratio: f32,
+    ) -> LayerOut {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2.
-            return unsafe { self.layer_avx2(cur, below, ratio) };
+            return unsafe { self.layer_avx2(cur, below, irr, ratio) };
         }
-        self.layer_with(cur, below, ratio)
+        self.layer_with(cur, below, irr, ratio)
     }
 
     /// [`Engine::layer`] compiled for AVX2 (the same values).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn layer_avx2(&mut self, cur: &Prepared, below: Option<&Prepared>, ratio: f32) -> LayerOut {
-        self.layer_with(cur, below, ratio)
+    fn layer_avx2(
+        &mut self,
+        cur: &Prepared,
+        below: Option<&Prepared>,
+        irr: &Irradiance,
+        ratio: f32,
+    ) -> LayerOut {
+        self.layer_with(cur, below, irr, ratio)
     }
 
     #[inline(always)]
-    fn layer_with(&mut self, cur: &Prepared, below: Option<&Prepared>, ratio: f32) -> LayerOut {
+    fn layer_with(
+        &mut self,
+        cur: &Prepared,
+        below: Option<&Prepared>,
+        irr: &Irradiance,
+        ratio: f32,
+    ) -> LayerOut {
         // Everything above reaches this layer's top through one more layer: one factor,
         // folded into the buffer once it gets small.
         self.scale *= self.q;
         if self.scale < RENORMALIZE {
-            if let Some([x0, y0, x1, y1]) = self.acc_box {
-                let f = self.scale;
-                for y in y0..y1 {
-                    for a in &mut self.acc[y * self.sw + x0..y * self.sw + x1] {
-                        *a *= f;
+            let f = self.scale;
+            for (buf, bx, w) in [
+                (&mut self.acc, self.acc_box, self.sw),
+                (&mut self.irr, self.irr_box, self.w),
+            ] {
+                if let (Some([x0, y0, x1, y1]), false) = (bx, buf.is_empty()) {
+                    for y in y0..y1 {
+                        for a in &mut buf[y * w + x0..y * w + x1] {
+                            *a *= f;
+                        }
                     }
                 }
             }
             self.scale = 1.0;
+        }
+        if !self.irr.is_empty() && !irr.is_empty() {
+            self.add_irradiance(irr, ratio);
         }
         let mut out = LayerOut::default();
         if cur.is_empty() {
@@ -136,6 +198,24 @@ impl Engine {
             out.print_through_mm = self.print_through(cur, below);
         }
         out
+    }
+
+    /// irr += ratio · (the layer's irradiance) over its box.
+    fn add_irradiance(&mut self, irr: &Irradiance, ratio: f32) {
+        let [c0, r0, c1, r1] = irr.bbox;
+        let gain = ratio / self.scale;
+        for (r, row) in (r0..r1).zip(irr.data.chunks(c1 - c0)) {
+            for (a, v) in self.irr[r * self.w + c0..r * self.w + c1]
+                .iter_mut()
+                .zip(row)
+            {
+                *a += gain * v;
+            }
+        }
+        self.irr_box = Some(match self.irr_box {
+            None => irr.bbox,
+            Some(a) => [a[0].min(c0), a[1].min(r0), a[2].max(c1), a[3].max(r1)],
+        });
     }
 
     /// acc += ratio · (the layer's own light) over its sample box (each row's span).
@@ -278,7 +358,7 @@ impl Engine {
             let i = i as usize;
             if !cured[i] {
                 cured[i] =
-                    (run.c0..run.c1).any(|c| self.pixel_max(c as usize, run.r as usize) >= mid);
+                    (run[1]..run[2]).any(|c| self.pixel_max(c as usize, run[0] as usize) >= mid);
             }
         }
         let (px, sum) = (&cur.px, &cur.sum);
@@ -312,24 +392,20 @@ impl Engine {
                         .iter()
                         .position(|&v| v < mid)
                         .map_or(row.len(), |b| x + a + b);
-                    runs.push(Run {
-                        r: y as u32,
-                        c0: (x0 + x + a) as u32,
-                        c1: (x0 + b) as u32,
-                    });
+                    runs.push([y as u32, (x0 + x + a) as u32, (x0 + b) as u32]);
                     x = b;
                 }
                 rows.push(runs.len() as u32);
             }
-            let (region_of, m) = connect(&runs, &rows);
+            let (region_of, m) = components(&runs);
             let mut region: Vec<Vec<usize>> = vec![Vec::new(); m];
             for (run, &l) in cur.runs.iter().zip(&cur.island) {
-                let (a, b) = (run.c0 * SUB as u32, run.c1 * SUB as u32);
-                for y in run.r as usize * SUB..(run.r as usize + 1) * SUB {
+                let (a, b) = (run[1] * SUB as u32, run[2] * SUB as u32);
+                for y in run[0] as usize * SUB..(run[0] as usize + 1) * SUB {
                     let k = y - y0;
                     for j in rows[k] as usize..rows[k + 1] as usize {
                         let s = runs[j];
-                        if s.c0 < b && a < s.c1 {
+                        if s[1] < b && a < s[2] {
                             let g = region_of[j] as usize;
                             if region[g].last() != Some(&(l as usize)) {
                                 region[g].push(l as usize);
@@ -438,15 +514,15 @@ impl Engine {
                 below
                     .row(r)
                     .iter()
-                    .map(|b| (b.c0.saturating_sub(1), b.c1 + 1)),
+                    .map(|b| (b[1].saturating_sub(1), b[2] + 1)),
             );
             if r > 0 {
-                iv.extend(below.row(r - 1).iter().map(|b| (b.c0, b.c1)));
+                iv.extend(below.row(r - 1).iter().map(|b| (b[1], b[2])));
             }
-            iv.extend(below.row(r + 1).iter().map(|b| (b.c0, b.c1)));
+            iv.extend(below.row(r + 1).iter().map(|b| (b[1], b[2])));
             iv.sort_unstable();
             for run in runs {
-                let mut pos = run.c0;
+                let mut pos = run[1];
                 let mut free = |a: u32, b: u32| {
                     for c in a..b {
                         let v = self.pixel_max(c as usize, r);
@@ -459,19 +535,19 @@ impl Engine {
                     if e <= pos {
                         continue;
                     }
-                    if s >= run.c1 {
+                    if s >= run[2] {
                         break;
                     }
                     if s > pos {
                         free(pos, s);
                     }
                     pos = pos.max(e);
-                    if pos >= run.c1 {
+                    if pos >= run[2] {
                         break;
                     }
                 }
-                if pos < run.c1 {
-                    free(pos, run.c1);
+                if pos < run[2] {
+                    free(pos, run[2]);
                 }
             }
         }
@@ -483,10 +559,9 @@ impl Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::exec::cure::tests::model;
-    use crate::exec::cure::{Irradiance, Kernel};
-    use crate::resin::psf::phi_inv;
-    use crate::resin::Psf;
+    use crate::cure::psf::phi_inv;
+    use crate::cure::test_model as model;
+    use crate::cure::{Irradiance, Psf};
 
     /// A `w`×`h` image with `v` in the pixel rectangle [c0, c1) × [r0, r1).
     fn rect(w: usize, h: usize, [c0, r0, c1, r1]: [usize; 4], v: f32) -> Vec<f32> {
@@ -515,7 +590,13 @@ mod tests {
             .collect();
         let mut out = vec![LayerOut::default(); stack.len()];
         for i in (0..stack.len()).rev() {
-            out[i] = e.layer(&irr[i], i.checked_sub(1).map(|b| &irr[b]), stack[i].1);
+            let none = Irradiance::default();
+            out[i] = e.layer(
+                &irr[i],
+                i.checked_sub(1).map(|b| &irr[b]),
+                &none,
+                stack[i].1,
+            );
         }
         out
     }
@@ -608,7 +689,7 @@ mod tests {
                 }
                 let ratio = [0.1, 0.5, 0.9, 1.0, 3.0][layer % 5];
                 let p = k.prepare(&Irradiance::from_image(w, h, &img), ratio);
-                let out = e.layer(&p, None, ratio);
+                let out = e.layer(&p, None, &Irradiance::default(), ratio);
                 let want = e.cured_samples_reference(&p);
                 assert!(
                     (out.cured_samples - want).abs() <= 1e-9 * want.max(1.0),

@@ -8,6 +8,7 @@ pub fn phi(x: f64) -> f64 {
 }
 
 /// The inverse of [`phi`] for `p` in (0, 1) (bisection to 1e-12).
+#[cfg(test)]
 pub fn phi_inv(p: f64) -> f64 {
     let (mut lo, mut hi) = (-40.0f64, 40.0f64);
     for _ in 0..200 {
@@ -70,6 +71,7 @@ impl Psf {
 
     /// The standard deviation of the light across a straight anti-aliased edge: the PSF and
     /// a pixel's box (variance 1/12) together, √(σ² + 1/12).
+    #[cfg(test)]
     pub fn sigma_edge_px(&self) -> f64 {
         (self.sigma_px * self.sigma_px + 1.0 / 12.0).sqrt()
     }

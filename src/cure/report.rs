@@ -1,13 +1,12 @@
 //! The cure check's report: its types (`CureCheck`, one `LayerCureCheck` per layer,
 //! `Finding`s) and the job's figures from the layers' (`summarize`).
 
-use crate::bundle::Manifest;
-use crate::exec::report::{six, six_opt};
-use crate::resin::CureModel;
-use serde::Serialize;
-
+use super::check::{SUB, WORST_LAYERS};
 use super::engine::LayerOut;
-use super::{SUB, WORST_LAYERS};
+use super::CureModel;
+use crate::bundle::Manifest;
+use crate::round::{six, six_opt, six_pair};
+use serde::Serialize;
 
 /// Statistics of the absolute edge offset over layers, px.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
@@ -40,14 +39,6 @@ pub struct Finding {
     pub at_mm: [f64; 2],
 }
 
-fn six_pair<S: serde::Serializer>(v: &[f64; 2], s: S) -> std::result::Result<S::Ok, S::Error> {
-    [
-        crate::round::decimals(v[0], 6),
-        crate::round::decimals(v[1], 6),
-    ]
-    .serialize(s)
-}
-
 /// One layer's cure, from its masks.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct LayerCureCheck {
@@ -57,7 +48,7 @@ pub struct LayerCureCheck {
     #[serde(serialize_with = "six")]
     pub section_mm2: f64,
     /// Cured area at mid-layer, mm² (samples where the layer's own light is at least
-    /// [`NEAR`](super::NEAR) of a full pixel's).
+    /// [`NEAR`](super::check::NEAR) of a full pixel's).
     #[serde(serialize_with = "six")]
     pub cured_mm2: f64,
     /// The drawn perimeter, mm (Σ|∇| of the relative irradiance).
@@ -78,7 +69,8 @@ pub struct LayerCureCheck {
     /// Deepest cure below the layer's bottom at its downward-facing pixels, mm.
     #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
     pub print_through_mm: Option<f64>,
-    /// The slicer's signed mean edge error of the layer (`layers[].cure.mean_px`).
+    /// The slicer's prediction of the layer's mean edge offset (`layers[].cure.offset_px`;
+    /// its signed mean edge error `mean_px` in bundles without it).
     #[serde(serialize_with = "six_opt", skip_serializing_if = "Option::is_none")]
     pub slicer_mean_px: Option<f64>,
     /// `offset_px` − `slicer_mean_px`.
@@ -140,35 +132,18 @@ pub struct CureCheck {
     pub per_layer: Vec<LayerCureCheck>,
 }
 
-/// The job's figures from the layers'.
-pub(super) fn summarize(
+/// The job's figures from the layers' (`outs`, in layer order), mask pixels mapped to
+/// the build plane by `to_mm`.
+pub fn summarize(
     manifest: &Manifest,
     model: &CureModel,
-    proj: &crate::bundle::machine::Projector,
+    to_mm: &dyn Fn([f64; 2]) -> [f64; 2],
     outs: Vec<LayerOut>,
 ) -> CureCheck {
     let p = model.pixel_mm;
     let sample_mm2 = p * p / (SUB * SUB) as f64;
     let c = manifest.cure.as_ref();
     let held = c.map_or(0, |c| c.held_back_layers);
-    // Mask pixel (column, row) in pixel units → build-plane mm.
-    let field_h = manifest.machine.field().height_px as f64;
-    let to_mm = |[u, v]: [f64; 2]| {
-        let u = if proj.mirror_x {
-            proj.width_px as f64 - u
-        } else {
-            u
-        };
-        let v = if proj.mirror_y {
-            proj.height_px as f64 - v
-        } else {
-            v
-        };
-        [
-            (proj.offset_px[0] as f64 + u) * p,
-            (field_h - proj.offset_px[1] as f64 - v) * p,
-        ]
-    };
     let mut per_layer = Vec::with_capacity(outs.len());
     let mut findings = Vec::new();
     let mut agree = SlicerAgreement::default();
@@ -202,7 +177,7 @@ pub(super) fn summarize(
         let slicer = l.cure.as_ref();
         let diff = slicer
             .filter(|_| o.perimeter_px > 0.0)
-            .map(|s| offset_px - s.mean_px);
+            .map(|s| offset_px - s.offset_px.unwrap_or(s.mean_px));
         if let Some(s) = slicer {
             any_slicer = true;
             if (s.vanished == 0) != o.vanished.is_empty() {
@@ -227,41 +202,12 @@ pub(super) fn summarize(
             vanished: o.vanished.len(),
             merged: o.merged.len(),
             print_through_mm: o.print_through_mm,
-            slicer_mean_px: slicer.map(|s| s.mean_px),
+            slicer_mean_px: slicer.map(|s| s.offset_px.unwrap_or(s.mean_px)),
             slicer_diff_px: diff,
         });
     }
     let checked: Vec<&LayerCureCheck> = per_layer.iter().filter(|l| l.perimeter_mm > 0.0).collect();
-    let total: f64 = checked.iter().map(|l| l.perimeter_mm).sum();
-    let mut edge = OffsetStats::default();
-    let mut signed = 0.0;
-    if total > 0.0 {
-        edge.mean = checked
-            .iter()
-            .map(|l| l.perimeter_mm * l.offset_px.abs())
-            .sum::<f64>()
-            / total;
-        signed = checked
-            .iter()
-            .map(|l| l.perimeter_mm * l.offset_px)
-            .sum::<f64>()
-            / total;
-        let mut by: Vec<(f64, f64)> = checked
-            .iter()
-            .map(|l| (l.offset_px.abs(), l.perimeter_mm))
-            .collect();
-        by.sort_by(|a, b| a.0.total_cmp(&b.0));
-        edge.max = by.last().map_or(0.0, |b| b.0);
-        let mut cum = 0.0;
-        edge.p95 = edge.max;
-        for (a, wgt) in by {
-            cum += wgt;
-            if cum >= 0.95 * total {
-                edge.p95 = a;
-                break;
-            }
-        }
-    }
+    let (edge, signed) = offset_stats(&checked);
     let mut worst: Vec<&LayerCureCheck> = checked.clone();
     worst.sort_by(|a, b| {
         b.offset_px
@@ -292,4 +238,40 @@ pub(super) fn summarize(
         findings,
         per_layer,
     }
+}
+
+/// The absolute per-layer offsets of `checked` weighted by their perimeters (mean, p95,
+/// largest) and their signed mean.
+fn offset_stats(checked: &[&LayerCureCheck]) -> (OffsetStats, f64) {
+    let total: f64 = checked.iter().map(|l| l.perimeter_mm).sum();
+    let mut edge = OffsetStats::default();
+    let mut signed = 0.0;
+    if total > 0.0 {
+        edge.mean = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px.abs())
+            .sum::<f64>()
+            / total;
+        signed = checked
+            .iter()
+            .map(|l| l.perimeter_mm * l.offset_px)
+            .sum::<f64>()
+            / total;
+        let mut by: Vec<(f64, f64)> = checked
+            .iter()
+            .map(|l| (l.offset_px.abs(), l.perimeter_mm))
+            .collect();
+        by.sort_by(|a, b| a.0.total_cmp(&b.0));
+        edge.max = by.last().map_or(0.0, |b| b.0);
+        let mut cum = 0.0;
+        edge.p95 = edge.max;
+        for (a, wgt) in by {
+            cum += wgt;
+            if cum >= 0.95 * total {
+                edge.p95 = a;
+                break;
+            }
+        }
+    }
+    (edge, signed)
 }

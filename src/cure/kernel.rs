@@ -3,11 +3,46 @@
 //! that cure whole whatever the layers above add, the drawn perimeter and the lit runs
 //! and islands (`Prepared`).
 
-use crate::resin::{CureModel, Psf};
-
-use super::irradiance::Irradiance;
+use super::check::{CHUNK, NEAR, SUB};
 use super::islands::{lit_islands, Run};
-use super::{CHUNK, NEAR, SUB};
+use super::{CureModel, Psf};
+
+/// A layer's relative irradiance inside its lit box (pixels, ends exclusive): the
+/// engine's input.
+#[derive(Debug, Clone, Default)]
+pub struct Irradiance {
+    /// `[c0, r0, c1, r1]`; empty when nothing is lit.
+    pub bbox: [usize; 4],
+    /// Row-major over the box.
+    pub data: Vec<f32>,
+}
+
+impl Irradiance {
+    /// The irradiance of a whole `w`×`h` image, cut to its nonzero box.
+    #[cfg(test)]
+    pub(crate) fn from_image(w: usize, h: usize, img: &[f32]) -> Irradiance {
+        let lit = |r: usize| img[r * w..(r + 1) * w].iter().any(|&v| v != 0.0);
+        let Some(r0) = (0..h).find(|&r| lit(r)) else {
+            return Irradiance::default();
+        };
+        let r1 = (0..h).rfind(|&r| lit(r)).unwrap_or(r0) + 1;
+        let col = |c: usize| (r0..r1).any(|r| img[r * w + c] != 0.0);
+        let c0 = (0..w).find(|&c| col(c)).unwrap_or(0);
+        let c1 = (0..w).rfind(|&c| col(c)).unwrap_or(c0) + 1;
+        let data = (r0..r1)
+            .flat_map(|r| img[r * w + c0..r * w + c1].iter().copied())
+            .collect();
+        Irradiance {
+            bbox: [c0, r0, c1, r1],
+            data,
+        }
+    }
+
+    /// Whether nothing is lit.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+}
 
 /// What a layer gives that depends on its mask alone, computed ahead of the sequential
 /// recurrence (in parallel, several layers at a time): its own blurred light, perimeter,

@@ -1,0 +1,178 @@
+//! Islands: runs of lit pixels and their 4-connected components (union-find). One counter
+//! for the planner's islands (regions that print onto nothing, `plan::analysis`) and the
+//! cure check's (islands that vanish, cured regions that join them).
+
+use super::check::LIT;
+use super::kernel::{Irradiance, Prepared};
+
+/// A run of one row's pixels (or samples): `[row, first column, end column)`. Runs are
+/// sorted by row, then column, and a row's runs neither overlap nor touch (the layout of
+/// [`crate::raster::LitRuns`]).
+pub type Run = [u32; 3];
+
+/// The 4-connected components of `runs`: each run's component, numbered from 0 in the
+/// order of their first run, and how many (union-find, a component's smallest run its
+/// root).
+pub fn components(runs: &[Run]) -> (Vec<u32>, usize) {
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    let n = runs.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    // The runs of the row above the current run's: `above`, and where the current row
+    // starts.
+    let (mut above, mut start) = (0..0, 0);
+    let mut j = 0;
+    for i in 0..n {
+        let a = runs[i];
+        if i == 0 || runs[i - 1][0] != a[0] {
+            above = if i > 0 && runs[i - 1][0] + 1 == a[0] {
+                start..i
+            } else {
+                i..i
+            };
+            start = i;
+            j = above.start;
+        }
+        while j < above.end && runs[j][2] <= a[1] {
+            j += 1;
+        }
+        let mut t = j;
+        while t < above.end && runs[t][1] < a[2] {
+            let (x, y) = (find(&mut parent, t as u32), find(&mut parent, i as u32));
+            if x != y {
+                parent[x.max(y) as usize] = x.min(y);
+            }
+            t += 1;
+        }
+    }
+    let mut map = vec![u32::MAX; n];
+    let mut ids = Vec::with_capacity(n);
+    let mut count = 0u32;
+    for i in 0..n {
+        let root = find(&mut parent, i as u32) as usize;
+        if map[root] == u32::MAX {
+            map[root] = count;
+            count += 1;
+        }
+        ids.push(map[root]);
+    }
+    (ids, count as usize)
+}
+
+/// The lit runs of `cur` (relative irradiance ≥ [`LIT`]) and its islands, into `p`.
+#[inline(never)]
+pub(super) fn lit_islands(cur: &Irradiance, p: &mut Prepared) {
+    let [c0, r0, c1, r1] = cur.bbox;
+    let bw = c1 - c0;
+    p.rows.push(0);
+    for r in r0..r1 {
+        let row = &cur.data[(r - r0) * bw..(r - r0 + 1) * bw];
+        let mut c = 0;
+        while c < bw {
+            if row[c] < LIT {
+                c += 1;
+                continue;
+            }
+            let start = c;
+            while c < bw && row[c] >= LIT {
+                c += 1;
+            }
+            p.runs
+                .push([r as u32, (c0 + start) as u32, (c0 + c) as u32]);
+        }
+        p.rows.push(p.runs.len() as u32);
+    }
+    let (ids, count) = components(&p.runs);
+    p.px = vec![0; count];
+    p.sum = vec![[0.0; 2]; count];
+    for (run, &l) in p.runs.iter().zip(&ids) {
+        let (l, len) = (l as usize, (run[2] - run[1]) as u64);
+        p.px[l] += len;
+        // Σ (c + ½) over the run and len·(r + ½): sums of halves, exact in f64.
+        p.sum[l][0] += len as f64 * (run[1] + run[2]) as f64 * 0.5;
+        p.sum[l][1] += len as f64 * (run[0] as f64 + 0.5);
+    }
+    p.island = ids;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Components of random pixel grids against a flood fill of their pixels.
+    #[test]
+    fn components_match_a_flood_fill() {
+        let mut seed = 0x51_7e_u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (w, h) = (23usize, 17usize);
+        let mut total = 0;
+        for case in 0..300 {
+            let p = 0.3 + 0.4 * rnd();
+            let g: Vec<bool> = (0..w * h).map(|_| rnd() < p).collect();
+            // Some rows left dark, so rows without runs come between lit ones.
+            let dark = (rnd() * h as f64) as usize;
+            let lit = |k: usize| g[k] && k / w != dark;
+            let mut runs = Vec::new();
+            for r in 0..h {
+                let mut c = 0;
+                while c < w {
+                    if lit(r * w + c) {
+                        let s = c;
+                        while c < w && lit(r * w + c) {
+                            c += 1;
+                        }
+                        runs.push([r as u32, s as u32, c as u32]);
+                    } else {
+                        c += 1;
+                    }
+                }
+            }
+            let (ids, count) = components(&runs);
+            // Flood fill: the label of each pixel's region, in order of first pixel.
+            let mut label = vec![usize::MAX; w * h];
+            let mut want = 0;
+            for s in 0..w * h {
+                if !lit(s) || label[s] != usize::MAX {
+                    continue;
+                }
+                label[s] = want;
+                let mut stack = vec![s];
+                while let Some(k) = stack.pop() {
+                    let (r, c) = (k / w, k % w);
+                    let nb = [
+                        (r > 0).then(|| k - w),
+                        (r + 1 < h).then(|| k + w),
+                        (c > 0).then(|| k - 1),
+                        (c + 1 < w).then(|| k + 1),
+                    ];
+                    for q in nb.into_iter().flatten() {
+                        if lit(q) && label[q] == usize::MAX {
+                            label[q] = want;
+                            stack.push(q);
+                        }
+                    }
+                }
+                want += 1;
+            }
+            assert_eq!(count, want, "case {case}");
+            for (run, &id) in runs.iter().zip(&ids) {
+                for c in run[1]..run[2] {
+                    let k = run[0] as usize * w + c as usize;
+                    assert_eq!(label[k], id as usize, "case {case}");
+                }
+            }
+            total += want;
+        }
+        assert!(total > 1000, "{total}");
+    }
+}
