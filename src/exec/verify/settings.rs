@@ -2,7 +2,9 @@
 //! so a setting changed on its own (the layer height, the normal exposure, the light
 //! compensation) is a `settings` problem.
 //!
-//! * Every layer is `settings.layer_height_mm` thick.
+//! * Every layer is `settings.layer_height_mm` thick (a layer 0 mm thick is a further
+//!   exposure of the layer below, as a job imported from a control file that shows a
+//!   layer's images in turn carries them, and is left out of these rules).
 //! * The layered layers are exposed `machine.exposure.layer_s` once the bottom layers and
 //!   the ramp after them are over: the last layered exposure is `layer_s`, unless the
 //!   job ends on its ramp (the last two differ, the last one nearer `layer_s`) or has only
@@ -24,7 +26,7 @@ pub(super) fn check(dir: &dyn BundleSource, m: &Manifest, problems: &mut Vec<Vio
     let job = (MANIFEST, MANIFEST);
     let mut add = |msg: String| problems.push(problem_in(dir, None, Kind::Settings, job, &msg));
     let h = m.settings.layer_height_mm;
-    let thick = m.layers.iter().enumerate();
+    let thick = m.layers.iter().enumerate().filter(|(_, l)| l.thickness_mm > 0.0);
     let mut other = thick.filter(|(_, l)| (l.thickness_mm - h).abs() > THICKNESS_TOL_MM);
     if let Some((i, l)) = other.next() {
         let more = other.count();
@@ -54,7 +56,7 @@ fn normal_exposure(m: &Manifest) -> Option<String> {
     let layer_s = m.machine.exposure.layer_s.get();
     let layered = m.layers.iter().enumerate();
     let e: Vec<(usize, f64)> = layered
-        .filter(|(_, l)| l.mode == Mode::Layered)
+        .filter(|(_, l)| l.mode == Mode::Layered && l.thickness_mm > 0.0)
         .map(|(i, l)| (i, l.exposure_s))
         .collect();
     let [.., (_, before), (j, v)] = e[..] else {
@@ -113,6 +115,13 @@ mod tests {
         assert!(only(&m)[0].contains("settings.compensation is zone, but the job has no light compensation record"));
         m.settings.compensation = "bright".into();
         assert!(only(&m)[0].contains("settings.compensation is \"bright\": off, zone or pixel"));
+        // A further exposure of a layer (0 mm thick, another exposure time) is no layer of
+        // the height's or the exposure's rules.
+        let mut again = fine.clone();
+        again.layers.push(again.layers[1].clone());
+        (again.layers[2].index, again.layers[2].thickness_mm) = (2, 0.0);
+        again.layers[2].exposure_s = 3.0;
+        assert_eq!(only(&again), Vec::<String>::new());
         let _ = manifest;
     }
 }
