@@ -20,7 +20,7 @@ for model in "$@"; do
     cg="$OUT/$m-$c.callgrind"
     rm -rf "$OUT/$m-$c.dmdjob"
     RAYON_NUM_THREADS=1 valgrind --tool=callgrind --dump-instr=no --callgrind-out-file="$cg" \
-      "$BIN" slice "$model" -q -o "$OUT/$m-$c.dmdjob" --compensation $c >/dev/null 2>&1 \
+      "$BIN" slice "$model" -q -o "$OUT/$m-$c.dmdjob" --compensation $c --cure-correction off >/dev/null 2>&1 \
       || { echo "$m $c: slice failed" >&2; exit 1; }
     T[$c]=$(grep -m1 '^totals:' "$cg" | awk '{print $2}')
     S[$c]=$(callgrind_annotate --inclusive=yes "$cg" 2>/dev/null \

@@ -3,15 +3,15 @@
 
 Usage: overhead.py DMDSL_BIN OUTDIR RUNS MODEL.stl [MODEL.stl ...]
 
-* Compensation: `dmdsl slice` with `--compensation off`, the default (zone) and `pixel`,
-  interleaved; medians of process CPU (user + sys, from wait4) and wall time, as ratios
+* Compensation: `dmdsl slice --cure-correction off` with `--compensation off`, the default
+  (zone) and `pixel`, interleaved (the path where the rasterizer applies the compensation); medians of process CPU (user + sys, from wait4) and wall time, as ratios
   of `off`.
 * Analysis: the `analysis_cpu_s` of `--json` (time spent in the per-layer analysis,
   summed over the workers) against the rest of the process CPU, default settings.
 
 Put OUTDIR on a tmpfs (e.g. /dev/shm/ov) to leave out the filesystem: on this machine's
 journal-less ext4, creating files shortly after many were deleted costs a varying amount of
-kernel time (see docs/BENCHMARKS.md). Bundles are deleted after each round.
+kernel time. Bundles are deleted after each round.
 """
 import json, os, shutil, statistics, subprocess, sys, time
 
@@ -36,7 +36,7 @@ def main():
             name = os.path.splitext(os.path.basename(m))[0]
             for mode, extra in modes.items():
                 out = os.path.join(outdir, f"{name}-{mode}-{r}.dmdjob")
-                cpu, wall, js = run([dmdsl, "slice", m, "-q", "--json", "-o", out] + extra)
+                cpu, wall, js = run([dmdsl, "slice", m, "-q", "--json", "--cure-correction", "off", "-o", out] + extra)
                 comp.setdefault((name, mode), []).append((cpu, wall))
                 if mode == "zone":
                     a = json.loads(js)["timings"]["analysis_cpu_s"]

@@ -22,7 +22,7 @@ import os, shutil, statistics, subprocess, sys, time
 def run(binary, model, out):
     shutil.rmtree(out, ignore_errors=True)
     t = time.perf_counter()
-    p = subprocess.Popen([binary, "slice", model, "-q", "-o", out],
+    p = subprocess.Popen([binary, "slice", model, "-q", "--cure-correction", "off", "-o", out],
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _, status, ru = os.wait4(p.pid, 0)
     wall = time.perf_counter() - t
