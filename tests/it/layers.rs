@@ -18,7 +18,7 @@ type Graph = BTreeMap<String, BTreeMap<String, String>>;
 
 /// `src` with comments, string literals and character literals blanked out (newlines are
 /// kept; lifetimes are left alone).
-fn strip(src: &str) -> String {
+pub(super) fn strip(src: &str) -> String {
     let c: Vec<char> = src.chars().collect();
     let mut out = String::with_capacity(src.len());
     let mut i = 0;
@@ -481,7 +481,7 @@ fn violations(g: &Graph, t: &Layers) -> Vec<String> {
 }
 
 /// Every `.rs` file under `dir`, as (path relative to `root`, text).
-fn read_rs(root: &Path, dir: &Path, out: &mut Vec<(String, String)>) {
+pub(super) fn read_rs(root: &Path, dir: &Path, out: &mut Vec<(String, String)>) {
     let mut entries: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())

@@ -18,6 +18,7 @@ mod import;
 mod inspect;
 mod json;
 mod layers;
+mod limits;
 mod plan;
 mod readme;
 mod replace;
