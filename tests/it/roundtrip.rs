@@ -163,6 +163,8 @@ fn a_nanodlp_plate_carries_the_documented_files_and_keys() {
             "0.2",
             "-p",
             "bottom-up",
+            "--cure-correction",
+            "off",
             "-o",
             "b.nanodlp",
             "--json",

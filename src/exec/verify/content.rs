@@ -60,8 +60,9 @@ pub(super) struct ContentRule {
     /// a layer's masks may light less than its section, down to nothing.
     held_back: bool,
     /// The grays add up to the section's area exactly: coverage masks of one projector,
-    /// neither pre-warped nor moved by the cure correction, in a job dmdsl sliced (an
-    /// imported job's areas are its importer's estimates).
+    /// neither pre-warped nor moved by the cure correction, in a job dmdsl sliced from a
+    /// mesh (an imported job's areas are its importer's estimates, also once exported to a
+    /// bundle).
     exact_area: bool,
     /// Binary masks of one projector without compensation: every lit pixel is 255.
     binary: bool,
@@ -93,7 +94,12 @@ impl ContentRule {
                 .cure
                 .as_ref()
                 .is_some_and(|c| c.held_back_layers > 0),
-            exact_area: native && coverage && one && !corrected && s.distortion.is_none(),
+            exact_area: native
+                && manifest.source.triangles > 0
+                && coverage
+                && one
+                && !corrected
+                && s.distortion.is_none(),
             binary: s.binary && s.compensation == "off" && one,
         }
     }
