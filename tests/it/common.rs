@@ -206,8 +206,10 @@ pub fn warnings_of<'a>(v: &'a serde_json::Value, code: &str) -> Vec<&'a serde_js
 /// Runs `dmdsl` with `args` in `cwd` under resource limits set in the child before it
 /// starts (`setrlimit`: `RLIMIT_AS` address space, `RLIMIT_FSIZE` largest file written,
 /// with SIGXFSZ ignored so a write past it fails with EFBIG, as on a full disk), and its
-/// peak resident memory in bytes (`wait4`'s `ru_maxrss`): the output, the exit code and
-/// the peak.
+/// peak resident memory in bytes: the output, the exit code and the peak. The peak is the
+/// program's own `VmHWM`, read from `/proc` while it runs (monotonic, so the last reading
+/// before it exits is its peak): `wait4`'s `ru_maxrss` would also count the resident size
+/// of this test process at the fork, which other tests running beside it make large.
 #[cfg(target_os = "linux")]
 pub fn run_limited(
     cwd: &Path,
@@ -248,9 +250,31 @@ pub fn run_limited(
     // Waited for by `wait4` below, which also gives its resource use.
     #[allow(clippy::zombie_processes)]
     let mut child = cmd.spawn().expect("run dmdsl");
+    let pid = child.id();
+    let watch = std::thread::spawn(move || {
+        let mut peak = 0;
+        // Until the program has exited (a zombie's status has no memory lines); readings
+        // before its exec (the forked copy of this process) are left out by name.
+        while let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
+            let field = |k: &str| {
+                status
+                    .lines()
+                    .find_map(|l| l.strip_prefix(k))
+                    .map(str::trim)
+            };
+            let Some(hwm) = field("VmHWM:") else { break };
+            if field("Name:") == Some("dmdsl") {
+                let kb: u64 = hwm.trim_end_matches("kB").trim().parse().unwrap_or(0);
+                peak = peak.max(kb * 1024);
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        peak
+    });
     let (mut out, mut err) = (Vec::new(), Vec::new());
     child.stdout.take().unwrap().read_to_end(&mut out).unwrap();
     child.stderr.take().unwrap().read_to_end(&mut err).unwrap();
+    let peak = watch.join().unwrap();
     let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
     // SAFETY: waits for this child only; `status` and `usage` are valid for writes.
     let pid = unsafe { libc::wait4(child.id() as i32, &mut status, 0, &mut usage) };
@@ -261,5 +285,5 @@ pub fn run_limited(
         stdout: out,
         stderr: err,
     };
-    (output, status.code(), usage.ru_maxrss as u64 * 1024)
+    (output, status.code(), peak)
 }

@@ -1081,5 +1081,9 @@ fn unused_large_entries_are_never_inflated() {
     std::fs::write(dir.join("big.sl1"), &bytes).unwrap();
     let (o, code, peak) = run_limited(&dir, &["run", "big.sl1", "-q"], Some(1 << 30), None);
     assert_eq!(code, Some(0), "{}", stderr(&o));
+    assert!(
+        peak > 1 << 20,
+        "the program's memory was read: {peak} bytes"
+    );
     assert!(peak < 200 << 20, "peak {peak} bytes");
 }
