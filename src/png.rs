@@ -1,7 +1,7 @@
 //! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
 //! deflate block whose back-references are runs (distance 1) and copies of one of the
 //! eight rows above (zone-compensated masks repeat rows, [`zlib_rows`]); the work grows with
-//! the number of runs, not of pixels (docs/ARCHITECTURE.md, `png`).
+//! the number of runs, not of pixels.
 //!
 //! Invariants: a standard PNG; the bytes are deterministic and independent of the lit box
 //! the caller gives; a test pins the stream to an obvious bit-by-bit encoder of the same rule.

@@ -1,7 +1,7 @@
 //! A shaded picture of the part as the masks build it (and the thumbnail a bundle can
 //! carry): the lit pixels of about [`Z_SLABS`] layers, shrunk to about [`XY_CELLS`] cells
-//! across, stacked into voxels and seen from the front right, above (docs/ARCHITECTURE.md,
-//! "Inspection").
+//! across, stacked into voxels whose surface normals come from their lit neighbours, and
+//! drawn from the front right, above, with a depth buffer.
 
 use super::field::{layer_cells, part_crop};
 use crate::bundle::BundleSource;

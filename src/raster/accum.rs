@@ -3,8 +3,8 @@
 //! pixel its exact coverage.
 
 /// A zeroed buffer whose pages are first touched by writes (a first read would map the
-/// shared zero page, and the write after it would flush the other CPUs' TLBs: see
-/// docs/ARCHITECTURE.md, `raster`).
+/// shared zero page, and the write after it would cost a TLB-flush interrupt to the other
+/// CPUs).
 pub(super) fn zeroed_by_writes<T: Copy + Default>(n: usize) -> Vec<T> {
     let mut v = vec![T::default(); n];
     let step = (4096 / std::mem::size_of::<T>().max(1)).max(1);
