@@ -292,6 +292,41 @@ fn correction_puts_the_cured_edge_on_the_section_and_the_report_shows_the_error(
     );
     let shift = xy["cure"]["shift_px"].as_f64().unwrap();
     assert!(shift > 0.3 && shift < 0.7, "{shift}");
+    only_edge_pixels_moved(&dir.join("off.dmdjob"), &dir.join("xy.dmdjob"), &off);
+}
+
+/// Every pixel the correction changed, on every layer, lies within two pixels of the
+/// uncorrected mask's edge (a pixel that is neither dark nor fully lit, or the meeting of
+/// the two): the interior and the background stay as they were.
+fn only_edge_pixels_moved(off: &Path, xy: &Path, summary: &Value) {
+    const R: i64 = 2;
+    let layers = summary["layers"].as_u64().unwrap() as usize;
+    let mut moved = 0;
+    for i in 0..layers {
+        let name = format!("masks/{i:05}.png");
+        let (w, h, a) = read_gray(&off.join(&name));
+        let (_, _, b) = read_gray(&xy.join(&name));
+        let (w, h) = (w as i64, h as i64);
+        let near = |x: i64, y: i64, want: &dyn Fn(u8) -> bool| {
+            (y - R..=y + R).any(|yy| {
+                (x - R..=x + R).any(|xx| {
+                    (0..w).contains(&xx) && (0..h).contains(&yy) && want(a[(yy * w + xx) as usize])
+                })
+            })
+        };
+        for (k, (&va, &vb)) in a.iter().zip(&b).enumerate() {
+            if va == vb {
+                continue;
+            }
+            moved += 1;
+            let (x, y) = (k as i64 % w, k as i64 / w);
+            assert!(
+                near(x, y, &|v| v < 255) && near(x, y, &|v| v > 0),
+                "layer {i}: pixel ({x}, {y}) changed {va} -> {vb} away from any edge"
+            );
+        }
+    }
+    assert!(moved > 0, "the correction moved no pixel");
 }
 
 #[test]
