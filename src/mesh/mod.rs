@@ -41,7 +41,8 @@ pub struct Mesh {
 /// What the loader found wrong (or right) with a mesh, in the spirit of admesh.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct MeshReport {
-    /// File format read: "stl-binary", "stl-ascii" or "obj".
+    /// File format read: "stl-binary", "stl-ascii" or "obj"; "mixed" for a plate of parts
+    /// in several formats.
     pub format: String,
     /// Triangles in the file.
     pub triangles_in_file: u64,
@@ -429,6 +430,35 @@ impl Mesh {
             }
         }
     }
+
+    /// Adds the triangles of `other` (a separate body: no vertex or edge is shared), its
+    /// report's counts to this one's.
+    pub fn append(&mut self, other: &Mesh) {
+        let v0 = self.vertices.len() as u32;
+        let e0 = self.edge_count as u32;
+        self.vertices.extend_from_slice(&other.vertices);
+        let shifted = |t: &[u32; 3], by: u32| t.map(|i| i + by);
+        self.triangles
+            .extend(other.triangles.iter().map(|t| shifted(t, v0)));
+        self.tri_edges
+            .extend(other.tri_edges.iter().map(|t| shifted(t, e0)));
+        self.edge_count += other.edge_count;
+        let (r, o) = (&mut self.report, &other.report);
+        if r.format != o.format {
+            r.format = "mixed".into();
+        }
+        r.triangles_in_file += o.triangles_in_file;
+        r.triangles += o.triangles;
+        r.vertices += o.vertices;
+        r.edges += o.edges;
+        r.shells += o.shells;
+        r.open_edges += o.open_edges;
+        r.nonmanifold_edges += o.nonmanifold_edges;
+        r.backwards_edges += o.backwards_edges;
+        r.degenerate_triangles += o.degenerate_triangles;
+        r.volume_mm3 += o.volume_mm3;
+        r.closed_manifold &= o.closed_manifold;
+    }
 }
 
 /// An outward-facing cube of edge `s` with its lowest corner at `at` (for unit tests).
@@ -459,6 +489,22 @@ mod tests {
         assert!(r.closed_manifold, "{r:?}");
         assert!((r.volume_mm3 - 1000.0).abs() < 1e-9);
         assert!(r.warnings().is_empty());
+    }
+
+    #[test]
+    fn appended_bodies_are_welded_as_one_soup_of_both_would_be() {
+        let (a, b) = (cube_soup(10.0, [0.0; 3]), cube_soup(5.0, [20.0, 0.0, 0.0]));
+        let mut m = Mesh::from_soup(&a, "stl-binary");
+        m.append(&Mesh::from_soup(&b, "obj"));
+        let both = Mesh::from_soup(&[a, b].concat(), "stl-binary");
+        assert_eq!(
+            (&m.vertices, &m.triangles, &m.tri_edges, m.edge_count),
+            (&both.vertices, &both.triangles, &both.tri_edges, both.edge_count)
+        );
+        let r = &m.report;
+        assert_eq!((r.triangles, r.vertices, r.edges, r.shells), (24, 16, 36, 2));
+        assert!(r.closed_manifold && (r.volume_mm3 - 1125.0).abs() < 1e-9);
+        assert_eq!(r.format, "mixed");
     }
 
     type Welded = (Vec<[f64; 3]>, Vec<[u32; 3]>, Vec<[u32; 3]>);
