@@ -265,6 +265,34 @@ pub struct Source {
     pub placement: Placement,
     /// Mesh validation report.
     pub mesh: crate::mesh::MeshReport,
+    /// The copies of the parts of a plate (placement mode "plate"), in the order they were
+    /// given; then `file` joins their names, `sha256` is the hash of their hashes (one
+    /// `<sha256>  <file>` line per copy), `bbox_mm` is the plate's box on the build plane and
+    /// `mesh` sums their reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parts: Option<Vec<PlatePart>>,
+}
+
+/// One copy of a part on a plate: a point p of its file lands at R·(S·p) +
+/// `translate_mm`, S and R the plate's `scale` and `rotate_deg`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlatePart {
+    /// File name of the part (no directories).
+    pub file: String,
+    /// SHA-256 of the file, hex.
+    pub sha256: String,
+    /// Which copy of the part this is, 1 to `copies`.
+    pub copy: usize,
+    /// How many copies of the part the plate has.
+    pub copies: usize,
+    /// Number of triangles in the file.
+    pub triangles: u64,
+    /// Bounding box in the file's coordinates, mm: [min, max].
+    pub bbox_mm: [[f64; 3]; 2],
+    /// Translation added to the (scaled, rotated) file coordinates, mm.
+    pub translate_mm: [f64; 3],
+    /// Bounding box on the build plane, mm: [min, max].
+    pub placed_bbox_mm: [[f64; 3]; 2],
 }
 
 /// Placement of the part in build-plane coordinates: a point p of the file lands at
@@ -273,7 +301,8 @@ pub struct Source {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Placement {
     /// "center" (XY box centred on the field, lowest point at z = 0), "keep" (file
-    /// coordinates) or "position" (XY box centred on `position_mm`, lowest point at z = 0).
+    /// coordinates), "position" (XY box centred on `position_mm`, lowest point at z = 0) or
+    /// "plate" (several parts, each placed as its record in [`Source::parts`] says).
     pub mode: String,
     /// Translation added to the (scaled, rotated) file coordinates, mm.
     pub translate_mm: [f64; 3],

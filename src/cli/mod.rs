@@ -125,7 +125,7 @@ pub(crate) struct Cli {
 pub(crate) enum Cmd {
     /// Slice parts (STL or OBJ) into job bundles of mask PNGs and a manifest, one each.
     #[command(after_help = help::join(help::SLICE, slice::SLICE_EXIT_HELP))]
-    Slice(slice::SliceArgs),
+    Slice(Box<slice::SliceArgs>),
     /// Show or list machine profiles.
     #[command(subcommand, after_help = help::PROFILE)]
     Profile(profile::ProfileCmd),
@@ -187,7 +187,7 @@ impl Cli {
 /// Runs the command `cli` names; returns its exit code.
 pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
     match cli.cmd {
-        Cmd::Slice(a) => slice::slice(a, cli.quiet),
+        Cmd::Slice(a) => slice::slice(*a, cli.quiet),
         Cmd::Distortion(a) => distortion::distortion(a, cli.quiet),
         Cmd::Run(a) => run::run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),

@@ -79,14 +79,34 @@ enum CompensationArg {
     Off,
 }
 
+/// Many parts on one plate (boxed: they would make every command's arguments larger).
+#[derive(clap::Args)]
+struct PlateArgs {
+    /// Put all the parts, with their --copies, on one plate (several parts with -o go on one
+    /// plate without it): one job, the parts laid out in
+    /// rows on the field --spacing apart, inside the calibrated area when they fit there
+    /// (with --keep-position: where their files put them, none overlapping). The bundle is
+    /// -o's, or plate.dmdjob (or the --format's ending) in --output-dir or the current
+    /// directory.
+    #[arg(long)]
+    plate: bool,
+    /// Copies of each part on the plate (1 to 1000; more than 1 puts them on a plate).
+    #[arg(long, value_name = "N")]
+    copies: Option<usize>,
+    /// Gap between the boxes of a plate's arranged parts, mm [default: 3].
+    #[arg(long, value_name = "MM", allow_hyphen_values = true)]
+    spacing: Option<f64>,
+}
+
 #[derive(Args)]
 pub(crate) struct SliceArgs {
     /// The parts: binary or ASCII STL, or OBJ; `-` reads an STL from stdin (then -o is
-    /// required). Several parts are sliced one after another, a bundle each.
+    /// required). Several parts are sliced one after another, a bundle each; with -o,
+    /// --plate or --copies, onto one plate.
     #[arg(required = true, value_name = "PART")]
     inputs: Vec<PathBuf>,
     /// Bundle to write (default: <part stem>.dmdjob in the current directory, or the
-    /// --format's ending); one part only. Its name picks the format: NAME.dmdjob (a
+    /// --format's ending); several parts go on one plate. Its name picks the format: NAME.dmdjob (a
     /// directory), NAME.dmdjob.zip, NAME.sl1, NAME.sl1s; a plain .zip needs --format.
     /// Missing parent directories are created.
     #[arg(short, long, conflicts_with = "output_dir")]
@@ -142,6 +162,8 @@ pub(crate) struct SliceArgs {
         conflicts_with = "keep_position"
     )]
     position: Option<String>,
+    #[command(flatten)]
+    plate: Box<PlateArgs>,
     /// Turn the part before placing it: DEG degrees about Z, or X,Y,Z degrees about the
     /// axes, applied in X, Y, Z order (counter-clockwise seen from the positive axis).
     #[arg(long, value_name = "DEG|X,Y,Z", allow_hyphen_values = true)]
@@ -203,6 +225,7 @@ struct Job<'a> {
     cancel: &'a AtomicBool,
     show_progress: bool,
     format: Option<crate::formats::Format>,
+    plate: Option<job::Plate>,
 }
 
 impl Job<'_> {
@@ -242,6 +265,7 @@ impl Job<'_> {
             distortion: self.distortion.clone(),
             format: self.format,
             cure: self.cure.clone(),
+            plate: self.plate.clone(),
         };
         job::slice_to_bundle(&opts)
     }
@@ -308,6 +332,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         },
         cancel: &cancel,
         format: a.format,
+        plate: plate(&a)?,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -529,16 +554,25 @@ fn parts(a: &SliceArgs) -> Result<Vec<Part>, crate::Error> {
         return usage(format!(
             "reading a part from stdin (-) needs -o PATH for its bundle{}",
             if n > 1 {
-                ", and -o takes a single part: slice the others in another call"
+                ", and a plate's parts are read from files: slice the others in another call"
             } else {
                 ""
             }
         ));
     }
-    if n > 1 && a.output.is_some() {
-        return usage(format!(
-            "-o names the bundle of a single part, but {n} parts were given; use --output-dir DIR for several"
-        ));
+    if a.plate.plate || a.plate.copies.is_some_and(|c| c > 1) || (n > 1 && a.output.is_some()) {
+        if a.inputs.iter().any(|p| is_stdin(p)) {
+            return usage("a plate's parts are read from files: - (stdin) cannot be one".into());
+        }
+        let format = a.format.unwrap_or(crate::formats::Format::Dmdjob);
+        let name = job::default_output_as(Path::new("plate"), format);
+        return Ok(vec![Part {
+            input: a.inputs[0].clone(),
+            output: Some(a.output.clone().unwrap_or_else(|| match &a.output_dir {
+                Some(d) => d.join(name),
+                None => name,
+            })),
+        }]);
     }
     let parts: Vec<Part> = a
         .inputs
@@ -568,6 +602,38 @@ fn parts(a: &SliceArgs) -> Result<Vec<Part>, crate::Error> {
         }
     }
     Ok(parts)
+}
+
+/// The plate of `--plate`/`--copies`: the parts after the first and how they are laid out.
+fn plate(a: &SliceArgs) -> Result<Option<job::Plate>, crate::Error> {
+    let usage = |m: &str| Err(crate::Error::Usage(m.into()));
+    let copies = a.plate.copies.unwrap_or(1);
+    if !(1..=job::MAX_COPIES).contains(&copies) {
+        return usage(&format!(
+            "--copies must be a whole number from 1 to {}, got {copies}",
+            job::MAX_COPIES
+        ));
+    }
+    let spacing_mm = a.plate.spacing.unwrap_or(job::SPACING_MM);
+    if !(spacing_mm.is_finite() && spacing_mm >= 0.0) {
+        return usage(&format!(
+            "--spacing must be a number of mm ≥ 0, got {spacing_mm}"
+        ));
+    }
+    if !(a.plate.plate || copies > 1 || (a.inputs.len() > 1 && a.output.is_some())) {
+        return match a.plate.spacing {
+            Some(_) => usage("--spacing lays out the parts of a plate: add --plate or --copies N"),
+            None => Ok(None),
+        };
+    }
+    if a.position.is_some() {
+        return usage("--position places a single part; a plate's parts are arranged on the field (or kept where their files put them with --keep-position)");
+    }
+    Ok(Some(job::Plate {
+        more: a.inputs[1..].to_vec(),
+        copies,
+        spacing_mm,
+    }))
 }
 
 /// Where `part`'s bundle goes.

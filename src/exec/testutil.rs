@@ -62,6 +62,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
                 ..Default::default()
             },
             mesh: Default::default(),
+            parts: None,
         },
         settings: Settings {
             layer_height_mm: h,

@@ -233,6 +233,7 @@ impl Imported {
                     ..Placement::default()
                 },
                 mesh: Default::default(),
+                parts: None,
             },
             settings: Settings {
                 layer_height_mm: self.layer_height_mm,

@@ -33,6 +33,18 @@ pub(super) struct PlacedPart<'a> {
     pub translate_mm: [f64; 3],
     /// Number of layers.
     pub layers: usize,
+    /// A plate's copies of its parts, and their mesh warnings naming each file.
+    pub plate: Option<(Vec<bundle::PlatePart>, Vec<Warning>)>,
+}
+
+impl PlacedPart<'_> {
+    /// The warnings about the mesh (on a plate, each naming its part's file).
+    pub fn mesh_warnings(&self) -> Vec<Warning> {
+        match &self.plate {
+            Some((_, w)) => w.clone(),
+            None => self.mesh.report.warnings(),
+        }
+    }
 }
 
 /// The layers' records and totals, as planned.
@@ -182,17 +194,25 @@ pub(super) fn manifest(
 
 /// The manifest's record of the model file and its placement.
 fn source(part: &PlacedPart) -> Source {
+    let parts = part.plate.as_ref().map(|p| p.0.clone());
     Source {
-        file: part
-            .path
-            .file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default(),
+        file: match &parts {
+            Some(p) => {
+                let mut names: Vec<&str> = p.iter().map(|r| r.file.as_str()).collect();
+                names.dedup();
+                names.join(" + ")
+            }
+            None => part
+                .path
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        },
         sha256: part.sha256.clone(),
         triangles: part.mesh.report.triangles_in_file,
         bbox_mm: part.bbox_in_file.map(|c| c.map(round::plane_mm)),
         placement: Placement {
-            mode: part.mode.as_str().into(),
+            mode: if parts.is_some() { "plate" } else { part.mode.as_str() }.into(),
             // Like the bounding box, to 1 µm.
             translate_mm: part.translate_mm.map(round::plane_mm),
             scale: (part.transform.scale != [1.0; 3]).then_some(part.transform.scale),
@@ -208,5 +228,6 @@ fn source(part: &PlacedPart) -> Source {
             },
         },
         mesh: part.mesh.report.clone(),
+        parts,
     }
 }

@@ -25,6 +25,7 @@ mod optics_records;
 mod options;
 mod pipeline;
 mod placement;
+mod plate;
 mod sink;
 
 pub use cure_records::CureOptions;
@@ -32,6 +33,7 @@ pub use options::{default_output_as, SliceOptions, SliceSummary, Timings};
 #[cfg(any(test, feature = "internals"))]
 pub use pipeline::BLOCK;
 pub use placement::{place_mesh, PlacementMode, Transform};
+pub use plate::{Plate, MAX_COPIES, SPACING_MM};
 
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
@@ -120,7 +122,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
 
     let t_finish = Instant::now();
     let distortion_report = setup.correction.as_ref().map(Correction::report);
-    let mut warnings = part.mesh.report.warnings();
+    let mut warnings = part.mesh_warnings();
     warnings.extend(slicing_warnings(&sliced.stats, distortion_report.as_ref()));
     let analysis_cpu_s = sliced.layers.iter().map(|o| o.analysis_s).sum();
     let mut planned = manifest::plan_layers(&profile, sliced.layers, part.path)?;
@@ -282,6 +284,10 @@ fn load_and_place<'a>(
         path: path.into(),
         msg,
     })?;
+    if let Some(plate) = &opts.plate {
+        let part = plate::place_plate(opts, plate, profile, (sha256, mesh))?;
+        return Ok((setup, part));
+    }
     opts.transform.apply(&mut mesh);
     let (translate_mm, layers) = place_mesh(path, &mut mesh, profile, opts.placement, h)?;
     let part = PlacedPart {
@@ -293,6 +299,7 @@ fn load_and_place<'a>(
         mode: opts.placement,
         translate_mm,
         layers,
+        plate: None,
     };
     Ok((setup, part))
 }

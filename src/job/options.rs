@@ -46,6 +46,8 @@ pub struct SliceOptions<'a> {
     pub format: Option<Format>,
     /// Cure prediction and correction (`--predict`, `--cure-correction`; docs/CURE.md).
     pub cure: super::CureOptions,
+    /// More parts, or copies, on one plate with `input` (`--plate`, `--copies`).
+    pub plate: Option<super::Plate>,
 }
 
 impl SliceOptions<'_> {
@@ -72,6 +74,7 @@ impl SliceOptions<'_> {
             distortion: DistortionChoice::default(),
             format: None,
             cure: Default::default(),
+            plate: None,
         }
     }
 

@@ -208,8 +208,16 @@ fn parts_that_would_share_a_bundle_and_o_with_several_parts_are_usage_errors() {
             "x/p.stl and y/p.stl would both write o/p.dmdjob",
         ),
         (
-            &["slice", "x/p.stl", "y/p.stl", "-o", "o.dmdjob"],
-            "-o names the bundle of a single part, but 2 parts were given; use --output-dir DIR",
+            &[
+                "slice",
+                "x/p.stl",
+                "y/p.stl",
+                "-o",
+                "o.dmdjob",
+                "--position",
+                "1,1",
+            ],
+            "--position places a single part; a plate's parts are arranged",
         ),
         (
             &["slice", "x/p.stl", "-o", "o.dmdjob", "--output-dir", "o"],

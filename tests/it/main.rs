@@ -20,6 +20,7 @@ mod json;
 mod layers;
 mod limits;
 mod plan;
+mod plate;
 mod readme;
 mod replace;
 mod roundtrip;

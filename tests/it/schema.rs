@@ -37,10 +37,10 @@ const KEYWORDS: &[&str] = &[
 ];
 
 /// Every schema of `docs/schemas/`, by file name.
-struct Schemas(BTreeMap<String, Value>);
+pub(crate) struct Schemas(BTreeMap<String, Value>);
 
 impl Schemas {
-    fn load() -> Schemas {
+    pub(crate) fn load() -> Schemas {
         let dir = root().join("docs/schemas");
         let mut map = BTreeMap::new();
         for e in std::fs::read_dir(&dir).unwrap() {
@@ -68,7 +68,7 @@ impl Schemas {
     }
 
     /// Panics with the errors unless `doc` is valid against schema file `name`.
-    fn assert_valid(&self, name: &str, doc: &Value) {
+    pub(crate) fn assert_valid(&self, name: &str, doc: &Value) {
         let e = self.errors(name, doc);
         assert!(
             e.is_empty(),
