@@ -110,6 +110,8 @@ struct Loaded {
     sha256: String,
     mesh: Mesh,
     bbox_in_file: [[f64; 3]; 2],
+    /// Its box once turned, mm.
+    bbox: [[f64; 3]; 2],
 }
 
 /// One copy of a part: which part, which copy, where it goes.
@@ -134,7 +136,7 @@ pub(super) fn place_plate<'a>(
         .map(|p| read_model(p, None))
         .collect::<Result<_>>()?;
     let paths = std::iter::once(&opts.input).chain(&plate.more);
-    let mut parts: Vec<Loaded> = paths
+    let parts: Vec<Loaded> = paths
         .zip(std::iter::once(first).chain(rest))
         .map(|(path, (sha256, mut mesh))| {
             let bbox_in_file = mesh.bbox();
@@ -142,6 +144,7 @@ pub(super) fn place_plate<'a>(
             Loaded {
                 path: path.clone(),
                 sha256,
+                bbox: mesh.bbox(),
                 mesh,
                 bbox_in_file,
             }
@@ -151,21 +154,22 @@ pub(super) fn place_plate<'a>(
     let mut plate_mesh: Option<Mesh> = None;
     let mut records = Vec::with_capacity(instances.len());
     for inst in &instances {
-        let part = &mut parts[inst.part];
-        part.mesh.translate(inst.translate);
+        let part = &parts[inst.part];
+        let mut copy = part.mesh.clone();
+        copy.translate(inst.translate);
         match plate_mesh.as_mut() {
-            None => plate_mesh = Some(part.mesh.clone()),
-            Some(m) => m.append(&part.mesh),
+            None => plate_mesh = Some(copy),
+            Some(m) => m.append(&copy),
         }
-        part.mesh.translate(inst.translate.map(|t| -t));
         records.push(record(part, inst, plate.copies));
     }
     let mut mesh = plate_mesh.expect("a plate has a part");
     // The tallest copy names the plate in the travel and layer-count checks.
-    let tallest = instances
+    let tallest = records
         .iter()
-        .max_by(|a, b| top(&parts[a.part], a).total_cmp(&top(&parts[b.part], b)))
-        .map_or(&opts.input, |i| &parts[i.part].path);
+        .zip(&instances)
+        .max_by(|a, b| a.0.placed_bbox_mm[1][2].total_cmp(&b.0.placed_bbox_mm[1][2]))
+        .map_or(&opts.input, |(_, i)| &parts[i.part].path);
     let h = profile.slicing.layer_height_mm.get();
     let (_, layers) = place_mesh(tallest, &mut mesh, profile, PlacementMode::Keep, h)?;
     let warnings = parts
@@ -191,11 +195,6 @@ pub(super) fn place_plate<'a>(
     })
 }
 
-/// The top of copy `inst` of `part` once placed, mm.
-fn top(part: &Loaded, inst: &Instance) -> f64 {
-    part.mesh.bbox()[1][2] + inst.translate[2]
-}
-
 /// Where each copy of each part goes: laid out in rows ([`arrange`]) inside the
 /// calibrated area when they fit there, else the field; or, with `Keep`, where the files
 /// put them (one copy each, no two overlapping).
@@ -205,7 +204,7 @@ fn lay_out(
     profile: &Profile,
     mode: PlacementMode,
 ) -> Result<Vec<Instance>> {
-    let boxes: Vec<[[f64; 3]; 2]> = parts.iter().map(|p| p.mesh.bbox()).collect();
+    let boxes: Vec<[[f64; 3]; 2]> = parts.iter().map(|p| p.bbox).collect();
     let field = profile.field();
     let (fw, fh) = (field.width_mm(), field.height_mm());
     let usage = |m: String| Error::Usage(m);
@@ -312,7 +311,7 @@ fn file_name(path: &Path) -> String {
 
 /// The manifest's record of copy `inst` of `part`.
 fn record(part: &Loaded, inst: &Instance, copies: usize) -> PlatePart {
-    let [lo, hi] = part.mesh.bbox();
+    let [lo, hi] = part.bbox;
     let placed = [lo, hi].map(|c| [0, 1, 2].map(|k| round::plane_mm(c[k] + inst.translate[k])));
     PlatePart {
         file: file_name(&part.path),
