@@ -59,12 +59,17 @@ pub fn fixed(v: f64, decimals: usize) -> String {
     }
 }
 
-/// [`fixed`] with its sign, `+` included: a change (`+2.04`, `-0.50`).
+/// [`fixed`] with its sign, `+` included: a change (`+2.04`, `-0.50`); a value that
+/// rounds to zero is `0.00`, without a sign.
 pub fn signed(v: f64, decimals: usize) -> String {
     if v.is_finite() && v.abs() >= 1e9 {
         format!("{v:+.4e}")
     } else {
-        format!("{v:+.decimals$}")
+        let s = format!("{v:+.decimals$}");
+        match s[1..].bytes().all(|b| b == b'0' || b == b'.') {
+            true => s[1..].to_string(),
+            false => s,
+        }
     }
 }
 
@@ -104,7 +109,10 @@ mod tests {
         assert_eq!(fixed(-1e12, 3), "-1.0000e12");
         assert_eq!(fixed(1e300, 4), "1.0000e300");
         assert_eq!(signed(2.0444, 2), "+2.04");
-        assert_eq!(signed(-0.001, 2), "-0.00");
+        assert_eq!(signed(-0.001, 2), "0.00");
+        assert_eq!(signed(0.004, 2), "0.00");
+        assert_eq!(signed(-0.0, 0), "0");
+        assert_eq!(signed(-0.006, 2), "-0.01");
         assert_eq!(signed(f64::INFINITY, 2), "+inf");
         assert_eq!(signed(2e300, 2), "+2.0000e300");
     }

@@ -56,6 +56,8 @@ pub struct SmallFeature {
     pub contours: Vec<usize>,
     /// Its outer contour's bounding box (build-plane mm).
     pub at: FeatureBox,
+    /// Its wall width 2A/P, mm: the thin part of it (a ring's wall, a pin's radius).
+    pub wall_mm: f64,
     /// The pixels its outer contour's bounding box touches.
     pixels: PixelBox,
 }
@@ -67,6 +69,8 @@ pub struct Widening {
     pub widened: u32,
     /// The first of them (in contour order).
     pub first: Option<FeatureBox>,
+    /// The first one's wall width ([`SmallFeature::wall_mm`]), mm.
+    pub first_wall_mm: f64,
     /// Small features that stay below T even widened (drawn corrected).
     pub failed: u32,
     /// The mask's lit box grown by the widened pixels.
@@ -123,6 +127,7 @@ pub fn small_features(
         out.push(SmallFeature {
             contours: list,
             at: super::predict::contour_box(c),
+            wall_mm: 2.0 * area[o] / length[o],
             pixels,
         });
     }
@@ -288,7 +293,10 @@ pub fn widen(
         }
         if reached >= t {
             out.widened += 1;
-            out.first.get_or_insert(f.at);
+            if out.first.is_none() {
+                out.first = Some(f.at);
+                out.first_wall_mm = f.wall_mm;
+            }
             for b in &band {
                 if mask.data[b.0] > 0 {
                     let (r, c) = (b.0 / w, b.0 % w);

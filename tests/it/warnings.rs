@@ -1,5 +1,5 @@
 //! Warning codes: the table in `docs/WARNINGS.md` lists exactly the codes the library can
-//! raise (`dmdsl::warning::CODES`), with their severity, figures and meaning.
+//! raise (`dmdsl::warning::CODES`), with their severity, figures, meaning and remedy.
 
 use crate::common::*;
 use dmdsl::warning::{Severity, CODES};
@@ -24,7 +24,10 @@ fn expected_rows() -> Vec<String> {
                     .collect::<Vec<_>>()
                     .join(", ")
             };
-            format!("| `{}` | {severity} | {fields} | {} |", c.code, c.meaning)
+            format!(
+                "| `{}` | {severity} | {fields} | {} | {} |",
+                c.code, c.meaning, c.remedy
+            )
         })
         .collect()
 }
