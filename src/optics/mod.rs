@@ -248,23 +248,11 @@ impl JobOptics {
                 plural(layers_outside, "layer reaches", "layers reach"),
                 fixed(beyond, 2),
             );
-            let w = if beyond > margin + 1e-9 {
-                Warning::new(
-                    "optics.beyond-extrapolation",
-                    format!(
-                        "{reach}, farther than the calibration's extrapolate_mm = {} mm: beyond that margin the light is unknown and compensated as if it were the light at the margin",
-                        number(margin)
-                    ),
-                )
-            } else {
-                Warning::new(
-                    "optics.outside-calibrated-area",
-                    format!(
-                        "{reach}, within the calibration's extrapolate_mm = {} mm: the compensation there extrapolates the measured light",
-                        number(margin)
-                    ),
-                )
+            let (code, rest) = match beyond > margin + 1e-9 {
+                true => ("optics.beyond-extrapolation", "farther than the calibration's extrapolate_mm = {m} mm: beyond that margin the light is unknown and compensated as if it were the light at the margin"),
+                false => ("optics.outside-calibrated-area", "within the calibration's extrapolate_mm = {m} mm: the compensation there extrapolates the measured light"),
             };
+            let w = Warning::new(code, format!("{reach}, {}", rest.replace("{m}", &number(margin))));
             warnings.push(
                 w.with("layers", layers_outside)
                     .with("area_mm", vec![x0, y0, x1, y1])

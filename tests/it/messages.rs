@@ -4,6 +4,7 @@
 //! docs/WARNINGS.md). Errors about outputs name the path the user gave.
 
 use crate::common::*;
+use dmdsl::text::{count, fixed, hms, number, plural, signed};
 use dmdsl::warning::{lookup, CODES};
 use serde_json::Value;
 use std::path::Path;
@@ -522,4 +523,45 @@ fn output_errors_name_the_path_given() {
         .filter(|n| n.contains(".tmp-"))
         .collect();
     assert!(left.is_empty(), "{left:?}");
+}
+
+// The one formatter every number in a message goes through (`dmdsl::text`).
+#[test]
+fn counts_and_durations() {
+    assert_eq!(count(1, "layer", "layers"), "1 layer");
+    assert_eq!(count(0, "layer", "layers"), "0 layers");
+    assert_eq!(plural(2, "is", "are"), "are");
+    assert_eq!(hms(0.4), "0h00m00s");
+    assert_eq!(hms(-5.0), "0h00m00s");
+    assert_eq!(hms(37858.4), "10h30m58s");
+    assert_eq!(hms(3723.4), "1h02m03s");
+}
+
+#[test]
+fn numbers_are_short_and_free_of_noise() {
+    for (v, want) in [
+        (25.0, "25"),
+        (0.9, "0.9"),
+        (-0.0, "0"),
+        (5.00125, "5.00125"),
+        (0.00125, "0.00125"),
+        (16.0 / 3.0, "5.33333"),
+        (123456.789, "123457"),
+        (999999.7, "1000000"),
+        (1.23456789e-7, "1.23457e-7"),
+        (-1e12, "-1e12"),
+        (f64::INFINITY, "inf"),
+    ] {
+        assert_eq!(number(v), want, "{v}");
+    }
+    assert_eq!(fixed(500.0, 4), "500.0000");
+    assert_eq!(fixed(-1e12, 3), "-1.0000e12");
+    assert_eq!(fixed(1e300, 4), "1.0000e300");
+    assert_eq!(signed(2.0444, 2), "+2.04");
+    assert_eq!(signed(-0.001, 2), "0.00");
+    assert_eq!(signed(0.004, 2), "0.00");
+    assert_eq!(signed(-0.0, 0), "0");
+    assert_eq!(signed(-0.006, 2), "-0.01");
+    assert_eq!(signed(f64::INFINITY, 2), "+inf");
+    assert_eq!(signed(2e300, 2), "+2.0000e300");
 }

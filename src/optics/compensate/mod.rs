@@ -141,32 +141,26 @@ impl Compensator {
     }
 
     /// Counts the layer of mask `m` (zero outside `lit_box`) as lit outside the calibrated
-    /// area and records how far its lit pixels reach.
+    /// area and records how far its lit pixel centres reach (rows outside the area whole,
+    /// the others left and right of it).
     fn record_outside(&self, m: &Mask, lit_box: PixelBox) {
         self.count_outside();
         let (PixelBox { r0, r1, c0, c1 }, cal, w) = (lit_box, self.calibrated, self.w);
-        let (c1, r1) = (c1.min(w), r1.min(self.h));
-        let [ax0, ay0, ax1, ay1] = self.area_mm;
-        let p = self.pixel_mm;
+        let ([ax0, ay0, ax1, ay1], p, c1) = (self.area_mm, self.pixel_mm, c1.min(w));
         let mut beyond = 0.0f64;
-        for r in r0..r1 {
+        for r in r0..r1.min(self.h) {
             let row = &m.data[r * w..(r + 1) * w];
-            let y = (self.h - r) as f64 * p - 0.5 * p;
-            let inside_rows = r >= cal.r0 && r < cal.r1;
-            // The leftmost lit column (left of the area when the row is inside it).
-            let left_end = if inside_rows { c1.min(cal.c0) } else { c1 };
-            let left = (c0..left_end).find(|&c| row[c] != 0);
-            let right_start = if inside_rows { c0.max(cal.c1) } else { c0 };
-            let right = (right_start..c1).rev().find(|&c| row[c] != 0);
-            if left.is_none() && right.is_none() {
-                continue;
+            let inside = r >= cal.r0 && r < cal.r1;
+            let (left, right) = if inside { (c1.min(cal.c0), c0.max(cal.c1)) } else { (c1, c0) };
+            let x = |c: Option<usize>| c.map(|c| (c as f64 + 0.5) * p);
+            let xl = x((c0..left).find(|&c| row[c] != 0));
+            let xr = x((right..c1).rev().find(|&c| row[c] != 0));
+            if xl.or(xr).is_some() {
+                let y = (self.h - r) as f64 * p - 0.5 * p;
+                let dx = xl.map_or(0.0, |x| ax0 - x).max(xr.map_or(0.0, |x| x - ax1));
+                beyond = beyond.max(dx).max(ay0 - y).max(y - ay1);
             }
-            let dy = (ay0 - y).max(y - ay1).max(0.0);
-            let x = |c: usize| (c as f64 + 0.5) * p;
-            let dx = left.map_or(0.0, |c| ax0 - x(c)).max(right.map_or(0.0, |c| x(c) - ax1));
-            beyond = beyond.max(dx.max(dy));
         }
-        self.beyond_bits
-            .fetch_max(beyond.max(0.0).to_bits(), Ordering::Relaxed);
+        self.beyond_bits.fetch_max(beyond.to_bits(), Ordering::Relaxed);
     }
 }
