@@ -18,7 +18,7 @@ use crate::bundle::machine::Projector;
 use crate::profile::Profile;
 use crate::raster::{Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section, Slicer};
-use crate::text::{fixed, number, plural};
+use crate::text::{number, plural};
 use crate::warning::Warning;
 use rayon::prelude::*;
 use std::path::Path;
@@ -463,13 +463,16 @@ impl CureJob {
             Warning::new(
                 "cure.features-widened",
                 format!(
-                    "cure: {k} {} with walls too thin to cure {} drawn wider so that {}, in {n} {} (first: layer {first}, at {}, walls {} mm wide); {} cured size is the smallest the machine makes, larger than the part's",
+                    "cure: {k} {} too thin to cure {} drawn wider so that {}, in {n} {} (first: layer {first}, at {}{}); {} cured size is the smallest the machine makes, larger than the part's",
                     plural(k, "feature", "features"),
                     plural(k, "was", "were"),
                     plural(k, "it cures", "they cure"),
                     plural(n, "layer", "layers"),
                     where_is(&at),
-                    fixed(wall_mm, 3),
+                    match wall_mm > 0.0 {
+                        true => format!(", its thin part {} mm wide", number((wall_mm * 1e3).round() / 1e3)),
+                        false => String::new(),
+                    },
                     plural(k, "its", "their"),
                 ),
             )

@@ -116,7 +116,7 @@ pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
     {
         return Err(format!(
             "layer {} is exposed at stage position {:.3} mm, outside the stage travel {}..{} mm (part too tall for this machine)",
-            l.index, l.z_mm, st.travel_min_mm, st.travel_max_mm
+            l.index, l.z_mm, number(st.travel_min_mm), number(st.travel_max_mm)
         ));
     }
     let mut notes = Notes::default();

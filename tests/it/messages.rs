@@ -137,6 +137,7 @@ fn parts(dir: &Path) {
     let mut t = box_tris([0.0; 3], [5.0, 5.0, 0.5]);
     t.extend(box_tris([5.03, 0.0, 0.0], [10.0, 5.0, 0.5]));
     write_stl(&dir.join("slot.stl"), &t);
+    write_stl(&dir.join("ring.stl"), &ring([20.0, 20.0], 5.0, 0.03, 0.3));
     // A 5 mm prism: the hybrid process prints it continuously.
     write_stl(&dir.join("prism.stl"), &box_tris([0.0; 3], [5.0, 5.0, 1.2]));
     // The lens table's corner x, y <= 30 mm: the small part reaches past it.
@@ -148,6 +149,26 @@ fn parts(dir: &Path) {
         })
         .collect();
     std::fs::write(dir.join("corner_lens.csv"), corner.join("\n") + "\n").unwrap();
+}
+
+/// A square ring, outer side `side` from corner `at`, walls `wall` wide, `h` tall.
+fn ring(at: [f32; 2], side: f32, wall: f32, h: f32) -> Vec<[[f32; 3]; 3]> {
+    let sq = |d: f32| {
+        let (a, b) = (d, side - d);
+        [[a, a], [b, a], [b, b], [a, b]].map(|[x, y]| [at[0] + x, at[1] + y])
+    };
+    let (o, i) = (sq(0.0), sq(wall));
+    let p = |q: [f32; 2], z: f32| [q[0], q[1], z];
+    let mut t = Vec::new();
+    let mut quad = |a, b, c, d| t.extend([[a, b, c], [a, c, d]]);
+    for k in 0..4 {
+        let n = (k + 1) % 4;
+        quad(p(o[k], h), p(o[n], h), p(i[n], h), p(i[k], h));
+        quad(p(i[k], 0.0), p(i[n], 0.0), p(o[n], 0.0), p(o[k], 0.0));
+        quad(p(o[k], 0.0), p(o[n], 0.0), p(o[n], h), p(o[k], h));
+        quad(p(i[n], 0.0), p(i[k], 0.0), p(i[k], h), p(i[n], h));
+    }
+    t
 }
 
 const ABSOLUTE: &str = "projector.0.calibration.units=mW/cm2";
@@ -259,11 +280,33 @@ fn cure_optics_and_calibrate_messages_name_a_remedy() {
         .iter()
         .find(|w| w["code"] == "cure.features-widened");
     let msg = w.expect("the pin is widened")["message"].as_str().unwrap();
+    assert!(msg.contains("so that they cure"), "{msg}");
     assert!(
-        msg.contains("walls 0.0") && msg.contains("so that they cure"),
-        "{msg}"
+        !msg.contains("thin part"),
+        "the pin's box shows its size: {msg}"
     );
     ws.extend(widened);
+    // A 5 mm ring with 0.03 mm walls: its box does not say what is thin, the message does.
+    let ring = [
+        "slice",
+        "ring.stl",
+        "-o",
+        "r.dmdjob",
+        "--keep-position",
+        "--compensation",
+        "off",
+    ];
+    let ring = raised(
+        &dir,
+        &[&ring[..], &["--predict", "--cure-correction", "xy"]].concat(),
+    );
+    let w = ring.iter().find(|w| w["code"] == "cure.features-widened");
+    let msg = w.expect("the ring is widened")["message"].as_str().unwrap();
+    assert!(
+        msg.contains("5 × 5 mm, its thin part 0.03 mm wide)"),
+        "{msg}"
+    );
+    ws.extend(ring);
     let tab = fixture("tab2.stl");
     let tab = [
         "slice",
