@@ -25,6 +25,29 @@ pub fn temp_sibling(path: &Path) -> Option<PathBuf> {
     )))
 }
 
+/// What is wrong with the directory an output at `path` goes in, if anything: it does
+/// not exist, or it is not a directory (a file of that name).
+pub fn parent_problem(path: &Path) -> Option<String> {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty())?;
+    if parent.is_dir() {
+        None
+    } else if parent.exists() {
+        Some(format!("{} is not a directory", parent.display()))
+    } else {
+        Some(format!("directory {} does not exist", parent.display()))
+    }
+}
+
+/// The error of a failed write of the output `path` (through its temporary sibling):
+/// naming `path`, the I/O error said as [`parent_problem`] when there is one (its kind,
+/// and so the error's code, kept).
+pub fn write_error(path: &Path, e: std::io::Error) -> Error {
+    match parent_problem(path) {
+        Some(msg) => Error::io(path, std::io::Error::new(e.kind(), msg)),
+        None => Error::io(path, e),
+    }
+}
+
 /// Refuses an output at `path` that is a symbolic link (see the module docs), naming
 /// where it points.
 pub fn refuse_link(path: &Path) -> Result<()> {
@@ -52,7 +75,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .and_then(|_| std::fs::rename(&tmp, path))
         .map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
-            Error::io(path, e)
+            write_error(path, e)
         })
 }
 

@@ -312,7 +312,7 @@ impl Rasterizer {
         scratch.reported_outside = match (map, mapped) {
             (Some(m), false) => m.apply(&mut out, lit),
             (Some(m), true) if outside => {
-                m.lit_outside();
+                m.lit_outside(&out, lit);
                 true
             }
             _ => false,
@@ -401,8 +401,9 @@ pub trait CoverageMap {
     /// it mapped that has a lit pixel (coverage, thresholded when binary, above zero)
     /// outside it.
     fn area(&self) -> PixelBox;
-    /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area).
-    fn lit_outside(&self);
+    /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area),
+    /// with its mapped mask `m` (zero outside `lit_box`).
+    fn lit_outside(&self, m: &Mask, lit_box: PixelBox);
     /// What the map needs for one row (looked up once per row, not per pixel).
     type Row<'a>: Copy
     where
@@ -427,7 +428,7 @@ impl CoverageMap for NoMap {
     fn area(&self) -> PixelBox {
         match *self {}
     }
-    fn lit_outside(&self) {
+    fn lit_outside(&self, _: &Mask, _: PixelBox) {
         match *self {}
     }
     type Row<'a> = ();

@@ -832,7 +832,7 @@ mod tests {
         )
         .unwrap();
         assert_eq!(w.warnings[0].code, "bundle.uncoded");
-        assert_eq!(w.warnings[0].message, "old text");
+        assert!(w.warnings[0].message.starts_with("old text; "));
         assert_eq!(w.warnings[1].code, "plan.travel-clamped");
         assert_eq!(w.warnings[1].fields["moves"], 2);
     }

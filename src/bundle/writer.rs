@@ -330,10 +330,10 @@ impl BundleWriter {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
-        if !parent.is_dir() {
+        if let Some(msg) = crate::output::parent_problem(dest) {
             return Err(Error::Bundle {
                 path: dest.into(),
-                msg: format!("parent directory {} does not exist", parent.display()),
+                msg,
             });
         }
         clean_stale(dest);

@@ -56,6 +56,10 @@ pub struct SmallFeature {
     pub contours: Vec<usize>,
     /// Its outer contour's bounding box (build-plane mm).
     pub at: FeatureBox,
+    /// The width of its thin part where its box does not show it, mm: 2A/P (a wall's
+    /// width) for a feature with holes (a ring) or one much thinner than its box (a
+    /// slanted bar), else 0.
+    pub wall_mm: f64,
     /// The pixels its outer contour's bounding box touches.
     pixels: PixelBox,
 }
@@ -67,6 +71,8 @@ pub struct Widening {
     pub widened: u32,
     /// The first of them (in contour order).
     pub first: Option<FeatureBox>,
+    /// The first one's [`SmallFeature::wall_mm`].
+    pub first_wall_mm: f64,
     /// Small features that stay below T even widened (drawn corrected).
     pub failed: u32,
     /// The mask's lit box grown by the widened pixels.
@@ -118,15 +124,27 @@ pub fn small_features(
             r0: floor(height_px - b[3] / p),
             r1: floor(height_px - b[1] / p) + 1,
         };
+        let wall_mm = thin_part(2.0 * area[o] / length[o], &b, !holes[o].is_empty());
         let mut list = vec![o];
         list.extend(&holes[o]);
         out.push(SmallFeature {
             contours: list,
             at: super::predict::contour_box(c),
+            wall_mm,
             pixels,
         });
     }
     out
+}
+
+/// [`SmallFeature::wall_mm`] of a feature of width `wall` = 2A/P and box `b`.
+fn thin_part(wall: f64, b: &[f64; 4], holes: bool) -> f64 {
+    let thinner = wall < 0.5 * (b[2] - b[0]).min(b[3] - b[1]);
+    if holes || thinner {
+        wall
+    } else {
+        0.0
+    }
 }
 
 /// Margin around a feature's pixels that widening may touch, px.
@@ -288,7 +306,10 @@ pub fn widen(
         }
         if reached >= t {
             out.widened += 1;
-            out.first.get_or_insert(f.at);
+            if out.first.is_none() {
+                out.first = Some(f.at);
+                out.first_wall_mm = f.wall_mm;
+            }
             for b in &band {
                 if mask.data[b.0] > 0 {
                     let (r, c) = (b.0 / w, b.0 % w);

@@ -4,7 +4,7 @@
 use super::sim::{FaultEvent, Motion, SegKind, Segment, ShutterState, Sink};
 use super::Violation;
 use crate::plot::{Band, Canvas, Chart, Panel, Series, Style};
-use crate::text::{count, hms};
+use crate::text::{count, hms, signed};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -371,8 +371,9 @@ pub fn render_human(r: &Report) -> String {
     let (total, est, diff) = (r.total_s, r.estimate_s, r.estimate_diff_pct);
     let _ = writeln!(
         o,
-        "simulated {} ({total:.2} s); {estimate} {est:.2} s ({diff:+.2} %)",
-        hms(total)
+        "simulated {} ({total:.2} s); {estimate} {est:.2} s ({} %)",
+        hms(total),
+        signed(diff, 2)
     );
     let _ = writeln!(
         o,
@@ -455,12 +456,16 @@ fn render_cure(o: &mut String, c: &super::cure::CureCheck) {
         .map_or("none".to_string(), |t| format!("{t:.3} mm"));
     let held = c.held_back_layers;
     let z = c.z_error_mm.map_or(String::new(), |z| {
-        format!(" (Z error {z:+.3} mm, {held} layers held back)")
+        format!(
+            " (Z error {} mm, {} held back)",
+            signed(z, 3),
+            count(held as u64, "layer", "layers")
+        )
     });
     let _ = writeln!(
         o,
-        "cure: edge offset {:+.2} px mean ({:.3} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
-        c.signed_mean_px, c.signed_mean_mm, c.edge_offset_px.p95, c.vanished, c.merged
+        "cure: edge offset {} px mean ({:.3} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
+        signed(c.signed_mean_px, 2), c.signed_mean_mm, c.edge_offset_px.p95, c.vanished, c.merged
     );
     if let Some((s, l)) = c.slicer.as_ref().and_then(|s| Some((s, s.max_diff_layer?))) {
         let islands = match s.vanish_disagreements.len() {

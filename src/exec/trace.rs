@@ -57,7 +57,7 @@ impl TraceWriter {
         let tmp = crate::output::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
         crate::output::refuse_link(path)?;
-        let f = File::create(&tmp).map_err(|e| Error::io(path, e))?;
+        let f = File::create(&tmp).map_err(|e| crate::output::write_error(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 16, f);
         let err = writeln!(w, "{HEADER}").err();
         Ok(TraceWriter {

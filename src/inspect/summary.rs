@@ -159,7 +159,14 @@ pub fn render_human(s: &Summary) -> String {
     };
     let (n, h, tall) = (s.layers, s.layer_height_mm, s.height_mm);
     let (source, profile) = (&s.source, &s.profile);
-    let _ = writeln!(o, "{}{format}: {n} layers of {h} mm, {tall:.2} mm tall; sliced from {source} for {profile}{projectors}", s.bundle);
+    // An imported job's profile is a placeholder name: say where its machine comes from.
+    let origin = match profile.as_str() {
+        "sla-control-import" | "nanodlp-import" | "sl1-import" => {
+            format!("imported from {source}, for the machine that file states")
+        }
+        _ => format!("sliced from {source} for {profile}"),
+    };
+    let _ = writeln!(o, "{}{format}: {n} layers of {} mm, {tall:.2} mm tall; {origin}{projectors}", s.bundle, number(h));
     let continuous = s.continuous_layers.map_or(String::new(), |c| {
         format!(", {c} layers printed continuously")
     });

@@ -18,7 +18,7 @@ use crate::bundle::machine::Projector;
 use crate::profile::Profile;
 use crate::raster::{Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section, Slicer};
-use crate::text::plural;
+use crate::text::{number, plural};
 use crate::warning::Warning;
 use rayon::prelude::*;
 use std::path::Path;
@@ -84,6 +84,8 @@ struct WidenedFeatures {
     layers: u64,
     first_layer: Option<u64>,
     first: Option<FeatureBox>,
+    /// The first one's wall width, mm.
+    wall_mm: f64,
 }
 
 /// Points along a drawn contour at which its edges' moves are solved, px apart at most.
@@ -107,6 +109,8 @@ pub(super) struct LayerWidened {
     pub features: u32,
     /// The first one's bounding box (in contour order), build-plane mm.
     pub first: FeatureBox,
+    /// The first one's wall width, mm.
+    pub wall_mm: f64,
 }
 
 /// What drawing a layer through the cure model gave besides its mask.
@@ -397,6 +401,7 @@ impl CureJob {
             Some(LayerWidened {
                 features: wd.widened,
                 first: wd.first?,
+                wall_mm: wd.first_wall_mm,
             })
         });
         let (p, h) = (self.model.pixel_mm, m.height);
@@ -445,6 +450,7 @@ impl CureJob {
         if t.first_layer.is_none_or(|f| layer < f) {
             t.first_layer = Some(layer);
             t.first = Some(w.first);
+            t.wall_mm = w.wall_mm;
         }
     }
 
@@ -452,17 +458,21 @@ impl CureJob {
     pub fn widened_warning(&self) -> Option<Warning> {
         let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
         let (first, at) = (t.first_layer?, t.first?);
-        let (k, n) = (t.features, t.layers);
+        let (k, n, wall_mm) = (t.features, t.layers, t.wall_mm);
         Some(
             Warning::new(
                 "cure.features-widened",
                 format!(
-                    "cure: {k} {} too thin to cure {} drawn wider so {} cure, in {n} {} (first: layer {first}, at {}); {} cured size is the smallest the machine makes, larger than the part's",
+                    "cure: {k} {} too thin to cure {} drawn wider so that {}, in {n} {} (first: layer {first}, at {}{}); {} cured size is the smallest the machine makes, larger than the part's",
                     plural(k, "feature", "features"),
                     plural(k, "was", "were"),
-                    plural(k, "it", "they"),
+                    plural(k, "it cures", "they cure"),
                     plural(n, "layer", "layers"),
                     where_is(&at),
+                    match wall_mm > 0.0 {
+                        true => format!(", its thin part {} mm wide", number((wall_mm * 1e3).round() / 1e3)),
+                        false => String::new(),
+                    },
                     plural(k, "its", "their"),
                 ),
             )
@@ -472,7 +482,8 @@ impl CureJob {
             .with("x_mm", at.x_mm)
             .with("y_mm", at.y_mm)
             .with("width_mm", at.width_mm)
-            .with("height_mm", at.height_mm),
+            .with("height_mm", at.height_mm)
+            .with("wall_mm", wall_mm),
         )
     }
 
@@ -486,15 +497,16 @@ impl CureJob {
             Warning::new(
                 "cure.features-dropped",
                 format!(
-                    "cure: the xyz correction leaves out {k} flat {} over nothing thinner than {} layers ({} {} in {n} {}; first: layer {first}, at {}); use --cure-correction xy, or make {} at least {} layers ({thick} mm) thick",
+                    "cure: the xyz correction leaves out {k} flat {} over nothing thinner than {} layers ({} {} in {n} {}; first: layer {first}, at {}): {} at least {} layers ({} mm) thick",
                     plural(k, "feature", "features"),
                     m + 1,
                     t.pixels,
                     plural(t.pixels, "pixel", "pixels"),
                     plural(n, "layer", "layers"),
                     where_is(&at),
-                    plural(k, "it", "them"),
+                    plural(k, "it is kept when", "they are kept when"),
                     m + 1,
+                    number(thick),
                 ),
             )
             .with("features", k)
@@ -895,7 +907,10 @@ fn prediction(layers: &[Layer], hist: &Histogram, pixel_mm: f64) -> CurePredicti
 fn where_is(b: &FeatureBox) -> String {
     format!(
         "x {} mm, y {} mm, {} × {} mm",
-        b.x_mm, b.y_mm, b.width_mm, b.height_mm
+        number(b.x_mm),
+        number(b.y_mm),
+        number(b.width_mm),
+        number(b.height_mm)
     )
 }
 
@@ -924,7 +939,7 @@ pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
         let mut w = Warning::new(
             "cure.features-vanish",
             format!(
-                "cure: {k} {} cure nowhere in {n} {} (first: layer {first}{}); widen them or raise the exposure",
+                "cure: {k} {} cure nowhere in {n} {} (first: layer {first}{})",
                 plural(k, "feature", "features"),
                 plural(n, "layer", "layers"),
                 at.map_or(String::new(), |a| format!(", at {}", where_is(&a))),

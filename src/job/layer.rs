@@ -176,8 +176,7 @@ pub(super) fn layer_masks(
     };
     if drawn.outside && origin != Origin::Drawn {
         if let Some(o) = ctx.optics {
-            use crate::raster::CoverageMap;
-            o.compensator.lit_outside();
+            o.compensator.count_outside();
         }
     }
     let masks = write_masks(ctx, &drawn, i)?;

@@ -8,6 +8,7 @@
 use super::Units;
 use crate::profile::{Profile, Resin};
 use crate::units::Positive;
+use crate::text::{fixed, number};
 use crate::warning::Warning;
 
 /// How a job's exposure was derived.
@@ -66,8 +67,8 @@ pub fn resolve(
                     Warning::new(
                         "exposure.implausible-dose",
                         format!(
-                            "layer {thickness_mm} mm + overcure {} mm is {depth:.1} Dp deep: the working curve asks {dose:.0} mJ/cm² (> 100 Ec), implausible for resin {:?}",
-                            resin.overcure_mm, resin.name
+                            "layer {} mm + overcure {} mm is {} Dp deep: the working curve asks {} mJ/cm² (> 100 Ec), implausible for resin {:?}",
+                            number(thickness_mm), number(resin.overcure_mm.get()), fixed(depth, 1), fixed(dose, 0), resin.name
                         ),
                     )
                     .with("thickness_mm", thickness_mm)
@@ -82,8 +83,8 @@ pub fn resolve(
                     Warning::new(
                         "exposure.too-long",
                         format!(
-                            "at E* = {target:.4} mW/cm² resin {:?} (Ec {} mJ/cm²) needs {t:.0} s per layer: implausible; check the calibration's units (µW vs mW) and the resin",
-                            resin.name, resin.ec_mj_cm2
+                            "at E* = {} mW/cm² resin {:?} (Ec {} mJ/cm²) needs {} s per layer: implausible",
+                            number(target), resin.name, number(resin.ec_mj_cm2.get()), fixed(t, 0)
                         ),
                     )
                     .with("exposure_s", t)
@@ -96,8 +97,8 @@ pub fn resolve(
                     Warning::new(
                         "exposure.too-short",
                         format!(
-                            "at E* = {target:.4} mW/cm² resin {:?} needs only {t:.3} s per layer, shorter than shutter timing allows to control; check the calibration's units",
-                            resin.name
+                            "at E* = {} mW/cm² resin {:?} needs only {} s per layer, shorter than shutter timing allows to control",
+                            number(target), resin.name, number(t)
                         ),
                     )
                     .with("exposure_s", t)
@@ -117,8 +118,8 @@ pub fn resolve(
                     Warning::new(
                         "exposure.not-positive",
                         format!(
-                            "working-curve exposure {t} s is not a positive number; kept the profile's {} s",
-                            e.layer_s
+                            "working-curve exposure {} s is not a positive number: kept the profile's {} s",
+                            number(t), number(e.layer_s.get())
                         ),
                     )
                     .with("exposure_s", if t.is_finite() { t.into() } else { serde_json::Value::Null })

@@ -26,7 +26,7 @@ use crate::bundle::Optics;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
 use crate::raster::Mask;
-use crate::text::plural;
+use crate::text::{fixed, number, plural};
 use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -241,16 +241,23 @@ impl JobOptics {
         let [x0, y0, x1, y1] = self.calibration.field.area_mm;
         let layers_outside = c.layers_outside();
         if layers_outside > 0 {
+            let (beyond, margin) = (c.beyond_mm(), self.calibration.field.extrapolate_mm.get());
+            let area = format!("x {}..{}, y {}..{} mm", number(x0), number(x1), number(y0), number(y1));
+            let reach = format!(
+                "{layers_outside} {} up to {} mm beyond the calibrated area ({area})",
+                plural(layers_outside, "layer reaches", "layers reach"),
+                fixed(beyond, 2),
+            );
+            let (code, rest) = match beyond > margin + 1e-9 {
+                true => ("optics.beyond-extrapolation", "farther than the calibration's extrapolate_mm = {m} mm: beyond that margin the light is unknown and compensated as if it were the light at the margin"),
+                false => ("optics.outside-calibrated-area", "within the calibration's extrapolate_mm = {m} mm: the compensation there extrapolates the measured light"),
+            };
+            let w = Warning::new(code, format!("{reach}, {}", rest.replace("{m}", &number(margin))));
             warnings.push(
-                Warning::new(
-                    "optics.outside-calibrated-area",
-                    format!(
-                        "{layers_outside} {} outside the calibrated area x {x0}..{x1}, y {y0}..{y1} mm: compensation there extrapolates the calibration",
-                        plural(layers_outside, "layer reaches", "layers reach")
-                    ),
-                )
-                .with("layers", layers_outside)
-                .with("area_mm", vec![x0, y0, x1, y1]),
+                w.with("layers", layers_outside)
+                    .with("area_mm", vec![x0, y0, x1, y1])
+                    .with("beyond_mm", beyond)
+                    .with("extrapolate_mm", margin),
             );
         }
         if pr.unreachable > 0 && layers_outside > 0 {
@@ -262,7 +269,7 @@ impl JobOptics {
                 Warning::new(
                     "optics.unreachable",
                     format!(
-                        "{} {} outside the calibrated area cannot reach the target irradiance even fully on",
+                        "{} {} outside the calibrated area cannot reach the target irradiance even fully on: the part's exposure there falls short",
                         pr.unreachable,
                         plural(pr.unreachable, unit, units)
                     ),

@@ -5,6 +5,7 @@ use super::{Calibration, Compensator, Dither, Mode};
 use crate::bundle::Spreads;
 use crate::error::{Error, Result};
 use crate::profile::Field;
+use crate::text::fixed;
 use crate::warning::Warning;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -181,13 +182,8 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
             "is a directory; give the calibration file to write",
         ));
     }
-    if let Some(parent) = out.parent() {
-        if !parent.as_os_str().is_empty() && !parent.is_dir() {
-            return Err(Error::input(
-                out,
-                format!("directory {} does not exist", parent.display()),
-            ));
-        }
+    if let Some(msg) = crate::output::parent_problem(out) {
+        return Err(Error::input(out, msg));
     }
     let readings = calib::read_csv(&opts.input)?;
     let fit: FitResult = calib::fit(&readings, &opts.input, &opts.fit)?;
@@ -208,7 +204,7 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
             Warning::new(
                 "calibrate.low-grays-unmeasured",
                 format!(
-                    "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0; measure lower grays",
+                    "zone compensation needs grays down to {lowest}, below the lowest measured gray {}: S there is interpolated towards S(0) = 0",
                     f.measured_gray[0]
                 ),
             )
@@ -223,8 +219,8 @@ pub fn calibrate(opts: &CalibrateOptions) -> Result<CalibrateReport> {
                 Warning::new(
                     "calibrate.spread-remains",
                     format!(
-                        "{name} mode leaves a predicted spread of {:.2} % (zone means) / {:.2} % (pixels): the gray range cannot flatten this field",
-                        p.spreads.after_zone_pct, p.spreads.after_pixel_pct
+                        "{name} mode leaves a predicted spread of {} % (zone means) / {} % (pixels): the gray range cannot flatten this field",
+                        fixed(p.spreads.after_zone_pct, 2), fixed(p.spreads.after_pixel_pct, 2)
                     ),
                 )
                 .with("mode", name)

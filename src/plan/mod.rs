@@ -21,7 +21,7 @@ pub use analysis::LayerAnalysis;
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
 use crate::round;
-use crate::text::plural;
+use crate::text::{fixed, hms, number, plural};
 use crate::warning::Warning;
 
 /// What the planner needs to know about one layer.
@@ -78,6 +78,7 @@ pub(crate) struct Notes {
     wait_model_max_s: f64,
     wait_model_max_layer: usize,
     wait_model_max_patch_mm: f64,
+    wait_model_max_film_mm: f64,
     beyond_table: usize,
     beyond_table_max_mm: f64,
 }
@@ -115,7 +116,7 @@ pub fn plan(profile: &Profile, layers: &[LayerInfo]) -> Result<Plan, String> {
     {
         return Err(format!(
             "layer {} is exposed at stage position {:.3} mm, outside the stage travel {}..{} mm (part too tall for this machine)",
-            l.index, l.z_mm, st.travel_min_mm, st.travel_max_mm
+            l.index, l.z_mm, number(st.travel_min_mm), number(st.travel_max_mm)
         ));
     }
     let mut notes = Notes::default();
@@ -149,11 +150,13 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
             Warning::new(
                 "plan.wait-capped",
                 format!(
-                    "leveling wait capped at recoat.wait_max_s = {cap} s on {capped} of {n} {}: the thin-film model asks up to {:.0} s (layer {}, a {:.1} mm wide flat patch)",
+                    "natural leveling takes longer than recoat.wait_max_s = {} s on {capped} of {n} {} (the thin-film model: up to {} for the {} mm film over the {} mm wide flat patch of layer {}): they are exposed on a surface that may not be level yet, and large flat areas may come out uneven in thickness",
+                    number(cap),
                     plural(n, "layer", "layers"),
-                    notes.wait_model_max_s,
+                    hms(notes.wait_model_max_s),
+                    number(notes.wait_model_max_film_mm),
+                    fixed(notes.wait_model_max_patch_mm, 1),
                     notes.wait_model_max_layer,
-                    notes.wait_model_max_patch_mm
                 ),
             )
             .with("layers", capped)
@@ -172,7 +175,7 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
                 format!(
                     "{k} {} shortened to end at stage.travel_max_mm = {} mm",
                     plural(k, "lift or dip was", "lifts or dips were"),
-                    st.travel_max_mm
+                    number(st.travel_max_mm)
                 ),
             )
             .with("moves", k)
@@ -188,10 +191,12 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
             Warning::new(
                 "plan.beyond-lift-table",
                 format!(
-                    "{k} {} a max fill distance beyond the lift table (up to {:.2} mm > {table_max} mm): {} the last row's lift, {lift} mm",
+                    "{k} {} a max fill distance beyond the lift table (up to {} mm > {} mm): {} the last row's lift, {} mm",
                     plural(k, "slice has", "slices have"),
-                    notes.beyond_table_max_mm,
+                    fixed(notes.beyond_table_max_mm, 2),
+                    number(table_max),
                     plural(k, "it uses", "they use"),
+                    number(lift),
                 ),
             )
             .with("slices", k)

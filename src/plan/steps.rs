@@ -93,6 +93,7 @@ pub(super) fn top_down(
                     notes.wait_model_max_s = raw;
                     notes.wait_model_max_layer = l.index;
                     notes.wait_model_max_patch_mm = 2.0 * l.max_fill_distance_mm;
+                    notes.wait_model_max_film_mm = l.thickness_mm;
                 }
             }
             push_wait(&mut steps, w);

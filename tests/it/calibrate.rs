@@ -397,7 +397,7 @@ fn absolute_calibration_sets_exposure_from_the_working_curve() {
     // The plate reaches the top 3.75 mm strip outside the measured area: that is reported;
     // the dose is plausible.
     let w = job["warnings"].to_string();
-    assert!(w.contains("outside the calibrated area"), "{w}");
+    assert!(w.contains("beyond the calibrated area"), "{w}");
     assert!(!w.contains("implausible"), "{w}");
 }
 

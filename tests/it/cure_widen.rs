@@ -75,7 +75,7 @@ fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
     assert!((y - (300.0 * P + 0.025)).abs() < 1e-3, "{}", w[0]);
     let msg = w[0]["message"].as_str().unwrap();
     assert!(
-        msg.starts_with("cure: 6 features too thin to cure were drawn wider so they cure"),
+        msg.starts_with("cure: 6 features too thin to cure were drawn wider so that they cure"),
         "{msg}"
     );
     assert!(msg.contains(&format!(

@@ -19,6 +19,7 @@ mod inspect;
 mod json;
 mod layers;
 mod limits;
+mod messages;
 mod plan;
 mod plate;
 mod readme;

@@ -591,7 +591,7 @@ fn prism_reaching_outside_the_calibrated_area_counts_every_layer() {
                 && w["message"]
                     .as_str()
                     .unwrap()
-                    .starts_with("20 layers reach outside the calibrated area")),
+                    .starts_with("20 layers reach up to ")),
         "{warnings:?}"
     );
 }

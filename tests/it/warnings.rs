@@ -1,8 +1,8 @@
 //! Warning codes: the table in `docs/WARNINGS.md` lists exactly the codes the library can
-//! raise (`dmdsl::warning::CODES`), with their severity, figures and meaning.
+//! raise (`dmdsl::warning::CODES`), with their severity, figures, meaning and remedy.
 
 use crate::common::*;
-use dmdsl::warning::{Severity, CODES};
+use dmdsl::warning::{any_error, lookup, Policy, Severity, Warning, CODES};
 use serde_json::Value;
 
 /// The table's row for each code, as `docs/WARNINGS.md` must have it.
@@ -24,7 +24,10 @@ fn expected_rows() -> Vec<String> {
                     .collect::<Vec<_>>()
                     .join(", ")
             };
-            format!("| `{}` | {severity} | {fields} | {} |", c.code, c.meaning)
+            format!(
+                "| `{}` | {severity} | {fields} | {} | {} |",
+                c.code, c.meaning, c.remedy
+            )
         })
         .collect()
 }
@@ -177,10 +180,13 @@ fn warnings_carry_codes_and_the_command_line_denies_or_allows_them() {
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(1));
     assert!(
-        e.contains("dmdsl: error: mesh has 3 open edges (holes); open section contours are closed or dropped [mesh.open-edges]"),
+        e.contains("dmdsl: error: mesh has 3 open edges (holes); open section contours are closed or dropped; close the holes in the CAD tool or a mesh repairer, then check the repaired layers (`dmdsl inspect`) [mesh.open-edges]"),
         "{e}"
     );
-    assert!(e.contains("dmdsl: note: leveling wait capped"), "{e}");
+    assert!(
+        e.contains("dmdsl: note: natural leveling takes longer"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -208,4 +214,97 @@ fn bad_warning_rules_are_usage_errors_listing_the_codes() {
     );
     assert_eq!(stderr(&o).lines().count(), 1, "{}", stderr(&o));
     assert!(!dir.join("broken.dmdjob").exists());
+}
+
+#[test]
+fn json_shape_keeps_code_severity_and_fields() {
+    let w = Warning::new("plan.travel-clamped", "3 lifts shortened")
+        .with("layers", 3)
+        .with("wait_max_s", 60.0);
+    let v = serde_json::to_value(&w).unwrap();
+    assert_eq!(v["code"], "plan.travel-clamped");
+    assert_eq!(v["severity"], "warning");
+    assert_eq!(v["fields"]["layers"], 3);
+    assert_eq!(v["fields"]["wait_max_s"], 60.0);
+    let back: Warning = serde_json::from_value(v).unwrap();
+    assert_eq!(back, w);
+    let n = serde_json::to_value(Warning::new("mesh.degenerate-facets", "x")).unwrap();
+    assert_eq!(n["severity"], "note");
+    assert!(n.get("fields").is_none());
+    assert_eq!(
+        Warning::new("plan.travel-clamped", "m").to_string(),
+        format!(
+            "m; {} [plan.travel-clamped]",
+            lookup("plan.travel-clamped").unwrap().remedy
+        ),
+        "people see the code to allow or deny it"
+    );
+}
+
+#[test]
+fn policy_most_specific_rule_wins_and_notes_need_their_code() {
+    let ws = vec![
+        Warning::new("mesh.open-edges", "a"),
+        Warning::new("mesh.degenerate-facets", "b"),
+        Warning::new("plan.unsupported-islands", "c"),
+        Warning::new("plan.wait-capped", "d"),
+    ];
+    // The severity each of `ws` is reported with, in order ("-": left out).
+    let sev = |p: &Policy| -> Vec<String> {
+        let mut out = p.apply(&ws).into_iter().peekable();
+        let got: Vec<String> = (ws.iter())
+            .map(|w| match out.next_if(|o| o.code == w.code) {
+                Some(o) => format!("{:?}", o.severity).to_lowercase(),
+                None => "-".into(),
+            })
+            .collect();
+        assert!(out.next().is_none(), "reported in the order raised");
+        got
+    };
+    // No rules: as raised.
+    assert_eq!(
+        sev(&Policy::default()),
+        ["warning", "note", "warning", "note"]
+    );
+    // --deny-warnings: warnings fail, notes stay notes.
+    let mut p = Policy::default();
+    p.deny_warnings();
+    assert_eq!(sev(&p), ["error", "note", "error", "note"]);
+    // A code beats an area beats all, whatever the order; allow silences.
+    p.add("plan.unsupported-islands=allow").unwrap();
+    p.add("mesh=warn").unwrap();
+    p.add("plan.wait-capped=error").unwrap();
+    assert_eq!(sev(&p), ["warning", "note", "-", "error"]);
+    assert!(any_error(&p.apply(&ws)));
+    // Equally specific: the last rule wins; `mesh.*` is the area.
+    let mut p = Policy::default();
+    p.add("mesh.*=error").unwrap();
+    p.add("mesh=allow").unwrap();
+    assert_eq!(sev(&p), ["-", "-", "warning", "note"]);
+    // Bad rules are one-line errors naming the rule.
+    let err = |rule: &str| Policy::default().add(rule).unwrap_err();
+    assert!(err("mesh.open-edge=error").contains("unknown warning code \"mesh.open-edge\""));
+    assert!(err("mesh.open-edges=fatal").contains("unknown action"));
+    assert!(err("mesh.open-edges").contains("expected CODE="));
+}
+
+#[test]
+fn codes_are_unique_and_well_formed() {
+    let mut seen = std::collections::HashSet::new();
+    for c in CODES {
+        assert!(seen.insert(c.code), "{} twice", c.code);
+        let (area, name) = c.code.split_once('.').expect("area.name");
+        let kebab = |s: &str| {
+            !s.is_empty()
+                && s.chars()
+                    .all(|ch| ch.is_ascii_lowercase() || ch.is_ascii_digit() || ch == '-')
+        };
+        assert!(kebab(area) && kebab(name), "{}", c.code);
+        assert!(c.severity != Severity::Error, "{}", c.code);
+        assert!(
+            !c.remedy.is_empty() && !c.remedy.ends_with('.'),
+            "{}",
+            c.code
+        );
+    }
 }

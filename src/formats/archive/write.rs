@@ -158,7 +158,7 @@ impl<'a> ZipOut<'a> {
             path: dest.into(),
             msg: "not a file name".into(),
         })?;
-        let file = File::create(&tmp).map_err(|e| Error::io(dest, e))?;
+        let file = File::create(&tmp).map_err(|e| crate::output::write_error(dest, e))?;
         let failed = Arc::new(Mutex::new(None));
         let zip = ZipWriter::new(Quiet {
             file: BufWriter::with_capacity(BUFFER_BYTES, file),

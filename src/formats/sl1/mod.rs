@@ -269,6 +269,11 @@ fn num(v: f64) -> String {
     format!("{}", crate::round::derived(v))
 }
 
+/// A duration for a message, s, to the millisecond.
+fn secs(v: f64) -> String {
+    crate::text::number((v * 1000.0).round() / 1000.0)
+}
+
 /// What an SL1 (`format` Sl1) or SL1S cannot carry of `m` (a job of one projector and
 /// at least one layer), in the order the exporter reports it: layers the exposure scheme
 /// cannot give their exposure, other layer thicknesses, continuous layers, the stage
@@ -285,14 +290,14 @@ pub(crate) fn cannot_carry(format: Format, m: &Manifest) -> Vec<Warning> {
             Warning::new(
                 "export.sl1-exposure",
                 format!(
-                    "SL1 exposes layers 0-2 for expTimeFirst ({} s), fades over numFade ({}) layers to expTime ({} s); {n} {} a different exposure in the job (first layer {first}: {} s in the job, {} s in the SL1; largest difference {} s)",
-                    num(scheme.first_s),
-                    scheme.fade,
-                    num(scheme.exp_s),
+                    "SL1 exposes layers 0-2 for expTimeFirst ({} s), fades over {} (numFade) to expTime ({} s); {n} {} a different exposure in the job (first layer {first}: {} s in the job, {} s in the SL1; largest difference {} s)",
+                    secs(scheme.first_s),
+                    crate::text::count(scheme.fade as u64, "layer", "layers"),
+                    secs(scheme.exp_s),
                     plural(n, "layer has", "layers have"),
-                    num(job_s),
-                    num(sl1_s),
-                    num(worst)
+                    secs(job_s),
+                    secs(sl1_s),
+                    secs(worst)
                 ),
             )
             .with("layers", n)
@@ -343,7 +348,7 @@ pub(crate) fn cannot_carry(format: Format, m: &Manifest) -> Vec<Warning> {
                     .ok()
                     .and_then(|v| v.as_str().map(String::from))
                     .unwrap_or_default(),
-                num(m.totals.print_time_s)
+                secs(m.totals.print_time_s)
             ),
         )
         .with("steps", steps)

@@ -5,7 +5,6 @@
 
 use super::{map_words, Compensator, Dither, Mask, Mode};
 use crate::png::PixelBox;
-use std::sync::atomic::Ordering;
 
 impl Compensator {
     /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
@@ -33,9 +32,6 @@ impl Compensator {
             return false;
         }
         let outside = self.lit_outside(m, PixelBox::new(br0, br1, bc0, bc1));
-        if outside {
-            self.layers_outside.fetch_add(1, Ordering::Relaxed);
-        }
         match (self.mode, self.dither) {
             (Mode::Zone, _) => {
                 for r in br0..br1 {
@@ -56,6 +52,9 @@ impl Compensator {
                 }
             }
             (Mode::Off, _) => {}
+        }
+        if outside {
+            self.record_outside(m, PixelBox::new(br0, br1, bc0, bc1));
         }
         outside
     }
@@ -128,8 +127,8 @@ impl crate::raster::CoverageMap for Compensator {
         self.calibrated
     }
 
-    fn lit_outside(&self) {
-        self.layers_outside.fetch_add(1, Ordering::Relaxed);
+    fn lit_outside(&self, m: &Mask, lit_box: PixelBox) {
+        self.record_outside(m, lit_box);
     }
 
     type Row<'a> = CompRow<'a>;

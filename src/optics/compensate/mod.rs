@@ -54,7 +54,13 @@ pub struct Compensator {
     gray_map: GrayMap,
     /// The calibrated area in pixels.
     calibrated: PixelBox,
+    /// The calibrated area, mm, and the pixel size, mm (for [`beyond_mm`](Self::beyond_mm)).
+    area_mm: [f64; 4],
+    pixel_mm: f64,
     layers_outside: AtomicU64,
+    /// The bits of the largest distance, mm, a lit pixel centre lies beyond the calibrated
+    /// area (a non-negative `f64`: its bits order as the values do).
+    beyond_bits: AtomicU64,
     /// What the model predicts; see [`Prediction`].
     pub prediction: Prediction,
 }
@@ -119,5 +125,42 @@ impl Compensator {
     /// calibrated area.
     pub fn layers_outside(&self) -> u64 {
         self.layers_outside.load(Ordering::Relaxed)
+    }
+
+    /// How far, mm, the farthest lit pixel centre of those layers lies beyond the
+    /// calibrated area (along x or y, whichever is farther: the calibration's
+    /// `extrapolate_mm` margin is per axis).
+    pub fn beyond_mm(&self) -> f64 {
+        f64::from_bits(self.beyond_bits.load(Ordering::Relaxed))
+    }
+
+    /// Counts a layer lit outside the calibrated area whose mask repeats one already
+    /// counted (its reach is that one's).
+    pub fn count_outside(&self) {
+        self.layers_outside.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Counts the layer of mask `m` (zero outside `lit_box`) as lit outside the calibrated
+    /// area and records how far its lit pixel centres reach (rows outside the area whole,
+    /// the others left and right of it).
+    fn record_outside(&self, m: &Mask, lit_box: PixelBox) {
+        self.count_outside();
+        let (PixelBox { r0, r1, c0, c1 }, cal, w) = (lit_box, self.calibrated, self.w);
+        let ([ax0, ay0, ax1, ay1], p, c1) = (self.area_mm, self.pixel_mm, c1.min(w));
+        let mut beyond = 0.0f64;
+        for r in r0..r1.min(self.h) {
+            let row = &m.data[r * w..(r + 1) * w];
+            let inside = r >= cal.r0 && r < cal.r1;
+            let (left, right) = if inside { (c1.min(cal.c0), c0.max(cal.c1)) } else { (c1, c0) };
+            let x = |c: Option<usize>| c.map(|c| (c as f64 + 0.5) * p);
+            let xl = x((c0..left).find(|&c| row[c] != 0));
+            let xr = x((right..c1).rev().find(|&c| row[c] != 0));
+            if xl.or(xr).is_some() {
+                let y = (self.h - r) as f64 * p - 0.5 * p;
+                let dx = xl.map_or(0.0, |x| ax0 - x).max(xr.map_or(0.0, |x| x - ax1));
+                beyond = beyond.max(dx).max(ay0 - y).max(y - ay1);
+            }
+        }
+        self.beyond_bits.fetch_max(beyond.to_bits(), Ordering::Relaxed);
     }
 }

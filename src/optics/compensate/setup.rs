@@ -167,7 +167,10 @@ impl Compensator {
             pixel_tables,
             gray_map,
             calibrated: area,
+            area_mm: fm.area_mm,
+            pixel_mm: field.pixel_mm,
             layers_outside: AtomicU64::new(0),
+            beyond_bits: AtomicU64::new(0),
             prediction,
         })
     }
