@@ -46,6 +46,9 @@ pub struct SliceOptions<'a> {
     pub format: Option<Format>,
     /// Cure prediction and correction (`--predict`, `--cure-correction`; docs/CURE.md).
     pub cure: super::CureOptions,
+    /// Pixel values (field-sized, 255 = as drawn) the masks are scaled to: the doses of a
+    /// calibration test job ([`crate::calib::working_curve`]).
+    pub dose: Option<crate::raster::Mask>,
 }
 
 impl SliceOptions<'_> {
@@ -72,6 +75,7 @@ impl SliceOptions<'_> {
             distortion: DistortionChoice::default(),
             format: None,
             cure: Default::default(),
+            dose: None,
         }
     }
 
