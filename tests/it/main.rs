@@ -30,3 +30,4 @@ mod slice;
 mod synthetic;
 mod tamper;
 mod warnings;
+mod working_curve;
