@@ -93,26 +93,42 @@ pub fn working_curve(p: &Profile, n: usize, [lo, hi]: [f64; 2]) -> std::result::
             }
         }
     }
-    let mut out = b"dmdsl working-curve windows".to_vec();
-    out.resize(80, b' ');
-    out.extend(((stl.len() / 50) as u32).to_le_bytes());
-    out.extend(stl);
-    Ok(WorkingCurve { windows, stl: out, dose, layer_s: hi })
+    Ok(WorkingCurve { windows, stl: stl_file(stl), dose, layer_s: hi })
 }
 
 /// Appends the 12 triangles of the box from `a` to `b` (binary STL records).
 fn push_box(out: &mut Vec<u8>, a: [f64; 3], b: [f64; 3]) {
     // Corner k has x of b when bit 0 is set, y when bit 1, z when bit 2; faces CCW outside.
-    const FACES: [([usize; 4], [f32; 3]); 6] = [
-        ([0, 2, 3, 1], [0., 0., -1.]), ([4, 5, 7, 6], [0., 0., 1.]), ([0, 1, 5, 4], [0., -1., 0.]),
-        ([2, 6, 7, 3], [0., 1., 0.]), ([0, 4, 6, 2], [-1., 0., 0.]), ([1, 3, 7, 5], [1., 0., 0.]),
-    ];
-    let corner = |k: usize| [0, 1, 2].map(|d| if k >> d & 1 == 1 { b[d] } else { a[d] } as f32);
-    for (q, n) in FACES {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            n.into_iter().chain(t.iter().flat_map(|&k| corner(k))).for_each(|v| out.extend(v.to_le_bytes()));
-            out.extend([0, 0]);
-        }
+    const FACES: [[usize; 4]; 6] =
+        [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let corner = |k: usize| [0, 1, 2].map(|d| if k >> d & 1 == 1 { b[d] } else { a[d] });
+    FACES.iter().for_each(|q| push_quad(out, q.map(corner)));
+}
+
+/// Appends a square frame at (x, y): a hole of `s` in a wall 1 mm wide, 3 mm tall (one
+/// closed shell: outer and inner walls, top and bottom rings).
+fn push_frame(out: &mut Vec<u8>, x: f64, y: f64, s: f64) {
+    let sq = |lo: f64, hi: f64| [[lo, lo], [hi, lo], [hi, hi], [lo, hi]].map(|[u, v]| [x + u, y + v]);
+    let (o, i) = (sq(0.0, s + 2.0), sq(1.0, s + 1.0));
+    let at = |p: [f64; 2], z: f64| [p[0], p[1], z];
+    for k in 0..4 {
+        let j = (k + 1) % 4;
+        push_quad(out, [at(o[k], 0.), at(o[j], 0.), at(o[j], 3.), at(o[k], 3.)]);
+        push_quad(out, [at(i[j], 0.), at(i[k], 0.), at(i[k], 3.), at(i[j], 3.)]);
+        push_quad(out, [at(o[k], 3.), at(o[j], 3.), at(i[j], 3.), at(i[k], 3.)]);
+        push_quad(out, [at(o[j], 0.), at(o[k], 0.), at(i[k], 0.), at(i[j], 0.)]);
+    }
+}
+
+/// Appends the planar quad `p` (counter-clockwise seen from outside) as two triangles.
+fn push_quad(out: &mut Vec<u8>, p: [[f64; 3]; 4]) {
+    let (u, v) = ([0, 1, 2].map(|d| p[1][d] - p[0][d]), [0, 1, 2].map(|d| p[2][d] - p[0][d]));
+    let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    let len = n.iter().map(|c| c * c).sum::<f64>().sqrt();
+    for t in [[0, 1, 2], [0, 2, 3]] {
+        let pts = t.iter().flat_map(|&k| p[k]);
+        n.map(|c| c / len).into_iter().chain(pts).for_each(|c| out.extend((c as f32).to_le_bytes()));
+        out.extend([0, 0]);
     }
 }
 
@@ -279,4 +295,164 @@ impl ResinFit {
         }
         Ok(())
     }
+}
+
+/// The sizes of the accuracy part's features, mm.
+pub const ACCURACY_SIZES: [f64; 5] = [0.2, 0.5, 1.0, 2.0, 5.0];
+
+/// One measurement of the accuracy part: a feature kind, the axis it is measured along, its
+/// nominal size and where it is (its centre, mm).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Feature {
+    /// `pin`, `wall`, `hole`, `slot` or `step`.
+    pub kind: &'static str,
+    /// `X`, `Y` or `Z`.
+    pub axis: char,
+    /// Nominal size, mm.
+    pub nominal_mm: f64,
+    /// Centre on the build plane, mm.
+    pub centre_mm: [f64; 2],
+}
+
+/// The accuracy part: one cluster in each half of the field, each with pins, walls, holes,
+/// slots (in X and in Y) of every size in [`ACCURACY_SIZES`], 3 mm tall, and steps (in Z):
+/// 3 × 3 mm blocks that tall. Every feature is closed shells that do not touch. Returns the features and
+/// the part as binary STL.
+pub fn accuracy_part(p: &Profile) -> std::result::Result<(Vec<Feature>, Vec<u8>), String> {
+    let f = p.field();
+    let (w, h, gap) = (f.width_mm(), f.height_mm(), 1.0);
+    let (mut feats, mut stl) = (Vec::new(), Vec::new());
+    for cx in [w / 4.0, 3.0 * w / 4.0] {
+        let (x0, mut y) = (cx - 14.0, h / 2.0 + 20.5);
+        let rows: [Row; 7] = [
+            ("pin", &['X', 'Y'], |s| [s, s], |s| vec![[0., 0., 0., s, s, 3.]]),
+            ("wall", &['X'], |s| [s, 3.], |s| vec![[0., 0., 0., s, 3., 3.]]),
+            ("wall", &['Y'], |s| [3., s], |s| vec![[0., 0., 0., 3., s, 3.]]),
+            ("hole", &['X', 'Y'], |s| [s + 2., s + 2.], |_| Vec::new()),
+            ("slot", &['X'], |s| [s + 3., 3.], |s| vec![[0., 0., 0., 1.5, 3., 3.], [1.5 + s, 0., 0., 3. + s, 3., 3.]]),
+            ("slot", &['Y'], |s| [3., s + 3.], |s| vec![[0., 0., 0., 3., 1.5, 3.], [0., 1.5 + s, 0., 3., 3. + s, 3.]]),
+            ("step", &['Z'], |_| [3., 3.], |s| vec![[0., 0., 0., 3., 3., s]]),
+        ];
+        for (kind, axes, size, boxes) in rows {
+            let depth = size(5.0)[1];
+            y -= depth;
+            let mut x = x0;
+            for s in ACCURACY_SIZES {
+                let [fw, fh] = size(s);
+                if kind == "hole" {
+                    push_frame(&mut stl, x, y, s);
+                }
+                for b in boxes(s) {
+                    push_box(&mut stl, [x + b[0], y + b[1], b[2]], [x + b[3], y + b[4], b[5]]);
+                }
+                let centre_mm = [x + fw / 2.0, y + fh / 2.0];
+                feats.extend(axes.iter().map(|&axis| Feature { kind, axis, nominal_mm: s, centre_mm }));
+                x += fw + gap;
+            }
+            if x > w || y < 0.0 {
+                return Err(format!("accuracy part: profile {:?}'s {w} x {h} mm field is too small (the part needs 2 x 28 x 41 mm)", p.name));
+            }
+            y -= gap;
+        }
+    }
+    Ok((feats, stl_file(stl)))
+}
+
+/// A row of the accuracy part: kind, axes, the footprint of size s, the boxes of size s
+/// from the footprint's corner.
+type Row = (&'static str, &'static [char], fn(f64) -> [f64; 2], fn(f64) -> Vec<[f64; 6]>);
+
+/// A measured row of an accuracy sheet: kind, axis, nominal, measured, edge sign.
+type Measured = (String, String, f64, f64, f64);
+
+/// Binary STL of `records` (50-byte triangle records).
+fn stl_file(records: Vec<u8>) -> Vec<u8> {
+    let mut out = b"dmdsl calibration test part".to_vec();
+    out.resize(80, b' ');
+    out.extend(((records.len() / 50) as u32).to_le_bytes());
+    out.extend(records);
+    out
+}
+
+/// Error statistics of a group of measurements, mm.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// The group: "all", an axis or a feature kind.
+    pub group: String,
+    /// Measurements.
+    pub n: usize,
+    /// Mean of measured − nominal, mm.
+    pub mean_mm: f64,
+    /// Its standard deviation (n − 1), mm.
+    pub sd_mm: f64,
+    /// Share within ±0.06 mm (Xu et al. 2010's figure), 0..1.
+    pub within_006: f64,
+    /// Share within the tolerance asked, 0..1.
+    pub within_tolerance: f64,
+}
+
+/// An axis's fit measured = scale·nominal ± offset (+ for pins, walls and steps, − for holes
+/// and slots: their edges move the other way).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxisFit {
+    /// `X`, `Y` or `Z`.
+    pub axis: char,
+    /// Scale.
+    pub scale: f64,
+    /// Offset, mm (the growth of an outer size).
+    pub offset_mm: f64,
+    /// RMS of the fit's residuals, mm.
+    pub residual_rms_mm: f64,
+}
+
+/// The accuracy report of a sheet: statistics (all, per axis, per kind) and a fit per axis
+/// where the sheet has two sizes or more.
+pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<(Vec<ErrorStats>, Vec<AxisFit>)> {
+    let mut rows = Vec::new();
+    for i in 0..s.rows() {
+        let (kind, line) = s.text(i, "feature");
+        let axis = s.text(i, "axis").0.to_ascii_uppercase();
+        let Some(m) = s.num(i, "measured_mm", true)? else { continue };
+        let nominal = s.num(i, "nominal_mm", true)?.filter(|&v| v > 0.0);
+        let Some(nominal) = nominal else {
+            return Err(Error::input(&s.path, format!("line {line}, column nominal_mm: a measured feature needs a positive nominal size")));
+        };
+        if !["X", "Y", "Z"].contains(&axis.as_str()) {
+            return Err(Error::input(&s.path, format!("line {line}, column axis: {axis:?} is not X, Y or Z")));
+        }
+        let sign = if matches!(kind, "hole" | "slot") { -1.0 } else { 1.0 };
+        rows.push((kind.to_string(), axis, nominal, m, sign));
+    }
+    if rows.is_empty() {
+        return Err(Error::input(&s.path, "no measured feature (measured_mm is empty on every line)"));
+    }
+    let stats = |group: &str, e: Vec<f64>| {
+        let n = e.len() as f64;
+        let mean = e.iter().sum::<f64>() / n;
+        let sd = (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
+        let share = |t: f64| e.iter().filter(|v| v.abs() <= t + 1e-9).count() as f64 / n;
+        ErrorStats { group: group.into(), n: e.len(), mean_mm: mean, sd_mm: sd, within_006: share(0.06), within_tolerance: share(tolerance) }
+    };
+    let err = |keep: &dyn Fn(&Measured) -> bool| rows.iter().filter(|r| keep(r)).map(|r| r.3 - r.2).collect::<Vec<f64>>();
+    let mut out = vec![stats("all", err(&|_| true))];
+    let mut groups: Vec<String> = ["X", "Y", "Z"].map(String::from).into();
+    groups.extend(["pin", "wall", "hole", "slot", "step"].map(String::from));
+    groups.extend(rows.iter().map(|r| r.0.clone()).filter(|k| !["pin", "wall", "hole", "slot", "step"].contains(&k.as_str())));
+    groups.dedup();
+    for g in groups {
+        let e = err(&|r| r.1 == g || r.0 == g);
+        if !e.is_empty() && !out.iter().any(|o| o.group == g) {
+            out.push(stats(&g, e));
+        }
+    }
+    let mut fits = Vec::new();
+    for axis in ['X', 'Y', 'Z'] {
+        let r: Vec<_> = rows.iter().filter(|r| r.1.starts_with(axis)).collect();
+        let a = nalgebra::DMatrix::from_fn(r.len(), 2, |i, j| if j == 0 { r[i].2 } else { r[i].4 });
+        let b = nalgebra::DVector::from_iterator(r.len(), r.iter().map(|r| r.3));
+        let Some(x) = crate::polyfit::LeastSquares::new(a.clone()).filter(|_| r.len() >= 3).filter(|l| l.full_rank(1e-9)).and_then(|l| l.solve(&b)) else { continue };
+        let rms = ((&a * &x - &b).norm_squared() / r.len() as f64).sqrt();
+        fits.push(AxisFit { axis, scale: x[0], offset_mm: x[1], residual_rms_mm: rms });
+    }
+    Ok((out, fits))
 }

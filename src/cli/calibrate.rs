@@ -20,7 +20,7 @@ pub(crate) struct CalibrateArgs {
     #[arg(short, long, required = true)]
     output: Option<PathBuf>,
     #[command(subcommand)]
-    resin: Option<Resin>,
+    kind: Option<Kind>,
     /// The irradiance column is in arbitrary units (exposure then comes from the profile).
     #[arg(long)]
     relative: bool,
@@ -47,9 +47,9 @@ pub(crate) struct CalibrateArgs {
     warnings: super::WarningArgs,
 }
 
-/// The resin's working curve (instead of the light).
+/// What else is calibrated (instead of the light).
 #[derive(clap::Subcommand)]
-enum Resin {
+enum Kind {
     /// Fit Jacobs' working curve Cd = Dp·ln(E/Ec) to the filled-in sheet of `dmdsl testjob
     /// working-curve`; writes Dp and Ec (TOML, for `slice --resin`) and the curve's plot.
     Resin {
@@ -59,12 +59,28 @@ enum Resin {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Report the accuracy of the filled-in sheet of `dmdsl testjob accuracy` (error mean
+    /// and deviation, share within ±0.06 mm and the tolerance, per axis and feature kind)
+    /// and fit measured = scale·nominal ± offset per axis.
+    Accuracy {
+        /// The sheet (feature, axis, nominal_mm, measured_mm; empty where not measured).
+        input: PathBuf,
+        /// Tolerance, mm.
+        #[arg(long, value_name = "MM", default_value_t = 0.1)]
+        tolerance: f64,
+    },
 }
 
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
-    if let Some(Resin::Resin { input, output }) = a.resin {
-        return super::testjob::calibrate_resin(input, output, quiet);
+    match a.kind {
+        Some(Kind::Resin { input, output }) => {
+            return super::testjob::calibrate_resin(input, output, quiet)
+        }
+        Some(Kind::Accuracy { input, tolerance }) => {
+            return super::testjob::calibrate_accuracy(&input, tolerance)
+        }
+        None => {}
     }
     let (input, output) = (a.input.expect("required"), a.output.expect("required"));
     use crate::optics::report::{self, CalibrateOptions};

@@ -11,6 +11,7 @@ pub(crate) const TESTJOB_HELP: &str = "Examples:
   dmdsl testjob working-curve -o wc.dmdjob               # 12 windows; wc.csv beside the job
   dmdsl testjob working-curve -o wc.sl1 -p bottom-up --windows 10 --exposure 2..30
   dmdsl calibrate resin wc.csv -o resin.toml             # after filling in cured_mm
+  dmdsl testjob accuracy -o acc.dmdjob -p bottom-up      # dimensions; acc.csv beside it
 
 Exit codes:
   0    the job and its sheet were written
@@ -21,6 +22,17 @@ pub(crate) enum TestjobCmd {
     /// Jacobs' windowpane: windows one layer thick, each at its own dose (a pixel value
     /// through the calibrated response S(g)), and the sheet <job stem>.csv to fill in.
     WorkingCurve(WorkingCurveArgs),
+    /// A dimensional test part: pins, walls, holes and slots in X and Y, steps in Z, 0.2 to
+    /// 5 mm, in both halves of the field, sliced with the profile's settings; the sheet
+    /// <job stem>.csv lists each measurement to make.
+    Accuracy {
+        /// Job to write (its form from the name, as `slice -o`); the sheet goes beside it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Machine profile.
+        #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+        profile: String,
+    },
 }
 
 #[derive(Args)]
@@ -45,7 +57,11 @@ pub(crate) struct WorkingCurveArgs {
 }
 
 /// Runs `dmdsl testjob ...`.
-pub(crate) fn testjob(TestjobCmd::WorkingCurve(a): TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
+pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
+    let a = match cmd {
+        TestjobCmd::WorkingCurve(a) => a,
+        TestjobCmd::Accuracy { output, profile } => return accuracy_job(&output, &profile, quiet),
+    };
     let mut p = Profile::resolve(&a.profile)?;
     crate::optics::apply_calibration_args(&mut p, a.calibration.as_slice())?;
     let t = p.exposure.layer_s.get();
@@ -147,5 +163,79 @@ pub(crate) fn calibrate_resin(input: PathBuf, output: PathBuf, quiet: bool) -> a
             png.display()
         );
     }
+    Ok(0)
+}
+
+/// Writes the accuracy part's job and its sheet.
+fn accuracy_job(output: &std::path::Path, profile: &str, quiet: bool) -> anyhow::Result<u8> {
+    let p = Profile::resolve(profile)?;
+    let (feats, stl) = crate::calib::accuracy_part(&p).map_err(Error::Usage)?;
+    let mut o = crate::job::SliceOptions::new("accuracy.stl", output, p);
+    o.input_bytes = Some(&stl);
+    o.placement = crate::job::PlacementMode::Keep;
+    let sheet_path = output.with_extension("csv");
+    crate::output::refuse_link(&sheet_path)?;
+    let s = crate::job::slice_to_bundle(&o)?;
+    let mut sheet = String::from("feature,axis,nominal_mm,measured_mm,x_mm,y_mm\n");
+    for f in &feats {
+        let [x, y] = f.centre_mm;
+        sheet += &format!("{},{},{},,{x:.3},{y:.3}\n", f.kind, f.axis, f.nominal_mm);
+    }
+    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    if !quiet {
+        super::print_warnings(&s.warnings, "");
+        println!(
+            "{}: {} layers; sheet {} ({} measurements)",
+            s.bundle.display(),
+            s.layers,
+            sheet_path.display(),
+            feats.len()
+        );
+    }
+    Ok(0)
+}
+
+/// Runs `dmdsl calibrate accuracy SHEET`.
+pub(crate) fn calibrate_accuracy(input: &std::path::Path, tolerance: f64) -> anyhow::Result<u8> {
+    if !(tolerance > 0.0 && tolerance.is_finite()) {
+        return Err(Error::Usage(format!("--tolerance {tolerance}: give a size in mm > 0")).into());
+    }
+    let sheet =
+        crate::calib::Sheet::read(input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
+    let (stats, fits) = crate::calib::accuracy(&sheet, tolerance)?;
+    println!(
+        "{:<8} {:>4} {:>10} {:>9} {:>10} {:>10}",
+        "group",
+        "n",
+        "mean (mm)",
+        "sd (mm)",
+        "±0.06 mm",
+        format!("±{tolerance} mm")
+    );
+    for g in &stats {
+        println!(
+            "{:<8} {:>4} {:>+10.4} {:>9.4} {:>9.1}% {:>9.1}%",
+            g.group,
+            g.n,
+            g.mean_mm,
+            g.sd_mm,
+            100.0 * g.within_006,
+            100.0 * g.within_tolerance
+        );
+    }
+    for f in &fits {
+        println!("{}: measured = {:.5}·nominal ± {:+.4} mm (− for holes and slots), residual RMS {:.4} mm", f.axis, f.scale, f.offset_mm, f.residual_rms_mm);
+    }
+    let inv = |a: char| {
+        fits.iter()
+            .find(|f| f.axis == a)
+            .map_or(1.0, |f| 1.0 / f.scale)
+    };
+    println!(
+        "scale correction: dmdsl slice --scale {:.5},{:.5},{:.5}",
+        inv('X'),
+        inv('Y'),
+        inv('Z')
+    );
     Ok(0)
 }

@@ -246,3 +246,111 @@ fn bad_sheets_are_refused_in_one_line_naming_file_line_and_column() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(!dir.join("w.dmdjob").exists() && !dir.join("w.csv").exists());
 }
+
+/// The accuracy sheet filled from measured = scale·nominal ± offset (per axis; − for holes
+/// and slots) plus noise; returns the errors written.
+fn fill_accuracy(path: &Path, fit: [(f64, f64); 3], sd: f64) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let head = lines.next().unwrap();
+    assert_eq!(head, "feature,axis,nominal_mm,measured_mm,x_mm,y_mm");
+    let (mut out, mut errors, mut n) = (format!("{head}\n"), Vec::new(), noise(5, sd));
+    for l in lines {
+        let c: Vec<&str> = l.split(',').collect();
+        let (k, nominal): (usize, f64) = ("XYZ".find(c[1]).unwrap(), c[2].parse().unwrap());
+        let sign = if matches!(c[0], "hole" | "slot") {
+            -1.0
+        } else {
+            1.0
+        };
+        let m = fit[k].0 * nominal + sign * fit[k].1 + n();
+        errors.push(m - nominal);
+        out += &format!("{},{},{},{m:.4},{},{}\n", c[0], c[1], c[2], c[4], c[5]);
+    }
+    std::fs::write(path, out).unwrap();
+    errors
+}
+
+#[test]
+fn accuracy_part_runs_exports_and_its_sheet_is_fitted_back() {
+    let dir = tempdir("accuracy");
+    ok(&run_in(&dir, &["testjob", "accuracy", "-o", "acc.dmdjob"]));
+    ok(&run_in(&dir, &["run", "acc.dmdjob"]));
+    ok(&run_in(&dir, &["export", "acc.dmdjob", "-o", "acc.sl1"]));
+    let sheet = std::fs::read_to_string(dir.join("acc.csv")).unwrap();
+    for kind in ["pin", "wall", "hole", "slot", "step"] {
+        assert!(sheet.lines().any(|l| l.starts_with(kind)), "{kind}");
+    }
+    let fit = [(1.01, 0.04), (0.995, -0.02), (1.02, 0.05)];
+    let errors = fill_accuracy(&dir.join("acc.csv"), fit, 0.01);
+    let out = ok(&run_in(
+        &dir,
+        &["calibrate", "accuracy", "acc.csv", "--tolerance", "0.1"],
+    ));
+    // The "all" line: n, mean, share within ±0.06 mm as the test counts them.
+    let all: Vec<&str> = out
+        .lines()
+        .find(|l| l.starts_with("all"))
+        .unwrap()
+        .split_whitespace()
+        .collect();
+    let n = errors.len() as f64;
+    let mean = errors.iter().sum::<f64>() / n;
+    let within = 100.0 * errors.iter().filter(|e| e.abs() <= 0.06).count() as f64 / n;
+    assert_eq!(all[1], errors.len().to_string(), "{out}");
+    assert!(
+        (all[2].parse::<f64>().unwrap() - mean).abs() < 1e-4,
+        "{out}"
+    );
+    assert!(
+        (all[4].trim_end_matches('%').parse::<f64>().unwrap() - within).abs() < 0.06,
+        "{out}"
+    );
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        let l = out
+            .lines()
+            .find(|l| l.starts_with(&format!("{axis}: measured")))
+            .unwrap();
+        let w: Vec<&str> = l.split_whitespace().collect();
+        let scale: f64 = w[3].trim_end_matches("·nominal").parse().unwrap();
+        let offset: f64 = w[5].parse().unwrap();
+        eprintln!(
+            "{axis}: scale {scale:.5} (chosen {}), offset {offset:+.4} mm (chosen {})",
+            fit[k].0, fit[k].1
+        );
+        assert!((scale - fit[k].0).abs() < 0.005, "{l}");
+        assert!((offset - fit[k].1).abs() < 0.012, "{l}");
+    }
+    for (what, text, want) in [
+        (
+            "missing column",
+            "feature,axis,nominal_mm\npin,X,1\n",
+            "line 1",
+        ),
+        (
+            "text",
+            "feature,axis,nominal_mm,measured_mm\npin,X,1,1.0\npin,X,2,wide\n",
+            "line 3, column measured_mm",
+        ),
+        (
+            "negative",
+            "feature,axis,nominal_mm,measured_mm\npin,X,1,-1\n",
+            "line 2, column measured_mm",
+        ),
+        (
+            "axis",
+            "feature,axis,nominal_mm,measured_mm\npin,W,1,1\n",
+            "line 2, column axis",
+        ),
+    ] {
+        std::fs::write(dir.join("bad.csv"), text).unwrap();
+        let o = run_in(&dir, &["calibrate", "accuracy", "bad.csv"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{what}: {err}");
+        assert!(
+            err.contains("bad.csv") && err.contains(want),
+            "{what}: {err}"
+        );
+    }
+}
