@@ -47,7 +47,7 @@ pub struct SliceOptions<'a> {
     /// Cure prediction and correction (`--predict`, `--cure-correction`; docs/CURE.md).
     pub cure: super::CureOptions,
     /// Pixel values (field-sized, 255 = as drawn) the masks are scaled to: the doses of a
-    /// calibration test job ([`crate::calib::working_curve`]).
+    /// calibration test job (`dmdsl testjob working-curve`).
     pub dose: Option<crate::raster::Mask>,
 }
 
