@@ -49,8 +49,8 @@ pub mod profile;
 mod test_support;
 
 stages!(
-    cure, digest, exec, formats, geometry, input, inspect, job, mesh, motion, optics, output,
-    picture, plan, plot, png, polyfit, raster, round, slice, table, text, units, warning,
+    calib, cure, digest, exec, formats, geometry, input, inspect, job, mesh, motion, optics,
+    output, picture, plan, plot, png, polyfit, raster, round, slice, table, text, units, warning,
 );
 
 pub use bundle::Manifest;

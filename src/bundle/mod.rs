@@ -110,6 +110,10 @@ pub struct Cure {
     pub dp_mm: f64,
     /// Critical energy Ec, mJ/cm².
     pub ec_mj_cm2: f64,
+    /// Where `psf_sigma_px`, `dp_mm` and `ec_mj_cm2` came from: the measurement sheet each
+    /// was fitted to (name and SHA-256), or "assumed" (typed into the profile).
+    #[serde(default)]
+    pub sources: std::collections::BTreeMap<String, String>,
     /// Cure depth beyond the layer, mm.
     pub overcure_mm: f64,
     /// Layer thickness, mm.
@@ -325,7 +329,8 @@ pub struct Settings {
     pub layer_height_mm: f64,
     /// Binary (thresholded) masks instead of 8-bit coverage.
     pub binary: bool,
-    /// Light compensation mode: "off", "zone" or "pixel".
+    /// Light compensation mode: "off", "zone" or "pixel"; "dose": uncompensated masks whose
+    /// pixel values are a calibration test job's doses (`dmdsl testjob`).
     pub compensation: String,
     /// Distortion correction applied to the masks: its table and fit report.
     #[serde(default, skip_serializing_if = "Option::is_none")]

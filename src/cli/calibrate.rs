@@ -14,10 +14,13 @@ pub(crate) const CALIBRATE_EXIT_HELP: &str = "Exit codes:
 pub(crate) struct CalibrateArgs {
     /// Measurements: CSV with header x_mm,y_mm,gray,irradiance_mw_cm2 (zone centre from the
     /// field's bottom-left corner, pixel value shown there (255 = fully on), irradiance).
-    input: PathBuf,
+    #[arg(required = true)]
+    input: Option<PathBuf>,
     /// Calibration file to write (TOML); PNG plots are written next to it.
-    #[arg(short, long)]
-    output: PathBuf,
+    #[arg(short, long, required = true)]
+    output: Option<PathBuf>,
+    #[command(subcommand)]
+    kind: Option<Kind>,
     /// The irradiance column is in arbitrary units (exposure then comes from the profile).
     #[arg(long)]
     relative: bool,
@@ -44,8 +47,42 @@ pub(crate) struct CalibrateArgs {
     warnings: super::WarningArgs,
 }
 
+/// What else is calibrated (instead of the light).
+#[derive(clap::Subcommand)]
+enum Kind {
+    /// Fit Jacobs' working curve Cd = Dp·ln(E/Ec) to the filled-in sheet of `dmdsl testjob
+    /// working-curve`; writes Dp and Ec (TOML, for `slice --resin`) and the curve's plot.
+    Resin {
+        /// The sheet (window, exposure_s, dose_mj_cm2, cured_mm: 0 or empty where nothing cured).
+        input: PathBuf,
+        /// Resin calibration file to write (TOML); the plot goes beside it as .png.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Report the accuracy of the filled-in sheet of `dmdsl testjob accuracy` (error mean
+    /// and deviation, share within ±0.06 mm and the tolerance, per axis and feature kind)
+    /// and fit measured = scale·nominal ± offset per axis.
+    Accuracy {
+        /// The sheet (feature, axis, nominal_mm, measured_mm; empty where not measured).
+        input: PathBuf,
+        /// Tolerance, mm.
+        #[arg(long, value_name = "MM", default_value_t = 0.1)]
+        tolerance: f64,
+    },
+}
+
 /// Runs `dmdsl calibrate`.
 pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
+    match a.kind {
+        Some(Kind::Resin { input, output }) => {
+            return super::testjob::calibrate_resin(input, output, quiet)
+        }
+        Some(Kind::Accuracy { input, tolerance }) => {
+            return super::testjob::calibrate_accuracy(&input, tolerance)
+        }
+        None => {}
+    }
+    let (input, output) = (a.input.expect("required"), a.output.expect("required"));
     use crate::optics::report::{self, CalibrateOptions};
     use crate::optics::{calib::FitOptions, Units};
     let policy = a.warnings.policy(&[])?;
@@ -62,8 +99,8 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         degree: a.degree,
     };
     let mut r = report::calibrate(&CalibrateOptions {
-        input: a.input,
-        output: a.output,
+        input,
+        output,
         fit,
         field,
         plots: !a.no_plots,

@@ -13,6 +13,7 @@ mod process;
 mod profile;
 mod run;
 mod slice;
+mod testjob;
 
 pub use process::main;
 
@@ -135,10 +136,14 @@ pub(crate) enum Cmd {
     Run(run::RunArgs),
     /// Fit a light-uniformity calibration (E = P(x,y)·S(g)) to irradiance measurements.
     #[command(after_help = help::join(help::CALIBRATE, calibrate::CALIBRATE_EXIT_HELP))]
+    #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
     Calibrate(calibrate::CalibrateArgs),
     /// Fit a distortion correction table and report its quality (and optionally plot it).
     #[command(after_help = help::join(help::DISTORTION, distortion::DISTORTION_EXIT_HELP))]
     Distortion(distortion::DistortionArgs),
+    /// Make a calibration test job and the measurement sheet beside it (docs/CALIBRATION.md).
+    #[command(subcommand, after_help = testjob::TESTJOB_HELP)]
+    Testjob(testjob::TestjobCmd),
     /// Write a job bundle in another form: one zip, Prusa SL1/SL1S, or the SLA
     /// control-file standard.
     #[command(after_help = export::EXPORT_HELP)]
@@ -179,7 +184,7 @@ impl Cli {
             Cmd::Distortion(a) => a.json,
             Cmd::Inspect(a) => a.json,
             Cmd::Export(a) => a.json(),
-            Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) => false,
+            Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) | Cmd::Testjob(_) => false,
         }
     }
 }
@@ -191,6 +196,7 @@ pub(crate) fn run(cli: Cli) -> anyhow::Result<u8> {
         Cmd::Distortion(a) => distortion::distortion(a, cli.quiet),
         Cmd::Run(a) => run::run_bundle(a, cli.quiet),
         Cmd::Calibrate(a) => calibrate::calibrate(a, cli.quiet),
+        Cmd::Testjob(c) => testjob::testjob(c, cli.quiet),
         Cmd::Inspect(a) => inspect::inspect(a, cli.quiet),
         Cmd::Export(a) => export::export(a, cli.quiet),
         Cmd::Profile(c) => profile::profile(c),

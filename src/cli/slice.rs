@@ -65,6 +65,10 @@ struct CureArgs {
     /// outline over its section into DIR (PNG).
     #[arg(long, value_name = "DIR", requires = "predict")]
     cure_plots: Option<PathBuf>,
+    /// Resin calibration file from `dmdsl calibrate resin`: its Dp (and Ec, when fitted to
+    /// absolute doses) replace the profile's.
+    #[arg(long, value_name = "FILE")]
+    resin: Option<PathBuf>,
 }
 
 /// Light compensation mode.
@@ -266,6 +270,7 @@ impl Job<'_> {
             format: self.format,
             cure: self.cure.clone(),
             plate: self.plate.clone(),
+            dose: None,
         };
         job::slice_to_bundle(&opts)
     }
@@ -284,6 +289,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     let overrides = overrides(&a)?;
     let mut profile = Profile::resolve(&a.profile)?.with_overrides(&overrides)?;
     crate::optics::apply_calibration_args(&mut profile, &a.calibration)?;
+    if let Some(r) = &a.cure.resin {
+        crate::calib::ResinFit::apply_file(r, &mut profile)?;
+    }
     if let Some(path) = &a.machine {
         super::export::fit_profile(&mut profile, path)?;
     }

@@ -281,6 +281,7 @@ mod tests {
             pixel_mm: m.pixel_mm,
             dp_mm: m.dp_mm,
             ec_mj_cm2: m.ec_mj_cm2,
+            sources: Default::default(),
             overcure_mm: m.overcure_mm,
             layer_mm: m.layer_mm,
             edge_threshold: m.edge_threshold(),

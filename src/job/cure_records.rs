@@ -40,6 +40,8 @@ pub struct CureOptions {
 /// The cure model of one job.
 pub(super) struct CureJob {
     model: CureModel,
+    /// Where the model's values came from (`bundle::Cure::sources`).
+    sources: std::collections::BTreeMap<String, String>,
     /// The pixel-phase averaged light across a drawn edge.
     profile: cure::shift::EdgeProfile,
     /// The exposures of the layers (bottom layers' longer), for their doses.
@@ -187,8 +189,12 @@ impl CureJob {
             }
             _ => 0,
         };
+        let r = &profile.resin;
+        let of = |s: &Option<String>| s.clone().unwrap_or_else(|| "assumed".into());
+        let sources = [("psf_sigma_px", "assumed".into()), ("dp_mm", of(&r.dp_source)), ("ec_mj_cm2", of(&r.ec_source))];
         Ok(Some(CureJob {
             model,
+            sources: sources.map(|(k, v)| (k.to_string(), v)).into(),
             profile: cure::shift::EdgeProfile::new(&cure::Psf {
                 sigma_px: model.sigma_px,
             }),
@@ -687,6 +693,7 @@ impl CureJob {
             pixel_mm: m.pixel_mm,
             dp_mm: m.dp_mm,
             ec_mj_cm2: m.ec_mj_cm2,
+            sources: self.sources.clone(),
             overcure_mm: m.overcure_mm,
             layer_mm: m.layer_mm,
             edge_threshold: r(m.edge_threshold()),

@@ -48,6 +48,8 @@ pub(super) struct LayerContext<'a> {
     /// Where the field's coverage masks go for the cure prediction of a job of several
     /// projectors (`--predict`; their masks do not show the field's light).
     pub field: Option<&'a Sink>,
+    /// Pixel values the drawn masks are scaled to (255 = as drawn): the doses of a test job.
+    pub dose: Option<&'a Mask>,
 }
 
 impl LayerContext<'_> {
@@ -322,7 +324,7 @@ fn draw(
     let comp = ctx.optics.map(|o| &o.compensator);
     let coverage = drawing.coverage.take();
     let drawn_section = drawing.drawn();
-    let (field_mask, lit_pixels, outside, dropped, widened) = match ctx.cure.filter(|c| c.active())
+    let (mut field_mask, lit_pixels, outside, dropped, widened) = match ctx.cure.filter(|c| c.active())
     {
         // The cure correction works on the coverage (the relative irradiance the
         // compensation then delivers): drawn and corrected, then thresholded and
@@ -349,6 +351,9 @@ fn draw(
             (m, lit, outside, Vec::new(), None)
         }
     };
+    for (v, d) in field_mask.data.iter_mut().zip(ctx.dose.map_or(&[][..], |d| &d.data)) {
+        *v = ((*v as u32 * *d as u32 + 127) / 255) as u8;
+    }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {

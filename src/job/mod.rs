@@ -117,7 +117,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         &part,
         (&writer, field.as_ref()),
         &control,
-        cure.as_ref(),
+        (cure.as_ref(), opts.dose.as_ref()),
     )?;
 
     let t_finish = Instant::now();
@@ -135,6 +135,9 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         &profile,
     )?;
     warnings.append(&mut optics.warnings);
+    if opts.dose.is_some() {
+        optics.compensation = "dose".into();
+    }
     let predicted_at = warnings.len();
     warnings.extend(cure.as_ref().and_then(|c| c.dropped_warning()));
     warnings.extend(cure.as_ref().and_then(|c| c.widened_warning()));
@@ -381,7 +384,7 @@ fn make_layers(
     part: &PlacedPart,
     (writer, field_store): (&Sink, Option<&Sink>),
     control: &Control,
-    cure: Option<&cure_records::CureJob>,
+    (cure, dose): (Option<&cure_records::CureJob>, Option<&Mask>),
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
     let h = profile.slicing.layer_height_mm.get();
     let field = profile.field();
@@ -402,6 +405,7 @@ fn make_layers(
         px_area_mm2: field.pixel_mm * field.pixel_mm,
         cure,
         field: field_store,
+        dose,
     };
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {

@@ -48,6 +48,9 @@ pub struct SliceOptions<'a> {
     pub cure: super::CureOptions,
     /// More parts, or copies, on one plate with `input` (`--plate`, `--copies`).
     pub plate: Option<super::Plate>,
+    /// Pixel values (field-sized, 255 = as drawn) the masks are scaled to: the doses of a
+    /// calibration test job (`dmdsl testjob working-curve`).
+    pub dose: Option<crate::raster::Mask>,
 }
 
 impl SliceOptions<'_> {
@@ -75,6 +78,7 @@ impl SliceOptions<'_> {
             format: None,
             cure: Default::default(),
             plate: None,
+            dose: None,
         }
     }
 

@@ -150,7 +150,7 @@ fn header(cal: &Calibration, input: &Path) -> String {
 /// is renamed into place only when every file was written. A symbolic link at a path is
 /// refused ([`crate::output::refuse_link`]); an error names the file, not its temporary
 /// sibling.
-fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
+pub(crate) fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     let tmp: Vec<PathBuf> = files
         .iter()
         .map(|(p, _)| {

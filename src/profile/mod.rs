@@ -248,6 +248,13 @@ pub struct Resin {
     pub overcure_mm: NonNegative,
     /// Dynamic viscosity, Pa·s.
     pub viscosity_pa_s: Positive,
+    /// The measurement sheet Dp was fitted to (`dmdsl calibrate resin`: its name and
+    /// SHA-256); without it Dp is assumed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dp_source: Option<String>,
+    /// The same for Ec (fitted only to absolute doses).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ec_source: Option<String>,
 }
 
 /// Size of the whole build field.
@@ -529,7 +536,7 @@ pub fn builtin_source(name: &str) -> Option<&'static str> {
     BUILTIN.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
 }
 
-fn one_line(s: &str) -> String {
+pub(crate) fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 

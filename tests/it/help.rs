@@ -33,6 +33,7 @@ fn every_command_shows_examples_and_its_own_exit_codes() {
             "the calibration (and its plots) were written",
         ),
         (&["distortion"], "the table was fitted"),
+        (&["testjob"], "the job and its sheet were written"),
         (&["profile"], "unknown profile name"),
         (&["completions"], "the script was written"),
         (&["man"], "the page was written"),
@@ -90,6 +91,7 @@ fn completions_for_each_shell() {
             "distortion",
             "profile",
             "export",
+            "testjob",
         ] {
             assert!(s.contains(cmd), "{shell} completion lacks {cmd}");
         }

@@ -32,3 +32,4 @@ mod slice;
 mod synthetic;
 mod tamper;
 mod warnings;
+mod working_curve;

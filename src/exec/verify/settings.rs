@@ -39,11 +39,11 @@ pub(super) fn check(dir: &dyn BundleSource, m: &Manifest, problems: &mut Vec<Vio
     let c = m.settings.compensation.as_str();
     let records: Vec<_> = m.optics.iter().chain(&m.projector_optics).collect();
     let msg = match (c, records.iter().find(|o| o.mode != c)) {
-        ("off", Some(o)) => Some(format!("settings.compensation is off, but the job records the {} compensation of projector {}", o.mode, o.projector)),
+        ("off" | "dose", Some(o)) => Some(format!("settings.compensation is {c}, but the job records the {} compensation of projector {}", o.mode, o.projector)),
         ("zone" | "pixel", _) if records.is_empty() => Some(format!("settings.compensation is {c}, but the job has no light compensation record (optics)")),
         ("zone" | "pixel", Some(o)) => Some(format!("settings.compensation is {c}, but the compensation of projector {} is {}", o.projector, o.mode)),
-        ("off" | "zone" | "pixel", _) => None,
-        _ => Some(format!("settings.compensation is {c:?}: off, zone or pixel")),
+        ("off" | "zone" | "pixel" | "dose", _) => None,
+        _ => Some(format!("settings.compensation is {c:?}: off, zone, pixel or dose")),
     };
     if let Some(msg) = msg {
         add(msg);
@@ -114,7 +114,7 @@ mod tests {
         m.settings.compensation = "zone".into();
         assert!(only(&m)[0].contains("settings.compensation is zone, but the job has no light compensation record"));
         m.settings.compensation = "bright".into();
-        assert!(only(&m)[0].contains("settings.compensation is \"bright\": off, zone or pixel"));
+        assert!(only(&m)[0].contains("settings.compensation is \"bright\": off, zone, pixel or dose"));
         // A further exposure of a layer (0 mm thick, another exposure time) is no layer of
         // the height's or the exposure's rules.
         let mut again = fine.clone();

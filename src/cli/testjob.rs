@@ -1,0 +1,241 @@
+//! `dmdsl testjob working-curve` and `dmdsl calibrate resin`: the working curve's test job
+//! with its measurement sheet, and the fit of the filled-in sheet (docs/CALIBRATION.md).
+
+use crate::error::Error;
+use crate::profile::{self, Profile};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+/// After `dmdsl testjob --help`.
+pub(crate) const TESTJOB_HELP: &str = "Examples:
+  dmdsl testjob working-curve -o wc.dmdjob               # 12 windows; wc.csv beside the job
+  dmdsl testjob working-curve -o wc.sl1 -p bottom-up --windows 10 --exposure 2..30
+  dmdsl calibrate resin wc.csv -o resin.toml             # after filling in cured_mm
+  dmdsl testjob accuracy -o acc.dmdjob -p bottom-up      # dimensions; acc.csv beside it
+
+Exit codes:
+  0    the job and its sheet were written
+  2    usage or input error (bad range, profile or output); nothing was written";
+
+#[derive(Subcommand)]
+pub(crate) enum TestjobCmd {
+    /// Jacobs' windowpane: windows one layer thick, each at its own dose (a pixel value
+    /// through the calibrated response S(g)), and the sheet <job stem>.csv to fill in.
+    WorkingCurve(WorkingCurveArgs),
+    /// A dimensional test part: pins, walls, holes and slots in X and Y, steps in Z, 0.2 to
+    /// 5 mm, in both halves of the field, sliced with the profile's settings; the sheet
+    /// <job stem>.csv lists each measurement to make.
+    Accuracy {
+        /// Job to write (its form from the name, as `slice -o`); the sheet goes beside it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Machine profile.
+        #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+        profile: String,
+    },
+}
+
+#[derive(Args)]
+pub(crate) struct WorkingCurveArgs {
+    /// Job to write (its form from the name, as `slice -o`); the sheet goes beside it.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Machine profile.
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// Number of windows (2 to 64).
+    #[arg(long, default_value_t = 12)]
+    windows: usize,
+    /// Exposures LO..HI in s at the brightest gray, a geometric series [default: half to
+    /// 8 times the profile's layer exposure].
+    #[arg(long, visible_alias = "dose", value_name = "LO..HI")]
+    exposure: Option<String>,
+    /// Light calibration file from `dmdsl calibrate`, replacing the profile's: its S(g)
+    /// sets the gray levels and, when absolute, the doses in mJ/cm².
+    #[arg(long, value_name = "FILE")]
+    calibration: Option<String>,
+}
+
+/// Runs `dmdsl testjob ...`.
+pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
+    let a = match cmd {
+        TestjobCmd::WorkingCurve(a) => a,
+        TestjobCmd::Accuracy { output, profile } => return accuracy_job(&output, &profile, quiet),
+    };
+    let mut p = Profile::resolve(&a.profile)?;
+    crate::optics::apply_calibration_args(&mut p, a.calibration.as_slice())?;
+    let t = p.exposure.layer_s.get();
+    let range = match &a.exposure {
+        None => [0.5 * t, 8.0 * t],
+        Some(s) => match s.split_once("..").map(|(l, h)| (l.parse(), h.parse())) {
+            Some((Ok(l), Ok(h))) => [l, h],
+            _ => {
+                return Err(
+                    Error::Usage(format!("--exposure {s}: give LO..HI in s, e.g. 2..30")).into(),
+                )
+            }
+        },
+    };
+    let wc = crate::calib::working_curve(&p, a.windows, range).map_err(Error::Usage)?;
+    let layer_s = crate::units::Positive::new(wc.layer_s).expect("checked positive");
+    (p.exposure.layer_s, p.exposure.bottom_s) = (layer_s, layer_s);
+    let mut o = crate::job::SliceOptions::new("working-curve.stl", &a.output, p);
+    o.input_bytes = Some(&wc.stl);
+    o.placement = crate::job::PlacementMode::Keep;
+    o.binary = Some(false);
+    o.optics.mode = Some(crate::optics::Mode::Off);
+    o.cure.correction = Some(crate::cure::Correction::Off);
+    o.dose = Some(wc.dose.clone());
+    let sheet_path = a.output.with_extension("csv");
+    crate::output::refuse_link(&sheet_path)?;
+    let s = crate::job::slice_to_bundle(&o)?;
+    let mut sheet = String::from("window,x_mm,y_mm,gray,exposure_s,dose_mj_cm2,cured_mm\n");
+    for (i, w) in wc.windows.iter().enumerate() {
+        let dose = w.dose_mj_cm2.map_or(String::new(), |d| format!("{d:.4}"));
+        let [x, y] = w.centre_mm;
+        sheet += &format!(
+            "{},{x:.3},{y:.3},{},{:.4},{dose},\n",
+            i + 1,
+            w.gray,
+            w.exposure_s
+        );
+    }
+    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    if !quiet {
+        super::print_warnings(&s.warnings, "");
+        println!(
+            "{}: {} windows, {:.3}..{:.3} s at the brightest gray, layer exposure {:.3} s",
+            s.bundle.display(),
+            wc.windows.len(),
+            range[0],
+            range[1],
+            wc.layer_s
+        );
+        println!(
+            "sheet: {} (fill in cured_mm, then `dmdsl calibrate resin`)",
+            sheet_path.display()
+        );
+    }
+    Ok(0)
+}
+
+/// Runs `dmdsl calibrate resin SHEET -o FILE`.
+pub(crate) fn calibrate_resin(input: PathBuf, output: PathBuf, quiet: bool) -> anyhow::Result<u8> {
+    let sheet =
+        crate::calib::Sheet::read(&input, &["window", "exposure_s", "dose_mj_cm2", "cured_mm"])?;
+    let f = crate::calib::fit_resin(&sheet)?;
+    let (crit, unit) = match f.ec_mj_cm2 {
+        Some(ec) => (
+            format!("Ec = {ec:.4} ± {:.4} mJ/cm²", f.critical_se),
+            "mJ/cm²",
+        ),
+        None => (
+            format!(
+                "critical exposure {:.4} ± {:.4} s at the brightest gray",
+                f.critical_exposure_s.unwrap_or(0.0),
+                f.critical_se
+            ),
+            "s",
+        ),
+    };
+    let head = format!("# dmdsl resin calibration, fitted by `dmdsl calibrate resin {}`: Jacobs' working\n# curve Cd = Dp*ln(E/Ec), least squares in ln E. Use it with `dmdsl slice --resin FILE`.\n", input.display());
+    let png = output.with_extension("png");
+    let chart = f.chart().render().encode(crate::plot::Format::Png);
+    let toml = head + &toml::to_string(&f).expect("fit serializes");
+    crate::optics::report::write_all(&[(output.clone(), toml.into_bytes()), (png.clone(), chart)])?;
+    if !quiet {
+        println!(
+            "{}: {} cured windows; Dp = {:.4} ± {:.4} mm, {crit}",
+            output.display(),
+            f.residuals.len(),
+            f.dp_mm,
+            f.dp_se_mm
+        );
+        for r in &f.residuals {
+            println!(
+                "  line {}: E {:.4} {unit}, cured {:.4} mm, residual {:+.4} mm",
+                r[0], r[1], r[2], r[3]
+            );
+        }
+        println!(
+            "residual RMS {:.4} mm\nplot: {}",
+            f.residual_rms_mm,
+            png.display()
+        );
+    }
+    Ok(0)
+}
+
+/// Writes the accuracy part's job and its sheet.
+fn accuracy_job(output: &std::path::Path, profile: &str, quiet: bool) -> anyhow::Result<u8> {
+    let p = Profile::resolve(profile)?;
+    let (feats, stl) = crate::calib::accuracy_part(&p).map_err(Error::Usage)?;
+    let mut o = crate::job::SliceOptions::new("accuracy.stl", output, p);
+    o.input_bytes = Some(&stl);
+    o.placement = crate::job::PlacementMode::Keep;
+    let sheet_path = output.with_extension("csv");
+    crate::output::refuse_link(&sheet_path)?;
+    let s = crate::job::slice_to_bundle(&o)?;
+    let mut sheet = String::from("feature,axis,nominal_mm,measured_mm,x_mm,y_mm\n");
+    for f in &feats {
+        let [x, y] = f.centre_mm;
+        sheet += &format!("{},{},{},,{x:.3},{y:.3}\n", f.kind, f.axis, f.nominal_mm);
+    }
+    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    if !quiet {
+        super::print_warnings(&s.warnings, "");
+        println!(
+            "{}: {} layers; sheet {} ({} measurements)",
+            s.bundle.display(),
+            s.layers,
+            sheet_path.display(),
+            feats.len()
+        );
+    }
+    Ok(0)
+}
+
+/// Runs `dmdsl calibrate accuracy SHEET`.
+pub(crate) fn calibrate_accuracy(input: &std::path::Path, tolerance: f64) -> anyhow::Result<u8> {
+    if !(tolerance > 0.0 && tolerance.is_finite()) {
+        return Err(Error::Usage(format!("--tolerance {tolerance}: give a size in mm > 0")).into());
+    }
+    let sheet =
+        crate::calib::Sheet::read(input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
+    let (stats, fits) = crate::calib::accuracy(&sheet, tolerance)?;
+    println!(
+        "{:<8} {:>4} {:>10} {:>9} {:>10} {:>10}",
+        "group",
+        "n",
+        "mean (mm)",
+        "sd (mm)",
+        "±0.06 mm",
+        format!("±{tolerance} mm")
+    );
+    for g in &stats {
+        println!(
+            "{:<8} {:>4} {:>+10.4} {:>9.4} {:>9.1}% {:>9.1}%",
+            g.group,
+            g.n,
+            g.mean_mm,
+            g.sd_mm,
+            100.0 * g.within_006,
+            100.0 * g.within_tolerance
+        );
+    }
+    for f in &fits {
+        println!("{}: measured = {:.5}·nominal ± {:+.4} mm (− for holes and slots), residual RMS {:.4} mm", f.axis, f.scale, f.offset_mm, f.residual_rms_mm);
+    }
+    let inv = |a: char| {
+        fits.iter()
+            .find(|f| f.axis == a)
+            .map_or(1.0, |f| 1.0 / f.scale)
+    };
+    println!(
+        "scale correction: dmdsl slice --scale {:.5},{:.5},{:.5}",
+        inv('X'),
+        inv('Y'),
+        inv('Z')
+    );
+    Ok(0)
+}
