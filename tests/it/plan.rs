@@ -426,7 +426,7 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
     );
     assert_eq!(
         islands["message"],
-        "1 unsupported island on 1 layer (first at layer 5): regions that do not rest on the layer below need supports"
+        "1 unsupported island on 1 layer (first at layer 5): regions that do not rest on the layer below need supports; add supports under these regions, or orient the part so that they rest on the layer below"
     );
 }
 

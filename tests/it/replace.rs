@@ -250,7 +250,7 @@ fn errors_name_the_output_not_its_temporary_file() {
         let e = stderr(&o);
         assert_eq!(
             e,
-            format!("dmdsl: error: {out}: Not a directory (os error 20)\n")
+            format!("dmdsl: error: {out}: ro is not a directory\n")
         );
     }
 }
