@@ -222,6 +222,16 @@ impl Coverage {
         }
     }
 
+    /// Writes the coverage mask it was made of back into `m` (zero outside the lit box).
+    pub fn paint(&self, m: &mut Mask) {
+        let (w, cols) = (m.width as usize, self.size[0].saturating_sub(2));
+        let (c0, r0) = ((self.at[0] + 1.0) as usize, (self.at[1] + 1.0) as usize);
+        for k in 0..self.size[1].saturating_sub(2) {
+            m.data[(r0 + k) * w + c0..][..cols]
+                .copy_from_slice(&self.data[(k + 1) * self.size[0] + 1..][..cols]);
+        }
+    }
+
     /// The coverage (0 to 1) at `p` (pixel coordinates).
     #[inline]
     pub fn value(&self, p: [f64; 2]) -> f64 {
