@@ -107,6 +107,11 @@ impl LitRuns {
     }
 }
 
+/// What a [`Scratch`] knows of the last mask it drew besides the mask: its lit box, its
+/// lit area and its lit runs ([`Scratch::drawn`]), for [`Rasterizer::redraw`].
+#[derive(Debug, Clone, Default)]
+pub struct Drawn(PixelBox, Option<u64>, Option<LitRuns>);
+
 /// Reusable scratch memory for [`Rasterizer::coverage`] (one per worker thread).
 #[derive(Debug, Default)]
 pub struct Scratch {
@@ -188,6 +193,12 @@ impl Scratch {
         }
     }
 
+    /// What the scratch knows of the last [`Rasterizer::coverage`] mask besides the mask.
+    pub fn drawn(&self) -> Drawn {
+        let runs = self.record_runs.then(|| self.lit_runs.clone());
+        Drawn(self.lit, self.lit_sum, runs)
+    }
+
     fn zeroed(&mut self, w: usize, h: usize) -> Vec<u8> {
         match self.spare.pop() {
             Some((mut v, PixelBox { r0, r1, c0, c1 })) if v.len() == w * h => {
@@ -222,6 +233,29 @@ impl Rasterizer {
     /// Anti-aliased coverage mask of the section (exact area fractions).
     pub fn coverage(&self, contours: &[Contour], scratch: &mut Scratch) -> Mask {
         self.render::<NoMap>(contours, scratch, false, None)
+    }
+
+    /// A [`Rasterizer::coverage`] mask again without drawing it: `paint` writes its lit box,
+    /// the scratch is left as that call left it (`drawn`, [`Scratch::drawn`] after it).
+    /// `None` when only one of `drawn` and the scratch records lit runs.
+    pub fn redraw(
+        &self,
+        scratch: &mut Scratch,
+        drawn: &Drawn,
+        paint: impl FnOnce(&mut Mask),
+    ) -> Option<Mask> {
+        if scratch.record_runs != drawn.2.is_some() {
+            return None;
+        }
+        let (w, h) = (self.field.width_px, self.field.height_px);
+        let data = scratch.zeroed(w as usize, h as usize);
+        let mut m = Mask { width: w, height: h, data };
+        paint(&mut m);
+        (scratch.lit, scratch.lit_sum, scratch.reported_outside) = (drawn.0, drawn.1, false);
+        let runs = drawn.2.as_ref().map_or(&[][..], |r| &r.runs);
+        scratch.lit_runs.runs.clear();
+        scratch.lit_runs.runs.extend_from_slice(runs);
+        Some(m)
     }
 
     /// The mask of a layer as it is written: coverage, thresholded at 50 % when `binary`

@@ -28,14 +28,8 @@ pub fn edge_shift_px(model: &CureModel) -> f64 {
 /// Area of the unit pixel centred at the origin on the side `n·p ≤ u` of a line with
 /// unit normal `n`.
 pub fn halfplane_coverage(n: [f64; 2], u: f64) -> f64 {
-    let (a, b) = {
-        let (x, y) = (n[0].abs(), n[1].abs());
-        if x >= y {
-            (x, y)
-        } else {
-            (y, x)
-        }
-    };
+    let (x, y) = (n[0].abs(), n[1].abs());
+    let (a, b) = if x >= y { (x, y) } else { (y, x) };
     let h1 = 0.5 * (a - b);
     let h2 = 0.5 * (a + b);
     if u <= -h2 {
@@ -73,7 +67,7 @@ pub fn correct_coverage(
     let reach = |i: usize| std::f64::consts::FRAC_1_SQRT_2 + shifts.of_edge(i).abs();
     let w = mask.width as usize;
     let mut changed = 0;
-    nearest_edges(segs, lit, reach, |r, c, i| {
+    nearest_edges(segs, (lit, STRIP), reach, |r, c, i| {
         let s = &segs.segs[i];
         let p = [c as f64 + 0.5, r as f64 + 0.5];
         // Signed distance of the centre outside the edge's line.
@@ -95,66 +89,82 @@ pub fn correct_coverage(
     changed
 }
 
+/// Rows of a box whose pixels' nearest edges [`correct_coverage`] finds at a time (their
+/// entries stay in cache).
+const STRIP: usize = 16;
+
 /// Calls `f(row, column, edge)` for every pixel of the box `lit` whose centre lies within
-/// `reach_of(edge)` px of an edge of `segs`, with the nearest of those edges' index; only
-/// the pixels some edge comes near are visited.
+/// `reach_of(edge)` px of an edge of `segs`, with the nearest of those edges' index (the
+/// first one at equal distances); only the pixels some edge comes near are visited, by
+/// strips of `strip` rows (in the order edges first reach them in each).
 pub(super) fn nearest_edges(
     segs: &Segments,
-    lit: PixelBox,
+    (lit, strip): (PixelBox, usize),
     reach_of: impl Fn(usize) -> f64,
     mut f: impl FnMut(usize, usize, usize),
 ) {
-    let bw = lit.c1 - lit.c0;
+    let (bw, strip) = (lit.c1 - lit.c0, strip.clamp(1, (lit.r1 - lit.r0).max(1)));
     BAND.with(|band| {
         let band = &mut *band.borrow_mut();
-        band.prepare(bw * (lit.r1 - lit.r0));
-        // Nearest edge of each pixel of the box within reach: distance and edge. Only
-        // the pixels some edge comes near are visited, and only they are reset after.
+        let strips = (lit.r1 - lit.r0).div_ceil(strip);
+        band.prepare(bw * strip, strips);
+        // Each edge's rows within reach, listed in the strips they meet.
         for (i, s) in segs.segs.iter().enumerate() {
-            let reach = reach_of(i);
-            let r2 = reach * reach;
-            let (a, b) = (s.a, s.b);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let l2 = dx * dx + dy * dy;
+            let (reach, (a, b)) = (reach_of(i), (s.a[1], s.b[1]));
             // (Truncation floors the non-negative values: `floor` is a libm call.)
-            let rows = (a[1].min(b[1]) - reach - 0.5).max(lit.r0 as f64) as usize
-                ..ceil(a[1].max(b[1]) + reach - 0.5).min(lit.r1);
-            for r in rows {
-                let v = r as f64 + 0.5;
-                // The part of the edge within `reach` of the row, then its columns.
-                let (t0, t1) = if dy.abs() > 1e-12 {
-                    let (p, q) = ((v - reach - a[1]) / dy, (v + reach - a[1]) / dy);
-                    (p.min(q).max(0.0), p.max(q).min(1.0))
-                } else {
-                    (0.0, 1.0)
-                };
-                if t0 > t1 {
-                    continue;
-                }
-                let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
-                let c0 = (x0.min(x1) - reach - 0.5).max(lit.c0 as f64) as usize;
-                let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
-                for c in c0..c1 {
-                    let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
-                    let t = if l2 > 0.0 {
-                        ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
-                    } else {
-                        0.0
-                    };
-                    let (ex, ey) = (wx - t * dx, wy - t * dy);
-                    let d2 = ex * ex + ey * ey;
-                    if d2 < r2 {
-                        band.offer((r - lit.r0) * bw + (c - lit.c0), d2 as f32, i as u32);
-                    }
+            let r0 = (a.min(b) - reach - 0.5).max(lit.r0 as f64) as usize;
+            let r1 = ceil(a.max(b) + reach - 0.5).min(lit.r1);
+            if r0 < r1 {
+                for k in (r0 - lit.r0) / strip..(r1 - lit.r0).div_ceil(strip) {
+                    band.strips[k].push((i as u32, r0 as u32, r1 as u32));
                 }
             }
         }
-        for &k in &band.touched {
-            let (_, i) = band.best[k as usize];
-            let (r, c) = (k as usize / bw, k as usize % bw);
-            f(r + lit.r0, c + lit.c0, i as usize);
+        for k in 0..strips {
+            let (s0, s1) = (lit.r0 + k * strip, (lit.r0 + (k + 1) * strip).min(lit.r1));
+            for j in 0..band.strips[k].len() {
+                let (i, r0, r1) = band.strips[k][j];
+                let (i, s) = (i as usize, &segs.segs[i as usize]);
+                let (reach, (a, b)) = (reach_of(i), (s.a, s.b));
+                let (r2, (dx, dy)) = (reach * reach, (b[0] - a[0], b[1] - a[1]));
+                let l2 = dx * dx + dy * dy;
+                for r in (r0 as usize).max(s0)..(r1 as usize).min(s1) {
+                    let v = r as f64 + 0.5;
+                    // The part of the edge within `reach` of the row, then its columns.
+                    let (t0, t1) = if dy.abs() > 1e-12 {
+                        let (p, q) = ((v - reach - a[1]) / dy, (v + reach - a[1]) / dy);
+                        (p.min(q).max(0.0), p.max(q).min(1.0))
+                    } else {
+                        (0.0, 1.0)
+                    };
+                    if t0 > t1 {
+                        continue;
+                    }
+                    let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
+                    let c0 = (x0.min(x1) - reach - 0.5).max(lit.c0 as f64) as usize;
+                    let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
+                    for c in c0..c1 {
+                        let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
+                        let t = if l2 > 0.0 {
+                            ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        let (ex, ey) = (wx - t * dx, wy - t * dy);
+                        let d2 = ex * ex + ey * ey;
+                        if d2 < r2 {
+                            band.offer((r - s0) * bw + (c - lit.c0), d2 as f32, i as u32);
+                        }
+                    }
+                }
+            }
+            for &k in &band.touched {
+                let (_, i) = band.best[k as usize];
+                let (r, c) = (k as usize / bw, k as usize % bw);
+                f(r + s0, c + lit.c0, i as usize);
+            }
+            band.reset();
         }
-        band.reset();
     })
 }
 
@@ -171,14 +181,18 @@ fn ceil(x: f64) -> usize {
 struct Band {
     best: Vec<(f32, u32)>,
     touched: Vec<u32>,
+    /// Per strip of rows, the edges that reach it and their rows.
+    strips: Vec<Vec<(u32, u32, u32)>>,
 }
 
 impl Band {
-    fn prepare(&mut self, n: usize) {
+    fn prepare(&mut self, n: usize, strips: usize) {
         if self.best.len() < n {
             self.best.resize(n, (f32::INFINITY, u32::MAX));
         }
         self.touched.clear();
+        self.strips.resize_with(strips.max(self.strips.len()), Vec::new);
+        self.strips[..strips].iter_mut().for_each(Vec::clear);
     }
 
     fn offer(&mut self, k: usize, d: f32, i: u32) {

@@ -173,17 +173,9 @@ impl EdgeProfile {
     /// ḡ(y): how far outside a drawn straight edge the light falls to `y` (of a full
     /// pixel's), averaged over where the edge falls in its pixel.
     pub fn growth(&self, y: f64) -> f64 {
-        // P is decreasing: bisection over the table.
-        let (mut lo, mut hi) = (-SPAN_PX, SPAN_PX);
-        for _ in 0..40 {
-            let mid = 0.5 * (lo + hi);
-            if self.light(mid) >= y {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        0.5 * (lo + hi)
+        // P is decreasing: bisection over the table (40 halvings).
+        let tol = 2.0 * SPAN_PX / 2f64.powi(40);
+        bisect((-SPAN_PX, SPAN_PX), tol, |m| self.light(m) >= y)
     }
 }
 
@@ -219,6 +211,16 @@ impl Coverage {
             at: [lit.c0 as f64 - 1.0, lit.r0 as f64 - 1.0],
             size,
             data,
+        }
+    }
+
+    /// Writes the coverage mask it was made of back into `m` (zero outside the lit box).
+    pub fn paint(&self, m: &mut Mask) {
+        let (w, cols) = (m.width as usize, self.size[0].saturating_sub(2));
+        let (c0, r0) = ((self.at[0] + 1.0) as usize, (self.at[1] + 1.0) as usize);
+        for k in 0..self.size[1].saturating_sub(2) {
+            m.data[(r0 + k) * w + c0..][..cols]
+                .copy_from_slice(&self.data[(k + 1) * self.size[0] + 1..][..cols]);
         }
     }
 
@@ -324,16 +326,7 @@ pub fn wall_shifts(
         } else if f(hi) >= 0.0 {
             hi
         } else {
-            let (mut a, mut b) = (lo, hi);
-            while b - a > 1e-6 {
-                let m = 0.5 * (a + b);
-                if f(m) >= 0.0 {
-                    a = m;
-                } else {
-                    b = m;
-                }
-            }
-            0.5 * (a + b)
+            bisect((lo, hi), 1e-6, |m| f(m) >= 0.0)
         };
     }
     s
@@ -658,23 +651,24 @@ impl Point {
             s = next;
         }
         // Else bisection over [lo, hi].
-        let (mut a, mut b) = (lo, hi);
-        if f(a).0 <= 0.0 {
+        if f(lo).0 <= 0.0 {
             return lo;
         }
-        if f(b).0 >= 0.0 {
+        if f(hi).0 >= 0.0 {
             return hi;
         }
-        while b - a > 1e-5 {
-            let m = 0.5 * (a + b);
-            if f(m).0 >= 0.0 {
-                a = m;
-            } else {
-                b = m;
-            }
-        }
-        0.5 * (a + b)
+        bisect((lo, hi), 1e-5, |m| f(m).0 >= 0.0)
     }
+}
+
+/// The midpoint of `[a, b]` halved, keeping the half where `up` holds at its low end,
+/// until it is at most `tol` wide.
+fn bisect((mut a, mut b): (f64, f64), tol: f64, up: impl Fn(f64) -> bool) -> f64 {
+    while b - a > tol {
+        let m = 0.5 * (a + b);
+        (a, b) = if up(m) { (m, b) } else { (a, m) };
+    }
+    0.5 * (a + b)
 }
 
 #[cfg(test)]

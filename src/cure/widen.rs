@@ -263,7 +263,7 @@ pub fn widen(
         let mut band: Vec<(usize, usize, [f64; 2], f64)> = Vec::new();
         nearest_edges(
             &segs,
-            *nb,
+            (*nb, usize::MAX),
             |_| reach,
             |r, c, i| {
                 let s = &segs.segs[i];

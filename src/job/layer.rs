@@ -279,27 +279,35 @@ fn drawing(
                 let m = ctx
                     .raster
                     .coverage(s.as_deref().unwrap_or(&c.section.contours), scratch);
-                let cov = Coverage::of(&m, scratch.lit_box());
+                let coverage = Coverage::of(&m, scratch.lit_box());
+                let drawn = scratch.drawn();
                 scratch.recycle(m);
-                Ok(cov)
+                Ok((coverage, drawn))
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    // The section as cut (not one without its collinear points) is drawn as a layer below
+    // drew it for its look-ahead, if one did; else its coverage is offered to them.
+    let mine = layer.cut.take_own().filter(|_| !same);
     let drawn = warped.as_ref().map_or(&section, |w| &w.0);
-    let m = ctx
-        .raster
-        .render::<crate::optics::Compensator>(drawn, scratch, false, None);
+    let again = mine
+        .as_ref()
+        .and_then(|c| ctx.raster.redraw(scratch, &c.1, |m| c.0.paint(m)));
+    let m = match again {
+        Some(m) => m,
+        None => ctx
+            .raster
+            .render::<crate::optics::Compensator>(drawn, scratch, false, None),
+    };
     let lit = scratch.lit_box();
-    let own = Coverage::of(&m, lit);
-    let refs: Vec<&Coverage> = upper.iter().map(|c| &**c).collect();
-    let corr = job.correction_of(i, layer.above, drawn, &own, &refs);
+    let own = mine.unwrap_or_else(|| Arc::new((Coverage::of(&m, lit), scratch.drawn())));
+    if !same {
+        layer.cut.offer(&own);
+    }
+    let refs: Vec<&Coverage> = upper.iter().map(|c| &c.0).collect();
+    let corr = job.correction_of(i, layer.above, drawn, &own.0, &refs);
     for c in &layer.upper {
         c.release();
-    }
-    // The section as cut (not one without its collinear points) is what the layers below
-    // look at.
-    if !same {
-        layer.cut.offer(|| own);
     }
     Ok(Drawing {
         section,

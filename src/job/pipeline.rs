@@ -19,7 +19,7 @@
 use super::layer::{layer_masks, BlockWorker, LayerContext, LayerInput, LayerOutput};
 use crate::cure::shift::Coverage;
 use crate::error::{Error, Result};
-use crate::raster::Scratch;
+use crate::raster::{Drawn, Scratch};
 use crate::slice::{Section, SliceStats, Slicer};
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -38,17 +38,21 @@ pub const BLOCK: usize = 8;
 const MAX_AHEAD: usize = 3 * WINDOW;
 
 /// A layer's section as the slicer cut it, and its coverage while the cure correction of
-/// the layers below it still looks at it: drawn by whichever needs it first (a layer
-/// below, or the layer itself when it draws this very section), dropped when the last
-/// layer below that looks at it is done. So each section is drawn about once for the
-/// look-ahead, and only the coverage of the layers in work is kept.
+/// the layers below it or the layer itself still looks at it: drawn by whichever needs it
+/// first (a layer below, or the layer itself when it draws this very section), dropped
+/// when the last of them is done. So each section is drawn about once, and only the
+/// coverage of the layers in work is kept.
 pub(super) struct Cut {
     /// The section.
     pub section: Section,
-    /// Its coverage (pre-warped with a distortion correction), and how many layers below
-    /// will still look at it.
-    coverage: Mutex<(Option<Arc<Coverage>>, usize)>,
+    /// Its coverage (pre-warped with a distortion correction), and how many layers (those
+    /// below and the layer itself) will still look at it.
+    coverage: Mutex<(Option<Arc<CutCoverage>>, usize)>,
 }
+
+/// A section's coverage as the cure correction reads it, and what the rasterizer's
+/// scratch knew of the mask it came from (the layer itself draws its mask from them).
+pub(super) type CutCoverage = (Coverage, Drawn);
 
 impl Cut {
     fn new(section: Section, users: usize) -> Cut {
@@ -59,7 +63,7 @@ impl Cut {
     }
 
     /// The coverage, made by `make` unless a layer made it already.
-    pub fn coverage(&self, make: impl FnOnce() -> Result<Coverage>) -> Result<Arc<Coverage>> {
+    pub fn coverage(&self, make: impl FnOnce() -> Result<CutCoverage>) -> Result<Arc<CutCoverage>> {
         let mut g = lock(&self.coverage);
         if let Some(c) = &g.0 {
             return Ok(Arc::clone(c));
@@ -71,12 +75,20 @@ impl Cut {
         Ok(c)
     }
 
+    /// The layer itself is done looking for its coverage: the coverage, if a layer below
+    /// drew it.
+    pub fn take_own(&self) -> Option<Arc<CutCoverage>> {
+        let mut g = lock(&self.coverage);
+        g.1 = g.1.saturating_sub(1);
+        if g.1 == 0 { g.0.take() } else { g.0.clone() }
+    }
+
     /// Offers the coverage the layer made of its own section, while a layer below will
     /// still look at it.
-    pub fn offer(&self, make: impl FnOnce() -> Coverage) {
+    pub fn offer(&self, c: &Arc<CutCoverage>) {
         let mut g = lock(&self.coverage);
         if g.0.is_none() && g.1 > 0 {
-            g.0 = Some(Arc::new(make()));
+            g.0 = Some(Arc::clone(c));
         }
     }
 
@@ -234,7 +246,7 @@ impl Cursor<'_> {
             sections
                 .into_iter()
                 .enumerate()
-                .map(|(k, section)| Cut::new(section, ahead.min(start + k)))
+                .map(|(k, section)| Cut::new(section, ahead.min(start + k) + (ahead > 0) as usize))
                 .collect(),
         )
     }
