@@ -3,8 +3,8 @@
 //! least-squares fit of Jacobs' working curve Cd = Dp·ln(E/Ec) ([`fit_resin`]).
 
 use crate::error::{Error, Result};
-use crate::optics::{Dither, Mode};
 use crate::optics::Compensator;
+use crate::optics::{Dither, Mode};
 use crate::plot::{Chart, Panel, Series, Style};
 use crate::profile::Profile;
 use crate::raster::Mask;
@@ -43,9 +43,15 @@ pub struct WorkingCurve {
 /// calibrated response S(g) (the nearest level), and each window's exposure is expressed at
 /// E*: t·P(x, y)·S(g)/E*; without a calibration, S is taken as linear in the pixel value
 /// and P as flat.
-pub fn working_curve(p: &Profile, n: usize, [lo, hi]: [f64; 2]) -> std::result::Result<WorkingCurve, String> {
+pub fn working_curve(
+    p: &Profile,
+    n: usize,
+    [lo, hi]: [f64; 2],
+) -> std::result::Result<WorkingCurve, String> {
     if !((2..=64).contains(&n) && lo > 0.0 && hi > lo && hi.is_finite()) {
-        return Err(format!("working curve: {n} windows over {lo}..{hi} s; give 2 to 64 windows and 0 < LO < HI"));
+        return Err(format!(
+            "working curve: {n} windows over {lo}..{hi} s; give 2 to 64 windows and 0 < LO < HI"
+        ));
     }
     let f = p.field();
     let (w, h) = (f.width_mm(), f.height_mm());
@@ -53,7 +59,9 @@ pub fn working_curve(p: &Profile, n: usize, [lo, hi]: [f64; 2]) -> std::result::
     let rows = n.div_ceil(cols);
     let pitch = (0.8 * w / cols as f64).min(0.8 * h / rows as f64);
     let side = (0.6 * pitch).min(10.0);
-    let cal = (p.projector.len() == 1).then(|| p.projector[0].calibration.as_ref()).flatten();
+    let cal = (p.projector.len() == 1)
+        .then(|| p.projector[0].calibration.as_ref())
+        .flatten();
     // The response's levels and the target irradiance E* a compensated job delivers.
     let light = match cal {
         Some(c) => {
@@ -77,12 +85,26 @@ pub fn working_curve(p: &Profile, n: usize, [lo, hi]: [f64; 2]) -> std::result::
                 let k = l.nearest(want * t / p).max(usize::from(l.gray[0] == 0));
                 (l.gray[k], p * l.s[k] / t)
             }
-            None => ((want * 255.0).round().max(1.0) as u8, (want * 255.0).round().max(1.0) / 255.0),
+            None => (
+                (want * 255.0).round().max(1.0) as u8,
+                (want * 255.0).round().max(1.0) / 255.0,
+            ),
         };
-        let absolute = light.as_ref().filter(|l| l.0.units == crate::profile::calibration::Units::MwCm2);
+        let absolute = light
+            .as_ref()
+            .filter(|l| l.0.units == crate::profile::calibration::Units::MwCm2);
         let dose_mj_cm2 = absolute.map(|l| hi * e * l.2);
-        windows.push(Window { centre_mm: [x, y], gray, exposure_s: hi * e, dose_mj_cm2 });
-        push_box(&mut stl, [x - side / 2.0, y - side / 2.0, 0.0], [x + side / 2.0, y + side / 2.0, th]);
+        windows.push(Window {
+            centre_mm: [x, y],
+            gray,
+            exposure_s: hi * e,
+            dose_mj_cm2,
+        });
+        push_box(
+            &mut stl,
+            [x - side / 2.0, y - side / 2.0, 0.0],
+            [x + side / 2.0, y + side / 2.0, th],
+        );
         let px = f.pixel_mm;
         for r in 0..f.height_px as usize {
             let yr = (f.height_px as f64 - r as f64 - 0.5) * px;
@@ -93,14 +115,25 @@ pub fn working_curve(p: &Profile, n: usize, [lo, hi]: [f64; 2]) -> std::result::
             }
         }
     }
-    Ok(WorkingCurve { windows, stl: stl_file(stl), dose, layer_s: hi })
+    Ok(WorkingCurve {
+        windows,
+        stl: stl_file(stl),
+        dose,
+        layer_s: hi,
+    })
 }
 
 /// Appends the 12 triangles of the box from `a` to `b` (binary STL records).
 fn push_box(out: &mut Vec<u8>, a: [f64; 3], b: [f64; 3]) {
     // Corner k has x of b when bit 0 is set, y when bit 1, z when bit 2; faces CCW outside.
-    const FACES: [[usize; 4]; 6] =
-        [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    const FACES: [[usize; 4]; 6] = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
     let corner = |k: usize| [0, 1, 2].map(|d| if k >> d & 1 == 1 { b[d] } else { a[d] });
     FACES.iter().for_each(|q| push_quad(out, q.map(corner)));
 }
@@ -108,26 +141,49 @@ fn push_box(out: &mut Vec<u8>, a: [f64; 3], b: [f64; 3]) {
 /// Appends a square frame at (x, y): a hole of `s` in a wall 1 mm wide, 3 mm tall (one
 /// closed shell: outer and inner walls, top and bottom rings).
 fn push_frame(out: &mut Vec<u8>, x: f64, y: f64, s: f64) {
-    let sq = |lo: f64, hi: f64| [[lo, lo], [hi, lo], [hi, hi], [lo, hi]].map(|[u, v]| [x + u, y + v]);
+    let sq =
+        |lo: f64, hi: f64| [[lo, lo], [hi, lo], [hi, hi], [lo, hi]].map(|[u, v]| [x + u, y + v]);
     let (o, i) = (sq(0.0, s + 2.0), sq(1.0, s + 1.0));
     let at = |p: [f64; 2], z: f64| [p[0], p[1], z];
     for k in 0..4 {
         let j = (k + 1) % 4;
-        push_quad(out, [at(o[k], 0.), at(o[j], 0.), at(o[j], 3.), at(o[k], 3.)]);
-        push_quad(out, [at(i[j], 0.), at(i[k], 0.), at(i[k], 3.), at(i[j], 3.)]);
-        push_quad(out, [at(o[k], 3.), at(o[j], 3.), at(i[j], 3.), at(i[k], 3.)]);
-        push_quad(out, [at(o[j], 0.), at(o[k], 0.), at(i[k], 0.), at(i[j], 0.)]);
+        push_quad(
+            out,
+            [at(o[k], 0.), at(o[j], 0.), at(o[j], 3.), at(o[k], 3.)],
+        );
+        push_quad(
+            out,
+            [at(i[j], 0.), at(i[k], 0.), at(i[k], 3.), at(i[j], 3.)],
+        );
+        push_quad(
+            out,
+            [at(o[k], 3.), at(o[j], 3.), at(i[j], 3.), at(i[k], 3.)],
+        );
+        push_quad(
+            out,
+            [at(o[j], 0.), at(o[k], 0.), at(i[k], 0.), at(i[j], 0.)],
+        );
     }
 }
 
 /// Appends the planar quad `p` (counter-clockwise seen from outside) as two triangles.
 fn push_quad(out: &mut Vec<u8>, p: [[f64; 3]; 4]) {
-    let (u, v) = ([0, 1, 2].map(|d| p[1][d] - p[0][d]), [0, 1, 2].map(|d| p[2][d] - p[0][d]));
-    let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    let (u, v) = (
+        [0, 1, 2].map(|d| p[1][d] - p[0][d]),
+        [0, 1, 2].map(|d| p[2][d] - p[0][d]),
+    );
+    let n = [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ];
     let len = n.iter().map(|c| c * c).sum::<f64>().sqrt();
     for t in [[0, 1, 2], [0, 2, 3]] {
         let pts = t.iter().flat_map(|&k| p[k]);
-        n.map(|c| c / len).into_iter().chain(pts).for_each(|c| out.extend((c as f32).to_le_bytes()));
+        n.map(|c| c / len)
+            .into_iter()
+            .chain(pts)
+            .for_each(|c| out.extend((c as f32).to_le_bytes()));
         out.extend([0, 0]);
     }
 }
@@ -148,15 +204,41 @@ impl Sheet {
     /// Reads `path`, which must have the columns `required`.
     pub fn read(path: &Path, required: &[&str]) -> Result<Sheet> {
         let bytes = crate::input::read_file(path, "measurement sheet", 64 << 20)?;
-        let bad = |e: csv::Error| Error::input(path, format!("line {}: {e}", e.position().map_or(0, |p| p.line())));
-        let mut r = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(&bytes[..]);
-        let header: Vec<String> = r.headers().map_err(bad)?.iter().map(str::to_string).collect();
+        let bad = |e: csv::Error| {
+            Error::input(
+                path,
+                format!("line {}: {e}", e.position().map_or(0, |p| p.line())),
+            )
+        };
+        let mut r = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .from_reader(&bytes[..]);
+        let header: Vec<String> = r
+            .headers()
+            .map_err(bad)?
+            .iter()
+            .map(str::to_string)
+            .collect();
         if let Some(c) = required.iter().find(|c| !header.iter().any(|h| h == *c)) {
-            return Err(Error::input(path, format!("line 1: no column {c} (the header has {})", header.join(","))));
+            return Err(Error::input(
+                path,
+                format!(
+                    "line 1: no column {c} (the header has {})",
+                    header.join(",")
+                ),
+            ));
         }
-        let rows = r.records().map(|x| x.map(|x| (x.position().map_or(0, |p| p.line()), x))).collect::<std::result::Result<_, _>>();
+        let rows = r
+            .records()
+            .map(|x| x.map(|x| (x.position().map_or(0, |p| p.line()), x)))
+            .collect::<std::result::Result<_, _>>();
         let sha256 = crate::digest::sha256_hex(&bytes);
-        Ok(Sheet { path: path.into(), sha256, header, rows: rows.map_err(bad)? })
+        Ok(Sheet {
+            path: path.into(),
+            sha256,
+            header,
+            rows: rows.map_err(bad)?,
+        })
     }
 
     /// The number of data rows.
@@ -167,7 +249,10 @@ impl Sheet {
     /// Row `i`'s text in column `col` (empty when the row is short) and its line.
     pub fn text(&self, i: usize, col: &str) -> (&str, u64) {
         let k = self.header.iter().position(|h| h == col);
-        (k.and_then(|k| self.rows[i].1.get(k)).unwrap_or(""), self.rows[i].0)
+        (
+            k.and_then(|k| self.rows[i].1.get(k)).unwrap_or(""),
+            self.rows[i].0,
+        )
     }
 
     /// Row `i`'s number in column `col`: `None` when empty; text, a non-finite number or a
@@ -177,8 +262,18 @@ impl Sheet {
         let v = match t.parse::<f64>() {
             _ if t.is_empty() => return Ok(None),
             Ok(v) if v.is_finite() && (v >= 0.0 || !non_negative) => v,
-            Ok(_) => return Err(Error::input(&self.path, format!("line {line}, column {col}: {t} is negative or not finite"))),
-            Err(_) => return Err(Error::input(&self.path, format!("line {line}, column {col}: {t:?} is not a number"))),
+            Ok(_) => {
+                return Err(Error::input(
+                    &self.path,
+                    format!("line {line}, column {col}: {t} is negative or not finite"),
+                ))
+            }
+            Err(_) => {
+                return Err(Error::input(
+                    &self.path,
+                    format!("line {line}, column {col}: {t:?} is not a number"),
+                ))
+            }
         };
         Ok(Some(v))
     }
@@ -216,7 +311,10 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     let mut pts = Vec::new();
     for i in 0..s.rows() {
         let cd = s.num(i, "cured_mm", true)?;
-        let (t, d) = (s.num(i, "exposure_s", true)?, s.num(i, "dose_mj_cm2", true)?);
+        let (t, d) = (
+            s.num(i, "exposure_s", true)?,
+            s.num(i, "dose_mj_cm2", true)?,
+        );
         if let Some(cd) = cd.filter(|&c| c > 0.0) {
             pts.push((s.text(i, "window").1 as f64, t, d, cd));
         }
@@ -226,7 +324,14 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     for &(line, t, d, cd) in &pts {
         match if absolute { d } else { t }.filter(|&e| e > 0.0) {
             Some(e) => xy.push((line, e, cd)),
-            None => return Err(Error::input(&s.path, format!("line {line}, column exposure_s: a cured window needs a positive exposure"))),
+            None => {
+                return Err(Error::input(
+                    &s.path,
+                    format!(
+                        "line {line}, column exposure_s: a cured window needs a positive exposure"
+                    ),
+                ))
+            }
         }
     }
     let n = xy.len() as f64;
@@ -235,12 +340,22 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     let sxx: f64 = xy.iter().map(|p| (p.1.ln() - mx).powi(2)).sum();
     let dp = xy.iter().map(|p| (p.1.ln() - mx) * (p.2 - my)).sum::<f64>() / sxx;
     if xy.len() < 3 || dp.is_nan() || dp <= 0.0 {
-        let why = if xy.len() < 3 { format!("{} cured windows (cured_mm > 0), the fit needs at least 3", xy.len()) } else { format!("the fit's Dp = {dp:.4} mm is not positive (cure depth must grow with dose)") };
+        let why = if xy.len() < 3 {
+            format!(
+                "{} cured windows (cured_mm > 0), the fit needs at least 3",
+                xy.len()
+            )
+        } else {
+            format!("the fit's Dp = {dp:.4} mm is not positive (cure depth must grow with dose)")
+        };
         return Err(Error::input(&s.path, why));
     }
     let b = my - dp * mx;
     let lnc = -b / dp;
-    let residuals: Vec<[f64; 4]> = xy.iter().map(|&(l, e, cd)| [l, e, cd, cd - dp * (e.ln() - lnc)]).collect();
+    let residuals: Vec<[f64; 4]> = xy
+        .iter()
+        .map(|&(l, e, cd)| [l, e, cd, cd - dp * (e.ln() - lnc)])
+        .collect();
     let ss: f64 = residuals.iter().map(|r| r[3] * r[3]).sum();
     let s2 = if n > 2.0 { ss / (n - 2.0) } else { 0.0 };
     // Var(b) = s²(1/n + x̄²/Sxx), Cov(Dp, b) = −x̄ s²/Sxx; ln Ec = −b/Dp by the delta method.
@@ -248,7 +363,10 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     let vl = vb / (dp * dp) + b * b * vd / dp.powi(4) - 2.0 * b * cov / dp.powi(3);
     let crit = lnc.exp();
     Ok(ResinFit {
-        sheet: s.path.file_name().map_or(String::new(), |f| f.to_string_lossy().into()),
+        sheet: s
+            .path
+            .file_name()
+            .map_or(String::new(), |f| f.to_string_lossy().into()),
         sheet_sha256: s.sha256.clone(),
         dp_mm: dp,
         dp_se_mm: vd.sqrt(),
@@ -263,19 +381,38 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
 impl ResinFit {
     /// The chart of the working curve: the measured points and the fitted line against ln E.
     pub fn chart(&self) -> Chart {
-        let unit = if self.ec_mj_cm2.is_some() { "mJ/cm²" } else { "s" };
+        let unit = if self.ec_mj_cm2.is_some() {
+            "mJ/cm²"
+        } else {
+            "s"
+        };
         let pts: Vec<(f64, f64)> = self.residuals.iter().map(|r| (r[1].ln(), r[2])).collect();
         let c = self.ec_mj_cm2.or(self.critical_exposure_s).unwrap_or(1.0);
         let hi = pts.iter().map(|p| p.0).fold(f64::MIN, f64::max);
-        let line = (0..=20).map(|k| c.ln() + (hi - c.ln()) * k as f64 / 20.0).map(|x| (x, self.dp_mm * (x - c.ln()))).collect();
+        let line = (0..=20)
+            .map(|k| c.ln() + (hi - c.ln()) * k as f64 / 20.0)
+            .map(|x| (x, self.dp_mm * (x - c.ln())))
+            .collect();
         Chart {
-            title: format!("{}: working curve Cd = Dp·ln(E/Ec), Dp = {:.4} mm, {} = {c:.4} {unit}", self.sheet, self.dp_mm, if self.ec_mj_cm2.is_some() { "Ec" } else { "critical exposure" }),
+            title: format!(
+                "{}: working curve Cd = Dp·ln(E/Ec), Dp = {:.4} mm, {} = {c:.4} {unit}",
+                self.sheet,
+                self.dp_mm,
+                if self.ec_mj_cm2.is_some() {
+                    "Ec"
+                } else {
+                    "critical exposure"
+                }
+            ),
             x_label: format!("ln(E / 1 {unit}), E = dose (as exposure time when in s)"),
             width: 1000,
             height: 700,
             panels: vec![Panel {
                 y_label: "cured thickness Cd (mm)".into(),
-                series: vec![Series::new("fit", [31, 119, 180], Style::Line, line), Series::new("measured", [214, 39, 40], Style::Points, pts)],
+                series: vec![
+                    Series::new("fit", [31, 119, 180], Style::Line, line),
+                    Series::new("measured", [214, 39, 40], Style::Points, pts),
+                ],
                 y_from_zero: true,
                 ..Default::default()
             }],
@@ -286,8 +423,12 @@ impl ResinFit {
     /// Dp (and Ec, when absolute) to `profile`'s resin, which then records the sheet.
     pub fn apply_file(path: &Path, profile: &mut Profile) -> Result<()> {
         let src = crate::input::read_text(path, "resin calibration")?;
-        let f: ResinFit = toml::from_str(&src).map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))?;
-        let pos = |v: f64, k: &str| crate::units::Positive::new(v).ok_or_else(|| Error::input(path, format!("{k} = {v} is not positive")));
+        let f: ResinFit = toml::from_str(&src)
+            .map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))?;
+        let pos = |v: f64, k: &str| {
+            crate::units::Positive::new(v)
+                .ok_or_else(|| Error::input(path, format!("{k} = {v} is not positive")))
+        };
         let source = Some(format!("{} sha256:{}", f.sheet, f.sheet_sha256));
         (profile.resin.dp_mm, profile.resin.dp_source) = (pos(f.dp_mm, "dp_mm")?, source.clone());
         if let Some(ec) = f.ec_mj_cm2 {
@@ -325,13 +466,43 @@ pub fn accuracy_part(p: &Profile) -> std::result::Result<(Vec<Feature>, Vec<u8>)
     for cx in [w / 4.0, 3.0 * w / 4.0] {
         let (x0, mut y) = (cx - 14.0, h / 2.0 + 20.5);
         let rows: [Row; 7] = [
-            ("pin", &['X', 'Y'], |s| [s, s], |s| vec![[0., 0., 0., s, s, 3.]]),
-            ("wall", &['X'], |s| [s, 3.], |s| vec![[0., 0., 0., s, 3., 3.]]),
-            ("wall", &['Y'], |s| [3., s], |s| vec![[0., 0., 0., 3., s, 3.]]),
+            (
+                "pin",
+                &['X', 'Y'],
+                |s| [s, s],
+                |s| vec![[0., 0., 0., s, s, 3.]],
+            ),
+            (
+                "wall",
+                &['X'],
+                |s| [s, 3.],
+                |s| vec![[0., 0., 0., s, 3., 3.]],
+            ),
+            (
+                "wall",
+                &['Y'],
+                |s| [3., s],
+                |s| vec![[0., 0., 0., 3., s, 3.]],
+            ),
             ("hole", &['X', 'Y'], |s| [s + 2., s + 2.], |_| Vec::new()),
-            ("slot", &['X'], |s| [s + 3., 3.], |s| vec![[0., 0., 0., 1.5, 3., 3.], [1.5 + s, 0., 0., 3. + s, 3., 3.]]),
-            ("slot", &['Y'], |s| [3., s + 3.], |s| vec![[0., 0., 0., 3., 1.5, 3.], [0., 1.5 + s, 0., 3., 3. + s, 3.]]),
-            ("step", &['Z'], |_| [3., 3.], |s| vec![[0., 0., 0., 3., 3., s]]),
+            (
+                "slot",
+                &['X'],
+                |s| [s + 3., 3.],
+                |s| vec![[0., 0., 0., 1.5, 3., 3.], [1.5 + s, 0., 0., 3. + s, 3., 3.]],
+            ),
+            (
+                "slot",
+                &['Y'],
+                |s| [3., s + 3.],
+                |s| vec![[0., 0., 0., 3., 1.5, 3.], [0., 1.5 + s, 0., 3., 3. + s, 3.]],
+            ),
+            (
+                "step",
+                &['Z'],
+                |_| [3., 3.],
+                |s| vec![[0., 0., 0., 3., 3., s]],
+            ),
         ];
         for (kind, axes, size, boxes) in rows {
             let depth = size(5.0)[1];
@@ -343,10 +514,19 @@ pub fn accuracy_part(p: &Profile) -> std::result::Result<(Vec<Feature>, Vec<u8>)
                     push_frame(&mut stl, x, y, s);
                 }
                 for b in boxes(s) {
-                    push_box(&mut stl, [x + b[0], y + b[1], b[2]], [x + b[3], y + b[4], b[5]]);
+                    push_box(
+                        &mut stl,
+                        [x + b[0], y + b[1], b[2]],
+                        [x + b[3], y + b[4], b[5]],
+                    );
                 }
                 let centre_mm = [x + fw / 2.0, y + fh / 2.0];
-                feats.extend(axes.iter().map(|&axis| Feature { kind, axis, nominal_mm: s, centre_mm }));
+                feats.extend(axes.iter().map(|&axis| Feature {
+                    kind,
+                    axis,
+                    nominal_mm: s,
+                    centre_mm,
+                }));
                 x += fw + gap;
             }
             if x > w || y < 0.0 {
@@ -360,7 +540,12 @@ pub fn accuracy_part(p: &Profile) -> std::result::Result<(Vec<Feature>, Vec<u8>)
 
 /// A row of the accuracy part: kind, axes, the footprint of size s, the boxes of size s
 /// from the footprint's corner.
-type Row = (&'static str, &'static [char], fn(f64) -> [f64; 2], fn(f64) -> Vec<[f64; 6]>);
+type Row = (
+    &'static str,
+    &'static [char],
+    fn(f64) -> [f64; 2],
+    fn(f64) -> Vec<[f64; 6]>,
+);
 
 /// A measured row of an accuracy sheet: kind, axis, nominal, measured, edge sign.
 type Measured = (String, String, f64, f64, f64);
@@ -412,32 +597,60 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<(Vec<ErrorStats>, Vec<AxisF
     for i in 0..s.rows() {
         let (kind, line) = s.text(i, "feature");
         let axis = s.text(i, "axis").0.to_ascii_uppercase();
-        let Some(m) = s.num(i, "measured_mm", true)? else { continue };
+        let Some(m) = s.num(i, "measured_mm", true)? else {
+            continue;
+        };
         let nominal = s.num(i, "nominal_mm", true)?.filter(|&v| v > 0.0);
         let Some(nominal) = nominal else {
             return Err(Error::input(&s.path, format!("line {line}, column nominal_mm: a measured feature needs a positive nominal size")));
         };
         if !["X", "Y", "Z"].contains(&axis.as_str()) {
-            return Err(Error::input(&s.path, format!("line {line}, column axis: {axis:?} is not X, Y or Z")));
+            return Err(Error::input(
+                &s.path,
+                format!("line {line}, column axis: {axis:?} is not X, Y or Z"),
+            ));
         }
-        let sign = if matches!(kind, "hole" | "slot") { -1.0 } else { 1.0 };
+        let sign = if matches!(kind, "hole" | "slot") {
+            -1.0
+        } else {
+            1.0
+        };
         rows.push((kind.to_string(), axis, nominal, m, sign));
     }
     if rows.is_empty() {
-        return Err(Error::input(&s.path, "no measured feature (measured_mm is empty on every line)"));
+        return Err(Error::input(
+            &s.path,
+            "no measured feature (measured_mm is empty on every line)",
+        ));
     }
     let stats = |group: &str, e: Vec<f64>| {
         let n = e.len() as f64;
         let mean = e.iter().sum::<f64>() / n;
         let sd = (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
         let share = |t: f64| e.iter().filter(|v| v.abs() <= t + 1e-9).count() as f64 / n;
-        ErrorStats { group: group.into(), n: e.len(), mean_mm: mean, sd_mm: sd, within_006: share(0.06), within_tolerance: share(tolerance) }
+        ErrorStats {
+            group: group.into(),
+            n: e.len(),
+            mean_mm: mean,
+            sd_mm: sd,
+            within_006: share(0.06),
+            within_tolerance: share(tolerance),
+        }
     };
-    let err = |keep: &dyn Fn(&Measured) -> bool| rows.iter().filter(|r| keep(r)).map(|r| r.3 - r.2).collect::<Vec<f64>>();
+    let err = |keep: &dyn Fn(&Measured) -> bool| {
+        rows.iter()
+            .filter(|r| keep(r))
+            .map(|r| r.3 - r.2)
+            .collect::<Vec<f64>>()
+    };
     let mut out = vec![stats("all", err(&|_| true))];
     let mut groups: Vec<String> = ["X", "Y", "Z"].map(String::from).into();
     groups.extend(["pin", "wall", "hole", "slot", "step"].map(String::from));
-    groups.extend(rows.iter().map(|r| r.0.clone()).filter(|k| !["pin", "wall", "hole", "slot", "step"].contains(&k.as_str())));
+    groups.extend(
+        rows.iter()
+            .map(|r| r.0.clone())
+            .filter(|k| !["pin", "wall", "hole", "slot", "step"].contains(&k.as_str())),
+    );
     groups.dedup();
     for g in groups {
         let e = err(&|r| r.1 == g || r.0 == g);
@@ -450,9 +663,20 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<(Vec<ErrorStats>, Vec<AxisF
         let r: Vec<_> = rows.iter().filter(|r| r.1.starts_with(axis)).collect();
         let a = nalgebra::DMatrix::from_fn(r.len(), 2, |i, j| if j == 0 { r[i].2 } else { r[i].4 });
         let b = nalgebra::DVector::from_iterator(r.len(), r.iter().map(|r| r.3));
-        let Some(x) = crate::polyfit::LeastSquares::new(a.clone()).filter(|_| r.len() >= 3).filter(|l| l.full_rank(1e-9)).and_then(|l| l.solve(&b)) else { continue };
+        let Some(x) = crate::polyfit::LeastSquares::new(a.clone())
+            .filter(|_| r.len() >= 3)
+            .filter(|l| l.full_rank(1e-9))
+            .and_then(|l| l.solve(&b))
+        else {
+            continue;
+        };
         let rms = ((&a * &x - &b).norm_squared() / r.len() as f64).sqrt();
-        fits.push(AxisFit { axis, scale: x[0], offset_mm: x[1], residual_rms_mm: rms });
+        fits.push(AxisFit {
+            axis,
+            scale: x[0],
+            offset_mm: x[1],
+            residual_rms_mm: rms,
+        });
     }
     Ok((out, fits))
 }

@@ -98,7 +98,9 @@ mod tests {
         #[cfg(unix)]
         {
             std::os::unix::fs::symlink("a.png", dir.join("l.png")).unwrap();
-            let e = write_atomic(&dir.join("l.png"), b"x").unwrap_err().to_string();
+            let e = write_atomic(&dir.join("l.png"), b"x")
+                .unwrap_err()
+                .to_string();
             assert!(e.ends_with("l.png: is a symbolic link (to a.png); refusing to replace it (to replace what it points to, give that path as the output)"), "{e}");
             assert_eq!(std::fs::read(dir.join("a.png")).unwrap(), b"two");
         }

@@ -231,7 +231,6 @@ impl AdlerDelta {
     }
 }
 
-
 /// The deflate bit stream being written.
 struct Bits {
     /// The bytes written so far.
@@ -1001,7 +1000,13 @@ mod tests {
         for (w, h) in [(1, 1), (5, 3), (1024, 768), (333, 17)] {
             for zeros in [false, true] {
                 let d: Vec<u8> = (0..w * h)
-                    .map(|i| if zeros && (i / w) % 3 != 1 { 0 } else { rnd() as u8 % 4 * 60 })
+                    .map(|i| {
+                        if zeros && (i / w) % 3 != 1 {
+                            0
+                        } else {
+                            rnd() as u8 % 4 * 60
+                        }
+                    })
                     .collect();
                 let png = encode_gray8(w as u32, h as u32, &d);
                 let mut plain = Vec::new();

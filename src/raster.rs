@@ -249,7 +249,11 @@ impl Rasterizer {
         }
         let (w, h) = (self.field.width_px, self.field.height_px);
         let data = scratch.zeroed(w as usize, h as usize);
-        let mut m = Mask { width: w, height: h, data };
+        let mut m = Mask {
+            width: w,
+            height: h,
+            data,
+        };
         paint(&mut m);
         (scratch.lit, scratch.lit_sum, scratch.reported_outside) = (drawn.0, drawn.1, false);
         let runs = drawn.2.as_ref().map_or(&[][..], |r| &r.runs);

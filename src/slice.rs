@@ -383,7 +383,10 @@ fn join_open(mut open: Vec<Contour>, section: &mut Section) {
                 if j == i || !alive[j] {
                     continue;
                 }
-                for (d, rev) in [(dist2(end, c[0]), false), (dist2(end, *c.last().unwrap()), true)] {
+                for (d, rev) in [
+                    (dist2(end, c[0]), false),
+                    (dist2(end, *c.last().unwrap()), true),
+                ] {
                     if d <= max2 && d < best.0 {
                         best = (d, j, rev);
                     }

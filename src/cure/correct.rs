@@ -191,7 +191,8 @@ impl Band {
             self.best.resize(n, (f32::INFINITY, u32::MAX));
         }
         self.touched.clear();
-        self.strips.resize_with(strips.max(self.strips.len()), Vec::new);
+        self.strips
+            .resize_with(strips.max(self.strips.len()), Vec::new);
         self.strips[..strips].iter_mut().for_each(Vec::clear);
     }
 

@@ -4,9 +4,9 @@
 
 use super::check::{NEAR, SUB};
 use super::islands::{components, Run};
-use super::kernel::{Irradiance, Prepared};
 #[cfg(test)]
 use super::kernel::Kernel;
+use super::kernel::{Irradiance, Prepared};
 use super::CureModel;
 
 /// The accumulation's pending decay factor below which it is applied to the buffer.

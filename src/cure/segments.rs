@@ -79,11 +79,7 @@ impl Segments {
                     lo[k] = lo[k].min(a[k]).min(b[k]);
                     hi[k] = hi[k].max(a[k]).max(b[k]);
                 }
-                segs.push(Segment {
-                    a,
-                    b,
-                    n,
-                });
+                segs.push(Segment { a, b, n });
             }
         }
         starts.push(segs.len());

@@ -162,7 +162,8 @@ impl Sink for Checker<'_> {
         }
         if *accel_max && moving && accel > amax * (1.0 + LIMIT_SLACK) {
             let (a, max) = (number(accel), number(amax));
-            let msg = format!("layer {i}: {what} at {a} mm/s² exceeds the stage's {accel_is} {max}");
+            let msg =
+                format!("layer {i}: {what} at {a} mm/s² exceeds the stage's {accel_is} {max}");
             push(Kind::Accel, msg);
         }
         if s.kind == SegKind::Expose && (s.from_mm - layer.z_mm).abs() > m.half_step_mm() + 1e-9 {

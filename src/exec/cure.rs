@@ -4,11 +4,11 @@
 //! irradiance (its gray through the projector's response and the bundle's gray map, or
 //! g/255) and each layer's dose ratio (its exposure against the normal layer's).
 
+use crate::bundle::machine::Projector;
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 pub use crate::cure::CureCheck;
 use crate::cure::{CureModel, Irradiance};
 use crate::error::{Error, Result};
-use crate::bundle::machine::Projector;
 use image::codecs::png::PngDecoder;
 use image::ImageDecoder;
 

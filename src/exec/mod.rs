@@ -179,9 +179,12 @@ pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Repor
     let cure_s = t3.elapsed().as_secs_f64();
     // An imported job's timing has no shutter or DMD latency: a machine that adds some is
     // not held against the file's own times.
-    let latency = |m: &MachineRecord| m.shutter.open_s.get() + m.shutter.close_s.get() + m.dmd.load_s.get();
-    let check_estimate =
-        native || given.as_ref().is_none_or(|g| latency(&g.0) <= latency(&manifest.machine));
+    let latency =
+        |m: &MachineRecord| m.shutter.open_s.get() + m.shutter.close_s.get() + m.dmd.load_s.get();
+    let check_estimate = native
+        || given
+            .as_ref()
+            .is_none_or(|g| latency(&g.0) <= latency(&manifest.machine));
     if !check_estimate {
         notes.push("estimate: not checked: the file's own timing has no shutter or DMD latency, the machine's are simulated".into());
     }
@@ -230,7 +233,10 @@ fn run_machine(
     opts: &RunOptions,
     native: bool,
 ) -> Result<Option<(MachineRecord, &'static str)>> {
-    let given = match (opts.machine.is_some() || opts.hardware.is_some(), opts.set.is_empty()) {
+    let given = match (
+        opts.machine.is_some() || opts.hardware.is_some(),
+        opts.set.is_empty(),
+    ) {
         (false, true) => return Ok(None),
         (true, true) => "--machine",
         (false, false) => "--set",
@@ -508,11 +514,16 @@ fn report(
         timings,
         cure: None,
         cure_skipped: None,
-        unchecked: ["stage.travel_max_mm", "stage.max_speed_mm_s", "stage.max_accel_mm_s2", "projector[].pixel_mm"]
-            .into_iter()
-            .filter(|k| !manifest.machine.states(k))
-            .map(String::from)
-            .collect(),
+        unchecked: [
+            "stage.travel_max_mm",
+            "stage.max_speed_mm_s",
+            "stage.max_accel_mm_s2",
+            "projector[].pixel_mm",
+        ]
+        .into_iter()
+        .filter(|k| !manifest.machine.states(k))
+        .map(String::from)
+        .collect(),
         notes: Vec::new(),
     }
 }

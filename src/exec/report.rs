@@ -346,7 +346,10 @@ pub fn render_human(r: &Report) -> String {
         let name = &m.profile;
         if m.differences.is_empty() {
             let by = m.given;
-            let _ = writeln!(o, "machine {name} ({by}): the same stage, shutter, DMD and projectors as the job's");
+            let _ = writeln!(
+                o,
+                "machine {name} ({by}): the same stage, shutter, DMD and projectors as the job's"
+            );
         } else {
             let shown = m.differences.iter().take(DIFFERENCES_SHOWN);
             let shown: Vec<String> = shown
@@ -387,7 +390,10 @@ pub fn render_human(r: &Report) -> String {
     );
     if !r.unchecked.is_empty() {
         let keys = r.unchecked.join(", ");
-        let _ = writeln!(o, "not checked: {keys}: the job's machine states no value (give --machine or --set)");
+        let _ = writeln!(
+            o,
+            "not checked: {keys}: the job's machine states no value (give --machine or --set)"
+        );
     }
     for n in &r.notes {
         let _ = writeln!(o, "note: {n}");

@@ -11,8 +11,7 @@ use super::archive::read::Archive;
 use super::{ForeignEstimate, Format, Job, Request};
 use crate::bundle::machine::{Dmd, Exposure, Projector, Resin, Shutter, Stage};
 use crate::bundle::{
-    Generator, Layer, Machine, Manifest, MaskRef, Mode, Placement, Settings, Source, Step,
-    Totals,
+    Generator, Layer, Machine, Manifest, MaskRef, Mode, Placement, Settings, Source, Step, Totals,
 };
 use crate::error::Result;
 use crate::units::{NonNegative, Positive};
@@ -197,7 +196,8 @@ impl Imported {
                 Some(_) => "layer areas are estimates",
                 None => "layer areas and the resin volume are estimates",
             };
-            self.notes.push(format!("{what}: the masks' pixels lit at least half"));
+            self.notes
+                .push(format!("{what}: the masks' pixels lit at least half"));
         }
         let bbox_mm = layers
             .iter()
@@ -283,7 +283,10 @@ pub(crate) fn rescale(m: &mut Manifest, pixel_mm: f64) {
         p.pixel_mm = pos(pixel_mm);
         p.offset_px = p.offset_px.map(|o| (o as f64 / f).round() as u32);
     }
-    let (h0, h1) = (before.field().height_px as f64, m.machine.field().height_px as f64);
+    let (h0, h1) = (
+        before.field().height_px as f64,
+        m.machine.field().height_px as f64,
+    );
     for l in &mut m.layers {
         l.area_mm2 *= f * f;
         let k = l.masks.first().map_or(0, |k| k.projector as usize);

@@ -45,8 +45,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 pub use format::Format;
-pub(crate) use imported::DEFLATE_MAX_RATIO;
 pub(crate) use imported::rescale;
+pub(crate) use imported::DEFLATE_MAX_RATIO;
 
 /// Where an imported job's total time estimate comes from, when not from dmdsl's planner.
 #[derive(Debug, Clone, PartialEq)]

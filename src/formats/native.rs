@@ -42,7 +42,9 @@ pub(super) fn bundle_folder(archive: &Archive) -> Option<String> {
 /// bundle's files are in inside the archive ([`bundle_folder`]).
 pub(super) fn open_zip(archive: Archive, dir: &str) -> Result<Job> {
     let path = archive.path().to_path_buf();
-    let text = archive.get(&format!("{dir}{MANIFEST}"))?.unwrap_or_default();
+    let text = archive
+        .get(&format!("{dir}{MANIFEST}"))?
+        .unwrap_or_default();
     let manifest = Manifest::from_json(text, &path.join(dir).join(MANIFEST))?;
     Ok(Job {
         source: Box::new(archive.into_source(dir)),
@@ -83,7 +85,10 @@ fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, F
     let mut seen = HashSet::new();
     let n = m.machine.projector.len();
     let own = m.layers.iter().all(|l| l.masks.len() == n)
-        && m.layers.iter().flat_map(|l| &l.masks).all(|k| seen.insert(k.file.as_str()));
+        && m.layers
+            .iter()
+            .flat_map(|l| &l.masks)
+            .all(|k| seen.insert(k.file.as_str()));
     if own {
         return (std::borrow::Cow::Borrowed(m), HashMap::new());
     }
@@ -106,16 +111,27 @@ fn own_files(m: &Manifest) -> (std::borrow::Cow<'_, Manifest>, HashMap<String, F
                 p.offset_px,
                 [p.mirror_x, p.mirror_y],
             );
-            (crate::digest::sha256_hex(&png), std::sync::Arc::new(png), px)
+            (
+                crate::digest::sha256_hex(&png),
+                std::sync::Arc::new(png),
+                px,
+            )
         })
         .collect();
     for l in &mut out.layers {
         let lit: Vec<u32> = l.masks.iter().map(|k| k.projector).collect();
         for k in &mut l.masks {
             let file = name(k.projector as usize, l.index);
-            from.insert(file.clone(), From::File(std::mem::replace(&mut k.file, file)));
+            from.insert(
+                file.clone(),
+                From::File(std::mem::replace(&mut k.file, file)),
+            );
         }
-        for (k, (sha, png, px)) in dark.iter().enumerate().filter(|(k, _)| !lit.contains(&(*k as u32))) {
+        for (k, (sha, png, px)) in dark
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| !lit.contains(&(*k as u32)))
+        {
             let file = name(k, l.index);
             from.insert(file.clone(), From::Made(png.clone()));
             l.masks.push(crate::bundle::MaskRef {

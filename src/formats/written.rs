@@ -103,7 +103,11 @@ pub(super) fn survey<'m>(
         k.sha256 = sha.clone().unwrap_or(std::mem::take(&mut k.sha256));
         let p = projectors.get(k.projector as usize);
         if let (None, Some(px), Some(p)) = (k.pixels, px, p) {
-            let place = ([p.width_px, p.height_px], p.offset_px, [p.mirror_x, p.mirror_y]);
+            let place = (
+                [p.width_px, p.height_px],
+                p.offset_px,
+                [p.mirror_x, p.mirror_y],
+            );
             k.pixels = Some(px.placed(place.0, place.1, place.2));
         }
     }

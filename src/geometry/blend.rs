@@ -229,10 +229,7 @@ mod tests {
     #[test]
     fn two_by_one_seam_weights() {
         // tiled-2x1: 1024-wide projectors, the second at column 992 (32 px overlap).
-        let rects = [
-            rect(0, 0, 1024, 768),
-            rect(992, 0, 2016, 768),
-        ];
+        let rects = [rect(0, 0, 1024, 768), rect(992, 0, 2016, 768)];
         assert_eq!(overlap_widths(&rects, 0), [0, 32, 0, 0]);
         assert_eq!(overlap_widths(&rects, 1), [32, 0, 0, 0]);
         for curve in CURVES.into_iter().chain([BlendCurve::eehm()]) {

@@ -371,7 +371,12 @@ mod tests {
     fn nonlinear_response_gray_gives_the_irradiance_share() {
         let ps = two(64, 16);
         let g = Response::gamma(2.2).unwrap();
-        let t = Tiler::new(&ps, &BlendCurve::Smoothstep, &[g.clone(), g.clone()], &[None, None]);
+        let t = Tiler::new(
+            &ps,
+            &BlendCurve::Smoothstep,
+            &[g.clone(), g.clone()],
+            &[None, None],
+        );
         let (a, b) = full(&t, 112);
         for c in 48..64u32 {
             let e = g.irradiance(a.get(c, 0)).unwrap() + g.irradiance(b.get(c - 48, 0)).unwrap();

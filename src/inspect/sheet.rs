@@ -118,7 +118,10 @@ pub fn contact_sheet(
     } else {
         "Each thumbnail is one layer's mask as the projector shows it: gray on black, white = full light."
     };
-    let zone = manifest.optics.as_ref().or(manifest.projector_optics.first());
+    let zone = manifest
+        .optics
+        .as_ref()
+        .or(manifest.projector_optics.first());
     let note1 = match zone.filter(|o| o.mode == "zone") {
         Some(o) => format!(
             "{note1} Faint squares inside the part: the light compensation's {} mm zones, each with its own gray.",
@@ -168,7 +171,8 @@ fn z_decimals(zs: impl Iterator<Item = f64> + Clone) -> usize {
     (2..=4)
         .find(|&d| {
             let scale = 10f64.powi(d as i32);
-            zs.clone().all(|z| ((z * scale).round() - z * scale).abs() < 1e-6)
+            zs.clone()
+                .all(|z| ((z * scale).round() - z * scale).abs() < 1e-6)
         })
         .unwrap_or(4)
 }

@@ -166,7 +166,12 @@ pub fn render_human(s: &Summary) -> String {
         }
         _ => format!("sliced from {source} for {profile}"),
     };
-    let _ = writeln!(o, "{}{format}: {n} layers of {} mm, {tall:.2} mm tall; {origin}{projectors}", s.bundle, number(h));
+    let _ = writeln!(
+        o,
+        "{}{format}: {n} layers of {} mm, {tall:.2} mm tall; {origin}{projectors}",
+        s.bundle,
+        number(h)
+    );
     let continuous = s.continuous_layers.map_or(String::new(), |c| {
         format!(", {c} layers printed continuously")
     });
@@ -175,7 +180,11 @@ pub fn render_human(s: &Summary) -> String {
         true => "resin not measured (no pixel size)".to_string(),
         false => format!("resin {resin:.2} ml"),
     };
-    let _ = writeln!(o, "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, {resin}{continuous}", hms(t));
+    let _ = writeln!(
+        o,
+        "estimated print time {} ({t:.1} s), exposure {exposure:.1} s, {resin}{continuous}",
+        hms(t)
+    );
     match (s.compensation.as_deref(), s.zone_mm) {
         (Some("zone"), Some(z)) => {
             let _ = writeln!(o, "light compensation: zone: each {} mm zone has its own gray, so a mask shows faint squares inside the part (darker where the projector is brighter)", number(z));

@@ -1,6 +1,7 @@
 //! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
 //! edge errors of all layers, and the manifest's record and warnings.
 
+use crate::bundle::machine::Projector;
 use crate::bundle::{
     self, BundleSource, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
     Manifest,
@@ -14,7 +15,6 @@ use crate::cure::{self, widen, Correction, CureModel, Irradiance};
 use crate::error::{Error, Result};
 use crate::geometry::distortion;
 use crate::optics::Compensator;
-use crate::bundle::machine::Projector;
 use crate::profile::Profile;
 use crate::raster::{Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section, Slicer};
@@ -191,7 +191,11 @@ impl CureJob {
         };
         let r = &profile.resin;
         let of = |s: &Option<String>| s.clone().unwrap_or_else(|| "assumed".into());
-        let sources = [("psf_sigma_px", "assumed".into()), ("dp_mm", of(&r.dp_source)), ("ec_mj_cm2", of(&r.ec_source))];
+        let sources = [
+            ("psf_sigma_px", "assumed".into()),
+            ("dp_mm", of(&r.dp_source)),
+            ("ec_mj_cm2", of(&r.ec_source)),
+        ];
         Ok(Some(CureJob {
             model,
             sources: sources.map(|(k, v)| (k.to_string(), v)).into(),
@@ -817,7 +821,10 @@ impl LayerLight {
                 return [a, -near];
             }
             let at = [p[0] - o0 as f64, p[1] - o1 as f64];
-            [a, predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near]
+            [
+                a,
+                predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near,
+            ]
         };
         let samples = predict::edge_samples(m, &margin, self.height as f64, &self.framed);
         let (c, h) = predict::summarize(m, &samples, &self.drawn);

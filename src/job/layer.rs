@@ -332,34 +332,38 @@ fn draw(
     let comp = ctx.optics.map(|o| &o.compensator);
     let coverage = drawing.coverage.take();
     let drawn_section = drawing.drawn();
-    let (mut field_mask, lit_pixels, outside, dropped, widened) = match ctx.cure.filter(|c| c.active())
+    let (mut field_mask, lit_pixels, outside, dropped, widened) =
+        match ctx.cure.filter(|c| c.active()) {
+            // The cure correction works on the coverage (the relative irradiance the
+            // compensation then delivers): drawn and corrected, then thresholded and
+            // compensated.
+            Some(job) => {
+                let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+                let (m, c) = job.draw(
+                    ctx.raster,
+                    drawn_section,
+                    coverage,
+                    drawing.corr.as_ref(),
+                    &lower,
+                    layer.above == 0,
+                    scratch,
+                    ctx.binary,
+                    comp,
+                );
+                (m, c.lit_pixels, c.outside, c.dropped, c.widened)
+            }
+            None => {
+                let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
+                let lit = scratch.lit_pixels(&m);
+                let outside = comp.is_some() && scratch.reported_outside();
+                (m, lit, outside, Vec::new(), None)
+            }
+        };
+    for (v, d) in field_mask
+        .data
+        .iter_mut()
+        .zip(ctx.dose.map_or(&[][..], |d| &d.data))
     {
-        // The cure correction works on the coverage (the relative irradiance the
-        // compensation then delivers): drawn and corrected, then thresholded and
-        // compensated.
-        Some(job) => {
-            let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
-            let (m, c) = job.draw(
-                ctx.raster,
-                drawn_section,
-                coverage,
-                drawing.corr.as_ref(),
-                &lower,
-                layer.above == 0,
-                scratch,
-                ctx.binary,
-                comp,
-            );
-            (m, c.lit_pixels, c.outside, c.dropped, c.widened)
-        }
-        None => {
-            let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
-            let lit = scratch.lit_pixels(&m);
-            let outside = comp.is_some() && scratch.reported_outside();
-            (m, lit, outside, Vec::new(), None)
-        }
-    };
-    for (v, d) in field_mask.data.iter_mut().zip(ctx.dose.map_or(&[][..], |d| &d.data)) {
         *v = ((*v as u32 * *d as u32 + 127) / 255) as u8;
     }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
@@ -379,11 +383,23 @@ fn draw(
                 (png, MaskPixels { adler32, ..px })
             }
             Cow::Owned(m) => {
-                let place = ([p.width_px, p.height_px], p.offset_px, [p.mirror_x, p.mirror_y]);
+                let place = (
+                    [p.width_px, p.height_px],
+                    p.offset_px,
+                    [p.mirror_x, p.mirror_y],
+                );
                 let png = super::encode_png(m);
-                let px = MaskPixels::of_gray8_in(m.width, &m.data, 0..m.height as usize, 0..m.width as usize);
+                let px = MaskPixels::of_gray8_in(
+                    m.width,
+                    &m.data,
+                    0..m.height as usize,
+                    0..m.width as usize,
+                );
                 let adler32 = crate::png::scanlines_adler32_of(&png);
-                (png, MaskPixels { adler32, ..px }.placed(place.0, place.1, place.2))
+                (
+                    png,
+                    MaskPixels { adler32, ..px }.placed(place.0, place.1, place.2),
+                )
             }
         };
         let sha = bundle::sha256_hex(&png);

@@ -212,7 +212,12 @@ fn source(part: &PlacedPart) -> Source {
         triangles: part.mesh.report.triangles_in_file,
         bbox_mm: part.bbox_in_file.map(|c| c.map(round::plane_mm)),
         placement: Placement {
-            mode: if parts.is_some() { "plate" } else { part.mode.as_str() }.into(),
+            mode: if parts.is_some() {
+                "plate"
+            } else {
+                part.mode.as_str()
+            }
+            .into(),
             // Like the bounding box, to 1 µm.
             translate_mm: part.translate_mm.map(round::plane_mm),
             scale: (part.transform.scale != [1.0; 3]).then_some(part.transform.scale),

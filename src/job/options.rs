@@ -175,4 +175,3 @@ fn stem(input: &Path) -> String {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "part".into())
 }
-

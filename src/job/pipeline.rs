@@ -80,7 +80,11 @@ impl Cut {
     pub fn take_own(&self) -> Option<Arc<CutCoverage>> {
         let mut g = lock(&self.coverage);
         g.1 = g.1.saturating_sub(1);
-        if g.1 == 0 { g.0.take() } else { g.0.clone() }
+        if g.1 == 0 {
+            g.0.take()
+        } else {
+            g.0.clone()
+        }
     }
 
     /// Offers the coverage the layer made of its own section, while a layer below will

@@ -305,8 +305,10 @@ fn overlap(a: &[[f64; 3]; 2], b: &[[f64; 3]; 2]) -> bool {
 
 /// A file's name without its directories, as the manifest records it.
 fn file_name(path: &Path) -> String {
-    path.file_name()
-        .map_or_else(|| path.display().to_string(), |s| s.to_string_lossy().into_owned())
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    )
 }
 
 /// The manifest's record of copy `inst` of `part`.
@@ -342,7 +344,10 @@ mod tests {
     fn overlaps(c: &[[f64; 2]], s: &[[f64; 2]], gap: f64) -> bool {
         (0..c.len()).any(|i| {
             (0..i).any(|j| {
-                (0..2).all(|k| c[i][k] < c[j][k] + s[j][k] + gap - 1e-9 && c[j][k] < c[i][k] + s[i][k] + gap - 1e-9)
+                (0..2).all(|k| {
+                    c[i][k] < c[j][k] + s[j][k] + gap - 1e-9
+                        && c[j][k] < c[i][k] + s[i][k] + gap - 1e-9
+                })
             })
         })
     }

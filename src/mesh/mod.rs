@@ -79,14 +79,24 @@ impl MeshReport {
                 "open edge",
                 " (holes); open section contours are closed or dropped",
             ),
-            ("mesh.nonmanifold-edges", self.nonmanifold_edges, "non-manifold edge", ""),
+            (
+                "mesh.nonmanifold-edges",
+                self.nonmanifold_edges,
+                "non-manifold edge",
+                "",
+            ),
             (
                 "mesh.backwards-edges",
                 self.backwards_edges,
                 "backwards edge",
                 " (inconsistently oriented facets); contours are oriented by majority",
             ),
-            ("mesh.degenerate-facets", self.degenerate_triangles, "degenerate triangle", ""),
+            (
+                "mesh.degenerate-facets",
+                self.degenerate_triangles,
+                "degenerate triangle",
+                "",
+            ),
         ];
         let mut w: Vec<Warning> = counts
             .into_iter()
@@ -344,7 +354,11 @@ impl Mesh {
         } = edge_table(&triangles, vertices.len());
         let edge_count = faces.len();
         let open = faces.iter().filter(|&&n| n == 1).count() as u64;
-        let backwards = faces.iter().zip(&fwd).filter(|&(&n, &f)| n == 2 && f != 1).count() as u64;
+        let backwards = faces
+            .iter()
+            .zip(&fwd)
+            .filter(|&(&n, &f)| n == 2 && f != 1)
+            .count() as u64;
         let nonmanifold = faces.iter().filter(|&&n| !(1..=2).contains(&n)).count() as u64;
 
         // Shells: union-find over triangles sharing an edge.
@@ -377,7 +391,10 @@ impl Mesh {
             let [a, b, c] = t.map(|v| vertices[v as usize]);
             let bc = cross(b, c);
             volume += (a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2]) / 6.0;
-            let n = cross([0, 1, 2].map(|i| b[i] - a[i]), [0, 1, 2].map(|i| c[i] - a[i]));
+            let n = cross(
+                [0, 1, 2].map(|i| b[i] - a[i]),
+                [0, 1, 2].map(|i| c[i] - a[i]),
+            );
             if n == [0.0; 3] {
                 degenerate += 1;
             }
@@ -499,10 +516,18 @@ mod tests {
         let both = Mesh::from_soup(&[a, b].concat(), "stl-binary");
         assert_eq!(
             (&m.vertices, &m.triangles, &m.tri_edges, m.edge_count),
-            (&both.vertices, &both.triangles, &both.tri_edges, both.edge_count)
+            (
+                &both.vertices,
+                &both.triangles,
+                &both.tri_edges,
+                both.edge_count
+            )
         );
         let r = &m.report;
-        assert_eq!((r.triangles, r.vertices, r.edges, r.shells), (24, 16, 36, 2));
+        assert_eq!(
+            (r.triangles, r.vertices, r.edges, r.shells),
+            (24, 16, 36, 2)
+        );
         assert!(r.closed_manifold && (r.volume_mm3 - 1125.0).abs() < 1e-9);
         assert_eq!(r.format, "mixed");
     }

@@ -134,7 +134,10 @@ fn parse_ascii<'a>(path: &Path, b: &'a [u8]) -> Result<Soup> {
     // The next token, which a solid or a facet that has begun must have.
     let next = |tk: &mut Tokens<'a>| {
         tk.next().ok_or_else(|| {
-            let msg = format!("ASCII STL ends inside a facet or solid (last line {})", tk.line);
+            let msg = format!(
+                "ASCII STL ends inside a facet or solid (last line {})",
+                tk.line
+            );
             Error::input(path, msg)
         })
     };
@@ -144,7 +147,9 @@ fn parse_ascii<'a>(path: &Path, b: &'a [u8]) -> Result<Soup> {
     };
     let number = |tk: &mut Tokens<'a>| {
         let tok = next(tk)?;
-        let n = std::str::from_utf8(tok.0).ok().and_then(|s| s.parse::<f32>().ok());
+        let n = std::str::from_utf8(tok.0)
+            .ok()
+            .and_then(|s| s.parse::<f32>().ok());
         n.ok_or_else(|| expected(tok, "a number"))
     };
     let mut soup = Vec::new();

@@ -417,7 +417,11 @@ impl<'a> Setup<'a> {
             *v = i;
         }
         let npos = pos.len();
-        let positions = count(npos as u64, "distinct zone position", "distinct zone positions");
+        let positions = count(
+            npos as u64,
+            "distinct zone position",
+            "distinct zone positions",
+        );
         let grays: std::collections::BTreeSet<u8> = readings.iter().map(|r| r.gray).collect();
         // Without several grays nothing else can be fitted: say so first.
         if grays.len() < 3 {
@@ -444,8 +448,10 @@ impl<'a> Setup<'a> {
         }
         // A cubic needs at least 4 distinct coordinates along each axis.
         for (i, axis) in ["x", "y"].into_iter().enumerate() {
-            let vals: std::collections::BTreeSet<i64> =
-                readings.iter().map(|r| <[i64; 2]>::from(position_key(r))[i]).collect();
+            let vals: std::collections::BTreeSet<i64> = readings
+                .iter()
+                .map(|r| <[i64; 2]>::from(position_key(r))[i])
+                .collect();
             if vals.len() < 4 {
                 return Err(input_error(format!(
                     "ill-conditioned fit: the zone centres take only {} distinct {axis} {}; a cubic P(x, y) needs zones spread over the field in both x and y (at least 4 distinct values each)",

@@ -7,8 +7,8 @@
 
 use super::Units;
 use crate::profile::{Profile, Resin};
-use crate::units::Positive;
 use crate::text::{fixed, number};
+use crate::units::Positive;
 use crate::warning::Warning;
 
 /// How a job's exposure was derived.

@@ -234,7 +234,11 @@ impl JobOptics {
         let c = &self.compensator;
         let pr = &c.prediction;
         let zone_grays = match c.mode() {
-            Mode::Zone => pr.zone_gray.chunks(pr.zone_grid.0).map(<[u8]>::to_vec).collect(),
+            Mode::Zone => pr
+                .zone_gray
+                .chunks(pr.zone_grid.0)
+                .map(<[u8]>::to_vec)
+                .collect(),
             _ => Vec::new(),
         };
         let mut warnings = self.exposure.warnings.clone();
@@ -242,7 +246,13 @@ impl JobOptics {
         let layers_outside = c.layers_outside();
         if layers_outside > 0 {
             let (beyond, margin) = (c.beyond_mm(), self.calibration.field.extrapolate_mm.get());
-            let area = format!("x {}..{}, y {}..{} mm", number(x0), number(x1), number(y0), number(y1));
+            let area = format!(
+                "x {}..{}, y {}..{} mm",
+                number(x0),
+                number(x1),
+                number(y0),
+                number(y1)
+            );
             let reach = format!(
                 "{layers_outside} {} up to {} mm beyond the calibrated area ({area})",
                 plural(layers_outside, "layer reaches", "layers reach"),
@@ -252,7 +262,10 @@ impl JobOptics {
                 true => ("optics.beyond-extrapolation", "farther than the calibration's extrapolate_mm = {m} mm: beyond that margin the light is unknown and compensated as if it were the light at the margin"),
                 false => ("optics.outside-calibrated-area", "within the calibration's extrapolate_mm = {m} mm: the compensation there extrapolates the measured light"),
             };
-            let w = Warning::new(code, format!("{reach}, {}", rest.replace("{m}", &number(margin))));
+            let w = Warning::new(
+                code,
+                format!("{reach}, {}", rest.replace("{m}", &number(margin))),
+            );
             warnings.push(
                 w.with("layers", layers_outside)
                     .with("area_mm", vec![x0, y0, x1, y1])

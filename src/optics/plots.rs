@@ -284,12 +284,27 @@ fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8>
         Series::new("level values", [214, 39, 40], Style::Points, valid_pts),
     ];
     if !excluded_pts.is_empty() {
-        series.push(Series::new("excluded levels", ORANGE, Style::Points, excluded_pts));
+        series.push(Series::new(
+            "excluded levels",
+            ORANGE,
+            Style::Points,
+            excluded_pts,
+        ));
     }
     let [mlo, mhi] = (cal.fit.as_ref().map_or([glo, ghi], |f| f.measured_gray)).map(f64::from);
-    let mut bands = vec![Band::new(mlo, mhi, GREEN, "measured gray range (S monotone)")];
+    let mut bands = vec![Band::new(
+        mlo,
+        mhi,
+        GREEN,
+        "measured gray range (S monotone)",
+    )];
     if f64::from(glo) < mlo {
-        bands.push(Band::new(glo.into(), mlo, PEACH, "interpolated down to S(0) = 0"));
+        bands.push(Band::new(
+            glo.into(),
+            mlo,
+            PEACH,
+            "interpolated down to S(0) = 0",
+        ));
     }
     Chart {
         title: format!(

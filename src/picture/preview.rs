@@ -297,7 +297,12 @@ fn draw_plate(c: &mut Canvas, to_px: &dyn Fn(V3) -> (f64, f64), b: [f64; 4]) {
         let (px, py) = to_px([x, y, 0.0]);
         (px as f32, py as f32)
     };
-    let corners = [corner(x0, y0), corner(x1, y0), corner(x1, y1), corner(x0, y1)];
+    let corners = [
+        corner(x0, y0),
+        corner(x1, y0),
+        corner(x1, y1),
+        corner(x0, y1),
+    ];
     c.polygon(&corners, PLATE, 255);
     let mut x = (x0 / 10.0).ceil() * 10.0;
     while x < x1 {

@@ -274,7 +274,9 @@ fn estimate_matches_an_independent_replay() {
     for name in crate::profile::builtin_names() {
         let p = Profile::resolve(name).unwrap();
         let h = p.slicing.layer_height_mm.get();
-        let layers = layers_of(40, h, |i| (20.0 * (i % 7) as f64, [1.0, 3.0, 6.0, 9.0][i / 10]));
+        let layers = layers_of(40, h, |i| {
+            (20.0 * (i % 7) as f64, [1.0, 3.0, 6.0, 9.0][i / 10])
+        });
         let plan = plan(&p, &layers).unwrap();
         let r = replay(&p, &plan.layers);
         // The estimate is the replay of the steps as written, to 1 ms.

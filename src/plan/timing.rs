@@ -116,7 +116,11 @@ mod tests {
         let a = [Step::Expose { s: 2.0 }];
         assert!((t().layer_times(&[&a])[0] - (0.5 + 0.1 + 2.0 + 0.2)).abs() < 1e-12);
         // A move longer than the load hides it.
-        let b = [mv(10.0, 10.0, 100.0), Step::Wait { s: 0.25 }, Step::Expose { s: 2.0 }];
+        let b = [
+            mv(10.0, 10.0, 100.0),
+            Step::Wait { s: 0.25 },
+            Step::Expose { s: 2.0 },
+        ];
         let mv = move_time(10.0, 10.0, 100.0);
         assert!((t().layer_times(&[&b])[0] - (mv + 0.25 + 2.3)).abs() < 1e-12);
     }
@@ -124,7 +128,11 @@ mod tests {
     #[test]
     fn sweep_run_opens_once_and_closes_in_last_layer() {
         let (s1, s2) = (sweep(0.1), sweep(0.2));
-        let m = [mv(2.3, 5.0, 50.0), mv(0.3, 5.0, 50.0), Step::Expose { s: 1.0 }];
+        let m = [
+            mv(2.3, 5.0, 50.0),
+            mv(0.3, 5.0, 50.0),
+            Step::Expose { s: 1.0 },
+        ];
         let v = t().layer_times(&[&s1, &s2, &m]);
         assert!((v[0] - (0.5 + 0.1 + 2.0)).abs() < 1e-12, "{v:?}");
         assert!((v[1] - (2.0 + 0.2)).abs() < 1e-12, "{v:?}");

@@ -93,7 +93,8 @@ impl Canvas {
         if let Some(path) = path {
             let paint = paint(color, alpha, true);
             let id = Transform::identity();
-            self.pm.fill_path(&path, &paint, FillRule::Winding, id, None);
+            self.pm
+                .fill_path(&path, &paint, FillRule::Winding, id, None);
         }
     }
 

@@ -455,7 +455,10 @@ mod tests {
         // Data filling the whole plot area: the legend's text must not be drawn over it.
         let pts: Vec<(f64, f64)> = (0..=200).map(|i| (i as f64, 10.0)).collect();
         let label = "a long legend entry for the series";
-        let ch = one_panel(vec![Series::new(label, [200, 0, 0], Style::Line, pts)], vec![]);
+        let ch = one_panel(
+            vec![Series::new(label, [200, 0, 0], Style::Line, pts)],
+            vec![],
+        );
         let mut probe = Canvas::new(640, 360, [255; 3]);
         let below = ch.legend(&mut probe, 0.0, 100.0, 600.0, false);
         assert!(below > 100.0);

@@ -111,9 +111,8 @@ impl Heatmap {
         let (map_w, map_h) = (cols as f32 * cell_w, rows as f32 * cell_h);
 
         // About one tick per 70 px of the map.
-        let ticks = |[lo, hi]: [f64; 2], px: f32| {
-            axes::ticks(lo, hi, (px / 70.0).max(2.0) as usize, false)
-        };
+        let ticks =
+            |[lo, hi]: [f64; 2], px: f32| axes::ticks(lo, hi, (px / 70.0).max(2.0) as usize, false);
         let (x_ticks, y_ticks) = (ticks(self.x_range, map_w), ticks(self.y_range, map_h));
         let bar_ticks = axes::ticks(lo, hi, 6, false);
         let ml = PAD + label_h + 8.0 + axes::y_labels_width(&y_ticks);
@@ -232,13 +231,21 @@ impl Heatmap {
     /// Fills the cells (and writes their values when `annotate`).
     fn draw_cells(&self, c: &mut Canvas, area: Area, cell_w: f32, cell_h: f32) {
         // The cells' edges, whole pixels.
-        let xs: Vec<f32> = (0..=self.cols).map(|k| (area.x + k as f32 * cell_w).round()).collect();
-        let ys: Vec<f32> = (0..=self.rows).map(|k| (area.y + k as f32 * cell_h).round()).collect();
+        let xs: Vec<f32> = (0..=self.cols)
+            .map(|k| (area.x + k as f32 * cell_w).round())
+            .collect();
+        let ys: Vec<f32> = (0..=self.rows)
+            .map(|k| (area.y + k as f32 * cell_h).round())
+            .collect();
         for r in 0..self.rows {
             let (y0, y1) = (ys[r], ys[r + 1]);
             for col in 0..self.cols {
                 let (x0, x1) = (xs[col], xs[col + 1]);
-                let v = self.values.get(r * self.cols + col).copied().unwrap_or(f64::NAN);
+                let v = self
+                    .values
+                    .get(r * self.cols + col)
+                    .copied()
+                    .unwrap_or(f64::NAN);
                 let color = self.color_of(v);
                 c.fill_rect(x0, y0, x1 - x0, y1 - y0, color, 255);
                 if self.annotate && v.is_finite() {

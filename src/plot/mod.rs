@@ -16,6 +16,6 @@ pub mod text;
 pub use canvas::Canvas;
 pub use chart::{Band, Chart, Panel, Series, Style};
 pub use format::Format;
-pub use heatmap::Heatmap;
 #[cfg(any(test, feature = "internals"))]
 pub use heatmap::colormap;
+pub use heatmap::Heatmap;

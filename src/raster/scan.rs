@@ -113,7 +113,12 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     outside: &mut bool,
     mut lit: Option<&mut LitRuns>,
 ) -> (u64, f32) {
-    let PixelBox { r0, r1, c0, c1: end } = span;
+    let PixelBox {
+        r0,
+        r1,
+        c0,
+        c1: end,
+    } = span;
     let area = emit.area();
     let (stride, words) = (acc.stride, acc.words);
     let mut max_winding = 0.0f32;

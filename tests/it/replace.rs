@@ -248,10 +248,7 @@ fn errors_name_the_output_not_its_temporary_file() {
         let o = run_in(&dir, args);
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         let e = stderr(&o);
-        assert_eq!(
-            e,
-            format!("dmdsl: error: {out}: ro is not a directory\n")
-        );
+        assert_eq!(e, format!("dmdsl: error: {out}: ro is not a directory\n"));
     }
 }
 

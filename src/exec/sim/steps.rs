@@ -283,7 +283,9 @@ impl Simulation<'_, '_, '_> {
         let target = self.machine.quantize(to_mm);
         let dur = move_time(target - self.pos, speed_mm_s, accel_mm_s2);
         let exact_dur = move_time(to_mm - self.exact_mm, speed_mm_s, accel_mm_s2);
-        if self.endless(k, dur + exact_dur, || format!("move to {} mm", number(to_mm))) {
+        if self.endless(k, dur + exact_dur, || {
+            format!("move to {} mm", number(to_mm))
+        }) {
             return true;
         }
         self.record.quantization_s += (dur - exact_dur).abs();

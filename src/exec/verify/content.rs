@@ -83,7 +83,10 @@ impl ContentRule {
             made.projector.len() <= 1 || made.projector.iter().all(|p| p.calibration.is_none());
         let coverage = !s.binary && s.compensation == "off" && linear;
         let one = made.projector.len() == 1;
-        let corrected = manifest.cure.as_ref().is_some_and(|c| c.correction != "off");
+        let corrected = manifest
+            .cure
+            .as_ref()
+            .is_some_and(|c| c.correction != "off");
         ContentRule {
             pixel_mm: p,
             field_h_px: field.height_px as f64,

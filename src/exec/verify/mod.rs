@@ -68,7 +68,12 @@ fn problem_in(
 /// machine the manifest embeds.
 #[cfg(any(test, feature = "internals"))]
 pub fn verify(dir: &Path, manifest: &Manifest) -> Verification {
-    verify_source(&crate::bundle::DirSource::new(dir), manifest, &manifest.machine, true)
+    verify_source(
+        &crate::bundle::DirSource::new(dir),
+        manifest,
+        &manifest.machine,
+        true,
+    )
 }
 
 /// Verifies the bundle whose files `dir` reads for `machine`, which may differ from the one the manifest
@@ -153,7 +158,11 @@ pub fn verify_source(
 
 /// The pixels of projector `p`'s mask with their box in the field.
 fn placed(px: MaskPixels, p: &Projector) -> MaskPixels {
-    px.placed([p.width_px, p.height_px], p.offset_px, [p.mirror_x, p.mirror_y])
+    px.placed(
+        [p.width_px, p.height_px],
+        p.offset_px,
+        [p.mirror_x, p.mirror_y],
+    )
 }
 
 /// The pixels of two masks together (pixels lit in both count twice; no checksum).
@@ -207,7 +216,13 @@ fn against_record(
         text(px),
         text(rec)
     );
-    Some(problem_in(dir, Some(i), Kind::MaskPixels, (&m.file, &m.file), &msg))
+    Some(problem_in(
+        dir,
+        Some(i),
+        Kind::MaskPixels,
+        (&m.file, &m.file),
+        &msg,
+    ))
 }
 
 /// Every mask file the manifest names, with its layer.

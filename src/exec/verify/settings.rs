@@ -26,7 +26,11 @@ pub(super) fn check(dir: &dyn BundleSource, m: &Manifest, problems: &mut Vec<Vio
     let job = (MANIFEST, MANIFEST);
     let mut add = |msg: String| problems.push(problem_in(dir, None, Kind::Settings, job, &msg));
     let h = m.settings.layer_height_mm;
-    let thick = m.layers.iter().enumerate().filter(|(_, l)| l.thickness_mm > 0.0);
+    let thick = m
+        .layers
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.thickness_mm > 0.0);
     let mut other = thick.filter(|(_, l)| (l.thickness_mm - h).abs() > THICKNESS_TOL_MM);
     if let Some((i, l)) = other.next() {
         let more = other.count();
@@ -39,11 +43,21 @@ pub(super) fn check(dir: &dyn BundleSource, m: &Manifest, problems: &mut Vec<Vio
     let c = m.settings.compensation.as_str();
     let records: Vec<_> = m.optics.iter().chain(&m.projector_optics).collect();
     let msg = match (c, records.iter().find(|o| o.mode != c)) {
-        ("off" | "dose", Some(o)) => Some(format!("settings.compensation is {c}, but the job records the {} compensation of projector {}", o.mode, o.projector)),
-        ("zone" | "pixel", _) if records.is_empty() => Some(format!("settings.compensation is {c}, but the job has no light compensation record (optics)")),
-        ("zone" | "pixel", Some(o)) => Some(format!("settings.compensation is {c}, but the compensation of projector {} is {}", o.projector, o.mode)),
+        ("off" | "dose", Some(o)) => Some(format!(
+            "settings.compensation is {c}, but the job records the {} compensation of projector {}",
+            o.mode, o.projector
+        )),
+        ("zone" | "pixel", _) if records.is_empty() => Some(format!(
+            "settings.compensation is {c}, but the job has no light compensation record (optics)"
+        )),
+        ("zone" | "pixel", Some(o)) => Some(format!(
+            "settings.compensation is {c}, but the compensation of projector {} is {}",
+            o.projector, o.mode
+        )),
         ("off" | "zone" | "pixel" | "dose", _) => None,
-        _ => Some(format!("settings.compensation is {c:?}: off, zone, pixel or dose")),
+        _ => Some(format!(
+            "settings.compensation is {c:?}: off, zone, pixel or dose"
+        )),
     };
     if let Some(msg) = msg {
         add(msg);
@@ -63,8 +77,8 @@ fn normal_exposure(m: &Manifest) -> Option<String> {
         return None;
     };
     let at_normal = (v - layer_s).abs() <= EXPOSURE_TOL_S;
-    let ramping = (v - before).abs() > EXPOSURE_TOL_S
-        && (v - before).signum() == (layer_s - v).signum();
+    let ramping =
+        (v - before).abs() > EXPOSURE_TOL_S && (v - before).signum() == (layer_s - v).signum();
     let bottom_only = e.iter().all(|x| (x.1 - v).abs() <= EXPOSURE_TOL_S);
     (!(at_normal || ramping || bottom_only)).then(|| {
         let (s, v) = (number(layer_s), number(v));
@@ -85,7 +99,11 @@ mod tests {
         let dir = Scratch::new("settings");
         let only = |m: &crate::bundle::Manifest| {
             let v = verify(&dir, m);
-            let p: Vec<_> = v.problems.into_iter().filter(|p| p.kind == Kind::Settings).collect();
+            let p: Vec<_> = v
+                .problems
+                .into_iter()
+                .filter(|p| p.kind == Kind::Settings)
+                .collect();
             p.into_iter().map(|p| p.message).collect::<Vec<_>>()
         };
         // Layers 16 s, 8 s on a machine whose normal exposure is 8 s.
@@ -112,9 +130,13 @@ mod tests {
         assert_eq!(only(&three), Vec::<String>::new());
         m = fine.clone();
         m.settings.compensation = "zone".into();
-        assert!(only(&m)[0].contains("settings.compensation is zone, but the job has no light compensation record"));
+        assert!(only(&m)[0].contains(
+            "settings.compensation is zone, but the job has no light compensation record"
+        ));
         m.settings.compensation = "bright".into();
-        assert!(only(&m)[0].contains("settings.compensation is \"bright\": off, zone, pixel or dose"));
+        assert!(
+            only(&m)[0].contains("settings.compensation is \"bright\": off, zone, pixel or dose")
+        );
         // A further exposure of a layer (0 mm thick, another exposure time) is no layer of
         // the height's or the exposure's rules.
         let mut again = fine.clone();

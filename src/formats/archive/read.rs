@@ -149,7 +149,10 @@ impl Archive {
                 true => format!("more than {}", e.size),
                 false => data.len().to_string(),
             };
-            return Err(format!("inflates to {got} bytes, its header declares {}", e.size));
+            return Err(format!(
+                "inflates to {got} bytes, its header declares {}",
+                e.size
+            ));
         }
         Ok(data)
     }
@@ -231,7 +234,10 @@ pub fn read_zip(path: &Path, bytes: Vec<u8>, limits: &Limits) -> Result<Archive>
     // The zip crate keeps one entry per name: a name listed twice shows in the central
     // directory itself.
     if let Some(dup) = duplicate_name(bytes.as_ref(), zip.len()) {
-        return Err(error(Some(&dup), "the name appears twice in the archive".into()));
+        return Err(error(
+            Some(&dup),
+            "the name appears twice in the archive".into(),
+        ));
     }
     let files = declared(&mut zip, limits).map_err(|(at, msg)| error(at.as_deref(), msg))?;
     let mut archive = Archive {
@@ -408,7 +414,10 @@ mod tests {
         assert_eq!(&*files.read("00000.png").unwrap(), b"masks/00000.png");
         assert_eq!(files.shown("00000.png"), Path::new("a.zip/masks/00000.png"));
         let files = open(&Limits::default()).unwrap().into_source("");
-        assert_eq!(&*files.read("masks//00001.png").unwrap(), b"masks/00001.png");
+        assert_eq!(
+            &*files.read("masks//00001.png").unwrap(),
+            b"masks/00001.png"
+        );
         let e = files.read("../job.json").unwrap_err();
         assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
         let few = Limits {
@@ -441,7 +450,10 @@ mod tests {
         }
         let mut z = w.finish().unwrap().into_inner();
         let at = |z: &[u8], what: &[u8], k: usize| {
-            let mut hits = z.windows(what.len()).enumerate().filter(|(_, w)| *w == what);
+            let mut hits = z
+                .windows(what.len())
+                .enumerate()
+                .filter(|(_, w)| *w == what);
             hits.nth(k).unwrap().0
         };
         // The local and central sizes of a.txt: 5 bytes declared as 4.

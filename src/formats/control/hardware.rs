@@ -139,9 +139,11 @@ impl Keys<'_> {
         let limit = |k: usize| -> Result<Option<f64>> {
             match self.at(&[c, "limits", a]).and_then(|l| l.get(k)) {
                 None | Some(Value::Null) => Ok(None),
-                Some(v) => v.as_f64().filter(|x| x.is_finite()).map(Some).ok_or_else(|| {
-                    self.bad(&format!("{c}.limits.{a}"), &format!("holds {v}"))
-                }),
+                Some(v) => v
+                    .as_f64()
+                    .filter(|x| x.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| self.bad(&format!("{c}.limits.{a}"), &format!("holds {v}"))),
             }
         };
         let start = match self.at(&[c, "bottom_position"]) {
@@ -161,10 +163,17 @@ impl Keys<'_> {
     }
 
     fn engine(&self, name: &str) -> Result<Engine> {
-        let px = |v: &Value| v.as_u64().filter(|&n| (1..=65536).contains(&n)).map(|n| n as u32);
+        let px = |v: &Value| {
+            v.as_u64()
+                .filter(|&n| (1..=65536).contains(&n))
+                .map(|n| n as u32)
+        };
         let res = self.list(&[name, "resolution"], px)?;
         let [w, h] = res[..] else {
-            return Err(self.bad(&format!("{name}.resolution"), "is not [width, height] in pixels"));
+            return Err(self.bad(
+                &format!("{name}.resolution"),
+                "is not [width, height] in pixels",
+            ));
         };
         let nm = |v: &Value| v.as_u64().and_then(|n| u32::try_from(n).ok());
         let text = |v: &Value| Some(v.as_str().unwrap_or_default().to_string());
@@ -242,7 +251,8 @@ impl Hardware {
             msg: format!("`{}` = {v} is not a limit a stage has", key(k)),
         };
         s.max_speed_mm_s = Positive::new(a.speed).ok_or_else(|| bad("axes_speed", a.speed))?;
-        s.max_accel_mm_s2 = Positive::new(a.accel).ok_or_else(|| bad("axes_acceleration", a.accel))?;
+        s.max_accel_mm_s2 =
+            Positive::new(a.accel).ok_or_else(|| bad("axes_acceleration", a.accel))?;
         s.steps_per_mm =
             Positive::new(a.counts_per_mm).ok_or_else(|| bad("axes_ctspmm", a.counts_per_mm))?;
         let travel = format!(
@@ -271,14 +281,21 @@ impl Hardware {
     /// The engine a projector named `name` (the `k`-th) uses: the engine of that name, or
     /// the `k`-th (the standard's check takes the first when an image names none).
     pub fn engine_of(&self, name: &str, k: usize) -> Option<(&str, Option<u32>)> {
-        let e = self.engines.iter().find(|e| e.name == name).or(self.engines.get(k))?;
+        let e = self
+            .engines
+            .iter()
+            .find(|e| e.name == name)
+            .or(self.engines.get(k))?;
         Some((&e.name, e.leds_nm.first().copied()))
     }
 
     /// Gives each projector of `m` (the record of a profile or a job) the light engine it
     /// uses ([`Hardware::engine_of`]): its name, and its first LED's wavelength when the
     /// projector states none.
-    pub fn name_engines(&self, projectors: impl Iterator<Item = (String, Option<u32>)>) -> Vec<(String, Option<u32>)> {
+    pub fn name_engines(
+        &self,
+        projectors: impl Iterator<Item = (String, Option<u32>)>,
+    ) -> Vec<(String, Option<u32>)> {
         projectors
             .enumerate()
             .map(|(k, (name, nm))| match self.engine_of(&name, k) {
@@ -325,11 +342,18 @@ impl Hardware {
             out.push(job(format!("the printer reads control files of schema {versions} (valid_schema_versions), not v5")));
         }
         if vacuum && !self.vacuum {
-            out.push(job("the job prints under vacuum, but the printer has no vacuum controller (mks)".into()));
+            out.push(job(
+                "the job prints under vacuum, but the printer has no vacuum controller (mks)"
+                    .into(),
+            ));
         }
         for r in requests {
             if let Some(message) = self.lacks(r) {
-                let at = if r.at.is_empty() { String::new() } else { format!(" ({})", r.at) };
+                let at = if r.at.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", r.at)
+                };
                 out.push(Finding {
                     layer: Some(r.layer),
                     file: Some(r.file.clone()),
@@ -345,13 +369,29 @@ impl Hardware {
         let names: Vec<&str> = self.engines.iter().map(|e| e.name.as_str()).collect();
         let Some(e) = self.engines.iter().find(|e| e.name == r.engine) else {
             let e = &r.engine;
-            return Some(format!("light engine '{e}' is not on this printer (light_engines: {})", names.join(", ")));
+            return Some(format!(
+                "light engine '{e}' is not on this printer (light_engines: {})",
+                names.join(", ")
+            ));
         };
-        let leds = || e.leds_nm.iter().map(u32::to_string).collect::<Vec<_>>().join(", ");
+        let leds = || {
+            e.leds_nm
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         let led = match r.wavelength_nm {
             Some(nm) => match e.leds_nm.iter().position(|&l| l == nm) {
                 Some(i) => i,
-                None => return Some(format!("light engine {} has no {nm} nm LED ({}.leds_nm: {})", e.name, e.name, leds())),
+                None => {
+                    return Some(format!(
+                        "light engine {} has no {nm} nm LED ({}.leds_nm: {})",
+                        e.name,
+                        e.name,
+                        leds()
+                    ))
+                }
             },
             None => 0,
         };
@@ -360,7 +400,10 @@ impl Hardware {
         }
         if let Some((w, h)) = r.size_px.filter(|&s| s != e.resolution) {
             let (rw, rh) = e.resolution;
-            return Some(format!("the image is {w} × {h} px, light engine {} shows {rw} × {rh} ({}.resolution)", e.name, e.name));
+            return Some(format!(
+                "the image is {w} × {h} px, light engine {} shows {rw} × {rh} ({}.resolution)",
+                e.name, e.name
+            ));
         }
         let [x, y] = r.offset_um;
         if x == 0.0 && y == 0.0 {

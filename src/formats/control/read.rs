@@ -198,7 +198,13 @@ impl Reader<'_> {
     }
 
     /// The named settings `key` of `m` names in `table`, or none.
-    fn uses(&self, m: &Map<String, Value>, key: &str, table: &str, at: &str) -> Result<Option<Map<String, Value>>> {
+    fn uses(
+        &self,
+        m: &Map<String, Value>,
+        key: &str,
+        table: &str,
+        at: &str,
+    ) -> Result<Option<Map<String, Value>>> {
         match m.get(key).and_then(Value::as_str) {
             Some(n) if !n.is_empty() => self.named(table, n, at).map(Some),
             _ => Ok(None),
@@ -207,7 +213,13 @@ impl Reader<'_> {
 
     /// Setting `key` from the first of `maps` that has it, as a number ≥ 0 (> 0 when
     /// `positive`; the schema allows 0 for speeds, which no move can have).
-    fn num(&self, maps: &[&Map<String, Value>], key: &str, at: &str, positive: bool) -> Result<f64> {
+    fn num(
+        &self,
+        maps: &[&Map<String, Value>],
+        key: &str,
+        at: &str,
+        positive: bool,
+    ) -> Result<f64> {
         let v = get(maps, key)
             .ok_or_else(|| self.bad(format!("{at}: no `{key}` (nor in the defaults)")))?;
         let x = match v.as_f64() {
@@ -221,18 +233,40 @@ impl Reader<'_> {
         };
         // What the schema leaves unbounded, bounded by what a machine has (as a profile's
         // keys are): a longer wait or move, or a slower one, never finishes a print.
-        let (lo, hi) = RANGES.iter().find(|(unit, ..)| key.ends_with(unit)).map_or((0.0, f64::MAX), |r| (r.1, r.2));
+        let (lo, hi) = RANGES
+            .iter()
+            .find(|(unit, ..)| key.ends_with(unit))
+            .map_or((0.0, f64::MAX), |r| (r.1, r.2));
         if x > hi || (x > 0.0 && x < lo) {
-            return Err(self.bad(format!("{at}: `{key}` is {v}, not what a machine has ({} to {hi:e})", if lo > 0.0 { format!("{lo:e}") } else { "0".into() })));
+            return Err(self.bad(format!(
+                "{at}: `{key}` is {v}, not what a machine has ({} to {hi:e})",
+                if lo > 0.0 {
+                    format!("{lo:e}")
+                } else {
+                    "0".into()
+                }
+            )));
         }
         Ok(x)
     }
 
     /// The image `own` of a layer at `at`, over the layer's named default image settings
     /// `layer_img` and the defaults `dimg`; `dir` is the image directory.
-    fn image(&self, own: &Map<String, Value>, (layer_img, dimg): (&Map<String, Value>, &Map<String, Value>), dir: &str, at: &str, notes: &mut Techniques) -> Result<Image> {
+    fn image(
+        &self,
+        own: &Map<String, Value>,
+        (layer_img, dimg): (&Map<String, Value>, &Map<String, Value>),
+        dir: &str,
+        at: &str,
+        notes: &mut Techniques,
+    ) -> Result<Image> {
         // An image's own named settings replace the layer's named defaults.
-        let named = self.uses(own, "Using named image settings", "Named image settings", at)?;
+        let named = self.uses(
+            own,
+            "Using named image settings",
+            "Named image settings",
+            at,
+        )?;
         let maps = [own, named.as_ref().unwrap_or(layer_img), dimg];
         let ms = |key: &str| self.num(&maps, key, at, false).map(|v| v / 1000.0);
         let text = |key: &str| get(&maps, key).and_then(Value::as_str).unwrap_or_default();
@@ -271,28 +305,55 @@ impl Reader<'_> {
             wavelength_nm: int("Light engine wavelength (nm)").or(legacy_nm),
             power: int("Light engine power setting"),
             offset_um: [offset("Image x offset (um)"), offset("Image y offset (um)")],
-            mirror: [flag("Mirror image long axis"), flag("Mirror image short axis")],
+            mirror: [
+                flag("Mirror image long axis"),
+                flag("Mirror image short axis"),
+            ],
             gray_correction: flag("Do grayscale correction"),
             at: at.to_string(),
         })
     }
 
     /// The layer `layer` (a `LAYER_BASE` object) at `at`, with the defaults.
-    fn layer(&self, layer: &Map<String, Value>, at: &str, copies: u64, notes: &mut Techniques) -> Result<LayerSpec> {
+    fn layer(
+        &self,
+        layer: &Map<String, Value>,
+        at: &str,
+        copies: u64,
+        notes: &mut Techniques,
+    ) -> Result<LayerSpec> {
         let defaults = obj(self.root.get("Default layer settings"));
-        let (dpos, dimg) = (obj(defaults.get("Position settings")), obj(defaults.get("Image settings")));
+        let (dpos, dimg) = (
+            obj(defaults.get("Position settings")),
+            obj(defaults.get("Image settings")),
+        );
         let own_pos = obj(layer.get("Position settings"));
-        let named_pos = self.uses(&own_pos, "Using named position settings", "Named position settings", at)?;
+        let named_pos = self.uses(
+            &own_pos,
+            "Using named position settings",
+            "Named position settings",
+            at,
+        )?;
         let named_pos = named_pos.unwrap_or_default();
         let pos = [&own_pos, &named_pos, &dpos];
-        if get(&pos, "Special layer techniques").is_some_and(|v| enabled(&obj(Some(v)), &["Squeeze out resin", "Enable squeeze"])) {
+        if get(&pos, "Special layer techniques")
+            .is_some_and(|v| enabled(&obj(Some(v)), &["Squeeze out resin", "Enable squeeze"]))
+        {
             notes.push(("Squeeze out resin", at.to_string()));
         }
         let layer_img = self
-            .uses(layer, "Using named default image settings", "Named image settings", at)?
+            .uses(
+                layer,
+                "Using named default image settings",
+                "Named image settings",
+                at,
+            )?
             .unwrap_or_default();
         let dir = obj(self.root.get("Header"));
-        let dir = dir.get("Image directory").and_then(Value::as_str).unwrap_or_default();
+        let dir = dir
+            .get("Image directory")
+            .and_then(Value::as_str)
+            .unwrap_or_default();
         // No list, or an empty one: one exposure of the default image.
         let list = match layer.get("Image settings list").and_then(Value::as_array) {
             Some(a) if !a.is_empty() => a.iter().map(|v| obj(Some(v))).collect(),
@@ -318,7 +379,8 @@ impl Reader<'_> {
     /// and the special techniques they ask for.
     fn layers(&self) -> Result<(Vec<LayerSpec>, Techniques)> {
         let defaults = obj(self.root.get("Default layer settings"));
-        let copies_of = |m: &Map<String, Value>| m.get("Number of duplications").and_then(Value::as_u64);
+        let copies_of =
+            |m: &Map<String, Value>| m.get("Number of duplications").and_then(Value::as_u64);
         let default_copies = copies_of(&defaults).unwrap_or(1);
         let items = self.root.get("Layers").and_then(Value::as_array);
         let mut notes = Vec::new();
@@ -335,8 +397,12 @@ impl Reader<'_> {
     fn pixel_mm(&self) -> Option<f64> {
         let comment = self.root.get("Header")?.get("Comment")?.as_str()?;
         let rest = &comment[comment.find("pixel_mm ")? + 9..];
-        let text = rest.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-')).next()?;
-        text.parse().ok().filter(|p: &f64| p.is_finite() && *p > 0.0)
+        let text = rest
+            .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-'))
+            .next()?;
+        text.parse()
+            .ok()
+            .filter(|p: &f64| p.is_finite() && *p > 0.0)
     }
 }
 
@@ -445,9 +511,14 @@ fn settings<'a>(archive: &'a Archive, entry: &'a str) -> Result<Reader<'a>> {
     // The version first, as the standard's validator checks it: another major version
     // is another schema.
     let version = r.root.get("Header").and_then(|h| h.get("Schema version"));
-    if !version.and_then(Value::as_str).is_some_and(|v| v.starts_with("5.")) {
+    if !version
+        .and_then(Value::as_str)
+        .is_some_and(|v| v.starts_with("5."))
+    {
         let v = version.map_or("none".into(), Value::to_string);
-        return Err(r.bad(format!("Header: `Schema version` is {v}; this reader reads schema 5.x.y")));
+        return Err(r.bad(format!(
+            "Header: `Schema version` is {v}; this reader reads schema 5.x.y"
+        )));
     }
     let size = archive.get(entry)?.map_or(0, <[u8]>::len) as u64;
     let mut budget = Budget::new(EXPANSION_BYTES + EXPANSION_FACTOR * size);
@@ -589,8 +660,19 @@ fn not_simulated(techniques: &Techniques, vacuum: bool) -> Vec<String> {
     let mut notes: Vec<String> = names
         .iter()
         .map(|name| {
-            let at: Vec<&str> = techniques.iter().filter(|t| t.0 == *name).map(|t| t.1.as_str()).collect();
-            format!("not simulated: {name} ({}{})", at[0], match at.len() { 1 => String::new(), k => format!(" and {} more", k - 1) })
+            let at: Vec<&str> = techniques
+                .iter()
+                .filter(|t| t.0 == *name)
+                .map(|t| t.1.as_str())
+                .collect();
+            format!(
+                "not simulated: {name} ({}{})",
+                at[0],
+                match at.len() {
+                    1 => String::new(),
+                    k => format!(" and {} more", k - 1),
+                }
+            )
         })
         .collect();
     if vacuum {
@@ -674,7 +756,14 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
         s if s.is_empty() => "SLA control file v5".to_string(),
         s => format!("SLA control file v5 ({s})"),
     };
-    let vacuum = enabled(&r.root, &["Special print techniques", "Print under vacuum", "Enable vacuum"]);
+    let vacuum = enabled(
+        &r.root,
+        &[
+            "Special print techniques",
+            "Print under vacuum",
+            "Enable vacuum",
+        ],
+    );
     let imported = Imported {
         format: Format::SlaControl,
         generator,

@@ -66,12 +66,21 @@ pub(super) fn check(settings: &Value) -> Option<String> {
     if what.chars().count() > SHOWN {
         what = what.chars().take(SHOWN).collect::<String>() + "…";
     }
-    let at = if at.is_empty() { "the settings".into() } else { at };
+    let at = if at.is_empty() {
+        "the settings".into()
+    } else {
+        at
+    };
     let more = match more {
         0 => String::new(),
-        k => format!(" (and {})", crate::text::count(k as u64, "more problem", "more problems")),
+        k => format!(
+            " (and {})",
+            crate::text::count(k as u64, "more problem", "more problems")
+        ),
     };
-    Some(format!("{at}: {what}, against the standard's schema v5{more}"))
+    Some(format!(
+        "{at}: {what}, against the standard's schema v5{more}"
+    ))
 }
 
 #[cfg(test)]
@@ -105,13 +114,34 @@ mod tests {
     fn the_schema_names_the_place_and_the_problem() {
         assert_eq!(check(&settings(json!({"Image file": "b.png"}))), None);
         let cases = [
-            (json!({"Layer exposure time (ms)": "abc"}), "\"abc\" is not of type \"number\""),
-            (json!({"Layer exposure time (ms)": -1}), "-1 is less than the minimum of 0"),
-            (json!({"Layer exposure time (ms)": 1e308}), "is greater than the maximum of 10000"),
-            (json!({"Layer exposure time (ms)": null}), "null is not of type \"number\""),
-            (json!({"Light engine power setting": -1}), "-1 is less than the minimum of 0"),
-            (json!({"Light engine power setting": 2.5}), "is not of type \"integer\""),
-            (json!({"Shutter": 1}), "Additional properties are not allowed"),
+            (
+                json!({"Layer exposure time (ms)": "abc"}),
+                "\"abc\" is not of type \"number\"",
+            ),
+            (
+                json!({"Layer exposure time (ms)": -1}),
+                "-1 is less than the minimum of 0",
+            ),
+            (
+                json!({"Layer exposure time (ms)": 1e308}),
+                "is greater than the maximum of 10000",
+            ),
+            (
+                json!({"Layer exposure time (ms)": null}),
+                "null is not of type \"number\"",
+            ),
+            (
+                json!({"Light engine power setting": -1}),
+                "-1 is less than the minimum of 0",
+            ),
+            (
+                json!({"Light engine power setting": 2.5}),
+                "is not of type \"integer\"",
+            ),
+            (
+                json!({"Shutter": 1}),
+                "Additional properties are not allowed",
+            ),
         ];
         for (image, what) in cases {
             let key = image.as_object().unwrap().keys().next().unwrap().clone();
@@ -124,7 +154,10 @@ mod tests {
         s["Header"]["Schema version"] = json!("4.0.0");
         s["Layers"] = json!([[]]);
         let e = check(&s).unwrap();
-        assert!(e.starts_with("Header.Schema version: \"4.0.0\" does not match"), "{e}");
+        assert!(
+            e.starts_with("Header.Schema version: \"4.0.0\" does not match"),
+            "{e}"
+        );
         assert!(e.ends_with("(and 1 more problem)"), "{e}");
     }
 }

@@ -143,8 +143,14 @@ fn entries(m: &Manifest) -> Vec<Entry<'_>> {
                 let o = img.as_object_mut().expect("object");
                 if several {
                     o.insert("Light engine".into(), json!(p.name));
-                    o.insert("Light engine wavelength (nm)".into(), json!(p.wavelength_nm.unwrap_or(WAVELENGTH_NM as u32)));
-                    o.insert("Light engine power setting".into(), json!(p.power_setting.unwrap_or(POWER_SETTING as u32)));
+                    o.insert(
+                        "Light engine wavelength (nm)".into(),
+                        json!(p.wavelength_nm.unwrap_or(WAVELENGTH_NM as u32)),
+                    );
+                    o.insert(
+                        "Light engine power setting".into(),
+                        json!(p.power_setting.unwrap_or(POWER_SETTING as u32)),
+                    );
                     let px = p.pixel_mm.get() * 1000.0;
                     o.insert("Image x offset (um)".into(), n(p.offset_px[0] as f64 * px));
                     o.insert("Image y offset (um)".into(), n(p.offset_px[1] as f64 * px));
@@ -154,7 +160,10 @@ fn entries(m: &Manifest) -> Vec<Entry<'_>> {
                     true => (p.mirror_x, p.mirror_y),
                     false => (p.mirror_y, p.mirror_x),
                 };
-                for (key, on) in [("Mirror image long axis", long), ("Mirror image short axis", short)] {
+                for (key, on) in [
+                    ("Mirror image long axis", long),
+                    ("Mirror image short axis", short),
+                ] {
                     if on {
                         o.insert(key.into(), json!(true));
                     }

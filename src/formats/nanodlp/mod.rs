@@ -80,7 +80,14 @@ impl Group {
     /// The values of [`KEYS`] in order, in the group's units.
     fn values(&self) -> [f64; 6] {
         let g = self;
-        [g.cure_s, g.thickness_mm, g.lift_mm, g.top_wait_s, g.before_s, g.after_s]
+        [
+            g.cure_s,
+            g.thickness_mm,
+            g.lift_mm,
+            g.top_wait_s,
+            g.before_s,
+            g.after_s,
+        ]
     }
 
     fn set(&mut self, k: usize, v: f64) {

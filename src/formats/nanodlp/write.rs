@@ -26,7 +26,11 @@ const SAME: f64 = 1e-6;
 fn group(layers: &[Layer], f: usize, from_mm: f64, limits: (f64, f64)) -> Group {
     let l = &layers[f];
     let mut before_s = 0.0;
-    for s in l.steps.iter().take_while(|s| !matches!(s, Step::Expose { .. })) {
+    for s in l
+        .steps
+        .iter()
+        .take_while(|s| !matches!(s, Step::Expose { .. }))
+    {
         match *s {
             Step::Wait { s } => before_s += s,
             _ => before_s = 0.0,
@@ -90,7 +94,13 @@ fn plate(m: &Manifest) -> Plate {
         true => 0,
         false => layers.iter().take_while(|l| same(l)).count(),
     };
-    let from = |f: usize| if f == 0 { stage.home_mm } else { layers[f - 1].z_mm };
+    let from = |f: usize| {
+        if f == 0 {
+            stage.home_mm
+        } else {
+            layers[f - 1].z_mm
+        }
+    };
     let support = group(layers, 0, from(0), limits);
     let other = match normal_layer(&layers[bottom..]) {
         Some(f) => group(layers, bottom + f, from(bottom + f), limits),
@@ -107,10 +117,19 @@ fn same_steps(a: &[Step], b: &[Step]) -> bool {
     let near = |x: f64, y: f64| (x - y).abs() <= SAME * x.abs().max(1.0);
     a.len() == b.len()
         && a.iter().zip(b).all(|(x, y)| match (*x, *y) {
-            (Step::Wait { s }, Step::Wait { s: t }) | (Step::Expose { s }, Step::Expose { s: t }) => near(s, t),
+            (Step::Wait { s }, Step::Wait { s: t })
+            | (Step::Expose { s }, Step::Expose { s: t }) => near(s, t),
             (
-                Step::Move { to_mm: a, speed_mm_s: b, accel_mm_s2: c },
-                Step::Move { to_mm: d, speed_mm_s: e, accel_mm_s2: f },
+                Step::Move {
+                    to_mm: a,
+                    speed_mm_s: b,
+                    accel_mm_s2: c,
+                },
+                Step::Move {
+                    to_mm: d,
+                    speed_mm_s: e,
+                    accel_mm_s2: f,
+                },
             ) => near(a, d) && near(b, e) && near(c, f),
             _ => false,
         })
@@ -125,7 +144,11 @@ fn layers_warning(code: &str, bad: &[u64], what: &str) -> Option<Warning> {
         plural(k, "layer has", "layers have"),
         plural(k, "it gets", "they get")
     );
-    Some(Warning::new(code, msg).with("layers", k).with("first_layer", first))
+    Some(
+        Warning::new(code, msg)
+            .with("layers", k)
+            .with("first_layer", first),
+    )
 }
 
 /// What a plate cannot carry of `m` (one projector, at least one layer): the layers it
@@ -289,7 +312,14 @@ pub(crate) fn write(
     let mut profile: Map<String, Value> = p.to_profile();
     for (k, v) in [
         ("Title", json!(m.machine.resin.name)),
-        ("Desc", json!(format!("{} (dmdsl {})", m.machine.name, env!("CARGO_PKG_VERSION")))),
+        (
+            "Desc",
+            json!(format!(
+                "{} (dmdsl {})",
+                m.machine.name,
+                env!("CARGO_PKG_VERSION")
+            )),
+        ),
         ("Updated", json!(now)),
         ("ProfileID", json!(0)),
         ("ResinID", json!(0)),

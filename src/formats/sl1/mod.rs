@@ -74,7 +74,11 @@ pub(crate) fn holds(archive: &super::archive::read::Archive) -> bool {
 /// image per layer.
 pub(crate) fn check_projectors(format: Format, projectors: usize, out: &Path) -> Result<()> {
     if projectors > 1 {
-        let name = if format == Format::Nanodlp { "NanoDLP plates" } else { "SL1/SL1S" };
+        let name = if format == Format::Nanodlp {
+            "NanoDLP plates"
+        } else {
+            "SL1/SL1S"
+        };
         return Err(Error::Usage(format!(
             "{}: {name} carry one image per layer, but this job's machine has {projectors} projectors; export it as dmdjob-zip or sla-control instead",
             out.display()

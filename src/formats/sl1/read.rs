@@ -293,14 +293,20 @@ pub(crate) fn import(archive: Archive, sha256: &str) -> Result<Job> {
         // 1 µm steps, or finer for layers thinner than that.
         1000f64.max(1.0 / layer_mm),
     );
-    let unstated = ["stage.max_speed_mm_s", "stage.max_accel_mm_s2", "stage.steps_per_mm"];
+    let unstated = [
+        "stage.max_speed_mm_s",
+        "stage.max_accel_mm_s2",
+        "stage.steps_per_mm",
+    ];
     let machine = imported::machine((name, resin), tower, vec![display], &unstated);
     let layers = layers(&s, &archive, &image_names(&archive, &s.job_dir)?, &machine);
     let sl1s = archive
         .path()
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("sl1s"));
-    let resin_ml = cfg.opt_text("usedMaterial").and_then(|t| t.parse::<f64>().ok());
+    let resin_ml = cfg
+        .opt_text("usedMaterial")
+        .and_then(|t| t.parse::<f64>().ok());
     let imported = Imported {
         format: match s.printer_model == "SL1S" || sl1s {
             true => Format::Sl1s,

@@ -82,7 +82,12 @@ fn rgba_png(rgb: &RgbImage) -> Vec<u8> {
     let rgba: Vec<u8> = rgb.pixels().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(&rgba, rgb.width(), rgb.height(), image::ExtendedColorType::Rgba8)
+        .write_image(
+            &rgba,
+            rgb.width(),
+            rgb.height(),
+            image::ExtendedColorType::Rgba8,
+        )
         .expect("PNG encodes into memory");
     png
 }
@@ -94,7 +99,12 @@ pub(crate) fn preview_png(
     files: &dyn BundleSource,
     (w, h): (u32, u32),
 ) -> Result<Vec<u8>> {
-    Ok(rgba_png(&crate::picture::preview(&slabs(manifest), files, w, h)?))
+    Ok(rgba_png(&crate::picture::preview(
+        &slabs(manifest),
+        files,
+        w,
+        h,
+    )?))
 }
 
 #[cfg(test)]

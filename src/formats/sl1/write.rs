@@ -165,7 +165,6 @@ fn ini<'a>(pairs: impl IntoIterator<Item = (&'a str, String)>) -> String {
         .collect()
 }
 
-
 /// The stage travel the file states: the machine's, or, when its record does not state one
 /// (a job imported from a file without it), PrusaSlicer's default of 150 mm where that is
 /// more than the stand-in.

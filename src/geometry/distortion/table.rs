@@ -151,7 +151,10 @@ mod tests {
         let e = err("a,b,c,d\n");
         assert!(e.starts_with("t.csv: line 1: unknown column \"a\""), "{e}");
         let e = err("1,2,3,4\n1,2,inf,4\n");
-        assert!(e.contains("line 2, column seen_x_mm: \"inf\" is not a finite"), "{e}");
+        assert!(
+            e.contains("line 2, column seen_x_mm: \"inf\" is not a finite"),
+            "{e}"
+        );
     }
 
     #[test]

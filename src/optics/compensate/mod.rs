@@ -151,7 +151,11 @@ impl Compensator {
         for r in r0..r1.min(self.h) {
             let row = &m.data[r * w..(r + 1) * w];
             let inside = r >= cal.r0 && r < cal.r1;
-            let (left, right) = if inside { (c1.min(cal.c0), c0.max(cal.c1)) } else { (c1, c0) };
+            let (left, right) = if inside {
+                (c1.min(cal.c0), c0.max(cal.c1))
+            } else {
+                (c1, c0)
+            };
             let x = |c: Option<usize>| c.map(|c| (c as f64 + 0.5) * p);
             let xl = x((c0..left).find(|&c| row[c] != 0));
             let xr = x((right..c1).rev().find(|&c| row[c] != 0));
@@ -161,6 +165,7 @@ impl Compensator {
                 beyond = beyond.max(dx).max(ay0 - y).max(y - ay1);
             }
         }
-        self.beyond_bits.fetch_max(beyond.to_bits(), Ordering::Relaxed);
+        self.beyond_bits
+            .fetch_max(beyond.to_bits(), Ordering::Relaxed);
     }
 }

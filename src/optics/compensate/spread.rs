@@ -57,7 +57,9 @@ impl Spread {
 /// The spread of `v(z)` over the zones `z` with `inside[z]`, %.
 pub(super) fn zone_spread(inside: &[bool], v: impl Fn(usize) -> f64) -> f64 {
     let mut s = Spread::new();
-    (0..inside.len()).filter(|&z| inside[z]).for_each(|z| s.add(v(z)));
+    (0..inside.len())
+        .filter(|&z| inside[z])
+        .for_each(|z| s.add(v(z)));
     s.pct()
 }
 

@@ -79,38 +79,38 @@ pub(super) fn set_up(
     dither: Dither,
     forced_target: Option<f64>,
 ) -> Option<(ZoneTables, GrayMap, ModePrediction)> {
-        let target = zone_target(survey, lv, dither, forced_target)?;
-        let grays = zone_grays(&survey.zone_p, lv, target, dither);
-        let zones = &survey.zones;
-        let zone_gray: Vec<u8> = grays
-            .mix
-            .iter()
-            .map(|m| {
-                if m.upper_64ths >= 32 {
-                    m.upper
-                } else {
-                    m.lower
-                }
-            })
-            .collect();
-        let after_zone = zone_spread(&survey.zone_inside, |z| grays.zone_after[z]);
-        // Per-pixel prediction: each row of a zone shows one gray.
-        let s_by_gray = s_of_gray(lv);
-        let after_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |r, zc| {
-            s_by_gray[grays.mix[zones.of_row[r] as usize * zones.cols + zc].on_row(r) as usize]
-        });
-        let tables = ZoneTables::new(&grays, zones);
-        let gray_map = GrayMap::of_zone_tables(&tables, zones);
-        let prediction = ModePrediction {
-            target,
-            zone_gray,
-            zone_after: grays.zone_after,
-            after_zone_pct: after_zone,
-            after_pixel_pct: after_pixel,
-            unreachable: grays.unreachable,
-            mixed_zones: grays.mixed,
-        };
-        Some((tables, gray_map, prediction))
+    let target = zone_target(survey, lv, dither, forced_target)?;
+    let grays = zone_grays(&survey.zone_p, lv, target, dither);
+    let zones = &survey.zones;
+    let zone_gray: Vec<u8> = grays
+        .mix
+        .iter()
+        .map(|m| {
+            if m.upper_64ths >= 32 {
+                m.upper
+            } else {
+                m.lower
+            }
+        })
+        .collect();
+    let after_zone = zone_spread(&survey.zone_inside, |z| grays.zone_after[z]);
+    // Per-pixel prediction: each row of a zone shows one gray.
+    let s_by_gray = s_of_gray(lv);
+    let after_pixel = pixel_spread(&survey.sums, &zones.segments, survey.inside, |r, zc| {
+        s_by_gray[grays.mix[zones.of_row[r] as usize * zones.cols + zc].on_row(r) as usize]
+    });
+    let tables = ZoneTables::new(&grays, zones);
+    let gray_map = GrayMap::of_zone_tables(&tables, zones);
+    let prediction = ModePrediction {
+        target,
+        zone_gray,
+        zone_after: grays.zone_after,
+        after_zone_pct: after_zone,
+        after_pixel_pct: after_pixel,
+        unreachable: grays.unreachable,
+        mixed_zones: grays.mixed,
+    };
+    Some((tables, gray_map, prediction))
 }
 
 /// S of each gray on the levels `lv` (0 for grays that are not levels).

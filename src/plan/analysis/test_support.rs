@@ -14,7 +14,10 @@ pub(super) fn hole(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
 
 /// A ring of `n`-gons around `c`: the outer counter-clockwise, the hole clockwise.
 pub(super) fn ring(c: [f64; 2], outer: f64, inner: f64, n: usize) -> Vec<Contour> {
-    vec![ngon(c[0], c[1], outer, n, true), ngon(c[0], c[1], inner, n, false)]
+    vec![
+        ngon(c[0], c[1], outer, n, true),
+        ngon(c[0], c[1], inner, n, false),
+    ]
 }
 
 /// An ellipse of half-axes `a` and `b` around the origin, 400 points.

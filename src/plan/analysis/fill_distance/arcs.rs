@@ -522,7 +522,8 @@ impl Edges {
     fn stray(&self, c: [f64; 2], h: f64, arcs: &[&Arc]) -> Option<u32> {
         let skip = |k: usize| arcs.iter().any(|a| a.has_span(self.spans[k]));
         let stray = |v: u32| (!arcs.iter().any(|a| a.has(v))).then_some(v);
-        self.walk_square(c, h, skip, stray).unwrap_or(Some(u32::MAX))
+        self.walk_square(c, h, skip, stray)
+            .unwrap_or(Some(u32::MAX))
     }
 
     /// Whether no point of the square `[c ± h]` is deeper than `t`, shown from two walls

@@ -314,7 +314,9 @@ mod tests {
 
     /// `n` random points in `[-2, 2]²`.
     fn random_points(rnd: &mut impl FnMut() -> f64, n: usize) -> Vec<[f64; 2]> {
-        (0..n).map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0]).collect()
+        (0..n)
+            .map(|_| [4.0 * rnd() - 2.0, 4.0 * rnd() - 2.0])
+            .collect()
     }
 
     #[test]

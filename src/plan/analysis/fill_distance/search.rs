@@ -7,9 +7,7 @@ use super::arcs::ArcCache;
 use super::cells::{Cell, Queue};
 use super::edges::{seg_d2, Edges};
 use super::plane::d2;
-use super::points::{
-    exceeds, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS,
-};
+use super::points::{exceeds, witness, Witnesses, MAX_COVER_POINTS, MAX_EXTRA_COVER_POINTS};
 use super::SearchScratch;
 
 /// Most generations in a row of cells split with the walls followed from their parent's,
@@ -654,9 +652,7 @@ impl Search<'_> {
             if n > 0 {
                 // A child holding an uncovered point of the cell's test is not covered
                 // by the same points.
-                if !wit.uncover(cc, qh, &pts[..n], t * t)
-                    && !exceeds(cc, qh, &pts[..n], t * t).0
-                {
+                if !wit.uncover(cc, qh, &pts[..n], t * t) && !exceeds(cc, qh, &pts[..n], t * t).0 {
                     continue;
                 }
                 cmax = cmax.min(far_corner(cc, qh, pts[0]));

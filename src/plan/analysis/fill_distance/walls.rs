@@ -168,14 +168,19 @@ impl Edges {
         out: &mut [u32; MAX_CROSSING_EDGES],
     ) -> Option<usize> {
         let mut m = 0;
-        let walk = self.walk_square(c, h, |_| false, |v| {
-            if m == MAX_CROSSING_EDGES {
-                return Some(());
-            }
-            out[m] = v;
-            m += 1;
-            None
-        });
+        let walk = self.walk_square(
+            c,
+            h,
+            |_| false,
+            |v| {
+                if m == MAX_CROSSING_EDGES {
+                    return Some(());
+                }
+                out[m] = v;
+                m += 1;
+                None
+            },
+        );
         matches!(walk, Ok(None)).then_some(m)
     }
 
@@ -231,7 +236,10 @@ impl Edges {
         // The ranges of the points `from` to `to` along the line `f` and across it.
         let extent = |f: ([f64; 2], [f64; 2]), from: u32, to: u32| {
             let n = [-f.1[1], f.1[0]];
-            let (mut t, mut l) = ([f64::INFINITY, f64::NEG_INFINITY], [f64::INFINITY, f64::NEG_INFINITY]);
+            let (mut t, mut l) = (
+                [f64::INFINITY, f64::NEG_INFINITY],
+                [f64::INFINITY, f64::NEG_INFINITY],
+            );
             let mut k = from;
             loop {
                 let x = self.vert(k);
