@@ -153,8 +153,11 @@ pub(crate) fn calibrate_resin(input: PathBuf, output: PathBuf, quiet: bool) -> a
         );
         for r in &f.residuals {
             println!(
-                "  line {}: E {:.4} {unit}, cured {:.4} mm, residual {:+.4} mm",
-                r[0], r[1], r[2], r[3]
+                "  line {}: E {:.4} {unit}, cured {:.4} mm, residual {} mm",
+                r[0],
+                r[1],
+                r[2],
+                crate::text::signed(r[3], 4)
             );
         }
         println!(
