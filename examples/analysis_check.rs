@@ -45,7 +45,7 @@ fn main() {
     }
     let mut results: Vec<analysis::LayerAnalysis> = Vec::with_capacity(n);
     for (i, r) in out.into_iter().enumerate() {
-        let r = r.with_islands(|| analysis::islands(&lit[i], &lit[i - 1]));
+        let r = r.with_islands(|| analysis::islands_found(&lit[i], &lit[i - 1]));
         results.push(r.resolve(results.last()));
     }
     let mut out = String::new();

@@ -68,6 +68,13 @@ pub(super) fn plan_layers(
     let n = outs.len();
     let analyses = resolve_analyses(&outs);
     let z_of = layer_tops(profile);
+    let field = profile.field();
+    let (px, top) = (field.pixel_mm, field.height_mm());
+    // The largest island on the build plane: x, y of its centre and its area, mm.
+    let island_mm = |i: &plan::analysis::Island| {
+        let [c, r] = i.col_row;
+        [c * px, top - r * px, i.pixels as f64 * px * px].map(round::plane_mm)
+    };
     // What the planner is given is what the manifest records: rounded (crate::round).
     let infos: Vec<LayerInfo> = outs
         .iter()
@@ -80,6 +87,7 @@ pub(super) fn plan_layers(
             area_mm2: round::area_mm2(o.area_mm2),
             max_fill_distance_mm: round::plane_mm_down(a.max_fill_distance_mm),
             islands: a.islands,
+            island_mm: a.island.as_ref().map(island_mm),
         })
         .collect();
     let plan = plan::plan(profile, &infos).map_err(|msg| Error::Job {
@@ -154,7 +162,7 @@ fn resolve_analyses(outs: &[LayerOutput]) -> Vec<LayerAnalysis> {
         let a = o.analysis.with_islands(|| {
             let own = o.runs.as_ref().expect("kept with the analysis");
             let below = outs[i - 1].runs.as_ref().expect("kept by the block below");
-            plan::analysis::islands(own, below)
+            plan::analysis::islands_found(own, below)
         });
         analyses.push(a.resolve(analyses.last()));
     }

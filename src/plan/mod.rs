@@ -39,6 +39,8 @@ pub struct LayerInfo {
     pub max_fill_distance_mm: f64,
     /// Regions not resting on the layer below.
     pub islands: u32,
+    /// The largest of them on the build plane: x and y of its centre and its area, mm.
+    pub island_mm: Option<[f64; 3]>,
 }
 
 /// The plan of one layer.
@@ -209,11 +211,39 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
     if let Some(first) = with_islands.first() {
         let islands = with_islands.iter().map(|l| l.islands as u64).sum::<u64>();
         let k = with_islands.len() as u64;
+        // Where: the largest island of each of the first layers, and how many more.
+        let shown = 3;
+        let mut at: Vec<String> = with_islands
+            .iter()
+            .take(shown)
+            .filter_map(|l| {
+                let [x, y, a] = l.island_mm?;
+                Some(format!(
+                    "layer {} at x {}, y {} mm ({} mm²)",
+                    l.index,
+                    fixed(x, 2),
+                    fixed(y, 2),
+                    number(a)
+                ))
+            })
+            .collect();
+        if with_islands.len() > shown {
+            let more = with_islands.len() - shown;
+            at.push(format!(
+                "{more} more {}",
+                plural(more as u64, "layer", "layers")
+            ));
+        }
+        let largest = if at.is_empty() {
+            String::new()
+        } else {
+            format!("; largest per layer: {}", at.join("; "))
+        };
         warnings.push(
             Warning::new(
                 "plan.unsupported-islands",
                 format!(
-                    "{islands} unsupported {} on {k} {} (first at layer {}): regions that do not rest on the layer below need supports",
+                    "{islands} unsupported {} on {k} {} (first at layer {}){largest}: regions that do not rest on the layer below need supports",
                     plural(islands, "island", "islands"),
                     plural(k, "layer", "layers"),
                     first.index
@@ -221,10 +251,20 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
             )
             .with("islands", islands)
             .with("layers", k)
-            .with("first_layer", first.index as u64),
+            .with("first_layer", first.index as u64)
+            .with("largest_mm", largest_mm(&with_islands)),
         );
     }
     warnings
+}
+
+/// The largest island of each layer that has any: `[layer, x_mm, y_mm, area_mm2]`.
+fn largest_mm(layers: &[&LayerInfo]) -> serde_json::Value {
+    let rows = layers.iter().filter_map(|l| {
+        let [x, y, a] = l.island_mm?;
+        Some(serde_json::json!([l.index, x, y, a]))
+    });
+    serde_json::Value::Array(rows.collect())
 }
 
 #[cfg(test)]

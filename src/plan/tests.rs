@@ -17,6 +17,7 @@ fn info(i: usize, h: f64, area: f64, fill: f64) -> LayerInfo {
         area_mm2: area,
         max_fill_distance_mm: fill,
         islands: 0,
+        island_mm: None,
     }
 }
 

@@ -422,11 +422,14 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
     assert_eq!(islands["severity"], "warning");
     assert_eq!(
         islands["fields"],
-        serde_json::json!({"islands": 1, "layers": 1, "first_layer": 5})
+        serde_json::json!({"islands": 1, "layers": 1, "first_layer": 5,
+            "largest_mm": [[5, 37.991, 23.899, 15.992]]})
     );
+    // B, centred with the part on the field, has its centre at (38, 23.875) mm and 16 mm²;
+    // its pixels put it within a pixel (0.063 mm) of that.
     assert_eq!(
         islands["message"],
-        "1 unsupported island on 1 layer (first at layer 5): regions that do not rest on the layer below need supports; add supports under these regions, or orient the part so that they rest on the layer below"
+        "1 unsupported island on 1 layer (first at layer 5); largest per layer: layer 5 at x 37.99, y 23.90 mm (15.992 mm²): regions that do not rest on the layer below need supports; add supports under these regions, or orient the part so that they rest on the layer below"
     );
 }
 

@@ -7,7 +7,31 @@ use crate::cure::islands::components;
 
 /// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
 /// with the lit pixels `prev` of the layer below.
+#[cfg(any(test, feature = "internals"))]
 pub fn islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+    islands_found(cur, prev).count
+}
+
+/// An island of a layer: where it is and how large, in the field's pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Island {
+    /// Centre of its pixels: column and row (pixel centres at +0.5; row 0 at the top).
+    pub col_row: [f64; 2],
+    /// Its lit pixels.
+    pub pixels: u64,
+}
+
+/// The islands of a layer: how many, and the largest.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Islands {
+    /// Number of regions resting on nothing below.
+    pub count: u32,
+    /// The largest of them.
+    pub largest: Option<Island>,
+}
+
+/// [`islands`], with the largest island.
+pub fn islands_found(cur: &LitRuns, prev: &LitRuns) -> Islands {
     count_islands(cur, prev)
 }
 
@@ -33,19 +57,42 @@ fn supported_runs(cur: &LitRuns, prev: &LitRuns) -> (Vec<bool>, bool) {
     (on, !all)
 }
 
-/// [`islands`]. Usually every run rests on a run below and there is no island; otherwise
-/// the runs' regions, each supported when one of its runs rests on the layer below.
-pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> u32 {
+/// [`islands_found`]. Usually every run rests on a run below and there is no island;
+/// otherwise the runs' regions, each supported when one of its runs rests on the layer
+/// below.
+pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> Islands {
     let (on, any_free) = supported_runs(cur, prev);
     if !any_free {
-        return 0;
+        return Islands::default();
     }
     let (region, n) = components(&cur.runs);
     let mut supported = vec![false; n];
-    for (&g, &s) in region.iter().zip(&on) {
+    // Per region: pixels, Σ column centres, Σ row centres.
+    let mut sums = vec![(0u64, 0.0, 0.0); n];
+    for ((&g, &s), r) in region.iter().zip(&on).zip(&cur.runs) {
         supported[g as usize] |= s;
+        let (len, [row, c0, c1]) = (u64::from(r[2] - r[1]), r.map(f64::from));
+        let t = &mut sums[g as usize];
+        *t = (
+            t.0 + len,
+            t.1 + (c0 + c1) / 2.0 * (c1 - c0),
+            t.2 + (row + 0.5) * (c1 - c0),
+        );
     }
-    supported.iter().filter(|&&s| !s).count() as u32
+    let free = || (0..n).filter(|&g| !supported[g]);
+    let largest = free()
+        .max_by_key(|&g| (sums[g].0, std::cmp::Reverse(g)))
+        .map(|g| {
+            let (k, sc, sr) = sums[g];
+            Island {
+                col_row: [sc / k as f64, sr / k as f64],
+                pixels: k,
+            }
+        });
+    Islands {
+        count: free().count() as u32,
+        largest,
+    }
 }
 
 #[cfg(test)]
@@ -88,6 +135,21 @@ mod tests {
         // A base covering less than half of every pixel it touches supports nothing.
         let thin = [rect(0.0, 0.0, 10.0, 0.4 * px)];
         assert_eq!(islands_of(&base, &thin), 1);
+    }
+
+    #[test]
+    fn the_largest_island_is_found_with_its_centre_and_size() {
+        let runs = |r: &[[u32; 3]]| LitRuns { runs: r.to_vec() };
+        // Below: row 0, columns 0..4. Above: a 2-pixel region resting on it, a 6-pixel
+        // island (rows 2-3, columns 10..13) and a 1-pixel island.
+        let below = runs(&[[0, 0, 4]]);
+        let cur = runs(&[[0, 1, 3], [2, 10, 13], [2, 20, 21], [3, 10, 13]]);
+        let f = islands_found(&cur, &below);
+        assert_eq!(f.count, 2);
+        let big = f.largest.unwrap();
+        assert_eq!(big.pixels, 6);
+        assert_eq!(big.col_row, [11.5, 3.0]);
+        assert_eq!(islands_found(&below, &below), Islands::default());
     }
 
     /// The islands of the `w × h` pixel grid `cur` (row-major) over `below` by a flood

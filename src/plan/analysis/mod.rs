@@ -25,7 +25,9 @@ use collinear::simplify_section;
 use fill_distance::{fill_distance, SearchScratch};
 #[cfg(any(test, feature = "internals"))]
 pub use fill_distance::{max_fill_distance, max_fill_distance_with, Edges, COARSE_MM};
+#[cfg(any(test, feature = "internals"))]
 pub use islands::islands;
+pub use islands::{islands_found, Island, Islands};
 
 /// Guaranteed accuracy of [`max_fill_distance`], mm: the result lies in
 /// `[exact − PRECISION_MM, exact]`.
@@ -38,6 +40,8 @@ pub struct LayerAnalysis {
     pub max_fill_distance_mm: f64,
     /// Regions of the section that do not rest on the layer below.
     pub islands: u32,
+    /// The largest of them.
+    pub island: Option<Island>,
     /// Bounding box of the section, mm; `None` for an empty section.
     pub bbox_mm: Option<[[f64; 2]; 2]>,
 }
@@ -52,6 +56,17 @@ pub fn analyse(
     prev: Option<(&[Contour], &LitRuns)>,
 ) -> LayerAnalysis {
     Analyser::new().analyse(usize::MAX, cur, lit, prev)
+}
+
+impl LayerAnalysis {
+    /// This analysis with the islands `f`.
+    fn with(self, f: Islands) -> LayerAnalysis {
+        LayerAnalysis {
+            islands: f.count,
+            island: f.largest,
+            ..self
+        }
+    }
 }
 
 /// What [`Analyser::analyse_or_defer`] found.
@@ -74,12 +89,9 @@ impl Analysed {
     /// layer's lit pixels and `below` those of the layer below
     /// ([`islands`](fn@islands)). Other results are returned as they are, without calling
     /// it.
-    pub fn with_islands(self, islands: impl FnOnce() -> u32) -> Analysed {
+    pub fn with_islands(self, islands: impl FnOnce() -> Islands) -> Analysed {
         match self {
-            Analysed::NeedsBelow(a) => Analysed::Done(LayerAnalysis {
-                islands: islands(),
-                ..a
-            }),
+            Analysed::NeedsBelow(a) => Analysed::Done(a.with(islands())),
             r => r,
         }
     }
@@ -94,10 +106,9 @@ impl Analysed {
         match self {
             Analysed::Done(a) => a,
             Analysed::NeedsBelow(_) => panic!("islands over the layer below not counted"),
-            Analysed::SameAsBelow => LayerAnalysis {
-                islands: 0,
-                ..*below.expect("a layer equal to the layer below has one")
-            },
+            Analysed::SameAsBelow => below
+                .expect("a layer equal to the layer below has one")
+                .with(Islands::default()),
         }
     }
 }
@@ -165,15 +176,14 @@ impl Analyser {
     ) -> LayerAnalysis {
         match self.analyse_or_defer(index, cur, Some(lit), prev.map(|p| p.0)) {
             Analysed::Done(a) => a,
-            Analysed::NeedsBelow(a) => LayerAnalysis {
-                islands: prev.map_or(0, |p| islands(lit, p.1)),
-                ..a
-            },
+            Analysed::NeedsBelow(a) => {
+                a.with(prev.map_or(Islands::default(), |p| islands_found(lit, p.1)))
+            }
             Analysed::SameAsBelow => {
                 let a = LayerAnalysis {
                     max_fill_distance_mm: fill_distance(cur, &mut self.search).0,
-                    islands: 0,
                     bbox_mm: bbox(cur),
+                    ..Default::default()
                 };
                 if let Some(l) = self.last.as_mut() {
                     l.analysis = Some(a);
@@ -265,7 +275,7 @@ impl Analyser {
         if c.same {
             let copied = below
                 .and_then(|l| l.analysis)
-                .map(|a| LayerAnalysis { islands: 0, ..a });
+                .map(|a| a.with(Islands::default()));
             // The lit pixels kept: this layer's, or the layer below's when its mask is
             // that one.
             let runs = match lit {
@@ -286,17 +296,18 @@ impl Analyser {
         }
         let lit = lit.expect("a layer unlike the layer below has its own mask");
         let islands = match prev {
-            None => Some(0),
+            None => Some(Islands::default()),
             Some(_) => below
                 .filter(|l| l.runs)
-                .map(|_| islands(lit, &self.last_runs)),
+                .map(|_| islands_found(lit, &self.last_runs)),
         };
         let fill = self.fill(cur);
         let a = LayerAnalysis {
             max_fill_distance_mm: fill,
-            islands: islands.unwrap_or(0),
             bbox_mm: bb,
-        };
+            ..Default::default()
+        }
+        .with(islands.unwrap_or_default());
         self.last_runs.clone_from(lit);
         if simplified {
             std::mem::swap(&mut self.section, &mut self.last_section);
@@ -384,7 +395,7 @@ mod tests {
         let r = b.analyse_or_defer(2, &layers[2], Some(&lits[2]), Some(&layers[1]));
         assert!(matches!(r, Analysed::NeedsBelow(_)));
         assert_eq!(
-            r.with_islands(|| islands(&lits[2], &lits[1]))
+            r.with_islands(|| islands_found(&lits[2], &lits[1]))
                 .resolve(None)
                 .islands,
             1
@@ -467,7 +478,7 @@ mod tests {
                     }
                     let r = a.analyse_or_defer(i, &layers[i], Some(&lits[i]), below);
                     deferred += usize::from(r == Analysed::SameAsBelow);
-                    out.push(r.with_islands(|| islands(&lits[i], &lits[i - 1])));
+                    out.push(r.with_islands(|| islands_found(&lits[i], &lits[i - 1])));
                 }
             }
             let mut got: Vec<LayerAnalysis> = Vec::new();
