@@ -200,6 +200,14 @@ pub(super) fn manifest(
     }
 }
 
+/// A file's name without its directories, as the manifest records it (so bundles are
+/// reproducible across paths).
+pub(super) fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
 /// The manifest's record of the model file and its placement.
 fn source(part: &PlacedPart) -> Source {
     let parts = part.plate.as_ref().map(|p| p.0.clone());
@@ -210,11 +218,7 @@ fn source(part: &PlacedPart) -> Source {
                 names.dedup();
                 names.join(" + ")
             }
-            None => part
-                .path
-                .file_name()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default(),
+            None => file_name(part.path),
         },
         sha256: part.sha256.clone(),
         triangles: part.mesh.report.triangles_in_file,

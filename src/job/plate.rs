@@ -3,7 +3,7 @@
 //! when they fit there) or kept where their files put them, and merged into one mesh that
 //! the pipeline slices as one part.
 
-use super::manifest::PlacedPart;
+use super::manifest::{file_name, PlacedPart};
 use super::{place_mesh, read_model, PlacementMode, SliceOptions};
 use crate::bundle::PlatePart;
 use crate::error::{Error, Result};
@@ -12,7 +12,7 @@ use crate::profile::Profile;
 use crate::round;
 use crate::text::number;
 use rayon::prelude::*;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// A plate: the parts after the job's input, and how they are laid out.
 #[derive(Debug, Clone)]
@@ -301,14 +301,6 @@ fn calibrated_area(profile: &Profile) -> Option<[f64; 4]> {
 /// True when two boxes' XY extents share more than an edge.
 fn overlap(a: &[[f64; 3]; 2], b: &[[f64; 3]; 2]) -> bool {
     (0..2).all(|k| a[0][k] < b[1][k] - EPS && b[0][k] < a[1][k] - EPS)
-}
-
-/// A file's name without its directories, as the manifest records it.
-fn file_name(path: &Path) -> String {
-    path.file_name().map_or_else(
-        || path.display().to_string(),
-        |s| s.to_string_lossy().into_owned(),
-    )
 }
 
 /// The manifest's record of copy `inst` of `part`.
