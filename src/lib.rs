@@ -50,7 +50,8 @@ mod test_support;
 
 stages!(
     calib, cure, digest, exec, formats, geometry, input, inspect, job, mesh, motion, optics,
-    output, picture, plan, plot, png, polyfit, raster, round, slice, table, text, units, warning,
+    output, picture, plan, plot, png, polyfit, raster, round, slice, support, table, text, units,
+    warning,
 );
 
 pub use bundle::Manifest;

@@ -44,6 +44,8 @@ pub struct Section {
     pub joined_chains: u32,
     /// Open chains that were dropped (repair rule 2).
     pub dropped_chains: u32,
+    /// Area of the contours of support shells ([`Slicer::with_supports_from`]), mm².
+    pub support_area_mm2: f64,
 }
 
 /// Repair counts over the whole job.
@@ -115,6 +117,8 @@ pub struct Slicer<'m> {
     z_lo: f64,
     /// Repair counts over the windows sliced so far.
     pub stats: SliceStats,
+    /// Edges from this id on belong to support shells.
+    support_edges: u32,
 }
 
 impl<'m> Slicer<'m> {
@@ -150,7 +154,16 @@ impl<'m> Slicer<'m> {
             active: Vec::new(),
             z_lo: f64::NEG_INFINITY,
             stats: SliceStats::default(),
+            support_edges: u32::MAX,
         }
+    }
+
+    /// The same slicer, counting the contours of the edges from `edge` on (the shells
+    /// appended after the part: supports, whose shells share no edge with it) as support
+    /// ([`Section::support_area_mm2`]).
+    pub fn with_supports_from(mut self, edge: Option<u32>) -> Self {
+        self.support_edges = edge.unwrap_or(u32::MAX);
+        self
     }
 
     /// Sections of layers `range`: cheapest after the previous call's range (a range
@@ -213,7 +226,8 @@ impl<'m> Slicer<'m> {
                 segs[i as usize].push(s);
             }
         }
-        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s)).collect();
+        let support = self.support_edges;
+        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s, support)).collect();
         for s in &sections {
             if s.joined_chains + s.dropped_chains > 0 {
                 self.stats.repaired_layers += 1;
@@ -257,8 +271,9 @@ fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64)
     })
 }
 
-/// Chains one layer's segments into closed contours (see the module docs for the rule).
-fn chain(segs: &[Seg]) -> Section {
+/// Chains one layer's segments into closed contours (see the module docs for the rule);
+/// the closed contours of edges from `support` on are counted as support.
+fn chain(segs: &[Seg], support: u32) -> Section {
     let n = segs.len();
     let mut starts: Vec<(u32, u32)> = segs
         .iter()
@@ -327,6 +342,9 @@ fn chain(segs: &[Seg]) -> Section {
             pts.pop(); // last point equals the first
             finish_loop(&mut pts, agree < 0);
             if pts.len() >= 3 {
+                if start_node >= support {
+                    section.support_area_mm2 += signed_area(&pts);
+                }
                 section.contours.push(pts);
             }
             continue;

@@ -39,10 +39,12 @@ use std::path::Path;
 pub mod machine;
 mod pixels;
 mod source;
+mod supports;
 mod writer;
 pub use machine::Machine;
 pub use pixels::MaskPixels;
 pub use source::{is_inside, BundleSource, DirSource, MemSource};
+pub use supports::{Foot, SupportPad, SupportPoint, Supports};
 pub(crate) use writer::stale_siblings;
 pub use writer::{is_bundle, BundleWriter};
 
@@ -97,6 +99,9 @@ pub struct Manifest {
     /// point-spread function.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cure: Option<Cure>,
+    /// The supports the job was compiled with (`slice --supports`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supports: Option<Supports>,
 }
 
 /// A job's cure model, correction and prediction (docs/CURE.md).
@@ -568,6 +573,9 @@ pub struct Layer {
     /// Predicted cure against the section (`slice --predict`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cure: Option<LayerCure>,
+    /// Area of the supports' and the pad's sections, mm² (jobs with supports).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub support_area_mm2: Option<f64>,
 }
 
 /// A mask file of a layer.

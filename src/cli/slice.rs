@@ -100,6 +100,15 @@ struct PlateArgs {
     /// Gap between the boxes of a plate's arranged parts, mm [default: 3].
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     spacing: Option<f64>,
+    /// Generate supports: a point under every island and every surface facing down too
+    /// flat, heads, pillars and a pad, the part lifted by the elevation (the profile's
+    /// [supports] section, changed with --set supports.KEY=VALUE; docs/SUPPORTS.md).
+    #[arg(long)]
+    supports: bool,
+    /// With --supports: also write the support structure (pad and supports, closed
+    /// shells, build-plane coordinates) as a binary STL.
+    #[arg(long, value_name = "FILE.stl", requires = "supports")]
+    supports_stl: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -230,6 +239,7 @@ struct Job<'a> {
     show_progress: bool,
     format: Option<crate::formats::Format>,
     plate: Option<job::Plate>,
+    supports_stl: Option<PathBuf>,
 }
 
 impl Job<'_> {
@@ -271,6 +281,7 @@ impl Job<'_> {
             cure: self.cure.clone(),
             plate: self.plate.clone(),
             dose: None,
+            supports_stl: self.supports_stl.clone(),
         };
         job::slice_to_bundle(&opts)
     }
@@ -341,6 +352,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
         cancel: &cancel,
         format: a.format,
         plate: plate(&a)?,
+        supports_stl: a.plate.supports_stl.clone(),
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -362,6 +374,7 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
                 "timings": summary.timings,
                 "distortion": summary.distortion,
                 "cure": summary.cure,
+                "supports": summary.supports,
             });
             super::print_json(&v)?;
         } else if !quiet {
@@ -511,6 +524,17 @@ fn print_summary(summary: &SliceSummary, prefix: &str) {
         summary.totals.resin_volume_ml,
         summary.timings.total_s
     );
+    if let Some(s) = &summary.supports {
+        println!(
+            "{prefix}supports: {} ({} under islands, {} standing on the part), {:.1} mm³ with the pad ({:.1} mm²); the part lifted {} mm",
+            count(s.points as u64, "point", "points"),
+            s.on_islands,
+            s.on_part,
+            s.volume_mm3,
+            s.pad_area_mm2,
+            crate::text::number(s.lift_mm)
+        );
+    }
     if let Some(p) = summary.cure.as_ref().and_then(|c| c.predicted.as_ref()) {
         let e = &p.edge_error_px;
         println!(
@@ -609,6 +633,11 @@ fn parts(a: &SliceArgs) -> Result<Vec<Part>, crate::Error> {
             ));
         }
     }
+    if parts.len() > 1 && a.plate.supports_stl.is_some() {
+        return usage(
+            "--supports-stl names one file, but the parts are sliced one by one: add --plate, or slice one part".into(),
+        );
+    }
     Ok(parts)
 }
 
@@ -681,6 +710,13 @@ fn overrides(a: &SliceArgs) -> Result<Vec<Override>, crate::Error> {
             format!("--exposure {t}"),
             "exposure.layer_s",
             toml::Value::Float(v),
+        ));
+    }
+    if a.plate.supports {
+        o.push(Override::new(
+            "--supports",
+            "supports.enabled",
+            toml::Value::Boolean(true),
         ));
     }
     if let Some(t) = &a.bottom_layers {

@@ -41,6 +41,7 @@ pub fn layer(
         islands: 0,
         bbox_mm: None,
         cure: None,
+        support_area_mm2: None,
     }
 }
 
@@ -85,6 +86,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
         layers,
         optics: None,
         projector_optics: Vec::new(),
+        supports: None,
     }
 }
 

@@ -145,6 +145,7 @@ pub(crate) fn layer(
         steps,
         time_s,
         cure: None,
+        support_area_mm2: None,
     }
 }
 
@@ -255,6 +256,7 @@ impl Imported {
             layers,
             optics: None,
             projector_optics: Vec::new(),
+            supports: None,
         };
         Ok(Job {
             source: Box::new(archive.into_source("")),

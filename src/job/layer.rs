@@ -88,6 +88,8 @@ pub(super) struct LayerInput<'a> {
 pub(super) struct LayerOutput {
     /// Lit area, mm².
     pub area_mm2: f64,
+    /// Area of its support contours, mm².
+    pub support_area_mm2: f64,
     /// The layer's analysis, possibly left for the layer below to complete.
     pub analysis: Analysed,
     /// CPU time of the analysis, s.
@@ -205,6 +207,7 @@ pub(super) fn layer_masks(
     analysis_s += clock.elapsed_s();
     Ok(LayerOutput {
         area_mm2,
+        support_area_mm2: layer.section.support_area_mm2,
         analysis,
         analysis_s,
         masks,

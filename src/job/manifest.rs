@@ -35,6 +35,12 @@ pub(super) struct PlacedPart<'a> {
     pub layers: usize,
     /// A plate's copies of its parts, and their mesh warnings naming each file.
     pub plate: Option<(Vec<bundle::PlatePart>, Vec<Warning>)>,
+    /// The supports appended to `mesh` (`slice --supports`).
+    pub supports: Option<bundle::Supports>,
+    /// The first edge of `mesh` that belongs to the supports.
+    pub support_edges: Option<u32>,
+    /// The support structure alone (pad and supports).
+    pub support_mesh: Option<Mesh>,
 }
 
 impl PlacedPart<'_> {
@@ -64,6 +70,7 @@ pub(super) fn plan_layers(
     outs: Vec<LayerOutput>,
     model: &Path,
 ) -> Result<PlannedLayers> {
+    let supported = profile.supports.enabled;
     let h = profile.slicing.layer_height_mm.get();
     let n = outs.len();
     let analyses = resolve_analyses(&outs);
@@ -117,6 +124,7 @@ pub(super) fn plan_layers(
             steps: p.steps,
             time_s: p.time_s,
             cure: None,
+            support_area_mm2: supported.then(|| round::area_mm2(o.support_area_mm2)),
         });
     }
     let totals = Totals {
@@ -197,6 +205,7 @@ pub(super) fn manifest(
         optics: optics.optics,
         projector_optics: optics.projector_optics,
         cure: None,
+        supports: part.supports.clone(),
     }
 }
 

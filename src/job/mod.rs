@@ -27,9 +27,10 @@ mod pipeline;
 mod placement;
 mod plate;
 mod sink;
+mod supported;
 
 pub use cure_records::CureOptions;
-pub use options::{default_output_as, SliceOptions, SliceSummary, Timings};
+pub use options::{default_output_as, SliceOptions, SliceSummary, SupportsSummary, Timings};
 #[cfg(any(test, feature = "internals"))]
 pub use pipeline::BLOCK;
 pub use placement::{place_mesh, PlacementMode, Transform};
@@ -159,14 +160,26 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     if control.cancelled() {
         return Err(Error::Interrupted);
     }
-    let (bundle, export_warnings) = match writer {
-        Sink::Dir(w) => (w.finish(&manifest)?, Vec::new()),
+    // The support mesh first: removed again when the bundle cannot be written.
+    let stl = match (&opts.supports_stl, &part.support_mesh) {
+        (Some(path), Some(m)) => {
+            crate::output::write_atomic(path, &mesh::binary_stl(&m.soup()))?;
+            Some(path)
+        }
+        _ => None,
+    };
+    let written = match writer {
+        Sink::Dir(w) => w.finish(&manifest).map(|b| (b, Vec::new())),
         Sink::Memory { out, kept } => {
             let files = MemoryFiles::new(&out, kept);
-            let w = crate::formats::write(format, &manifest, &files, &out, opts.cancel)?;
-            (out, w)
+            crate::formats::write(format, &manifest, &files, &out, opts.cancel).map(|w| (out, w))
         }
     };
+    let (bundle, export_warnings) = written.inspect_err(|_| {
+        if let Some(p) = stl {
+            let _ = std::fs::remove_file(p);
+        }
+    })?;
     made.keep();
     cure_plots(cure.as_ref(), opts, &manifest, made_plots)?;
     let mut warnings = manifest.warnings;
@@ -190,6 +203,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         .rounded(),
         distortion: distortion_report,
         cure: manifest.cure,
+        supports: manifest.supports.as_ref().map(SupportsSummary::of),
     })
 }
 
@@ -288,12 +302,15 @@ fn load_and_place<'a>(
         msg,
     })?;
     if let Some(plate) = &opts.plate {
-        let part = plate::place_plate(opts, plate, profile, (sha256, mesh))?;
+        let mut part = plate::place_plate(opts, plate, profile, (sha256, mesh))?;
+        if profile.supports.enabled {
+            supported::add_supports(&mut part, profile)?;
+        }
         return Ok((setup, part));
     }
     opts.transform.apply(&mut mesh);
     let (translate_mm, layers) = place_mesh(path, &mut mesh, profile, opts.placement, h)?;
-    let part = PlacedPart {
+    let mut part = PlacedPart {
         path,
         sha256,
         mesh,
@@ -303,7 +320,13 @@ fn load_and_place<'a>(
         translate_mm,
         layers,
         plate: None,
+        supports: None,
+        support_edges: None,
+        support_mesh: None,
     };
+    if profile.supports.enabled {
+        supported::add_supports(&mut part, profile)?;
+    }
     Ok((setup, part))
 }
 
@@ -408,7 +431,7 @@ fn make_layers(
         dose,
     };
     let gray_map = OnceLock::new();
-    let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n), n, control, || {
+    let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n).with_supports_from(part.support_edges), n, control, || {
         // The gray map depends on the set-up only: written while the masks are made (its
         // encoding would otherwise wait for the last layer).
         if let Some(o) = ctx.optics {

@@ -51,6 +51,8 @@ pub struct SliceOptions<'a> {
     /// Pixel values (field-sized, 255 = as drawn) the masks are scaled to: the doses of a
     /// calibration test job (`dmdsl testjob working-curve`).
     pub dose: Option<crate::raster::Mask>,
+    /// Where to write the support structure as a binary STL (`--supports-stl`).
+    pub supports_stl: Option<PathBuf>,
 }
 
 impl SliceOptions<'_> {
@@ -79,6 +81,7 @@ impl SliceOptions<'_> {
             cure: Default::default(),
             plate: None,
             dose: None,
+            supports_stl: None,
         }
     }
 
@@ -155,6 +158,44 @@ pub struct SliceSummary {
     /// The cure model, correction and prediction, when the machine has a PSF.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cure: Option<crate::bundle::Cure>,
+    /// The supports, when generated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub supports: Option<SupportsSummary>,
+}
+
+/// What `--json` and the summary say of a job's supports.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SupportsSummary {
+    /// Support points.
+    pub points: usize,
+    /// Of them, those holding an island.
+    pub on_islands: usize,
+    /// Of them, those standing on the part (the others stand on the pad).
+    pub on_part: usize,
+    /// Volume of the pad and supports, mm³.
+    pub volume_mm3: f64,
+    /// Area of the pad's top, mm².
+    pub pad_area_mm2: f64,
+    /// How far the part was lifted, mm.
+    pub lift_mm: f64,
+}
+
+impl SupportsSummary {
+    /// The summary of a manifest's supports record.
+    pub fn of(s: &crate::bundle::Supports) -> SupportsSummary {
+        SupportsSummary {
+            points: s.points.len(),
+            on_islands: s.points.iter().filter(|p| p.island).count(),
+            on_part: s
+                .points
+                .iter()
+                .filter(|p| p.foot == crate::bundle::Foot::Part)
+                .count(),
+            volume_mm3: s.volume_mm3,
+            pad_area_mm2: s.pad.area_mm2,
+            lift_mm: s.lift_mm,
+        }
+    }
 }
 
 /// Serializes a format by its name.

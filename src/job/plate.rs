@@ -192,6 +192,9 @@ pub(super) fn place_plate<'a>(
         translate_mm: [0.0; 3],
         layers,
         plate: Some((records, warnings)),
+        supports: None,
+        support_edges: None,
+        support_mesh: None,
     })
 }
 

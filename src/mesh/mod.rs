@@ -2,7 +2,8 @@
 //! (told apart by content and size, not by a leading `solid`) or OBJ (through tobj,
 //! triangulated), welds corners with bit-identical coordinates into shared vertices, builds
 //! the edge table the slicer chains through and a [`MeshReport`] like admesh's.
-//! [`binary_stl`] writes binary STL (for tests and tools that make meshes).
+//! [`binary_stl`] writes binary STL (`slice --supports-stl`, tests and tools that make
+//! meshes).
 //!
 //! Invariants: all coordinates are finite; triangles with a repeated vertex are removed;
 //! vertex and edge ids are in order of first appearance whatever the thread count; defects
@@ -12,7 +13,6 @@ mod obj;
 mod stl;
 
 pub use crate::input::MESH_MAX_BYTES;
-#[cfg(any(test, feature = "internals"))]
 pub use stl::binary_stl;
 
 use crate::error::{Error, Result};
@@ -437,6 +437,12 @@ impl Mesh {
             }
         }
         [lo, hi]
+    }
+
+    /// The triangles as corners (single precision, as an STL holds them).
+    pub fn soup(&self) -> Soup {
+        let f = |v: u32| self.vertices[v as usize].map(|c| c as f32);
+        self.triangles.iter().map(|t| t.map(f)).collect()
     }
 
     /// Adds `d` to every vertex.

@@ -55,8 +55,7 @@ pub(super) fn parse(path: &Path, b: &[u8]) -> Result<(Soup, &'static str)> {
 
 /// Encodes `triangles` as a binary STL: an 80-byte header of zeros, the count, and per
 /// triangle a zero normal (readers recompute it from the corners), the corners and a zero
-/// attribute word. [`load`](super::load) reads it back corner for corner.
-#[cfg(any(test, feature = "internals"))]
+/// attribute word. The loader reads it back corner for corner.
 pub fn binary_stl(triangles: &[[[f32; 3]; 3]]) -> Vec<u8> {
     let mut b = Vec::with_capacity(84 + 50 * triangles.len());
     b.resize(80, 0u8);

@@ -12,12 +12,14 @@ pub mod calibration;
 mod distortion;
 mod overrides;
 mod process;
+mod supports;
 
 pub use blend::BlendCurve;
 pub use calibration::Calibration;
 pub use distortion::DistortionConfig;
 pub use overrides::Override;
 pub use process::{Hybrid, OlhStep, Peel, Recoat, WaitModel};
+pub use supports::Supports;
 
 use crate::error::{Error, Result};
 use crate::units::{NonNegative, Positive};
@@ -93,6 +95,10 @@ pub struct Profile {
     /// Edge blending across projector overlaps (default: raised cosine; docs/GEOMETRY.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub blend: Option<BlendCurve>,
+    /// Supports, pad and elevation (off unless `enabled`; a profile without the section
+    /// takes the defaults).
+    #[serde(default)]
+    pub supports: Supports,
 }
 
 /// One DMD projector.
@@ -374,6 +380,7 @@ impl Profile {
         if let Some(b) = &self.blend {
             b.validate()?;
         }
+        self.supports.validate()?;
         process::validate(self)
     }
 

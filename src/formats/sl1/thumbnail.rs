@@ -40,6 +40,7 @@ fn slabs(m: &Manifest) -> Manifest {
         warnings: Vec::new(),
         optics: None,
         projector_optics: Vec::new(),
+        supports: None,
         format: m.format.clone(),
         version: m.version,
         generator: m.generator.clone(),

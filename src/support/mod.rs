@@ -1,0 +1,236 @@
+//! Supports: points under every island and every surface that faces down too flat, a head,
+//! pillar and foot for each, and a pad under them all, as one mesh the slicer cuts with
+//! the part (docs/SUPPORTS.md).
+//!
+//! The search runs on the part's own lit pixels, layer by layer, as the job will draw them
+//! (the same rasterizer, coverage ≥ 50 %): the part is cut and drawn once more before the
+//! job, its pixels kept as runs. `points.rs` places the points, `columns.rs` finds what
+//! each support stands on and its profile, `shapes.rs` makes the meshes, `runs.rs` holds
+//! the pixel-set operations. The part is lifted by whole layers (the pad and the
+//! elevation), so its sections are those of the job without supports, moved up.
+
+mod columns;
+mod points;
+mod runs;
+mod shapes;
+
+pub use columns::{Column, Foot, Shape};
+
+pub use shapes::SIDES;
+
+use crate::mesh::Mesh;
+use crate::profile::{Field, Supports};
+use crate::raster::{Rasterizer, Scratch};
+use crate::slice::Slicer;
+use rayon::prelude::*;
+
+/// Layers cut and drawn at a time by the search.
+const WINDOW: usize = 64;
+
+/// The pad: its outlines and thickness.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pad {
+    /// Thickness, mm (whole layers).
+    pub thickness_mm: f64,
+    /// Outline of its top, counter-clockwise, mm.
+    pub top: Vec<[f64; 2]>,
+    /// Outline of its bottom (on the platform), mm.
+    pub bottom: Vec<[f64; 2]>,
+}
+
+impl Pad {
+    /// Area of its top, mm².
+    pub fn top_area_mm2(&self) -> f64 {
+        crate::slice::signed_area(&self.top)
+    }
+}
+
+/// The supports of a part.
+#[derive(Debug, Clone)]
+pub struct Generated {
+    /// One per point, in the order placed (bottom up).
+    pub columns: Vec<Column>,
+    /// The pad under them.
+    pub pad: Pad,
+    /// The shapes they were made with.
+    pub shape: Shape,
+    /// The whole structure: one closed shell per support and the pad.
+    pub mesh: Mesh,
+}
+
+impl Generated {
+    /// Where a column's point is on the build plane, mm.
+    pub fn point_mm(&self, c: &Column, field: &Field) -> [f64; 3] {
+        let px = field.pixel_mm;
+        let [col, row] = c.point.col_row;
+        [
+            (col as f64 + 0.5) * px,
+            field.height_mm() - (row as f64 + 0.5) * px,
+            c.point.layer as f64 * self.shape.layer_mm,
+        ]
+    }
+}
+
+/// Layers the part is lifted by: the pad's and the elevation's, each whole layers (at
+/// least one for the pad).
+pub fn lift_layers(s: &Supports, layer_mm: f64) -> usize {
+    let pad = ((s.pad_thickness_mm / layer_mm).round() as usize).max(1);
+    pad + (s.elevation_mm / layer_mm).round() as usize
+}
+
+/// The supports of `part` (placed and lifted by [`lift_layers`] = `first`), sliced into
+/// `n` layers of `layer_mm` on `field`. An error (a message) when the pad does not fit
+/// the field.
+pub fn generate(
+    part: &Mesh,
+    field: Field,
+    (layer_mm, n, first): (f64, usize, usize),
+    s: &Supports,
+) -> Result<Generated, String> {
+    let masks = part_pixels(part, field, layer_mm, n, first);
+    let px = field.pixel_mm;
+    let tan = s.critical_angle_deg.to_radians().tan();
+    let cover_mm = s.spacing_mm / std::f64::consts::SQRT_2;
+    let pad_layers = ((s.pad_thickness_mm / layer_mm).round() as usize).max(1);
+    let spread = points::Spread {
+        width: field.width_px,
+        height: field.height_px,
+        cover_px: cover_mm / px,
+        min_apart_px: s.pillar_diameter_mm / px,
+        reach_layers: (cover_mm * tan / layer_mm).ceil() as usize,
+        self_px: layer_mm / tan / px,
+        first_on_pad: first == pad_layers,
+    };
+    let shape = Shape {
+        pixel_mm: px,
+        layer_mm,
+        contact_r: s.head_front_diameter_mm / 2.0,
+        pillar_r: s.pillar_diameter_mm / 2.0,
+        base_r: s.base_diameter_mm / 2.0,
+        head_len: s.head_length_mm,
+        penetration: s.head_penetration_mm,
+        base_len: s.base_height_mm,
+        pad_top: pad_layers as f64 * layer_mm,
+        max_len: s.pillar_max_length_mm,
+    };
+    let pts = points::place(&masks, first, &spread);
+    let columns: Vec<Column> = pts
+        .par_iter()
+        .map(|&p| columns::column(p, &masks, first, &shape))
+        .collect();
+    let mut g = Generated {
+        columns,
+        pad: Pad {
+            thickness_mm: shape.pad_top,
+            top: Vec::new(),
+            bottom: Vec::new(),
+        },
+        shape,
+        mesh: Mesh::from_soup(&[], "supports"),
+    };
+    let on_pad = spread.first_on_pad.then(|| masks[first].as_slice());
+    g.pad = pad(&g, on_pad, field, s)?;
+    let mut mesh = shapes::pad(&g.pad.bottom, &g.pad.top, shape.pad_top);
+    for c in &g.columns {
+        let [x, y, _] = g.point_mm(c, &field);
+        mesh.append(&shapes::revolved(x, y, &c.rings));
+    }
+    g.mesh = mesh;
+    Ok(g)
+}
+
+/// The part's lit pixels per layer (empty below `first`), as the job draws them.
+fn part_pixels(
+    part: &Mesh,
+    field: Field,
+    layer_mm: f64,
+    n: usize,
+    first: usize,
+) -> Vec<Vec<runs::Run>> {
+    let raster = Rasterizer::new(field);
+    let mut slicer = Slicer::new(part, layer_mm, n);
+    let mut masks = vec![Vec::new(); first.min(n)];
+    let mut lo = first;
+    while lo < n {
+        let sections = slicer.window(lo..(lo + WINDOW).min(n));
+        let drawn: Vec<Vec<runs::Run>> = sections
+            .par_iter()
+            .map_init(
+                || {
+                    let mut s = Scratch::default();
+                    s.record_runs = true;
+                    s
+                },
+                |scratch, sec| {
+                    let m = raster.coverage(&sec.contours, scratch);
+                    scratch.recycle(m);
+                    std::mem::take(&mut scratch.lit_runs.runs)
+                },
+            )
+            .collect();
+        masks.extend(drawn);
+        lo += WINDOW;
+    }
+    masks
+}
+
+/// The pad under the columns that stand on it (and the part's first layer `on_pad`, when
+/// it rests on the pad), or an error when it does not fit `field`.
+fn pad(
+    g: &Generated,
+    on_pad: Option<&[runs::Run]>,
+    field: Field,
+    s: &Supports,
+) -> Result<Pad, String> {
+    let px = field.pixel_mm;
+    let mut pts: Vec<[f64; 2]> = Vec::new();
+    for c in g.columns.iter().filter(|c| c.foot == Foot::Pad) {
+        let [x, y, _] = g.point_mm(c, &field);
+        let r = c.rings[0][1];
+        pts.extend((0..SIDES).map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / SIDES as f64;
+            [x + r * a.cos(), y + r * a.sin()]
+        }));
+    }
+    for &[row, a, b] in on_pad.unwrap_or(&[]) {
+        let (y0, y1) = (
+            field.height_mm() - (row + 1) as f64 * px,
+            field.height_mm() - row as f64 * px,
+        );
+        for x in [a as f64 * px, b as f64 * px] {
+            pts.extend([[x, y0], [x, y1]]);
+        }
+    }
+    let hull = shapes::convex_hull(&pts);
+    if hull.is_empty() {
+        return Err("nothing to stand on the pad".into());
+    }
+    let margin = s.pad_margin_mm.max(px / 2.0);
+    let slope = s.pad_wall_slope_deg.to_radians();
+    let out = if s.pad_wall_slope_deg >= 90.0 {
+        0.0
+    } else {
+        g.shape.pad_top / slope.tan()
+    };
+    let pad = Pad {
+        thickness_mm: g.shape.pad_top,
+        top: shapes::offset(&hull, margin),
+        bottom: shapes::offset(&hull, margin + out),
+    };
+    let (w, h) = (field.width_mm(), field.height_mm());
+    let lo = pad
+        .bottom
+        .iter()
+        .fold([f64::INFINITY; 2], |a, p| [a[0].min(p[0]), a[1].min(p[1])]);
+    let hi = pad.bottom.iter().fold([f64::NEG_INFINITY; 2], |a, p| {
+        [a[0].max(p[0]), a[1].max(p[1])]
+    });
+    let beyond = (-lo[0]).max(-lo[1]).max(hi[0] - w).max(hi[1] - h);
+    if beyond > 1e-9 {
+        return Err(format!(
+            "the supports' pad spans x {:.3}..{:.3}, y {:.3}..{:.3} mm, {:.3} mm beyond the build field 0..{w:.3} x 0..{h:.3} mm; move the part in or lower supports.pad_margin_mm",
+            lo[0], hi[0], lo[1], hi[1], beyond
+        ));
+    }
+    Ok(pad)
+}

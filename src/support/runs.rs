@@ -1,0 +1,201 @@
+//! Sets of lit pixels as runs `[row, first column, end column)` (the layout of
+//! [`crate::raster::LitRuns`]: sorted by row then column, a row's runs disjoint and not
+//! touching), and the few operations the support search needs on them.
+
+/// A run of one row's pixels: `[row, first column, end column)`.
+pub type Run = [u32; 3];
+
+/// Sorts `runs` and merges those of a row that overlap or touch.
+fn normalized(mut runs: Vec<Run>) -> Vec<Run> {
+    runs.sort_unstable();
+    let mut out: Vec<Run> = Vec::with_capacity(runs.len());
+    for r in runs {
+        match out.last_mut() {
+            Some(l) if l[0] == r[0] && r[1] <= l[2] => l[2] = l[2].max(r[2]),
+            _ => out.push(r),
+        }
+    }
+    out
+}
+
+/// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, inside
+/// `width` × `height`.
+pub fn dilated(runs: &[Run], radius: f64, width: u32, height: u32) -> Vec<Run> {
+    let k = radius.floor() as i64;
+    let mut out = Vec::with_capacity(runs.len() * (2 * k as usize + 1));
+    for &[row, a, b] in runs {
+        for dy in -k..=k {
+            let r = row as i64 + dy;
+            if r < 0 || r >= height as i64 {
+                continue;
+            }
+            let w = (radius * radius - (dy * dy) as f64).sqrt().floor() as u32;
+            out.push([r as u32, a.saturating_sub(w), (b + w).min(width)]);
+        }
+    }
+    normalized(out)
+}
+
+/// The pixels of `a` that are not in `b`.
+pub fn minus(a: &[Run], b: &[Run]) -> Vec<Run> {
+    let mut out = Vec::new();
+    let mut j = 0;
+    for &[row, s, e] in a {
+        while j < b.len() && (b[j][0] < row || (b[j][0] == row && b[j][2] <= s)) {
+            j += 1;
+        }
+        let mut from = s;
+        let mut k = j;
+        while k < b.len() && b[k][0] == row && b[k][1] < e {
+            if b[k][1] > from {
+                out.push([row, from, b[k][1]]);
+            }
+            from = from.max(b[k][2]);
+            k += 1;
+        }
+        if from < e {
+            out.push([row, from, e]);
+        }
+    }
+    out
+}
+
+/// For each run of `a`, how many of its pixels `b` also has.
+pub fn shared_pixels(a: &[Run], b: &[Run]) -> Vec<u32> {
+    let mut j = 0;
+    a.iter()
+        .map(|&[row, s, e]| {
+            while j < b.len() && (b[j][0] < row || (b[j][0] == row && b[j][2] <= s)) {
+                j += 1;
+            }
+            let mut n = 0;
+            let mut k = j;
+            while k < b.len() && b[k][0] == row && b[k][1] < e {
+                n += b[k][2].min(e) - b[k][1].max(s);
+                k += 1;
+            }
+            n
+        })
+        .collect()
+}
+
+/// The union of two run sets.
+pub fn union(a: &[Run], b: &[Run]) -> Vec<Run> {
+    normalized(a.iter().chain(b).copied().collect())
+}
+
+/// Whether pixel (`col`, `row`) is in `runs`.
+pub fn contains(runs: &[Run], col: u32, row: u32) -> bool {
+    let i = runs.partition_point(|r| r[0] < row || (r[0] == row && r[2] <= col));
+    i < runs.len() && runs[i][0] == row && runs[i][1] <= col
+}
+
+/// Whether a pixel of `runs` has its centre within `radius` pixels of the point
+/// (`cx`, `cy`) (in pixels: column, row; pixel centres at +0.5).
+pub fn any_within(runs: &[Run], cx: f64, cy: f64, radius: f64) -> bool {
+    let lo = (cy - radius - 0.5).floor().max(0.0) as u32;
+    let hi = (cy + radius - 0.5).ceil().max(0.0) as u32;
+    let mut i = runs.partition_point(|r| r[0] < lo);
+    while i < runs.len() && runs[i][0] <= hi {
+        let [row, a, b] = runs[i];
+        let dy = row as f64 + 0.5 - cy;
+        if dy.abs() <= radius {
+            let w = (radius * radius - dy * dy).sqrt();
+            if a as f64 + 0.5 <= cx + w && b as f64 - 0.5 >= cx - w {
+                return true;
+            }
+        }
+        i += 1;
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The runs of a boolean grid (row-major, `w` wide).
+    fn runs_of(g: &[bool], w: usize) -> Vec<Run> {
+        let mut out = Vec::new();
+        for (r, row) in g.chunks(w).enumerate() {
+            let mut c = 0;
+            while c < w {
+                if row[c] {
+                    let a = c;
+                    while c < w && row[c] {
+                        c += 1;
+                    }
+                    out.push([r as u32, a as u32, c as u32]);
+                } else {
+                    c += 1;
+                }
+            }
+        }
+        out
+    }
+
+    /// A pseudo-random grid (fixed seed).
+    fn grid(seed: u64, w: usize, h: usize, fill: u64) -> Vec<bool> {
+        let mut s = seed;
+        (0..w * h)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 33) % 100 < fill
+            })
+            .collect()
+    }
+
+    #[test]
+    fn operations_match_brute_force_on_random_grids() {
+        let (w, h) = (37usize, 23usize);
+        for seed in 0..40 {
+            let ga = grid(seed, w, h, 30);
+            let gb = grid(seed + 1000, w, h, 20);
+            let (a, b) = (runs_of(&ga, w), runs_of(&gb, w));
+            let at = |g: &[bool], c: i64, r: i64| {
+                c >= 0
+                    && r >= 0
+                    && (c as usize) < w
+                    && (r as usize) < h
+                    && g[r as usize * w + c as usize]
+            };
+            let radius = 1.0 + (seed % 5) as f64 * 0.7;
+            let dil = dilated(&a, radius, w as u32, h as u32);
+            let k = radius.floor() as i64;
+            let brute_dil: Vec<bool> = (0..w * h)
+                .map(|i| {
+                    let (c, r) = ((i % w) as i64, (i / w) as i64);
+                    (-k..=k).any(|dy| {
+                        (-k..=k).any(|dx| {
+                            (dx * dx + dy * dy) as f64 <= radius * radius && at(&ga, c + dx, r + dy)
+                        })
+                    })
+                })
+                .collect();
+            assert_eq!(dil, runs_of(&brute_dil, w), "seed {seed}");
+            let diff: Vec<bool> = ga.iter().zip(&gb).map(|(&x, &y)| x && !y).collect();
+            assert_eq!(minus(&a, &b), runs_of(&diff, w));
+            let uni: Vec<bool> = ga.iter().zip(&gb).map(|(&x, &y)| x || y).collect();
+            assert_eq!(union(&a, &b), runs_of(&uni, w));
+            for (run, n) in a.iter().zip(shared_pixels(&a, &b)) {
+                let brute = (run[1]..run[2])
+                    .filter(|&c| gb[run[0] as usize * w + c as usize])
+                    .count();
+                assert_eq!(n as usize, brute);
+            }
+            for r in 0..h {
+                for c in 0..w {
+                    assert_eq!(contains(&a, c as u32, r as u32), ga[r * w + c]);
+                }
+            }
+            let (cx, cy, rad) = (10.3 + seed as f64 * 0.4, 7.9, 2.6);
+            let brute_near = (0..w * h).any(|i| {
+                let (c, r) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                ga[i] && (c - cx).powi(2) + (r - cy).powi(2) <= rad * rad
+            });
+            assert_eq!(any_within(&a, cx, cy, rad), brute_near, "seed {seed}");
+        }
+    }
+}
