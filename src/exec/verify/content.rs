@@ -66,6 +66,8 @@ pub(super) struct ContentRule {
     exact_area: bool,
     /// Binary masks of one projector without compensation: every lit pixel is 255.
     binary: bool,
+    /// How far the cure correction moved the edges in, px (0 without it).
+    shift_px: f64,
 }
 
 impl ContentRule {
@@ -104,6 +106,11 @@ impl ContentRule {
                 && !corrected
                 && s.distortion.is_none(),
             binary: s.binary && s.compensation == "off" && one,
+            shift_px: manifest
+                .cure
+                .as_ref()
+                .filter(|_| corrected)
+                .map_or(0.0, |c| c.shift_px.max(0.0)),
         }
     }
 
@@ -121,10 +128,20 @@ impl ContentRule {
             if area_px >= 1.0 {
                 min = 1.0;
             }
-            min = min.max(0.5 * area_px - AREA_SLACK_PX);
+            // Edges moved in by the cure correction shrink a section whose largest
+            // inscribed circle has radius r by up to ((r − shift) / r)² (a layer of small
+            // round features, such as support heads, the most).
+            let r = layer.max_fill_distance_mm / p;
+            let shrink = if self.shift_px > 0.0 && r > 0.0 {
+                ((r - self.shift_px).max(0.0) / r).powi(2)
+            } else {
+                1.0
+            };
+            min = min.max(0.5 * area_px * shrink - AREA_SLACK_PX);
         }
-        // Pixels wholly inside the largest inscribed circle are fully covered.
-        let r = (layer.max_fill_distance_mm - self.warp_mm) / p;
+        // Pixels wholly inside the largest inscribed circle (less the correction's move)
+        // are fully covered.
+        let r = (layer.max_fill_distance_mm - self.warp_mm) / p - self.shift_px;
         if r >= std::f64::consts::SQRT_2 {
             let inner = self.inner_radius_px(layer);
             min = min.max((std::f64::consts::PI * inner * inner).max(1.0));
@@ -133,10 +150,10 @@ impl ContentRule {
     }
 
     /// The radius of the circle, concentric with the section's largest inscribed circle
-    /// (moved by the pre-warp), whose every pixel lies wholly inside the section, px (0
-    /// when there is none).
+    /// (moved by the pre-warp, shrunk by the cure correction), whose every pixel lies wholly
+    /// inside the section, px (0 when there is none).
     fn inner_radius_px(&self, layer: &Layer) -> f64 {
-        let r = (layer.max_fill_distance_mm - self.warp_mm) / self.pixel_mm;
+        let r = (layer.max_fill_distance_mm - self.warp_mm) / self.pixel_mm - self.shift_px;
         (r - std::f64::consts::SQRT_2).max(0.0)
     }
 
