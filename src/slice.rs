@@ -44,8 +44,9 @@ pub struct Section {
     pub joined_chains: u32,
     /// Open chains that were dropped (repair rule 2).
     pub dropped_chains: u32,
-    /// Area of the contours of support shells ([`Slicer::with_supports_from`]), mm².
-    pub support_area_mm2: f64,
+    /// With support shells in the layer ([`Slicer::with_supports_from`]): the area of the
+    /// part's own contours, mm² (the supports add the rest of the layer's lit area).
+    pub part_area_mm2: Option<f64>,
 }
 
 /// Repair counts over the whole job.
@@ -160,7 +161,7 @@ impl<'m> Slicer<'m> {
 
     /// The same slicer, counting the contours of the edges from `edge` on (the shells
     /// appended after the part: supports, whose shells share no edge with it) as support
-    /// ([`Section::support_area_mm2`]).
+    /// ([`Section::part_area_mm2`]).
     pub fn with_supports_from(mut self, edge: Option<u32>) -> Self {
         self.support_edges = edge.unwrap_or(u32::MAX);
         self
@@ -319,6 +320,9 @@ fn chain(segs: &[Seg], support: u32) -> Section {
 
     let mut section = Section::default();
     let mut open: Vec<Contour> = Vec::new();
+    // Support contours go after the part's: an open chain of the part is closed or dropped
+    // as it would be without them.
+    let mut supports: Vec<Contour> = Vec::new();
     for s0 in 0..n {
         if used[s0] {
             continue;
@@ -343,9 +347,10 @@ fn chain(segs: &[Seg], support: u32) -> Section {
             finish_loop(&mut pts, agree < 0);
             if pts.len() >= 3 {
                 if start_node >= support {
-                    section.support_area_mm2 += signed_area(&pts);
+                    supports.push(pts);
+                } else {
+                    section.contours.push(pts);
                 }
-                section.contours.push(pts);
             }
             continue;
         }
@@ -367,7 +372,62 @@ fn chain(segs: &[Seg], support: u32) -> Section {
     if !open.is_empty() {
         join_open(open, &mut section);
     }
+    if !supports.is_empty() {
+        section.part_area_mm2 = Some(section.contours.iter().map(signed_area).sum());
+        orient_supports(&section.contours, &mut supports);
+        section.contours.append(&mut supports);
+    }
     section
+}
+
+/// Turns each support contour to the sign of the part's winding at its centre, so that
+/// a support inside a region of the part whose contours run backwards (a defective mesh:
+/// winding −1) adds to it instead of cancelling it under the nonzero rule.
+fn orient_supports(part: &[Contour], supports: &mut [Contour]) {
+    if part.is_empty() {
+        return;
+    }
+    // The part's edges in bands of y, for the crossing counts.
+    let (lo, hi) = part
+        .iter()
+        .flatten()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, p| {
+            (a.0.min(p[1]), a.1.max(p[1]))
+        });
+    const BANDS: usize = 64;
+    let step = ((hi - lo) / BANDS as f64).max(1e-9);
+    let band = |y: f64| (((y - lo) / step).floor().max(0.0) as usize).min(BANDS - 1);
+    let mut bands: Vec<Vec<([f64; 2], [f64; 2])>> = vec![Vec::new(); BANDS];
+    for c in part {
+        for i in 0..c.len() {
+            let (a, b) = (c[i], c[(i + 1) % c.len()]);
+            for k in band(a[1].min(b[1]))..=band(a[1].max(b[1])) {
+                bands[k].push((a, b));
+            }
+        }
+    }
+    for c in supports.iter_mut() {
+        let n = c.len() as f64;
+        let [x, y] = c
+            .iter()
+            .fold([0.0; 2], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+        if y < lo || y > hi {
+            continue;
+        }
+        // Winding number of the part at (x, y): edges crossing the ray to the right.
+        let mut w = 0i32;
+        for &(a, b) in &bands[band(y)] {
+            if (a[1] <= y) != (b[1] <= y) {
+                let t = (y - a[1]) / (b[1] - a[1]);
+                if a[0] + t * (b[0] - a[0]) > x {
+                    w += if b[1] > a[1] { 1 } else { -1 };
+                }
+            }
+        }
+        if w < 0 {
+            c.reverse();
+        }
+    }
 }
 
 fn finish_loop(pts: &mut Contour, reverse: bool) {
