@@ -573,7 +573,8 @@ pub struct Layer {
     /// Predicted cure against the section (`slice --predict`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cure: Option<LayerCure>,
-    /// Area of the supports' and the pad's sections, mm² (jobs with supports).
+    /// The lit area the supports and the pad add to the part's section, mm² (jobs with
+    /// supports).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub support_area_mm2: Option<f64>,
 }

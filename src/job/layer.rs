@@ -88,7 +88,7 @@ pub(super) struct LayerInput<'a> {
 pub(super) struct LayerOutput {
     /// Lit area, mm².
     pub area_mm2: f64,
-    /// Area of its support contours, mm².
+    /// The lit area its supports add to the part's, mm².
     pub support_area_mm2: f64,
     /// The layer's analysis, possibly left for the layer below to complete.
     pub analysis: Analysed,
@@ -207,7 +207,10 @@ pub(super) fn layer_masks(
     analysis_s += clock.elapsed_s();
     Ok(LayerOutput {
         area_mm2,
-        support_area_mm2: layer.section.support_area_mm2,
+        support_area_mm2: layer
+            .section
+            .part_area_mm2
+            .map_or(0.0, |part| (area_mm2 - part).max(0.0)),
         analysis,
         analysis_s,
         masks,

@@ -26,6 +26,8 @@ use rayon::prelude::*;
 
 /// Layers cut and drawn at a time by the search.
 const WINDOW: usize = 64;
+/// What the pad and the base cones keep clear of the field's edge, mm.
+const EDGE_ROOM_MM: f64 = 1e-3;
 
 /// The pad: its outlines and thickness.
 #[derive(Debug, Clone, PartialEq)]
@@ -128,6 +130,16 @@ pub fn generate(
         shape,
         mesh: Mesh::from_soup(&[], "supports"),
     };
+    // A base cone by the field's edge is narrowed to fit (not below the pillar).
+    let (w, h) = (field.width_mm(), field.height_mm());
+    for i in 0..g.columns.len() {
+        let [x, y, _] = g.point_mm(&g.columns[i], &field);
+        let c = &mut g.columns[i];
+        if c.foot == Foot::Pad && c.rings.len() > 1 {
+            let room = x.min(w - x).min(y).min(h - y) - EDGE_ROOM_MM;
+            c.rings[0][1] = c.rings[0][1].min(room).max(c.rings[1][1]);
+        }
+    }
     let on_pad = spread.first_on_pad.then(|| masks[first].as_slice());
     g.pad = pad(&g, on_pad, field, s)?;
     let mut mesh = shapes::pad(&g.pad.bottom, &g.pad.top, shape.pad_top);
@@ -205,19 +217,25 @@ fn pad(
     if hull.is_empty() {
         return Err("nothing to stand on the pad".into());
     }
-    let margin = s.pad_margin_mm.max(px / 2.0);
     let slope = s.pad_wall_slope_deg.to_radians();
     let out = if s.pad_wall_slope_deg >= 90.0 {
         0.0
     } else {
         g.shape.pad_top / slope.tan()
     };
+    // By the field's edge the margin and the slope narrow to what fits.
+    let (w, h) = (field.width_mm(), field.height_mm());
+    let room = hull
+        .iter()
+        .map(|p| p[0].min(w - p[0]).min(p[1]).min(h - p[1]))
+        .fold(f64::INFINITY, f64::min)
+        - EDGE_ROOM_MM;
+    let top = s.pad_margin_mm.max(px / 2.0).min(room).max(EDGE_ROOM_MM);
     let pad = Pad {
         thickness_mm: g.shape.pad_top,
-        top: shapes::offset(&hull, margin),
-        bottom: shapes::offset(&hull, margin + out),
+        top: shapes::offset(&hull, top),
+        bottom: shapes::offset(&hull, (s.pad_margin_mm + out).min(room).max(top)),
     };
-    let (w, h) = (field.width_mm(), field.height_mm());
     let lo = pad
         .bottom
         .iter()
@@ -228,7 +246,7 @@ fn pad(
     let beyond = (-lo[0]).max(-lo[1]).max(hi[0] - w).max(hi[1] - h);
     if beyond > 1e-9 {
         return Err(format!(
-            "the supports' pad spans x {:.3}..{:.3}, y {:.3}..{:.3} mm, {:.3} mm beyond the build field 0..{w:.3} x 0..{h:.3} mm; move the part in or lower supports.pad_margin_mm",
+            "the supports' pad spans x {:.3}..{:.3}, y {:.3}..{:.3} mm, {:.3} mm beyond the build field 0..{w:.3} x 0..{h:.3} mm: the part's supports stand too close to its edge; move the part in (--position) or turn it",
             lo[0], hi[0], lo[1], hi[1], beyond
         ));
     }

@@ -29,6 +29,7 @@ mod run;
 mod run_cure;
 mod schema;
 mod slice;
+mod supports;
 mod synthetic;
 mod tamper;
 mod warnings;

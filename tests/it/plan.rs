@@ -429,7 +429,7 @@ fn islands_are_counted_where_a_region_starts_in_mid_air() {
     // its pixels put it within a pixel (0.063 mm) of that.
     assert_eq!(
         islands["message"],
-        "1 unsupported island on 1 layer (first at layer 5); largest per layer: layer 5 at x 37.99, y 23.90 mm (15.992 mm²): regions that do not rest on the layer below need supports; add supports under these regions, or orient the part so that they rest on the layer below"
+        "1 unsupported island on 1 layer (first at layer 5); largest per layer: layer 5 at x 37.99, y 23.90 mm (15.992 mm²): regions that do not rest on the layer below need supports; slice with --supports to hold them, or orient the part so that they rest on the layer below"
     );
 }
 

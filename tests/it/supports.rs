@@ -1,0 +1,474 @@
+//! `slice --supports`: parts that start in mid-air or overhang, made printable. Checked
+//! from what the job writes, independently of the slicer: every lit region of every mask
+//! rests on a lit pixel of the layer below, down to the platform; the support structure
+//! (`--supports-stl`, sliced alone) lies inside the part's sections only where a head or
+//! a foot reaches into it; the structure is closed; `dmdsl run` passes.
+
+use crate::common::*;
+use crate::schema::Schemas;
+use serde_json::Value;
+use std::path::Path;
+
+type Tris = Vec<[[f32; 3]; 3]>;
+
+/// A closed vertical cylinder (a regular `n`-gon) about (`cx`, `cy`).
+fn cylinder(cx: f32, cy: f32, r: f32, z0: f32, z1: f32, n: usize) -> Tris {
+    let p = |i: usize, z: f32| {
+        let a = std::f32::consts::TAU * (i % n) as f32 / n as f32;
+        [cx + r * a.cos(), cy + r * a.sin(), z]
+    };
+    let mut t = Vec::new();
+    for i in 0..n {
+        t.push([[cx, cy, z0], p(i + 1, z0), p(i, z0)]);
+        t.push([[cx, cy, z1], p(i, z1), p(i + 1, z1)]);
+        t.push([p(i, z0), p(i + 1, z0), p(i + 1, z1)]);
+        t.push([p(i, z0), p(i + 1, z1), p(i, z1)]);
+    }
+    t
+}
+
+/// A cup upside down: open at the bottom, a wall from radius `ri` to `ro`, `h` tall, its
+/// ceiling `t` thick.
+fn cup(c: [f32; 2], ro: f32, ri: f32, h: f32, t: f32, n: usize) -> Tris {
+    let p = |r: f32, i: usize, z: f32| {
+        let a = std::f32::consts::TAU * (i % n) as f32 / n as f32;
+        [c[0] + r * a.cos(), c[1] + r * a.sin(), z]
+    };
+    let mut v = Vec::new();
+    for i in 0..n {
+        let j = i + 1;
+        // Outer wall, top, inner wall (facing the axis), ceiling (facing down), rim.
+        v.push([p(ro, i, 0.0), p(ro, j, 0.0), p(ro, j, h)]);
+        v.push([p(ro, i, 0.0), p(ro, j, h), p(ro, i, h)]);
+        v.push([[c[0], c[1], h], p(ro, i, h), p(ro, j, h)]);
+        v.push([p(ri, i, 0.0), p(ri, j, h - t), p(ri, j, 0.0)]);
+        v.push([p(ri, i, 0.0), p(ri, i, h - t), p(ri, j, h - t)]);
+        v.push([[c[0], c[1], h - t], p(ri, j, h - t), p(ri, i, h - t)]);
+        v.push([p(ri, i, 0.0), p(ri, j, 0.0), p(ro, j, 0.0)]);
+        v.push([p(ri, i, 0.0), p(ro, j, 0.0), p(ro, i, 0.0)]);
+    }
+    v
+}
+
+/// A UV sphere of `n` segments about `c`.
+fn sphere(c: [f32; 3], r: f32, n: usize) -> Tris {
+    let p = |i: usize, j: usize| {
+        let (a, b) = (
+            std::f32::consts::TAU * (i % (2 * n)) as f32 / (2 * n) as f32,
+            std::f32::consts::PI * j as f32 / n as f32,
+        );
+        [
+            c[0] + r * b.sin() * a.cos(),
+            c[1] + r * b.sin() * a.sin(),
+            c[2] - r * b.cos(),
+        ]
+    };
+    let mut t = Vec::new();
+    for i in 0..2 * n {
+        for j in 0..n {
+            let (a, b, cc, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+            if j > 0 {
+                t.push([a, b, cc]);
+            }
+            if j + 1 < n {
+                t.push([a, cc, d]);
+            }
+        }
+    }
+    t
+}
+
+/// The test parts: an arch, a T, a sphere floating over a base, a cup upside down.
+fn test_parts(dir: &Path) -> Vec<(&'static str, std::path::PathBuf)> {
+    let mut arch = box_tris([0.0, 0.0, 0.0], [2.0, 3.0, 4.0]);
+    arch.extend(box_tris([8.0, 0.0, 0.0], [10.0, 3.0, 4.0]));
+    arch.extend(box_tris([0.0, 0.0, 4.0], [10.0, 3.0, 5.5]));
+    let mut tee = box_tris([4.0, 0.0, 0.0], [6.0, 3.0, 4.0]);
+    tee.extend(box_tris([0.0, 0.0, 4.0], [10.0, 3.0, 5.5]));
+    let mut floating = box_tris([0.0, 0.0, 0.0], [10.0, 10.0, 1.5]);
+    floating.extend(sphere([5.0, 5.0, 5.0], 2.5, 16));
+    let parts = [
+        ("arch", arch),
+        ("tee", tee),
+        ("floating", floating),
+        ("cup", cup([5.0, 5.0], 4.0, 3.0, 5.0, 1.0, 32)),
+    ];
+    parts
+        .into_iter()
+        .map(|(name, tris)| {
+            let p = dir.join(format!("{name}.stl"));
+            write_stl(&p, &tris);
+            (name, p)
+        })
+        .collect()
+}
+
+/// The lit pixels (value ≥ 128) of each layer of the one-projector bundle `job`.
+fn lit_layers(job: &Path) -> Vec<(u32, Vec<bool>)> {
+    let m: Value = serde_json::from_slice(&std::fs::read(job.join("job.json")).unwrap()).unwrap();
+    m["layers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| {
+            let (w, _, px) = read_gray(&job.join(l["masks"][0]["file"].as_str().unwrap()));
+            (w, px.iter().map(|&v| v >= 128).collect())
+        })
+        .collect()
+}
+
+/// The regions (4-connected lit pixels) of each layer that share no pixel with the layer
+/// below's lit pixels (layer 0 rests on the platform): (layer, pixels). A flood fill
+/// written here, apart from the slicer's run-based counter.
+fn resting_on_nothing(layers: &[(u32, Vec<bool>)]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for i in 1..layers.len() {
+        let (w, cur) = (&layers[i].0, &layers[i].1);
+        let below = &layers[i - 1].1;
+        let w = *w as usize;
+        let mut seen = vec![false; cur.len()];
+        for start in 0..cur.len() {
+            if !cur[start] || seen[start] {
+                continue;
+            }
+            let (mut stack, mut size, mut rests) = (vec![start], 0, false);
+            seen[start] = true;
+            while let Some(k) = stack.pop() {
+                size += 1;
+                rests |= below[k];
+                let (x, y) = (k % w, k / w);
+                let mut near = Vec::with_capacity(4);
+                if x > 0 {
+                    near.push(k - 1);
+                }
+                if x + 1 < w {
+                    near.push(k + 1);
+                }
+                if y > 0 {
+                    near.push(k - w);
+                }
+                if k + w < cur.len() {
+                    near.push(k + w);
+                }
+                for q in near {
+                    if cur[q] && !seen[q] {
+                        seen[q] = true;
+                        stack.push(q);
+                    }
+                }
+            }
+            if !rests {
+                out.push((i, size));
+            }
+        }
+    }
+    out
+}
+
+/// Slices `args` to `out` in `dir` (exit 0 expected); the manifest.
+fn slice(dir: &Path, args: &[&str], out: &str) -> Value {
+    let mut a = vec!["slice"];
+    a.extend_from_slice(args);
+    a.extend_from_slice(&["-o", out]);
+    let o = run_in(dir, &a);
+    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    serde_json::from_slice(&std::fs::read(dir.join(out).join("job.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn test_parts_print_from_the_platform_up_on_every_process() {
+    let dir = tempdir("supports-parts");
+    let schemas = Schemas::load();
+    // Coverage masks, 0.1 mm layers (short jobs).
+    let exact = [
+        "--compensation",
+        "off",
+        "--cure-correction",
+        "off",
+        "--layer-height",
+        "0.1",
+    ];
+    for (name, stl) in test_parts(&dir) {
+        let stl = stl.to_str().unwrap();
+        let mut bare = vec![stl];
+        bare.extend(exact);
+        slice(&dir, &bare, "bare.dmdjob");
+        // The sphere starts in mid-air; the arch's, the T's and the cup's overhangs hang
+        // from what holds them.
+        let bare_free = resting_on_nothing(&lit_layers(&dir.join("bare.dmdjob")));
+        assert_eq!(
+            !bare_free.is_empty(),
+            name == "floating",
+            "{name}: {bare_free:?}"
+        );
+        std::fs::remove_dir_all(dir.join("bare.dmdjob")).unwrap();
+        for profile in ["xu2010-topdown", "bottom-up", "hybrid-bottomup"] {
+            let out = format!("{name}-{profile}.dmdjob");
+            let mut args = vec![stl, "--supports", "-p", profile];
+            args.extend(exact);
+            let job = slice(&dir, &args, &out);
+            schemas.assert_valid("job.schema.json", &job);
+            let points = job["supports"]["points"].as_array().unwrap();
+            assert!(!points.is_empty(), "{name} {profile}");
+            let free = resting_on_nothing(&lit_layers(&dir.join(&out)));
+            assert!(
+                free.is_empty(),
+                "{name} on {profile}: regions on nothing {free:?}"
+            );
+            let w = serde_json::json!({"warnings": job["warnings"]});
+            assert!(
+                warnings_of(&w, "plan.unsupported-islands").is_empty(),
+                "{name} {profile}"
+            );
+            let r = run_in(&dir, &["run", &out]);
+            assert!(
+                r.status.success(),
+                "run {out}: {}{}",
+                stdout(&r),
+                stderr(&r)
+            );
+            std::fs::remove_dir_all(dir.join(&out)).unwrap();
+        }
+        // The job as users make it (compensation, cure correction) runs clean too.
+        slice(&dir, &[stl, "--supports"], "default.dmdjob");
+        let r = run_in(&dir, &["run", "default.dmdjob"]);
+        assert!(
+            r.status.success(),
+            "run {name}: {}{}",
+            stdout(&r),
+            stderr(&r)
+        );
+        std::fs::remove_dir_all(dir.join("default.dmdjob")).unwrap();
+    }
+}
+
+/// Whether pixel (`col`, `row`) at height `z` lies where a support of `job` reaches into
+/// the part: within a head (the cone below its point and the penetration above it) or a
+/// foot standing on the part, with a pixel and a layer of slack.
+fn in_head_or_foot(job: &Value, col: usize, row: usize, z: f64, px: f64, field_h: f64) -> bool {
+    let s = &job["supports"];
+    let (hl, pen) = (
+        s["head_length_mm"].as_f64().unwrap(),
+        s["head_penetration_mm"].as_f64().unwrap(),
+    );
+    let (x, y) = ((col as f64 + 0.5) * px, field_h - (row as f64 + 0.5) * px);
+    s["points"].as_array().unwrap().iter().any(|p| {
+        let at: Vec<f64> = p["at_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let r = p["pillar_diameter_mm"].as_f64().unwrap() / 2.0 + 3.0 * px;
+        let near = (x - at[0]).hypot(y - at[1]) <= r;
+        let head = z >= at[2] - hl - 0.1 && z <= at[2] + pen + 0.1;
+        let foot_z = p["foot_z_mm"].as_f64().unwrap();
+        let foot = p["foot"] == "part" && z >= foot_z - 0.1 && z <= foot_z + hl + 0.1;
+        near && (head || foot)
+    })
+}
+
+#[test]
+fn supports_reach_into_the_part_only_at_heads_and_feet_and_form_closed_shells() {
+    let dir = tempdir("supports-inside");
+    let parts = test_parts(&dir);
+    let exact = ["--compensation", "off", "--cure-correction", "off"];
+    for (name, stl) in parts
+        .iter()
+        .filter(|(n, _)| *n == "floating" || *n == "cup")
+    {
+        let stl = stl.to_str().unwrap();
+        let mut args = vec![stl, "--supports", "--supports-stl", "s.stl"];
+        args.extend(exact);
+        let job = slice(&dir, &args, "with.dmdjob");
+        let mut bare = vec![stl];
+        bare.extend(exact);
+        slice(&dir, &bare, "bare.dmdjob");
+        let mesh = dmdsl::mesh::load(&dir.join("s.stl")).unwrap();
+        let points = job["supports"]["points"].as_array().unwrap().len();
+        assert!(mesh.report.closed_manifold, "{name}: {:?}", mesh.report);
+        assert_eq!(
+            mesh.report.shells as usize,
+            points + 1,
+            "{name}: a shell per support and the pad"
+        );
+        let vol = job["supports"]["volume_mm3"].as_f64().unwrap();
+        assert!((mesh.report.volume_mm3 - vol).abs() < 1e-3 * vol, "{name}");
+        // The structure alone, where the job put it.
+        let mut alone = vec!["s.stl", "--keep-position"];
+        alone.extend(exact);
+        slice(&dir, &alone, "alone.dmdjob");
+        let (with, part, sup) = (
+            lit_layers(&dir.join("with.dmdjob")),
+            lit_layers(&dir.join("bare.dmdjob")),
+            lit_layers(&dir.join("alone.dmdjob")),
+        );
+        let h = job["settings"]["layer_height_mm"].as_f64().unwrap();
+        let lift = (job["supports"]["lift_mm"].as_f64().unwrap() / h).round() as usize;
+        assert_eq!(with.len(), part.len() + lift, "{name}");
+        let (px, field_h) = (65.0 / 1024.0, 48.75);
+        let mut inside = 0;
+        for (i, (w, lit)) in with.iter().enumerate() {
+            let part_lit = i.checked_sub(lift).map(|k| &part[k].1);
+            let sup_lit = sup.get(i).map(|s| &s.1);
+            for k in 0..lit.len() {
+                let p = part_lit.is_some_and(|p| p[k]);
+                let s = sup_lit.is_some_and(|s| s[k]);
+                // The job lights the part and the supports (and, where their edges meet
+                // in a pixel, what their coverages light together).
+                let (w, col) = (*w as usize, k % *w as usize);
+                let near = |m: Option<&Vec<bool>>| {
+                    m.is_some_and(|m| {
+                        (col > 0 && m[k - 1])
+                            || (col + 1 < w && m[k + 1])
+                            || (k >= w && m[k - w])
+                            || (k + w < m.len() && m[k + w])
+                    })
+                };
+                assert!(!(p || s) || lit[k], "{name} layer {i} pixel {k}");
+                let edge = near(part_lit) || near(sup_lit);
+                assert!(!lit[k] || p || s || edge, "{name} layer {i} pixel {k}");
+                if p && s {
+                    let row = k / w;
+                    if !in_head_or_foot(&job, col, row, (i as f64 + 0.5) * h, px, field_h) {
+                        inside += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(
+            inside, 0,
+            "{name}: support pixels inside the part away from heads and feet"
+        );
+        for d in ["with.dmdjob", "bare.dmdjob", "alone.dmdjob"] {
+            std::fs::remove_dir_all(dir.join(d)).unwrap();
+        }
+    }
+}
+
+#[test]
+fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
+    let dir = tempdir("supports-bunny");
+    let bunny = fixture("bunny00.stl");
+    let o = run_in(
+        &dir,
+        &["slice", bunny.to_str().unwrap(), "--json", "-o", "b.dmdjob"],
+    );
+    let bare: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = &warnings_of(&bare, "plan.unsupported-islands")[0];
+    assert!(w["message"].as_str().unwrap().contains("--supports"), "{w}");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            bunny.to_str().unwrap(),
+            "--supports",
+            "--json",
+            "-o",
+            "s.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    Schemas::load().assert_valid("slice-summary.schema.json", &v);
+    assert!(
+        warnings_of(&v, "plan.unsupported-islands").is_empty(),
+        "{v}"
+    );
+    let s = &v["supports"];
+    assert!(
+        s["points"].as_u64().unwrap() > 20 && s["volume_mm3"].as_f64().unwrap() > 0.0,
+        "{s}"
+    );
+    let r = run_in(&dir, &["run", "s.dmdjob"]);
+    assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
+    // Each layer records its supports' area apart from the part's.
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("s.dmdjob/job.json")).unwrap()).unwrap();
+    let layers = job["layers"].as_array().unwrap();
+    assert!(layers[0]["support_area_mm2"].as_f64().unwrap() > 0.0);
+    assert!(layers
+        .iter()
+        .all(|l| l["support_area_mm2"].as_f64().unwrap() <= l["area_mm2"].as_f64().unwrap()));
+    // A plate of copies: one pad, supports for each copy.
+    let parts = test_parts(&dir);
+    let floating = parts[2].1.to_str().unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            floating,
+            "--copies",
+            "4",
+            "--supports",
+            "-o",
+            "p.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("p.dmdjob/job.json")).unwrap()).unwrap();
+    assert!(
+        job["supports"]["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|p| p["island"] == true)
+            .count()
+            >= 4
+    );
+    let r = run_in(&dir, &["run", "p.dmdjob"]);
+    assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
+}
+
+#[test]
+fn bad_support_settings_and_a_pad_off_the_field_are_one_line_errors() {
+    let dir = tempdir("supports-errors");
+    let cube = fixture("cube10.stl");
+    let cube = cube.to_str().unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            cube,
+            "--supports",
+            "--set",
+            "supports.spacing_mm=0",
+            "-o",
+            "x.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(
+        e.contains("supports.spacing_mm = 0.0 is outside 0.2..100"),
+        "{e}"
+    );
+    // --supports-stl without --supports.
+    let o = run_in(
+        &dir,
+        &["slice", cube, "--supports-stl", "s.stl", "-o", "x.dmdjob"],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    // A T in the field's corner: the pillars under its bar would stand off the field.
+    let tee = test_parts(&dir)[1].1.clone();
+    let tee = tee.to_str().unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            tee,
+            "--supports",
+            "--keep-position",
+            "--supports-stl",
+            "s.stl",
+            "-o",
+            "x.dmdjob",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert!(e.contains("beyond the build field"), "{e}");
+    assert!(!dir.join("x.dmdjob").exists() && !dir.join("s.stl").exists());
+}
