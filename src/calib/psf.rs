@@ -347,7 +347,7 @@ fn predict(model: &CureModel, sigma: f64, kind: Drawn, w: u32, layers: u32) -> f
 }
 
 /// Fits σ per projector to the sheet's printed widths (rows with `printed_mm` empty are
-/// skipped) under `model` (its σ is not used): least squares in mm, a scan of 49
+/// skipped) under `model` (its σ is not used): least squares in mm, a scan of 33
 /// log-spaced σ over [`SIGMA_BRACKET`] and golden-section search between the best one's
 /// neighbours. Fewer than 3 measured rows of a projector, or a minimum at the bracket's
 /// edge, is an error.
@@ -406,7 +406,7 @@ fn fit_one(s: &Sheet, model: &CureModel, name: String, rows: &[Row]) -> Result<P
         sum
     };
     let [lo, hi] = SIGMA_BRACKET;
-    const N: usize = 49;
+    const N: usize = 33;
     let grid: Vec<f64> = (0..N)
         .map(|k| lo * (hi / lo).powf(k as f64 / (N - 1) as f64))
         .collect();
