@@ -61,9 +61,13 @@ pub struct PsfPattern {
 /// A rectangle of field pixels: columns `[0] .. [2]`, rows `[1] .. [3]` (ends exclusive).
 type Rect = [i64; 4];
 
-/// One cluster's lit rectangles and features (kind, axis, width, centre), in pixels from
-/// the cluster's top-left corner, and its size.
-fn cluster() -> (Vec<Rect>, Vec<(Drawn, char, u32, [f64; 2])>, [i64; 2]) {
+/// A feature of a cluster: kind, axis, drawn width (px), centre (px from the cluster's
+/// top-left corner).
+type ClusterFeature = (Drawn, char, u32, [f64; 2]);
+
+/// One cluster's lit rectangles and features, in pixels from the cluster's top-left
+/// corner, and its size.
+fn cluster() -> (Vec<Rect>, Vec<ClusterFeature>, [i64; 2]) {
     let (s, b, l) = (SPACE_PX as i64, BLOCK_PX as i64, LENGTH_PX as i64);
     let (mut rects, mut feats) = (Vec::new(), Vec::new());
     // Along x: lines (top), gaps between blocks (below them); along y the same turned,
@@ -310,7 +314,7 @@ fn measured_rows(s: &Sheet) -> Result<Vec<(String, Vec<Row>)>> {
         };
         let whole = |col: &str| -> Result<u32> {
             match s.num(i, col, true)? {
-                Some(v) if v >= 1.0 && v <= 10_000.0 && v.fract() == 0.0 => Ok(v as u32),
+                Some(v) if (1.0..=10_000.0).contains(&v) && v.fract() == 0.0 => Ok(v as u32),
                 _ => Err(bad(col, format!("{:?} is not a whole number of 1 or more", s.text(i, col).0))),
             }
         };
