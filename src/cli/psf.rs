@@ -15,6 +15,12 @@ pub(crate) fn psf_job(output: &Path, profile: &str, quiet: bool) -> anyhow::Resu
     // Every layer at the layer exposure, so the lines' and gaps' layers are exposed alike
     // in every form the job is written in (SL1 fades its first layers' exposure).
     p.exposure.bottom_s = p.exposure.layer_s;
+    // A continuous slice is exposed for its sweep: make the sweep last `layer_s` too.
+    let (layer_mm, layer_s) = (p.slicing.layer_height_mm.get(), p.exposure.layer_s.get());
+    if let Some(h) = &mut p.hybrid {
+        h.continuous_speed_mm_s =
+            crate::units::Positive::new(layer_mm / layer_s).expect("a positive speed");
+    }
     let px = p.field().pixel_mm;
     let mut o = crate::job::SliceOptions::new("psf.stl", output, p);
     o.input_bytes = Some(&pat.stl);

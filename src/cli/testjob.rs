@@ -9,11 +9,9 @@ use std::path::PathBuf;
 /// After `dmdsl testjob --help`.
 pub(crate) const TESTJOB_HELP: &str = "Examples:
   dmdsl testjob working-curve -o wc.dmdjob               # 12 windows; wc.csv beside the job
-  dmdsl testjob working-curve -o wc.sl1 -p bottom-up --windows 10 --exposure 2..30
   dmdsl calibrate resin wc.csv -o resin.toml             # after filling in cured_mm
   dmdsl testjob accuracy -o acc.dmdjob -p bottom-up      # dimensions; acc.csv beside it
-  dmdsl testjob psf -o psf.dmdjob                        # the blur: lines and gaps 1-8 px
-  dmdsl calibrate psf psf.csv -o psf.toml                # after filling in printed_mm
+  dmdsl testjob psf -o psf.dmdjob                        # the blur; psf.csv beside it
 
 Exit codes:
   0    the job and its sheet were written

@@ -168,6 +168,28 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
     ] {
         assert!(sheet.contains(want), "{want}");
     }
+    // Every layer is exposed alike on every profile (the model's assumption): bottom
+    // layers and a hybrid profile's continuous sweeps included.
+    for (p, job) in [
+        ("xu2010-topdown", "psf.dmdjob"),
+        ("bottom-up", "b.dmdjob"),
+        ("hybrid-bottomup", "h.dmdjob"),
+    ] {
+        if job != "psf.dmdjob" {
+            ok(&run_in(&dir, &["testjob", "psf", "-o", job, "-p", p]));
+            ok(&run_in(&dir, &["run", job]));
+        }
+        let j: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join(job).join("job.json")).unwrap())
+                .unwrap();
+        let layers = j["layers"].as_array().unwrap();
+        assert_eq!(layers.len(), 10, "{p}");
+        let t = |l: &serde_json::Value| l["exposure_s"].as_f64().unwrap();
+        assert!(
+            layers.iter().all(|l| t(l) == t(&layers[0])),
+            "{p}: {layers:?}"
+        );
+    }
     let r = resin(&dir, "xu2010-topdown");
     let chosen = 0.8;
     assert_eq!(fill(&dir.join("psf.csv"), r, &|_| chosen, 0.004, 3), 160);
