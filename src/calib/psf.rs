@@ -556,3 +556,48 @@ impl PsfFit {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_place_has_each_width_of_each_kind_on_both_axes() {
+        let p = Profile::resolve("xu2010-topdown").unwrap();
+        let pat = pattern(&p).unwrap();
+        assert_eq!(pat.features.len(), 5 * 2 * 2 * WIDTHS_PX.len());
+        for place in ["centre", "top-left", "top-right", "bottom-left", "bottom-right"] {
+            for kind in [Drawn::Line, Drawn::Gap] {
+                for axis in ['x', 'y'] {
+                    let mut w: Vec<u32> = pat
+                        .features
+                        .iter()
+                        .filter(|f| f.place == place && f.kind == kind && f.axis == axis)
+                        .map(|f| f.drawn_px)
+                        .collect();
+                    w.sort_unstable();
+                    assert_eq!(w, WIDTHS_PX, "{place} {kind:?} {axis}");
+                }
+            }
+        }
+        // Inside the calibrated area (0..65 x 0..45 mm), 2 mm in.
+        for f in &pat.features {
+            let [x, y] = f.centre_mm;
+            assert!(x > 2.0 && x < 63.0 && y > 2.0 && y < 43.0, "{f:?}");
+        }
+    }
+
+    #[test]
+    fn a_field_without_room_for_five_clusters_is_refused() {
+        let mut p = Profile::resolve("bottom-up").unwrap();
+        p.projector[0].width_px = 500;
+        let e = pattern(&p).unwrap_err();
+        assert!(e.contains("projector p0") && e.contains("too small"), "{e}");
+    }
+
+    #[test]
+    fn golden_section_finds_the_minimum() {
+        let x = golden(&|x: f64| (x - 0.83).powi(2) + 1.0, 0.5, 1.5, 1e-7);
+        assert!((x - 0.83).abs() < 1e-6, "{x}");
+    }
+}

@@ -190,6 +190,11 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
             "{p}: {layers:?}"
         );
     }
+    drawn_as_the_sheet_says(
+        &dir.join("psf.dmdjob/masks/00005.png"),
+        &sheet,
+        0.0634765625,
+    );
     let r = resin(&dir, "xu2010-topdown");
     let chosen = 0.8;
     assert_eq!(fill(&dir.join("psf.csv"), r, &|_| chosen, 0.004, 3), 160);
@@ -229,6 +234,29 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
         .unwrap()
         .starts_with("psf.csv sha256:"));
     assert_eq!(c["sources"]["dp_mm"], "assumed");
+}
+
+/// Every feature of `sheet` is drawn in the layer's mask `png` as wide as the sheet says:
+/// the run of lit (line) or dark (gap) pixels through its centre, along its axis, is
+/// `drawn_px` long (an edge off the pixel grid would light one more pixel partly).
+fn drawn_as_the_sheet_says(png: &Path, sheet: &str, px: f64) {
+    let (w, h, m) = read_gray(png);
+    let at = |c: i64, r: i64| m[(r * w as i64 + c) as usize];
+    for l in sheet.lines().skip(1) {
+        let c: Vec<&str> = l.split(',').collect();
+        let (x, y): (f64, f64) = (c[4].parse().unwrap(), c[5].parse().unwrap());
+        let (col, row) = ((x / px).floor() as i64, (h as f64 - y / px).floor() as i64);
+        let lit = c[1] == "line";
+        let step = if c[2] == "x" { [1, 0] } else { [0, 1] };
+        let run = |dir: i64| {
+            (1..)
+                .take_while(|&k| (at(col + dir * k * step[0], row + dir * k * step[1]) > 0) == lit)
+                .count()
+        };
+        assert_eq!((at(col, row) > 0), lit, "{l}");
+        let n = 1 + run(1) + run(-1);
+        assert_eq!(n.to_string(), c[7], "{l}");
+    }
 }
 
 #[test]
