@@ -1,6 +1,8 @@
 //! Calibration test jobs and their fits (docs/CALIBRATION.md): the working-curve windowpane
 //! ([`working_curve`]), the measurement sheets the user fills in ([`Sheet`]) and the
-//! least-squares fit of Jacobs' working curve Cd = Dp·ln(E/Ec) ([`fit_resin`]).
+//! least-squares fit of Jacobs' working curve Cd = Dp·ln(E/Ec) ([`fit_resin`]), the
+//! accuracy part ([`accuracy_part`], [`accuracy`]) and the blur job with the fit of the
+//! point-spread function's σ ([`psf`]).
 
 use crate::error::{Error, Result};
 use crate::optics::Compensator;
@@ -10,6 +12,8 @@ use crate::profile::Profile;
 use crate::raster::Mask;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+
+pub mod psf;
 
 /// One window of the working-curve job.
 #[derive(Debug, Clone, PartialEq)]

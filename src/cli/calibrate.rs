@@ -69,6 +69,25 @@ enum Kind {
         #[arg(long, value_name = "MM", default_value_t = 0.1)]
         tolerance: f64,
     },
+    /// Fit the point-spread function's σ (psf_sigma_px, per projector) to the filled-in
+    /// sheet of `dmdsl testjob psf` under the cure model; writes σ (TOML, for `slice
+    /// --psf`) and the plot of printed against drawn width.
+    Psf {
+        /// The sheet (feature, kind, projector, drawn_px, layers, printed_mm; empty where
+        /// not measured).
+        input: PathBuf,
+        /// Blur calibration file to write (TOML); the plot goes beside it as .png.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The profile the job was printed with (its resin, layer and exposure make the
+        /// cure model).
+        #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+        profile: String,
+        /// Resin calibration file from `dmdsl calibrate resin`, replacing the profile's Dp
+        /// (and Ec).
+        #[arg(long, value_name = "FILE")]
+        resin: Option<PathBuf>,
+    },
 }
 
 /// Runs `dmdsl calibrate`.
@@ -80,6 +99,12 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         Some(Kind::Accuracy { input, tolerance }) => {
             return super::testjob::calibrate_accuracy(&input, tolerance)
         }
+        Some(Kind::Psf {
+            input,
+            output,
+            profile,
+            resin,
+        }) => return super::psf::calibrate_psf(&input, &output, &profile, resin.as_deref(), quiet),
         None => {}
     }
     let (input, output) = (a.input.expect("required"), a.output.expect("required"));

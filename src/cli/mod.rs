@@ -11,6 +11,7 @@ mod interrupt;
 mod man;
 mod process;
 mod profile;
+mod psf;
 mod run;
 mod slice;
 mod testjob;

@@ -69,6 +69,10 @@ struct CureArgs {
     /// absolute doses) replace the profile's.
     #[arg(long, value_name = "FILE")]
     resin: Option<PathBuf>,
+    /// Blur calibration file from `dmdsl calibrate psf`: its psf_sigma_px replace the
+    /// named projectors'.
+    #[arg(long, value_name = "FILE")]
+    psf: Option<PathBuf>,
 }
 
 /// Light compensation mode.
@@ -302,6 +306,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     crate::optics::apply_calibration_args(&mut profile, &a.calibration)?;
     if let Some(r) = &a.cure.resin {
         crate::calib::ResinFit::apply_file(r, &mut profile)?;
+    }
+    if let Some(f) = &a.cure.psf {
+        crate::calib::psf::PsfFit::apply_file(f, &mut profile)?;
     }
     if let Some(path) = &a.machine {
         super::export::fit_profile(&mut profile, path)?;

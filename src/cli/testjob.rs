@@ -9,9 +9,9 @@ use std::path::PathBuf;
 /// After `dmdsl testjob --help`.
 pub(crate) const TESTJOB_HELP: &str = "Examples:
   dmdsl testjob working-curve -o wc.dmdjob               # 12 windows; wc.csv beside the job
-  dmdsl testjob working-curve -o wc.sl1 -p bottom-up --windows 10 --exposure 2..30
   dmdsl calibrate resin wc.csv -o resin.toml             # after filling in cured_mm
   dmdsl testjob accuracy -o acc.dmdjob -p bottom-up      # dimensions; acc.csv beside it
+  dmdsl testjob psf -o psf.dmdjob                        # the blur; psf.csv beside it
 
 Exit codes:
   0    the job and its sheet were written
@@ -26,6 +26,18 @@ pub(crate) enum TestjobCmd {
     /// 5 mm, in both halves of the field, sliced with the profile's settings; the sheet
     /// <job stem>.csv lists each measurement to make.
     Accuracy {
+        /// Job to write (its form from the name, as `slice -o`); the sheet goes beside it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Machine profile.
+        #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+        profile: String,
+    },
+    /// The blur: lines and gaps 1 to 8 px wide, along x and along y, at the centre and
+    /// the four corners of each projector's (calibrated) area, a few layers thick on base
+    /// plates, drawn exactly (no cure correction); the sheet <job stem>.csv lists each
+    /// width to measure.
+    Psf {
         /// Job to write (its form from the name, as `slice -o`); the sheet goes beside it.
         #[arg(short, long)]
         output: PathBuf,
@@ -61,6 +73,9 @@ pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
     let a = match cmd {
         TestjobCmd::WorkingCurve(a) => a,
         TestjobCmd::Accuracy { output, profile } => return accuracy_job(&output, &profile, quiet),
+        TestjobCmd::Psf { output, profile } => {
+            return super::psf::psf_job(&output, &profile, quiet)
+        }
     };
     let mut p = Profile::resolve(&a.profile)?;
     crate::optics::apply_calibration_args(&mut p, a.calibration.as_slice())?;

@@ -12,7 +12,8 @@
 //!   edge's move from the layer's dose and the layers above (`shift.rs`), the XY
 //!   correction of the coverage (`correct.rs`), narrow features drawn back and wider
 //!   until they cure (`widen.rs`), the flat features the Z correction drops
-//!   (`held_back.rs`), pictures (`plots.rs`).
+//!   (`held_back.rs`), pictures (`plots.rs`); the cured width of a straight line or
+//!   gap (`width.rs`, what `dmdsl calibrate psf` fits σ with).
 //!
 //! Like every algorithm stage it takes inputs and returns values; `job` and `exec` read
 //! and record them.
@@ -31,6 +32,7 @@ pub mod report;
 pub mod segments;
 pub mod shift;
 pub mod widen;
+pub mod width;
 
 pub use check::run_layers;
 pub use correct::{correct_coverage, edge_shift_px};

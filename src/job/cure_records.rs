@@ -191,8 +191,14 @@ impl CureJob {
         };
         let r = &profile.resin;
         let of = |s: &Option<String>| s.clone().unwrap_or_else(|| "assumed".into());
+        // σ is the largest of the projectors' (`CureModel::from_profile`): its source.
+        let psf = profile
+            .projector
+            .iter()
+            .filter(|p| p.psf_sigma_px.map(|s| s.get()) == Some(model.sigma_px))
+            .find_map(|p| p.psf_source.clone());
         let sources = [
-            ("psf_sigma_px", "assumed".into()),
+            ("psf_sigma_px", of(&psf)),
             ("dp_mm", of(&r.dp_source)),
             ("ec_mj_cm2", of(&r.ec_source)),
         ];

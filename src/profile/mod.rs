@@ -128,6 +128,10 @@ pub struct Projector {
     /// (profiles written before the key existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub psf_sigma_px: Option<Positive>,
+    /// The measurement sheet `psf_sigma_px` was fitted to (`dmdsl calibrate psf`: its name
+    /// and SHA-256); without it σ is assumed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psf_source: Option<String>,
     /// The light engine's wavelength, nm, when the machine has a choice (the SLA
     /// control-file export writes it; without it, the schema's default 365 nm).
     #[serde(default, skip_serializing_if = "Option::is_none")]
