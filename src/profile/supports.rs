@@ -5,8 +5,8 @@
 use serde::{Deserialize, Serialize};
 
 /// Support generation settings. The defaults are PrusaSlicer's SLA defaults where it has
-/// the same setting (head front diameter 0.4 mm, penetration 0.2 mm, head width 1 mm,
-/// pillar 1 mm, elevation 5 mm, pad 1 mm).
+/// the same setting (head front diameter 0.4 mm, head width 1 mm, pillar 1 mm, elevation
+/// 5 mm, pad 1 mm), but for the penetration: 0 (docs/SUPPORTS.md says why).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Supports {
@@ -14,7 +14,8 @@ pub struct Supports {
     pub enabled: bool,
     /// Diameter of a head where it touches the part, mm.
     pub head_front_diameter_mm: f64,
-    /// How far a head reaches into the part, mm.
+    /// How far a head reaches into the part (and a foot into the layer it stands on, at
+    /// most ¾ of it), mm.
     pub head_penetration_mm: f64,
     /// Length of a head's cone from the contact to the pillar's diameter, mm.
     pub head_length_mm: f64,
@@ -49,7 +50,7 @@ impl Default for Supports {
         Supports {
             enabled: false,
             head_front_diameter_mm: 0.4,
-            head_penetration_mm: 0.2,
+            head_penetration_mm: 0.0,
             head_length_mm: 1.0,
             pillar_diameter_mm: 1.0,
             pillar_max_length_mm: 15.0,

@@ -83,9 +83,9 @@ pub fn column(p: Point, masks: &[Vec<Run>], first: usize, s: &Shape) -> Column {
     let r = s.pillar_r * (pillar / s.max_len).sqrt().max(1.0);
     // Both cones shortened alike when the gap is shorter than the two.
     let f = (avail / (foot_len + s.head_len)).min(1.0);
-    // A foot on the part reaches into the layer it stands on, and no lower: what reaches
-    // below the part's top there might hang in the air.
-    let into = z0 - 0.75 * s.layer_mm;
+    // A foot on the part reaches into the layer it stands on by the penetration, and no
+    // lower: what reached below the part's top there might hang in the air.
+    let into = z0 - s.penetration.min(0.75 * s.layer_mm);
     let mut rings = match foot {
         Foot::Pad if s.base_len > 0.0 => vec![[z0, s.base_r.max(r)], [z0 + foot_len * f, r]],
         Foot::Pad => vec![[z0, r]],

@@ -130,15 +130,22 @@ pub fn generate(
         shape,
         mesh: Mesh::from_soup(&[], "supports"),
     };
-    // A base cone by the field's edge is narrowed to fit (not below the pillar).
+    // A base cone is narrowed to fit the field and to keep clear of its neighbours' (so
+    // that no two shells overlap there), not below its pillar.
     let (w, h) = (field.width_mm(), field.height_mm());
-    for i in 0..g.columns.len() {
-        let [x, y, _] = g.point_mm(&g.columns[i], &field);
+    let on_pad: Vec<(usize, [f64; 3])> = (0..g.columns.len())
+        .filter(|&i| g.columns[i].foot == Foot::Pad && g.columns[i].rings.len() > 1)
+        .map(|i| (i, g.point_mm(&g.columns[i], &field)))
+        .collect();
+    for &(i, [x, y, _]) in &on_pad {
+        let apart = on_pad
+            .iter()
+            .filter(|&&(j, _)| j != i)
+            .map(|(_, q)| (q[0] - x).hypot(q[1] - y))
+            .fold(f64::INFINITY, f64::min);
+        let room = x.min(w - x).min(y).min(h - y) - EDGE_ROOM_MM;
         let c = &mut g.columns[i];
-        if c.foot == Foot::Pad && c.rings.len() > 1 {
-            let room = x.min(w - x).min(y).min(h - y) - EDGE_ROOM_MM;
-            c.rings[0][1] = c.rings[0][1].min(room).max(c.rings[1][1]);
-        }
+        c.rings[0][1] = c.rings[0][1].min(room).min(apart / 2.0).max(c.rings[1][1]);
     }
     let on_pad = spread.first_on_pad.then(|| masks[first].as_slice());
     g.pad = pad(&g, on_pad, field, s)?;
