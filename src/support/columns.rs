@@ -95,8 +95,11 @@ pub fn column(p: Point, masks: &[Vec<Run>], first: usize, s: &Shape) -> Column {
             [z0 + foot_len * f, r],
         ],
         Foot::Part(_, false) => {
+            // Beside the axis the part is a pixel or so outside the pillar: the widened end
+            // reaches into that layer (¾ of it) to share its pixels, whatever the
+            // penetration.
             let wide = r + 1.5 * s.pixel_mm;
-            vec![[into, wide], [z0 + foot_len * f, r]]
+            vec![[z0 - 0.75 * s.layer_mm, wide], [z0 + foot_len * f, r]]
         }
     };
     rings.extend([
