@@ -38,7 +38,9 @@ pub(super) struct Accum<'a> {
 impl<'a> Accum<'a> {
     /// The accumulation buffer for field rows `r0..r1` and columns `c0..=c1` in `cells` and
     /// `touched` (all zero; the scan leaves them so), grown when the box needs more than
-    /// they hold: their size follows the largest box drawn, not the field.
+    /// they hold, to at least twice their size (a part whose sections grow layer after
+    /// layer grows them a few times, not at every layer): their size follows the largest
+    /// box drawn, not the field.
     pub(super) fn of_box(
         cells: &'a mut Vec<f32>,
         touched: &'a mut Vec<u64>,
@@ -51,10 +53,10 @@ impl<'a> Accum<'a> {
         let words = stride.div_ceil(BLOCK).div_ceil(64);
         let rows = r1.saturating_sub(r0);
         if cells.len() < stride * rows {
-            *cells = zeroed_by_writes(stride * rows);
+            *cells = zeroed_by_writes((stride * rows).max(2 * cells.len()));
         }
         if touched.len() < words * rows {
-            *touched = zeroed_by_writes(words * rows);
+            *touched = zeroed_by_writes((words * rows).max(2 * touched.len()));
         }
         Accum {
             cells,
