@@ -21,7 +21,7 @@ mod accum;
 mod nonzero;
 mod scan;
 
-use accum::{line, zeroed_by_writes, Accum, BLOCK};
+use accum::{line, Accum};
 pub use scan::map_words;
 use scan::{scan_runs, Mapped, Plain};
 
@@ -199,6 +199,13 @@ impl Scratch {
         Drawn(self.lit, self.lit_sum, runs)
     }
 
+    /// Cells of the accumulation buffer held (its size follows the largest section box
+    /// drawn, at most twice its cells, not the field).
+    #[cfg(test)]
+    pub(crate) fn accum_cells(&self) -> usize {
+        self.acc.len()
+    }
+
     fn zeroed(&mut self, w: usize, h: usize) -> Vec<u8> {
         match self.spare.pop() {
             Some((mut v, PixelBox { r0, r1, c0, c1 })) if v.len() == w * h => {
@@ -279,7 +286,6 @@ impl Rasterizer {
     ) -> Mask {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
-        let stride = w + 2;
         let mut out = Mask {
             width: w as u32,
             height: h as u32,
@@ -291,21 +297,9 @@ impl Rasterizer {
         if contours.is_empty() {
             return out;
         }
-        let words = stride.div_ceil(BLOCK).div_ceil(64);
-        if scratch.acc.len() != stride * h {
-            scratch.acc = zeroed_by_writes(stride * h);
-            scratch.touched = zeroed_by_writes(words * h);
-        }
-        let acc = &mut Accum {
-            cells: &mut scratch.acc,
-            touched: &mut scratch.touched,
-            stride,
-            words,
-        };
-        let [r0, r1, c0, c1] = self.accumulate(contours, acc);
-        let r1 = r1.min(h);
-        let c1 = c1.min(w + 1);
-        debug_assert!(c1 < stride);
+        let [r0, r1, c0, c1] = self.bounds(contours);
+        let acc = &mut Accum::of_box(&mut scratch.acc, &mut scratch.touched, [r0, r1, c0, c1]);
+        self.accumulate(contours, acc);
         let lit = PixelBox::new(r0, r1, c0, c1.min(w));
         scratch.lit = lit;
         let fused = map.filter(|m| m.fusable());
@@ -337,7 +331,7 @@ impl Rasterizer {
         if max_winding > 1.001 {
             // Overlapping shells: the accumulated winding integral over-counts pixels where
             // two boundaries meet; redo the layer with the exact nonzero rule.
-            self.coverage_nonzero(contours, &mut out);
+            self.coverage_nonzero(contours, &mut out, lit);
             scratch.lit_sum = Some(box_sum(&out, lit));
             if scratch.record_runs {
                 scratch.lit_runs.scan_mask(&out, lit);
@@ -358,35 +352,51 @@ impl Rasterizer {
         out
     }
 
-    /// Adds every edge of `contours` to the accumulation buffer; returns the rows
-    /// `r0..r1` and columns `c0..c1` they touched (`c1` may be one past the field: edges
-    /// carry area one column past their rightmost pixel).
+    /// The rows `r0..r1` and columns `c0..c1` that [`accumulate`](Self::accumulate) writes
+    /// to for `contours` (`c1` may be one past the field: edges carry area one column
+    /// past their rightmost pixel; the cells of column `c1` are written too, and hold 0).
     #[inline]
-    fn accumulate(&self, contours: &[Contour], acc: &mut Accum) -> [usize; 4] {
+    fn bounds(&self, contours: &[Contour]) -> [usize; 4] {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
         let (mut r0, mut r1) = (h, 0usize);
         let (mut c0, mut c1) = (w, 0usize);
+        // Clamped, so non-negative: `as usize` truncates = floors.
+        let ceil = |v: f64| {
+            let t = v as usize;
+            t + ((t as f64) < v) as usize
+        };
+        for p in contours.iter().flatten() {
+            let (x, y) = self.clamped_px(*p);
+            r0 = r0.min(y as usize);
+            r1 = r1.max(ceil(y));
+            c0 = c0.min(x as usize);
+            c1 = c1.max(ceil(x) + 1);
+        }
+        [r0, r1.min(h), c0, c1.min(w + 1)]
+    }
+
+    /// `p` in pixel coordinates, clamped into the field: the planner guarantees parts fit,
+    /// this only guards.
+    #[inline]
+    fn clamped_px(&self, p: [f64; 2]) -> (f64, f64) {
+        let (x, y) = self.px(p);
+        let (w, h) = (self.field.width_px as f64, self.field.height_px as f64);
+        (x.clamp(0.0, w), y.clamp(0.0, h))
+    }
+
+    /// Adds every edge of `contours` to the accumulation buffer (its box from
+    /// [`bounds`](Self::bounds)).
+    #[inline]
+    fn accumulate(&self, contours: &[Contour], acc: &mut Accum) {
+        let h = self.field.height_px as usize;
         for c in contours {
             for i in 0..c.len() {
-                let (x0, y0) = self.px(c[i]);
-                let (x1, y1) = self.px(c[(i + 1) % c.len()]);
-                // Clamp into the field: the planner guarantees parts fit, this only guards.
-                let cl = |v: f64, m: usize| v.clamp(0.0, m as f64);
-                let (x0, y0, x1, y1) = (cl(x0, w), cl(y0, h), cl(x1, w), cl(y1, h));
+                let (x0, y0) = self.clamped_px(c[i]);
+                let (x1, y1) = self.clamped_px(c[(i + 1) % c.len()]);
                 line(acc, h, x0 as f32, y0 as f32, x1 as f32, y1 as f32);
-                // Clamped, so non-negative: `as usize` truncates = floors.
-                let ceil = |v: f64| {
-                    let t = v as usize;
-                    t + ((t as f64) < v) as usize
-                };
-                r0 = r0.min(y0.min(y1) as usize);
-                r1 = r1.max(ceil(y0.max(y1)));
-                c0 = c0.min(x0.min(x1) as usize);
-                c1 = c1.max(ceil(x0.max(x1)) + 1);
             }
         }
-        [r0, r1, c0, c1]
     }
 
     /// Binary mask: 255 where the anti-aliased coverage is at least 50 % (value ≥ 128),
@@ -398,12 +408,13 @@ impl Rasterizer {
 }
 
 /// Thresholds a coverage mask at 50 % in place: values ≥ 128 become 255, others 0.
+#[cfg(any(test, feature = "internals"))]
 pub fn threshold(m: &mut Mask) {
     threshold_in(m, PixelBox::whole(m.width as usize, m.height as usize));
 }
 
 /// Thresholds the box `lit_box` of a mask at 50 % in place (the mask is zero outside it).
-fn threshold_in(m: &mut Mask, lit_box: PixelBox) {
+pub fn threshold_in(m: &mut Mask, lit_box: PixelBox) {
     let PixelBox { r0, r1, c0, c1 } = lit_box;
     let w = m.width as usize;
     for r in r0..r1 {
@@ -488,6 +499,7 @@ pub fn shows_as_is(p: &Projector, width: u32, height: u32) -> bool {
 
 /// Cuts projector `p`'s part out of a field mask and applies its mirror flags (borrows the
 /// field mask when the projector covers it exactly, unmirrored).
+#[cfg(any(test, feature = "internals"))]
 pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::Cow<'a, Mask> {
     let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
     let (w, h) = (p.width_px as usize, p.height_px as usize);
@@ -508,8 +520,48 @@ pub fn projector_view<'a>(field_mask: &'a Mask, p: &Projector) -> std::borrow::C
     std::borrow::Cow::Owned(out)
 }
 
+/// [`projector_view`] of a field mask that is zero outside `lit`, and the box of the view
+/// outside which it is zero: only the rows and columns of `lit` the projector shows are
+/// copied (the rest of a view it owns is zeroed memory never written).
+pub fn projector_view_in<'a>(
+    field_mask: &'a Mask,
+    p: &Projector,
+    lit: PixelBox,
+) -> (std::borrow::Cow<'a, Mask>, PixelBox) {
+    if shows_as_is(p, field_mask.width, field_mask.height) {
+        return (std::borrow::Cow::Borrowed(field_mask), lit);
+    }
+    let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
+    let (w, h) = (p.width_px as usize, p.height_px as usize);
+    // `lit` in the projector's unmirrored pixels.
+    let (r0, r1) = (lit.r0.max(oy) - oy, lit.r1.min(oy + h).saturating_sub(oy));
+    let (c0, c1) = (lit.c0.max(ox) - ox, lit.c1.min(ox + w).saturating_sub(ox));
+    let mut out = Mask::zeros(w as u32, h as u32);
+    if r0 >= r1 || c0 >= c1 {
+        return (std::borrow::Cow::Owned(out), PixelBox::EMPTY);
+    }
+    let fw = field_mask.width as usize;
+    let flip = |a: usize, b: usize, n: usize, m: bool| if m { (n - b, n - a) } else { (a, b) };
+    let (vr0, vr1) = flip(r0, r1, h, p.mirror_y);
+    let (vc0, vc1) = flip(c0, c1, w, p.mirror_x);
+    for sr in r0..r1 {
+        let r = if p.mirror_y { h - 1 - sr } else { sr };
+        let src = &field_mask.data[(oy + sr) * fw + ox..][c0..c1];
+        let dst = &mut out.data[r * w..][vc0..vc1];
+        dst.copy_from_slice(src);
+        if p.mirror_x {
+            dst.reverse();
+        }
+    }
+    (
+        std::borrow::Cow::Owned(out),
+        PixelBox::new(vr0, vr1, vc0, vc1),
+    )
+}
+
 #[cfg(test)]
 mod tests {
+    use super::accum::BLOCK;
     use super::*;
     use crate::test_support::{closed, ngon as circle, rect, xorshift};
 
@@ -635,6 +687,63 @@ mod tests {
         assert!((barea - exact).abs() / exact < 2e-3, "{barea} vs {exact}");
     }
 
+    #[test]
+    fn a_small_section_in_a_huge_field_uses_a_buffer_of_its_box() {
+        // A 16384 × 16384 px field (268 M pixels): the accumulation buffer holds the
+        // section's box (plus a block of columns), never the field; the mask's values are
+        // exact there, and one scratch drawing boxes of other shapes and places in turn
+        // gives the masks a fresh scratch gives (the buffer is left clean at any stride).
+        let p = 0.0625;
+        let f = Field {
+            width_px: 16384,
+            height_px: 16384,
+            pixel_mm: p,
+        };
+        let r = Rasterizer::new(f);
+        let mut s = Scratch::default();
+        // Columns 9000..9100, rows from the bottom 12000..12040 → image rows 4344..4384,
+        // the left column half covered.
+        let c = rect(8999.5 * p, 12000.0 * p, 9100.0 * p, 12040.0 * p);
+        let m = r.coverage(std::slice::from_ref(&c), &mut s);
+        let b = s.lit_box();
+        assert_eq!((b.r0, b.r1, b.c0, b.c1), (4344, 4384, 8999, 9101));
+        assert!(
+            s.accum_cells() <= 40 * (102 + 2 * BLOCK),
+            "accumulation buffer of {} cells for a 40 × 102 px box",
+            s.accum_cells()
+        );
+        assert_eq!(m.get(8999, 4350), 128);
+        assert_eq!(m.get(9000, 4344), 255);
+        assert_eq!(m.get(9099, 4383), 255);
+        assert_eq!(m.get(9100, 4383), 0);
+        assert_eq!(m.lit_pixels_in(b), (100 * 255 + 128) as f64 * 40.0 / 255.0);
+        // (Masks are dropped, not recycled: the recycling check would visit the field.)
+        drop(m);
+        let mut largest = 40 * (102 + 2 * BLOCK);
+        let mut rnd = xorshift(0x5eed_1234_abcd_ef01);
+        for case in 0..12 {
+            let (cx, cy) = (rnd() * 1000.0, rnd() * 1000.0);
+            let rmax = 0.3 + rnd() * 6.0;
+            let star = closed(5 + case * 3, true, |a| {
+                let rad = rmax * (0.3 + 0.7 * rnd());
+                [cx + rad * a.cos(), cy + rad * a.sin()]
+            });
+            let shapes = [star];
+            let a = r.coverage(&shapes, &mut s);
+            let box_a = s.lit_box();
+            // The buffer grows to the largest box drawn (at most twice its cells).
+            largest = largest.max((box_a.r1 - box_a.r0) * (box_a.c1 - box_a.c0 + 2 + 2 * BLOCK));
+            assert!(s.accum_cells() <= 2 * largest, "case {case}");
+            let mut fresh = Scratch::default();
+            let want = r.coverage(&shapes, &mut fresh);
+            assert_eq!(box_a, fresh.lit_box(), "case {case}");
+            for row in box_a.rows() {
+                let cols = row * 16384 + box_a.c0..row * 16384 + box_a.c1;
+                assert!(a.data[cols.clone()] == want.data[cols], "case {case} row {row}");
+            }
+        }
+    }
+
     /// Largest per-pixel difference between two masks.
     fn max_diff(a: &Mask, b: &Mask) -> u8 {
         a.data
@@ -679,5 +788,35 @@ mod tests {
         p.mirror_x = false;
         p.mirror_y = true;
         assert_eq!(projector_view(&m, &p).data, vec![5, 6, 7, 8, 1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn projector_view_of_the_lit_box_is_the_whole_view() {
+        // Every mirroring and an offset projector cutting the field: the view made from
+        // the lit box alone equals the whole view, and is zero outside the box it gives.
+        let (fw, fh) = (13u32, 9u32);
+        let mut m = Mask::zeros(fw, fh);
+        let lit = PixelBox::new(2, 7, 3, 11);
+        let mut rnd = xorshift(7);
+        for r in lit.rows() {
+            for c in lit.cols() {
+                m.data[r * fw as usize + c] = 1 + (rnd() * 254.0) as u8;
+            }
+        }
+        let mut p = crate::profile::Profile::default_profile().projector[0].clone();
+        for (w, h, ox, oy) in [(13, 9, 0, 0), (8, 6, 4, 1), (5, 4, 0, 5), (3, 2, 0, 0)] {
+            for (mx, my) in [(false, false), (true, false), (false, true), (true, true)] {
+                (p.width_px, p.height_px, p.offset_px) = (w, h, [ox, oy]);
+                (p.mirror_x, p.mirror_y) = (mx, my);
+                let whole = projector_view(&m, &p);
+                let (view, b) = projector_view_in(&m, &p, lit);
+                assert_eq!(view.data, whole.data, "{w}x{h}+{ox}+{oy} {mx} {my}");
+                for (i, &v) in view.data.iter().enumerate() {
+                    let (r, c) = (i / w as usize, i % w as usize);
+                    let inside = b.rows().contains(&r) && b.cols().contains(&c);
+                    assert!(inside || v == 0, "{w}x{h}+{ox}+{oy} {mx} {my}: {r},{c}");
+                }
+            }
+        }
     }
 }

@@ -212,9 +212,9 @@ impl Tiler {
             .map_or(Mode::Off, |o| o.compensator.mode())
     }
 
-    /// After all layers: each projector's gray map (encoded by `png`), the per-projector
-    /// manifest records and the job's warnings.
-    pub fn finish(&self, profile: &Profile, png: impl Fn(&Mask) -> Vec<u8>) -> TiledOptics {
+    /// After all layers: each projector's gray map, the per-projector manifest records and
+    /// the job's warnings.
+    pub fn finish(&self, profile: &Profile) -> TiledOptics {
         // The gray maps are projector-sized: view them without the field offsets.
         let mut local = profile.clone();
         for p in &mut local.projector {
@@ -222,7 +222,7 @@ impl Tiler {
         }
         let mut out = TiledOptics::default();
         for (k, o) in self.optics.iter().enumerate() {
-            let map = o.gray_map(&local, &png);
+            let map = o.gray_map(&local);
             let sha = sha256_hex(&map.png);
             let (r, w) = o.finish_with((map.file.clone(), sha));
             out.gray_maps.push(map);

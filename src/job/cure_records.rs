@@ -426,7 +426,7 @@ impl CureJob {
             .filter_map(|(k, d)| Some((k, LayerDropped::of(d?.finish(), p, h)?)))
             .collect();
         if binary {
-            crate::raster::threshold(&mut m);
+            crate::raster::threshold_in(&mut m, drawn_lit);
         }
         let outside = comp.is_some_and(|c| c.apply_in(&mut m, drawn_lit));
         (

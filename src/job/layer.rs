@@ -14,7 +14,7 @@ use crate::geometry::tile::Tiler;
 use crate::optics::JobOptics;
 use crate::plan::analysis::{Analysed, Analyser, LitRuns};
 use crate::profile::Profile;
-use crate::raster::{projector_view, Mask, PixelBox, Rasterizer, Scratch};
+use crate::raster::{projector_view_in, Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section};
 use std::borrow::Cow;
 use std::path::Path;
@@ -365,24 +365,31 @@ fn draw(
                 (m, lit, outside, Vec::new(), None)
             }
         };
-    for (v, d) in field_mask
-        .data
-        .iter_mut()
-        .zip(ctx.dose.map_or(&[][..], |d| &d.data))
-    {
-        *v = ((*v as u32 * *d as u32 + 127) / 255) as u8;
+    if let Some(d) = ctx.dose {
+        // Zero outside the lit box stays zero.
+        let (w, lit) = (field_mask.width as usize, scratch.lit_box());
+        for r in lit.rows() {
+            let (row, dose) = (&mut field_mask.data[r * w..], &d.data[r * w..]);
+            for (v, d) in row[lit.cols()].iter_mut().zip(&dose[lit.cols()]) {
+                *v = ((*v as u32 * *d as u32 + 127) / 255) as u8;
+            }
+        }
     }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {
-        let view = match ctx.tiler {
-            Some(t) => Cow::Owned(t.render(k, &field_mask)),
-            None => projector_view(&field_mask, p),
+        // The view and the box outside which it is zero.
+        let (view, b) = match ctx.tiler {
+            Some(t) => {
+                let m = t.render(k, &field_mask);
+                let all = PixelBox::whole(m.width as usize, m.height as usize);
+                (Cow::Owned(m), all)
+            }
+            // The field mask is zero outside the rasterizer's lit box.
+            None => projector_view_in(&field_mask, p, scratch.lit_box()),
         };
         let (png, pixels) = match &view {
-            // The field mask itself: zero outside the rasterizer's lit box.
             Cow::Borrowed(m) => {
-                let b = scratch.lit_box();
                 let png = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
                 let px = MaskPixels::of_gray8_in(m.width, &m.data, b.rows(), b.cols());
                 let adler32 = crate::png::scanlines_adler32_of(&png);
@@ -394,13 +401,8 @@ fn draw(
                     p.offset_px,
                     [p.mirror_x, p.mirror_y],
                 );
-                let png = super::encode_png(m);
-                let px = MaskPixels::of_gray8_in(
-                    m.width,
-                    &m.data,
-                    0..m.height as usize,
-                    0..m.width as usize,
-                );
+                let png = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
+                let px = MaskPixels::of_gray8_in(m.width, &m.data, b.rows(), b.cols());
                 let adler32 = crate::png::scanlines_adler32_of(&png);
                 (
                     png,

@@ -2,7 +2,6 @@
 //! projector's gray map (written beside the masks, as it depends on the set-up only) and,
 //! for several projectors, each projector's gray map and record from the tiler.
 
-use super::encode_png;
 use super::sink::Sink;
 use crate::bundle::{self, Optics};
 use crate::error::Result;
@@ -21,7 +20,7 @@ pub(super) fn write_gray_map(
     writer: &Sink,
     profile: &Profile,
 ) -> WrittenGrayMap {
-    write_one(writer, &optics.gray_map(profile, encode_png))
+    write_one(writer, &optics.gray_map(profile))
 }
 
 /// Writes a gray map into the bundle; returns its file and SHA-256.
@@ -67,7 +66,7 @@ pub(super) fn optics_records(
     };
     let projector_optics = match tiler {
         Some(t) => {
-            let done = t.finish(profile, encode_png);
+            let done = t.finish(profile);
             for map in &done.gray_maps {
                 write_one(writer, map)?;
             }

@@ -25,7 +25,6 @@ pub use compensate::Compensator;
 use crate::bundle::Optics;
 use crate::error::{Error, Result};
 use crate::profile::Profile;
-use crate::raster::Mask;
 use crate::text::{fixed, number, plural};
 use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
@@ -218,13 +217,13 @@ pub struct GrayMap {
 }
 
 impl JobOptics {
-    /// The gray map of the calibrated projector, encoded by `png`. It depends on the set-up
-    /// only, so the job can write it while the masks are made.
-    pub fn gray_map(&self, profile: &Profile, png: impl Fn(&Mask) -> Vec<u8>) -> GrayMap {
+    /// The gray map of the calibrated projector, as a PNG (the masks' encoding). It depends
+    /// on the set-up only, so the job can write it while the masks are made.
+    pub fn gray_map(&self, profile: &Profile) -> GrayMap {
         let p = &profile.projector[self.projector];
         GrayMap {
             file: format!("optics/{}-gray-map.png", p.name),
-            png: self.compensator.gray_map_png(p, png),
+            png: self.compensator.gray_map_png(p),
         }
     }
 

@@ -19,17 +19,56 @@ pub(super) fn zeroed_by_writes<T: Copy + Default>(n: usize) -> Vec<T> {
 /// Accumulation cells per bit of [`super::Scratch`]'s `touched`.
 pub(super) const BLOCK: usize = 32;
 
-/// The signed-area accumulation buffer of one field and its touched-block bitmap.
+/// The signed-area accumulation buffer of one section's box of field pixels (rows
+/// `row0..`, columns `col0..col0 + stride`) and its touched-block bitmap. Edges are
+/// computed in field pixel coordinates; only their cells' indices are relative to the box.
 pub(super) struct Accum<'a> {
     pub(super) cells: &'a mut [f32],
     pub(super) touched: &'a mut [u64],
+    /// Cells per row: the box's columns.
     pub(super) stride: usize,
     /// Bitmap words per row.
     pub(super) words: usize,
+    /// The field row of the box's first row.
+    pub(super) row0: usize,
+    /// The field column of the box's first column (a multiple of [`BLOCK`]).
+    pub(super) col0: usize,
 }
 
-impl Accum<'_> {
-    /// Marks cells `lo..=hi` of row `r` as written.
+impl<'a> Accum<'a> {
+    /// The accumulation buffer for field rows `r0..r1` and columns `c0..=c1` in `cells` and
+    /// `touched` (all zero; the scan leaves them so), grown when the box needs more than
+    /// they hold, to at least twice their size (a part whose sections grow layer after
+    /// layer grows them a few times, not at every layer): their size follows the largest
+    /// box drawn, not the field.
+    pub(super) fn of_box(
+        cells: &'a mut Vec<f32>,
+        touched: &'a mut Vec<u64>,
+        [r0, r1, c0, c1]: [usize; 4],
+    ) -> Self {
+        // One column more on the left: a line's column, interpolated in `f32` between its
+        // ends, may round to just left of its leftmost end.
+        let col0 = c0.saturating_sub(1) / BLOCK * BLOCK;
+        let stride = (c1 + 1).saturating_sub(col0);
+        let words = stride.div_ceil(BLOCK).div_ceil(64);
+        let rows = r1.saturating_sub(r0);
+        if cells.len() < stride * rows {
+            *cells = zeroed_by_writes((stride * rows).max(2 * cells.len()));
+        }
+        if touched.len() < words * rows {
+            *touched = zeroed_by_writes((words * rows).max(2 * touched.len()));
+        }
+        Accum {
+            cells,
+            touched,
+            stride,
+            words,
+            row0: r0,
+            col0,
+        }
+    }
+
+    /// Marks cells `lo..=hi` (box columns) of box row `r` as written.
     #[inline]
     fn mark(&mut self, r: usize, lo: usize, hi: usize) {
         let row = &mut self.touched[r * self.words..(r + 1) * self.words];
@@ -85,13 +124,14 @@ pub(super) fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f
         }
         let xn = if bot == yb { xb } else { x + dxdy * dy };
         let d = dy * dir;
-        let base = r * stride;
+        let base = (r - accum.row0) * stride;
         let (lx, rx) = if x < xn { (x, xn) } else { (xn, x) };
         let lf = floor_nn(lx);
-        let li = lf as usize;
         let rc = ceil_nn(rx);
-        let ri = rc as usize;
-        accum.mark(r, li, ri.max(li + 1));
+        // Box columns: the arithmetic above stays in field coordinates.
+        let li = lf as usize - accum.col0;
+        let ri = rc as usize - accum.col0;
+        accum.mark(r - accum.row0, li, ri.max(li + 1));
         let acc = &mut *accum.cells;
         if ri <= li + 1 {
             // The line stays inside one pixel column on this row.

@@ -1,6 +1,6 @@
 //! The exact nonzero-winding fallback for layers whose shells overlap.
 
-use super::{Mask, Rasterizer};
+use super::{Mask, PixelBox, Rasterizer};
 use crate::slice::Contour;
 
 /// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
@@ -30,7 +30,10 @@ impl Rasterizer {
     /// Nonzero-winding coverage by analytic spans on [`SUBLINES`] sub-scanlines per pixel
     /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for layers whose shells
     /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
-    pub(super) fn coverage_nonzero(&self, contours: &[Contour], out: &mut Mask) {
+    ///
+    /// `out` is zero outside `lit` (the box of every contour point), where the section has
+    /// no area: only that box is written.
+    pub(super) fn coverage_nonzero(&self, contours: &[Contour], out: &mut Mask, lit: PixelBox) {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
         // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding).
@@ -51,7 +54,9 @@ impl Rasterizer {
             }
         }
         edges.sort_by(|a, b| a.2.total_cmp(&b.2));
-        out.data.fill(0);
+        for r in lit.rows() {
+            out.data[r * w..][lit.cols()].fill(0);
+        }
         let mut diff = vec![0.0f64; w + 2];
         let mut cover = vec![0.0f64; w + 1];
         let mut active: Vec<usize> = Vec::new();
@@ -103,9 +108,10 @@ impl Rasterizer {
                     }
                 }
             }
-            let dst = &mut out.data[r * w..(r + 1) * w];
+            // Columns left of the box hold no span: `run` is 0 there.
+            let dst = &mut out.data[r * w..][lit.cols()];
             let mut run = 0.0;
-            for (col, d) in dst.iter_mut().enumerate() {
+            for (col, d) in lit.cols().zip(dst) {
                 run += diff[col];
                 let v = (cover[col] + run).clamp(0.0, 1.0);
                 *d = (v * 255.0 + 0.5) as u8;

@@ -120,12 +120,13 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         c1: end,
     } = span;
     let area = emit.area();
-    let (stride, words) = (acc.stride, acc.words);
+    let (stride, words, col0) = (acc.stride, acc.words, acc.col0);
     let mut max_winding = 0.0f32;
     let mut lit_sum = 0u64;
     for r in r0..r1 {
-        let row = &mut acc.cells[r * stride..(r + 1) * stride];
-        let marks = &mut acc.touched[r * words..(r + 1) * words];
+        let k = r - acc.row0;
+        let row = &mut acc.cells[k * stride..(k + 1) * stride];
+        let marks = &mut acc.touched[k * words..(k + 1) * words];
         let mut sink = Runs::<E, BIN, CHECK> {
             er: emit.row(r),
             dst: &mut data[r * w..(r + 1) * w],
@@ -144,21 +145,27 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
             while bits != 0 {
                 let b = wi * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let (bs, be) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                // The block's box cells and field columns.
+                let (ks, ke) = (b * BLOCK, ((b + 1) * BLOCK).min(stride));
+                let (bs, be) = (col0 + ks, col0 + ke);
                 let from = bs.max(c0).min(end);
                 let to = be.min(end).max(from);
                 // Most cells of a touched block are zero: one vectorizable pass marks the
                 // nonzero ones, then only those are visited (in column order).
-                let mut nonzero = nonzero_cells(&row[bs..be]);
+                let mut nonzero = nonzero_cells(&row[ks..ke]);
+                // Cells left of the section's box (a rounded line end): not part of the
+                // mask, just cleared.
+                row[ks..from.max(bs) - col0].fill(0.0);
                 nonzero &= (1u64 << (to - bs)) - 1;
                 nonzero &= !((1u64 << (from - bs)) - 1);
                 while nonzero != 0 {
-                    let c = bs + nonzero.trailing_zeros() as usize;
+                    let i = nonzero.trailing_zeros() as usize;
+                    let c = bs + i;
                     nonzero &= nonzero - 1;
-                    let a = row[c];
+                    let a = row[ks + i];
                     sum += a;
                     // Cleared as it is read: the buffer is all zeros after the scan.
-                    row[c] = 0.0;
+                    row[ks + i] = 0.0;
                     let v = sum.abs();
                     max_winding = max_winding.max(v);
                     let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
@@ -179,7 +186,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
                 }
                 // Cells right of the field (edges carry area one column past their
                 // rightmost pixel): not part of the mask, just cleared.
-                row[to.max(bs)..be].fill(0.0);
+                row[to.max(bs) - col0..ke].fill(0.0);
             }
         }
         if start < end {

@@ -4,7 +4,9 @@
 
 use super::zone_mode::ZoneTables;
 use super::zones::ZoneGrid;
-use super::{Compensator, Mask};
+use super::Compensator;
+#[cfg(any(test, feature = "internals"))]
+use super::Mask;
 
 /// The full-coverage gray of every pixel as distinct rows (`w` bytes each) and the index
 /// of each image row's (zone mode: about 15 distinct rows per zone row; pixel mode: every
@@ -85,6 +87,7 @@ impl Compensator {
 
     /// The full-coverage gray of every pixel (what a plate covering the field gets, without
     /// error diffusion), in field orientation.
+    #[cfg(any(test, feature = "internals"))]
     pub fn gray_map(&self) -> Mask {
         let mut data = Vec::with_capacity(self.w * self.h);
         for r in 0..self.h {
@@ -98,21 +101,31 @@ impl Compensator {
     }
 
     /// The gray map as projector `p` shows it ([`crate::raster::projector_view`]),
-    /// encoded by `png`, which must give `png::encode_gray8`'s bytes (the
-    /// bundle's mask encoder): when `p` shows the field as it is, the map is encoded row by
-    /// row with `png::encode_gray8_rows` (the same bytes) without making it.
-    pub fn gray_map_png(
-        &self,
-        p: &crate::profile::Projector,
-        png: impl Fn(&Mask) -> Vec<u8>,
-    ) -> Vec<u8> {
+    /// encoded as `png::encode_gray8` encodes it (the bundle's mask encoder), row by row
+    /// with `png::encode_gray8_rows` (the same bytes) without making the map: when `p`
+    /// does not show the field as it is, its distinct rows are cut and mirrored once.
+    pub fn gray_map_png(&self, p: &crate::profile::Projector) -> Vec<u8> {
         let (w, h) = (self.w as u32, self.h as u32);
         if crate::raster::shows_as_is(p, w, h) {
-            crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r))
-        } else {
-            let m = self.gray_map();
-            png(&crate::raster::projector_view(&m, p))
+            return crate::png::encode_gray8_rows(w, h, |r| self.gray_row(r));
         }
+        let (ox, oy) = (p.offset_px[0] as usize, p.offset_px[1] as usize);
+        let (pw, ph) = (p.width_px as usize, p.height_px as usize);
+        let distinct = self.gray_map.rows.len() / self.w.max(1);
+        let mut rows = Vec::with_capacity(distinct * pw);
+        for k in 0..distinct {
+            let row = &self.gray_map.rows[k * self.w + ox..][..pw];
+            let at = rows.len();
+            rows.extend_from_slice(row);
+            if p.mirror_x {
+                rows[at..].reverse();
+            }
+        }
+        let row_of = &self.gray_map.row_of;
+        crate::png::encode_gray8_rows(p.width_px, p.height_px, |r| {
+            let sr = if p.mirror_y { ph - 1 - r } else { r };
+            &rows[row_of[oy + sr] as usize * pw..][..pw]
+        })
     }
 }
 
@@ -154,10 +167,15 @@ mod tests {
             let mut p = crate::profile::Profile::default_profile().projector[0].clone();
             (p.width_px, p.height_px) = (w as u32, h as u32);
             let png = |m: &Mask| crate::png::encode_gray8(m.width, m.height, &m.data);
-            assert_eq!(c.gray_map_png(&p, png), png(&map));
-            p.mirror_x = true;
-            let view = crate::raster::projector_view(&map, &p);
-            assert_eq!(c.gray_map_png(&p, png), png(&view));
+            assert_eq!(c.gray_map_png(&p), png(&map));
+            for (pw, ph, ox, oy) in [(200, 150, 0, 0), (120, 90, 70, 33)] {
+                for (mx, my) in [(true, false), (false, true), (true, true), (false, false)] {
+                    (p.width_px, p.height_px, p.offset_px) = (pw, ph, [ox, oy]);
+                    (p.mirror_x, p.mirror_y) = (mx, my);
+                    let view = crate::raster::projector_view(&map, &p);
+                    assert_eq!(c.gray_map_png(&p), png(&view), "{pw}x{ph}+{ox}+{oy} {mx} {my}");
+                }
+            }
         }
     }
 }
