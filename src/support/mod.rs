@@ -101,6 +101,7 @@ pub fn generate(
         min_apart_px: s.pillar_diameter_mm / px,
         reach_layers: (cover_mm * tan / layer_mm).ceil() as usize,
         self_px: layer_mm / tan / px,
+        contact_px: s.head_front_diameter_mm / 2.0 / px,
         first_on_pad: first == pad_layers,
     };
     let shape = Shape {

@@ -9,8 +9,9 @@
 //! overhang). Then the points are placed layer by layer from the bottom, since a point
 //! covers pixels of the layers above it too: a down-facing pixel is covered by a point
 //! within `spacing / √2` of it placed at most as many layers lower as a surface at the
-//! critical angle climbs over that distance. Every island gets a point of its own at its
-//! most interior pixel; the other points go to the first uncovered pixel in scan order,
+//! critical angle climbs over that distance. Every island gets a point at its most
+//! interior pixel, unless a head of the same layer nearer than a pillar's diameter touches
+//! it already; the other points go to the first uncovered pixel in scan order,
 //! moved inward when the pixel there is down-facing too, and never closer than a pillar's
 //! diameter to a point of the same reach.
 
@@ -52,6 +53,8 @@ pub struct Spread {
     pub reach_layers: usize,
     /// Self-supporting distance per layer, pixels.
     pub self_px: f64,
+    /// A head's contact reaches this far, pixels.
+    pub contact_px: f64,
     /// The part's first layer rests on the pad (elevation 0): it needs no points.
     pub first_on_pad: bool,
 }
@@ -80,11 +83,23 @@ pub fn place(masks: &[Vec<Run>], first: usize, s: &Spread) -> Vec<Point> {
     let mut placed = Placed::new(s);
     for (l, need) in needs.iter().enumerate() {
         for island in &need.islands {
-            placed.push(Point {
-                col_row: interior(island),
-                layer: l,
-                island: true,
-            });
+            let [c, r] = interior(island);
+            // A head of this layer that touches the island already holds it (islands a
+            // pixel or two apart would otherwise get pillars that overlap all the way down).
+            let held = placed
+                .near(c as f64, r as f64, l, s.min_apart_px)
+                .filter(|q| q.layer == l)
+                .any(|q| {
+                    let [qc, qr] = q.col_row.map(|v| v as f64 + 0.5);
+                    runs::any_within(island, qc, qr, s.contact_px)
+                });
+            if !held {
+                placed.push(Point {
+                    col_row: placed.apart_within(island, [c, r], l),
+                    layer: l,
+                    island: true,
+                });
+            }
         }
         for &run in &need.down {
             placed.cover_run(run, l, &need.down);
@@ -228,6 +243,22 @@ impl<'s> Placed<'s> {
             })
     }
 
+    /// `at`, or when it lies within a pillar's diameter of a point reaching layer `l`, the
+    /// pixel of `region` that lies that far from every such point (the first in scan
+    /// order), if there is one: so that the pillars do not overlap.
+    fn apart_within(&self, region: &[Run], at: [u32; 2], l: usize) -> [u32; 2] {
+        let d = self.s.min_apart_px;
+        let clear = |c: u32, r: u32| self.near(c as f64, r as f64, l, d).next().is_none();
+        if clear(at[0], at[1]) {
+            return at;
+        }
+        region
+            .iter()
+            .flat_map(|&[row, a, b]| (a..b).map(move |c| [c, row]))
+            .find(|&[c, r]| clear(c, r))
+            .unwrap_or(at)
+    }
+
     /// Places points on layer `l` until every pixel of `run` is covered; `down` is the
     /// layer's down-facing set (where a point may move inward to).
     fn cover_run(&mut self, [row, a, b]: Run, l: usize, down: &[Run]) {
@@ -283,6 +314,7 @@ mod tests {
             min_apart_px: 5.0,
             reach_layers: 10,
             self_px: 1.0,
+            contact_px: 2.0,
             first_on_pad: false,
         }
     }
