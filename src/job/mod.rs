@@ -160,26 +160,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     if control.cancelled() {
         return Err(Error::Interrupted);
     }
-    // The support mesh first: removed again when the bundle cannot be written.
-    let stl = match (&opts.supports_stl, &part.support_mesh) {
-        (Some(path), Some(m)) => {
-            crate::output::write_atomic(path, &mesh::binary_stl(&m.soup()))?;
-            Some(path)
-        }
-        _ => None,
-    };
-    let written = match writer {
-        Sink::Dir(w) => w.finish(&manifest).map(|b| (b, Vec::new())),
-        Sink::Memory { out, kept } => {
-            let files = MemoryFiles::new(&out, kept);
-            crate::formats::write(format, &manifest, &files, &out, opts.cancel).map(|w| (out, w))
-        }
-    };
-    let (bundle, export_warnings) = written.inspect_err(|_| {
-        if let Some(p) = stl {
-            let _ = std::fs::remove_file(p);
-        }
-    })?;
+    let (bundle, export_warnings) = write_out(writer, format, &manifest, &part, opts)?;
     made.keep();
     cure_plots(cure.as_ref(), opts, &manifest, made_plots)?;
     let mut warnings = manifest.warnings;
@@ -204,6 +185,37 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         distortion: distortion_report,
         cure: manifest.cure,
         supports: manifest.supports.as_ref().map(SupportsSummary::of),
+    })
+}
+
+/// Writes the support mesh (`--supports-stl`) and then the job through `writer` (in
+/// `format` when it writes one file): the bundle's path and what the format could not carry. The support
+/// mesh is removed again when the job cannot be written.
+fn write_out(
+    writer: Sink,
+    format: Format,
+    manifest: &bundle::Manifest,
+    part: &PlacedPart,
+    opts: &SliceOptions,
+) -> Result<(PathBuf, Vec<Warning>)> {
+    let stl = match (&opts.supports_stl, &part.support_mesh) {
+        (Some(path), Some(m)) => {
+            crate::output::write_atomic(path, &mesh::binary_stl(&m.soup()))?;
+            Some(path)
+        }
+        _ => None,
+    };
+    let written = match writer {
+        Sink::Dir(w) => w.finish(manifest).map(|b| (b, Vec::new())),
+        Sink::Memory { out: o, kept } => {
+            let files = MemoryFiles::new(&o, kept);
+            crate::formats::write(format, manifest, &files, &o, opts.cancel).map(|w| (o, w))
+        }
+    };
+    written.inspect_err(|_| {
+        if let Some(p) = stl {
+            let _ = std::fs::remove_file(p);
+        }
     })
 }
 
