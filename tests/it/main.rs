@@ -22,6 +22,7 @@ mod limits;
 mod messages;
 mod plan;
 mod plate;
+mod printable;
 mod readme;
 mod replace;
 mod roundtrip;
