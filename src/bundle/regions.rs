@@ -19,9 +19,8 @@ pub type Run = [u32; 3];
 /// The gray at and above which a field pixel is lit (half of full light).
 pub const LIT_GRAY: u8 = 128;
 
-/// The high bit of every byte of a word: a byte is at least [`LIT_GRAY`] when its bit is
-/// set.
-const HIGH: u64 = 0x8080_8080_8080_8080;
+/// Pixels a row's scan tests at once.
+const BLOCK: usize = 64;
 
 /// Where a projector's mask lies in the field: its size in pixels, its offset and its
 /// mirroring (a projector record's keys).
@@ -56,40 +55,52 @@ impl Placement {
     }
 }
 
-/// Appends the lit runs (gray ≥ [`LIT_GRAY`]) of `row`, as row `r` with its first pixel
-/// at column `base`, to `out`. Eight pixels at a time: a word of dark (or of lit) pixels
-/// costs one test.
-fn row_runs(row: &[u8], r: u32, base: u32, out: &mut Vec<Run>) {
-    if row.iter().fold(0u8, |a, &v| a | v) < LIT_GRAY {
-        return;
+/// The lit pixels of a block of [`BLOCK`] grays as bits (bit j: pixel j is at least
+/// [`LIT_GRAY`], its high bit set): each word's high bits gathered by one multiplication.
+fn lit_bits(block: &[u8]) -> u64 {
+    const HIGH: u64 = 0x8080_8080_8080_8080;
+    // Byte i's bit 7 lands at bit 56 + i, and no two products meet.
+    const GATHER: u64 = 0x0002_0408_1020_4081;
+    let mut m = 0;
+    for (k, w) in block.chunks_exact(8).enumerate() {
+        let high = u64::from_le_bytes(w.try_into().expect("8 bytes")) & HIGH;
+        m |= (high.wrapping_mul(GATHER) >> 56) << (8 * k);
     }
+    m
+}
+
+/// Appends the lit runs (gray ≥ [`LIT_GRAY`]) of `row`, as row `r` with its first pixel
+/// at column `base`, to `out`. [`BLOCK`] pixels at a time as bits ([`lit_bits`]): a block
+/// of dark pixels outside a run (or of lit ones inside one) costs one test, and in the
+/// others each start and end of a run is the next bit where a pixel differs from the one
+/// before.
+fn row_runs(row: &[u8], r: u32, base: u32, out: &mut Vec<Run>) {
     let mut start: Option<usize> = None;
     let mut push = |s: usize, e: usize| out.push([r, base + s as u32, base + e as u32]);
-    let mut step = |c: usize, v: u8, start: &mut Option<usize>| match (v >= LIT_GRAY, *start) {
-        (true, None) => *start = Some(c),
-        (false, Some(s)) => {
-            push(s, c);
-            *start = None;
-        }
-        _ => {}
+    let mut toggle = |c: usize, start: &mut Option<usize>| match start.take() {
+        None => *start = Some(c),
+        Some(s) => push(s, c),
     };
-    let words = row.chunks_exact(8);
-    let tail = words.remainder();
-    for (k, w) in words.enumerate() {
-        let c = k * 8;
-        let high = u64::from_le_bytes(w.try_into().expect("8 bytes")) & HIGH;
-        match (high, start) {
-            (0, None) | (HIGH, Some(_)) => {}
-            _ => {
-                for (j, &v) in w.iter().enumerate() {
-                    step(c + j, v, &mut start);
-                }
-            }
+    let blocks = row.chunks_exact(BLOCK);
+    let tail = blocks.remainder();
+    for (k, block) in blocks.enumerate() {
+        let lit = lit_bits(block);
+        let inside = start.is_some();
+        if (lit == 0 && !inside) || (lit == u64::MAX && inside) {
+            continue;
+        }
+        // Bit j: pixel j differs from pixel j − 1 (the one before the block: `inside`).
+        let mut change = lit ^ ((lit << 1) | u64::from(inside));
+        while change != 0 {
+            toggle(k * BLOCK + change.trailing_zeros() as usize, &mut start);
+            change &= change - 1;
         }
     }
     let at = row.len() - tail.len();
     for (j, &v) in tail.iter().enumerate() {
-        step(at + j, v, &mut start);
+        if (v >= LIT_GRAY) != start.is_some() {
+            toggle(at + j, &mut start);
+        }
     }
     if let Some(s) = start {
         push(s, row.len());
@@ -97,20 +108,18 @@ fn row_runs(row: &[u8], r: u32, base: u32, out: &mut Vec<Run>) {
 }
 
 /// The lit runs of the row-major 8-bit image `data`, `width` pixels wide, in its own
-/// pixels (row 0 at the top), visiting only `rows`.
-pub fn lit_runs(width: u32, data: &[u8], rows: Range<usize>) -> Vec<Run> {
+/// pixels (row 0 at the top), visiting only `rows` and `cols` (the image dark outside
+/// them).
+pub fn lit_runs(width: u32, data: &[u8], rows: Range<usize>, cols: Range<usize>) -> Vec<Run> {
     let mut out = Vec::new();
     let w = width as usize;
-    if w == 0 {
+    if w == 0 || cols.start >= cols.end.min(w) {
         return out;
     }
-    let rows = data
-        .chunks_exact(w)
-        .enumerate()
-        .take(rows.end)
-        .skip(rows.start);
+    let cols = cols.start..cols.end.min(w);
+    let rows = data.chunks_exact(w).enumerate().take(rows.end).skip(rows.start);
     for (r, row) in rows {
-        row_runs(row, r as u32, 0, &mut out);
+        row_runs(&row[cols.clone()], r as u32, cols.start as u32, &mut out);
     }
     out
 }
@@ -141,7 +150,10 @@ pub fn placed(mut runs: Vec<Run>, at: Placement) -> Vec<Run> {
 pub fn field_runs(masks: &[(&[u8], Placement)]) -> Vec<Run> {
     match masks {
         [] => Vec::new(),
-        [(data, at)] => placed(lit_runs(at.size[0], data, 0..at.size[1] as usize), *at),
+        [(data, at)] => {
+            let [w, h] = at.size.map(|v| v as usize);
+            placed(lit_runs(at.size[0], data, 0..h, 0..w), *at)
+        }
         _ => composed(masks),
     }
 }
@@ -411,7 +423,7 @@ mod tests {
     #[test]
     fn lit_runs_are_those_of_each_pixel() {
         let mut rnd = xorshift(0x7e57_0001);
-        for w in [1usize, 7, 8, 9, 16, 31, 40, 67] {
+        for w in [1usize, 7, 8, 9, 16, 31, 63, 64, 65, 100, 130, 200] {
             for _ in 0..40 {
                 // Long runs of one gray, so whole words of lit and dark pixels occur.
                 let mut g = Vec::with_capacity(w * 5);
@@ -421,12 +433,12 @@ mod tests {
                     g.extend(std::iter::repeat_n(v, n));
                 }
                 g.truncate(w * 5);
-                assert_eq!(lit_runs(w as u32, &g, 0..5), naive_runs(&g, w), "{w}");
+                assert_eq!(lit_runs(w as u32, &g, 0..5, 0..w), naive_runs(&g, w), "{w}");
                 let rows: Vec<Run> = naive_runs(&g, w)
                     .into_iter()
                     .filter(|r| (1..3).contains(&r[0]))
                     .collect();
-                assert_eq!(lit_runs(w as u32, &g, 1..3), rows);
+                assert_eq!(lit_runs(w as u32, &g, 1..3, 0..w), rows);
             }
         }
     }
@@ -452,8 +464,8 @@ mod tests {
             let (cur, below) = (gray(pc, &mut rnd), gray(pb, &mut rnd));
             let lit = |g: &[u8]| g.iter().map(|&v| v >= LIT_GRAY).collect::<Vec<_>>();
             let mut want = flood(&lit(&cur), &lit(&below), w, h);
-            let rc = lit_runs(w as u32, &cur, 0..h);
-            let rb = lit_runs(w as u32, &below, 0..h);
+            let rc = lit_runs(w as u32, &cur, 0..h, 0..w);
+            let rb = lit_runs(w as u32, &below, 0..h, 0..w);
             let mut got: Vec<(u64, f64, f64)> = unsupported(&rc, &rb)
                 .iter()
                 .map(|g| {

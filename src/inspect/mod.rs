@@ -44,31 +44,32 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
     } else {
         ""
     };
-    let resting = match rings.len() as u64 {
+    let mut lines = vec![note.to_string()];
+    lines.push(match rings.len() as u64 {
         0 => format!("No region{held} rests on nothing below."),
         k => format!(
-            "Red rings: the largest region{held} of each of the {} where one rests on nothing below ({} of any size in all).",
+            "Red rings: regions{held} resting on nothing below, the largest of each of {} ({} of any size in all).",
             count(k, "layer", "layers"),
             count(regions.len() as u64, "region", "regions")
         ),
-    };
-    let supports = match &m.supports {
-        Some(s) => format!(
-            " Orange: the {}, each from its foot to its head's tip.",
+    });
+    if let Some(s) = &m.supports {
+        lines.push(format!(
+            "Orange: the {}, each from its foot to its head's tip.",
             count(s.points.len() as u64, "support", "supports")
-        ),
-        None => String::new(),
-    };
+        ));
+    }
     let pad = 12.0;
     let small = text::line_height(SMALL.size);
-    let band = pad + text::line_height(TITLE.size) + 4.0 + 2.0 * small + 8.0;
+    let band = pad + text::line_height(TITLE.size) + 4.0 + lines.len() as f32 * small + 8.0;
     let mut c = Canvas::new(w, h + band.ceil() as u32, [255; 3]);
     c.draw_rgb(&img, 0, band.ceil() as i64);
     marks::draw(&mut c, &proj, band.ceil() as f64, &rings, m.supports.as_ref());
     c.text(pad, pad, &title, TITLE);
     let y = pad + text::line_height(TITLE.size) + 4.0;
-    c.text(pad, y, note, SMALL);
-    c.text(pad, y + small, &format!("{resting}{supports}"), SMALL);
+    for (k, l) in lines.iter().enumerate() {
+        c.text(pad, y + k as f32 * small, l, SMALL);
+    }
     Ok(c)
 }
 

@@ -192,11 +192,11 @@ fn decode_layer(
         return (checks, None);
     }
     let runs = match (group, checks.first().and_then(|c| c.lit)) {
-        // One mask: only the rows its lit box spans.
+        // One mask: only its lit box.
         ([(_, m)], Some(px)) => {
             let at = Placement::of(&projectors[m.projector as usize]);
-            let rows = px.lit_box_px.map_or(0..0, |b| b[1] as usize..b[3] as usize);
-            placed_runs(lit_runs(at.size[0], &bufs[0], rows), at)
+            let [c0, r0, c1, r1] = px.lit_box_px.map_or([0; 4], |b| b.map(|v| v as usize));
+            placed_runs(lit_runs(at.size[0], &bufs[0], r0..r1, c0..c1), at)
         }
         _ => {
             let masks: Vec<(&[u8], Placement)> = group
