@@ -117,7 +117,11 @@ pub fn lit_runs(width: u32, data: &[u8], rows: Range<usize>, cols: Range<usize>)
         return out;
     }
     let cols = cols.start..cols.end.min(w);
-    let rows = data.chunks_exact(w).enumerate().take(rows.end).skip(rows.start);
+    let rows = data
+        .chunks_exact(w)
+        .enumerate()
+        .take(rows.end)
+        .skip(rows.start);
     for (r, row) in rows {
         row_runs(&row[cols.clone()], r as u32, cols.start as u32, &mut out);
     }
@@ -445,7 +449,7 @@ mod tests {
 
     #[test]
     fn regions_match_a_pixel_flood_fill() {
-        let mut rnd = xorshift(0x2e_61_0115);
+        let mut rnd = xorshift(0x2e61_0115);
         let (w, h) = (23usize, 17usize);
         let mut total = 0;
         for case in 0..300 {

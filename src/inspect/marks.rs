@@ -97,7 +97,7 @@ pub fn draw(
     supports: Option<&Supports>,
 ) {
     let at = |q: [f64; 3]| {
-        let (x, y) = proj.to_px(q);
+        let (x, y) = proj.pixel_of(q);
         (x as f32, (y + top) as f32)
     };
     if let Some(s) = supports {

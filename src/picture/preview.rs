@@ -205,7 +205,7 @@ pub struct Projection {
 impl Projection {
     /// The picture pixel (x right, y down) of build-volume point `q` (x, y on the build
     /// plane, z above it; mm).
-    pub fn to_px(&self, q: [f64; 3]) -> (f64, f64) {
+    pub fn pixel_of(&self, q: [f64; 3]) -> (f64, f64) {
         (
             self.offset[0] + (dot(q, self.view_right) - self.lo[0]) * self.scale,
             self.height - self.offset[1] - (dot(q, self.view_up) - self.lo[1]) * self.scale,
@@ -272,7 +272,7 @@ pub fn preview_projected(
         ],
         height: height as f64,
     };
-    let to_px = |q: V3| projection.to_px(q);
+    let to_px = |q: V3| projection.pixel_of(q);
 
     let mut canvas = Canvas::new(width, height, BACKGROUND);
     draw_plate(&mut canvas, &to_px, [x0, y0, x1, y1]);
