@@ -96,6 +96,8 @@ pub const CODES: &[Code] = &[
         "slices have a max fill distance beyond the hybrid lift table; they use its last row's lift", "add a [[hybrid.olh]] row that reaches this fill distance"),
     code("plan.unsupported-islands", Warn, "islands, layers, first_layer, largest_mm",
         "regions of a layer rest on nothing in the layer below and need supports (largest_mm: per layer with islands, its largest island as [layer, x, y, area], mm and mm²)", "slice with --supports to hold them, or orient the part so that they rest on the layer below"),
+    code("run.unsupported-regions", Warn, "regions, layers, first_layer, largest_mm",
+        "regions of a layer's masks rest on nothing in the layer below, in a job without supports (`dmdsl run`, from the masks; largest_mm: per layer with such regions, its largest as [layer, x, y, area], mm and mm²)", "add supports under these regions (`dmdsl slice --supports`), or orient the part so that they rest on the layer below"),
     code("exposure.implausible-dose", Warn, "thickness_mm, overcure_mm, depth_dp, dose_mj_cm2, resin",
         "the working curve asks more than 100 Ec to cure the layer and its overcure", "check the resin's working curve (Dp, Ec), the layer height and the overcure"),
     code("exposure.too-long", Warn, "exposure_s, target_irradiance_mw_cm2, ec_mj_cm2, resin",

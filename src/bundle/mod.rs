@@ -38,6 +38,7 @@ use std::path::Path;
 
 pub mod machine;
 mod pixels;
+pub mod regions;
 mod source;
 mod supports;
 mod writer;

@@ -23,6 +23,16 @@ pub struct Supports {
     pub volume_mm3: f64,
 }
 
+impl Supports {
+    /// The area a support head touches, mm²: a disc of `head_front_diameter_mm`. A region
+    /// of the masks this large or larger that rests on nothing below is an
+    /// `unsupported-region` of `dmdsl run`; smaller ones are what the masks' edges leave
+    /// (docs/EXECUTOR.md "Printability").
+    pub fn head_contact_mm2(&self) -> f64 {
+        std::f64::consts::PI * (self.head_front_diameter_mm / 2.0).powi(2)
+    }
+}
+
 /// One support.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -1,68 +1,14 @@
-//! Islands: runs of lit pixels and their 4-connected components (union-find). One counter
-//! for the planner's islands (regions that print onto nothing, `plan::analysis`) and the
-//! cure check's (islands that vanish, cured regions that join them).
+//! Islands: runs of lit pixels and their 4-connected components (union-find,
+//! [`crate::bundle::regions::components`]). One counter for the planner's islands (regions
+//! that print onto nothing, `plan::analysis`), the cure check's (islands that vanish, cured
+//! regions that join them) and the executor's unsupported regions.
 
 use super::check::LIT;
 use super::kernel::{Irradiance, Prepared};
 
-/// A run of one row's pixels (or samples): `[row, first column, end column)`. Runs are
-/// sorted by row, then column, and a row's runs neither overlap nor touch (the layout of
-/// [`crate::raster::LitRuns`]).
-pub type Run = [u32; 3];
-
-/// The 4-connected components of `runs`: each run's component, numbered from 0 in the
-/// order of their first run, and how many (union-find, a component's smallest run its
-/// root).
-pub fn components(runs: &[Run]) -> (Vec<u32>, usize) {
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
-    let n = runs.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    // The runs of the row above the current run's: `above`, and where the current row
-    // starts.
-    let (mut above, mut start) = (0..0, 0);
-    let mut j = 0;
-    for i in 0..n {
-        let a = runs[i];
-        if i == 0 || runs[i - 1][0] != a[0] {
-            above = if i > 0 && runs[i - 1][0] + 1 == a[0] {
-                start..i
-            } else {
-                i..i
-            };
-            start = i;
-            j = above.start;
-        }
-        while j < above.end && runs[j][2] <= a[1] {
-            j += 1;
-        }
-        let mut t = j;
-        while t < above.end && runs[t][1] < a[2] {
-            let (x, y) = (find(&mut parent, t as u32), find(&mut parent, i as u32));
-            if x != y {
-                parent[x.max(y) as usize] = x.min(y);
-            }
-            t += 1;
-        }
-    }
-    let mut map = vec![u32::MAX; n];
-    let mut ids = Vec::with_capacity(n);
-    let mut count = 0u32;
-    for i in 0..n {
-        let root = find(&mut parent, i as u32) as usize;
-        if map[root] == u32::MAX {
-            map[root] = count;
-            count += 1;
-        }
-        ids.push(map[root]);
-    }
-    (ids, count as usize)
-}
+/// A run of one row's pixels (or samples), and the 4-connected components of runs: the
+/// job format's ([`crate::bundle::regions`]), which the executor and `inspect` share.
+pub use crate::bundle::regions::{components, Run};
 
 /// The lit runs of `cur` (relative irradiance ≥ [`LIT`]) and its islands, into `p`.
 #[inline(never)]

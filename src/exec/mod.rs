@@ -11,14 +11,18 @@
 //!
 //! 1. [`verify`]: manifest structure and every mask (present, SHA-256, decodable PNG of
 //!    the projector's size and bit depth, its own file, lit where the layer's section is
-//!    and enough for its area) and gray map, all problems collected, in parallel.
-//! 2. [`sim`]: event-based simulation of the steps under the bundle's timing contract,
+//!    and enough for its area) and gray map, all problems collected, in parallel; each
+//!    layer's lit pixels on the field kept as runs.
+//! 2. [`printable`]: the regions of each layer resting on nothing below, from those runs
+//!    in one pass over consecutive layers: a warning, or a violation for a job compiled
+//!    with supports.
+//! 3. [`sim`]: event-based simulation of the steps under the bundle's timing contract,
 //!    with optional fault injection, streaming [`sim::Segment`]s to sinks.
-//! 3. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
+//! 4. Sinks: [`check::Checker`] (invariants → violations), [`report::Stats`],
 //!    [`trace::TraceWriter`] (`--trace`), [`report::PlotCollector`] (`--plot`).
-//! 4. With `--cure`, [`cure`]: what cures, predicted from the masks alone (the model of
+//! 5. With `--cure`, [`cure`]: what cures, predicted from the masks alone (the model of
 //!    [`crate::cure`]), once the masks verified; information, never a violation.
-//! 5. [`report::Report`]: the summary, `--json`, exit status.
+//! 6. [`report::Report`]: the summary, `--json`, exit status.
 //!
 //! [`testutil`] builds manifests by hand for the executor's tests and benchmarks.
 //!
@@ -26,6 +30,7 @@
 
 pub mod check;
 pub mod cure;
+pub mod printable;
 pub mod report;
 pub mod sim;
 pub mod trace;
@@ -47,6 +52,7 @@ use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+pub use printable::UnsupportedRegion;
 pub use violation::{Kind, Violation};
 
 /// What to do besides verifying and simulating.
@@ -158,6 +164,13 @@ pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Repor
     let t1 = Instant::now();
     let machine = given.as_ref().map_or(&manifest.machine, |g| &g.0);
     let mut verified = verify::verify_source(source, &manifest, machine, native);
+    // The regions resting on nothing below, from the runs the masks' decoding left.
+    let printable = printable::check(source, &manifest, machine, &verified.runs);
+    verified.runs = Vec::new();
+    verified.problems.extend(printable.violations);
+    verified
+        .problems
+        .sort_by_key(|p| p.layer.map_or(0, |l| l + 1));
     verified.problems.extend(hardware);
     let verify_s = t1.elapsed().as_secs_f64();
     let t3 = Instant::now();
@@ -167,7 +180,12 @@ pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Repor
     let unreadable = verified
         .problems
         .iter()
-        .any(|p| !matches!(p.kind, Kind::MaskContent | Kind::Hardware));
+        .any(|p| {
+            !matches!(
+                p.kind,
+                Kind::MaskContent | Kind::Hardware | Kind::UnsupportedRegion
+            )
+        });
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, source, model)?), None),
         Some(_) => (
@@ -221,6 +239,8 @@ pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Repor
     );
     report.cure = cure;
     report.cure_skipped = cure_skipped;
+    report.unsupported_regions = printable.regions;
+    report.warnings = printable.warning.into_iter().collect();
     report.notes = notes;
     Ok(report)
 }
@@ -514,6 +534,8 @@ fn report(
         timings,
         cure: None,
         cure_skipped: None,
+        unsupported_regions: Vec::new(),
+        warnings: Vec::new(),
         unchecked: [
             "stage.travel_max_mm",
             "stage.max_speed_mm_s",

@@ -133,6 +133,11 @@ pub struct Report {
     /// Why `--cure` was not evaluated (the bundle failed verification).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cure_skipped: Option<String>,
+    /// The regions of the layers that rest on nothing in the layer below, from the masks
+    /// (docs/EXECUTOR.md "Printability").
+    pub unsupported_regions: Vec<super::UnsupportedRegion>,
+    /// Warnings about the job (`run.unsupported-regions`, docs/WARNINGS.md).
+    pub warnings: Vec<crate::warning::Warning>,
     /// The machine record's keys whose checks were not made: its source states no value
     /// for them (`stage.max_speed_mm_s`, …; `projector[].pixel_mm`: areas not measured).
     pub unchecked: Vec<String>,
@@ -397,6 +402,9 @@ pub fn render_human(r: &Report) -> String {
     }
     for n in &r.notes {
         let _ = writeln!(o, "note: {n}");
+    }
+    for w in &r.warnings {
+        let _ = writeln!(o, "warning: {} [{}]", w.message, w.code);
     }
     if let Some(f) = &r.fault {
         let (t, at) = (f.time_s, hms(f.time_s));

@@ -5,7 +5,7 @@
 pub mod field;
 pub mod preview;
 
-pub use preview::preview;
+pub use preview::{preview, preview_projected, Projection};
 
 use crate::bundle::{BundleSource, MANIFEST};
 use crate::error::{Error, Result};

@@ -187,6 +187,37 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
     })
 }
 
+/// How a preview projects a point of the build volume into its picture.
+#[derive(Debug, Clone, Copy)]
+pub struct Projection {
+    view_right: V3,
+    view_up: V3,
+    /// The smallest screen coordinates (right, up) of the plate and the part, mm.
+    lo: [f64; 2],
+    /// Picture pixels per mm.
+    scale: f64,
+    /// Left and bottom margins, px.
+    offset: [f64; 2],
+    /// The picture's height, px.
+    height: f64,
+}
+
+impl Projection {
+    /// The picture pixel (x right, y down) of build-volume point `q` (x, y on the build
+    /// plane, z above it; mm).
+    pub fn pixel_of(&self, q: [f64; 3]) -> (f64, f64) {
+        (
+            self.offset[0] + (dot(q, self.view_right) - self.lo[0]) * self.scale,
+            self.height - self.offset[1] - (dot(q, self.view_up) - self.lo[1]) * self.scale,
+        )
+    }
+
+    /// Picture pixels per mm.
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+}
+
 /// A `width` × `height` picture of the part the masks of `manifest` build, read through
 /// `masks`: the lit pixels stacked into voxels, seen from the front right and above,
 /// shaded, on its build plate. Errors: a mask that cannot be read.
@@ -196,6 +227,16 @@ pub fn preview(
     width: u32,
     height: u32,
 ) -> Result<RgbImage> {
+    preview_projected(manifest, masks, width, height).map(|(img, _)| img)
+}
+
+/// [`preview()`] and how it projects the build volume, so that marks can be drawn over it.
+pub fn preview_projected(
+    manifest: &Manifest,
+    masks: &dyn BundleSource,
+    width: u32,
+    height: u32,
+) -> Result<(RgbImage, Projection)> {
     let (width, height) = (width.max(16), height.max(16));
     let v = voxels(manifest, masks)?;
     let view = View::new();
@@ -220,14 +261,18 @@ pub fn preview(
     let margin = 0.06 * width.min(height) as f64;
     let s = ((width as f64 - 2.0 * margin) / (hi[0] - lo[0]).max(1e-9))
         .min((height as f64 - 2.0 * margin) / (hi[1] - lo[1]).max(1e-9));
-    let ox = (width as f64 - (hi[0] - lo[0]) * s) / 2.0;
-    let oy = (height as f64 - (hi[1] - lo[1]) * s) / 2.0;
-    let to_px = |q: V3| -> (f64, f64) {
-        (
-            ox + (dot(q, view.right) - lo[0]) * s,
-            height as f64 - oy - (dot(q, view.up) - lo[1]) * s,
-        )
+    let projection = Projection {
+        view_right: view.right,
+        view_up: view.up,
+        lo,
+        scale: s,
+        offset: [
+            (width as f64 - (hi[0] - lo[0]) * s) / 2.0,
+            (height as f64 - (hi[1] - lo[1]) * s) / 2.0,
+        ],
+        height: height as f64,
     };
+    let to_px = |q: V3| projection.pixel_of(q);
 
     let mut canvas = Canvas::new(width, height, BACKGROUND);
     draw_plate(&mut canvas, &to_px, [x0, y0, x1, y1]);
@@ -287,7 +332,7 @@ pub fn preview(
             }
         }
     }
-    Ok(img)
+    Ok((img, projection))
 }
 
 /// The build plate under the part: its outline and lines every 10 mm.

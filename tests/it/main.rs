@@ -23,6 +23,7 @@ mod messages;
 mod plan;
 mod plate;
 mod psf;
+mod printable;
 mod readme;
 mod replace;
 mod roundtrip;

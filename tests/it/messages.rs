@@ -36,6 +36,7 @@ const NOUNS: &[&str] = &[
     "step",
     "move",
     "image",
+    "region",
 ];
 
 /// What is wrong with `message` of code `code`, if anything.
@@ -219,6 +220,8 @@ fn mesh_plan_and_exposure_messages_name_a_remedy() {
         &dir,
         &["slice", island.to_str().unwrap(), "-o", "is.dmdjob"],
     ));
+    // The executor finds the island in the masks.
+    ws.extend(raised(&dir, &["run", "is.dmdjob"]));
     let deep = ["--set", ABSOLUTE, "--set", "resin.dp_mm=0.00001"];
     ws.extend(raised(
         &dir,
@@ -250,6 +253,7 @@ const PLAN_CODES: &[&str] = &[
     "plan.travel-clamped",
     "plan.beyond-lift-table",
     "plan.unsupported-islands",
+    "run.unsupported-regions",
     "exposure.implausible-dose",
     "exposure.too-long",
     "exposure.too-short",

@@ -5,9 +5,10 @@
 //! compensation's gray maps; for a native job, each mask against its own record (its lit
 //! pixels, their box in the field and the sum of its grays: [`MaskPixels`]) and the
 //! settings against the layers. All problems are collected, each naming its file and
-//! layer. Files are read, hashed and decoded in parallel (rayon), one file per task, so
-//! memory stays at a few masks per thread; a decoded mask leaves only its
-//! [`MaskPixels`] behind.
+//! layer. Files are read, hashed and decoded in parallel (rayon), one layer's masks per
+//! task, so memory stays at a few masks per thread; a decoded mask leaves only its
+//! [`MaskPixels`] behind, and the layer its lit runs on the field
+//! ([`crate::bundle::regions`], for the printability pass, `exec::printable`).
 //!
 //! The parts: the manifest's structure and the run of the checks (here), each PNG file
 //! (`files.rs`), what a layer's masks must show (`content.rs`) and the settings
@@ -21,6 +22,7 @@ mod test_support;
 
 use super::{Kind, Violation};
 use crate::bundle::machine::{Machine, Projector};
+use crate::bundle::regions::{field_runs, lit_runs, placed as placed_runs, Placement, Run};
 use crate::bundle::{BundleSource, Manifest, MaskPixels, MaskRef, MANIFEST};
 use content::ContentRule;
 use files::{check_gray_maps, check_png, is_inside, PngCheck};
@@ -39,6 +41,9 @@ pub struct Verification {
     pub bytes: u64,
     /// Problems: the job's first, then by layer.
     pub problems: Vec<Violation>,
+    /// Each layer's lit pixels on the field as runs ([`crate::bundle::regions`]); `None`
+    /// for a layer whose masks did not all read and decode cleanly.
+    pub runs: Vec<Option<Vec<Run>>>,
 }
 
 fn problem(layer: Option<usize>, kind: Kind, file: Option<&str>, message: String) -> Violation {
@@ -100,43 +105,48 @@ pub fn verify_source(
         settings::check(dir, manifest, &mut problems);
     }
     let projectors = &machine.projector;
-    let per_file: Vec<PngCheck> = refs
+    // One task per layer: its masks read, checked and decoded, then its lit runs on the
+    // field (the projectors' masks placed and added up) once all of them decoded.
+    let groups: Vec<&[(usize, &MaskRef)]> = refs.chunk_by(|a, b| a.0 == b.0).collect();
+    let per_layer: Vec<(Vec<PngCheck>, Option<Vec<Run>>)> = groups
         .par_iter()
-        .map_init(Vec::new, |buf, &(i, m)| {
-            let proj = &projectors[m.projector as usize];
-            check_png(
-                dir,
-                &m.file,
-                &m.sha256,
-                proj,
-                &format!("layer {i}"),
-                "mask",
-                buf,
-            )
+        .map_init(Vec::new, |bufs: &mut Vec<Vec<u8>>, group| {
+            decode_layer(dir, group, projectors, bufs)
         })
         .collect();
+    let mut runs: Vec<Option<Vec<Run>>> = vec![None; manifest.layers.len()];
     let mut bytes = 0;
     // The masks' lit pixels per layer (as field pixels), once every mask decoded cleanly.
     let mut lit: Vec<Option<(MaskPixels, Vec<&MaskRef>)>> = vec![None; manifest.layers.len()];
     // Masks against their records, after each layer's content.
     let mut records = Vec::new();
-    for (&(i, m), c) in refs.iter().zip(per_file) {
-        bytes += c.bytes;
-        let clean = c.faults.is_empty();
-        for (fault, msg) in c.faults {
-            problems.push(problem(Some(i), fault.mask_kind(), Some(&m.file), msg));
+    for (group, (checks, layer_runs)) in groups.iter().zip(per_layer) {
+        if let (Some(&(i, _)), Some(r)) = (group.first(), layer_runs) {
+            runs[i] = Some(r);
         }
-        let Some(px) = c.lit.filter(|_| clean) else {
-            incomplete.insert(i);
-            continue;
-        };
-        let made_by = manifest.machine.projector.get(m.projector as usize);
-        records.extend(made_by.and_then(|p| against_record(dir, i, m, placed(px, p))));
-        if !incomplete.contains(&i) {
-            let px = placed(px, &projectors[m.projector as usize]);
-            let slot = lit[i].get_or_insert_with(|| (MaskPixels::default(), Vec::new()));
-            slot.0 = union(slot.0, px);
-            slot.1.push(m);
+        for (&(i, m), c) in group.iter().zip(checks) {
+            bytes += c.bytes;
+            let clean = c.faults.is_empty();
+            for (fault, msg) in c.faults {
+                problems.push(problem(Some(i), fault.mask_kind(), Some(&m.file), msg));
+            }
+            let Some(px) = c.lit.filter(|_| clean) else {
+                incomplete.insert(i);
+                continue;
+            };
+            let made_by = manifest.machine.projector.get(m.projector as usize);
+            records.extend(made_by.and_then(|p| against_record(dir, i, m, placed(px, p))));
+            if !incomplete.contains(&i) {
+                let px = placed(px, &projectors[m.projector as usize]);
+                let slot = lit[i].get_or_insert_with(|| (MaskPixels::default(), Vec::new()));
+                slot.0 = union(slot.0, px);
+                slot.1.push(m);
+            }
+        }
+    }
+    for i in &incomplete {
+        if let Some(r) = runs.get_mut(*i) {
+            *r = None;
         }
     }
     let rule = ContentRule::of(manifest, machine, native);
@@ -153,7 +163,54 @@ pub fn verify_source(
         gray_maps,
         bytes,
         problems,
+        runs,
     }
+}
+
+/// Checks and decodes the masks of one layer (`group`, each with its layer) into `bufs`
+/// (one buffer per mask, kept by the thread): each file's check, and the layer's lit runs
+/// on the field when every mask decoded cleanly.
+fn decode_layer(
+    dir: &dyn BundleSource,
+    group: &[(usize, &MaskRef)],
+    projectors: &[Projector],
+    bufs: &mut Vec<Vec<u8>>,
+) -> (Vec<PngCheck>, Option<Vec<Run>>) {
+    if bufs.len() < group.len() {
+        bufs.resize_with(group.len(), Vec::new);
+    }
+    let checks: Vec<PngCheck> = group
+        .iter()
+        .zip(bufs.iter_mut())
+        .map(|(&(i, m), buf)| {
+            let proj = &projectors[m.projector as usize];
+            check_png(dir, &m.file, &m.sha256, proj, &format!("layer {i}"), "mask", buf)
+        })
+        .collect();
+    let clean = checks.iter().all(|c| c.faults.is_empty() && c.lit.is_some());
+    if !clean {
+        return (checks, None);
+    }
+    let runs = match (group, checks.first().and_then(|c| c.lit)) {
+        // One mask: only its lit box.
+        ([(_, m)], Some(px)) => {
+            let at = Placement::of(&projectors[m.projector as usize]);
+            let [c0, r0, c1, r1] = px.lit_box_px.map_or([0; 4], |b| b.map(|v| v as usize));
+            placed_runs(lit_runs(at.size[0], &bufs[0], r0..r1, c0..c1), at)
+        }
+        _ => {
+            let masks: Vec<(&[u8], Placement)> = group
+                .iter()
+                .zip(bufs.iter())
+                .map(|(&(_, m), b)| {
+                    let at = Placement::of(&projectors[m.projector as usize]);
+                    (b.as_slice(), at)
+                })
+                .collect();
+            field_runs(&masks)
+        }
+    };
+    (checks, Some(runs))
 }
 
 /// The pixels of projector `p`'s mask with their box in the field.
