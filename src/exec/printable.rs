@@ -72,7 +72,15 @@ pub fn check(
     if regions.is_empty() {
         return out;
     }
-    match &manifest.supports {
+    // The cure correction moves edges in by up to a pixel and counts on the blur to close
+    // what that opens: a supported job's masks are checked for this only when uncorrected
+    // (corrected, what they leave over nothing is the warning, and `run --cure` predicts
+    // what cures).
+    let corrected = manifest
+        .cure
+        .as_ref()
+        .is_some_and(|c| c.correction != "off");
+    match manifest.supports.as_ref().filter(|_| !corrected) {
         Some(s) => {
             let least = smallest_held_mm2(s);
             let held: Vec<UnsupportedRegion> = regions
@@ -85,7 +93,10 @@ pub fn check(
                 .map(|l| violation(dir, manifest, l, least))
                 .collect();
         }
-        None => out.warning = Some(warning(&by_layer(&regions))),
+        None => {
+            let supported = manifest.supports.is_some();
+            out.warning = Some(warning(&by_layer(&regions), supported));
+        }
     }
     out.regions = regions;
     out
@@ -170,7 +181,7 @@ fn violation(
 }
 
 /// The `run.unsupported-regions` warning of the layers' regions (each largest first).
-fn warning(layers: &[Vec<UnsupportedRegion>]) -> Warning {
+fn warning(layers: &[Vec<UnsupportedRegion>], supported: bool) -> Warning {
     let n: u64 = layers.iter().map(|l| l.len() as u64).sum();
     let k = layers.len() as u64;
     let first = layers[0][0].layer;
@@ -194,10 +205,15 @@ fn warning(layers: &[Vec<UnsupportedRegion>]) -> Warning {
     Warning::new(
         "run.unsupported-regions",
         format!(
-            "{n} unsupported {} on {k} {} (first at layer {first}); largest per layer: {}: regions of the masks that do not rest on the layer below need supports",
+            "{n} unsupported {} on {k} {} (first at layer {first}); largest per layer: {}: regions of the masks that do not rest on the layer below need supports{}",
             plural(n, "region", "regions"),
             plural(k, "layer", "layers"),
-            at.join("; ")
+            at.join("; "),
+            if supported {
+                " (the job has supports, and its cure correction moved these edges in: `dmdsl run --cure` predicts whether they cure together)"
+            } else {
+                ""
+            }
         ),
     )
     .with("regions", n)

@@ -98,7 +98,7 @@ pub fn column(p: Point, masks: &[Vec<Run>], first: usize, s: &Shape) -> Column {
             // Beside the axis the part is a pixel or so outside the pillar: the widened end
             // reaches into that layer (¾ of it) to share its pixels, whatever the
             // penetration.
-            let wide = r + 1.5 * s.pixel_mm;
+            let wide = r + 2.5 * s.pixel_mm;
             vec![[z0 - 0.75 * s.layer_mm, wide], [z0 + foot_len * f, r]]
         }
     };
@@ -218,7 +218,7 @@ mod tests {
         let c = column(point(45), &masks, 0, &shape());
         assert_eq!(c.foot, Foot::Part(30, false));
         assert!(
-            (c.rings[0][0] - 3.025).abs() < 1e-9 && (c.rings[0][1] - 0.65).abs() < 1e-9,
+            (c.rings[0][0] - 3.025).abs() < 1e-9 && (c.rings[0][1] - 0.75).abs() < 1e-9,
             "{:?}",
             c.rings
         );

@@ -92,7 +92,10 @@ impl ContentRule {
         ContentRule {
             pixel_mm: p,
             field_h_px: field.height_px as f64,
-            tol_px: 1.0 + warp_mm / p,
+            // The cure correction moves edges by up to a pixel either way (in, and out
+            // where it widens what would not cure), so a corrected mask may light a pixel
+            // beyond the section's box.
+            tol_px: 1.0 + warp_mm / p + if corrected { 1.0 } else { 0.0 },
             warp_mm,
             coverage,
             held_back: manifest
