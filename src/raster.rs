@@ -739,7 +739,10 @@ mod tests {
             assert_eq!(box_a, fresh.lit_box(), "case {case}");
             for row in box_a.rows() {
                 let cols = row * 16384 + box_a.c0..row * 16384 + box_a.c1;
-                assert!(a.data[cols.clone()] == want.data[cols], "case {case} row {row}");
+                assert!(
+                    a.data[cols.clone()] == want.data[cols],
+                    "case {case} row {row}"
+                );
             }
         }
     }

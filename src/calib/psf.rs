@@ -89,12 +89,22 @@ fn cluster() -> (Vec<Rect>, Vec<ClusterFeature>, [i64; 2]) {
         for (k, &w) in WIDTHS_PX.iter().enumerate() {
             let w = w as i64;
             if gaps {
-                feats.push((Drawn::Gap, axis, w as u32, centre(a as f64 + 0.5 * w as f64)));
+                feats.push((
+                    Drawn::Gap,
+                    axis,
+                    w as u32,
+                    centre(a as f64 + 0.5 * w as f64),
+                ));
                 rects.push(put(a + w, a + w + b));
                 a += w + b;
             } else {
                 rects.push(put(a, a + w));
-                feats.push((Drawn::Line, axis, w as u32, centre(a as f64 + 0.5 * w as f64)));
+                feats.push((
+                    Drawn::Line,
+                    axis,
+                    w as u32,
+                    centre(a as f64 + 0.5 * w as f64),
+                ));
                 a += w + if k + 1 < WIDTHS_PX.len() { s } else { 0 };
             }
         }
@@ -123,7 +133,10 @@ fn areas(p: &Profile) -> Vec<Rect> {
         let mut a = rect(q);
         for (j, o) in p.projector.iter().enumerate() {
             let o = rect(o);
-            let (dx, dy) = (a[2].min(o[2]) - a[0].max(o[0]), a[3].min(o[3]) - a[1].max(o[1]));
+            let (dx, dy) = (
+                a[2].min(o[2]) - a[0].max(o[0]),
+                a[3].min(o[3]) - a[1].max(o[1]),
+            );
             if j == i || dx <= 0 || dy <= 0 {
                 continue;
             }
@@ -139,7 +152,12 @@ fn areas(p: &Profile) -> Vec<Rect> {
             let [x0, y0, x1, y1] = c.field.area_mm;
             let up = |v: f64| (v - 1e-6).ceil() as i64;
             let down = |v: f64| (v + 1e-6).floor() as i64;
-            let cal = [up(x0 / px), up(h - y1 / px), down(x1 / px), down(h - y0 / px)];
+            let cal = [
+                up(x0 / px),
+                up(h - y1 / px),
+                down(x1 / px),
+                down(h - y0 / px),
+            ];
             a = [
                 a[0].max(cal[0]),
                 a[1].max(cal[1]),
@@ -306,7 +324,9 @@ fn measured_rows(s: &Sheet) -> Result<Vec<(String, Vec<Row>)>> {
             continue;
         };
         let (kind, line) = s.text(i, "kind");
-        let bad = |col: &str, what: String| Error::input(&s.path, format!("line {line}, column {col}: {what}"));
+        let bad = |col: &str, what: String| {
+            Error::input(&s.path, format!("line {line}, column {col}: {what}"))
+        };
         let kind = match kind {
             "line" => Drawn::Line,
             "gap" => Drawn::Gap,
@@ -315,7 +335,10 @@ fn measured_rows(s: &Sheet) -> Result<Vec<(String, Vec<Row>)>> {
         let whole = |col: &str| -> Result<u32> {
             match s.num(i, col, true)? {
                 Some(v) if (1.0..=10_000.0).contains(&v) && v.fract() == 0.0 => Ok(v as u32),
-                _ => Err(bad(col, format!("{:?} is not a whole number of 1 or more", s.text(i, col).0))),
+                _ => Err(bad(
+                    col,
+                    format!("{:?} is not a whole number of 1 or more", s.text(i, col).0),
+                )),
             }
         };
         let (drawn, layers) = (whole("drawn_px")?, whole("layers")?);
@@ -323,14 +346,24 @@ fn measured_rows(s: &Sheet) -> Result<Vec<(String, Vec<Row>)>> {
         if name.is_empty() {
             return Err(bad("projector", "empty (name the projector)".into()));
         }
-        let row = (line, s.text(i, "feature").0.to_string(), kind, drawn, layers, printed);
+        let row = (
+            line,
+            s.text(i, "feature").0.to_string(),
+            kind,
+            drawn,
+            layers,
+            printed,
+        );
         match groups.iter_mut().find(|g| g.0 == name) {
             Some(g) => g.1.push(row),
             None => groups.push((name.to_string(), vec![row])),
         }
     }
     if groups.is_empty() {
-        return Err(Error::input(&s.path, "no measured feature (printed_mm is empty on every line)"));
+        return Err(Error::input(
+            &s.path,
+            "no measured feature (printed_mm is empty on every line)",
+        ));
     }
     Ok(groups)
 }
@@ -361,7 +394,13 @@ pub fn fit_psf(s: &Sheet, model: &CureModel) -> Result<PsfFit> {
     let mut all_layers = Vec::new();
     for (name, rows) in groups {
         if rows.len() < 3 {
-            return Err(Error::input(&s.path, format!("projector {name}: {} measured features (printed_mm), the fit needs at least 3", rows.len())));
+            return Err(Error::input(
+                &s.path,
+                format!(
+                    "projector {name}: {} measured features (printed_mm), the fit needs at least 3",
+                    rows.len()
+                ),
+            ));
         }
         all_layers.extend(rows.iter().map(|r| r.4));
         out.push(fit_one(s, model, name, &rows)?);
@@ -429,11 +468,17 @@ fn fit_one(s: &Sheet, model: &CureModel, name: String, rows: &[Row]) -> Result<P
         return Err(edge(sigma));
     }
     let n = rows.len() as f64;
-    let pred: Vec<f64> = rows.iter().map(|r| predict(model, sigma, r.2, r.3, r.4)).collect();
+    let pred: Vec<f64> = rows
+        .iter()
+        .map(|r| predict(model, sigma, r.2, r.3, r.4))
+        .collect();
     let d = 0.01 * sigma;
     let jj: f64 = rows
         .iter()
-        .map(|r| (predict(model, sigma + d, r.2, r.3, r.4) - predict(model, sigma - d, r.2, r.3, r.4)) / (2.0 * d))
+        .map(|r| {
+            (predict(model, sigma + d, r.2, r.3, r.4) - predict(model, sigma - d, r.2, r.3, r.4))
+                / (2.0 * d)
+        })
         .map(|j| j * j)
         .sum();
     let ss: f64 = rows.iter().zip(&pred).map(|(r, p)| (r.5 - p).powi(2)).sum();
@@ -503,14 +548,29 @@ impl PsfFit {
                         .map(|r| (r.drawn_px as f64 * px, r.printed_mm))
                         .collect::<Vec<_>>()
                 };
-                let curve = |g: fn(&ModelWidth) -> f64| p.model.iter().map(|m| (m.drawn_mm, g(m))).collect();
+                let curve = |g: fn(&ModelWidth) -> f64| {
+                    p.model.iter().map(|m| (m.drawn_mm, g(m))).collect()
+                };
                 let drawn = p.model.iter().map(|m| (m.drawn_mm, m.drawn_mm)).collect();
                 Panel {
-                    y_label: format!("{}: printed width (mm), σ = {:.3} ± {:.3} px", p.name, p.psf_sigma_px, p.psf_sigma_se_px),
+                    y_label: format!(
+                        "{}: printed width (mm), σ = {:.3} ± {:.3} px",
+                        p.name, p.psf_sigma_px, p.psf_sigma_se_px
+                    ),
                     series: vec![
                         Series::new("as drawn", [150, 150, 150], Style::Line, drawn),
-                        Series::new("model: line", [31, 119, 180], Style::Line, curve(|m| m.line_mm)),
-                        Series::new("model: gap", [44, 160, 44], Style::Line, curve(|m| m.gap_mm)),
+                        Series::new(
+                            "model: line",
+                            [31, 119, 180],
+                            Style::Line,
+                            curve(|m| m.line_mm),
+                        ),
+                        Series::new(
+                            "model: gap",
+                            [44, 160, 44],
+                            Style::Line,
+                            curve(|m| m.gap_mm),
+                        ),
                         Series::new("measured lines", [214, 39, 40], Style::Points, pts("line")),
                         Series::new("measured gaps", [148, 103, 189], Style::Points, pts("gap")),
                     ],
@@ -545,7 +605,10 @@ impl PsfFit {
         let source = format!("{} sha256:{}", f.sheet, f.sheet_sha256);
         for p in &f.projector {
             let Some(q) = profile.projector.iter_mut().find(|q| q.name == p.name) else {
-                return Err(Error::input(path, format!("projector {} is not in profile {}", p.name, profile.name)));
+                return Err(Error::input(
+                    path,
+                    format!("projector {} is not in profile {}", p.name, profile.name),
+                ));
             };
             let [lo, hi] = SIGMA_BRACKET;
             let sigma = crate::units::Positive::new(p.psf_sigma_px)
@@ -566,7 +629,13 @@ mod tests {
         let p = Profile::resolve("xu2010-topdown").unwrap();
         let pat = pattern(&p).unwrap();
         assert_eq!(pat.features.len(), 5 * 2 * 2 * WIDTHS_PX.len());
-        for place in ["centre", "top-left", "top-right", "bottom-left", "bottom-right"] {
+        for place in [
+            "centre",
+            "top-left",
+            "top-right",
+            "bottom-left",
+            "bottom-right",
+        ] {
             for kind in [Drawn::Line, Drawn::Gap] {
                 for axis in ['x', 'y'] {
                     let mut w: Vec<u32> = pat

@@ -57,7 +57,9 @@ pub fn printed_width_px(model: &CureModel, f: &Straight) -> f64 {
     let own: Vec<f32> = (0..height).flat_map(|_| row.iter().copied()).collect();
     let irr = Irradiance {
         bbox: [c0, 0, c1, height],
-        data: (0..height).flat_map(|_| row[c0..c1].iter().copied()).collect(),
+        data: (0..height)
+            .flat_map(|_| row[c0..c1].iter().copied())
+            .collect(),
     };
     let layers = f.layers.max(1) as usize;
     let mut acc: Vec<f32> = Vec::new();
@@ -154,7 +156,10 @@ mod tests {
                 layers,
             };
             let got = printed_width_px(&m, &f);
-            assert!((got - (40.0 + 2.0 * u)).abs() < 2e-3, "σ {sigma}: {got} vs {u}");
+            assert!(
+                (got - (40.0 + 2.0 * u)).abs() < 2e-3,
+                "σ {sigma}: {got} vs {u}"
+            );
             let g = Straight {
                 kind: Drawn::Gap,
                 width_px: 40,
@@ -162,7 +167,10 @@ mod tests {
                 layers,
             };
             let got = printed_width_px(&m, &g);
-            assert!((got - (40.0 - 2.0 * u)).abs() < 2e-3, "σ {sigma}: {got} vs {u}");
+            assert!(
+                (got - (40.0 - 2.0 * u)).abs() < 2e-3,
+                "σ {sigma}: {got} vs {u}"
+            );
         }
     }
 

@@ -46,13 +46,13 @@ use crate::error::{Error, Result};
 use crate::formats::control::hardware::Hardware;
 use crate::output::write_atomic;
 use crate::plot::Format;
+pub use printable::UnsupportedRegion;
 use report::{LayerTiming, MachineCheck, PlotCollector, Report, Stats, Timings};
 use sim::{FaultSpec, Machine, Sink};
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-pub use printable::UnsupportedRegion;
 pub use violation::{Kind, Violation};
 
 /// What to do besides verifying and simulating.
@@ -177,15 +177,12 @@ pub fn run_job(job: &mut crate::formats::Job, opts: &RunOptions) -> Result<Repor
     // The cure from the masks, once every mask and gray map read as recorded (a
     // `mask-content` problem does not stop it), under the job's own machine (its
     // exposure, calibration and projector).
-    let unreadable = verified
-        .problems
-        .iter()
-        .any(|p| {
-            !matches!(
-                p.kind,
-                Kind::MaskContent | Kind::Hardware | Kind::UnsupportedRegion
-            )
-        });
+    let unreadable = verified.problems.iter().any(|p| {
+        !matches!(
+            p.kind,
+            Kind::MaskContent | Kind::Hardware | Kind::UnsupportedRegion
+        )
+    });
     let (cure, cure_skipped) = match &cure_model {
         Some(model) if !unreadable => (Some(cure::check(&manifest, source, model)?), None),
         Some(_) => (

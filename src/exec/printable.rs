@@ -66,8 +66,7 @@ pub fn check(
             area_mm2: g.area_mm2(p),
         }
     };
-    let regions: Vec<UnsupportedRegion> =
-        unsupported_regions(runs).into_iter().map(mm).collect();
+    let regions: Vec<UnsupportedRegion> = unsupported_regions(runs).into_iter().map(mm).collect();
     let mut out = Printability::default();
     if regions.is_empty() {
         return out;

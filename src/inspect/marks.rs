@@ -65,7 +65,11 @@ pub fn regions(b: &Bundle) -> Result<Vec<(usize, Region)>> {
 pub fn largest_per_layer(b: &Bundle, regions: &[(usize, Region)]) -> Vec<Mark> {
     let field = b.manifest.machine.field();
     let p = field.pixel_mm;
-    let least = b.manifest.supports.as_ref().map_or(0.0, |s| s.head_contact_mm2());
+    let least = b
+        .manifest
+        .supports
+        .as_ref()
+        .map_or(0.0, |s| s.head_contact_mm2());
     let mut out: Vec<(Mark, u64)> = Vec::new();
     for &(layer, g) in regions.iter().filter(|(_, g)| g.area_mm2(p) >= least) {
         let l = &b.manifest.layers[layer];

@@ -64,7 +64,13 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
     let band = pad + text::line_height(TITLE.size) + 4.0 + lines.len() as f32 * small + 8.0;
     let mut c = Canvas::new(w, h + band.ceil() as u32, [255; 3]);
     c.draw_rgb(&img, 0, band.ceil() as i64);
-    marks::draw(&mut c, &proj, band.ceil() as f64, &rings, m.supports.as_ref());
+    marks::draw(
+        &mut c,
+        &proj,
+        band.ceil() as f64,
+        &rings,
+        m.supports.as_ref(),
+    );
     c.text(pad, pad, &title, TITLE);
     let y = pad + text::line_height(TITLE.size) + 4.0;
     for (k, l) in lines.iter().enumerate() {

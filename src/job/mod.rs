@@ -443,13 +443,19 @@ fn make_layers(
         dose,
     };
     let gray_map = OnceLock::new();
-    let sliced = pipeline::run(&ctx, Slicer::new(&part.mesh, h, n).with_supports_from(part.support_edges), n, control, || {
-        // The gray map depends on the set-up only: written while the masks are made (its
-        // encoding would otherwise wait for the last layer).
-        if let Some(o) = ctx.optics {
-            let _ = gray_map.set(optics_records::write_gray_map(o, writer, profile));
-        }
-    })?;
+    let sliced = pipeline::run(
+        &ctx,
+        Slicer::new(&part.mesh, h, n).with_supports_from(part.support_edges),
+        n,
+        control,
+        || {
+            // The gray map depends on the set-up only: written while the masks are made (its
+            // encoding would otherwise wait for the last layer).
+            if let Some(o) = ctx.optics {
+                let _ = gray_map.set(optics_records::write_gray_map(o, writer, profile));
+            }
+        },
+    )?;
     Ok((sliced, gray_map.into_inner()))
 }
 

@@ -184,10 +184,20 @@ fn decode_layer(
         .zip(bufs.iter_mut())
         .map(|(&(i, m), buf)| {
             let proj = &projectors[m.projector as usize];
-            check_png(dir, &m.file, &m.sha256, proj, &format!("layer {i}"), "mask", buf)
+            check_png(
+                dir,
+                &m.file,
+                &m.sha256,
+                proj,
+                &format!("layer {i}"),
+                "mask",
+                buf,
+            )
         })
         .collect();
-    let clean = checks.iter().all(|c| c.faults.is_empty() && c.lit.is_some());
+    let clean = checks
+        .iter()
+        .all(|c| c.faults.is_empty() && c.lit.is_some());
     if !clean {
         return (checks, None);
     }

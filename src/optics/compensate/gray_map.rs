@@ -173,7 +173,11 @@ mod tests {
                     (p.width_px, p.height_px, p.offset_px) = (pw, ph, [ox, oy]);
                     (p.mirror_x, p.mirror_y) = (mx, my);
                     let view = crate::raster::projector_view(&map, &p);
-                    assert_eq!(c.gray_map_png(&p), png(&view), "{pw}x{ph}+{ox}+{oy} {mx} {my}");
+                    assert_eq!(
+                        c.gray_map_png(&p),
+                        png(&view),
+                        "{pw}x{ph}+{ox}+{oy} {mx} {my}"
+                    );
                 }
             }
         }
