@@ -401,8 +401,8 @@ fn orient_supports(part: &[Contour], supports: &mut [Contour]) {
     for c in part {
         for i in 0..c.len() {
             let (a, b) = (c[i], c[(i + 1) % c.len()]);
-            for k in band(a[1].min(b[1]))..=band(a[1].max(b[1])) {
-                bands[k].push((a, b));
+            for edges in &mut bands[band(a[1].min(b[1]))..=band(a[1].max(b[1]))] {
+                edges.push((a, b));
             }
         }
     }

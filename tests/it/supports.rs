@@ -11,22 +11,6 @@ use std::path::Path;
 
 type Tris = Vec<[[f32; 3]; 3]>;
 
-/// A closed vertical cylinder (a regular `n`-gon) about (`cx`, `cy`).
-fn cylinder(cx: f32, cy: f32, r: f32, z0: f32, z1: f32, n: usize) -> Tris {
-    let p = |i: usize, z: f32| {
-        let a = std::f32::consts::TAU * (i % n) as f32 / n as f32;
-        [cx + r * a.cos(), cy + r * a.sin(), z]
-    };
-    let mut t = Vec::new();
-    for i in 0..n {
-        t.push([[cx, cy, z0], p(i + 1, z0), p(i, z0)]);
-        t.push([[cx, cy, z1], p(i, z1), p(i + 1, z1)]);
-        t.push([p(i, z0), p(i + 1, z0), p(i + 1, z1)]);
-        t.push([p(i, z0), p(i + 1, z1), p(i, z1)]);
-    }
-    t
-}
-
 /// A cup upside down: open at the bottom, a wall from radius `ri` to `ro`, `h` tall, its
 /// ceiling `t` thick.
 fn cup(c: [f32; 2], ro: f32, ri: f32, h: f32, t: f32, n: usize) -> Tris {
