@@ -374,18 +374,22 @@ fn chain(segs: &[Seg], support: u32) -> Section {
     }
     if !supports.is_empty() {
         section.part_area_mm2 = Some(section.contours.iter().map(signed_area).sum());
-        orient_supports(&section.contours, &mut supports);
-        section.contours.append(&mut supports);
+        let supports = orient_supports(&section.contours, supports);
+        section.contours.extend(supports);
     }
     section
 }
 
-/// Turns each support contour to the sign of the part's winding at its centre, so that
-/// a support inside a region of the part whose contours run backwards (a defective mesh:
-/// winding −1) adds to it instead of cancelling it under the nonzero rule.
-fn orient_supports(part: &[Contour], supports: &mut [Contour]) {
+/// Gives each support contour the winding that keeps it lit wherever it overlaps the part
+/// under the nonzero rule. A region of the part whose contours run backwards (a defective
+/// mesh) has winding −1, and a counter-clockwise support over it would cancel it there. The
+/// part's winding is sampled at the support's centre, at its vertices and half-way between:
+/// all of them ≥ 0 keeps the support counter-clockwise, all ≤ 0 turns it, and a support over
+/// both signs is doubled (winding 2, so that the sum with the part's −1, 0 or +1 is never 0).
+/// Returns the supports to append to the layer's contours.
+fn orient_supports(part: &[Contour], supports: Vec<Contour>) -> Vec<Contour> {
     if part.is_empty() {
-        return;
+        return supports;
     }
     // The part's edges in bands of y, for the crossing counts.
     let (lo, hi) = part
@@ -406,15 +410,11 @@ fn orient_supports(part: &[Contour], supports: &mut [Contour]) {
             }
         }
     }
-    for c in supports.iter_mut() {
-        let n = c.len() as f64;
-        let [x, y] = c
-            .iter()
-            .fold([0.0; 2], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+    // Winding number of the part at (x, y): edges crossing the ray to the right.
+    let winding = |[x, y]: [f64; 2]| {
         if y < lo || y > hi {
-            continue;
+            return 0;
         }
-        // Winding number of the part at (x, y): edges crossing the ray to the right.
         let mut w = 0i32;
         for &(a, b) in &bands[band(y)] {
             if (a[1] <= y) != (b[1] <= y) {
@@ -424,10 +424,31 @@ fn orient_supports(part: &[Contour], supports: &mut [Contour]) {
                 }
             }
         }
-        if w < 0 {
+        w
+    };
+    let mut out = Vec::with_capacity(supports.len());
+    for mut c in supports {
+        let n = c.len() as f64;
+        let centre = c
+            .iter()
+            .fold([0.0; 2], |s, p| [s[0] + p[0] / n, s[1] + p[1] / n]);
+        let samples = std::iter::once(centre).chain(
+            c.iter()
+                .flat_map(|p| [*p, [(p[0] + centre[0]) / 2.0, (p[1] + centre[1]) / 2.0]]),
+        );
+        let (mut neg, mut pos) = (false, false);
+        for w in samples.map(winding) {
+            neg |= w < 0;
+            pos |= w > 0;
+        }
+        if neg && pos {
+            out.push(c.clone());
+        } else if neg {
             c.reverse();
         }
+        out.push(c);
     }
+    out
 }
 
 fn finish_loop(pts: &mut Contour, reverse: bool) {
@@ -632,6 +653,32 @@ mod tests {
             (s.contours.len(), s.joined_chains, s.dropped_chains),
             (1, 0, 1)
         );
+    }
+
+    #[test]
+    fn supports_stay_lit_over_backwards_regions() {
+        let square = |x0: f64, x1: f64| vec![[x0, 0.0], [x1, 0.0], [x1, 2.0], [x0, 2.0]];
+        let mut backwards = square(0.0, 2.0);
+        backwards.reverse();
+        // A backwards square (winding −1) beside a proper one (+1).
+        let part = vec![backwards, square(2.0, 4.0)];
+        let supports = vec![
+            square(-0.5, 0.5), // over −1 and 0: turned
+            square(3.0, 3.5),  // over +1: kept
+            square(1.5, 2.5),  // over −1 and +1: doubled
+            square(5.0, 6.0),  // beside the part: kept
+        ];
+        let out = orient_supports(&part, supports.clone());
+        let mut turned = supports[0].clone();
+        turned.reverse();
+        let want = [
+            turned,
+            supports[1].clone(),
+            supports[2].clone(),
+            supports[2].clone(),
+            supports[3].clone(),
+        ];
+        assert_eq!(out, want);
     }
 
     #[test]

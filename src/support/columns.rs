@@ -84,8 +84,13 @@ pub fn column(p: Point, masks: &[Vec<Run>], first: usize, s: &Shape) -> Column {
     // Both cones shortened alike when the gap is shorter than the two.
     let f = (avail / (foot_len + s.head_len)).min(1.0);
     // A foot on the part reaches into the layer it stands on by the penetration, and no
-    // lower: what reached below the part's top there might hang in the air.
-    let into = z0 - s.penetration.min(0.75 * s.layer_mm);
+    // lower: what reached below the part's top there might hang in the air. A point right
+    // above that layer has no layer between: its contact goes into that layer (¾ of it).
+    let into = if avail < s.layer_mm / 2.0 {
+        z0 - 0.75 * s.layer_mm
+    } else {
+        z0 - s.penetration.min(0.75 * s.layer_mm)
+    };
     let mut rings = match foot {
         Foot::Pad if s.base_len > 0.0 => vec![[z0, s.base_r.max(r)], [z0 + foot_len * f, r]],
         Foot::Pad => vec![[z0, r]],
@@ -213,6 +218,19 @@ mod tests {
         assert_eq!(zs.len(), 5, "{zs:?}");
         assert!((zs[2] - 3.15).abs() < 1e-9, "{zs:?}");
         assert!(zs.windows(2).all(|w| w[1] > w[0]));
+        // A point right above the layer it stands on: its contact reaches into that layer
+        // (and up into the point's layer by the penetration).
+        let c = column(point(31), &masks, 0, &shape());
+        assert_eq!(c.foot, Foot::Part(30, true));
+        let want = [[3.025, 0.2], [3.1, 0.2], [3.3, 0.2]];
+        assert_eq!(c.rings.len(), 3, "{:?}", c.rings);
+        for (got, want) in c.rings.iter().zip(want) {
+            assert!(
+                (got[0] - want[0]).abs() < 1e-9 && got[1] == want[1],
+                "{:?}",
+                c.rings
+            );
+        }
         // The part beside the axis only: the pillar's end, widened, into layer 30.
         masks[30] = (45..55).map(|r| [r, 54, 60]).collect();
         let c = column(point(45), &masks, 0, &shape());
