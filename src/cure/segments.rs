@@ -199,6 +199,124 @@ impl Segments {
     }
 }
 
+impl Segments {
+    /// The edges split where edges of other contours cross them, each piece flagged when
+    /// it lies inside the section (material just beyond it: the nonzero winding of all the
+    /// contours there is not 0), as the edges of a support within the part, or of shells
+    /// that overlap, do. Pieces keep their edge's normal and contour; the boundary of the
+    /// union is the unflagged pieces.
+    pub fn union_pieces(&self) -> (Segments, Vec<bool>) {
+        let mut grid = Segments {
+            segs: self.segs.clone(),
+            starts: self.starts.clone(),
+            origin: self.origin,
+            cols: self.cols,
+            rows: self.rows,
+            cells: Vec::new(),
+        };
+        grid.index();
+        let contour_of = |i: usize| self.starts.partition_point(|&s| s <= i) - 1;
+        let mut out = Vec::with_capacity(self.segs.len());
+        let mut interior = Vec::with_capacity(self.segs.len());
+        let mut starts = Vec::with_capacity(self.starts.len());
+        let (mut ts, mut seen) = (Vec::new(), vec![usize::MAX; self.segs.len()]);
+        for (own, w) in self.starts.windows(2).enumerate() {
+            starts.push(out.len());
+            for i in w[0]..w[1] {
+                self.split(&grid, (i, own), (&mut ts, &mut seen), &contour_of);
+                let s = &self.segs[i];
+                for w in ts.windows(2) {
+                    let at = |t: f64| [0, 1].map(|k| s.a[k] + t * (s.b[k] - s.a[k]));
+                    let mid = at((w[0] + w[1]) / 2.0);
+                    let beyond = [0, 1].map(|k| mid[k] + 1e-3 * s.n[k]);
+                    interior.push(grid.winding(beyond) != 0);
+                    out.push(Segment {
+                        a: at(w[0]),
+                        b: at(w[1]),
+                        n: s.n,
+                    });
+                }
+            }
+        }
+        starts.push(out.len());
+        let pieces = Segments {
+            segs: out,
+            starts,
+            origin: self.origin,
+            cols: self.cols,
+            rows: self.rows,
+            cells: Vec::new(),
+        };
+        (pieces, interior)
+    }
+
+    /// The fractions of edge `i` (of contour `own`) where edges of other contours cross
+    /// it, with its ends, sorted, into `ts` (`seen`: the edge each other edge was last
+    /// tested against). The edges are found by the cells `i` spans in `grid`.
+    fn split(
+        &self,
+        grid: &Segments,
+        (i, own): (usize, usize),
+        (ts, seen): (&mut Vec<f64>, &mut [usize]),
+        contour_of: &impl Fn(usize) -> usize,
+    ) {
+        let s = &self.segs[i];
+        // Where other contours' edges cross this one (by the cells it spans).
+        ts.clear();
+        ts.extend([0.0, 1.0]);
+        let (c0, r0) = grid.cell(s.a[0].min(s.b[0]), s.a[1].min(s.b[1]));
+        let (c1, r1) = grid.cell(s.a[0].max(s.b[0]), s.a[1].max(s.b[1]));
+        for r in r0..=r1 {
+            for c in c0..=c1 {
+                for &j in &grid.cells[r * grid.cols + c] {
+                    let j = j as usize;
+                    if seen[j] != i && contour_of(j) != own {
+                        seen[j] = i;
+                        ts.extend(cross(s, &self.segs[j]));
+                    }
+                }
+            }
+        }
+        ts.sort_by(f64::total_cmp);
+        ts.dedup_by(|b, a| *b - *a < 1e-9);
+    }
+
+    /// The nonzero winding number of the edges (indexed) at `p`: signed crossings of the
+    /// ray from `p` along +u, through the cells of `p`'s row.
+    fn winding(&self, p: [f64; 2]) -> i32 {
+        let (c0, r) = self.cell(p[0], p[1]);
+        let mut w = 0;
+        let mut counted: Vec<u32> = Vec::new();
+        for c in c0..self.cols {
+            for &j in &self.cells[r * self.cols + c] {
+                let s = &self.segs[j as usize];
+                if (s.a[1] <= p[1]) != (s.b[1] <= p[1]) && !counted.contains(&j) {
+                    let t = (p[1] - s.a[1]) / (s.b[1] - s.a[1]);
+                    if s.a[0] + t * (s.b[0] - s.a[0]) > p[0] {
+                        counted.push(j);
+                        w += if s.b[1] > s.a[1] { 1 } else { -1 };
+                    }
+                }
+            }
+        }
+        w
+    }
+}
+
+/// Where segment `e` crosses segment `s`, as a fraction of `s` strictly inside it.
+fn cross(s: &Segment, e: &Segment) -> Option<f64> {
+    let d = [s.b[0] - s.a[0], s.b[1] - s.a[1]];
+    let f = [e.b[0] - e.a[0], e.b[1] - e.a[1]];
+    let den = d[0] * f[1] - d[1] * f[0];
+    if den.abs() < 1e-15 {
+        return None;
+    }
+    let w = [e.a[0] - s.a[0], e.a[1] - s.a[1]];
+    let t = (w[0] * f[1] - w[1] * f[0]) / den;
+    let u = (w[0] * d[1] - w[1] * d[0]) / den;
+    ((1e-9..1.0 - 1e-9).contains(&t) && (0.0..=1.0).contains(&u)).then_some(t)
+}
+
 /// The indices of the points of closed contour `c` kept when runs within `tol` (mm) of
 /// their chord are replaced by it (`None`: all, when `tol` is 0).
 fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
@@ -240,6 +358,41 @@ fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A support overlapping a part's edge: the pieces inside the other shape are flagged,
+    /// and the unflagged pieces are the union's outline.
+    #[test]
+    fn union_pieces_flag_the_edges_inside_the_other_shape() {
+        let part: Contour = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let support: Contour = vec![[8.0, 4.0], [12.0, 4.0], [12.0, 6.0], [8.0, 6.0]];
+        let segs = Segments::edges(&[part, support], 1.0, 100.0);
+        let (pieces, interior) = segs.union_pieces();
+        assert_eq!(pieces.starts, vec![0, 6, 12]);
+        let len = |s: &Segment| (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);
+        let (mut inside, mut outline) = (0.0, 0.0);
+        for (s, &i) in pieces.segs.iter().zip(&interior) {
+            if i {
+                inside += len(s);
+                // Inside: the part's edge across the support, the support's within the part.
+                let mid = [(s.a[0] + s.b[0]) / 2.0, 100.0 - (s.a[1] + s.b[1]) / 2.0];
+                assert!((8.0..=10.0).contains(&mid[0]) && (4.0..=6.0).contains(&mid[1]));
+            } else {
+                outline += len(s);
+            }
+        }
+        // 2 (part's edge) + 2 (support's left) + 2·2 (its top and bottom within the part).
+        assert!((inside - 8.0).abs() < 1e-9, "{inside}");
+        assert!(
+            (outline - (40.0 - 2.0 + 2.0 + 2.0 * 2.0)).abs() < 1e-9,
+            "{outline}"
+        );
+        // Shapes apart: nothing split, nothing flagged.
+        let apart: Contour = vec![[20.0, 4.0], [22.0, 4.0], [22.0, 6.0], [20.0, 6.0]];
+        let square: Contour = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let (pieces, interior) = Segments::edges(&[square, apart], 1.0, 100.0).union_pieces();
+        assert_eq!(pieces.segs.len(), 8);
+        assert!(interior.iter().all(|&i| !i));
+    }
 
     /// The grid's ray casts find what testing every edge finds.
     #[test]

@@ -509,6 +509,15 @@ impl EdgeShifts {
         out
     }
 
+    /// Holds the edges flagged in `interior` in place (no move): edges inside the
+    /// section bound nothing that cures ([`Segments::union_pieces`]); moved, they would
+    /// draw a dark line through the material.
+    pub fn hold(&mut self, interior: &[bool]) {
+        for (e, _) in self.edge.iter_mut().zip(interior).filter(|(_, &i)| i) {
+            *e = 0.0;
+        }
+    }
+
     /// The move of edge `i`, px.
     #[inline]
     pub fn of_edge(&self, i: usize) -> f64 {

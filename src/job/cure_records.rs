@@ -241,12 +241,12 @@ impl CureJob {
     /// Layer `index`'s correction (`None` with `off`): the edges of its drawn `section`
     /// (`own`: its coverage), their moves from its dose and from the layers above, `upper`
     /// (their sections' coverage, nearest first, at most [`cure::shift::LOOK_AHEAD`]),
-    /// `above` layers in all up to the job's top.
+    /// `above` layers in all up to the job's top. With `overlapping` contours (supports in
+    /// the section) only the edges of their union move.
     pub fn correction_of(
         &self,
-        index: usize,
-        above: usize,
-        section: &[Contour],
+        (index, above): (usize, usize),
+        (section, overlapping): (&[Contour], bool),
         own: &Coverage,
         upper: &[&Coverage],
     ) -> Option<LayerCorrection> {
@@ -255,6 +255,13 @@ impl CureJob {
         }
         let h = self.model_height_px;
         let segs = Segments::simplified(section, self.model.pixel_mm, h, 0.01);
+        let (segs, interior) = match overlapping {
+            true => {
+                let (pieces, interior) = segs.union_pieces();
+                (pieces, Some(interior))
+            }
+            false => (segs, None),
+        };
         let mut pairs = Vec::new();
         let layers = index + above + 1;
         let walls = self.walls.get_or_init(|| {
@@ -267,13 +274,16 @@ impl CureJob {
             upper,
             &mut pairs,
         );
-        let shifts = cure::shift::EdgeShifts::solve(
+        let mut shifts = cure::shift::EdgeShifts::solve(
             &self.model,
             &self.profile,
             (&segs, own),
             &look,
             SHIFT_SPACING_PX,
         );
+        if let Some(interior) = &interior {
+            shifts.hold(interior);
+        }
         let all = look.total();
         Some(LayerCorrection {
             segs,

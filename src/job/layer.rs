@@ -311,7 +311,8 @@ fn drawing(
         layer.cut.offer(&own);
     }
     let refs: Vec<&Coverage> = upper.iter().map(|c| &c.0).collect();
-    let corr = job.correction_of(i, layer.above, drawn, &own.0, &refs);
+    let supported = layer.section.part_area_mm2.is_some();
+    let corr = job.correction_of((i, layer.above), (drawn, supported), &own.0, &refs);
     for c in &layer.upper {
         c.release();
     }
