@@ -47,6 +47,10 @@ pub struct SupportPoint {
     pub foot: Foot,
     /// Height of its foot, mm.
     pub foot_z_mm: f64,
+    /// On a plate, which part it holds: an index into the source's `parts` (the part whose
+    /// placed box holds the point, else the nearest).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<usize>,
 }
 
 /// What a support stands on.

@@ -480,8 +480,9 @@ impl CureJob {
         }
     }
 
-    /// The warning naming the narrow features drawn wider so they cure, if any.
-    pub fn widened_warning(&self) -> Option<Warning> {
+    /// The warning naming the narrow features drawn wider so they cure, if any; `what_at`
+    /// names what the first one is part of (words to follow its position).
+    pub fn widened_warning(&self, what_at: &WhatAt) -> Option<Warning> {
         let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
         let (first, at) = (t.first_layer?, t.first?);
         let (k, n, wall_mm) = (t.features, t.layers, t.wall_mm);
@@ -494,7 +495,7 @@ impl CureJob {
                     plural(k, "was", "were"),
                     plural(k, "it cures", "they cure"),
                     plural(n, "layer", "layers"),
-                    where_is(&at),
+                    where_is(&at, first, what_at),
                     match wall_mm > 0.0 {
                         true => format!(", its thin part {} mm wide", number((wall_mm * 1e3).round() / 1e3)),
                         false => String::new(),
@@ -513,8 +514,9 @@ impl CureJob {
         )
     }
 
-    /// The warning naming the flat features the Z correction drops, if any.
-    pub fn dropped_warning(&self) -> Option<Warning> {
+    /// The warning naming the flat features the Z correction drops, if any; `what_at` as
+    /// for [`CureJob::widened_warning`].
+    pub fn dropped_warning(&self, what_at: &WhatAt) -> Option<Warning> {
         let t = self.dropped.lock().unwrap_or_else(|p| p.into_inner());
         let (first, at) = (t.first_layer?, t.first?);
         let (k, n, m) = (t.features, t.layers, self.held_back as u64);
@@ -529,7 +531,7 @@ impl CureJob {
                     t.pixels,
                     plural(t.pixels, "pixel", "pixels"),
                     plural(n, "layer", "layers"),
-                    where_is(&at),
+                    where_is(&at, first, what_at),
                     plural(k, "it is kept when", "they are kept when"),
                     m + 1,
                     number(thick),
@@ -933,14 +935,20 @@ fn prediction(layers: &[Layer], hist: &Histogram, pixel_mm: f64) -> CurePredicti
     }
 }
 
-/// "x 12.3 mm, y 4.5 mm, 0.1 × 0.2 mm": a feature's centre and size.
-fn where_is(b: &FeatureBox) -> String {
+/// What a message about a point (mm) of a layer (index) names besides the position, as
+/// words to follow it (", in b.stl"), or nothing ([`super::manifest::PlacedPart::what_at`]).
+pub(super) type WhatAt<'a> = dyn Fn([f64; 2], u64) -> Option<String> + 'a;
+
+/// "x 12.3 mm, y 4.5 mm, 0.1 × 0.2 mm": a feature's centre and size, and what it is part
+/// of (`what_at` of layer `layer`).
+fn where_is(b: &FeatureBox, layer: u64, what_at: &WhatAt) -> String {
     format!(
-        "x {} mm, y {} mm, {} × {} mm",
+        "x {} mm, y {} mm, {} × {} mm{}",
         number(b.x_mm),
         number(b.y_mm),
         number(b.width_mm),
-        number(b.height_mm)
+        number(b.height_mm),
+        what_at([b.x_mm, b.y_mm], layer).unwrap_or_default()
     )
 }
 
@@ -949,8 +957,9 @@ thread_local! {
     static LOWER: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
-/// The warnings of the layers' predictions: features that vanish, gaps that close.
-pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
+/// The warnings of the layers' predictions: features that vanish, gaps that close
+/// (`what_at` as for [`CureJob::widened_warning`]).
+pub(super) fn warnings(layers: &[Layer], what_at: &WhatAt) -> Vec<Warning> {
     let mut out = Vec::new();
     let count = |f: fn(&LayerCure) -> u32| {
         let hit: Vec<(u64, u32)> = layers
@@ -972,7 +981,10 @@ pub(super) fn warnings(layers: &[Layer]) -> Vec<Warning> {
                 "cure: {k} {} cure nowhere in {n} {} (first: layer {first}{})",
                 plural(k, "feature", "features"),
                 plural(n, "layer", "layers"),
-                at.map_or(String::new(), |a| format!(", at {}", where_is(&a))),
+                at.map_or(String::new(), |a| format!(
+                    ", at {}",
+                    where_is(&a, first, what_at)
+                )),
             ),
         )
         .with("features", k)

@@ -51,6 +51,37 @@ impl PlacedPart<'_> {
             None => self.mesh.report.warnings(),
         }
     }
+
+    /// What a message about the point `xy` (mm) of the layer at height `z_mm` names
+    /// besides its position: the supports' pad, a support (by its point), or on a plate
+    /// the part ([`super::plate::part_at`]), as words to follow the position (", in
+    /// b.stl"); `None` for a single part without supports there.
+    pub fn what_at(&self, xy: [f64; 2], z_mm: f64) -> Option<String> {
+        if let Some(s) = &self.supports {
+            if z_mm <= s.pad.thickness_mm + 1e-9 {
+                return Some(", in the supports' pad".into());
+            }
+            // A support's column: within its pillar (a head is narrower) from its foot's
+            // layer up to its point and the penetration.
+            let near = |p: &bundle::SupportPoint| {
+                let r = p.pillar_diameter_mm / 2.0 + 0.2;
+                let [x, y, z] = p.at_mm;
+                (xy[0] - x).hypot(xy[1] - y) <= r
+                    && (p.foot_z_mm - 0.1..=z + s.head_penetration_mm + 0.1).contains(&z_mm)
+            };
+            if let Some(p) = s.points.iter().find(|p| near(p)) {
+                let head = z_mm >= p.at_mm[2] - s.head_length_mm - 0.1;
+                let [x, y, z] = p.at_mm.map(crate::text::number);
+                return Some(match head {
+                    true => format!(", in the head of the support of the point at x {x}, y {y}, z {z} mm (supports.head_front_diameter_mm sets its width)"),
+                    false => format!(", in the support of the point at x {x}, y {y}, z {z} mm"),
+                });
+            }
+        }
+        let parts = &self.plate.as_ref()?.0;
+        super::plate::part_at(parts, xy)
+            .map(|i| format!(", in {}", super::plate::part_name(&parts[i])))
+    }
 }
 
 /// The layers' records and totals, as planned.
@@ -64,11 +95,11 @@ pub(super) struct PlannedLayers {
 }
 
 /// Completes the layers' analyses, plans the layers (`plan`) and builds their records; a
-/// plan that cannot be made is an error naming `model`.
+/// plan that cannot be made is an error naming `part`'s model.
 pub(super) fn plan_layers(
     profile: &Profile,
     outs: Vec<LayerOutput>,
-    model: &Path,
+    part: &PlacedPart,
 ) -> Result<PlannedLayers> {
     let supported = profile.supports.enabled;
     let h = profile.slicing.layer_height_mm.get();
@@ -95,10 +126,14 @@ pub(super) fn plan_layers(
             max_fill_distance_mm: round::plane_mm_down(a.max_fill_distance_mm),
             islands: a.islands,
             island_mm: a.island.as_ref().map(island_mm),
+            island_part: a.island.as_ref().and_then(|island| {
+                let [x, y, _] = island_mm(island);
+                part.what_at([x, y], slice::plane_z(i, h))
+            }),
         })
         .collect();
     let plan = plan::plan(profile, &infos).map_err(|msg| Error::Job {
-        path: model.into(),
+        path: part.path.into(),
         msg,
     })?;
     let hybrid = profile.process == Process::Hybrid;

@@ -84,7 +84,8 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         msg,
     })?;
     let cure = cure_records::CureJob::new(&profile, &opts.cure)?;
-    let (setup, part) = load_and_place(opts, &mut profile)?;
+    let corrected = cure.as_ref().is_some_and(|c| c.corrects());
+    let (setup, part) = load_and_place(opts, &mut profile, corrected)?;
     let load_s = t0.elapsed().as_secs_f64();
     let control = Control {
         progress: opts.progress,
@@ -126,7 +127,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let mut warnings = part.mesh_warnings();
     warnings.extend(slicing_warnings(&sliced.stats, distortion_report.as_ref()));
     let analysis_cpu_s = sliced.layers.iter().map(|o| o.analysis_s).sum();
-    let mut planned = manifest::plan_layers(&profile, sliced.layers, part.path)?;
+    let mut planned = manifest::plan_layers(&profile, sliced.layers, &part)?;
     warnings.append(&mut planned.warnings);
     let mut optics = optics_records::optics_records(
         setup.optics.as_ref(),
@@ -140,8 +141,11 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         optics.compensation = "dose".into();
     }
     let predicted_at = warnings.len();
-    warnings.extend(cure.as_ref().and_then(|c| c.dropped_warning()));
-    warnings.extend(cure.as_ref().and_then(|c| c.widened_warning()));
+    if let Some(c) = cure.as_ref() {
+        let what = what_at(&part, profile.slicing.layer_height_mm.get());
+        warnings.extend(c.dropped_warning(&what));
+        warnings.extend(c.widened_warning(&what));
+    }
     let mut manifest = manifest::manifest(
         &part,
         &profile,
@@ -253,9 +257,16 @@ fn predict(
     let warp = setup.correction.as_ref().map(|w| (w, part.path));
     let field = field.map(|f| f as &dyn bundle::BundleSource);
     cure.predict(manifest, writer, field, &part.mesh, warp)?;
-    let w = cure_records::warnings(&manifest.layers);
+    let h = manifest.settings.layer_height_mm;
+    let w = cure_records::warnings(&manifest.layers, &what_at(part, h));
     manifest.warnings.splice(at..at, w);
     Ok(())
+}
+
+/// What the cure's messages name besides a position: [`PlacedPart::what_at`] of a layer
+/// (layers `h` mm high).
+fn what_at<'a>(part: &'a PlacedPart, h: f64) -> impl Fn([f64; 2], u64) -> Option<String> + 'a {
+    move |xy, layer| part.what_at(xy, crate::slice::plane_z(layer as usize, h))
 }
 
 /// An error naming the model `path` when no layer of `manifest` has a closed section.
@@ -299,6 +310,7 @@ fn replays_clean(manifest: &bundle::Manifest, path: &Path) -> Result<()> {
 fn load_and_place<'a>(
     opts: &'a SliceOptions,
     profile: &mut Profile,
+    corrected: bool,
 ) -> Result<(SetUp, PlacedPart<'a>)> {
     let path = opts.input.as_path();
     let (setup, loaded) = rayon::join(
@@ -316,7 +328,7 @@ fn load_and_place<'a>(
     if let Some(plate) = &opts.plate {
         let mut part = plate::place_plate(opts, plate, profile, (sha256, mesh))?;
         if profile.supports.enabled {
-            supported::add_supports(&mut part, profile)?;
+            supported::add_supports(&mut part, profile, corrected)?;
         }
         return Ok((setup, part));
     }
@@ -337,7 +349,7 @@ fn load_and_place<'a>(
         support_mesh: None,
     };
     if profile.supports.enabled {
-        supported::add_supports(&mut part, profile)?;
+        supported::add_supports(&mut part, profile, corrected)?;
     }
     Ok((setup, part))
 }

@@ -322,6 +322,26 @@ fn record(part: &Loaded, inst: &Instance, copies: usize) -> PlatePart {
     }
 }
 
+/// Which of a plate's `parts` the build-plane point `xy` (mm) concerns: the one whose
+/// placed box holds it, else the one whose box is nearest (supports and widened features
+/// reach a little beyond a part's box). `None` without parts.
+pub(super) fn part_at(parts: &[PlatePart], xy: [f64; 2]) -> Option<usize> {
+    let gap = |b: &[[f64; 3]; 2]| {
+        let d = |k: usize| (b[0][k] - xy[k]).max(xy[k] - b[1][k]).max(0.0);
+        d(0).hypot(d(1))
+    };
+    (0..parts.len())
+        .min_by(|&a, &b| gap(&parts[a].placed_bbox_mm).total_cmp(&gap(&parts[b].placed_bbox_mm)))
+}
+
+/// A plate part as messages name it: its file, and which copy when there are several.
+pub(super) fn part_name(p: &PlatePart) -> String {
+    match p.copies {
+        1 => p.file.clone(),
+        n => format!("{} (copy {} of {n})", p.file, p.copy),
+    }
+}
+
 /// The plate's hash: SHA-256 of its parts' hashes and names, one line per copy as the
 /// manifest lists them (`<sha256>  <file>\n`, the form of `sha256sum`).
 fn plate_sha256(records: &[PlatePart]) -> String {
@@ -372,6 +392,28 @@ mod tests {
         let e = arrange(&[[40.0, 30.0], [40.0, 30.0]], 3.0, [0.0, 0.0, 65.0, 48.75]).unwrap_err();
         assert_eq!((e.index, e.axis), (1, 'Y'));
         assert!((e.missing_mm - (63.0 - 48.75)).abs() < 1e-9, "{e:?}");
+    }
+
+    #[test]
+    fn a_point_names_the_part_whose_box_holds_it_or_the_nearest() {
+        let part = |file: &str, copy: usize, x0: f64| PlatePart {
+            file: file.into(),
+            sha256: String::new(),
+            copy,
+            copies: 2,
+            triangles: 12,
+            bbox_mm: [[0.0; 3], [5.0, 5.0, 5.0]],
+            translate_mm: [x0, 0.0, 0.0],
+            placed_bbox_mm: [[x0, 10.0, 0.0], [x0 + 5.0, 15.0, 5.0]],
+        };
+        let parts = [part("a.stl", 1, 0.0), part("a.stl", 2, 10.0)];
+        assert_eq!(part_at(&parts, [12.0, 12.0]), Some(1));
+        assert_eq!(part_at(&parts, [2.0, 12.0]), Some(0));
+        // Between the boxes, nearer the first; below the second.
+        assert_eq!(part_at(&parts, [6.0, 12.0]), Some(0));
+        assert_eq!(part_at(&parts, [13.0, 8.0]), Some(1));
+        assert_eq!(part_at(&[], [0.0, 0.0]), None);
+        assert_eq!(part_name(&parts[1]), "a.stl (copy 2 of 2)");
     }
 
     #[test]

@@ -9,10 +9,15 @@ use crate::round;
 use crate::support::{self, Foot};
 use crate::text::number;
 
-/// Lifts `part` by whole layers, generates its supports and appends them to its mesh,
-/// keeping the part's own mesh report. Errors name the model: a lifted part beyond the
-/// stage's travel, a pad that does not fit the field.
-pub(super) fn add_supports(part: &mut PlacedPart, profile: &Profile) -> Result<()> {
+/// Lifts `part` by whole layers, generates its supports (for a job whose cure correction
+/// moves edges in: `corrected`) and appends them to its mesh, keeping the part's own mesh
+/// report. Errors name the model: a lifted part beyond the stage's travel, a pad that does
+/// not fit the field.
+pub(super) fn add_supports(
+    part: &mut PlacedPart,
+    profile: &Profile,
+    corrected: bool,
+) -> Result<()> {
     let s = &profile.supports;
     let h = profile.slicing.layer_height_mm.get();
     let first = support::lift_layers(s, h);
@@ -33,13 +38,27 @@ pub(super) fn add_supports(part: &mut PlacedPart, profile: &Profile) -> Result<(
     part.mesh.translate([0.0, 0.0, lift]);
     part.translate_mm[2] += lift;
     part.layers += first;
+    if let Some((parts, _)) = part.plate.as_mut() {
+        for p in parts {
+            p.translate_mm[2] = round::plane_mm(p.translate_mm[2] + lift);
+            for corner in &mut p.placed_bbox_mm {
+                corner[2] = round::plane_mm(corner[2] + lift);
+            }
+        }
+    }
     let field = profile.field();
-    let g = support::generate(&part.mesh, field, (h, part.layers, first), s).map_err(error)?;
+    let g = support::generate(&part.mesh, field, (h, part.layers, first), (s, corrected))
+        .map_err(error)?;
+    let plate = part.plate.as_ref().map(|p| &p.0[..]);
     let points = g
         .columns
         .iter()
         .map(|c| SupportPoint {
             at_mm: g.point_mm(c, &field).map(round::plane_mm),
+            part: plate.and_then(|parts| {
+                let [x, y, _] = g.point_mm(c, &field);
+                super::plate::part_at(parts, [x, y])
+            }),
             island: c.point.island,
             pillar_diameter_mm: round::plane_mm(c.pillar_diameter_mm),
             foot: match c.foot {

@@ -41,6 +41,9 @@ pub struct LayerInfo {
     pub islands: u32,
     /// The largest of them on the build plane: x and y of its centre and its area, mm.
     pub island_mm: Option<[f64; 3]>,
+    /// What the largest island is part of, as words to follow its position in messages
+    /// (", in b.stl" on a plate).
+    pub island_part: Option<String>,
 }
 
 /// The plan of one layer.
@@ -218,8 +221,9 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
             .take(shown)
             .filter_map(|l| {
                 let [x, y, a] = l.island_mm?;
+                let part = l.island_part.as_deref().unwrap_or_default();
                 Some(format!(
-                    "layer {} at x {}, y {} mm ({} mm²)",
+                    "layer {} at x {}, y {} mm ({} mm²){part}",
                     l.index,
                     fixed(x, 2),
                     fixed(y, 2),

@@ -18,6 +18,7 @@ fn info(i: usize, h: f64, area: f64, fill: f64) -> LayerInfo {
         max_fill_distance_mm: fill,
         islands: 0,
         island_mm: None,
+        island_part: None,
     }
 }
 

@@ -81,13 +81,13 @@ pub fn lift_layers(s: &Supports, layer_mm: f64) -> usize {
 }
 
 /// The supports of `part` (placed and lifted by [`lift_layers`] = `first`), sliced into
-/// `n` layers of `layer_mm` on `field`. An error (a message) when the pad does not fit
-/// the field.
+/// `n` layers of `layer_mm` on `field`, for a job whose cure correction moves edges in
+/// (`corrected`) or not. An error (a message) when the pad does not fit the field.
 pub fn generate(
     part: &Mesh,
     field: Field,
     (layer_mm, n, first): (f64, usize, usize),
-    s: &Supports,
+    (s, corrected): (&Supports, bool),
 ) -> Result<Generated, String> {
     let masks = part_pixels(part, field, layer_mm, n, first);
     let px = field.pixel_mm;
@@ -103,6 +103,7 @@ pub fn generate(
         self_px: layer_mm / tan / px,
         contact_px: s.head_front_diameter_mm / 2.0 / px,
         first_on_pad: first == pad_layers,
+        firm_hold: corrected,
     };
     let shape = Shape {
         pixel_mm: px,

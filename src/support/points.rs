@@ -57,6 +57,9 @@ pub struct Spread {
     pub contact_px: f64,
     /// The part's first layer rests on the pad (elevation 0): it needs no points.
     pub first_on_pad: bool,
+    /// The job's cure correction moves edges in: a region rests on the layer below only
+    /// where the pixels they share keep one whose four neighbours they share too.
+    pub firm_hold: bool,
 }
 
 /// What a layer needs: its islands (each as runs) and its pixels that face down (the
@@ -120,13 +123,16 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
     for (g, k) in region.iter().zip(runs::shared_pixels(cur, prev)) {
         shared[*g as usize] += k;
     }
-    let mut islands: Vec<Vec<Run>> = vec![Vec::new(); n];
+    let mut regions: Vec<Vec<Run>> = vec![Vec::new(); n];
     for (g, r) in region.iter().zip(cur) {
-        if shared[*g as usize] < MIN_SHARED_PX {
-            islands[*g as usize].push(*r);
-        }
+        regions[*g as usize].push(*r);
     }
-    islands.retain(|i| !i.is_empty());
+    let islands: Vec<Vec<Run>> = regions
+        .into_iter()
+        .zip(shared)
+        .filter(|(r, k)| *k < MIN_SHARED_PX || (s.firm_hold && !firm(r, prev)))
+        .map(|(r, _)| r)
+        .collect();
     let mut down = if l == first {
         Vec::new()
     } else {
@@ -142,6 +148,13 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
         down = runs::union(&down, i);
     }
     Needs { islands, down }
+}
+
+/// Whether `region` holds on `below` where edges move in by up to a pixel: some pixel
+/// they share has its four neighbours shared too (a hold a pixel or two wide does not
+/// survive the cure correction's moves of both layers' edges).
+fn firm(region: &[Run], below: &[Run]) -> bool {
+    runs::has_interior(&runs::minus(region, &runs::minus(region, below)))
 }
 
 /// The pixel of a region farthest from its outside (chamfer distance, 3-4 weights; the
@@ -316,6 +329,7 @@ mod tests {
             self_px: 1.0,
             contact_px: 2.0,
             first_on_pad: false,
+            firm_hold: false,
         }
     }
 
@@ -406,5 +420,27 @@ mod tests {
             },
         );
         assert!(pts.iter().any(|p| p.island && p.layer == 1), "{pts:?}");
+    }
+
+    #[test]
+    fn a_hold_two_pixels_wide_is_firm_only_without_the_correction() {
+        // A block whose pixels overlap the layer below in a strip `w` pixels wide.
+        let block: Vec<Run> = (20..40).map(|r| [r, 20, 60]).collect();
+        for (w, firm) in [(2, false), (3, true)] {
+            let below: Vec<Run> = (20..40).map(|r| [r, 60 - w, 80]).collect();
+            let masks = vec![below, block.clone()];
+            for firm_hold in [false, true] {
+                let s = Spread {
+                    first_on_pad: true,
+                    firm_hold,
+                    ..spread()
+                };
+                let island = place(&masks, 0, &s).iter().any(|p| p.island);
+                assert_eq!(island, firm_hold && !firm, "{w} px, firm hold {firm_hold}");
+            }
+        }
+        assert!(!runs::has_interior(&[[5, 0, 10], [6, 0, 10]]));
+        assert!(runs::has_interior(&[[5, 3, 4], [6, 0, 10], [7, 3, 5]]));
+        assert!(!runs::has_interior(&[[5, 3, 4], [6, 0, 10], [8, 3, 5]]));
     }
 }

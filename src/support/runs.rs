@@ -79,6 +79,25 @@ pub fn shared_pixels(a: &[Run], b: &[Run]) -> Vec<u32> {
         .collect()
 }
 
+/// Whether a pixel of `runs` has its four neighbours in `runs` too (the set survives an
+/// erosion by one pixel).
+pub fn has_interior(runs: &[Run]) -> bool {
+    let row = |r: u32| {
+        let lo = runs.partition_point(|x| x[0] < r);
+        &runs[lo..lo + runs[lo..].partition_point(|x| x[0] == r)]
+    };
+    runs.iter().any(|&[r, a, b]| {
+        // The run's columns whose left and right neighbours are in it.
+        let (lo, hi) = (a + 1, b.saturating_sub(1));
+        r > 0
+            && hi > lo
+            && row(r - 1).iter().any(|u| {
+                let (x0, x1) = (u[1].max(lo), u[2].min(hi));
+                x0 < x1 && row(r + 1).iter().any(|d| d[1].max(x0) < d[2].min(x1))
+            })
+    })
+}
+
 /// The union of two run sets.
 pub fn union(a: &[Run], b: &[Run]) -> Vec<Run> {
     normalized(a.iter().chain(b).copied().collect())
