@@ -114,6 +114,52 @@ fn resting_on_nothing(layers: &[(u32, Vec<bool>)]) -> Vec<(usize, usize)> {
         for start in 0..cur.len() {
             if !cur[start] || seen[start] {
                 continue;
+/// What `run --json` reports resting on nothing in a corrected job is smaller than
+/// `max_mm2`: what the cure correction leaves where it moves edges in (a pixel or two at an
+/// edge, a neck of the overexposed first layers), never a support's foot or contact cut
+/// off the part by edges moved inside the material.
+fn assert_regions_below(report: &Value, max_mm2: f64) {
+    for r in report["unsupported_regions"].as_array().unwrap() {
+        assert!(r["area_mm2"].as_f64().unwrap() < max_mm2, "{r}");
+    }
+}
+
+/// Two pixels of the default field (0.0635 mm), mm².
+const TWO_PX_MM2: f64 = 2.0 * 0.0635 * 0.0635 + 1e-6;
+
+/// Every support point of `job` (the bundle at `path`) is held: the pixel under it is lit
+/// in the layer below its own, whatever the support stands on (also a point right above
+/// the part's layer, whose support has no height of its own).
+fn assert_points_held(path: &Path, job: &Value) {
+    let h = job["settings"]["layer_height_mm"].as_f64().unwrap();
+    let p = &job["machine"]["projector"][0];
+    let (px, rows) = (
+        p["pixel_mm"].as_f64().unwrap(),
+        p["height_px"].as_u64().unwrap() as usize,
+    );
+    let layers = job["layers"].as_array().unwrap();
+    let mut masks = std::collections::HashMap::new();
+    for pt in job["supports"]["points"].as_array().unwrap() {
+        let at: Vec<f64> = pt["at_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let below = (at[2] / h).round() as usize - 1;
+        let (w, gray) = masks.entry(below).or_insert_with(|| {
+            let file = layers[below]["masks"][0]["file"].as_str().unwrap();
+            let (w, _, g) = read_gray(&path.join(file));
+            (w as usize, g)
+        });
+        let (col, row) = ((at[0] / px) as usize, rows - 1 - (at[1] / px) as usize);
+        assert!(
+            gray[row * *w + col] > 0,
+            "support point {pt} is not lit in layer {below}"
+        );
+    }
+}
+
             }
             let (mut stack, mut size, mut rests) = (vec![start], 0, false);
             seen[start] = true;
@@ -187,6 +233,7 @@ fn test_parts_print_from_the_platform_up_on_every_process() {
         );
         std::fs::remove_dir_all(dir.join("bare.dmdjob")).unwrap();
         for profile in ["xu2010-topdown", "bottom-up", "hybrid-bottomup"] {
+        assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), TWO_PX_MM2);
             let out = format!("{name}-{profile}.dmdjob");
             let mut args = vec![stl, "--supports", "-p", profile];
             args.extend(exact);
@@ -215,7 +262,7 @@ fn test_parts_print_from_the_platform_up_on_every_process() {
         }
         // The job as users make it (compensation, cure correction) runs clean too.
         slice(&dir, &[stl, "--supports"], "default.dmdjob");
-        let r = run_in(&dir, &["run", "default.dmdjob"]);
+        let r = run_in(&dir, &["run", "default.dmdjob", "--json"]);
         assert!(
             r.status.success(),
             "run {name}: {}{}",
@@ -306,12 +353,15 @@ fn supports_reach_into_the_part_only_at_heads_and_feet_and_form_closed_shells() 
                         (col > 0 && m[k - 1])
                             || (col + 1 < w && m[k + 1])
                             || (k >= w && m[k - w])
+    // Bottom-up: the first layers' long exposure moves corrected edges furthest.
                             || (k + w < m.len() && m[k + w])
                     })
                 };
                 assert!(!(p || s) || lit[k], "{name} layer {i} pixel {k}");
                 let edge = near(part_lit) || near(sup_lit);
                 assert!(!lit[k] || p || s || edge, "{name} layer {i} pixel {k}");
+            "--profile",
+            "bottom-up",
                 if p && s {
                     let row = k / w;
                     if !in_head_or_foot(&job, col, row, (i as f64 + 0.5) * h, px, field_h) {
@@ -333,11 +383,16 @@ fn supports_reach_into_the_part_only_at_heads_and_feet_and_form_closed_shells() 
 #[test]
 fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
     let dir = tempdir("supports-bunny");
+    let contact = std::f64::consts::PI
+        * (job["supports"]["head_front_diameter_mm"].as_f64().unwrap() / 2.0).powi(2);
+    assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), contact);
+    // Each layer records its supports' area apart from the part's.
     let bunny = fixture("bunny00.stl");
     let o = run_in(
         &dir,
         &["slice", bunny.to_str().unwrap(), "--json", "-o", "b.dmdjob"],
     );
+    assert_points_held(&dir.join("s.dmdjob"), &job);
     let bare: Value = serde_json::from_slice(&o.stdout).unwrap();
     let w = &warnings_of(&bare, "plan.unsupported-islands")[0];
     assert!(w["message"].as_str().unwrap().contains("--supports"), "{w}");
@@ -364,9 +419,8 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
         s["points"].as_u64().unwrap() > 20 && s["volume_mm3"].as_f64().unwrap() > 0.0,
         "{s}"
     );
-    let r = run_in(&dir, &["run", "s.dmdjob"]);
+    let r = run_in(&dir, &["run", "s.dmdjob", "--json"]);
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
-    // Each layer records its supports' area apart from the part's.
     let job: Value =
         serde_json::from_slice(&std::fs::read(dir.join("s.dmdjob/job.json")).unwrap()).unwrap();
     let layers = job["layers"].as_array().unwrap();
@@ -385,6 +439,10 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
             "--copies",
             "4",
             "--supports",
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = &warnings_of(&v, "plan.unsupported-islands")[0];
+    let m = w["message"].as_str().unwrap();
+    assert!(m.contains("mm²), in floating.stl (copy "), "{m}");
             "-o",
             "p.dmdjob",
         ],
@@ -392,14 +450,33 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
     assert!(o.status.success(), "{}", stderr(&o));
     let job: Value =
         serde_json::from_slice(&std::fs::read(dir.join("p.dmdjob/job.json")).unwrap()).unwrap();
-    assert!(
-        job["supports"]["points"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter(|p| p["island"] == true)
-            .count()
-            >= 4
+    let points = job["supports"]["points"].as_array().unwrap();
+    assert!(points.iter().filter(|p| p["island"] == true).count() >= 4);
+    // Each point names the copy it holds: the one whose box (lifted with the part) holds it.
+    let parts = job["source"]["parts"].as_array().unwrap();
+    let lift = job["supports"]["lift_mm"].as_f64().unwrap();
+    for (k, part) in parts.iter().enumerate() {
+        let b = &part["placed_bbox_mm"];
+        assert!((b[0][2].as_f64().unwrap() - lift).abs() < 1e-6, "{part}");
+        let inside = |p: &&Value| {
+            let at = &p["at_mm"];
+            (0..2).all(|a| {
+                let v = at[a].as_f64().unwrap();
+                b[0][a].as_f64().unwrap() <= v && v <= b[1][a].as_f64().unwrap()
+            })
+        };
+        let held: Vec<&Value> = points.iter().filter(|p| p["part"] == k).collect();
+        assert!(
+            !held.is_empty() && held.iter().all(inside),
+            "copy {k}: {held:?}"
+        );
+    }
+    // Without supports, the islands warning names the copy an island is in.
+    let o = run_in(
+        &dir,
+        &[
+            "slice", floating, "--copies", "2", "--json", "-o", "q.dmdjob",
+        ],
     );
     let r = run_in(&dir, &["run", "p.dmdjob"]);
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
