@@ -60,3 +60,44 @@ pub(crate) fn closed(n: usize, ccw: bool, f: impl FnMut(f64) -> [f64; 2]) -> Con
 pub(crate) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
     closed(n, ccw, |a| [cx + r * a.cos(), cy + r * a.sin()])
 }
+
+/// The regions of `cur` over `below` (`w × h` lit flags, row-major) by a flood fill, the
+/// independent oracle of the run-based region counters: (pixels,
+/// Σ columns, Σ rows) of each 4-connected region none of whose pixels is lit below.
+pub(crate) fn flood_regions(
+    cur: &[bool],
+    below: &[bool],
+    w: usize,
+    h: usize,
+) -> Vec<(u64, f64, f64)> {
+    let mut seen = vec![false; w * h];
+    let mut out = Vec::new();
+    for s in 0..w * h {
+        if !cur[s] || seen[s] {
+            continue;
+        }
+        seen[s] = true;
+        let (mut stack, mut rests, mut t) = (vec![s], false, (0u64, 0.0, 0.0));
+        while let Some(k) = stack.pop() {
+            rests |= below[k];
+            let (r, c) = (k / w, k % w);
+            t = (t.0 + 1, t.1 + c as f64 + 0.5, t.2 + r as f64 + 0.5);
+            let nb = [
+                (r > 0).then(|| k - w),
+                (r + 1 < h).then(|| k + w),
+                (c > 0).then(|| k - 1),
+                (c + 1 < w).then(|| k + 1),
+            ];
+            for q in nb.into_iter().flatten() {
+                if cur[q] && !seen[q] {
+                    seen[q] = true;
+                    stack.push(q);
+                }
+            }
+        }
+        if !rests {
+            out.push(t);
+        }
+    }
+    out
+}

@@ -359,15 +359,7 @@ pub fn unsupported_regions(layers: &[Option<Vec<Run>>]) -> Vec<(usize, Region)> 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn xorshift(mut seed: u64) -> impl FnMut() -> f64 {
-        move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::test_support::{flood_regions as flood, xorshift};
 
     /// The lit runs of a `w`-wide grid of grays, pixel by pixel.
     fn naive_runs(g: &[u8], w: usize) -> Vec<Run> {
@@ -384,41 +376,6 @@ mod tests {
                 } else {
                     c += 1;
                 }
-            }
-        }
-        out
-    }
-
-    /// The regions of `cur` over `below` (`w × h` lit flags) by a flood fill: (pixels,
-    /// Σ columns, Σ rows) of each 4-connected region none of whose pixels is lit below.
-    fn flood(cur: &[bool], below: &[bool], w: usize, h: usize) -> Vec<(u64, f64, f64)> {
-        let mut seen = vec![false; w * h];
-        let mut out = Vec::new();
-        for s in 0..w * h {
-            if !cur[s] || seen[s] {
-                continue;
-            }
-            seen[s] = true;
-            let (mut stack, mut rests, mut t) = (vec![s], false, (0u64, 0.0, 0.0));
-            while let Some(k) = stack.pop() {
-                rests |= below[k];
-                let (r, c) = (k / w, k % w);
-                t = (t.0 + 1, t.1 + c as f64 + 0.5, t.2 + r as f64 + 0.5);
-                let nb = [
-                    (r > 0).then(|| k - w),
-                    (r + 1 < h).then(|| k + w),
-                    (c > 0).then(|| k - 1),
-                    (c + 1 < w).then(|| k + 1),
-                ];
-                for q in nb.into_iter().flatten() {
-                    if cur[q] && !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-            if !rests {
-                out.push(t);
             }
         }
         out

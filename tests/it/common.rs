@@ -287,3 +287,46 @@ pub fn run_limited(
     };
     (output, status.code(), peak)
 }
+
+/// The regions of `cur` that rest on nothing in `below` (`w × h` lit flags, row-major), by
+/// a flood fill of the pixels, apart from dmdsl's run-based counters: (pixels, mean
+/// column, mean row) of each 4-connected region none of whose pixels is lit below (pixel
+/// centres at +0.5).
+pub fn regions_on_nothing(
+    cur: &[bool],
+    below: &[bool],
+    w: usize,
+    h: usize,
+) -> Vec<(u64, f64, f64)> {
+    let mut seen = vec![false; w * h];
+    let mut out = Vec::new();
+    for s in 0..w * h {
+        if !cur[s] || seen[s] {
+            continue;
+        }
+        seen[s] = true;
+        let (mut stack, mut rests) = (vec![s], false);
+        let (mut n, mut sc, mut sr) = (0u64, 0.0, 0.0);
+        while let Some(k) = stack.pop() {
+            rests |= below[k];
+            let (r, c) = (k / w, k % w);
+            (n, sc, sr) = (n + 1, sc + c as f64 + 0.5, sr + r as f64 + 0.5);
+            let near = [
+                (r > 0).then(|| k - w),
+                (r + 1 < h).then(|| k + w),
+                (c > 0).then(|| k - 1),
+                (c + 1 < w).then(|| k + 1),
+            ];
+            for q in near.into_iter().flatten() {
+                if cur[q] && !seen[q] {
+                    seen[q] = true;
+                    stack.push(q);
+                }
+            }
+        }
+        if !rests {
+            out.push((n, sc / n as f64, sr / n as f64));
+        }
+    }
+    out
+}

@@ -83,40 +83,12 @@ fn field_of(b: &Path, j: &Value) -> Field {
 /// The regions of every layer resting on nothing below, by a flood fill of the field's
 /// pixels: (layer, x mm, y mm, area mm²).
 fn flood_regions(f: &Field) -> Vec<(usize, f64, f64, f64)> {
-    let (w, h) = (f.w, f.h);
+    let (w, h, p) = (f.w, f.h, f.pixel_mm);
     let mut out = Vec::new();
     for i in 1..f.layers.len() {
-        let (cur, below) = (&f.layers[i], &f.layers[i - 1]);
-        let mut seen = vec![false; w * h];
-        for s in 0..w * h {
-            if !cur[s] || seen[s] {
-                continue;
-            }
-            seen[s] = true;
-            let (mut stack, mut rests) = (vec![s], false);
-            let (mut n, mut sc, mut sr) = (0u64, 0.0, 0.0);
-            while let Some(k) = stack.pop() {
-                rests |= below[k];
-                let (r, c) = (k / w, k % w);
-                (n, sc, sr) = (n + 1, sc + c as f64 + 0.5, sr + r as f64 + 0.5);
-                let nb = [
-                    (r > 0).then(|| k - w),
-                    (r + 1 < h).then(|| k + w),
-                    (c > 0).then(|| k - 1),
-                    (c + 1 < w).then(|| k + 1),
-                ];
-                for q in nb.into_iter().flatten() {
-                    if cur[q] && !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-            if !rests {
-                let p = f.pixel_mm;
-                let (c, r) = (sc / n as f64, sr / n as f64);
-                out.push((i, c * p, (h as f64 - r) * p, n as f64 * p * p));
-            }
+        let found = regions_on_nothing(&f.layers[i], &f.layers[i - 1], w, h);
+        for (n, c, r) in found {
+            out.push((i, c * p, (h as f64 - r) * p, n as f64 * p * p));
         }
     }
     out

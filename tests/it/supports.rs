@@ -102,18 +102,18 @@ fn lit_layers(job: &Path) -> Vec<(u32, Vec<bool>)> {
 }
 
 /// The regions (4-connected lit pixels) of each layer that share no pixel with the layer
-/// below's lit pixels (layer 0 rests on the platform): (layer, pixels). A flood fill
-/// written here, apart from the slicer's run-based counter.
+/// below's lit pixels (layer 0 rests on the platform): (layer, pixels), by the flood fill
+/// [`regions_on_nothing`], apart from the slicer's run-based counter.
 fn resting_on_nothing(layers: &[(u32, Vec<bool>)]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for i in 1..layers.len() {
-        let (w, cur) = (&layers[i].0, &layers[i].1);
-        let below = &layers[i - 1].1;
-        let w = *w as usize;
-        let mut seen = vec![false; cur.len()];
-        for start in 0..cur.len() {
-            if !cur[start] || seen[start] {
-                continue;
+        let (w, cur) = (layers[i].0 as usize, &layers[i].1);
+        let found = regions_on_nothing(cur, &layers[i - 1].1, w, cur.len() / w);
+        out.extend(found.into_iter().map(|(n, _, _)| (i, n as usize)));
+    }
+    out
+}
+
 /// What `run --json` reports resting on nothing in a corrected job is smaller than
 /// `max_mm2`: what the cure correction leaves where it moves edges in (a pixel or two at an
 /// edge, a neck of the overexposed first layers), never a support's foot or contact cut
@@ -160,41 +160,6 @@ fn assert_points_held(path: &Path, job: &Value) {
     }
 }
 
-            }
-            let (mut stack, mut size, mut rests) = (vec![start], 0, false);
-            seen[start] = true;
-            while let Some(k) = stack.pop() {
-                size += 1;
-                rests |= below[k];
-                let (x, y) = (k % w, k / w);
-                let mut near = Vec::with_capacity(4);
-                if x > 0 {
-                    near.push(k - 1);
-                }
-                if x + 1 < w {
-                    near.push(k + 1);
-                }
-                if y > 0 {
-                    near.push(k - w);
-                }
-                if k + w < cur.len() {
-                    near.push(k + w);
-                }
-                for q in near {
-                    if cur[q] && !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-            if !rests {
-                out.push((i, size));
-            }
-        }
-    }
-    out
-}
-
 /// Slices `args` to `out` in `dir` (exit 0 expected); the manifest.
 fn slice(dir: &Path, args: &[&str], out: &str) -> Value {
     let mut a = vec!["slice"];
@@ -233,7 +198,6 @@ fn test_parts_print_from_the_platform_up_on_every_process() {
         );
         std::fs::remove_dir_all(dir.join("bare.dmdjob")).unwrap();
         for profile in ["xu2010-topdown", "bottom-up", "hybrid-bottomup"] {
-        assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), TWO_PX_MM2);
             let out = format!("{name}-{profile}.dmdjob");
             let mut args = vec![stl, "--supports", "-p", profile];
             args.extend(exact);
@@ -269,6 +233,7 @@ fn test_parts_print_from_the_platform_up_on_every_process() {
             stdout(&r),
             stderr(&r)
         );
+        assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), TWO_PX_MM2);
         std::fs::remove_dir_all(dir.join("default.dmdjob")).unwrap();
     }
 }
@@ -353,15 +318,12 @@ fn supports_reach_into_the_part_only_at_heads_and_feet_and_form_closed_shells() 
                         (col > 0 && m[k - 1])
                             || (col + 1 < w && m[k + 1])
                             || (k >= w && m[k - w])
-    // Bottom-up: the first layers' long exposure moves corrected edges furthest.
                             || (k + w < m.len() && m[k + w])
                     })
                 };
                 assert!(!(p || s) || lit[k], "{name} layer {i} pixel {k}");
                 let edge = near(part_lit) || near(sup_lit);
                 assert!(!lit[k] || p || s || edge, "{name} layer {i} pixel {k}");
-            "--profile",
-            "bottom-up",
                 if p && s {
                     let row = k / w;
                     if !in_head_or_foot(&job, col, row, (i as f64 + 0.5) * h, px, field_h) {
@@ -383,25 +345,23 @@ fn supports_reach_into_the_part_only_at_heads_and_feet_and_form_closed_shells() 
 #[test]
 fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
     let dir = tempdir("supports-bunny");
-    let contact = std::f64::consts::PI
-        * (job["supports"]["head_front_diameter_mm"].as_f64().unwrap() / 2.0).powi(2);
-    assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), contact);
-    // Each layer records its supports' area apart from the part's.
     let bunny = fixture("bunny00.stl");
     let o = run_in(
         &dir,
         &["slice", bunny.to_str().unwrap(), "--json", "-o", "b.dmdjob"],
     );
-    assert_points_held(&dir.join("s.dmdjob"), &job);
     let bare: Value = serde_json::from_slice(&o.stdout).unwrap();
     let w = &warnings_of(&bare, "plan.unsupported-islands")[0];
     assert!(w["message"].as_str().unwrap().contains("--supports"), "{w}");
+    // Bottom-up: the first layers' long exposure moves corrected edges furthest.
     let o = run_in(
         &dir,
         &[
             "slice",
             bunny.to_str().unwrap(),
             "--supports",
+            "--profile",
+            "bottom-up",
             "--json",
             "-o",
             "s.dmdjob",
@@ -423,11 +383,16 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
     let job: Value =
         serde_json::from_slice(&std::fs::read(dir.join("s.dmdjob/job.json")).unwrap()).unwrap();
+    let contact = std::f64::consts::PI
+        * (job["supports"]["head_front_diameter_mm"].as_f64().unwrap() / 2.0).powi(2);
+    assert_regions_below(&serde_json::from_slice(&r.stdout).unwrap(), contact);
+    // Each layer records its supports' area apart from the part's.
     let layers = job["layers"].as_array().unwrap();
     assert!(layers[0]["support_area_mm2"].as_f64().unwrap() > 0.0);
     assert!(layers
         .iter()
         .all(|l| l["support_area_mm2"].as_f64().unwrap() <= l["area_mm2"].as_f64().unwrap()));
+    assert_points_held(&dir.join("s.dmdjob"), &job);
     // A plate of copies: one pad, supports for each copy.
     let parts = test_parts(&dir);
     let floating = parts[2].1.to_str().unwrap();
@@ -439,10 +404,6 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
             "--copies",
             "4",
             "--supports",
-    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
-    let w = &warnings_of(&v, "plan.unsupported-islands")[0];
-    let m = w["message"].as_str().unwrap();
-    assert!(m.contains("mm²), in floating.stl (copy "), "{m}");
             "-o",
             "p.dmdjob",
         ],
@@ -478,6 +439,10 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
             "slice", floating, "--copies", "2", "--json", "-o", "q.dmdjob",
         ],
     );
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = &warnings_of(&v, "plan.unsupported-islands")[0];
+    let m = w["message"].as_str().unwrap();
+    assert!(m.contains("mm²), in floating.stl (copy "), "{m}");
     let r = run_in(&dir, &["run", "p.dmdjob"]);
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
 }

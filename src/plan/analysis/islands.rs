@@ -1,9 +1,9 @@
 //! Islands: the connected regions of a layer's lit pixels that share no pixel with the
-//! layer below's (they would print onto nothing). The regions are
-//! [`crate::cure::islands::components`], the counter the cure check shares.
+//! layer below's (they would print onto nothing), found by
+//! [`crate::bundle::regions::unsupported`], which `dmdsl run` judges masks with too.
 
 use super::LitRuns;
-use crate::cure::islands::components;
+use crate::bundle::regions::unsupported;
 
 /// Number of connected regions (4-connected) of the lit pixels `cur` that share no pixel
 /// with the lit pixels `prev` of the layer below.
@@ -35,71 +35,26 @@ pub fn islands_found(cur: &LitRuns, prev: &LitRuns) -> Islands {
     count_islands(cur, prev)
 }
 
-/// Whether each run of `cur` shares a pixel with a run of `prev` in the same row, and
-/// whether any does not.
-fn supported_runs(cur: &LitRuns, prev: &LitRuns) -> (Vec<bool>, bool) {
-    let (rc, rp) = (&cur.runs, &prev.runs);
-    // Both sorted by row then column, and a row's runs are disjoint: one merge-walk.
-    let mut j = 0;
-    let mut all = true;
-    let on = rc
-        .iter()
-        .map(|r| {
-            // Skip the runs below that end before this one starts (in this row or earlier).
-            while j < rp.len() && (rp[j][0] < r[0] || (rp[j][0] == r[0] && rp[j][2] <= r[1])) {
-                j += 1;
-            }
-            let rests = j < rp.len() && rp[j][0] == r[0] && rp[j][1] < r[2];
-            all &= rests;
-            rests
-        })
-        .collect();
-    (on, !all)
-}
-
-/// [`islands_found`]. Usually every run rests on a run below and there is no island;
-/// otherwise the runs' regions, each supported when one of its runs rests on the layer
-/// below.
+/// [`islands_found`]: the regions [`unsupported`] finds, counted, and the largest (the
+/// first of equals).
 pub(super) fn count_islands(cur: &LitRuns, prev: &LitRuns) -> Islands {
-    let (on, any_free) = supported_runs(cur, prev);
-    if !any_free {
-        return Islands::default();
-    }
-    let (region, n) = components(&cur.runs);
-    let mut supported = vec![false; n];
-    // Per region: pixels, Σ column centres, Σ row centres.
-    let mut sums = vec![(0u64, 0.0, 0.0); n];
-    for ((&g, &s), r) in region.iter().zip(&on).zip(&cur.runs) {
-        supported[g as usize] |= s;
-        let (len, [row, c0, c1]) = (u64::from(r[2] - r[1]), r.map(f64::from));
-        let t = &mut sums[g as usize];
-        *t = (
-            t.0 + len,
-            t.1 + (c0 + c1) / 2.0 * (c1 - c0),
-            t.2 + (row + 0.5) * (c1 - c0),
-        );
-    }
-    let free = || (0..n).filter(|&g| !supported[g]);
-    let largest = free()
-        .max_by_key(|&g| (sums[g].0, std::cmp::Reverse(g)))
-        .map(|g| {
-            let (k, sc, sr) = sums[g];
-            Island {
-                col_row: [sc / k as f64, sr / k as f64],
-                pixels: k,
-            }
-        });
+    let free = unsupported(&cur.runs, &prev.runs);
     Islands {
-        count: free().count() as u32,
-        largest,
+        count: free.len() as u32,
+        largest: free.iter().rev().max_by_key(|g| g.pixels).map(|g| Island {
+            col_row: g.col_row,
+            pixels: g.pixels,
+        }),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bundle::regions::resting_runs;
     use crate::plan::analysis::test_support::{lit, rect, ring, scattered, xorshift};
     use crate::slice::Contour;
+    use crate::test_support::flood_regions as flood;
 
     /// [`islands`] of two sections.
     fn islands_of(cur: &[Contour], prev: &[Contour]) -> u32 {
@@ -152,56 +107,7 @@ mod tests {
         assert_eq!(islands_found(&below, &below), Islands::default());
     }
 
-    /// The islands of the `w × h` pixel grid `cur` (row-major) over `below` by a flood
-    /// fill: a 4-connected region of lit pixels counts when none of them is lit below.
-    fn flood_islands(cur: &[bool], below: &[bool], w: usize, h: usize) -> u32 {
-        let mut seen = vec![false; w * h];
-        let mut n = 0;
-        for s in 0..w * h {
-            if !cur[s] || seen[s] {
-                continue;
-            }
-            seen[s] = true;
-            let (mut stack, mut rests) = (vec![s], false);
-            while let Some(k) = stack.pop() {
-                rests |= below[k];
-                let (r, c) = (k / w, k % w);
-                let nb = [
-                    (r > 0).then(|| k - w),
-                    (r + 1 < h).then(|| k + w),
-                    (c > 0).then(|| k - 1),
-                    (c + 1 < w).then(|| k + 1),
-                ];
-                for q in nb.into_iter().flatten() {
-                    if cur[q] && !seen[q] {
-                        seen[q] = true;
-                        stack.push(q);
-                    }
-                }
-            }
-            n += u32::from(!rests);
-        }
-        n
-    }
-
-    /// The lit runs of the `w × h` grid `g`, and back.
-    fn runs_of(g: &[bool], w: usize) -> LitRuns {
-        let mut l = LitRuns::default();
-        for (r, row) in g.chunks(w).enumerate() {
-            let mut c = 0;
-            while c < w {
-                let s = c;
-                while c < w && row[c] {
-                    c += 1;
-                }
-                if c > s {
-                    l.runs.push([r as u32, s as u32, c as u32]);
-                }
-                c += 1;
-            }
-        }
-        l
-    }
+    /// The lit pixels of `l` on a `w × h` grid.
     fn grid_of(l: &LitRuns, w: usize, h: usize) -> Vec<bool> {
         let mut g = vec![false; w * h];
         for &[r, s, e] in &l.runs {
@@ -234,8 +140,8 @@ mod tests {
             let (w, h) = rc.runs.iter().chain(&rp.runs).fold((0, 0), |(w, h), r| {
                 (w.max(r[2] as usize), h.max(r[0] as usize + 1))
             });
-            let want = flood_islands(&grid_of(&rc, w, h), &grid_of(&rp, w, h), w, h);
-            if !supported_runs(&rc, &rp).1 {
+            let want = flood(&grid_of(&rc, w, h), &grid_of(&rp, w, h), w, h).len() as u32;
+            if !resting_runs(&rc.runs, &rp.runs).1 {
                 assert_eq!(want, 0);
                 shortcut += 1;
             }
@@ -243,27 +149,5 @@ mod tests {
             found += want;
         }
         assert!(shortcut > 40 && found > 40, "{shortcut} {found}");
-    }
-
-    #[test]
-    fn islands_match_a_pixel_flood_fill() {
-        // Random pixel grids (lit with probability 0.3–0.7, so regions of every shape:
-        // U-shapes resting by one arm, regions touching the layer below in one pixel)
-        // over random grids below: the count from the unsupported runs against a flood
-        // fill of the pixels.
-        let mut rnd = xorshift(0x15_1a_2d_u64);
-        let (w, h) = (23usize, 17usize);
-        let mut total = 0;
-        for case in 0..300 {
-            let (pc, pb) = (0.3 + 0.4 * rnd(), 0.1 + 0.6 * rnd());
-            let cur: Vec<bool> = (0..w * h).map(|_| rnd() < pc).collect();
-            let below: Vec<bool> = (0..w * h).map(|_| rnd() < pb).collect();
-            let want = flood_islands(&cur, &below, w, h);
-            let (rc, rb) = (runs_of(&cur, w), runs_of(&below, w));
-            assert_eq!(grid_of(&rc, w, h), cur);
-            assert_eq!(islands(&rc, &rb), want, "case {case}");
-            total += want;
-        }
-        assert!(total > 300, "{total}");
     }
 }
