@@ -330,3 +330,24 @@ pub fn regions_on_nothing(
     }
     out
 }
+
+/// Exports the job `job` in `dir` to the SLA control-file standard (`<job>.control.zip`)
+/// and checks that `run` replays both alike: the same exposure and light time, no
+/// violation (an exposure longer than the schema allows becomes several images, so the
+/// export may have more layers).
+pub fn assert_exports_to_control(dir: &Path, job: &str) {
+    let zip = format!("{job}.control.zip");
+    let o = run_in(dir, &["export", job, "--format", "sla-control", "-o", &zip]);
+    assert!(o.status.success(), "export {job}: {}", stderr(&o));
+    let report = |b: &str| -> serde_json::Value {
+        let o = run_in(dir, &["run", b, "--json"]);
+        assert!(o.status.success(), "run {b}: {}{}", stdout(&o), stderr(&o));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let (a, b) = (report(job), report(&zip));
+    assert_eq!(b["format"], "sla-control");
+    for k in ["exposure_s", "light_on_s"] {
+        assert_eq!(a[k], b[k], "{job}: {k}");
+    }
+    assert!(b["layers"].as_u64() >= a["layers"].as_u64(), "{job}: {b}");
+}

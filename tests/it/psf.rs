@@ -160,6 +160,7 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
     assert!(out.contains("160 features"), "{out}");
     ok(&run_in(&dir, &["run", "psf.dmdjob"]));
     ok(&run_in(&dir, &["export", "psf.dmdjob", "-o", "psf.sl1"]));
+    assert_exports_to_control(&dir, "psf.dmdjob");
     let sheet = std::fs::read_to_string(dir.join("psf.csv")).unwrap();
     for want in [
         ",line,x,centre,",

@@ -68,6 +68,7 @@ fn relative_working_curve_is_fitted_back_and_the_job_runs_and_exports() {
     assert!(sheet.lines().skip(1).all(|l| l.ends_with(",,")), "{sheet}");
     ok(&run_in(&dir, &["run", "wc.dmdjob"]));
     ok(&run_in(&dir, &["export", "wc.dmdjob", "-o", "wc.sl1"]));
+    assert_exports_to_control(&dir, "wc.dmdjob");
     let (dp, tc) = (0.12, 8.0);
     assert!(fill(&dir.join("wc.csv"), dp, tc, 0.004, 7) >= 8);
     let out = ok(&run_in(
@@ -277,6 +278,7 @@ fn accuracy_part_runs_exports_and_its_sheet_is_fitted_back() {
     ok(&run_in(&dir, &["testjob", "accuracy", "-o", "acc.dmdjob"]));
     ok(&run_in(&dir, &["run", "acc.dmdjob"]));
     ok(&run_in(&dir, &["export", "acc.dmdjob", "-o", "acc.sl1"]));
+    assert_exports_to_control(&dir, "acc.dmdjob");
     let sheet = std::fs::read_to_string(dir.join("acc.csv")).unwrap();
     for kind in ["pin", "wall", "hole", "slot", "step"] {
         assert!(sheet.lines().any(|l| l.starts_with(kind)), "{kind}");
