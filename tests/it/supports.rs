@@ -448,6 +448,34 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
 }
 
 #[test]
+fn a_head_too_thin_to_cure_is_named_as_a_support_head() {
+    let dir = tempdir("supports-thin-head");
+    let cube = fixture("cube10.stl");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            cube.to_str().unwrap(),
+            "--supports",
+            "--set",
+            "supports.head_front_diameter_mm=0.06",
+            "--json",
+            "-o",
+            "c.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = &warnings_of(&v, "cure.features-widened")[0];
+    let m = w["message"].as_str().unwrap();
+    assert!(
+        m.contains("in the head of the support of the point at x ")
+            && m.contains("supports.head_front_diameter_mm"),
+        "{m}"
+    );
+}
+
+#[test]
 fn bad_support_settings_and_a_pad_off_the_field_are_one_line_errors() {
     let dir = tempdir("supports-errors");
     let cube = fixture("cube10.stl");
