@@ -152,9 +152,12 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
 
 /// Whether `region` holds on `below` where edges move in by up to a pixel: some pixel
 /// they share has its four neighbours shared too (a hold a pixel or two wide does not
-/// survive the cure correction's moves of both layers' edges).
+/// survive the cure correction's moves of both layers' edges). A region that is itself a
+/// pixel or two wide everywhere (a thin wall or pin, which the correction draws wider so
+/// that it cures) holds as it is drawn.
 fn firm(region: &[Run], below: &[Run]) -> bool {
-    runs::has_interior(&runs::minus(region, &runs::minus(region, below)))
+    !runs::has_interior(region)
+        || runs::has_interior(&runs::minus(region, &runs::minus(region, below)))
 }
 
 /// The pixel of a region farthest from its outside (chamfer distance, 3-4 weights; the
@@ -439,6 +442,14 @@ mod tests {
                 assert_eq!(island, firm_hold && !firm, "{w} px, firm hold {firm_hold}");
             }
         }
+        // A wall two pixels thin, shifted by a pixel from layer to layer: it holds as drawn.
+        let wall = |c: u32| (20..40).map(|r| [r, c, c + 2]).collect::<Vec<Run>>();
+        let s = Spread {
+            first_on_pad: true,
+            firm_hold: true,
+            ..spread()
+        };
+        assert!(place(&[wall(30), wall(31), wall(32)], 0, &s).is_empty());
         assert!(!runs::has_interior(&[[5, 0, 10], [6, 0, 10]]));
         assert!(runs::has_interior(&[[5, 3, 4], [6, 0, 10], [7, 3, 5]]));
         assert!(!runs::has_interior(&[[5, 3, 4], [6, 0, 10], [8, 3, 5]]));
