@@ -61,43 +61,58 @@ pub(crate) fn ngon(cx: f64, cy: f64, r: f64, n: usize, ccw: bool) -> Contour {
     closed(n, ccw, |a| [cx + r * a.cos(), cy + r * a.sin()])
 }
 
-/// The regions of `cur` over `below` (`w × h` lit flags, row-major) by a flood fill, the
-/// independent oracle of the run-based region counters: (pixels,
-/// Σ columns, Σ rows) of each 4-connected region none of whose pixels is lit below.
+/// The 4-connected regions of the lit flags `lit` (`w × h`, row-major) by a flood fill, the
+/// independent oracle of the run-based region counters: each pixel's region, numbered in
+/// the order of its first pixel (`usize::MAX` where dark), and how many.
+pub(crate) fn flood_labels(lit: &[bool], w: usize, h: usize) -> (Vec<usize>, usize) {
+    let mut label = vec![usize::MAX; w * h];
+    let mut n = 0;
+    for s in 0..w * h {
+        if !lit[s] || label[s] != usize::MAX {
+            continue;
+        }
+        label[s] = n;
+        let mut stack = vec![s];
+        while let Some(k) = stack.pop() {
+            let (r, c) = (k / w, k % w);
+            let near = [
+                (r > 0).then(|| k - w),
+                (r + 1 < h).then(|| k + w),
+                (c > 0).then(|| k - 1),
+                (c + 1 < w).then(|| k + 1),
+            ];
+            for q in near.into_iter().flatten() {
+                if lit[q] && label[q] == usize::MAX {
+                    label[q] = n;
+                    stack.push(q);
+                }
+            }
+        }
+        n += 1;
+    }
+    (label, n)
+}
+
+/// The regions of `cur` over `below` (`w × h` lit flags, row-major) that rest on nothing,
+/// by [`flood_labels`]: (pixels, Σ columns, Σ rows) of each region none of whose pixels is
+/// lit below (pixel centres at +0.5).
 pub(crate) fn flood_regions(
     cur: &[bool],
     below: &[bool],
     w: usize,
     h: usize,
 ) -> Vec<(u64, f64, f64)> {
-    let mut seen = vec![false; w * h];
-    let mut out = Vec::new();
-    for s in 0..w * h {
-        if !cur[s] || seen[s] {
-            continue;
-        }
-        seen[s] = true;
-        let (mut stack, mut rests, mut t) = (vec![s], false, (0u64, 0.0, 0.0));
-        while let Some(k) = stack.pop() {
-            rests |= below[k];
-            let (r, c) = (k / w, k % w);
-            t = (t.0 + 1, t.1 + c as f64 + 0.5, t.2 + r as f64 + 0.5);
-            let nb = [
-                (r > 0).then(|| k - w),
-                (r + 1 < h).then(|| k + w),
-                (c > 0).then(|| k - 1),
-                (c + 1 < w).then(|| k + 1),
-            ];
-            for q in nb.into_iter().flatten() {
-                if cur[q] && !seen[q] {
-                    seen[q] = true;
-                    stack.push(q);
-                }
-            }
-        }
-        if !rests {
-            out.push(t);
-        }
+    let (label, n) = flood_labels(cur, w, h);
+    let mut rests = vec![false; n];
+    let mut sums = vec![(0u64, 0.0, 0.0); n];
+    for (k, &g) in label.iter().enumerate().filter(|(_, &g)| g != usize::MAX) {
+        rests[g] |= below[k];
+        let t = &mut sums[g];
+        *t = (
+            t.0 + 1,
+            t.1 + (k % w) as f64 + 0.5,
+            t.2 + (k / w) as f64 + 0.5,
+        );
     }
-    out
+    (0..n).filter(|&g| !rests[g]).map(|g| sums[g]).collect()
 }

@@ -53,13 +53,7 @@ mod tests {
     /// Components of random pixel grids against a flood fill of their pixels.
     #[test]
     fn components_match_a_flood_fill() {
-        let mut seed = 0x51_7e_u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::test_support::xorshift(0x51_7e_u64);
         let (w, h) = (23usize, 17usize);
         let mut total = 0;
         for case in 0..300 {
@@ -84,32 +78,8 @@ mod tests {
                 }
             }
             let (ids, count) = components(&runs);
-            // Flood fill: the label of each pixel's region, in order of first pixel.
-            let mut label = vec![usize::MAX; w * h];
-            let mut want = 0;
-            for s in 0..w * h {
-                if !lit(s) || label[s] != usize::MAX {
-                    continue;
-                }
-                label[s] = want;
-                let mut stack = vec![s];
-                while let Some(k) = stack.pop() {
-                    let (r, c) = (k / w, k % w);
-                    let nb = [
-                        (r > 0).then(|| k - w),
-                        (r + 1 < h).then(|| k + w),
-                        (c > 0).then(|| k - 1),
-                        (c + 1 < w).then(|| k + 1),
-                    ];
-                    for q in nb.into_iter().flatten() {
-                        if lit(q) && label[q] == usize::MAX {
-                            label[q] = want;
-                            stack.push(q);
-                        }
-                    }
-                }
-                want += 1;
-            }
+            let flags: Vec<bool> = (0..w * h).map(lit).collect();
+            let (label, want) = crate::test_support::flood_labels(&flags, w, h);
             assert_eq!(count, want, "case {case}");
             for (run, &id) in runs.iter().zip(&ids) {
                 for c in run[1]..run[2] {
