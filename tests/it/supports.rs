@@ -525,4 +525,27 @@ fn bad_support_settings_and_a_pad_off_the_field_are_one_line_errors() {
     let e = stderr(&o);
     assert!(e.contains("beyond the build field"), "{e}");
     assert!(!dir.join("x.dmdjob").exists() && !dir.join("s.stl").exists());
+    // One support mesh for parts sliced one by one (no -o): a usage error, nothing written.
+    std::fs::copy(cube, dir.join("cube10.stl")).unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            "cube10.stl",
+            tee,
+            "--supports",
+            "--supports-stl",
+            "s.stl",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let e = stderr(&o);
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(
+        e.contains("--supports-stl names one file") && e.contains("--plate"),
+        "{e}"
+    );
+    for left in ["cube10.dmdjob", "tee.dmdjob", "s.stl"] {
+        assert!(!dir.join(left).exists(), "{left}");
+    }
 }
