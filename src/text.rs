@@ -20,6 +20,29 @@ pub fn count(n: u64, one: &str, many: &str) -> String {
     format!("{n} {}", plural(n, one, many))
 }
 
+/// The first `shown` of `items` joined by "; ", then how many more of the `total` there
+/// are, in `one` / `many`: "layer 1 at …; layer 4 at …; 2 more layers".
+///
+/// ```
+/// use dmdsl::text::first_of;
+/// let items = ["a", "b", "c", "d"].map(String::from);
+/// assert_eq!(first_of(items.clone(), (3, 4), ("layer", "layers")), "a; b; c; 1 more layer");
+/// assert_eq!(first_of(items.clone(), (2, 9), ("layer", "layers")), "a; b; 7 more layers");
+/// assert_eq!(first_of(items, (5, 4), ("layer", "layers")), "a; b; c; d");
+/// ```
+pub fn first_of(
+    items: impl IntoIterator<Item = String>,
+    (shown, total): (usize, usize),
+    (one, many): (&str, &str),
+) -> String {
+    let mut at: Vec<String> = items.into_iter().take(shown).collect();
+    if total > shown {
+        let more = (total - shown) as u64;
+        at.push(format!("{more} more {}", plural(more, one, many)));
+    }
+    at.join("; ")
+}
+
 /// A duration in seconds as hours, minutes and seconds, rounded to the second:
 /// "1h02m03s" (negative durations as 0).
 pub fn hms(s: f64) -> String {

@@ -10,7 +10,7 @@ use super::{Kind, Violation};
 use crate::bundle::machine::Machine;
 use crate::bundle::regions::{unsupported_regions, Region, Run};
 use crate::bundle::{BundleSource, Manifest};
-use crate::text::{fixed, number, plural};
+use crate::text::{first_of, fixed, number, plural};
 use crate::warning::Warning;
 use serde::Serialize;
 
@@ -184,15 +184,11 @@ fn warning(layers: &[Vec<UnsupportedRegion>], supported: bool) -> Warning {
     let n: u64 = layers.iter().map(|l| l.len() as u64).sum();
     let k = layers.len() as u64;
     let first = layers[0][0].layer;
-    let mut at: Vec<String> = layers
-        .iter()
-        .take(SHOWN_LAYERS)
-        .map(|l| at_text(&l[0], true))
-        .collect();
-    if layers.len() > SHOWN_LAYERS {
-        let more = (layers.len() - SHOWN_LAYERS) as u64;
-        at.push(format!("{more} more {}", plural(more, "layer", "layers")));
-    }
+    let at = first_of(
+        layers.iter().map(|l| at_text(&l[0], true)),
+        (SHOWN_LAYERS, layers.len()),
+        ("layer", "layers"),
+    );
     let largest: Vec<serde_json::Value> = layers
         .iter()
         .map(|l| {
@@ -207,7 +203,7 @@ fn warning(layers: &[Vec<UnsupportedRegion>], supported: bool) -> Warning {
             "{n} unsupported {} on {k} {} (first at layer {first}); largest per layer: {}: regions of the masks that do not rest on the layer below need supports{}",
             plural(n, "region", "regions"),
             plural(k, "layer", "layers"),
-            at.join("; "),
+            at,
             if supported {
                 " (the job has supports, and its cure correction moved these edges in: `dmdsl run --cure` predicts whether they cure together)"
             } else {

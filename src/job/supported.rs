@@ -53,19 +53,19 @@ pub(super) fn add_supports(
     let points = g
         .columns
         .iter()
-        .map(|c| SupportPoint {
-            at_mm: g.point_mm(c, &field).map(round::plane_mm),
-            part: plate.and_then(|parts| {
-                let [x, y, _] = g.point_mm(c, &field);
-                super::plate::part_at(parts, [x, y])
-            }),
-            island: c.point.island,
-            pillar_diameter_mm: round::plane_mm(c.pillar_diameter_mm),
-            foot: match c.foot {
-                Foot::Pad => bundle::Foot::Pad,
-                Foot::Part(..) => bundle::Foot::Part,
-            },
-            foot_z_mm: round::plane_mm(c.foot_z(&g.shape)),
+        .map(|c| {
+            let at = g.point_mm(c, &field);
+            SupportPoint {
+                at_mm: at.map(round::plane_mm),
+                part: plate.and_then(|parts| super::plate::part_at(parts, [at[0], at[1]])),
+                island: c.point.island,
+                pillar_diameter_mm: round::plane_mm(c.pillar_diameter_mm),
+                foot: match c.foot {
+                    Foot::Pad => bundle::Foot::Pad,
+                    Foot::Part(..) => bundle::Foot::Part,
+                },
+                foot_z_mm: round::plane_mm(c.foot_z(&g.shape)),
+            }
         })
         .collect();
     part.supports = Some(bundle::Supports {

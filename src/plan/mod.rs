@@ -21,7 +21,7 @@ pub use analysis::LayerAnalysis;
 use crate::bundle::{Mode, Step};
 use crate::profile::{Process, Profile};
 use crate::round;
-use crate::text::{fixed, hms, number, plural};
+use crate::text::{first_of, fixed, hms, number, plural};
 use crate::warning::Warning;
 
 /// What the planner needs to know about one layer.
@@ -216,32 +216,22 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
         let k = with_islands.len() as u64;
         // Where: the largest island of each of the first layers, and how many more.
         let shown = 3;
-        let mut at: Vec<String> = with_islands
-            .iter()
-            .take(shown)
-            .filter_map(|l| {
-                let [x, y, a] = l.island_mm?;
-                let part = l.island_part.as_deref().unwrap_or_default();
-                Some(format!(
-                    "layer {} at x {}, y {} mm ({} mm²){part}",
-                    l.index,
-                    fixed(x, 2),
-                    fixed(y, 2),
-                    number(a)
-                ))
-            })
-            .collect();
-        if with_islands.len() > shown {
-            let more = with_islands.len() - shown;
-            at.push(format!(
-                "{more} more {}",
-                plural(more as u64, "layer", "layers")
-            ));
-        }
+        let at = with_islands.iter().take(shown).filter_map(|l| {
+            let [x, y, a] = l.island_mm?;
+            let part = l.island_part.as_deref().unwrap_or_default();
+            Some(format!(
+                "layer {} at x {}, y {} mm ({} mm²){part}",
+                l.index,
+                fixed(x, 2),
+                fixed(y, 2),
+                number(a)
+            ))
+        });
+        let at = first_of(at, (shown, with_islands.len()), ("layer", "layers"));
         let largest = if at.is_empty() {
             String::new()
         } else {
-            format!("; largest per layer: {}", at.join("; "))
+            format!("; largest per layer: {at}")
         };
         warnings.push(
             Warning::new(
