@@ -25,6 +25,8 @@
 //! 3. The sections are filled with the nonzero winding rule, so overlapping and touching
 //!    shells union.
 
+pub mod offset;
+
 use crate::mesh::Mesh;
 use rayon::prelude::*;
 
@@ -120,6 +122,8 @@ pub struct Slicer<'m> {
     pub stats: SliceStats,
     /// Edges from this id on belong to support shells.
     support_edges: u32,
+    /// The part's contours are offset by this, mm ([`Slicer::with_offset`]).
+    offset_mm: f64,
 }
 
 impl<'m> Slicer<'m> {
@@ -156,6 +160,7 @@ impl<'m> Slicer<'m> {
             z_lo: f64::NEG_INFINITY,
             stats: SliceStats::default(),
             support_edges: u32::MAX,
+            offset_mm: 0.0,
         }
     }
 
@@ -164,6 +169,14 @@ impl<'m> Slicer<'m> {
     /// ([`Section::part_area_mm2`]).
     pub fn with_supports_from(mut self, edge: Option<u32>) -> Self {
         self.support_edges = edge.unwrap_or(u32::MAX);
+        self
+    }
+
+    /// The same slicer, offsetting the part's contours of every section by `d_mm` along
+    /// their outward normals ([`offset::offset`]; the dimensional correction's
+    /// `xy_offset_mm`); support contours are not offset.
+    pub fn with_offset(mut self, d_mm: f64) -> Self {
+        self.offset_mm = d_mm;
         self
     }
 
@@ -227,8 +240,8 @@ impl<'m> Slicer<'m> {
                 segs[i as usize].push(s);
             }
         }
-        let support = self.support_edges;
-        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s, support)).collect();
+        let (support, d) = (self.support_edges, self.offset_mm);
+        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s, support, d)).collect();
         for s in &sections {
             if s.joined_chains + s.dropped_chains > 0 {
                 self.stats.repaired_layers += 1;
@@ -273,8 +286,9 @@ fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64)
 }
 
 /// Chains one layer's segments into closed contours (see the module docs for the rule);
-/// the closed contours of edges from `support` on are counted as support.
-fn chain(segs: &[Seg], support: u32) -> Section {
+/// the closed contours of edges from `support` on are counted as support. The part's
+/// contours are then offset by `offset_mm` ([`offset::offset`]).
+fn chain(segs: &[Seg], support: u32, offset_mm: f64) -> Section {
     let n = segs.len();
     let mut starts: Vec<(u32, u32)> = segs
         .iter()
@@ -371,6 +385,9 @@ fn chain(segs: &[Seg], support: u32) -> Section {
     }
     if !open.is_empty() {
         join_open(open, &mut section);
+    }
+    if offset_mm != 0.0 {
+        section.contours = offset::offset(&section.contours, offset_mm);
     }
     if !supports.is_empty() {
         section.part_area_mm2 = Some(section.contours.iter().map(signed_area).sum());

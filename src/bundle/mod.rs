@@ -283,8 +283,9 @@ pub struct Source {
     pub parts: Option<Vec<PlatePart>>,
 }
 
-/// One copy of a part on a plate: a point p of its file lands at R·(S·p) +
-/// `translate_mm`, S and R the plate's `scale` and `rotate_deg`.
+/// One copy of a part on a plate: a point p of its file lands at D·R·(S·p) +
+/// `translate_mm`, S and R the plate's `scale` and `rotate_deg`, D the dimensional
+/// correction's factors ([`Settings::accuracy`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlatePart {
     /// File name of the part (no directories).
@@ -306,8 +307,8 @@ pub struct PlatePart {
 }
 
 /// Placement of the part in build-plane coordinates: a point p of the file lands at
-/// R·(S·p) + `translate_mm`, S the `scale` and R the `rotate_deg` rotations (identity when
-/// absent).
+/// D·R·(S·p) + `translate_mm`, S the `scale`, R the `rotate_deg` rotations and D the
+/// dimensional correction's factors ([`Settings::accuracy`]; identity when absent).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Placement {
     /// "center" (XY box centred on the field, lowest point at z = 0), "keep" (file
@@ -341,6 +342,23 @@ pub struct Settings {
     /// Distortion correction applied to the masks: its table and fit report.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<FitReport>,
+    /// The dimensional correction applied to the part (the profile's `[accuracy]`; absent
+    /// when it corrects nothing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<Accuracy>,
+}
+
+/// The dimensional correction a job applied (docs/CALIBRATION.md, "Dimensions").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Accuracy {
+    /// Factors along the machine's X, Y and Z applied to the part after its scale and
+    /// rotation ([`Placement`]).
+    pub scale: [f64; 3],
+    /// Offset of the part's sections along their outward normals, mm.
+    pub xy_offset_mm: f64,
+    /// The measurement sheet the values were fitted to (name and SHA-256), or "typed in".
+    pub source: String,
 }
 
 /// Quality of the distortion correction fitted to a measured table (filled by

@@ -70,6 +70,7 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
             binary: false,
             compensation: "off".into(),
             distortion: None,
+            accuracy: None,
         },
         machine: Machine::of(&machine),
         totals: Totals {

@@ -241,6 +241,7 @@ impl Imported {
                 binary: false,
                 compensation: "off".into(),
                 distortion: None,
+                accuracy: None,
             },
             machine,
             totals: Totals {

@@ -583,14 +583,14 @@ impl CureJob {
     /// The cure prediction (`--predict`) of the planned job `manifest` from the masks it
     /// wrote (`files`; for several projectors `field`, the field's coverage masks): the
     /// engine of `dmdsl run --cure` from the top layer down, each layer's cured edge also
-    /// compared along its exact section's normals (re-cut from `mesh`, pre-warped by
-    /// `warp`). Fills `layers[].cure` and `cure.predicted`.
+    /// compared along its exact section's normals (re-cut by `slicer`, as the job cut it;
+    /// pre-warped by `warp`). Fills `layers[].cure` and `cure.predicted`.
     pub fn predict(
         &self,
         manifest: &mut Manifest,
         files: &dyn BundleSource,
         field: Option<&dyn BundleSource>,
-        mesh: &crate::mesh::Mesh,
+        mut slicer: Slicer<'_>,
         warp: Option<(&distortion::Correction, &Path)>,
     ) -> Result<()> {
         let m = self.model;
@@ -609,7 +609,6 @@ impl CureJob {
         };
         let (w, h) = (frame.width_px as usize, frame.height_px as usize);
         let field_h = manifest.machine.field().height_px as f64;
-        let mut slicer = Slicer::new(mesh, m.layer_mm, n);
         let mut window: (usize, Vec<Section>) = (n, Vec::new());
         let mut layers: Vec<Option<(LayerCure, Histogram)>> = vec![None; n];
         let mut failed: Option<Error> = None;

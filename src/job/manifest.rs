@@ -44,6 +44,14 @@ pub(super) struct PlacedPart<'a> {
 }
 
 impl PlacedPart<'_> {
+    /// The slicer of the part's layers `h` mm high, its supports counted apart and its
+    /// sections offset by `offset_mm` (the dimensional correction's).
+    pub fn slicer(&self, h: f64, offset_mm: f64) -> crate::slice::Slicer<'_> {
+        crate::slice::Slicer::new(&self.mesh, h, self.layers)
+            .with_supports_from(self.support_edges)
+            .with_offset(offset_mm)
+    }
+
     /// The warnings about the mesh (on a plate, each naming its part's file).
     pub fn mesh_warnings(&self) -> Vec<Warning> {
         match &self.plate {
@@ -232,6 +240,11 @@ pub(super) fn manifest(
             binary: profile.slicing.binary,
             compensation: optics.compensation,
             distortion,
+            accuracy: (!profile.accuracy.is_identity()).then(|| bundle::Accuracy {
+                scale: profile.accuracy.scale,
+                xy_offset_mm: profile.accuracy.xy_offset_mm,
+                source: profile.accuracy.source.clone().unwrap_or_else(|| "typed in".into()),
+            }),
         },
         machine: bundle::Machine::of(profile),
         totals: planned.totals,

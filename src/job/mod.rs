@@ -46,7 +46,7 @@ use crate::mesh::{self, Mesh};
 use crate::optics::JobOptics;
 use crate::profile::Profile;
 use crate::raster::{Mask, Rasterizer};
-use crate::slice::{SliceStats, Slicer};
+use crate::slice::SliceStats;
 use crate::text::plural;
 use crate::warning::Warning;
 use layer::LayerContext;
@@ -256,8 +256,9 @@ fn predict(
 ) -> Result<()> {
     let warp = setup.correction.as_ref().map(|w| (w, part.path));
     let field = field.map(|f| f as &dyn bundle::BundleSource);
-    cure.predict(manifest, writer, field, &part.mesh, warp)?;
     let h = manifest.settings.layer_height_mm;
+    let offset = manifest.settings.accuracy.as_ref().map_or(0.0, |a| a.xy_offset_mm);
+    cure.predict(manifest, writer, field, part.slicer(h, offset), warp)?;
     let w = cure_records::warnings(&manifest.layers, &what_at(part, h));
     manifest.warnings.splice(at..at, w);
     Ok(())
@@ -333,6 +334,7 @@ fn load_and_place<'a>(
         return Ok((setup, part));
     }
     opts.transform.apply(&mut mesh);
+    mesh.scale_axes(profile.accuracy.scale);
     let (translate_mm, layers) = place_mesh(path, &mut mesh, profile, opts.placement, h)?;
     let mut part = PlacedPart {
         path,
@@ -457,7 +459,7 @@ fn make_layers(
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(
         &ctx,
-        Slicer::new(&part.mesh, h, n).with_supports_from(part.support_edges),
+        part.slicer(h, profile.accuracy.xy_offset_mm),
         n,
         control,
         || {

@@ -141,6 +141,7 @@ pub(super) fn place_plate<'a>(
         .map(|(path, (sha256, mut mesh))| {
             let bbox_in_file = mesh.bbox();
             opts.transform.apply(&mut mesh);
+            mesh.scale_axes(profile.accuracy.scale);
             Loaded {
                 path: path.clone(),
                 sha256,

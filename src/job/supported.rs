@@ -47,8 +47,13 @@ pub(super) fn add_supports(
         }
     }
     let field = profile.field();
-    let g = support::generate(&part.mesh, field, (h, part.layers, first), (s, corrected))
-        .map_err(error)?;
+    let g = support::generate(
+        (&part.mesh, profile.accuracy.xy_offset_mm),
+        field,
+        (h, part.layers, first),
+        (s, corrected),
+    )
+    .map_err(error)?;
     let plate = part.plate.as_ref().map(|p| &p.0[..]);
     let points = g
         .columns

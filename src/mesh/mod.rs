@@ -454,6 +454,18 @@ impl Mesh {
         }
     }
 
+    /// Multiplies every vertex's coordinates by `f` (each > 0: the winding is kept).
+    pub fn scale_axes(&mut self, f: [f64; 3]) {
+        if f == [1.0; 3] {
+            return;
+        }
+        for v in &mut self.vertices {
+            for k in 0..3 {
+                v[k] *= f[k];
+            }
+        }
+    }
+
     /// Adds the triangles of `other` (a separate body: no vertex or edge is shared), its
     /// report's counts to this one's.
     pub fn append(&mut self, other: &Mesh) {

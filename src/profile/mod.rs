@@ -7,6 +7,7 @@
 //! ([`Override`], `slice --set`). Uses only leaf modules; a job records the keys it runs by
 //! (`bundle::Machine`).
 
+mod accuracy;
 mod blend;
 pub mod calibration;
 mod distortion;
@@ -14,6 +15,7 @@ mod overrides;
 mod process;
 mod supports;
 
+pub use accuracy::Accuracy;
 pub use blend::BlendCurve;
 pub use calibration::Calibration;
 pub use distortion::DistortionConfig;
@@ -99,6 +101,9 @@ pub struct Profile {
     /// takes the defaults).
     #[serde(default)]
     pub supports: Supports,
+    /// The dimensional correction (a profile without the section corrects nothing).
+    #[serde(default, skip_serializing_if = "Accuracy::is_identity")]
+    pub accuracy: Accuracy,
 }
 
 /// One DMD projector.
@@ -385,6 +390,7 @@ impl Profile {
             b.validate()?;
         }
         self.supports.validate()?;
+        self.accuracy.validate()?;
         process::validate(self)
     }
 

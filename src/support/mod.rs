@@ -80,16 +80,17 @@ pub fn lift_layers(s: &Supports, layer_mm: f64) -> usize {
     pad + (s.elevation_mm / layer_mm).round() as usize
 }
 
-/// The supports of `part` (placed and lifted by [`lift_layers`] = `first`), sliced into
-/// `n` layers of `layer_mm` on `field`, for a job whose cure correction moves edges in
-/// (`corrected`) or not. An error (a message) when the pad does not fit the field.
+/// The supports of `part` (placed and lifted by [`lift_layers`] = `first`; its sections
+/// offset by `offset_mm`, [`Slicer::with_offset`]), sliced into `n` layers of `layer_mm` on
+/// `field`, for a job whose cure correction moves edges in (`corrected`) or not. An error
+/// (a message) when the pad does not fit the field.
 pub fn generate(
-    part: &Mesh,
+    (part, offset_mm): (&Mesh, f64),
     field: Field,
     (layer_mm, n, first): (f64, usize, usize),
     (s, corrected): (&Supports, bool),
 ) -> Result<Generated, String> {
-    let masks = part_pixels(part, field, layer_mm, n, first);
+    let masks = part_pixels((part, offset_mm), field, layer_mm, n, first);
     let px = field.pixel_mm;
     let tan = s.critical_angle_deg.to_radians().tan();
     let cover_mm = s.spacing_mm / std::f64::consts::SQRT_2;
@@ -162,14 +163,14 @@ pub fn generate(
 
 /// The part's lit pixels per layer (empty below `first`), as the job draws them.
 fn part_pixels(
-    part: &Mesh,
+    (part, offset_mm): (&Mesh, f64),
     field: Field,
     layer_mm: f64,
     n: usize,
     first: usize,
 ) -> Vec<Vec<runs::Run>> {
     let raster = Rasterizer::new(field);
-    let mut slicer = Slicer::new(part, layer_mm, n);
+    let mut slicer = Slicer::new(part, layer_mm, n).with_offset(offset_mm);
     let mut masks = vec![Vec::new(); first.min(n)];
     let mut lo = first;
     while lo < n {

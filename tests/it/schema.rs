@@ -480,6 +480,16 @@ fn every_json_output_matches_its_schema() {
         (&island, "hyb.dmdjob", &["-p", "hybrid-bottomup"]),
         (&cube, "bu.dmdjob", &["-p", "bottom-up", "--predict"]),
         (&cube, "tiled.dmdjob", &["-p", "tiled-2x1"]),
+        (
+            &cube,
+            "acc.dmdjob",
+            &[
+                "--set",
+                "accuracy.scale=[1.01, 0.99, 1.0]",
+                "--set",
+                "accuracy.xy_offset_mm=-0.02",
+            ],
+        ),
     ];
     for (part, out, args) in jobs {
         let (summary, job) = slice_checked(&s, &dir, part, out, args);
@@ -489,6 +499,9 @@ fn every_json_output_matches_its_schema() {
         assert_eq!((code, &report["ok"]), (0, &json!(true)), "{out}: {report}");
         if out == &"top.dmdjob" {
             assert!(job["settings"]["distortion"].is_object());
+        }
+        if out == &"acc.dmdjob" {
+            assert_eq!(job["settings"]["accuracy"]["source"], "typed in");
         }
         if out == &"cal.dmdjob" {
             assert!(
