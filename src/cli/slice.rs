@@ -50,7 +50,8 @@ enum CureCorrectionArg {
     Off,
 }
 
-/// The cure model's options (boxed: they would make every command's arguments larger).
+/// The cure model's options and the calibration files (boxed: they would make every
+/// command's arguments larger).
 #[derive(clap::Args)]
 struct CureArgs {
     /// Predict what cures: each layer's cured edge against its section (edge error,
@@ -73,6 +74,10 @@ struct CureArgs {
     /// named projectors'.
     #[arg(long, value_name = "FILE")]
     psf: Option<PathBuf>,
+    /// Dimensional correction file from `dmdsl calibrate accuracy`: its scale and XY offset
+    /// replace the profile's [accuracy].
+    #[arg(long, value_name = "FILE")]
+    accuracy: Option<PathBuf>,
 }
 
 /// Light compensation mode.
@@ -309,6 +314,9 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
     }
     if let Some(f) = &a.cure.psf {
         crate::calib::psf::PsfFit::apply_file(f, &mut profile)?;
+    }
+    if let Some(f) = &a.cure.accuracy {
+        crate::calib::accuracy::AccuracyFit::apply_file(f, &mut profile)?;
     }
     if let Some(path) = &a.machine {
         super::export::fit_profile(&mut profile, path)?;

@@ -32,6 +32,10 @@ pub(crate) enum TestjobCmd {
         /// Machine profile.
         #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
         profile: String,
+        /// Correction file from `dmdsl calibrate accuracy`, replacing the profile's
+        /// [accuracy] (to check it, or to refine it: give it to `calibrate accuracy` too).
+        #[arg(long, value_name = "FILE")]
+        accuracy: Option<PathBuf>,
     },
     /// The blur: lines and gaps 1 to 8 px wide, along x and along y, at the centre and
     /// the four corners of each projector's (calibrated) area, a few layers thick on base
@@ -72,7 +76,11 @@ pub(crate) struct WorkingCurveArgs {
 pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
     let a = match cmd {
         TestjobCmd::WorkingCurve(a) => a,
-        TestjobCmd::Accuracy { output, profile } => return accuracy_job(&output, &profile, quiet),
+        TestjobCmd::Accuracy {
+            output,
+            profile,
+            accuracy,
+        } => return accuracy_job(&output, (&profile, accuracy.as_deref()), quiet),
         TestjobCmd::Psf { output, profile } => {
             return super::psf::psf_job(&output, &profile, quiet)
         }
@@ -185,8 +193,18 @@ pub(crate) fn calibrate_resin(input: PathBuf, output: PathBuf, quiet: bool) -> a
 }
 
 /// Writes the accuracy part's job and its sheet.
-fn accuracy_job(output: &std::path::Path, profile: &str, quiet: bool) -> anyhow::Result<u8> {
-    let p = Profile::resolve(profile)?;
+fn accuracy_job(
+    output: &std::path::Path,
+    (profile, accuracy): (&str, Option<&std::path::Path>),
+    quiet: bool,
+) -> anyhow::Result<u8> {
+    let mut p = Profile::resolve(profile)?;
+    if let Some(f) = accuracy {
+        crate::calib::accuracy::AccuracyFit::apply_file(f, &mut p)?;
+    }
+    // The part is drawn scaled by the correction about the field's origin: so are the
+    // features' centres in the sheet.
+    let [fx, fy, _] = p.accuracy.scale;
     let (feats, stl) = crate::calib::accuracy_part(&p).map_err(Error::Usage)?;
     let mut o = crate::job::SliceOptions::new("accuracy.stl", output, p);
     o.input_bytes = Some(&stl);
@@ -196,7 +214,7 @@ fn accuracy_job(output: &std::path::Path, profile: &str, quiet: bool) -> anyhow:
     let s = crate::job::slice_to_bundle(&o)?;
     let mut sheet = String::from("feature,axis,nominal_mm,measured_mm,x_mm,y_mm\n");
     for f in &feats {
-        let [x, y] = f.centre_mm;
+        let [x, y] = [f.centre_mm[0] * fx, f.centre_mm[1] * fy];
         sheet += &format!("{},{},{},,{x:.3},{y:.3}\n", f.kind, f.axis, f.nominal_mm);
     }
     crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
@@ -213,14 +231,56 @@ fn accuracy_job(output: &std::path::Path, profile: &str, quiet: bool) -> anyhow:
     Ok(0)
 }
 
+/// `dmdsl calibrate accuracy`'s options.
+pub(crate) struct AccuracyArgs<'a> {
+    /// The filled-in sheet.
+    pub input: &'a std::path::Path,
+    /// Where to write the correction (TOML; its plot beside it), if anywhere.
+    pub output: Option<&'a std::path::Path>,
+    /// The tolerance whose share is reported, mm.
+    pub tolerance: f64,
+    /// The profile the part was printed with (its `[accuracy]` correction).
+    pub profile: &'a str,
+    /// The correction file the part was printed with, replacing the profile's.
+    pub accuracy: Option<&'a std::path::Path>,
+}
+
 /// Runs `dmdsl calibrate accuracy SHEET`.
-pub(crate) fn calibrate_accuracy(input: &std::path::Path, tolerance: f64) -> anyhow::Result<u8> {
+pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result<u8> {
+    use crate::calib::accuracy::AccuracyFit;
+    let tolerance = a.tolerance;
     if !(tolerance > 0.0 && tolerance.is_finite()) {
         return Err(Error::Usage(format!("--tolerance {tolerance}: give a size in mm > 0")).into());
     }
+    let mut printed = Profile::resolve(a.profile)?;
+    if let Some(f) = a.accuracy {
+        AccuracyFit::apply_file(f, &mut printed)?;
+    }
     let sheet =
-        crate::calib::Sheet::read(input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
-    let (stats, fits) = crate::calib::accuracy(&sheet, tolerance)?;
+        crate::calib::Sheet::read(a.input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
+    let report = crate::calib::accuracy(&sheet, tolerance)?;
+    let fit = AccuracyFit::new(&sheet, report.fits.clone(), &printed.accuracy);
+    let correction = fit.correction();
+    if let Some(out) = a.output {
+        correction
+            .validate()
+            .map_err(|m| Error::input(a.input, format!("the fitted correction: {m}")))?;
+        let png = out.with_extension("png");
+        let toml = format!(
+            "# dmdsl calibrate accuracy: the correction of the dimensions fitted to {}\n# (slice --accuracy {}); scale and xy_offset_mm are the profile's [accuracy] keys.\n{}",
+            fit.sheet,
+            out.display(),
+            toml::to_string(&fit).expect("a correction serializes")
+        );
+        let chart = fit
+            .chart(&report.rows)
+            .render()
+            .encode(crate::plot::Format::Png);
+        crate::optics::report::write_all(&[(out.to_path_buf(), toml.into_bytes()), (png, chart)])?;
+    }
+    if quiet {
+        return Ok(0);
+    }
     println!(
         "{:<8} {:>4} {:>10} {:>9} {:>10} {:>10}",
         "group",
@@ -230,7 +290,7 @@ pub(crate) fn calibrate_accuracy(input: &std::path::Path, tolerance: f64) -> any
         "±0.06 mm",
         format!("±{tolerance} mm")
     );
-    for g in &stats {
+    for g in &report.stats {
         println!(
             "{:<8} {:>4} {:>+10.4} {:>9.4} {:>9.1}% {:>9.1}%",
             g.group,
@@ -241,19 +301,26 @@ pub(crate) fn calibrate_accuracy(input: &std::path::Path, tolerance: f64) -> any
             100.0 * g.within_tolerance
         );
     }
-    for f in &fits {
+    for f in &report.fits {
         println!("{}: measured = {:.5}·nominal ± {:+.4} mm (− for holes and slots), residual RMS {:.4} mm", f.axis, f.scale, f.offset_mm, f.residual_rms_mm);
     }
-    let inv = |a: char| {
-        fits.iter()
-            .find(|f| f.axis == a)
-            .map_or(1.0, |f| 1.0 / f.scale)
-    };
+    let [sx, sy, sz] = correction.scale;
     println!(
-        "scale correction: dmdsl slice --scale {:.5},{:.5},{:.5}",
-        inv('X'),
-        inv('Y'),
-        inv('Z')
+        "correction: scale {sx:.5}, {sy:.5}, {sz:.5}; xy offset {:+.4} mm{}",
+        correction.xy_offset_mm,
+        match fit.z_offset_mm {
+            Some(z) => format!(" (Z offset {z:+.4} mm: not corrected, see docs/CALIBRATION.md)"),
+            None => String::new(),
+        }
     );
+    match a.output {
+        Some(out) => println!(
+            "{}: dmdsl slice --accuracy {} applies it\nplot: {}",
+            out.display(),
+            out.display(),
+            out.with_extension("png").display()
+        ),
+        None => println!("(-o FILE writes it for dmdsl slice --accuracy FILE)"),
+    }
     Ok(0)
 }

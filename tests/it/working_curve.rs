@@ -251,11 +251,20 @@ fn bad_sheets_are_refused_in_one_line_naming_file_line_and_column() {
 /// The accuracy sheet filled from measured = scale·nominal ± offset (per axis; − for holes
 /// and slots) plus noise; returns the errors written.
 fn fill_accuracy(path: &Path, fit: [(f64, f64); 3], sd: f64) -> Vec<f64> {
+    let mut n = noise(5, sd);
+    fill_sheet(path, |sign, k, nominal| {
+        fit[k].0 * nominal + sign * fit[k].1 + n()
+    })
+}
+
+/// The accuracy sheet filled with `measured(sign, axis, nominal)` (sign −1 for holes and
+/// slots, axis 0, 1, 2 for X, Y, Z); returns the errors written.
+fn fill_sheet(path: &Path, mut measured: impl FnMut(f64, usize, f64) -> f64) -> Vec<f64> {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
     let head = lines.next().unwrap();
     assert_eq!(head, "feature,axis,nominal_mm,measured_mm,x_mm,y_mm");
-    let (mut out, mut errors, mut n) = (format!("{head}\n"), Vec::new(), noise(5, sd));
+    let (mut out, mut errors) = (format!("{head}\n"), Vec::new());
     for l in lines {
         let c: Vec<&str> = l.split(',').collect();
         let (k, nominal): (usize, f64) = ("XYZ".find(c[1]).unwrap(), c[2].parse().unwrap());
@@ -264,7 +273,7 @@ fn fill_accuracy(path: &Path, fit: [(f64, f64); 3], sd: f64) -> Vec<f64> {
         } else {
             1.0
         };
-        let m = fit[k].0 * nominal + sign * fit[k].1 + n();
+        let m = measured(sign, k, nominal);
         errors.push(m - nominal);
         out += &format!("{},{},{},{m:.4},{},{}\n", c[0], c[1], c[2], c[4], c[5]);
     }
@@ -354,5 +363,172 @@ fn accuracy_part_runs_exports_and_its_sheet_is_fitted_back() {
             err.contains("bad.csv") && err.contains(want),
             "{what}: {err}"
         );
+    }
+}
+
+/// The lit width of the middle row of `job`'s mask `layer`, px (coverage summed).
+fn lit_width_px(job: &Path, layer: usize) -> f64 {
+    let (w, h, px) = read_gray(&job.join(format!("masks/{layer:05}.png")));
+    let (w, r) = (w as usize, h as usize / 2);
+    px[r * w..(r + 1) * w]
+        .iter()
+        .map(|&v| v as f64 / 255.0)
+        .sum()
+}
+
+#[test]
+fn accuracy_correction_is_fitted_applied_recorded_and_refined() {
+    let dir = tempdir("accuracy-correction");
+    // The machine prints a designed size d as m·d ± g (− for holes and slots), Z as m·d.
+    let (m, g) = ([1.008, 1.004, 0.99], 0.05);
+    let print = |s: [f64; 3], c: f64| {
+        move |sign: f64, k: usize, n: f64| {
+            if k == 2 {
+                m[2] * s[2] * n
+            } else {
+                m[k] * (s[k] * n + sign * 2.0 * c) + sign * g
+            }
+        }
+    };
+    ok(&run_in(&dir, &["testjob", "accuracy", "-o", "acc.dmdjob"]));
+    fill_sheet(&dir.join("acc.csv"), print([1.0; 3], 0.0));
+    let out = ok(&run_in(
+        &dir,
+        &["calibrate", "accuracy", "acc.csv", "-o", "corr.toml"],
+    ));
+    assert!(
+        out.contains("corr.toml: dmdsl slice --accuracy corr.toml"),
+        "{out}"
+    );
+    assert!(dir.join("corr.png").exists());
+    let text = std::fs::read_to_string(dir.join("corr.toml")).unwrap();
+    let v: toml::Value = toml::from_str(&text).unwrap();
+    let scale: Vec<f64> = v["scale"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_float().unwrap())
+        .collect();
+    let offset = key(&text, "xy_offset_mm");
+    // The correction that undoes the machine: 1/m, and edges in by g/(2m) (X and Y's mean).
+    let want_offset = -(g / (2.0 * m[0]) + g / (2.0 * m[1])) / 2.0;
+    for k in 0..3 {
+        assert!((scale[k] - 1.0 / m[k]).abs() < 2e-4, "{k}: {text}");
+    }
+    assert!((offset - want_offset).abs() < 2e-4, "{text}");
+
+    // Applied by slice: a 10 × 6 × 4 mm box drawn scaled and offset, the job records it.
+    let part = dir.join("box.stl");
+    write_stl(&part, &box_tris([0.0, 0.0, 0.0], [10.0, 6.0, 4.0]));
+    let flat = ["--compensation", "off", "--cure-correction", "off"];
+    for (job, extra) in [
+        ("plain.dmdjob", None),
+        ("corrected.dmdjob", Some("corr.toml")),
+    ] {
+        let mut args = vec!["slice", "box.stl", "-o", job];
+        args.extend(flat);
+        if let Some(f) = extra {
+            args.extend(["--accuracy", f]);
+        }
+        ok(&run_in(&dir, &args));
+    }
+    let manifest = |job: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join(job).join("job.json")).unwrap()).unwrap()
+    };
+    let (plain, corrected) = (manifest("plain.dmdjob"), manifest("corrected.dmdjob"));
+    assert!(plain["settings"].get("accuracy").is_none());
+    let rec = &corrected["settings"]["accuracy"];
+    let sha = v["sheet_sha256"].as_str().unwrap();
+    assert_eq!(rec["source"], format!("acc.csv sha256:{sha}"), "{rec}");
+    assert_eq!(rec["xy_offset_mm"].as_f64().unwrap(), offset);
+    let px = plain["machine"]["projector"][0]["pixel_mm"]
+        .as_f64()
+        .unwrap();
+    let layers = |j: &serde_json::Value| j["layers"].as_array().unwrap().len();
+    assert_eq!(layers(&plain), 80);
+    // A partial top layer is dropped.
+    assert_eq!(layers(&corrected), (80.0 * scale[2]).floor() as usize);
+    let want = (10.0 * scale[0] + 2.0 * offset) / px;
+    let w0 = lit_width_px(&dir.join("plain.dmdjob"), 20);
+    let w1 = lit_width_px(&dir.join("corrected.dmdjob"), 20);
+    assert!((w0 - 10.0 / px).abs() < 0.01, "{w0}");
+    assert!(
+        (w1 - want).abs() < 0.01,
+        "corrected width {w1} px, want {want}"
+    );
+
+    // Refined: the part printed with the correction, measured and fitted again with it,
+    // gives the same correction (the machine's fixed point), composed with the printed one.
+    ok(&run_in(
+        &dir,
+        &[
+            "testjob",
+            "accuracy",
+            "-o",
+            "acc2.dmdjob",
+            "--accuracy",
+            "corr.toml",
+        ],
+    ));
+    let s = [scale[0], scale[1], scale[2]];
+    fill_sheet(&dir.join("acc2.csv"), print(s, offset));
+    ok(&run_in(
+        &dir,
+        &[
+            "calibrate",
+            "accuracy",
+            "acc2.csv",
+            "--accuracy",
+            "corr.toml",
+            "-o",
+            "corr2.toml",
+        ],
+    ));
+    let text2 = std::fs::read_to_string(dir.join("corr2.toml")).unwrap();
+    let v2: toml::Value = toml::from_str(&text2).unwrap();
+    for k in 0..3 {
+        let s2 = v2["scale"][k].as_float().unwrap();
+        assert!((s2 - scale[k]).abs() < 2e-4, "{k}: {text2}");
+        let fitted = v2["fits"][k]["scale"].as_float().unwrap();
+        assert!(
+            (fitted - 1.0).abs() < 2e-4,
+            "printed with the correction: {text2}"
+        );
+    }
+    assert!(
+        (key(&text2, "xy_offset_mm") - offset).abs() < 2e-4,
+        "{text2}"
+    );
+
+    // A correction out of range or not one: one line naming the file, exit 2, no job.
+    let mut range = v.as_table().unwrap().clone();
+    range.insert(
+        "scale".into(),
+        toml::Value::try_from([1.5, 1.0, 1.0]).unwrap(),
+    );
+    for (what, body, want) in [
+        ("range", toml::to_string(&range).unwrap(), "X factor 1.5"),
+        ("toml", "scale = ".to_string(), "bad.toml"),
+    ] {
+        std::fs::write(dir.join("bad.toml"), body).unwrap();
+        let o = run_in(
+            &dir,
+            &[
+                "slice",
+                "box.stl",
+                "-o",
+                "bad.dmdjob",
+                "--accuracy",
+                "bad.toml",
+            ],
+        );
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{what}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{what}: {err}");
+        assert!(
+            err.contains("bad.toml") && err.contains(want),
+            "{what}: {err}"
+        );
+        assert!(!dir.join("bad.dmdjob").exists(), "{what}");
     }
 }
