@@ -351,3 +351,16 @@ pub fn assert_exports_to_control(dir: &Path, job: &str) {
     }
     assert!(b["layers"].as_u64() >= a["layers"].as_u64(), "{job}: {b}");
 }
+
+/// `cure.predicted` of the job `slice fixtures/features.stl --predict -o OUT` with
+/// `extra` arguments writes in `dir` (the command must succeed).
+pub fn predicted_cure(dir: &Path, out: &str, extra: &[&str]) -> serde_json::Value {
+    let part = fixture("features.stl");
+    let mut args = vec!["slice", part.to_str().unwrap(), "--predict", "-o", out];
+    args.extend_from_slice(extra);
+    let o = run_in(dir, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join(out).join("job.json")).unwrap()).unwrap();
+    j["cure"]["predicted"].clone()
+}

@@ -235,6 +235,13 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
         .unwrap()
         .starts_with("psf.csv sha256:"));
     assert_eq!(c["sources"]["dp_mm"], "assumed");
+    // With the fitted σ, the feature part's prediction is the one of σ typed in, and the
+    // corrected edges land within a few hundredths of a pixel.
+    let typed = format!("projector.0.psf_sigma_px={sigma}");
+    let fitted = predicted_cure(&dir, "f.dmdjob", &["--psf", "psf.toml"]);
+    assert_eq!(fitted, predicted_cure(&dir, "t.dmdjob", &["--set", &typed]));
+    let mean = fitted["edge_error_px"]["mean"].as_f64().unwrap();
+    assert!(mean < 0.05, "{fitted}");
 }
 
 /// Every feature of `sheet` is drawn in the layer's mask `png` as wide as the sheet says:

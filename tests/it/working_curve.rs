@@ -107,6 +107,14 @@ fn relative_working_curve_is_fitted_back_and_the_job_runs_and_exports() {
         .starts_with("wc.csv sha256:"));
     assert_eq!(c["sources"]["ec_mj_cm2"], "assumed");
     assert_eq!(c["sources"]["psf_sigma_px"], "assumed");
+    // With the fitted Dp, the feature part's prediction is the one of Dp typed in.
+    let typed = format!("resin.dp_mm={fdp}");
+    let fitted = predicted_cure(&dir, "f.dmdjob", &["--resin", "resin.toml"]);
+    assert_eq!(fitted, predicted_cure(&dir, "t.dmdjob", &["--set", &typed]));
+    assert!(
+        fitted["edge_error_px"]["mean"].as_f64().unwrap() < 0.05,
+        "{fitted}"
+    );
 }
 
 #[test]
