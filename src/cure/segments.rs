@@ -303,6 +303,31 @@ impl Segments {
     }
 }
 
+/// Whether two contours of `contours` (a section, filled by the nonzero rule) may cross,
+/// touch or nest with the same orientation: two shells that overlap or meet, whose edges
+/// inside the union [`Segments::union_pieces`] must hold. Decided on their boxes (touching
+/// boxes count), per orientation: an outline and the holes inside it never ask for it.
+pub fn contours_may_meet(contours: &[Contour]) -> bool {
+    let mut boxes: [Vec<[f64; 4]>; 2] = [Vec::new(), Vec::new()];
+    for c in contours {
+        let b = c.iter().fold(
+            [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+            |b, p| [b[0].min(p[0]), b[1].max(p[0]), b[2].min(p[1]), b[3].max(p[1])],
+        );
+        boxes[usize::from(crate::slice::signed_area(c) < 0.0)].push(b);
+    }
+    boxes.iter_mut().any(|group| {
+        group.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]));
+        (0..group.len()).any(|i| {
+            let a = group[i];
+            group[i + 1..]
+                .iter()
+                .take_while(|b| b[0] <= a[1])
+                .any(|b| b[2] <= a[3] && a[2] <= b[3])
+        })
+    })
+}
+
 /// Where segment `e` crosses segment `s`, as a fraction of `s` strictly inside it.
 fn cross(s: &Segment, e: &Segment) -> Option<f64> {
     let d = [s.b[0] - s.a[0], s.b[1] - s.a[1]];
@@ -358,6 +383,22 @@ fn keep_points(c: &Contour, tol: f64) -> Option<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn contours_meet_when_shells_cross_touch_or_nest_but_not_for_holes() {
+        let sq = |x: f64, y: f64, s: f64| vec![[x, y], [x + s, y], [x + s, y + s], [x, y + s]];
+        let hole = |x: f64, y: f64, s: f64| {
+            let mut c = sq(x, y, s);
+            c.reverse();
+            c
+        };
+        assert!(!contours_may_meet(&[sq(0.0, 0.0, 10.0), hole(2.0, 2.0, 3.0)]));
+        assert!(!contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(5.0, 0.0, 4.0)]));
+        assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(4.0, 0.0, 4.0)]));
+        assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(3.0, 3.0, 4.0)]));
+        assert!(contours_may_meet(&[sq(0.0, 0.0, 10.0), sq(2.0, 2.0, 3.0)]));
+        assert!(!contours_may_meet(&[sq(0.0, 0.0, 4.0)]));
+    }
 
     /// A support overlapping a part's edge: the pieces inside the other shape are flagged,
     /// and the unflagged pieces are the union's outline.

@@ -242,7 +242,8 @@ impl CureJob {
     /// (`own`: its coverage), their moves from its dose and from the layers above, `upper`
     /// (their sections' coverage, nearest first, at most [`cure::shift::LOOK_AHEAD`]),
     /// `above` layers in all up to the job's top. With `overlapping` contours (supports in
-    /// the section) only the edges of their union move.
+    /// the section), or shells that may cross, touch or nest
+    /// ([`cure::segments::contours_may_meet`]), only the edges of their union move.
     pub fn correction_of(
         &self,
         (index, above): (usize, usize),
@@ -255,6 +256,7 @@ impl CureJob {
         }
         let h = self.model_height_px;
         let segs = Segments::simplified(section, self.model.pixel_mm, h, 0.01);
+        let overlapping = overlapping || cure::segments::contours_may_meet(section);
         let (segs, interior) = match overlapping {
             true => {
                 let (pieces, interior) = segs.union_pieces();

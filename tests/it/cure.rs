@@ -519,3 +519,47 @@ fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
     let (_, _, px) = read_gray(&dir.join("xyz.dmdjob/masks/00000.png"));
     assert!(px.iter().filter(|&&v| v == 255).count() > 90 * 90);
 }
+
+#[test]
+fn the_correction_moves_only_the_outline_of_shells_that_cross_or_touch() {
+    // Two crossing boxes and a box touching one along a face: their edges inside the
+    // union stay where they are, so every pixel 3 px inside the lit region is fully lit
+    // (no dark seam where the shells meet); the outline still moves in.
+    let dir = tempdir("cure-overlap");
+    let part = fixture("overlap_shells.stl");
+    let args = [
+        "slice",
+        part.to_str().unwrap(),
+        "--keep-position",
+        "--compensation",
+        "off",
+        "-o",
+        "o.dmdjob",
+    ];
+    let o = run_in(&dir, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let masks = dir.join("o.dmdjob/masks");
+    let mut layers = 0;
+    for e in std::fs::read_dir(&masks).unwrap() {
+        let (w, h, m) = read_gray(&e.unwrap().path());
+        let (w, h) = (w as usize, h as usize);
+        let lit = |r: usize, c: usize| m[r * w + c] > 0;
+        let (mut seam, mut edge) = (0, 0);
+        for r in 3..h - 3 {
+            for c in 3..w - 3 {
+                let v = m[r * w + c];
+                let core = (r - 3..=r + 3).all(|y| (c - 3..=c + 3).all(|x| lit(y, x)));
+                if core && v < 255 {
+                    seam += 1;
+                }
+                if lit(r, c) && !core && v < 255 {
+                    edge += 1;
+                }
+            }
+        }
+        assert_eq!(seam, 0, "dark pixels inside the union");
+        assert!(edge > 0, "the outline was not moved");
+        layers += 1;
+    }
+    assert!(layers > 10);
+}
