@@ -162,7 +162,12 @@ pub fn edge_samples(
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
-    let segs = Segments::new(contours, model.pixel_mm, height_px);
+    // Where shells cross, touch or nest (supports in the part), the edges inside their
+    // union bound nothing that cures: only the union's outline is sampled.
+    let segs = match super::segments::contours_may_meet(contours) {
+        true => Segments::edges(contours, model.pixel_mm, height_px).union_outline(),
+        false => Segments::new(contours, model.pixel_mm, height_px),
+    };
     // Far enough for the cured edge of any sensible model (the light falls from 1 to 0
     // within a pixel and the PSF's reach on either side).
     let search = psf.reach_px() + 2.0;
@@ -184,10 +189,12 @@ pub fn edge_samples(
             total += (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);
         }
         arc.push(total);
+        // A corner: the edges turn, or (on a union's outline) the outline leaves the
+        // contour for another's between them.
         let corners: Vec<f64> = (0..n)
             .filter(|&i| {
                 let (p, q) = (&ss[(i + n - 1) % n], &ss[i]);
-                p.n[0] * q.n[0] + p.n[1] * q.n[1] < cos_corner
+                p.n[0] * q.n[0] + p.n[1] * q.n[1] < cos_corner || p.b != q.a
             })
             .map(|i| arc[i])
             .collect();

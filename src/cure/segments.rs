@@ -250,6 +250,27 @@ impl Segments {
         (pieces, interior)
     }
 
+    /// The outline of the union of the contours' shells, with the grid index: the pieces
+    /// of [`Segments::union_pieces`] with no material beyond them, by contour.
+    pub fn union_outline(&self) -> Segments {
+        let (pieces, interior) = self.union_pieces();
+        let mut out = Segments {
+            segs: Vec::with_capacity(pieces.segs.len()),
+            starts: vec![0],
+            origin: pieces.origin,
+            cols: pieces.cols,
+            rows: pieces.rows,
+            cells: Vec::new(),
+        };
+        for w in pieces.starts.windows(2) {
+            out.segs
+                .extend((w[0]..w[1]).filter(|&i| !interior[i]).map(|i| pieces.segs[i]));
+            out.starts.push(out.segs.len());
+        }
+        out.index();
+        out
+    }
+
     /// The fractions of edge `i` (of contour `own`) where edges of other contours cross
     /// it, with its ends, sorted, into `ts` (`seen`: the edge each other edge was last
     /// tested against). The edges are found by the cells `i` spans in `grid`.

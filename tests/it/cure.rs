@@ -533,11 +533,18 @@ fn the_correction_moves_only_the_outline_of_shells_that_cross_or_touch() {
         "--keep-position",
         "--compensation",
         "off",
+        "--predict",
         "-o",
         "o.dmdjob",
     ];
     let o = run_in(&dir, &args);
     assert!(o.status.success(), "{}", stderr(&o));
+    // The prediction samples the union's outline only: no edge inside it counts as an
+    // error (sampled, they gave 2.9 px).
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("o.dmdjob/job.json")).unwrap()).unwrap();
+    let p = &job["cure"]["predicted"];
+    assert!(p["edge_error_px"]["max"].as_f64().unwrap() < 0.5, "{p}");
     let masks = dir.join("o.dmdjob/masks");
     let mut layers = 0;
     for e in std::fs::read_dir(&masks).unwrap() {
