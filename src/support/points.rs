@@ -10,8 +10,9 @@
 //! covers pixels of the layers above it too: a down-facing pixel is covered by a point
 //! within `spacing / √2` of it placed at most as many layers lower as a surface at the
 //! critical angle climbs over that distance. Every island gets a point at its most
-//! interior pixel, unless a head of the same layer nearer than a pillar's diameter touches
-//! it already; the other points go to the first uncovered pixel in scan order,
+//! interior pixel (or, crowded by a point below, its deepest pixel clear of it when that
+//! lies a head's contact inside), unless a head of the same layer nearer than a pillar's
+//! diameter touches it already; the other points go to the first uncovered pixel in scan order,
 //! moved inward when the pixel there is down-facing too, and never closer than a pillar's
 //! diameter to a point of the same reach.
 
@@ -163,6 +164,13 @@ fn firm(region: &[Run], below: &[Run]) -> bool {
 /// The pixel of a region farthest from its outside (chamfer distance, 3-4 weights; the
 /// first in scan order among equals).
 fn interior(region: &[Run]) -> [u32; 2] {
+    deepest(region, |_, _| true).map_or([region[0][1], region[0][0]], |(_, p)| p)
+}
+
+/// The pixel of a region farthest from its outside among those `keep` accepts, with its
+/// chamfer distance (3 per pixel straight, 4 diagonal; the first in scan order among
+/// equals).
+fn deepest(region: &[Run], keep: impl Fn(u32, u32) -> bool) -> Option<(u32, [u32; 2])> {
     let r0 = region[0][0];
     let r1 = region.iter().map(|r| r[0]).max().unwrap_or(r0) + 1;
     let c0 = region.iter().map(|r| r[1]).min().unwrap_or(0);
@@ -188,7 +196,6 @@ fn interior(region: &[Run]) -> [u32; 2] {
             }
         }
     }
-    let mut best = (0, [region[0][1], r0]);
     for y in (1..h - 1).rev() {
         for x in (1..w - 1).rev() {
             let i = y * w + x;
@@ -201,14 +208,16 @@ fn interior(region: &[Run]) -> [u32; 2] {
             }
         }
     }
+    let mut best: Option<(u32, [u32; 2])> = None;
     for y in 1..h - 1 {
         for x in 1..w - 1 {
-            if d[y * w + x] > best.0 {
-                best = (d[y * w + x], [c0 + x as u32 - 1, r0 + y as u32 - 1]);
+            let (depth, at) = (d[y * w + x], [c0 + x as u32 - 1, r0 + y as u32 - 1]);
+            if depth > best.map_or(0, |b| b.0) && keep(at[0], at[1]) {
+                best = Some((depth, at));
             }
         }
     }
-    best.1
+    best
 }
 
 /// The points placed so far, in cells of `cover_px` for the nearness queries.
@@ -260,19 +269,25 @@ impl<'s> Placed<'s> {
     }
 
     /// `at`, or when it lies within a pillar's diameter of a point reaching layer `l`, the
-    /// pixel of `region` that lies that far from every such point (the first in scan
-    /// order), if there is one: so that the pillars do not overlap.
+    /// deepest pixel of `region` that lies that far from every such point, if it lies deep
+    /// enough: so that the pillars do not overlap.
     fn apart_within(&self, region: &[Run], at: [u32; 2], l: usize) -> [u32; 2] {
         let d = self.s.min_apart_px;
         let clear = |c: u32, r: u32| self.near(c as f64, r as f64, l, d).next().is_none();
         if clear(at[0], at[1]) {
             return at;
         }
-        region
-            .iter()
-            .flat_map(|&[row, a, b]| (a..b).map(move |c| [c, row]))
-            .find(|&[c, r]| clear(c, r))
-            .unwrap_or(at)
+        // The deepest clear pixel, if it lies as deep as a head's contact reaches (or as
+        // the region's most interior pixel): a point at the region's edge would hold it
+        // by a sliver that the cure correction's moves take away. Else the most interior
+        // pixel, its pillar near another's.
+        let depth = |p: Option<(u32, [u32; 2])>| p.map_or(0, |p| p.0);
+        let want = depth(deepest(region, |c, r| [c, r] == at))
+            .min(3 * self.s.contact_px.round().max(2.0) as u32);
+        match deepest(region, clear) {
+            Some((k, p)) if k >= want => p,
+            _ => at,
+        }
     }
 
     /// Places points on layer `l` until every pixel of `run` is covered; `down` is the
@@ -389,6 +404,24 @@ mod tests {
         // A density near one per cover² (every pixel within the cover radius).
         let area = d.iter().map(|r| (r[2] - r[1]) as f64).sum::<f64>();
         assert!((pts.len() as f64) < 2.0 * area / 100.0, "{}", pts.len());
+    }
+
+    #[test]
+    fn an_island_crowded_by_a_point_below_gets_its_point_deep_inside_not_at_its_edge() {
+        // A small island at layer 3 (its point at its centre), then at layer 6 an island
+        // whose centre lies within a pillar's diameter (5 px) of that point.
+        let (a, b) = (disc(100.0, 100.0, 4.0), disc(102.0, 100.0, 10.0));
+        let masks = vec![vec![], vec![], vec![], a, vec![], vec![], b.clone()];
+        let pts = place(&masks, 3, &spread());
+        let first = pts.iter().find(|p| p.layer == 3).unwrap().col_row;
+        let p = pts.iter().find(|p| p.layer == 6 && p.island).unwrap().col_row;
+        let [c, r] = p.map(|v| v as f64);
+        let [c0, r0] = first.map(|v| v as f64);
+        assert!((c - c0).hypot(r - r0) > 5.0, "{pts:?}");
+        // At least a head's contact (2 px) inside the island's edge (the first clear pixel
+        // in scan order lay on it).
+        assert!((c + 0.5 - 102.0).hypot(r + 0.5 - 100.0) <= 8.0, "{pts:?}");
+        assert!(runs::contains(&b, p[0], p[1]));
     }
 
     #[test]
