@@ -263,8 +263,11 @@ impl Segments {
             cells: Vec::new(),
         };
         for w in pieces.starts.windows(2) {
-            out.segs
-                .extend((w[0]..w[1]).filter(|&i| !interior[i]).map(|i| pieces.segs[i]));
+            out.segs.extend(
+                (w[0]..w[1])
+                    .filter(|&i| !interior[i])
+                    .map(|i| pieces.segs[i]),
+            );
             out.starts.push(out.segs.len());
         }
         out.index();
@@ -332,8 +335,20 @@ pub fn contours_may_meet(contours: &[Contour]) -> bool {
     let mut boxes: [Vec<[f64; 4]>; 2] = [Vec::new(), Vec::new()];
     for c in contours {
         let b = c.iter().fold(
-            [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
-            |b, p| [b[0].min(p[0]), b[1].max(p[0]), b[2].min(p[1]), b[3].max(p[1])],
+            [
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ],
+            |b, p| {
+                [
+                    b[0].min(p[0]),
+                    b[1].max(p[0]),
+                    b[2].min(p[1]),
+                    b[3].max(p[1]),
+                ]
+            },
         );
         boxes[usize::from(crate::slice::signed_area(c) < 0.0)].push(b);
     }
@@ -413,7 +428,10 @@ mod tests {
             c.reverse();
             c
         };
-        assert!(!contours_may_meet(&[sq(0.0, 0.0, 10.0), hole(2.0, 2.0, 3.0)]));
+        assert!(!contours_may_meet(&[
+            sq(0.0, 0.0, 10.0),
+            hole(2.0, 2.0, 3.0)
+        ]));
         assert!(!contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(5.0, 0.0, 4.0)]));
         assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(4.0, 0.0, 4.0)]));
         assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(3.0, 3.0, 4.0)]));

@@ -243,7 +243,11 @@ pub(super) fn manifest(
             accuracy: (!profile.accuracy.is_identity()).then(|| bundle::Accuracy {
                 scale: profile.accuracy.scale,
                 xy_offset_mm: profile.accuracy.xy_offset_mm,
-                source: profile.accuracy.source.clone().unwrap_or_else(|| "typed in".into()),
+                source: profile
+                    .accuracy
+                    .source
+                    .clone()
+                    .unwrap_or_else(|| "typed in".into()),
             }),
         },
         machine: bundle::Machine::of(profile),

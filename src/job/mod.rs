@@ -257,7 +257,11 @@ fn predict(
     let warp = setup.correction.as_ref().map(|w| (w, part.path));
     let field = field.map(|f| f as &dyn bundle::BundleSource);
     let h = manifest.settings.layer_height_mm;
-    let offset = manifest.settings.accuracy.as_ref().map_or(0.0, |a| a.xy_offset_mm);
+    let offset = manifest
+        .settings
+        .accuracy
+        .as_ref()
+        .map_or(0.0, |a| a.xy_offset_mm);
     cure.predict(manifest, writer, field, part.slicer(h, offset), warp)?;
     let w = cure_records::warnings(&manifest.layers, &what_at(part, h));
     manifest.warnings.splice(at..at, w);

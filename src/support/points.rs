@@ -414,7 +414,11 @@ mod tests {
         let masks = vec![vec![], vec![], vec![], a, vec![], vec![], b.clone()];
         let pts = place(&masks, 3, &spread());
         let first = pts.iter().find(|p| p.layer == 3).unwrap().col_row;
-        let p = pts.iter().find(|p| p.layer == 6 && p.island).unwrap().col_row;
+        let p = pts
+            .iter()
+            .find(|p| p.layer == 6 && p.island)
+            .unwrap()
+            .col_row;
         let [c, r] = p.map(|v| v as f64);
         let [c0, r0] = first.map(|v| v as f64);
         assert!((c - c0).hypot(r - r0) > 5.0, "{pts:?}");
