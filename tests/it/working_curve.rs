@@ -519,24 +519,41 @@ fn accuracy_correction_is_fitted_applied_recorded_and_refined() {
         ("toml", "scale = ".to_string(), "bad.toml"),
     ] {
         std::fs::write(dir.join("bad.toml"), body).unwrap();
-        let o = run_in(
-            &dir,
-            &[
-                "slice",
-                "box.stl",
-                "-o",
-                "bad.dmdjob",
-                "--accuracy",
-                "bad.toml",
-            ],
-        );
-        let err = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "{what}: {err}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{what}: {err}");
-        assert!(
-            err.contains("bad.toml") && err.contains(want),
-            "{what}: {err}"
-        );
-        assert!(!dir.join("bad.dmdjob").exists(), "{what}");
+        // Each command that reads a correction file: slice, the test part, the fit.
+        let commands: [&[&str]; 3] = [
+            &["slice", "box.stl", "-o", "bad.dmdjob"],
+            &["testjob", "accuracy", "-o", "bad.dmdjob"],
+            &["calibrate", "accuracy", "acc.csv", "-o", "bad-fit.toml"],
+        ];
+        for c in commands {
+            let mut args = c.to_vec();
+            args.extend(["--accuracy", "bad.toml"]);
+            let o = run_in(&dir, &args);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{what} {c:?}: {err}");
+            assert_eq!(err.trim_end().lines().count(), 1, "{what} {c:?}: {err}");
+            assert!(
+                err.contains("bad.toml") && err.contains(want),
+                "{what} {c:?}: {err}"
+            );
+            assert!(!dir.join("bad.dmdjob").exists(), "{what} {c:?}");
+            assert!(!dir.join("bad.csv").exists(), "{what} {c:?}");
+            assert!(!dir.join("bad-fit.toml").exists(), "{what} {c:?}");
+        }
     }
+    // A sheet whose fit asks for a correction out of range: one line naming the sheet,
+    // exit 2, neither the file nor its plot written.
+    fill_sheet(&dir.join("acc.csv"), |sign, _, n| 1.5 * n + sign * 0.01);
+    let o = run_in(
+        &dir,
+        &["calibrate", "accuracy", "acc.csv", "-o", "wild.toml"],
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("acc.csv") && err.contains("the fitted correction") && err.contains("factor"),
+        "{err}"
+    );
+    assert!(!dir.join("wild.toml").exists() && !dir.join("wild.png").exists());
 }
