@@ -101,7 +101,6 @@ fn main() {
         &tiled.projector,
         &tiled.blend.unwrap_or_default(),
         &[Response::linear(), Response::linear()],
-        &[None, None],
     );
     let tables_s = t.elapsed().as_secs_f64();
     let traster = Rasterizer::new(tfield);
@@ -116,7 +115,7 @@ fn main() {
             c += t.elapsed().as_secs_f64();
             let t = Instant::now();
             for k in 0..tiled.projector.len() {
-                std::hint::black_box(tiler.render(k, &m));
+                std::hint::black_box(tiler.render(k, &m, tscratch.lit_box()));
             }
             s += t.elapsed().as_secs_f64();
             tscratch.recycle(m);

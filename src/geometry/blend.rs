@@ -5,7 +5,7 @@
 //! does not halve the light: gray → irradiance is nonlinear). A share becomes a gray level
 //! through the projector's response last ([`Response::inverse_lut`]). Each projector's raw
 //! weight at a pixel is the product of its [`BlendCurve`] ramps towards each overlapped
-//! side, divided by the sum over the projectors there ([`weight_maps`]).
+//! side, divided by the sum over the projectors there ([`shares`]).
 
 use crate::profile::BlendCurve;
 
@@ -82,44 +82,110 @@ fn raw_weight(curve: &BlendCurve, rect: &Rect, d: &[u32; 4], c: u32, r: u32) -> 
         * ramp(rect.y1 - 1 - r, d[3])
 }
 
-/// Irradiance share of every projector at every one of its pixels (row-major over the
-/// projector's own pixels, before mirroring). Wherever projectors overlap, the shares of all
-/// projectors covering a field pixel sum to one (for [`BlendCurve::None`] every share is 1).
-pub fn weight_maps(rects: &[Rect], curve: &BlendCurve) -> Vec<Vec<f32>> {
+/// One projector's irradiance shares where they may differ from one: per row of the
+/// projector (top first, before mirroring), the columns `a..b` of its overlaps in that
+/// row and their shares; every other pixel's share is 1. Memory follows the overlaps, not
+/// the projector.
+#[derive(Debug, Clone, Default)]
+pub struct Shares<T = f32> {
+    /// Per row, the columns `a..b` the row's shares cover.
+    pub spans: Vec<(u32, u32)>,
+    /// Per row, where its shares start in `values`.
+    start: Vec<usize>,
+    values: Vec<T>,
+}
+
+impl<T: Copy + PartialEq + Default> Shares<T> {
+    /// The values of row `r`, columns `spans[r]`.
+    pub fn row(&self, r: usize) -> &[T] {
+        let (a, b) = self.spans[r];
+        &self.values[self.start[r]..self.start[r] + (b - a) as usize]
+    }
+
+    /// Each value through `f`, each row's span trimmed at both ends to the first and last
+    /// value that is not `full` (the value of every pixel outside the spans).
+    pub fn map_trimmed<U: Copy + PartialEq + Default>(
+        &self,
+        f: impl Fn(T) -> U,
+        full: U,
+    ) -> Shares<U> {
+        let mut out = Shares::default();
+        for (r, &(a, _)) in self.spans.iter().enumerate() {
+            let v: Vec<U> = self.row(r).iter().map(|&x| f(x)).collect();
+            let i = v.iter().position(|&x| x != full).unwrap_or(v.len());
+            let j = v.iter().rposition(|&x| x != full).map_or(i, |j| j + 1);
+            out.start.push(out.values.len());
+            out.spans.push((a + i as u32, a + j as u32));
+            out.values.extend_from_slice(&v[i..j]);
+        }
+        out
+    }
+}
+
+/// Irradiance share of every projector at its pixels ([`Shares`]). Wherever projectors
+/// overlap, the shares of all projectors covering a field pixel sum to one (for
+/// [`BlendCurve::None`] every share is 1).
+pub fn shares(rects: &[Rect], curve: &BlendCurve) -> Vec<Shares> {
     let widths: Vec<[u32; 4]> = (0..rects.len()).map(|k| overlap_widths(rects, k)).collect();
     rects
         .iter()
         .enumerate()
         .map(|(k, a)| {
-            let (w, h) = a.size();
-            let mut out = vec![1.0f32; w * h];
-            if *curve == BlendCurve::None {
-                return out;
-            }
+            let mut out = Shares::default();
             let near: Vec<usize> = (0..rects.len())
                 .filter(|&j| j != k && a.overlaps_rows(&rects[j]) && a.overlaps_cols(&rects[j]))
+                .filter(|_| *curve != BlendCurve::None)
                 .collect();
-            // Only pixels inside some intersection can have a share below one.
-            for &j in &near {
-                let b = rects[j];
-                for r in a.y0.max(b.y0)..a.y1.min(b.y1) {
-                    for c in a.x0.max(b.x0)..a.x1.min(b.x1) {
-                        let mine = raw_weight(curve, a, &widths[k], c, r);
-                        let (mut total, mut count) = (mine, 1usize);
-                        for &i in &near {
-                            if rects[i].contains(c, r) {
-                                total += raw_weight(curve, &rects[i], &widths[i], c, r);
-                                count += 1;
-                            }
-                        }
-                        let v = if total > 0.0 {
-                            mine / total
-                        } else {
-                            1.0 / count as f64
-                        };
-                        out[(r - a.y0) as usize * w + (c - a.x0) as usize] = v as f32;
+            for r in a.y0..a.y1 {
+                // Only pixels inside some intersection can have a share below one.
+                let cuts = near
+                    .iter()
+                    .map(|&j| rects[j])
+                    .filter(|b| b.y0 <= r && r < b.y1);
+                let cols = cuts.map(|b| (a.x0.max(b.x0), a.x1.min(b.x1)));
+                let (c0, c1) =
+                    cols.fold((a.x1, a.x0), |(lo, hi), (x0, x1)| (lo.min(x0), hi.max(x1)));
+                out.start.push(out.values.len());
+                out.spans.push(if c0 < c1 {
+                    (c0 - a.x0, c1 - a.x0)
+                } else {
+                    (0, 0)
+                });
+                for c in c0..c1 {
+                    let mut over = near.iter().filter(|&&i| rects[i].contains(c, r)).peekable();
+                    if over.peek().is_none() {
+                        out.values.push(1.0);
+                        continue;
                     }
+                    let mine = raw_weight(curve, a, &widths[k], c, r);
+                    let (mut total, mut count) = (mine, 1usize);
+                    for &i in over {
+                        total += raw_weight(curve, &rects[i], &widths[i], c, r);
+                        count += 1;
+                    }
+                    let v = if total > 0.0 {
+                        mine / total
+                    } else {
+                        1.0 / count as f64
+                    };
+                    out.values.push(v as f32);
                 }
+            }
+            out
+        })
+        .collect()
+}
+
+/// The shares as one row-major map per projector.
+#[cfg(test)]
+fn weight_maps(rects: &[Rect], curve: &BlendCurve) -> Vec<Vec<f32>> {
+    (shares(rects, curve).iter().zip(rects))
+        .map(|(s, a)| {
+            let (w, h) = a.size();
+            let mut out = vec![1.0f32; w * h];
+            for r in 0..h {
+                let (c0, c1) = s.spans[r];
+                out[r * w + c0 as usize..r * w + c1 as usize].copy_from_slice(s.row(r));
             }
             out
         })

@@ -9,11 +9,12 @@
 //! common target irradiance E* (the lowest each would choose alone), so the field is flat
 //! across the seam.
 
-use super::blend::{self, Rect, Response, LUT_STEPS};
+use super::blend::{self, Rect, Response, Shares, LUT_STEPS};
 use crate::bundle::Optics;
 use crate::digest::sha256_hex;
 use crate::error::{Error, Result};
 use crate::optics::{Compensator, GrayMap, JobOptics, Mode, OpticsOptions};
+use crate::png::PixelBox;
 use crate::profile::{BlendCurve, Field, Profile, Projector};
 use crate::raster::Mask;
 use crate::warning::Warning;
@@ -36,14 +37,15 @@ const FULL: u32 = 16 << 16;
 #[derive(Debug, Clone)]
 struct Tile {
     rect: Rect,
-    mirror_x: bool,
-    mirror_y: bool,
-    /// `F` per projector pixel (row-major, unmirrored), or None when every `F` is [`FULL`].
-    factor: Option<Vec<u32>>,
-    /// Per row, the columns `a..b` outside which every `F` is [`FULL`].
-    spans: Vec<(u32, u32)>,
+    /// The projector at offset zero: how its own mask is mirrored.
+    view: Projector,
+    /// Per row, the columns `a..b` outside which every `F` is [`FULL`], and their `F`
+    /// (unmirrored).
+    factor: Shares<u32>,
     /// Irradiance fraction (in 1/LUT_STEPS) → gray.
     lut: Vec<u8>,
+    /// The gray of each coverage at full share, or None when that is the coverage itself.
+    full: Option<Vec<u8>>,
 }
 
 /// Splits field coverage masks into blended, response-corrected projector masks.
@@ -56,51 +58,26 @@ pub struct Tiler {
 
 impl Tiler {
     /// Tables for `projectors` blended with `curve`; `responses[k]` is projector k's gray →
-    /// irradiance curve, `gains[k]` an optional extra per-pixel factor ≤ 1 (compensation:
-    /// row-major over the projector's pixels, unmirrored).
-    pub fn new(
-        projectors: &[Projector],
-        curve: &BlendCurve,
-        responses: &[Response],
-        gains: &[Option<Vec<f32>>],
-    ) -> Tiler {
+    /// irradiance curve.
+    pub fn new(projectors: &[Projector], curve: &BlendCurve, responses: &[Response]) -> Tiler {
         let rects: Vec<Rect> = projectors.iter().map(rect_of).collect();
-        let weights = blend::weight_maps(&rects, curve);
-        let tiles = projectors
-            .iter()
-            .enumerate()
-            .map(|(k, p)| {
-                let gain = gains.get(k).and_then(|g| g.as_ref());
-                let w = &weights[k];
-                let factor: Vec<u32> = w
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &s)| {
-                        let g = gain.map_or(1.0, |g| g[i].clamp(0.0, 1.0));
-                        ((s as f64 * g as f64).clamp(0.0, 1.0) * FULL as f64).round() as u32
-                    })
-                    .collect();
-                let all_full = factor.iter().all(|&f| f == FULL);
-                let w = p.width_px as usize;
-                let spans = factor
-                    .chunks(w)
-                    .map(|row| {
-                        let a = row.iter().position(|&f| f != FULL).unwrap_or(w);
-                        let b = row.iter().rposition(|&f| f != FULL).map_or(a, |b| b + 1);
-                        (a as u32, b as u32)
-                    })
-                    .collect();
+        let tiles = (blend::shares(&rects, curve).into_iter().enumerate())
+            .map(|(k, s)| {
+                let to_f = |s: f32| (s.clamp(0.0, 1.0) as f64 * FULL as f64).round() as u32;
+                let response = responses.get(k).cloned();
+                let lut = response.unwrap_or_else(Response::linear).inverse_lut();
+                debug_assert_eq!(lut.len(), LUT_STEPS + 1);
+                let full: Vec<u8> = (0..=255usize).map(|v| lut[v * 16]).collect();
+                let identity = full.iter().enumerate().all(|(v, &g)| g as usize == v);
                 Tile {
                     rect: rects[k],
-                    mirror_x: p.mirror_x,
-                    mirror_y: p.mirror_y,
-                    factor: (!all_full).then_some(factor),
-                    spans,
-                    lut: responses
-                        .get(k)
-                        .cloned()
-                        .unwrap_or_else(Response::linear)
-                        .inverse_lut(),
+                    view: Projector {
+                        offset_px: [0, 0],
+                        ..projectors[k].clone()
+                    },
+                    factor: s.map_trimmed(to_f, FULL),
+                    lut,
+                    full: (!identity).then_some(full),
                 }
             })
             .collect();
@@ -145,7 +122,7 @@ impl Tiler {
         };
         let responses = ps.iter().map(response).collect::<Result<Vec<_>>>()?;
         let curve = profile.blend.unwrap_or_default();
-        let mut tiler = Tiler::new(ps, &curve, &responses, &vec![None; n]);
+        let mut tiler = Tiler::new(ps, &curve, &responses);
         let mode = opts.resolve_mode(ps.iter().any(|p| p.calibration.is_some()))?;
         if mode == Mode::Off {
             return Ok(tiler);
@@ -239,81 +216,82 @@ impl Tiler {
         out
     }
 
-    /// Projector `k`'s gray mask of a field coverage mask.
-    pub fn render(&self, k: usize, field: &Mask) -> Mask {
-        if let Some(o) = self.optics.get(k) {
-            return self.render_compensated(k, o, field);
-        }
+    /// Projector `k`'s gray mask of a field coverage mask that is zero outside `lit`,
+    /// and the box of the projector mask outside which it is zero (or black, when the
+    /// response gives a gray above zero for no light: then the whole mask). Only that box
+    /// is written.
+    pub fn render(&self, k: usize, field: &Mask, lit: PixelBox) -> (Mask, PixelBox) {
         let t = &self.tiles[k];
         let (w, h) = t.rect.size();
-        let fw = field.width as usize;
+        let black = t.lut[0];
+        let compensated = self.optics.get(k);
+        // The lit box in the projector's own (unmirrored) pixels.
+        let (x0, y0) = (t.rect.x0 as usize, t.rect.y0 as usize);
+        let cut = |a: usize, b: usize, o: usize, n: usize| {
+            let (a, b) = (a.clamp(o, o + n) - o, b.clamp(o, o + n) - o);
+            (a, b.max(a))
+        };
+        let ((r0, r1), (c0, c1)) = (cut(lit.r0, lit.r1, y0, h), cut(lit.c0, lit.c1, x0, w));
+        let b = if black == 0 || compensated.is_some() {
+            PixelBox::new(r0, r1, c0, c1)
+        } else {
+            PixelBox::whole(w, h)
+        };
         let mut out = Mask::zeros(w as u32, h as u32);
+        let fw = field.width as usize;
+        for r in b.rows() {
+            let row0 = (y0 + r) * fw + x0;
+            let src = &field.data[row0 + b.c0..row0 + b.c1];
+            let dst = &mut out.data[r * w + b.c0..r * w + b.c1];
+            match compensated {
+                Some(_) => Self::share_row(t, r, b.c0, src, dst),
+                None => Self::gray_row(t, r, b.c0, src, dst),
+            }
+        }
+        if let Some(o) = compensated {
+            o.compensator.apply_in(&mut out, b);
+        }
+        if !t.view.mirror_x && !t.view.mirror_y {
+            return (out, b);
+        }
+        let (view, b) = crate::raster::projector_view_in(&out, &t.view, b);
+        (view.into_owned(), b)
+    }
+
+    /// Columns `c0..` of row `r` of tile `t` without compensation: coverage × F through
+    /// the response LUT (a copy or one look-up per pixel where the share is full).
+    fn gray_row(t: &Tile, r: usize, c0: usize, src: &[u8], dst: &mut [u8]) {
         let lut = &t.lut[..];
-        debug_assert_eq!(lut.len(), LUT_STEPS + 1);
-        let black = lut[0];
-        // Gray of a pixel with full share at each coverage level.
-        let full: Vec<u8> = (0..=255usize).map(|v| lut[v * 16]).collect();
-        let identity = full.iter().enumerate().all(|(v, &g)| g as usize == v);
-        for r in 0..h {
-            let sr = if t.mirror_y { h - 1 - r } else { r };
-            let row0 = (t.rect.y0 as usize + r) * fw + t.rect.x0 as usize;
-            let src = &field.data[row0..row0 + w];
-            let dst = &mut out.data[sr * w..(sr + 1) * w];
-            // Full share: a copy (linear response) or one look-up per pixel.
-            if identity {
-                dst.copy_from_slice(src);
-            } else {
+        match &t.full {
+            None => dst.copy_from_slice(src),
+            Some(full) => {
                 for (d, &v) in dst.iter_mut().zip(src) {
                     *d = full[v as usize];
                 }
             }
-            // Shared or compensated pixels: coverage × F through the response LUT.
-            if let Some(f) = &t.factor {
-                let (a, b) = (t.spans[r].0 as usize, t.spans[r].1 as usize);
-                let fr = &f[r * w + a..r * w + b];
-                for ((d, &v), &f) in dst[a..b].iter_mut().zip(&src[a..b]).zip(fr) {
-                    *d = if v == 0 {
-                        black
-                    } else {
-                        lut[((v as u32 * f + 0x8000) >> 16) as usize]
-                    };
-                }
-            }
-            if t.mirror_x {
-                dst.reverse();
-            }
         }
-        out
+        let (a, f) = (t.factor.spans[r].0 as usize, t.factor.row(r));
+        let (lo, hi) = (a.max(c0), (a + f.len()).min(c0 + src.len()));
+        for c in lo..hi.max(lo) {
+            let (v, f) = (src[c - c0] as u32, f[c - a]);
+            dst[c - c0] = if v == 0 {
+                lut[0]
+            } else {
+                lut[((v * f + 0x8000) >> 16) as usize]
+            };
+        }
     }
 
-    /// Compensated path: crop, scale by the share (8-bit), compensate, mirror.
-    fn render_compensated(&self, k: usize, o: &JobOptics, field: &Mask) -> Mask {
-        let t = &self.tiles[k];
-        let (w, h) = t.rect.size();
-        let fw = field.width as usize;
-        let mut out = Mask::zeros(w as u32, h as u32);
-        for r in 0..h {
-            let row0 = (t.rect.y0 as usize + r) * fw + t.rect.x0 as usize;
-            let dst = &mut out.data[r * w..(r + 1) * w];
-            dst.copy_from_slice(&field.data[row0..row0 + w]);
-            if let Some(f) = &t.factor {
-                let (a, b) = (t.spans[r].0 as usize, t.spans[r].1 as usize);
-                for (d, &f) in dst[a..b].iter_mut().zip(&f[r * w + a..r * w + b]) {
-                    *d = ((*d as u32 * f + (FULL >> 1)) / FULL) as u8;
-                }
-            }
+    /// Columns `c0..` of row `r` of tile `t` before compensation: coverage scaled by the
+    /// share (8-bit).
+    fn share_row(t: &Tile, r: usize, c0: usize, src: &[u8], dst: &mut [u8]) {
+        dst.copy_from_slice(src);
+        let (a, f) = (t.factor.spans[r].0 as usize, t.factor.row(r));
+        let (lo, hi) = (a.max(c0), (a + f.len()).min(c0 + src.len()));
+        for c in lo..hi.max(lo) {
+            let d = &mut dst[c - c0];
+            *d = ((*d as u32 * f[c - a] + (FULL >> 1)) / FULL) as u8;
         }
-        o.compensator.apply(&mut out);
-        if t.mirror_y {
-            for r in 0..h / 2 {
-                let (top, bottom) = out.data.split_at_mut((h - 1 - r) * w);
-                top[r * w..(r + 1) * w].swap_with_slice(&mut bottom[..w]);
-            }
-        }
-        if t.mirror_x {
-            out.data.chunks_exact_mut(w).for_each(|row| row.reverse());
-        }
-        out
     }
 }
 
@@ -345,14 +323,20 @@ mod tests {
     fn full(t: &Tiler, w: u32) -> (Mask, Mask) {
         let mut field = Mask::zeros(w, 4);
         field.data.fill(255);
-        (t.render(0, &field), t.render(1, &field))
+        (whole(t, 0, &field), whole(t, 1, &field))
+    }
+
+    /// Projector `k`'s mask of the whole of `field`.
+    fn whole(t: &Tiler, k: usize, field: &Mask) -> Mask {
+        let lit = PixelBox::whole(field.width as usize, field.height as usize);
+        t.render(k, field, lit).0
     }
 
     #[test]
     fn full_plate_sums_to_255_across_the_seam() {
         let ps = two(64, 16);
         let lin = [Response::linear(), Response::linear()];
-        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin, &[None, None]);
+        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin);
         let (a, b) = full(&t, 112);
         for c in 0..112u32 {
             let va = if c < 64 { a.get(c, 2) as i32 } else { 0 };
@@ -364,19 +348,14 @@ mod tests {
         // Coverage scales the shares: a half-covered field gives half the gray.
         let mut field = Mask::zeros(112, 4);
         field.data.fill(128);
-        assert_eq!(t.render(0, &field).get(10, 1), 128);
+        assert_eq!(whole(&t, 0, &field).get(10, 1), 128);
     }
 
     #[test]
     fn nonlinear_response_gray_gives_the_irradiance_share() {
         let ps = two(64, 16);
         let g = Response::gamma(2.2).unwrap();
-        let t = Tiler::new(
-            &ps,
-            &BlendCurve::Smoothstep,
-            &[g.clone(), g.clone()],
-            &[None, None],
-        );
+        let t = Tiler::new(&ps, &BlendCurve::Smoothstep, &[g.clone(), g.clone()]);
         let (a, b) = full(&t, 112);
         for c in 48..64u32 {
             let e = g.irradiance(a.get(c, 0)).unwrap() + g.irradiance(b.get(c - 48, 0)).unwrap();
@@ -388,21 +367,49 @@ mod tests {
     }
 
     #[test]
-    fn mirror_and_gain() {
+    fn mirror() {
         let mut ps = two(8, 0);
         ps[1].mirror_x = true;
         ps[1].offset_px = [8, 0];
-        let gain = vec![0.5f32; 32];
         let lin = [Response::linear(), Response::linear()];
-        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin, &[Some(gain), None]);
+        let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &lin);
         let mut field = Mask::zeros(16, 4);
         for c in 0..16 {
             field.data[c] = (c * 10) as u8;
         }
-        let a = t.render(0, &field);
-        let b = t.render(1, &field);
-        assert_eq!(a.get(4, 0), 20); // 40 × 0.5
+        let b = whole(&t, 1, &field);
         assert_eq!(b.get(0, 0), 150); // mirrored: field column 15
         assert_eq!(b.get(7, 0), 80);
+    }
+
+    #[test]
+    fn a_lit_box_gives_the_whole_render_and_its_box() {
+        // A field zero outside a box renders to the same masks when only the box is
+        // given, across the seam, mirrored either way, through a nonlinear response; the
+        // box handed back holds every nonzero pixel.
+        let g = Response::gamma(2.2).unwrap();
+        for (mx, my) in [(false, false), (true, false), (false, true), (true, true)] {
+            let mut ps = two(64, 16);
+            for p in &mut ps {
+                (p.height_px, p.mirror_x, p.mirror_y) = (12, mx, my);
+            }
+            let t = Tiler::new(&ps, &BlendCurve::RaisedCosine, &[g.clone(), g.clone()]);
+            let mut field = Mask::zeros(112, 12);
+            let lit = PixelBox::new(3, 9, 30, 70);
+            for r in lit.rows() {
+                for c in lit.cols() {
+                    field.data[r * 112 + c] = (r * 37 + c * 11) as u8 | 1;
+                }
+            }
+            for k in 0..2 {
+                let (m, b) = t.render(k, &field, lit);
+                assert!(m == whole(&t, k, &field), "{k} {mx} {my}");
+                for (i, &v) in m.data.iter().enumerate() {
+                    let (r, c) = (i / 64, i % 64);
+                    let inside = b.rows().contains(&r) && b.cols().contains(&c);
+                    assert!(v == 0 || inside, "{k} {mx} {my} ({c}, {r}) {b:?}");
+                }
+            }
+        }
     }
 }

@@ -382,9 +382,8 @@ fn draw(
         // The view and the box outside which it is zero.
         let (view, b) = match ctx.tiler {
             Some(t) => {
-                let m = t.render(k, &field_mask);
-                let all = PixelBox::whole(m.width as usize, m.height as usize);
-                (Cow::Owned(m), all)
+                let (m, b) = t.render(k, &field_mask, scratch.lit_box());
+                (Cow::Owned(m), b)
             }
             // The field mask is zero outside the rasterizer's lit box.
             None => projector_view_in(&field_mask, p, scratch.lit_box()),

@@ -8,6 +8,7 @@ use crate::png::PixelBox;
 
 impl Compensator {
     /// Rewrites a coverage mask of the field (values = coverage × 255) into compensated grays.
+    #[cfg(any(test, feature = "internals"))]
     pub fn apply(&self, m: &mut Mask) {
         self.apply_in(m, PixelBox::whole(self.w, self.h));
     }
