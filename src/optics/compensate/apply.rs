@@ -88,15 +88,14 @@ impl Compensator {
     }
 
     /// Pixel mode without dithering, columns [a, b) of row `r`: full pixels take the
-    /// precomputed gray, edge pixels (0 < v < 255) are searched from it.
+    /// gray map's gray, edge pixels (0 < v < 255) are searched from it with E*/P of the
+    /// pixel.
     fn pixel_row(&self, row: &mut [u8], r: usize, a: usize, b: usize) {
-        let lv = &self.levels;
-        let base = r * self.w;
-        let fidx = &self.pixel_tables.full_idx[base + a..base + b];
-        let t = &self.pixel_tables.target_over_p[base + a..base + b];
-        map_words(&mut row[a..b], &self.gray_row(r)[a..b], |k, v| {
-            let target = v as f64 / 255.0 * t[k] as f64;
-            lv.gray[lv.nearest_from(fidx[k] as usize, target)]
+        let (lv, t) = (&self.levels, &self.pixel_tables);
+        let full = &self.gray_row(r)[a..b];
+        map_words(&mut row[a..b], full, |k, v| {
+            let target = v as f64 / 255.0 * t.target_over_p(r, a + k) as f64;
+            lv.gray[lv.nearest_from(t.level(full[k]), target)]
         });
     }
 }
@@ -106,22 +105,20 @@ impl Compensator {
 #[derive(Clone, Copy)]
 pub struct CompRow<'a> {
     comp: &'a Compensator,
-    r: usize,
     /// The row of the gray map (full coverage).
     full: &'a [u8],
-    /// Zone mode: the row's table index of each zone column.
+    /// The row's table index of each zone column.
     tabs: &'a [u32],
-    zone: bool,
 }
 
-/// The rasterizer applies the compensation while it writes a layer's mask
+/// The rasterizer applies zone mode while it writes a layer's mask
 /// ([`crate::raster::Rasterizer::render`]), with the values of [`Compensator::apply_in`],
-/// and reports layers lit outside the calibrated area as it counts them. Not fused (the
-/// finished coverage goes through `apply_in`): error diffusion (pixel mode, `--dither
-/// on`), which reads the neighbours' coverage.
+/// and reports layers lit outside the calibrated area as it counts them. Pixel mode is
+/// not fused (the finished coverage goes through `apply_in`): its edge pixels evaluate P
+/// one by one, and error diffusion reads the neighbours' coverage.
 impl crate::raster::CoverageMap for Compensator {
     fn fusable(&self) -> bool {
-        !(self.mode == Mode::Pixel && self.dither == Dither::On)
+        self.mode == Mode::Zone
     }
 
     fn area(&self) -> PixelBox {
@@ -136,17 +133,10 @@ impl crate::raster::CoverageMap for Compensator {
 
     #[inline(always)]
     fn row(&self, r: usize) -> CompRow<'_> {
-        let zone = self.mode == Mode::Zone;
         CompRow {
             comp: self,
-            r,
             full: self.gray_row(r),
-            tabs: if zone {
-                self.zone_tables.row(r, self.zones.cols)
-            } else {
-                &[]
-            },
-            zone,
+            tabs: self.zone_tables.row(r, self.zones.cols),
         }
     }
 
@@ -160,7 +150,7 @@ impl crate::raster::CoverageMap for Compensator {
             } else {
                 d.copy_from_slice(f);
             }
-        } else if row.zone {
+        } else {
             // One table per zone (and row): a run inside one zone is one value. The zone
             // of a column never decreases along the row.
             let (comp, tabs) = (row.comp, row.tabs);
@@ -178,15 +168,6 @@ impl crate::raster::CoverageMap for Compensator {
                 for (x, &z) in d.iter_mut().zip(zones) {
                     *x = table(z)[v as usize];
                 }
-            }
-        } else {
-            let (comp, r) = (row.comp, row.r);
-            let lv = &comp.levels;
-            let f = v as f64 / 255.0;
-            for (k, x) in d.iter_mut().enumerate() {
-                let i = r * comp.w + a + k;
-                let target = f * comp.pixel_tables.target_over_p[i] as f64;
-                *x = lv.gray[lv.nearest_from(comp.pixel_tables.full_idx[i] as usize, target)];
             }
         }
     }
@@ -294,9 +275,8 @@ mod tests {
                     "{mode:?} {dither:?} binary {binary}"
                 );
                 assert!(fused.layers_outside() > 0);
-                let pixel_dither = mode == Mode::Pixel && dither == Dither::On;
                 assert!(
-                    pixel_dither || in_scan > 20,
+                    mode == Mode::Pixel || in_scan > 20,
                     "{mode:?} {dither:?}: {in_scan}"
                 );
             }

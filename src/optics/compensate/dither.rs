@@ -14,9 +14,18 @@ impl Compensator {
         // Error (in units of E*) carried to the current and the next row; index c + 1.
         let mut cur = vec![0f32; w + 2];
         let mut next = vec![0f32; w + 2];
+        let mut t = vec![0f32; w];
         for r in r0..r1 {
             let ltr = (r - r0).is_multiple_of(2);
             let base = r * w;
+            // E*/P over the row's lit columns.
+            let lit = |c: &usize| m.data[base + c] != 0;
+            let (Some(a), Some(b)) = ((0..w).find(lit), (0..w).rfind(lit)) else {
+                std::mem::swap(&mut cur, &mut next);
+                next.fill(0.0);
+                continue;
+            };
+            self.pixel_tables.target_over_p_in(r, a, &mut t[a..=b]);
             for k in 0..w {
                 let c = if ltr { k } else { w - 1 - k };
                 let i = base + c;
@@ -24,10 +33,11 @@ impl Compensator {
                 if v == 0 {
                     continue;
                 }
-                let ti = self.pixel_tables.target_over_p[i] as f64;
+                let ti = t[c] as f64;
                 let d = v as f64 / 255.0 + cur[c + 1] as f64;
                 let target = d * ti;
-                let idx = lv.nearest_from(self.pixel_tables.full_idx[i] as usize, target);
+                let from = self.pixel_tables.level(self.gray_row(r)[c]);
+                let idx = lv.nearest_from(from, target);
                 m.data[i] = lv.gray[idx];
                 if idx == top && target > s_max {
                     // Cannot reach the target here: do not push the deficit around.

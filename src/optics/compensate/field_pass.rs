@@ -2,7 +2,7 @@
 //! area, and per row and zone segment of that area the sum and extremes of P (for the
 //! per-pixel spreads, [`super::spread`]).
 
-use super::field_rows::FieldSource;
+use super::field_rows::FieldRows;
 #[cfg(target_arch = "x86_64")]
 use super::kernels::sum_and_extremes_avx2;
 use super::kernels::{min_max, sum_and_extremes};
@@ -26,7 +26,7 @@ pub(super) struct FieldSums {
 
 /// [`field_sums_with`], with AVX2 when the CPU has it.
 pub(super) fn field_sums(
-    src: &mut FieldSource,
+    src: &FieldRows,
     w: usize,
     zones: &ZoneGrid,
     inside: PixelBox,
@@ -45,7 +45,7 @@ pub(super) fn field_sums(
 /// the same operations on wider vectors); otherwise a second pass adds them one by one.
 pub(super) fn field_sums_with(
     avx2: bool,
-    src: &mut FieldSource,
+    src: &FieldRows,
     w: usize,
     zones: &ZoneGrid,
     inside: PixelBox,
@@ -72,7 +72,7 @@ pub(super) fn field_sums_with(
         inside,
         nz,
     };
-    let run = |src: &mut FieldSource, rows: std::ops::Range<usize>, exact: bool| {
+    let run = |src: &FieldRows, rows: std::ops::Range<usize>, exact: bool| {
         #[cfg(target_arch = "x86_64")]
         if avx2 {
             // SAFETY: `avx2` is true only where the CPU has AVX2.
@@ -81,8 +81,7 @@ pub(super) fn field_sums_with(
         sum_rows::<false>(src, &geo, rows, exact)
     };
     let mid = h / 2;
-    let mut other = src.split();
-    let (top, bottom) = rayon::join(|| run(src, 0..mid, true), || run(&mut other, mid..h, true));
+    let (top, bottom) = rayon::join(|| run(src, 0..mid, true), || run(src, mid..h, true));
     let mut p = top;
     for (a, b) in p.zsum.iter_mut().zip(&bottom.zsum) {
         *a += b;
@@ -131,7 +130,7 @@ struct RowSums {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn sum_rows_avx2(
-    src: &mut FieldSource,
+    src: &FieldRows,
     geo: &PassGeometry,
     rows: std::ops::Range<usize>,
     exact: bool,
@@ -144,7 +143,7 @@ fn sum_rows_avx2(
 /// one in row-major order. `AVX2`: true only when called from [`sum_rows_avx2`].
 #[inline(always)]
 fn sum_rows<const AVX2: bool>(
-    src: &mut FieldSource,
+    src: &FieldRows,
     geo: &PassGeometry,
     rows: std::ops::Range<usize>,
     exact: bool,
@@ -246,7 +245,7 @@ pub(super) fn sums_are_exact(lo: f32, hi: f32, n: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::optics::compensate::field_rows::{pixel_p, FieldRows};
+    use crate::optics::compensate::field_rows::pixel_p;
     use crate::optics::compensate::test_support::{self, random_field, rng};
     use crate::optics::compensate::Form;
     use crate::optics::field::Poly;
@@ -277,11 +276,10 @@ mod tests {
             let (zone_of_col, zone_of_row, zcols) = (&zones.of_col, &zones.of_row, zones.cols);
             let segs = &zones.segments;
             let inside = PixelBox::new(3, 55, 5, 71);
-            let rows = || FieldSource::Rows(FieldRows::new(&fm, &field));
+            let rows = FieldRows::new(&fm, &field);
             let results = [
-                field_sums_with(false, &mut rows(), w, &zones, inside),
-                field_sums(&mut FieldSource::Field(&pp), w, &zones, inside),
-                field_sums(&mut rows(), w, &zones, inside),
+                field_sums_with(false, &rows, w, &zones, inside),
+                field_sums(&rows, w, &zones, inside),
             ];
             let nz = zcols * (*zone_of_row.iter().max().unwrap() as usize + 1);
             let (mut zs, mut zn, mut ins) = (vec![0f64; nz], vec![0usize; nz], 0.0f64);

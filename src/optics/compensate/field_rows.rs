@@ -1,7 +1,6 @@
-//! P, the calibration's field factor, at the pixel centres: row by row from the model
-//! ([`FieldRows`], no w × h buffer) or for the whole field ([`pixel_p`], which pixel mode
-//! keeps for its per-pixel tables). [`FieldSource`] is where the set-up's pass over the
-//! field ([`super::field_pass`]) reads it.
+//! P, the calibration's field factor, at the pixel centres, row by row or for some
+//! columns of a row from the model ([`FieldRows`], no w × h buffer): the set-up's pass
+//! over the field ([`super::field_pass`]) and pixel mode's edge pixels read it.
 
 #[cfg(target_arch = "x86_64")]
 use super::kernels::horner_avx2;
@@ -12,9 +11,9 @@ use super::{Field, FieldModel, Form};
 /// polynomial's rectangle Horner in u with the row's coefficients (in f64, rounded to f32,
 /// times the scale in f32), elsewhere [`FieldModel::eval`] rounded to f32 (its linear
 /// continuation, from gradients computed once per column or per row).
-#[derive(Clone)]
-pub(super) struct FieldRows<'a> {
-    fm: &'a FieldModel,
+#[derive(Debug, Clone)]
+pub(super) struct FieldRows {
+    fm: FieldModel,
     h: usize,
     p: f64,
     /// Per column: the clamped x minus its nearest point of the rectangle, mm, and u
@@ -27,12 +26,12 @@ pub(super) struct FieldRows<'a> {
     ua: usize,
     ub: usize,
     /// Value and gradient of the polynomial along the rectangle's bottom and top edges,
-    /// per column (computed when first needed).
+    /// per column.
     edge: [Vec<[f64; 3]>; 2],
 }
 
-impl<'a> FieldRows<'a> {
-    pub(super) fn new(fm: &'a FieldModel, field: &Field) -> FieldRows<'a> {
+impl FieldRows {
+    pub(super) fn new(fm: &FieldModel, field: &Field) -> FieldRows {
         let w = field.width_px as usize;
         let p = field.pixel_mm;
         let m = fm.extrapolate_mm.get();
@@ -54,8 +53,17 @@ impl<'a> FieldRows<'a> {
         let ua = (0..w).position(inside).unwrap_or(w);
         let ub = (0..w).rposition(inside).map_or(ua, |i| i + 1);
         debug_assert!((ua..ub).all(inside));
+        let [_, py0, _, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
+        let edge = [py0, py1].map(|py| {
+            let v = (py - fm.origin_mm[1]) * s;
+            let grad = |&uc: &f64| {
+                let (f, fu, fv) = fm.coefficients.eval_grad(uc, v);
+                [f, fu, fv]
+            };
+            u.iter().map(grad).collect()
+        });
         FieldRows {
-            fm,
+            fm: fm.clone(),
             h: field.height_px as usize,
             p,
             dx,
@@ -63,7 +71,7 @@ impl<'a> FieldRows<'a> {
             u,
             ua,
             ub,
-            edge: [Vec::new(), Vec::new()],
+            edge,
         }
     }
 
@@ -71,32 +79,43 @@ impl<'a> FieldRows<'a> {
     /// `AVX2`: true only where the CPU has AVX2 (inlined into [`sum_rows_avx2`](super::field_pass::sum_rows_avx2)); the
     /// same values either way.
     #[inline(always)]
-    pub(super) fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
-        let fm = self.fm;
+    pub(super) fn row<const AVX2: bool>(&self, r: usize, row: &mut [f32]) {
+        self.row_in::<AVX2>(r, 0, row)
+    }
+
+    /// P at the pixel centres of columns `c0..c0 + out.len()` of image row `r`: the values
+    /// [`row`](Self::row) gives there (each column's value is computed on its own).
+    #[inline(always)]
+    pub(super) fn row_in<const AVX2: bool>(&self, r: usize, c0: usize, out: &mut [f32]) {
+        let fm = &self.fm;
         let m = fm.extrapolate_mm.get();
         let [_, y0, _, y1] = fm.area_mm;
         let [_, py0, _, py1] = fm.polynomial_area_mm.unwrap_or(fm.area_mm);
         let s = 1.0 / fm.length_unit_mm.get();
-        let (ua, ub) = (self.ua, self.ub);
+        let c1 = c0 + out.len();
+        // The columns of the rectangle among c0..c1.
+        let (ua, ub) = (self.ua.clamp(c0, c1), self.ub.clamp(c0, c1));
+        let (ua, ub) = (ua, ub.max(ua));
         let y = (self.h as f64 - r as f64 - 0.5) * self.p;
         let yc = y.clamp(y0 - m, y1 + m);
         let yp = yc.clamp(py0, py1);
         let v = (yp - fm.origin_mm[1]) * s;
         let dy = yc - yp;
-        let (dx, u) = (&self.dx, &self.u);
+        let (dx, u) = (&self.dx[c0..c1], &self.u[c0..c1]);
         if yp == yc {
             let a = fm.coefficients.in_u(v);
             let from_top = self.finite_u && a.last().is_some_and(|&c| c.is_finite() && c != 0.0);
-            let seg = &mut row[ua..ub];
+            let (ia, ib) = (ua - c0, ub - c0);
+            let seg = &mut out[ia..ib];
             let scf = fm.scale.get() as f32;
             // Separate passes: exp must not be evaluated (speculatively) for polynomials.
             let horner = |seg: &mut [f32], scale: f32| {
                 #[cfg(target_arch = "x86_64")]
                 if AVX2 {
                     // SAFETY: AVX2 is true only where the CPU has AVX2.
-                    return unsafe { horner_avx2(seg, &u[ua..ub], &a, scale, from_top) };
+                    return unsafe { horner_avx2(seg, &u[ia..ib], &a, scale, from_top) };
                 }
-                horner_f32(seg, &u[ua..ub], &a, scale)
+                horner_f32(seg, &u[ia..ib], &a, scale)
             };
             match fm.form {
                 Form::Polynomial => horner(seg, scf),
@@ -112,37 +131,27 @@ impl<'a> FieldRows<'a> {
             // Left and right of the rectangle: one nearest point per side (both sides
             // in one run if the rectangle lies between two pixel centres).
             let mut g = (f64::NAN, [0.0; 3]);
-            for c in (0..ua).chain(ub..row.len()) {
+            for c in (0..ia).chain(ib..out.len()) {
                 if u[c].to_bits() != g.0.to_bits() {
                     let (f, fu, fv) = fm.coefficients.eval_grad(u[c], v);
                     g = (u[c], [f, fu, fv]);
                 }
-                row[c] = fm.continued(g.1, dx[c], dy) as f32;
+                out[c] = fm.continued(g.1, dx[c], dy) as f32;
             }
         } else {
             // Above or below the rectangle: the nearest point of each column is on its
             // top or bottom edge.
-            let side = (yp == py1) as usize;
-            let edge = &mut self.edge[side];
-            if edge.is_empty() {
-                *edge = u
-                    .iter()
-                    .map(|&uc| {
-                        let (f, fu, fv) = fm.coefficients.eval_grad(uc, v);
-                        [f, fu, fv]
-                    })
-                    .collect();
-            }
+            let edge = &self.edge[(yp == py1) as usize][c0..c1];
             if fm.form == Form::Polynomial {
                 // `continued` written out (the same operations; a loop the compiler
                 // vectorizes): scale · max(f + (fu·dx + fv·dy)·s, f/10).
                 let scale = fm.scale.get();
-                for ((o, &[f, fu, fv]), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                for ((o, &[f, fu, fv]), &d) in out.iter_mut().zip(edge).zip(dx) {
                     let lin = f + (fu * d + fv * dy) * s;
                     *o = (scale * lin.max(0.1 * f)) as f32;
                 }
             } else {
-                for ((o, &g), &d) in row.iter_mut().zip(edge.iter()).zip(dx) {
+                for ((o, &g), &d) in out.iter_mut().zip(edge).zip(dx) {
                     *o = fm.continued(g, d, dy) as f32;
                 }
             }
@@ -151,40 +160,15 @@ impl<'a> FieldRows<'a> {
 }
 
 /// P at every pixel centre of the field (row-major, top row first); see [`FieldRows`].
+#[cfg(test)]
 pub(super) fn pixel_p(fm: &FieldModel, field: &Field) -> Vec<f32> {
     let w = field.width_px as usize;
-    let mut rows = FieldRows::new(fm, field);
+    let rows = FieldRows::new(fm, field);
     let mut out = vec![0f32; w * field.height_px as usize];
     for (r, row) in out.chunks_exact_mut(w).enumerate() {
         rows.row::<false>(r, row);
     }
     out
-}
-
-/// Where the set-up reads P: row by row from the model (zone mode), or from the whole
-/// field's values (pixel mode, which keeps them for its per-pixel tables).
-pub(super) enum FieldSource<'a> {
-    Rows(FieldRows<'a>),
-    Field(&'a [f32]),
-}
-
-impl FieldSource<'_> {
-    /// Another source of the same values, for a pass over other rows.
-    pub(super) fn split(&self) -> Self {
-        match self {
-            FieldSource::Rows(rows) => FieldSource::Rows(rows.clone()),
-            FieldSource::Field(pp) => FieldSource::Field(pp),
-        }
-    }
-
-    /// P at the pixel centres of image row `r` into `row` (`AVX2`: see [`FieldRows::row`]).
-    #[inline(always)]
-    pub(super) fn row<const AVX2: bool>(&mut self, r: usize, row: &mut [f32]) {
-        match self {
-            FieldSource::Rows(rows) => rows.row::<AVX2>(r, row),
-            FieldSource::Field(pp) => row.copy_from_slice(&pp[r * row.len()..(r + 1) * row.len()]),
-        }
-    }
 }
 
 #[cfg(test)]
@@ -226,27 +210,35 @@ mod tests {
             let fm = random_field(&mut rnd, case);
             let field = test_support::field(61 + (case as u32 % 5) * 7, 47, 0.73);
             let (w, h) = (field.width_px as usize, field.height_px as usize);
-            let mut rows = FieldRows::new(&fm, &field);
+            let rows = FieldRows::new(&fm, &field);
             let (mut a, mut b) = (vec![0f32; w], vec![0f32; w]);
             for r in 0..h {
                 rows.row::<false>(r, &mut a);
                 #[cfg(target_arch = "x86_64")]
                 if std::arch::is_x86_feature_detected!("avx2") {
                     // SAFETY: the CPU has AVX2.
-                    unsafe { avx2_row(&mut rows, r, &mut b) };
+                    unsafe { avx2_row(&rows, r, &mut b) };
                     assert_eq!(a, b, "case {case} row {r}: AVX2");
                 }
                 for (c, &v) in a.iter().enumerate() {
                     let want = p_reference(&fm, &field, r, c);
                     assert_eq!(v.to_bits(), want.to_bits(), "case {case} row {r} col {c}");
                 }
+                // Some columns, and each column alone: the row's values.
+                let (c0, c1) = (r % w, (r * 7 + 5) % w + 1);
+                rows.row_in::<false>(r, c0, &mut b[c0..c1.max(c0)]);
+                assert_eq!(a[c0..c1.max(c0)], b[c0..c1.max(c0)], "case {case} row {r}");
+                for c in 0..w {
+                    rows.row_in::<false>(r, c, &mut b[c..c + 1]);
+                }
+                assert_eq!(a, b, "case {case} row {r}: one column at a time");
             }
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn avx2_row(rows: &mut FieldRows, r: usize, out: &mut [f32]) {
+    fn avx2_row(rows: &FieldRows, r: usize, out: &mut [f32]) {
         rows.row::<true>(r, out)
     }
 }

@@ -48,7 +48,7 @@ pub struct Compensator {
     zones: ZoneGrid,
     /// Zone mode's coverage → gray tables (empty in pixel mode).
     zone_tables: ZoneTables,
-    /// Pixel mode's per-pixel tables (empty in zone mode).
+    /// What pixel mode keeps besides the gray map (empty in zone mode).
     pixel_tables: PixelTables,
     /// The full-coverage gray of every pixel (both modes).
     gray_map: GrayMap,

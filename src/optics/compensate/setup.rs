@@ -3,7 +3,7 @@
 //! the chosen mode's tables ([`super::zone_mode`], [`super::pixel_mode`]).
 
 use super::field_pass::{field_sums, FieldSums};
-use super::field_rows::{pixel_p, FieldRows, FieldSource};
+use super::field_rows::FieldRows;
 use super::pixel_mode::{self, PixelTables};
 use super::spread::{pixel_spread, zone_spread};
 use super::zone_mode::{self, ZoneTables};
@@ -58,7 +58,7 @@ impl FieldSurvey {
     /// One pass over P (from `src`) for the zones of `zone_mm` and the calibrated area
     /// `inside` of `fm`.
     fn new(
-        src: &mut FieldSource,
+        src: &FieldRows,
         field: &Field,
         fm: &FieldModel,
         zone_mm: f64,
@@ -125,18 +125,10 @@ impl Compensator {
         let levels = cal.response.levels();
         let s_max = levels.s_max();
         let area = calibrated_pixels(fm, field)?;
-        // P: pixel mode keeps it for the whole field (its per-pixel tables need it); zone
-        // mode evaluates it row by row in its one pass over the field (no w × h buffer).
-        let pp = match mode {
-            Mode::Pixel => pixel_p(fm, field),
-            _ => Vec::new(),
-        };
-        let mut src = match mode {
-            Mode::Pixel => FieldSource::Field(&pp),
-            _ => FieldSource::Rows(FieldRows::new(fm, field)),
-        };
-        debug_assert!(source_matches_model(&mut src, fm, field));
-        let survey = FieldSurvey::new(&mut src, field, fm, cal.zone_mm.get(), area);
+        // P, evaluated row by row (no w × h buffer).
+        let src = FieldRows::new(fm, field);
+        debug_assert!(source_matches_model(&src, fm, field));
+        let survey = FieldSurvey::new(&src, field, fm, cal.zone_mm.get(), area);
         let (zone_tables, pixel_tables, gray_map, after) = match mode {
             Mode::Zone => {
                 let Some((t, g, p)) = zone_mode::set_up(&survey, &levels, dither, forced_target)
@@ -150,7 +142,7 @@ impl Compensator {
                 (t, PixelTables::default(), g, p)
             }
             Mode::Pixel => {
-                let (t, g, p) = pixel_mode::set_up(&survey, &levels, &pp, forced_target);
+                let (t, g, p) = pixel_mode::set_up(&survey, &levels, src, forced_target);
                 (ZoneTables::default(), t, g, p)
             }
             Mode::Off => unreachable!(),
@@ -177,7 +169,7 @@ impl Compensator {
 }
 
 /// Whether `src` gives P at a pixel centre as [`FieldModel::eval`] does (to 1e-5).
-fn source_matches_model(src: &mut FieldSource, fm: &FieldModel, field: &Field) -> bool {
+fn source_matches_model(src: &FieldRows, fm: &FieldModel, field: &Field) -> bool {
     let (w, h) = (field.width_px as usize, field.height_px as usize);
     let p = field.pixel_mm;
     let (c, r) = (w / 3, h / 3);
@@ -219,6 +211,7 @@ fn predict(survey: &FieldSurvey, area: PixelBox, s_max: f64, after: ModePredicti
 
 #[cfg(test)]
 mod tests {
+    use super::super::field_rows::pixel_p;
     use super::super::spread::Spread;
     use super::super::test_support::{self, setup, MODES};
     use super::*;
@@ -288,7 +281,8 @@ mod tests {
                     zs[z] += v as f64;
                     zn[z] += 1;
                     if mode == Mode::Pixel {
-                        za[z] += v as f64 * c.levels.s[c.pixel_tables.full_idx[i] as usize];
+                        let g = c.gray_row(i / w)[i % w];
+                        za[z] += v as f64 * c.levels.s[c.pixel_tables.level(g)];
                     }
                 }
                 for (z, &pz) in pr.zone_p.iter().enumerate() {
