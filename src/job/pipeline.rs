@@ -2,7 +2,11 @@
 //!
 //! One slicing task cuts windows of [`WINDOW`] layers and spawns each window's layers as
 //! blocks of [`BLOCK`] consecutive layers on rayon's pool as soon as they are cut (no
-//! barrier between windows), so the slicing overlaps the mask work. Before it cuts a
+//! barrier between windows), so the slicing overlaps the mask work. Blocks start in the
+//! order they were spawned (a FIFO scope): the layers below a section are made soon after
+//! it is drawn, and its coverage is dropped (started newest first, a window's blocks
+//! held the coverage of every section whose lower layers were still queued: a third more
+//! memory at 3840 × 2160 px). Before it cuts a
 //! window, the layers sliced but not yet made into masks must be at most [`MAX_AHEAD`];
 //! otherwise the task parks its state (the slicer, the last window) in the [`Backlog`] and
 //! returns, and its worker thread goes on with the queued blocks. The block whose end
@@ -161,8 +165,8 @@ pub(super) fn run<'a>(
         waiting: Vec::new(),
         slice_s: 0.0,
     };
-    rayon::scope(|scope| {
-        scope.spawn(|_| beside());
+    rayon::scope_fifo(|scope| {
+        scope.spawn_fifo(|_| beside());
         feed(scope, &p, cursor);
     });
     let masks_s = start.elapsed().as_secs_f64();
@@ -312,7 +316,7 @@ impl<'a> Backlog<'a> {
 
 /// The slicing task: cuts windows and spawns their blocks while there is room, then parks
 /// (see the module docs).
-fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: Cursor<'a>) {
+fn feed<'s, 'a: 's>(scope: &rayon::ScopeFifo<'s>, p: &'s Pipeline<'a>, mut cursor: Cursor<'a>) {
     loop {
         if cursor.next >= p.layers || p.stopped() {
             p.backlog.finish(cursor);
@@ -330,7 +334,7 @@ fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: C
         // The last window's blocks that waited for this one's sections.
         for mut block in cursor.waiting.drain(..) {
             block.next = Some(Arc::clone(&sections));
-            scope.spawn(move |scope| run_block(scope, p, block));
+            scope.spawn_fifo(move |scope| run_block(scope, p, block));
         }
         for b in 0..m.div_ceil(BLOCK) {
             let block = Block {
@@ -344,7 +348,7 @@ fn feed<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, mut cursor: C
             if block.ks.end - 1 + ahead >= m && start + m < p.layers {
                 cursor.waiting.push(block);
             } else {
-                scope.spawn(move |scope| run_block(scope, p, block));
+                scope.spawn_fifo(move |scope| run_block(scope, p, block));
             }
         }
         cursor.prev = Some(sections);
@@ -365,7 +369,7 @@ struct Block {
     ks: Range<usize>,
 }
 
-fn run_block<'s, 'a: 's>(scope: &rayon::Scope<'s>, p: &'s Pipeline<'a>, block: Block) {
+fn run_block<'s, 'a: 's>(scope: &rayon::ScopeFifo<'s>, p: &'s Pipeline<'a>, block: Block) {
     // Counts the block's layers off even if it panics (the panic reaches the caller when
     // the scope ends; the slicing task must not stay parked).
     let _leaving = Leaving {
@@ -449,7 +453,7 @@ fn upper_sections(block: &Block, k: usize, m: usize) -> Vec<&Cut> {
 /// Counts a block's layers off when it ends, resuming the slicing task when that makes
 /// room; a block that panics stops the rest.
 struct Leaving<'x, 's, 'a: 's> {
-    scope: &'x rayon::Scope<'s>,
+    scope: &'x rayon::ScopeFifo<'s>,
     p: &'s Pipeline<'a>,
     layers: usize,
 }
@@ -461,7 +465,7 @@ impl Drop for Leaving<'_, '_, '_> {
         }
         if let Some(cursor) = self.p.backlog.leave(self.layers) {
             let p = self.p;
-            self.scope.spawn(move |scope| feed(scope, p, cursor));
+            self.scope.spawn_fifo(move |scope| feed(scope, p, cursor));
         }
     }
 }

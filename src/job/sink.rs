@@ -14,8 +14,9 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// Bytes of files a one-file job keeps in memory; later files go to the spill file.
-pub(super) const MEMORY_BUDGET: u64 = 256 << 20;
+/// Bytes of files a one-file job keeps in memory; later files go to the spill file (a
+/// default job's masks take 5–15 MB).
+pub(super) const MEMORY_BUDGET: u64 = 64 << 20;
 
 /// Where one file is kept.
 enum Stored {
