@@ -202,11 +202,14 @@ impl Coverage {
         }
         let w = m.width as usize;
         let size = [lit.c1 - lit.c0 + 2, lit.r1 - lit.r0 + 2];
-        let mut data = vec![0u8; size[0] * size[1]];
-        for (k, r) in lit.rows().enumerate() {
-            data[(k + 1) * size[0] + 1..][..size[0] - 2]
-                .copy_from_slice(&m.data[r * w..][lit.cols()]);
+        // Row by row, the border's zeros written with them (not the whole box zeroed first).
+        let mut data = Vec::with_capacity(size[0] * size[1]);
+        data.resize(size[0] + 1, 0);
+        for r in lit.rows() {
+            data.extend_from_slice(&m.data[r * w..][lit.cols()]);
+            data.extend_from_slice(&[0, 0]);
         }
+        data.resize(size[0] * size[1], 0);
         Coverage {
             at: [lit.c0 as f64 - 1.0, lit.r0 as f64 - 1.0],
             size,
