@@ -289,36 +289,88 @@ fn cut_triangle(mesh: &Mesh, ti: usize, t: &[u32; 3], v: &[[f64; 3]; 3], z: f64)
 /// the closed contours of edges from `support` on are counted as support. The part's
 /// contours are then offset by `offset_mm` ([`offset::offset`]).
 fn chain(segs: &[Seg], support: u32, offset_mm: f64) -> Section {
-    let n = segs.len();
-    let mut starts: Vec<(u32, u32)> = segs
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.from_edge, i as u32))
-        .collect();
-    let mut ends: Vec<(u32, u32)> = segs
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.to_edge, i as u32))
-        .collect();
-    starts.sort_unstable();
-    ends.sort_unstable();
-    let mut used = vec![false; n];
-    let find = |tab: &[(u32, u32)], used: &[bool], e: u32| -> Option<u32> {
-        let mut k = tab.partition_point(|&(x, _)| x < e);
-        while k < tab.len() && tab[k].0 == e {
-            if !used[tab[k].1 as usize] {
-                return Some(tab[k].1);
+    SEG_OF_EDGE.with(|slots| chain_with(segs, support, offset_mm, &mut slots.borrow_mut()))
+}
+
+thread_local! {
+    /// Per mesh edge, the segments starting and ending at it ([`chain_with`]); every entry
+    /// is `NONE` between layers.
+    static SEG_OF_EDGE: std::cell::RefCell<Vec<[u32; 2]>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// No segment.
+const NONE: u32 = u32::MAX;
+
+/// The segments leaving each edge, in order of edge then segment: by edge index in `slots`
+/// when no edge starts (or ends) two segments, as in a closed mesh (entries put back to
+/// [`NONE`] afterwards), else from sorted tables. The first unused one is the same either
+/// way.
+enum Leaving<'a> {
+    Slots(&'a mut Vec<[u32; 2]>),
+    Sorted([Vec<(u32, u32)>; 2]),
+}
+
+impl Leaving<'_> {
+    /// The first unused segment starting (`end` 0) or ending (1) at edge `e`.
+    fn find(&self, end: usize, used: &[bool], e: u32) -> Option<u32> {
+        match self {
+            Leaving::Slots(slots) => {
+                let s = slots[e as usize][end];
+                (s != NONE && !used[s as usize]).then_some(s)
             }
-            k += 1;
+            Leaving::Sorted(tabs) => {
+                let tab = &tabs[end];
+                let k = tab.partition_point(|&(x, _)| x < e);
+                tab[k..]
+                    .iter()
+                    .take_while(|&&(x, _)| x == e)
+                    .find(|&&(_, s)| !used[s as usize])
+                    .map(|&(_, s)| s)
+            }
         }
-        None
+    }
+}
+
+fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 2]>) -> Section {
+    let n = segs.len();
+    let top = segs
+        .iter()
+        .map(|s| s.from_edge.max(s.to_edge) as usize + 1)
+        .max();
+    if slots.len() < top.unwrap_or(0) {
+        slots.resize(top.unwrap_or(0), [NONE; 2]);
+    }
+    let mut unique = true;
+    for (i, s) in segs.iter().enumerate() {
+        for (end, e) in [(0, s.from_edge), (1, s.to_edge)] {
+            let slot = &mut slots[e as usize][end];
+            unique &= *slot == NONE;
+            *slot = i as u32;
+        }
+    }
+    let leaving = if unique {
+        Leaving::Slots(slots)
+    } else {
+        for s in segs {
+            slots[s.from_edge as usize] = [NONE; 2];
+            slots[s.to_edge as usize] = [NONE; 2];
+        }
+        let table = |edge: fn(&Seg) -> u32| {
+            let mut t: Vec<(u32, u32)> = (segs.iter().enumerate())
+                .map(|(i, s)| (edge(s), i as u32))
+                .collect();
+            t.sort_unstable();
+            t
+        };
+        Leaving::Sorted([table(|s| s.from_edge), table(|s| s.to_edge)])
     };
+    let mut used = vec![false; n];
     // The next segment of a chain at `node`, marked used: one leaving it the way the
     // chain runs (`fwd`: from its start edge), else one leaving it the other way (a
     // flipped facet). Its other end's point and edge, and its vote for the orientation.
     let step = |node: u32, fwd: bool, used: &mut [bool]| {
         for from_start in [fwd, !fwd] {
-            if let Some(s) = find(if from_start { &starts } else { &ends }, used, node) {
+            if let Some(s) = leaving.find(!from_start as usize, used, node) {
                 used[s as usize] = true;
                 let sg = segs[s as usize];
                 let vote = if from_start == fwd { 1 } else { -1 };
@@ -382,6 +434,12 @@ fn chain(segs: &[Seg], support: u32, offset_mm: f64) -> Section {
             chain.reverse();
         }
         open.push(chain);
+    }
+    if let Leaving::Slots(slots) = leaving {
+        for s in segs {
+            slots[s.from_edge as usize] = [NONE; 2];
+            slots[s.to_edge as usize] = [NONE; 2];
+        }
     }
     if !open.is_empty() {
         join_open(open, &mut section);
