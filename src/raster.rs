@@ -19,9 +19,11 @@ use crate::slice::Contour;
 
 mod accum;
 mod nonzero;
+mod pool;
 mod scan;
 
 use accum::{line, Accum};
+pub use pool::ScratchPool;
 pub use scan::map_words;
 use scan::{scan_runs, Mapped, Plain};
 

@@ -23,7 +23,7 @@
 use super::layer::{layer_masks, BlockWorker, LayerContext, LayerInput, LayerOutput};
 use crate::cure::shift::Coverage;
 use crate::error::{Error, Result};
-use crate::raster::{Drawn, Scratch};
+use crate::raster::{Drawn, ScratchPool};
 use crate::slice::{Section, SliceStats, Slicer};
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -466,48 +466,6 @@ impl Drop for Leaving<'_, '_, '_> {
         if let Some(cursor) = self.p.backlog.leave(self.layers) {
             let p = self.p;
             self.scope.spawn_fifo(move |scope| feed(scope, p, cursor));
-        }
-    }
-}
-
-/// Scratch buffers kept from block to block.
-#[derive(Default)]
-struct ScratchPool(Mutex<Vec<Scratch>>);
-
-impl ScratchPool {
-    /// A scratch from the pool (or a new one), returned to it when dropped.
-    fn take(&self) -> PooledScratch<'_> {
-        let scratch = lock(&self.0).pop().unwrap_or_default();
-        PooledScratch {
-            pool: self,
-            scratch: Some(scratch),
-        }
-    }
-}
-
-/// A [`Scratch`] borrowed from a [`ScratchPool`].
-struct PooledScratch<'p> {
-    pool: &'p ScratchPool,
-    scratch: Option<Scratch>,
-}
-
-impl std::ops::Deref for PooledScratch<'_> {
-    type Target = Scratch;
-    fn deref(&self) -> &Scratch {
-        self.scratch.as_ref().expect("present until drop")
-    }
-}
-
-impl std::ops::DerefMut for PooledScratch<'_> {
-    fn deref_mut(&mut self) -> &mut Scratch {
-        self.scratch.as_mut().expect("present until drop")
-    }
-}
-
-impl Drop for PooledScratch<'_> {
-    fn drop(&mut self) {
-        if let Some(s) = self.scratch.take() {
-            lock(&self.pool.0).push(s);
         }
     }
 }

@@ -76,8 +76,9 @@ impl Rasterizer {
             if active.is_empty() {
                 continue;
             }
-            cover.fill(0.0);
-            diff.fill(0.0);
+            // Spans lie in the box's columns: cover[c0..=c1] and diff[c0..=c1 + 1] at most.
+            cover[lit.c0..(lit.c1 + 1).min(w + 1)].fill(0.0);
+            diff[lit.c0..(lit.c1 + 2).min(w + 2)].fill(0.0);
             for s in 0..SUBLINES {
                 let y = r as f64 + (s as f64 + 0.5) * inv;
                 xs.clear();

@@ -20,7 +20,7 @@ pub use shapes::SIDES;
 
 use crate::mesh::Mesh;
 use crate::profile::{Field, Supports};
-use crate::raster::{Rasterizer, Scratch};
+use crate::raster::{Rasterizer, ScratchPool};
 use crate::slice::Slicer;
 use rayon::prelude::*;
 
@@ -172,18 +172,17 @@ fn part_pixels(
     let raster = Rasterizer::new(field);
     let mut slicer = Slicer::new(part, layer_mm, n).with_offset(offset_mm);
     let mut masks = vec![Vec::new(); first.min(n)];
+    // Each split of a window takes a scratch from the pool (rayon makes many).
+    let pool = ScratchPool::default();
     let mut lo = first;
     while lo < n {
         let sections = slicer.window(lo..(lo + WINDOW).min(n));
         let drawn: Vec<Vec<runs::Run>> = sections
             .par_iter()
             .map_init(
-                || {
-                    let mut s = Scratch::default();
-                    s.record_runs = true;
-                    s
-                },
+                || pool.take(),
                 |scratch, sec| {
+                    scratch.record_runs = true;
                     let m = raster.coverage(&sec.contours, scratch);
                     scratch.recycle(m);
                     std::mem::take(&mut scratch.lit_runs.runs)
