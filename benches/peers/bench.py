@@ -12,19 +12,10 @@ recently deleted inode: replacing a bundle right after deleting another costs dm
 case: each run overwrites the previous run's output.) Reports per model the median wall time and peak RSS of each tool,
 the speed ratio, and the geometric mean of the ratios. Needs prusa-slicer (apt).
 """
-import json, math, os, statistics, subprocess, sys, time
+import json, math, os, statistics, subprocess, sys
+from timing import timed
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-
-
-def timed(cmd):
-    t = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, ru = os.wait4(p.pid, 0)
-    dt = time.perf_counter() - t
-    if status != 0:
-        raise SystemExit(f"failed: {cmd}")
-    return dt, ru.ru_maxrss  # KiB on Linux
 
 
 def main():
@@ -39,13 +30,13 @@ def main():
         for m in models:
             name = os.path.splitext(os.path.basename(m))[0]
             tag = "" if replace else f"-{r}"
-            dt, kb = timed(["prusa-slicer", "--load", os.path.join(HERE, "prusa_sla.ini"), "--export-sla",
+            dt, ru = timed(["prusa-slicer", "--load", os.path.join(HERE, "prusa_sla.ini"), "--export-sla",
                             "--output", os.path.join(out, f"{name}{tag}.sl1"), m])
             res[m]["prusa"].append(dt)
-            res[m]["prusa_kb"] = max(res[m]["prusa_kb"], kb)
-            dt, kb = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}{tag}.dmdjob")])
+            res[m]["prusa_kb"] = max(res[m]["prusa_kb"], ru.ru_maxrss)
+            dt, ru = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}{tag}.dmdjob")])
             res[m]["dmdsl"].append(dt)
-            res[m]["dmdsl_kb"] = max(res[m]["dmdsl_kb"], kb)
+            res[m]["dmdsl_kb"] = max(res[m]["dmdsl_kb"], ru.ru_maxrss)
     ratios = []
     for m in models:
         r = res[m]

@@ -14,20 +14,11 @@ time of each, the ratios, and the geometric means. With `--off`, each form is al
 with `--cure-correction off` (the uncorrected masks; columns `dir-off`, `zip-off`,
 `sl1-off`), interleaved with the rest.
 """
-import json, math, os, statistics, subprocess, sys, time
+import json, math, os, statistics, subprocess, sys
+from timing import timed
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 FORMS = [("dir", ".dmdjob"), ("zip", ".dmdjob.zip"), ("sl1", ".sl1")]
-
-
-def timed(cmd):
-    t = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, ru = os.wait4(p.pid, 0)
-    dt = time.perf_counter() - t
-    if status != 0:
-        raise SystemExit(f"failed: {cmd}")
-    return dt, ru.ru_stime
 
 
 def age(out, n):
@@ -72,9 +63,9 @@ def main():
             for form, ext, extra in forms:
                 if aging:
                     age(out, aging)
-                dt, st = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}-{r}-{form}{ext}")] + extra)
+                dt, ru = timed([dmdsl, "slice", m, "-q", "-o", os.path.join(out, f"{name}-{r}-{form}{ext}")] + extra)
                 t[m][form].append(dt)
-                sys_t[m][form].append(st)
+                sys_t[m][form].append(ru.ru_stime)
     ratios = {f: [] for f, _, _ in forms}
     for m in models:
         med = {k: statistics.median(v) for k, v in t[m].items()}

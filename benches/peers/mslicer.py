@@ -12,20 +12,12 @@ masks, one file, like the `.goo`), then the default `dmdsl slice MODEL -q -o
 y.dmdjob.zip`. Prints per model the median wall and CPU (user + system) time of each and
 their ratios to mslicer's.
 """
-import json, os, statistics, subprocess, sys, time
+import json, os, statistics, subprocess, sys
+from timing import timed
 
 DISPLAY = ["--platform-resolution", "1024,768", "--platform-size", "65,48.75,260",
            "--layer-height", "0.05", "--first-layers", "2", "--transition-layers", "0",
            "--exposure-time", "8", "--first-exposure-time", "16"]
-
-
-def timed(cmd):
-    t = time.perf_counter()
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, ru = os.wait4(p.pid, 0)
-    if status != 0:
-        raise SystemExit(f"failed: {cmd}")
-    return time.perf_counter() - t, ru.ru_utime + ru.ru_stime
 
 
 def main():
@@ -42,7 +34,8 @@ def main():
         for m in models:
             o = os.path.join(out, os.path.splitext(os.path.basename(m))[0])
             for k, cmd in tools.items():
-                wall, cpu = timed(cmd(m, o))
+                wall, ru = timed(cmd(m, o))
+                cpu = ru.ru_utime + ru.ru_stime
                 if r > 0:
                     t[m][k].append((wall, cpu))
     for m in models:
