@@ -191,6 +191,24 @@ pub struct Coverage {
     data: Vec<u8>,
 }
 
+/// Buffers of dropped coverages, for the next ones: a job draws thousands, each the size of
+/// its section's box, and allocating each anew costs page faults on large fields.
+static SPARE: std::sync::Mutex<Vec<Vec<u8>>> = std::sync::Mutex::new(Vec::new());
+
+/// The spare buffers (also after a panic elsewhere: a buffer list stays consistent).
+fn lock_spare() -> std::sync::MutexGuard<'static, Vec<Vec<u8>>> {
+    SPARE.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Drop for Coverage {
+    fn drop(&mut self) {
+        let mut spare = lock_spare();
+        if spare.len() < 8 && self.data.capacity() > 0 {
+            spare.push(std::mem::take(&mut self.data));
+        }
+    }
+}
+
 /// Steps of the searches along a normal, px.
 const STEP_PX: f64 = 1.0;
 
@@ -202,8 +220,11 @@ impl Coverage {
         }
         let w = m.width as usize;
         let size = [lit.c1 - lit.c0 + 2, lit.r1 - lit.r0 + 2];
-        // Row by row, the border's zeros written with them (not the whole box zeroed first).
-        let mut data = Vec::with_capacity(size[0] * size[1]);
+        // Row by row, the border's zeros written with them (not the whole box zeroed first),
+        // into the buffer of a coverage dropped before when there is one.
+        let mut data = lock_spare().pop().unwrap_or_default();
+        data.clear();
+        data.reserve(size[0] * size[1]);
         data.resize(size[0] + 1, 0);
         for r in lit.rows() {
             data.extend_from_slice(&m.data[r * w..][lit.cols()]);
