@@ -331,6 +331,7 @@ impl Leaving<'_> {
     }
 }
 
+/// [`chain`] with the thread's per-edge table `slots`.
 fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 2]>) -> Section {
     let n = segs.len();
     let top = segs

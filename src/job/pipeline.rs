@@ -4,12 +4,12 @@
 //! blocks of [`BLOCK`] consecutive layers on rayon's pool as soon as they are cut (no
 //! barrier between windows), so the slicing overlaps the mask work. Blocks start in the
 //! order they were spawned (a FIFO scope): the layers below a section are made soon after
-//! it is drawn, and its coverage is dropped (started newest first, a window's blocks
-//! held the coverage of every section whose lower layers were still queued: a third more
-//! memory at 3840 × 2160 px). Before it cuts a
-//! window, the layers sliced but not yet made into masks must be at most [`MAX_AHEAD`];
-//! otherwise the task parks its state (the slicer, the last window) in the [`Backlog`] and
-//! returns, and its worker thread goes on with the queued blocks. The block whose end
+//! it is drawn, and its coverage is dropped (newest first, the blocks of later windows
+//! would run while earlier ones wait, and every section whose lower layers wait keeps its
+//! coverage). Before it cuts a window, the layers sliced but not yet made into masks must
+//! be at most [`MAX_AHEAD`]; otherwise the task parks its state (the slicer, the last
+//! window) in the [`Backlog`] and returns, and its worker thread goes on with the queued
+//! blocks. The block whose end
 //! brings the count back under the limit spawns the slicing task again. So memory is
 //! bounded whatever the number of layers, no thread spins or sleeps, and no worker blocks
 //! waiting for room: the slicer must run on the pool, since it cuts its windows with the
