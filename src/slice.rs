@@ -305,20 +305,20 @@ const NONE: u32 = u32::MAX;
 /// when no edge starts (or ends) two segments, as in a closed mesh (entries put back to
 /// [`NONE`] afterwards), else from sorted tables. The first unused one is the same either
 /// way.
-enum Leaving<'a> {
+enum SegsAtEdge<'a> {
     Slots(&'a mut Vec<[u32; 2]>),
     Sorted([Vec<(u32, u32)>; 2]),
 }
 
-impl Leaving<'_> {
+impl SegsAtEdge<'_> {
     /// The first unused segment starting (`end` 0) or ending (1) at edge `e`.
     fn find(&self, end: usize, used: &[bool], e: u32) -> Option<u32> {
         match self {
-            Leaving::Slots(slots) => {
+            SegsAtEdge::Slots(slots) => {
                 let s = slots[e as usize][end];
                 (s != NONE && !used[s as usize]).then_some(s)
             }
-            Leaving::Sorted(tabs) => {
+            SegsAtEdge::Sorted(tabs) => {
                 let tab = &tabs[end];
                 let k = tab.partition_point(|&(x, _)| x < e);
                 tab[k..]
@@ -328,6 +328,14 @@ impl Leaving<'_> {
                     .map(|&(_, s)| s)
             }
         }
+    }
+}
+
+/// Puts the entries of `segs`' edges in `slots` back to [`NONE`].
+fn clear_slots(slots: &mut [[u32; 2]], segs: &[Seg]) {
+    for s in segs {
+        slots[s.from_edge as usize] = [NONE; 2];
+        slots[s.to_edge as usize] = [NONE; 2];
     }
 }
 
@@ -349,13 +357,10 @@ fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 
             *slot = i as u32;
         }
     }
-    let leaving = if unique {
-        Leaving::Slots(slots)
+    let at_edge = if unique {
+        SegsAtEdge::Slots(slots)
     } else {
-        for s in segs {
-            slots[s.from_edge as usize] = [NONE; 2];
-            slots[s.to_edge as usize] = [NONE; 2];
-        }
+        clear_slots(slots, segs);
         let table = |edge: fn(&Seg) -> u32| {
             let mut t: Vec<(u32, u32)> = (segs.iter().enumerate())
                 .map(|(i, s)| (edge(s), i as u32))
@@ -363,7 +368,7 @@ fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 
             t.sort_unstable();
             t
         };
-        Leaving::Sorted([table(|s| s.from_edge), table(|s| s.to_edge)])
+        SegsAtEdge::Sorted([table(|s| s.from_edge), table(|s| s.to_edge)])
     };
     let mut used = vec![false; n];
     // The next segment of a chain at `node`, marked used: one leaving it the way the
@@ -371,7 +376,7 @@ fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 
     // flipped facet). Its other end's point and edge, and its vote for the orientation.
     let step = |node: u32, fwd: bool, used: &mut [bool]| {
         for from_start in [fwd, !fwd] {
-            if let Some(s) = leaving.find(!from_start as usize, used, node) {
+            if let Some(s) = at_edge.find(!from_start as usize, used, node) {
                 used[s as usize] = true;
                 let sg = segs[s as usize];
                 let vote = if from_start == fwd { 1 } else { -1 };
@@ -436,11 +441,8 @@ fn chain_with(segs: &[Seg], support: u32, offset_mm: f64, slots: &mut Vec<[u32; 
         }
         open.push(chain);
     }
-    if let Leaving::Slots(slots) = leaving {
-        for s in segs {
-            slots[s.from_edge as usize] = [NONE; 2];
-            slots[s.to_edge as usize] = [NONE; 2];
-        }
+    if let SegsAtEdge::Slots(slots) = at_edge {
+        clear_slots(slots, segs);
     }
     if !open.is_empty() {
         join_open(open, &mut section);
