@@ -110,6 +110,8 @@ pub const CODES: &[Code] = &[
         "the cure model predicts that features of these layers cure nowhere (too narrow for the blur and dose); they will be missing from the part", "widen these features in the model or raise the exposure"),
     code("cure.features-widened", Warn, "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm, wall_mm",
         "the xy correction drew features too thin to cure wider (their uncorrected coverage, then up to 1 px outward) so that they cure: they come out at the smallest size the machine makes, larger than the part's (wall_mm: the width of a ring's walls or a slanted bar, which the box does not show; else 0)", "nothing to do if the larger size is acceptable; otherwise these features are too fine for the machine: widen them in the model"),
+    code("cure.features-on-nothing", Warn, "features, layers, first_layer, x_mm, y_mm, width_mm, height_mm",
+        "the xy correction left features too thin to cure as it drew them, not wider, because they rest on nothing in the layer below (widened, they would cure loose; the sections do not light them, so no support reaches them): they will be missing from the part", "thicken these features in the model so that they are lit, or give them something to rest on"),
     code("cure.features-dropped", Warn, "features, pixels, layers, first_layer, x_mm, y_mm, width_mm, height_mm, held_back_layers",
         "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part", "use --cure-correction xy, or make these features thicker"),
     code("cure.features-merge", Warn, "contours, layers, first_layer",

@@ -75,6 +75,11 @@ pub struct Widening {
     pub first_wall_mm: f64,
     /// Small features that stay below T even widened (drawn corrected).
     pub failed: u32,
+    /// Small features below T that rest on nothing in the layer below (drawn corrected,
+    /// not widened: they would cure loose).
+    pub on_nothing: u32,
+    /// The first of them (in contour order).
+    pub first_on_nothing: Option<FeatureBox>,
     /// The mask's lit box grown by the widened pixels.
     pub lit: PixelBox,
 }
@@ -225,8 +230,11 @@ impl Uncorrected {
 /// their uncorrected coverage (`saved`, from [`Uncorrected::take`]) and then wider, as
 /// the module describes; T = `threshold`, the layer's own light at which a feature that
 /// the layers above repeat cures. A feature `saved` finds held back
-/// ([`Uncorrected::held_back`]) is left as it is. `shift_px`: the correction's largest
-/// inward move.
+/// ([`Uncorrected::held_back`]) is left as it is, and so is one that `rests` says rests
+/// on nothing: given the mask indices of the feature's pixels (those within 0.75 px of
+/// it), whether the layer below has material in any of them (a feature widened over
+/// nothing would cure loose; no support reaches it, as the sections do not light it).
+/// `shift_px`: the correction's largest inward move.
 #[allow(clippy::too_many_arguments)]
 pub fn widen(
     model: &CureModel,
@@ -237,6 +245,7 @@ pub fn widen(
     saved: &Uncorrected,
     shift_px: f64,
     threshold: f64,
+    rests: &mut dyn FnMut(&[usize]) -> bool,
 ) -> Widening {
     let psf = Psf {
         sigma_px: model.sigma_px,
@@ -281,6 +290,12 @@ pub fn widen(
             .collect();
         let peak = |m: &Mask| peak_light(m, &psf, &table, &probes);
         if probes.is_empty() || peak(mask) >= goal {
+            continue;
+        }
+        let pixels: Vec<usize> = band.iter().filter(|b| b.3 < 0.75).map(|b| b.0).collect();
+        if !rests(&pixels) {
+            out.on_nothing += 1;
+            out.first_on_nothing = out.first_on_nothing.or(Some(f.at));
             continue;
         }
         let corrected: Vec<u8> = band.iter().map(|b| mask.data[b.0]).collect();
@@ -474,6 +489,11 @@ mod tests {
     /// The section drawn with the plain correction and with the widening, the widening's
     /// report, and the peak light of each over the given pixel centres' neighbourhood.
     fn drawn(section: &[Contour]) -> (Mask, Mask, Widening, CureModel) {
+        drawn_on(section, None)
+    }
+
+    /// As [`drawn`], over the section `below` (`None`: on the platform).
+    fn drawn_on(section: &[Contour], below: Option<&[Contour]>) -> (Mask, Mask, Widening, CureModel) {
         let profile = Profile::default_profile();
         let model = CureModel::from_profile(&profile).expect("the default profile has a PSF");
         let raster = Rasterizer::new(profile.field());
@@ -489,7 +509,14 @@ mod tests {
         super::super::correct_coverage(&mut m, lit, &segs, &shifts, lit);
         let plain = m.clone();
         let t = model.edge_threshold();
-        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift, t);
+        let under = below.map(|b| raster.coverage(b, &mut Scratch::default()));
+        let mut rests = |px: &[usize]| {
+            assert!(!px.is_empty());
+            under
+                .as_ref()
+                .is_none_or(|u| px.iter().any(|&k| u.data[k] > 0))
+        };
+        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift, t, &mut rests);
         (plain, m, wd, model)
     }
 
@@ -544,6 +571,23 @@ mod tests {
                 assert_eq!(plain.get(c, r), wide.get(c, r), "({c}, {r})");
             }
         }
+    }
+
+    #[test]
+    fn a_pin_over_nothing_is_not_widened_and_one_on_a_block_is() {
+        let p = Profile::default_profile().field().pixel_mm;
+        let (x0, y0) = (400.6 * p, 300.1 * p);
+        let pin = rect(x0, y0, x0 + 0.05, y0 + 0.05);
+        let under = rect(x0 - 0.2, y0 - 0.2, x0 + 0.2, y0 + 0.2);
+        let aside = rect(x0 + 1.0, y0, x0 + 2.0, y0 + 1.0);
+        let (_, wide, wd, _) = drawn_on(std::slice::from_ref(&pin), Some(&[under]));
+        assert_eq!((wd.widened, wd.on_nothing), (1, 0), "{wd:?}");
+        let (plain, kept, wd, _) = drawn_on(std::slice::from_ref(&pin), Some(&[aside]));
+        assert_eq!((wd.widened, wd.failed, wd.on_nothing), (0, 0, 1), "{wd:?}");
+        let at = wd.first_on_nothing.expect("named");
+        assert!((at.x_mm - (x0 + 0.025)).abs() < 1e-3, "{at:?}");
+        assert_eq!(plain, kept);
+        assert_ne!(plain, wide);
     }
 
     #[test]

@@ -79,7 +79,8 @@ struct WorstLayer {
     samples: Vec<EdgeSample>,
 }
 
-/// The narrow features the XY correction drew wider, over a job's layers.
+/// The narrow features the XY correction drew wider, over a job's layers, and those it
+/// left as they were because they rest on nothing.
 #[derive(Debug, Clone, Default)]
 struct WidenedFeatures {
     features: u64,
@@ -88,6 +89,8 @@ struct WidenedFeatures {
     first: Option<FeatureBox>,
     /// The first one's wall width, mm.
     wall_mm: f64,
+    /// Features over nothing (not widened), their layers, the lowest layer and its first.
+    on_nothing: (u64, u64, Option<u64>, Option<FeatureBox>),
 }
 
 /// Points along a drawn contour at which its edges' moves are solved, px apart at most.
@@ -104,15 +107,31 @@ pub(super) struct LayerCorrection {
     pub threshold: f64,
 }
 
-/// The narrow features of one layer the XY correction drew wider so they cure.
+/// The narrow features of one layer the XY correction drew wider so they cure, and those
+/// it left as they were because they rest on nothing in the layer below.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct LayerWidened {
-    /// How many.
+    /// How many were widened.
     pub features: u32,
     /// The first one's bounding box (in contour order), build-plane mm.
-    pub first: FeatureBox,
+    pub first: Option<FeatureBox>,
     /// The first one's wall width, mm.
     pub wall_mm: f64,
+    /// How many rest on nothing, and the first one's box.
+    pub on_nothing: (u32, Option<FeatureBox>),
+}
+
+impl LayerWidened {
+    /// The record of what [`widen::widen`] did to a layer, if it found any feature to
+    /// widen or over nothing.
+    fn of(wd: &widen::Widening) -> Option<LayerWidened> {
+        (wd.widened + wd.on_nothing > 0).then_some(LayerWidened {
+            features: wd.widened,
+            first: wd.first,
+            wall_mm: wd.first_wall_mm,
+            on_nothing: (wd.on_nothing, wd.first_on_nothing),
+        })
+    }
 }
 
 /// What drawing a layer through the cure model gave besides its mask.
@@ -326,8 +345,8 @@ impl CureJob {
     /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
     /// the layers below, nearest first: a downward-facing surface is drawn only from its
     /// held-back layers on; narrow features the correction starves are then drawn back and
-    /// wider, `cure::widen`), then thresholds (`binary`) and compensates (`comp`) it in
-    /// place. With `xyz` it also finds the flat features
+    /// wider, `cure::widen`, unless `rests` says they rest on nothing), then thresholds
+    /// (`binary`) and compensates (`comp`) it in place. With `xyz` it also finds the flat features
     /// the correction drops whose runs of lit layers end in the layer below (from
     /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
     /// this one.
@@ -339,6 +358,7 @@ impl CureJob {
         coverage: Option<(Mask, PixelBox)>,
         corr: Option<&LayerCorrection>,
         lower: &[&[Contour]],
+        rests: &mut dyn FnMut(&[usize]) -> bool,
         top: bool,
         scratch: &mut Scratch,
         binary: bool,
@@ -421,16 +441,13 @@ impl CureJob {
                 &saved,
                 inward,
                 c.threshold,
+                rests,
             );
             if wd.lit != lit {
                 scratch.grow_lit_box(wd.lit);
                 drawn_lit = scratch.lit_box();
             }
-            Some(LayerWidened {
-                features: wd.widened,
-                first: wd.first?,
-                wall_mm: wd.first_wall_mm,
-            })
+            LayerWidened::of(&wd)
         });
         let (p, h) = (self.model.pixel_mm, m.height);
         let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
@@ -473,13 +490,52 @@ impl CureJob {
         let Some(w) = widened else { return };
         let mut t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
         let layer = index as u64;
-        t.features += w.features as u64;
-        t.layers += 1;
-        if t.first_layer.is_none_or(|f| layer < f) {
-            t.first_layer = Some(layer);
-            t.first = Some(w.first);
-            t.wall_mm = w.wall_mm;
+        if let Some(first) = w.first {
+            t.features += w.features as u64;
+            t.layers += 1;
+            if t.first_layer.is_none_or(|f| layer < f) {
+                t.first_layer = Some(layer);
+                t.first = Some(first);
+                t.wall_mm = w.wall_mm;
+            }
         }
+        if let (k, Some(first)) = w.on_nothing {
+            let o = &mut t.on_nothing;
+            (o.0, o.1) = (o.0 + k as u64, o.1 + 1);
+            if o.2.is_none_or(|f| layer < f) {
+                (o.2, o.3) = (Some(layer), Some(first));
+            }
+        }
+    }
+
+    /// The warning naming the narrow features over nothing that were left as the
+    /// correction drew them (not widened), if any; `what_at` as for
+    /// [`CureJob::widened_warning`].
+    pub fn on_nothing_warning(&self, what_at: &WhatAt) -> Option<Warning> {
+        let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
+        let (k, n, first, at) = t.on_nothing;
+        let (first, at) = (first?, at?);
+        Some(
+            Warning::new(
+                "cure.features-on-nothing",
+                format!(
+                    "cure: {k} {} too thin to cure {} on nothing in the layer below, so {} not drawn wider, in {n} {} (first: layer {first}, at {}); widened, {} would cure loose",
+                    plural(k, "feature", "features"),
+                    plural(k, "rests", "rest"),
+                    plural(k, "it was", "they were"),
+                    plural(n, "layer", "layers"),
+                    where_is(&at, first, what_at),
+                    plural(k, "it", "they"),
+                ),
+            )
+            .with("features", k)
+            .with("layers", n)
+            .with("first_layer", first)
+            .with("x_mm", at.x_mm)
+            .with("y_mm", at.y_mm)
+            .with("width_mm", at.width_mm)
+            .with("height_mm", at.height_mm),
+        )
     }
 
     /// The warning naming the narrow features drawn wider so they cure, if any; `what_at`

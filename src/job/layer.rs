@@ -73,9 +73,10 @@ pub(super) struct LayerInput<'a> {
     pub cut: &'a Cut,
     /// The section of the layer below (None for layer 0), for analyses that compare layers.
     pub below: Option<&'a Section>,
-    /// The sections of the layers below, nearest first, one more than the cure correction
-    /// holds downward-facing surfaces back by (`--cure-correction xyz`, see
-    /// `CureJob::lower_layers`; else empty).
+    /// The sections of the layers below, nearest first, as many as the pipeline holds
+    /// when the cure correction is on (the narrow features' rest, `super::beneath`, and
+    /// with `--cure-correction xyz` the held-back layers and one more,
+    /// `CureJob::lower_layers`); else empty.
     pub lower: Vec<&'a Section>,
     /// The sections of the layers above, nearest first, that the cure correction looks at
     /// (`CureJob::upper_layers`; else empty).
@@ -345,13 +346,17 @@ fn draw(
             // compensation then delivers): drawn and corrected, then thresholded and
             // compensated.
             Some(job) => {
-                let lower: Vec<&[Contour]> = layer.lower.iter().map(|s| &s.contours[..]).collect();
+                let held = job.lower_layers().min(layer.lower.len());
+                let lower: Vec<&[Contour]> =
+                    layer.lower[..held].iter().map(|s| &s.contours[..]).collect();
+                let mut rests = super::beneath::Beneath::new(ctx, layer);
                 let (m, c) = job.draw(
                     ctx.raster,
                     drawn_section,
                     coverage,
                     drawing.corr.as_ref(),
                     &lower,
+                    &mut |px| rests.rests(px),
                     layer.above == 0,
                     scratch,
                     ctx.binary,

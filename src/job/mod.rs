@@ -16,6 +16,7 @@
 //! (per-thread CPU time), `optics_records.rs` (the light compensation's files and
 //! records) and `manifest.rs` (layer records, totals and the rest of the manifest).
 
+mod beneath;
 mod clock;
 mod cure_records;
 mod layer;
@@ -145,6 +146,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         let what = what_at(&part, profile.slicing.layer_height_mm.get());
         warnings.extend(c.dropped_warning(&what));
         warnings.extend(c.widened_warning(&what));
+        warnings.extend(c.on_nothing_warning(&what));
     }
     let mut manifest = manifest::manifest(
         &part,

@@ -311,6 +311,32 @@ fn cure_optics_and_calibrate_messages_name_a_remedy() {
         "{msg}"
     );
     ws.extend(ring);
+    // A pin like the one above in mid-air, over nothing: left as the correction draws it.
+    let mut floating = box_tris([10.0, 10.0, 0.0], [14.0, 14.0, 1.0]);
+    floating.extend(box_tris([20.0, 20.0, 1.0], [20.04, 20.04, 1.5]));
+    write_stl(&dir.join("floating_pin.stl"), &floating);
+    let args = [
+        "slice",
+        "floating_pin.stl",
+        "-o",
+        "f.dmdjob",
+        "--compensation",
+        "off",
+    ];
+    let on_nothing = raised(&dir, &[&args[..], &["--cure-correction", "xy"]].concat());
+    let w = on_nothing
+        .iter()
+        .find(|w| w["code"] == "cure.features-on-nothing");
+    let msg = w.expect("the pin is over nothing")["message"]
+        .as_str()
+        .unwrap();
+    assert!(
+        msg.contains(
+            "rest on nothing in the layer below, so they were not drawn wider, in 10 layers"
+        ),
+        "{msg}"
+    );
+    ws.extend(on_nothing);
     let tab = fixture("tab2.stl");
     let tab = [
         "slice",
@@ -392,6 +418,7 @@ fn cure_optics_and_calibrate_messages_name_a_remedy() {
 const OPTICS_CODES: &[&str] = &[
     "cure.features-vanish",
     "cure.features-widened",
+    "cure.features-on-nothing",
     "cure.features-dropped",
     "cure.features-merge",
     "optics.outside-calibrated-area",
