@@ -308,20 +308,29 @@ impl Region {
     }
 }
 
-/// The regions of the lit runs `cur` that share no pixel with the lit runs `below` of
-/// the layer below, in the order of their first run. Usually every run rests on a run
-/// below and there is none.
-pub fn unsupported(cur: &[Run], below: &[Run]) -> Vec<Region> {
+/// The 4-connected regions of the lit runs `cur` and which of them rest on the lit runs
+/// `below` of the layer below: each run's region (numbered in the order of their first
+/// run) and, per region, whether it shares a pixel with `below`. `None` when every run
+/// rests on a run below (usually), so that no region rests on nothing.
+pub fn resting_regions(cur: &[Run], below: &[Run]) -> Option<(Vec<u32>, Vec<bool>)> {
     let (on, any_free) = resting_runs(cur, below);
     if !any_free {
-        return Vec::new();
+        return None;
     }
     let (region, n) = components(cur);
     let mut rests = vec![false; n];
-    // Per region: pixels, Σ column centres, Σ row centres.
-    let mut sums = vec![(0u64, 0.0, 0.0); n];
-    for ((&g, &s), r) in region.iter().zip(&on).zip(cur) {
+    for (&g, &s) in region.iter().zip(&on) {
         rests[g as usize] |= s;
+    }
+    Some((region, rests))
+}
+
+/// Size and centre of the regions of `cur` (each run's region in `region`) that `pick`
+/// selects, in region order.
+pub fn regions_of(cur: &[Run], region: &[u32], pick: &[bool]) -> Vec<Region> {
+    // Per region: pixels, Σ column centres, Σ row centres.
+    let mut sums = vec![(0u64, 0.0, 0.0); pick.len()];
+    for (&g, r) in region.iter().zip(cur) {
         let len = u64::from(r[2] - r[1]);
         let [row, c0, c1] = r.map(f64::from);
         let t = &mut sums[g as usize];
@@ -331,8 +340,8 @@ pub fn unsupported(cur: &[Run], below: &[Run]) -> Vec<Region> {
             t.2 + (row + 0.5) * (c1 - c0),
         );
     }
-    (0..n)
-        .filter(|&g| !rests[g])
+    (0..pick.len())
+        .filter(|&g| pick[g])
         .map(|g| {
             let (k, sc, sr) = sums[g];
             Region {
@@ -341,6 +350,16 @@ pub fn unsupported(cur: &[Run], below: &[Run]) -> Vec<Region> {
             }
         })
         .collect()
+}
+
+/// The regions of the lit runs `cur` that share no pixel with the lit runs `below` of
+/// the layer below, in the order of their first run. Usually every run rests on a run
+/// below and there is none.
+pub fn unsupported(cur: &[Run], below: &[Run]) -> Vec<Region> {
+    resting_regions(cur, below).map_or(Vec::new(), |(region, rests)| {
+        let free: Vec<bool> = rests.iter().map(|r| !r).collect();
+        regions_of(cur, &region, &free)
+    })
 }
 
 /// The regions of every layer that rest on nothing below, with their layer, from each

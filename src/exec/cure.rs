@@ -208,13 +208,11 @@ impl Light {
                 Light::Linear(t) => data.extend(row.iter().map(|&g| t[g as usize])),
                 Light::Compensated { s, inv_full } => {
                     let inv = &inv_full[r * w + c0..r * w + c1];
-                    data.extend(row.iter().zip(inv).map(|(&g, &i)| {
-                        if i > 0.0 {
-                            s[g as usize] * i
-                        } else {
-                            g as f32 / 255.0
-                        }
-                    }))
+                    data.extend(
+                        row.iter()
+                            .zip(inv)
+                            .map(|(&g, &i)| compensated(s, g, i)),
+                    )
                 }
             }
         }
@@ -223,10 +221,28 @@ impl Light {
             data,
         }
     }
+
+    /// The relative irradiance of gray `g` at pixel `k` (row-major) of a mask.
+    pub fn at(&self, k: usize, g: u8) -> f32 {
+        match self {
+            Light::Linear(t) => t[g as usize],
+            Light::Compensated { s, inv_full } => compensated(s, g, inv_full[k]),
+        }
+    }
+}
+
+/// S(g)/S(G) from the response `s` and `inv` = 1/S(G) of a pixel, g/255 where G = 0.
+#[inline]
+fn compensated(s: &[f32; 256], g: u8, inv: f32) -> f32 {
+    if inv > 0.0 {
+        s[g as usize] * inv
+    } else {
+        g as f32 / 255.0
+    }
 }
 
 /// Decodes an 8-bit gray PNG of the bundle.
-fn decode(source: &dyn BundleSource, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
+pub(super) fn decode(source: &dyn BundleSource, rel: &str) -> Result<(usize, usize, Vec<u8>)> {
     let mut buf = Vec::new();
     let (w, h) = decode_into(source, rel, &mut buf)?;
     Ok((w, h, buf))
@@ -276,22 +292,7 @@ mod tests {
             "{e}"
         );
         let m = model();
-        man.cure = Some(crate::bundle::Cure {
-            psf_sigma_px: m.sigma_px,
-            pixel_mm: m.pixel_mm,
-            dp_mm: m.dp_mm,
-            ec_mj_cm2: m.ec_mj_cm2,
-            sources: Default::default(),
-            overcure_mm: m.overcure_mm,
-            layer_mm: m.layer_mm,
-            edge_threshold: m.edge_threshold(),
-            correction: "xy".into(),
-            shift_px: 0.49,
-            print_through_mm: m.print_through_mm(None),
-            held_back_layers: 0,
-            predicted: None,
-            dropped: None,
-        });
+        man.cure = Some(crate::exec::testutil::cure_record("xy"));
         assert_eq!(model_of(&man, &src).unwrap(), m);
         man.machine =
             crate::bundle::Machine::of(&crate::profile::Profile::resolve("tiled-2x1").unwrap());

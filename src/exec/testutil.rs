@@ -91,6 +91,29 @@ pub fn manifest(machine: Profile, layers: Vec<Layer>) -> Manifest {
     }
 }
 
+/// The `cure` record of the unit tests' model ([`crate::cure::test_model`]) with the
+/// correction `correction`.
+#[cfg(test)]
+pub fn cure_record(correction: &str) -> Cure {
+    let m = crate::cure::test_model();
+    Cure {
+        psf_sigma_px: m.sigma_px,
+        pixel_mm: m.pixel_mm,
+        dp_mm: m.dp_mm,
+        ec_mj_cm2: m.ec_mj_cm2,
+        sources: Default::default(),
+        overcure_mm: m.overcure_mm,
+        layer_mm: m.layer_mm,
+        edge_threshold: m.edge_threshold(),
+        correction: correction.into(),
+        shift_px: 0.49,
+        print_through_mm: m.print_through_mm(None),
+        held_back_layers: 0,
+        predicted: None,
+        dropped: None,
+    }
+}
+
 /// Records everything it is fed.
 #[derive(Debug, Default)]
 pub struct Collect {

@@ -114,6 +114,78 @@ fn resting_on_nothing(layers: &[(u32, Vec<bool>)]) -> Vec<(usize, usize)> {
     out
 }
 
+/// The pixels of each layer of the one-projector bundle `job` (made without light
+/// compensation) that cure by the model of its `cure` record, from the masks alone and
+/// apart from the executor's judgment: each pixel's light g/255, blurred by the PSF (a
+/// Gaussian of σ pixels integrated over each lit pixel by a midpoint sum, summed along
+/// rows, then columns, over the lit box), times the layer's exposure against the normal layer's, at least the
+/// record's edge threshold.
+fn cured_layers(job: &Path) -> Vec<(u32, Vec<bool>)> {
+    let m: Value = serde_json::from_slice(&std::fs::read(job.join("job.json")).unwrap()).unwrap();
+    let cure = &m["cure"];
+    let (sigma, t) = (
+        cure["psf_sigma_px"].as_f64().unwrap(),
+        cure["edge_threshold"].as_f64().unwrap(),
+    );
+    let normal = m["machine"]["exposure"]["layer_s"].as_f64().unwrap();
+    let reach = (5.0 * sigma).ceil() as i64 + 1;
+    // The share of a pixel's light that falls on the pixel `d` away, along one axis.
+    let share = |d: i64| {
+        let n = 400;
+        (0..n)
+            .map(|k| {
+                let x = d as f64 - 0.5 + (k as f64 + 0.5) / n as f64;
+                (-x * x / (2.0 * sigma * sigma)).exp() / (sigma * (std::f64::consts::TAU).sqrt())
+            })
+            .sum::<f64>()
+            / n as f64
+    };
+    let weights: Vec<f64> = (-reach..=reach).map(share).collect();
+    m["layers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| {
+            let (w, h, g) = read_gray(&job.join(l["masks"][0]["file"].as_str().unwrap()));
+            let (w, h) = (w as i64, h as i64);
+            let ratio = l["exposure_s"].as_f64().unwrap() / normal;
+            let mut cured = vec![false; (w * h) as usize];
+            let lit: Vec<i64> = (0..w * h).filter(|&k| g[k as usize] > 0).collect();
+            let Some(r0) = lit.first().map(|k| k / w) else {
+                return (w as u32, cured);
+            };
+            let r1 = lit.last().unwrap() / w;
+            let c0 = lit.iter().map(|k| k % w).min().unwrap();
+            let c1 = lit.iter().map(|k| k % w).max().unwrap();
+            let rows = (r0 - reach).max(0)..=(r1 + reach).min(h - 1);
+            let cols = (c0 - reach).max(0)..=(c1 + reach).min(w - 1);
+            // Across (over every row the blur down reads), then down.
+            let mut across = vec![0.0; (w * h) as usize];
+            for r in (r0 - 2 * reach).max(0)..=(r1 + 2 * reach).min(h - 1) {
+                for c in cols.clone() {
+                    across[(r * w + c) as usize] = (-reach..=reach)
+                        .filter(|d| (0..w).contains(&(c + d)))
+                        .map(|d| {
+                            g[(r * w + c + d) as usize] as f64 / 255.0
+                                * weights[(d + reach) as usize]
+                        })
+                        .sum();
+                }
+            }
+            for r in rows {
+                for c in cols.clone() {
+                    let b: f64 = (-reach..=reach)
+                        .filter(|d| (0..h).contains(&(r + d)))
+                        .map(|d| across[((r + d) * w + c) as usize] * weights[(d + reach) as usize])
+                        .sum();
+                    cured[(r * w + c) as usize] = ratio * b >= t;
+                }
+            }
+            (w as u32, cured)
+        })
+        .collect()
+}
+
 /// What `run --json` reports resting on nothing in a corrected job is smaller than
 /// `max_mm2`: what the cure correction leaves where it moves edges in (a pixel or two at an
 /// edge, a neck of the overexposed first layers), never a support's foot or contact cut
@@ -221,6 +293,37 @@ fn test_parts_print_from_the_platform_up_on_every_process() {
                 "run {out}: {}{}",
                 stdout(&r),
                 stderr(&r)
+            );
+            std::fs::remove_dir_all(dir.join(&out)).unwrap();
+        }
+        // Corrected (without the light compensation, whose grays the independent cure
+        // above does not model): what cures rests on what cured below, and `run` finds
+        // nothing on nothing.
+        for profile in ["xu2010-topdown", "bottom-up", "hybrid-bottomup"] {
+            let out = format!("{name}-{profile}-corrected.dmdjob");
+            let args = [
+                stl,
+                "--supports",
+                "-p",
+                profile,
+                "--compensation",
+                "off",
+                "--layer-height",
+                "0.1",
+            ];
+            slice(&dir, &args, &out);
+            let free = resting_on_nothing(&cured_layers(&dir.join(&out)));
+            assert!(
+                free.is_empty(),
+                "{name} on {profile}: cured on nothing {free:?}"
+            );
+            let r = run_in(&dir, &["run", &out, "--json"]);
+            assert!(r.status.success(), "run {out}: {}", stderr(&r));
+            let report: Value = serde_json::from_slice(&r.stdout).unwrap();
+            assert_eq!(
+                report["unsupported_regions"],
+                serde_json::json!([]),
+                "{out}"
             );
             std::fs::remove_dir_all(dir.join(&out)).unwrap();
         }

@@ -6,9 +6,11 @@
 //! is an `unsupported-region` violation. Any other job (no supports asked, or imported)
 //! gets the warning `run.unsupported-regions`.
 
+mod cured;
+
 use super::{Kind, Violation};
 use crate::bundle::machine::Machine;
-use crate::bundle::regions::{unsupported_regions, Region, Run};
+use crate::bundle::regions::{regions_of, resting_regions, Region, Run};
 use crate::bundle::{BundleSource, Manifest};
 use crate::text::{first_of, fixed, number, plural};
 use crate::warning::Warning;
@@ -66,20 +68,38 @@ pub fn check(
             area_mm2: g.area_mm2(p),
         }
     };
-    let regions: Vec<UnsupportedRegion> = unsupported_regions(runs).into_iter().map(mm).collect();
+    // A corrected job's candidates judged by what cures; by gray alone when there is no
+    // model to judge by.
+    let mut judge = None;
+    let mut regions = Vec::new();
+    for (i, pair) in runs.windows(2).enumerate() {
+        let [Some(below), Some(cur)] = pair else {
+            continue;
+        };
+        let Some((region, rests)) = resting_regions(cur, below) else {
+            continue;
+        };
+        let mut free: Vec<bool> = rests.iter().map(|r| !r).collect();
+        if let Some(j) = judge.get_or_insert_with(|| cured::CureJudge::of(dir, manifest, machine)) {
+            j.judge(i + 1, cur, &region, &mut free);
+        }
+        let found = regions_of(cur, &region, &free);
+        regions.extend(found.into_iter().map(|g| mm((i + 1, g))));
+    }
     let mut out = Printability::default();
     if regions.is_empty() {
         return out;
     }
-    // The cure correction moves edges in by up to a pixel and counts on the blur to close
-    // what that opens: a supported job's masks are checked for this only when uncorrected
-    // (corrected, what they leave over nothing is the warning, and `run --cure` predicts
+    // Without a model, a corrected job's masks are not judged for violations: the
+    // correction moves edges in by up to a pixel and counts on the blur to close what
+    // that opens (what they leave over nothing is the warning, and `run --cure` predicts
     // what cures).
-    let corrected = manifest
-        .cure
-        .as_ref()
-        .is_some_and(|c| c.correction != "off");
-    match manifest.supports.as_ref().filter(|_| !corrected) {
+    let gray_only = judge.flatten().is_none()
+        && manifest
+            .cure
+            .as_ref()
+            .is_some_and(|c| c.correction != "off");
+    match manifest.supports.as_ref().filter(|_| !gray_only) {
         Some(s) => {
             let least = smallest_held_mm2(s);
             let held: Vec<UnsupportedRegion> = regions
