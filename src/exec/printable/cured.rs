@@ -17,6 +17,8 @@ use crate::bundle::regions::Run;
 use crate::bundle::{BundleSource, Manifest};
 use crate::cure::Psf;
 use crate::exec::cure::{decode, model_of, ratios, Light};
+use std::cell::RefCell;
+use std::rc::Rc;
 
 /// The judge of one job's candidates: its light, its model's threshold and blur.
 pub(super) struct CureJudge<'a> {
@@ -35,6 +37,8 @@ pub(super) struct CureJudge<'a> {
     /// along one axis.
     weights: Vec<f32>,
     reach: usize,
+    /// The masks read last, by layer.
+    recent: RefCell<Vec<(usize, Rc<Vec<u8>>)>>,
 }
 
 /// What cures of a candidate region.
@@ -88,6 +92,7 @@ impl<'a> CureJudge<'a> {
             ratios: ratios(manifest),
             weights,
             reach,
+            recent: RefCell::new(Vec::new()),
         })
     }
 
@@ -115,11 +120,21 @@ impl<'a> CureJudge<'a> {
         }
     }
 
-    /// Layer `i`'s (first) mask's grays, `None` when it has none or it cannot be read.
-    fn mask(&self, i: usize) -> Option<Vec<u8>> {
+    /// Layer `i`'s (first) mask's grays, `None` when it has none or it cannot be read. The
+    /// last two read are kept: consecutive layers with regions share one.
+    fn mask(&self, i: usize) -> Option<Rc<Vec<u8>>> {
+        let mut recent = self.recent.borrow_mut();
+        if let Some((_, m)) = recent.iter().find(|(k, _)| *k == i) {
+            return Some(Rc::clone(m));
+        }
         let m = self.manifest.layers.get(i)?.masks.first()?;
         let (w, h, px) = decode(self.source, &m.file).ok()?;
-        ([w, h] == self.size).then_some(px)
+        let px = Rc::new(([w, h] == self.size).then_some(px)?);
+        if recent.len() == 2 {
+            recent.remove(0);
+        }
+        recent.push((i, Rc::clone(&px)));
+        Some(px)
     }
 
     /// What cures of region `g` of layer `i` (see [`CureJudge::judge`]); `masks`: the

@@ -80,6 +80,9 @@ pub fn check(
             continue;
         };
         let mut free: Vec<bool> = rests.iter().map(|r| !r).collect();
+        if !free.contains(&true) {
+            continue;
+        }
         if let Some(j) = judge.get_or_insert_with(|| cured::CureJudge::of(dir, manifest, machine)) {
             j.judge(i + 1, cur, &region, &mut free);
         }
