@@ -267,12 +267,15 @@ mod tests {
     fn writes_entries_in_order_stored_or_deflated() {
         let d = scratch("order");
         let p = d.join("a.zip");
-        let mut z = ZipOut::create(&p, None).unwrap();
-        z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
-            .unwrap();
-        z.add("masks/00000.png", &[7u8; 100], Method::Stored)
-            .unwrap();
-        z.finish().unwrap();
+        let write = || {
+            let mut z = ZipOut::create(&p, None).unwrap();
+            z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
+                .unwrap();
+            z.add("masks/00000.png", &[7u8; 100], Method::Stored)
+                .unwrap();
+            z.finish().unwrap();
+        };
+        write();
         assert_eq!(names(&d), ["a.zip"]);
         let mut a = zip::ZipArchive::new(File::open(&p).unwrap()).unwrap();
         assert_eq!(a.name_for_index(0).unwrap().unwrap(), "job.json");
@@ -283,12 +286,7 @@ mod tests {
         drop(e);
         // The same entries give the same bytes.
         let first = std::fs::read(&p).unwrap();
-        let mut z = ZipOut::create(&p, None).unwrap();
-        z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
-            .unwrap();
-        z.add("masks/00000.png", &[7u8; 100], Method::Stored)
-            .unwrap();
-        z.finish().unwrap();
+        write();
         assert_eq!(std::fs::read(&p).unwrap(), first);
         let _ = std::fs::remove_dir_all(&d);
     }

@@ -784,6 +784,7 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use super::super::test_settings as settings;
     use serde_json::json;
     use std::io::Write;
 
@@ -806,30 +807,6 @@ mod tests {
             crate::formats::archive::read::read_zip(path, bytes, &Default::default()).unwrap();
         let entry = settings_entry(&archive).unwrap();
         import(archive, &entry, "0")
-    }
-
-    fn settings(layers: Value) -> Value {
-        json!({
-            "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
-            "Default layer settings": {
-                "Number of duplications": 1,
-                "Position settings": {
-                    "Layer thickness (um)": 10, "Distance up (mm)": 0.3,
-                    "Initial wait (ms)": 0, "BP up speed (mm/sec)": 2,
-                    "BP up acceleration (mm/sec^2)": 20, "Up wait (ms)": 0,
-                    "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 10,
-                    "Final wait (ms)": 0
-                },
-                "Image settings": {
-                    "Image file": "a.png", "Layer exposure time (ms)": 100,
-                    "Light engine": "e", "Light engine power setting": 100,
-                    "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
-                    "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
-                }
-            },
-            "Named layer groups": {"g": [{}, {}]},
-            "Layers": layers
-        })
     }
 
     #[test]
