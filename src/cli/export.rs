@@ -82,7 +82,7 @@ pub(crate) fn fit_profile(
 ) -> Result<(), crate::Error> {
     let hw = Hardware::read(path)?;
     let ps = profile.projector.iter_mut();
-    name_engines(&hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)).collect());
+    name_engines(&hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)));
     let mine = crate::bundle::Machine::of(profile);
     let theirs = hw.machine(&mine)?;
     let (a, b) = (&mine.stage, &theirs.stage);
@@ -132,7 +132,11 @@ pub(crate) fn fit_profile(
 
 /// Gives the projectors (their names and wavelengths) the light engines of `hw` that show
 /// them ([`Hardware::name_engines`]).
-fn name_engines(hw: &Hardware, projectors: Vec<(&mut String, &mut Option<u32>)>) {
+fn name_engines<'a>(
+    hw: &Hardware,
+    projectors: impl Iterator<Item = (&'a mut String, &'a mut Option<u32>)>,
+) {
+    let projectors: Vec<_> = projectors.collect();
     let named = hw.name_engines(projectors.iter().map(|(n, w)| (n.to_string(), **w)));
     for ((name, nm), engine) in projectors.into_iter().zip(named) {
         (*name, *nm) = engine;
@@ -163,7 +167,7 @@ fn refuse(hw: &Hardware, path: &Path, problems: Vec<String>) -> Result<(), crate
 /// refused.
 fn fit_job(job: &mut crate::formats::Job, hw: &Hardware, path: &Path) -> Result<(), crate::Error> {
     let ps = job.manifest.machine.projector.iter_mut();
-    name_engines(hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)).collect());
+    name_engines(hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)));
     let mut on = job.manifest.clone();
     on.machine = hw.machine(&on.machine)?;
     let problems = crate::exec::hardware_check(job, hw)

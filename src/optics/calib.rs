@@ -227,11 +227,7 @@ fn log_linear_fit(rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFi
     let coef = (0..m).map(|t| x[t] / norms[t]).collect();
     let mut s: Vec<f64> = (m..cols).map(|t| (x[t] / norms[t]).exp()).collect();
     s.push(1.0);
-    Ok(FactorFit {
-        coef,
-        s,
-        condition,
-    })
+    Ok(FactorFit { coef, s, condition })
 }
 
 /// Least squares A·x ≈ b for a column-scaled A (columns of unit norm; at most 28 columns)
@@ -326,11 +322,7 @@ fn alternating_least_squares(
         }
         prev = obj;
     }
-    Ok(FactorFit {
-        coef,
-        s,
-        condition,
-    })
+    Ok(FactorFit { coef, s, condition })
 }
 
 /// Cross-validated RMS relative error (%) of degree-`d` fits: zone positions are split

@@ -3,7 +3,7 @@
 //!
 //! The settings are expanded (`expr.rs`), validated against the standard's schema
 //! (`schema.rs`), then checked for what the schema cannot say; the expansion and the layer
-//! records are bounded ([`MAX_LAYERS`], [`EXPANSION_BYTES`]) before anything is made. Each
+//! records are bounded ([`MAX_LAYERS`], `EXPANSION_BYTES`) before anything is made. Each
 //! image is a layer record of its own, the first with the layer's thickness and position
 //! steps, each further one 0 µm thick at the same height (the standard's "0 um layer").
 //! What the file does not state (pixel size, stage limits and resolution) is an
@@ -758,8 +758,8 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use super::super::test_settings as settings;
+    use super::*;
     use serde_json::json;
     use std::io::Write;
 
