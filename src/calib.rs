@@ -154,22 +154,14 @@ fn push_frame(out: &mut Vec<u8>, x: f64, y: f64, s: f64) {
     let at = |p: [f64; 2], z: f64| [p[0], p[1], z];
     for k in 0..4 {
         let j = (k + 1) % 4;
-        push_quad(
-            out,
+        for q in [
             [at(o[k], 0.), at(o[j], 0.), at(o[j], 3.), at(o[k], 3.)],
-        );
-        push_quad(
-            out,
             [at(i[j], 0.), at(i[k], 0.), at(i[k], 3.), at(i[j], 3.)],
-        );
-        push_quad(
-            out,
             [at(o[k], 3.), at(o[j], 3.), at(i[j], 3.), at(i[k], 3.)],
-        );
-        push_quad(
-            out,
             [at(o[j], 0.), at(o[k], 0.), at(i[k], 0.), at(i[j], 0.)],
-        );
+        ] {
+            push_quad(out, q);
+        }
     }
 }
 
@@ -248,6 +240,13 @@ impl Sheet {
         })
     }
 
+    /// The file's name (without its directory), as a fit records it.
+    pub fn file_name(&self) -> String {
+        self.path
+            .file_name()
+            .map_or(String::new(), |f| f.to_string_lossy().into())
+    }
+
     /// The number of data rows.
     pub fn rows(&self) -> usize {
         self.rows.len()
@@ -266,23 +265,16 @@ impl Sheet {
     /// negative one where `non_negative` is an error.
     pub fn num(&self, i: usize, col: &str, non_negative: bool) -> Result<Option<f64>> {
         let (t, line) = self.text(i, col);
-        let v = match t.parse::<f64>() {
+        let why = match t.parse::<f64>() {
             _ if t.is_empty() => return Ok(None),
-            Ok(v) if v.is_finite() && (v >= 0.0 || !non_negative) => v,
-            Ok(_) => {
-                return Err(Error::input(
-                    &self.path,
-                    format!("line {line}, column {col}: {t} is negative or not finite"),
-                ))
-            }
-            Err(_) => {
-                return Err(Error::input(
-                    &self.path,
-                    format!("line {line}, column {col}: {t:?} is not a number"),
-                ))
-            }
+            Ok(v) if v.is_finite() && (v >= 0.0 || !non_negative) => return Ok(Some(v)),
+            Ok(_) => format!("{t} is negative or not finite"),
+            Err(_) => format!("{t:?} is not a number"),
         };
-        Ok(Some(v))
+        Err(Error::input(
+            &self.path,
+            format!("line {line}, column {col}: {why}"),
+        ))
     }
 }
 
@@ -370,10 +362,7 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     let vl = vb / (dp * dp) + b * b * vd / dp.powi(4) - 2.0 * b * cov / dp.powi(3);
     let crit = lnc.exp();
     Ok(ResinFit {
-        sheet: s
-            .path
-            .file_name()
-            .map_or(String::new(), |f| f.to_string_lossy().into()),
+        sheet: s.file_name(),
         sheet_sha256: s.sha256.clone(),
         dp_mm: dp,
         dp_se_mm: vd.sqrt(),
@@ -388,10 +377,9 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
 impl ResinFit {
     /// The chart of the working curve: the measured points and the fitted line against ln E.
     pub fn chart(&self) -> Chart {
-        let unit = if self.ec_mj_cm2.is_some() {
-            "mJ/cm²"
-        } else {
-            "s"
+        let (unit, name) = match self.ec_mj_cm2 {
+            Some(_) => ("mJ/cm²", "Ec"),
+            None => ("s", "critical exposure"),
         };
         let pts: Vec<(f64, f64)> = self.residuals.iter().map(|r| (r[1].ln(), r[2])).collect();
         let c = self.ec_mj_cm2.or(self.critical_exposure_s).unwrap_or(1.0);
@@ -402,14 +390,8 @@ impl ResinFit {
             .collect();
         Chart {
             title: format!(
-                "{}: working curve Cd = Dp·ln(E/Ec), Dp = {:.4} mm, {} = {c:.4} {unit}",
-                self.sheet,
-                self.dp_mm,
-                if self.ec_mj_cm2.is_some() {
-                    "Ec"
-                } else {
-                    "critical exposure"
-                }
+                "{}: working curve Cd = Dp·ln(E/Ec), Dp = {:.4} mm, {name} = {c:.4} {unit}",
+                self.sheet, self.dp_mm,
             ),
             x_label: format!("ln(E / 1 {unit}), E = dose (as exposure time when in s)"),
             width: 1000,
@@ -429,9 +411,7 @@ impl ResinFit {
     /// Reads a resin calibration file (as written by `dmdsl calibrate resin`) and applies its
     /// Dp (and Ec, when absolute) to `profile`'s resin, which then records the sheet.
     pub fn apply_file(path: &Path, profile: &mut Profile) -> Result<()> {
-        let src = crate::input::read_text(path, "resin calibration")?;
-        let f: ResinFit = toml::from_str(&src)
-            .map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))?;
+        let f: ResinFit = read_fit(path, "resin calibration")?;
         let pos = |v: f64, k: &str| {
             crate::units::Positive::new(v)
                 .ok_or_else(|| Error::input(path, format!("{k} = {v} is not positive")))
@@ -443,6 +423,12 @@ impl ResinFit {
         }
         Ok(())
     }
+}
+
+/// Reads a fit file `path` (a TOML `what`, as a `dmdsl calibrate` command writes it).
+fn read_fit<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let src = crate::input::read_text(path, what)?;
+    toml::from_str(&src).map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))
 }
 
 /// Binary STL of `records` (50-byte triangle records).

@@ -733,12 +733,8 @@ mod tests {
             .chunks(8)
             .map(|b| b.iter().enumerate().map(|(j, &x)| (x as u8) << j).sum())
             .collect();
-        let (mut a, mut b) = (1u32, 0u32);
-        for &x in &raw {
-            a = (a + x as u32) % 65521;
-            b = (b + a) % 65521;
-        }
-        idat.extend_from_slice(&(b << 16 | a).to_be_bytes());
+        let (a, b) = adler_bytewise(raw.iter().copied());
+        idat.extend_from_slice(&((b << 16 | a) as u32).to_be_bytes());
         let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
         let mut ihdr = (w as u32).to_be_bytes().to_vec();
         ihdr.extend_from_slice(&(h as u32).to_be_bytes());
@@ -946,6 +942,14 @@ mod tests {
         }
     }
 
+    /// Adler-32's two sums over `data`, byte by byte.
+    fn adler_bytewise(data: impl IntoIterator<Item = u8>) -> (u64, u64) {
+        data.into_iter().fold((1, 0), |(a, b), x| {
+            let a = (a + x as u64) % ADLER_MOD;
+            (a, (b + a) % ADLER_MOD)
+        })
+    }
+
     #[test]
     fn adler_runs_match_bytewise() {
         let data: Vec<u8> = (0..200_000u32)
@@ -957,11 +961,7 @@ mod tests {
                 }
             })
             .collect();
-        let (mut a, mut b) = (1u64, 0u64);
-        for &x in &data {
-            a = (a + x as u64) % ADLER_MOD;
-            b = (b + a) % ADLER_MOD;
-        }
+        let (a, b) = adler_bytewise(data.iter().copied());
         let mut ad = Adler::NEW;
         let mut i = 0;
         while i < data.len() {
@@ -1009,16 +1009,8 @@ mod tests {
                     })
                     .collect();
                 let png = encode_gray8(w as u32, h as u32, &d);
-                let mut plain = Vec::new();
-                for row in d.chunks(w) {
-                    plain.push(0);
-                    plain.extend_from_slice(row);
-                }
-                let (mut a, mut b) = (1u64, 0u64);
-                for &x in &plain {
-                    a = (a + x as u64) % ADLER_MOD;
-                    b = (b + a) % ADLER_MOD;
-                }
+                let plain = d.chunks(w).flat_map(|row| [0].iter().chain(row).copied());
+                let (a, b) = adler_bytewise(plain);
                 let want = (b << 16 | a) as u32;
                 assert_eq!(scanlines_adler32(w as u32, &d), want);
                 assert_eq!(scanlines_adler32_of(&png), want);

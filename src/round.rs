@@ -1,20 +1,9 @@
-//! Rounding of the numbers dmdsl writes (`job.json`, the `--json` outputs).
+//! Rounding of the numbers dmdsl writes (`job.json`, the `--json` outputs); docs/JSON.md,
+//! "Numbers", lists what each quantity is rounded to and why.
 //!
-//! Floating-point arithmetic leaves noise in the last digits (3 × 0.1 is
-//! 0.30000000000000004). Every number a bundle records is rounded to what it means
-//! before it is used and written, so that it prints as a short decimal and a reader gets
-//! back exactly the value the planner used:
-//!
-//! * stage positions: a whole number of stage steps ([`StageGrid::position`]);
-//! * times: 1 ms, or 3 significant digits below 0.1 s ([`time_s`]);
-//! * lengths on the build plane: bounding boxes to 1 µm ([`plane_mm`]), fill distances
-//!   down to 1 µm ([`plane_mm_down`], as they are lower bounds);
-//! * section areas: 9 significant digits ([`area_mm2`]);
-//! * other derived quantities (volumes, irradiances, spreads, fit errors, warning
-//!   figures): 6 significant digits ([`derived`]).
-//!
-//! A value rounded here is the nearest `f64` to a decimal of few digits, so Rust and
-//! `serde_json` print it as that decimal, and parsing the printed text gives the same
+//! Every number a bundle records is rounded to what it means before it is used and
+//! written. A value rounded here is the nearest `f64` to a decimal of few digits, so Rust
+//! and `serde_json` print it as that decimal, and parsing the printed text gives the same
 //! `f64` back.
 
 /// 10⁰ … 10²², every one exactly representable as an `f64`.

@@ -192,9 +192,7 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<AccuracyReport> {
             return Err(Error::input(&s.path, format!("line {line}, column nominal_mm: a measured feature needs a positive nominal size")));
         };
         let axis = match axis.as_str() {
-            "X" => 'X',
-            "Y" => 'Y',
-            "Z" => 'Z',
+            "X" | "Y" | "Z" => axis.chars().next().expect("one letter"),
             _ => {
                 return Err(Error::input(
                     &s.path,
@@ -202,17 +200,16 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<AccuracyReport> {
                 ))
             }
         };
-        let sign = if matches!(kind, "hole" | "slot") {
-            -1.0
-        } else {
-            1.0
-        };
         rows.push(MeasuredRow {
             kind: kind.to_string(),
             axis,
             nominal_mm: nominal,
             measured_mm: m,
-            sign,
+            sign: if matches!(kind, "hole" | "slot") {
+                -1.0
+            } else {
+                1.0
+            },
         });
     }
     if rows.is_empty() {
@@ -259,13 +256,7 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<AccuracyReport> {
     let mut fits = Vec::new();
     for axis in ['X', 'Y', 'Z'] {
         let r: Vec<_> = rows.iter().filter(|r| r.axis == axis).collect();
-        let a = nalgebra::DMatrix::from_fn(r.len(), 2, |i, j| {
-            if j == 0 {
-                r[i].nominal_mm
-            } else {
-                r[i].sign
-            }
-        });
+        let a = nalgebra::DMatrix::from_fn(r.len(), 2, |i, j| [r[i].nominal_mm, r[i].sign][j]);
         let b = nalgebra::DVector::from_iterator(r.len(), r.iter().map(|r| r.measured_mm));
         let Some(x) = crate::polyfit::LeastSquares::new(a.clone())
             .filter(|_| r.len() >= 3)
@@ -325,11 +316,7 @@ impl AccuracyFit {
         let mut offsets = Vec::new();
         let mut z_offset_mm = None;
         for f in &fits {
-            let k = match f.axis {
-                'X' => 0,
-                'Y' => 1,
-                _ => 2,
-            };
+            let k = "XYZ".find(f.axis).unwrap_or(2);
             let s0 = printed_with.scale[k];
             scale[k] = s0 / f.scale;
             if k < 2 {
@@ -344,10 +331,7 @@ impl AccuracyFit {
             offsets.iter().sum::<f64>() / offsets.len() as f64
         };
         AccuracyFit {
-            sheet: sheet
-                .path
-                .file_name()
-                .map_or(String::new(), |f| f.to_string_lossy().into()),
+            sheet: sheet.file_name(),
             sheet_sha256: sheet.sha256.clone(),
             printed_with: printed_with.clone(),
             fits,
@@ -370,9 +354,7 @@ impl AccuracyFit {
     /// correction in `profile`, which then records the sheet. A value out of the profile's
     /// range is an error naming the file.
     pub fn apply_file(path: &Path, profile: &mut Profile) -> Result<()> {
-        let src = crate::input::read_text(path, "accuracy correction")?;
-        let f: AccuracyFit = toml::from_str(&src)
-            .map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))?;
+        let f: AccuracyFit = super::read_fit(path, "accuracy correction")?;
         let c = f.correction();
         c.validate().map_err(|m| Error::input(path, m))?;
         profile.accuracy = c;
@@ -407,18 +389,15 @@ impl AccuracyFit {
                     Series::new("pins, walls, steps", [31, 119, 180], Style::Points, outer),
                 ];
                 if !inner.is_empty() {
-                    series.push(Series::new(
-                        "fit, holes and slots",
-                        [255, 127, 14],
-                        Style::Line,
-                        line(-1.0),
-                    ));
-                    series.push(Series::new(
-                        "holes, slots",
-                        [214, 39, 40],
-                        Style::Points,
-                        inner,
-                    ));
+                    series.extend([
+                        Series::new(
+                            "fit, holes and slots",
+                            [255, 127, 14],
+                            Style::Line,
+                            line(-1.0),
+                        ),
+                        Series::new("holes, slots", [214, 39, 40], Style::Points, inner),
+                    ]);
                 }
                 Panel {
                     y_label: format!("{} error (mm)", f.axis),

@@ -87,24 +87,14 @@ fn cluster() -> (Vec<Rect>, Vec<ClusterFeature>, [i64; 2]) {
             a = b;
         }
         for (k, &w) in WIDTHS_PX.iter().enumerate() {
+            let kind = if gaps { Drawn::Gap } else { Drawn::Line };
+            feats.push((kind, axis, w, centre(a as f64 + 0.5 * w as f64)));
             let w = w as i64;
             if gaps {
-                feats.push((
-                    Drawn::Gap,
-                    axis,
-                    w as u32,
-                    centre(a as f64 + 0.5 * w as f64),
-                ));
                 rects.push(put(a + w, a + w + b));
                 a += w + b;
             } else {
                 rects.push(put(a, a + w));
-                feats.push((
-                    Drawn::Line,
-                    axis,
-                    w as u32,
-                    centre(a as f64 + 0.5 * w as f64),
-                ));
                 a += w + if k + 1 < WIDTHS_PX.len() { s } else { 0 };
             }
         }
@@ -158,12 +148,9 @@ fn areas(p: &Profile) -> Vec<Rect> {
                 down(x1 / px),
                 down(h - y0 / px),
             ];
-            a = [
-                a[0].max(cal[0]),
-                a[1].max(cal[1]),
-                a[2].min(cal[2]),
-                a[3].min(cal[3]),
-            ];
+            for k in 0..2 {
+                (a[k], a[k + 2]) = (a[k].max(cal[k]), a[k + 2].min(cal[k + 2]));
+            }
         }
         out.push(a);
     }
@@ -419,10 +406,7 @@ pub fn fit_psf(s: &Sheet, model: &CureModel) -> Result<PsfFit> {
             .collect();
     }
     Ok(PsfFit {
-        sheet: s
-            .path
-            .file_name()
-            .map_or(String::new(), |f| f.to_string_lossy().into()),
+        sheet: s.file_name(),
         sheet_sha256: s.sha256.clone(),
         layers,
         projector: out,
@@ -599,9 +583,7 @@ impl PsfFit {
     /// Reads a blur calibration file (as written by `dmdsl calibrate psf`) and sets each
     /// named projector's `psf_sigma_px` in `profile`, which then records the sheet.
     pub fn apply_file(path: &Path, profile: &mut Profile) -> Result<()> {
-        let src = crate::input::read_text(path, "blur calibration")?;
-        let f: PsfFit = toml::from_str(&src)
-            .map_err(|e| Error::input(path, crate::profile::one_line(&e.to_string())))?;
+        let f: PsfFit = super::read_fit(path, "blur calibration")?;
         let source = format!("{} sha256:{}", f.sheet, f.sheet_sha256);
         for p in &f.projector {
             let Some(q) = profile.projector.iter_mut().find(|q| q.name == p.name) else {

@@ -63,24 +63,7 @@ enum Kind {
     /// and deviation, share within ±0.06 mm and the tolerance, per axis and feature kind)
     /// and fit measured = scale·nominal ± offset per axis; with -o, write the correction
     /// that undoes the fits (TOML, for `slice --accuracy`) and the plot of the errors.
-    Accuracy {
-        /// The sheet (feature, axis, nominal_mm, measured_mm; empty where not measured).
-        input: PathBuf,
-        /// Correction file to write (TOML); the plot goes beside it as .png.
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-        /// Tolerance, mm.
-        #[arg(long, value_name = "MM", default_value_t = 0.1)]
-        tolerance: f64,
-        /// The profile the part was printed with (its [accuracy] correction is composed
-        /// with the fit).
-        #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
-        profile: String,
-        /// The correction file the part was printed with (`testjob accuracy --accuracy`),
-        /// replacing the profile's.
-        #[arg(long, value_name = "FILE")]
-        accuracy: Option<PathBuf>,
-    },
+    Accuracy(super::testjob::AccuracyArgs),
     /// Fit the point-spread function's σ (psf_sigma_px, per projector) to the filled-in
     /// sheet of `dmdsl testjob psf` under the cure model; writes σ (TOML, for `slice
     /// --psf`) and the plot of printed against drawn width.
@@ -108,22 +91,7 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
         Some(Kind::Resin { input, output }) => {
             return super::testjob::calibrate_resin(input, output, quiet)
         }
-        Some(Kind::Accuracy {
-            input,
-            output,
-            tolerance,
-            profile,
-            accuracy,
-        }) => {
-            let a = super::testjob::AccuracyArgs {
-                input: &input,
-                output: output.as_deref(),
-                tolerance,
-                profile: &profile,
-                accuracy: accuracy.as_deref(),
-            };
-            return super::testjob::calibrate_accuracy(a, quiet);
-        }
+        Some(Kind::Accuracy(a)) => return super::testjob::calibrate_accuracy(a, quiet),
         Some(Kind::Psf {
             input,
             output,

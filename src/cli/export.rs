@@ -81,15 +81,8 @@ pub(crate) fn fit_profile(
     path: &Path,
 ) -> Result<(), crate::Error> {
     let hw = Hardware::read(path)?;
-    let named = hw.name_engines(
-        profile
-            .projector
-            .iter()
-            .map(|p| (p.name.clone(), p.wavelength_nm)),
-    );
-    for (p, (name, nm)) in profile.projector.iter_mut().zip(named) {
-        (p.name, p.wavelength_nm) = (name, nm);
-    }
+    let ps = profile.projector.iter_mut();
+    name_engines(&hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)));
     let mine = crate::bundle::Machine::of(profile);
     let theirs = hw.machine(&mine)?;
     let (a, b) = (&mine.stage, &theirs.stage);
@@ -137,6 +130,19 @@ pub(crate) fn fit_profile(
     )
 }
 
+/// Gives the projectors (their names and wavelengths) the light engines of `hw` that show
+/// them ([`Hardware::name_engines`]).
+fn name_engines<'a>(
+    hw: &Hardware,
+    projectors: impl Iterator<Item = (&'a mut String, &'a mut Option<u32>)>,
+) {
+    let projectors: Vec<_> = projectors.collect();
+    let named = hw.name_engines(projectors.iter().map(|(n, w)| (n.to_string(), **w)));
+    for ((name, nm), engine) in projectors.into_iter().zip(named) {
+        (*name, *nm) = engine;
+    }
+}
+
 /// An error naming the first of `problems` (and how many more) when there are any.
 fn refuse(hw: &Hardware, path: &Path, problems: Vec<String>) -> Result<(), crate::Error> {
     let Some(first) = problems.first() else {
@@ -160,15 +166,8 @@ fn refuse(hw: &Hardware, path: &Path, problems: Vec<String>) -> Result<(), crate
 /// (a move beyond its build platform's limits, an image its engines cannot show) is
 /// refused.
 fn fit_job(job: &mut crate::formats::Job, hw: &Hardware, path: &Path) -> Result<(), crate::Error> {
-    let m = &mut job.manifest.machine;
-    let named = hw.name_engines(
-        m.projector
-            .iter()
-            .map(|p| (p.name.clone(), p.wavelength_nm)),
-    );
-    for (p, (name, nm)) in m.projector.iter_mut().zip(named) {
-        (p.name, p.wavelength_nm) = (name, nm);
-    }
+    let ps = job.manifest.machine.projector.iter_mut();
+    name_engines(hw, ps.map(|p| (&mut p.name, &mut p.wavelength_nm)));
     let mut on = job.manifest.clone();
     on.machine = hw.machine(&on.machine)?;
     let problems = crate::exec::hardware_check(job, hw)
@@ -213,16 +212,9 @@ pub(crate) struct ExportArgs {
     machine: Option<PathBuf>,
     /// Print a machine-readable summary on stdout (one JSON object).
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     #[command(flatten)]
     warnings: super::WarningArgs,
-}
-
-impl ExportArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
 }
 
 /// Runs `dmdsl export`.

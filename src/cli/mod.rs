@@ -180,11 +180,11 @@ impl Cli {
     pub(crate) fn json(&self) -> bool {
         match &self.cmd {
             Cmd::Slice(a) => a.json,
-            Cmd::Run(a) => a.json(),
+            Cmd::Run(a) => a.json,
             Cmd::Calibrate(a) => a.json,
             Cmd::Distortion(a) => a.json,
             Cmd::Inspect(a) => a.json,
-            Cmd::Export(a) => a.json(),
+            Cmd::Export(a) => a.json,
             Cmd::Profile(_) | Cmd::Completions(_) | Cmd::Man(_) | Cmd::Testjob(_) => false,
         }
     }

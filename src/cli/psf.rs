@@ -27,9 +27,6 @@ pub(crate) fn psf_job(output: &Path, profile: &str, quiet: bool) -> anyhow::Resu
     o.placement = crate::job::PlacementMode::Keep;
     // The masks draw the lines and gaps exactly: their widths are what is fitted.
     o.cure.correction = Some(crate::cure::Correction::Off);
-    let sheet_path = output.with_extension("csv");
-    crate::output::refuse_link(&sheet_path)?;
-    let s = crate::job::slice_to_bundle(&o)?;
     let mut sheet = String::from(
         "feature,kind,axis,place,x_mm,y_mm,projector,drawn_px,drawn_mm,layers,printed_mm\n",
     );
@@ -50,7 +47,7 @@ pub(crate) fn psf_job(output: &Path, profile: &str, quiet: bool) -> anyhow::Resu
             psf::FEATURE_LAYERS
         );
     }
-    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    let (s, sheet_path) = super::testjob::slice_with_sheet(&o, &sheet)?;
     if !quiet {
         super::print_warnings(&s.warnings, "");
         println!(
@@ -97,13 +94,8 @@ pub(crate) fn calibrate_psf(
     let sheet = crate::calib::Sheet::read(input, &required)?;
     let f = psf::fit_psf(&sheet, &model)?;
     let head = format!("# dmdsl blur calibration, fitted by `dmdsl calibrate psf {}` with profile {}:\n# the Gaussian point-spread function's sigma per projector, least squares of the printed\n# widths against the cure model's. Use it with `dmdsl slice --psf FILE`.\n", input.display(), p.name);
-    let png = output.with_extension("png");
-    let chart = f.chart().render().encode(crate::plot::Format::Png);
     let toml = head + &toml::to_string(&f).expect("fit serializes");
-    crate::optics::report::write_all(&[
-        (output.to_path_buf(), toml.into_bytes()),
-        (png.clone(), chart),
-    ])?;
+    let png = super::testjob::write_fit(output, toml, &f.chart())?;
     if !quiet {
         report(&f, output, &png);
     }

@@ -18,7 +18,7 @@ pub(crate) struct RunArgs {
     bundle: PathBuf,
     /// Print the report as JSON on stdout.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     /// Write the simulated timeline as CSV (time, stage, velocity, shutter, mask).
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
@@ -50,13 +50,6 @@ pub(crate) struct RunArgs {
     /// do not change the exit code.
     #[arg(long)]
     cure: bool,
-}
-
-impl RunArgs {
-    /// True when `--json` was given.
-    pub(crate) fn json(&self) -> bool {
-        self.json
-    }
 }
 
 /// Runs `dmdsl run`.

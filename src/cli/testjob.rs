@@ -109,9 +109,6 @@ pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
     o.optics.mode = Some(crate::optics::Mode::Off);
     o.cure.correction = Some(crate::cure::Correction::Off);
     o.dose = Some(wc.dose.clone());
-    let sheet_path = a.output.with_extension("csv");
-    crate::output::refuse_link(&sheet_path)?;
-    let s = crate::job::slice_to_bundle(&o)?;
     let mut sheet = String::from("window,x_mm,y_mm,gray,exposure_s,dose_mj_cm2,cured_mm\n");
     for (i, w) in wc.windows.iter().enumerate() {
         let dose = w.dose_mj_cm2.map_or(String::new(), |d| format!("{d:.4}"));
@@ -123,7 +120,7 @@ pub(crate) fn testjob(cmd: TestjobCmd, quiet: bool) -> anyhow::Result<u8> {
             w.exposure_s
         );
     }
-    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    let (s, sheet_path) = slice_with_sheet(&o, &sheet)?;
     if !quiet {
         super::print_warnings(&s.warnings, "");
         println!(
@@ -162,10 +159,11 @@ pub(crate) fn calibrate_resin(input: PathBuf, output: PathBuf, quiet: bool) -> a
         ),
     };
     let head = format!("# dmdsl resin calibration, fitted by `dmdsl calibrate resin {}`: Jacobs' working\n# curve Cd = Dp*ln(E/Ec), least squares in ln E. Use it with `dmdsl slice --resin FILE`.\n", input.display());
-    let png = output.with_extension("png");
-    let chart = f.chart().render().encode(crate::plot::Format::Png);
-    let toml = head + &toml::to_string(&f).expect("fit serializes");
-    crate::optics::report::write_all(&[(output.clone(), toml.into_bytes()), (png.clone(), chart)])?;
+    let png = write_fit(
+        &output,
+        head + &toml::to_string(&f).expect("fit serializes"),
+        &f.chart(),
+    )?;
     if !quiet {
         println!(
             "{}: {} cured windows; Dp = {:.4} ± {:.4} mm, {crit}",
@@ -209,15 +207,12 @@ fn accuracy_job(
     let mut o = crate::job::SliceOptions::new("accuracy.stl", output, p);
     o.input_bytes = Some(&stl);
     o.placement = crate::job::PlacementMode::Keep;
-    let sheet_path = output.with_extension("csv");
-    crate::output::refuse_link(&sheet_path)?;
-    let s = crate::job::slice_to_bundle(&o)?;
     let mut sheet = String::from("feature,axis,nominal_mm,measured_mm,x_mm,y_mm\n");
     for f in &feats {
         let [x, y] = [f.centre_mm[0] * fx, f.centre_mm[1] * fy];
         sheet += &format!("{},{},{},,{x:.3},{y:.3}\n", f.kind, f.axis, f.nominal_mm);
     }
-    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    let (s, sheet_path) = slice_with_sheet(&o, &sheet)?;
     if !quiet {
         super::print_warnings(&s.warnings, "");
         println!(
@@ -232,17 +227,24 @@ fn accuracy_job(
 }
 
 /// `dmdsl calibrate accuracy`'s options.
-pub(crate) struct AccuracyArgs<'a> {
-    /// The filled-in sheet.
-    pub input: &'a std::path::Path,
-    /// Where to write the correction (TOML; its plot beside it), if anywhere.
-    pub output: Option<&'a std::path::Path>,
-    /// The tolerance whose share is reported, mm.
-    pub tolerance: f64,
-    /// The profile the part was printed with (its `[accuracy]` correction).
-    pub profile: &'a str,
-    /// The correction file the part was printed with, replacing the profile's.
-    pub accuracy: Option<&'a std::path::Path>,
+#[derive(Args)]
+pub(crate) struct AccuracyArgs {
+    /// The sheet (feature, axis, nominal_mm, measured_mm; empty where not measured).
+    input: PathBuf,
+    /// Correction file to write (TOML); the plot goes beside it as .png.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Tolerance, mm.
+    #[arg(long, value_name = "MM", default_value_t = 0.1)]
+    tolerance: f64,
+    /// The profile the part was printed with (its [accuracy] correction is composed
+    /// with the fit).
+    #[arg(short, long, default_value = profile::DEFAULT_PROFILE)]
+    profile: String,
+    /// The correction file the part was printed with (`testjob accuracy --accuracy`),
+    /// replacing the profile's.
+    #[arg(long, value_name = "FILE")]
+    accuracy: Option<PathBuf>,
 }
 
 /// Runs `dmdsl calibrate accuracy SHEET`.
@@ -252,31 +254,26 @@ pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result
     if !(tolerance > 0.0 && tolerance.is_finite()) {
         return Err(Error::Usage(format!("--tolerance {tolerance}: give a size in mm > 0")).into());
     }
-    let mut printed = Profile::resolve(a.profile)?;
-    if let Some(f) = a.accuracy {
+    let mut printed = Profile::resolve(&a.profile)?;
+    if let Some(f) = &a.accuracy {
         AccuracyFit::apply_file(f, &mut printed)?;
     }
     let sheet =
-        crate::calib::Sheet::read(a.input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
+        crate::calib::Sheet::read(&a.input, &["feature", "axis", "nominal_mm", "measured_mm"])?;
     let report = crate::calib::accuracy(&sheet, tolerance)?;
     let fit = AccuracyFit::new(&sheet, report.fits.clone(), &printed.accuracy);
     let correction = fit.correction();
-    if let Some(out) = a.output {
+    if let Some(out) = &a.output {
         correction
             .validate()
-            .map_err(|m| Error::input(a.input, format!("the fitted correction: {m}")))?;
-        let png = out.with_extension("png");
+            .map_err(|m| Error::input(&a.input, format!("the fitted correction: {m}")))?;
         let toml = format!(
             "# dmdsl calibrate accuracy: the correction of the dimensions fitted to {}\n# (slice --accuracy {}); scale and xy_offset_mm are the profile's [accuracy] keys.\n{}",
             fit.sheet,
             out.display(),
             toml::to_string(&fit).expect("a correction serializes")
         );
-        let chart = fit
-            .chart(&report.rows)
-            .render()
-            .encode(crate::plot::Format::Png);
-        crate::optics::report::write_all(&[(out.to_path_buf(), toml.into_bytes()), (png, chart)])?;
+        write_fit(out, toml, &fit.chart(&report.rows))?;
     }
     if quiet {
         return Ok(0);
@@ -313,7 +310,7 @@ pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result
             None => String::new(),
         }
     );
-    match a.output {
+    match &a.output {
         Some(out) => println!(
             "{}: dmdsl slice --accuracy {} applies it\nplot: {}",
             out.display(),
@@ -323,4 +320,34 @@ pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result
         None => println!("(-o FILE writes it for dmdsl slice --accuracy FILE)"),
     }
     Ok(0)
+}
+
+/// Slices the test job `o` and writes its measurement sheet beside it (`.csv`; a symbolic
+/// link there is refused before anything is written); returns the sheet's path.
+pub(super) fn slice_with_sheet(
+    o: &crate::job::SliceOptions,
+    sheet: &str,
+) -> anyhow::Result<(crate::job::SliceSummary, PathBuf)> {
+    let output = o.output.as_ref().expect("a test job names its output");
+    let sheet_path = output.with_extension("csv");
+    crate::output::refuse_link(&sheet_path)?;
+    let s = crate::job::slice_to_bundle(o)?;
+    crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
+    Ok((s, sheet_path))
+}
+
+/// Writes a fit file `output` (`toml`) and its chart beside it (`.png`), both or neither;
+/// returns the chart's path.
+pub(super) fn write_fit(
+    output: &std::path::Path,
+    toml: String,
+    chart: &crate::plot::Chart,
+) -> anyhow::Result<PathBuf> {
+    let png = output.with_extension("png");
+    let bytes = chart.render().encode(crate::plot::Format::Png);
+    crate::optics::report::write_all(&[
+        (output.to_path_buf(), toml.into_bytes()),
+        (png.clone(), bytes),
+    ])?;
+    Ok(png)
 }

@@ -1,31 +1,13 @@
-//! Every form of a job, each format's reader and writer in one place: [`open`] reads a
-//! job in any form `dmdsl run`, `inspect` and `export` accept, found from its content, as a
-//! native [`Manifest`] and a [`BundleSource`] for its files; [`write()`] writes one in a
-//! [`Format`], atomically, and returns what the format cannot carry as [`Warning`]s (codes
-//! `export.*`, `docs/WARNINGS.md`), never dropped silently.
+//! Every form of a job, each format's reader and writer in one place (docs/FORMATS.md):
+//! [`open`] reads a job in any form `dmdsl run`, `inspect` and `export` accept, found from
+//! its content (docs/EXECUTOR.md, "What it reads"), as a native [`Manifest`] and a
+//! [`BundleSource`] for its files; [`write()`] writes one in a [`Format`], atomically, and
+//! returns what the format cannot carry as [`Warning`]s (codes `export.*`), never dropped
+//! silently.
 //!
-//! * `native.rs`: the bundle directory (`part.dmdjob/`) and the zipped bundle
-//!   (`part.dmdjob.zip`: the same files, `job.json` first; read also with all of them in
-//!   one folder `NAME/`);
-//! * [`sl1`]: PrusaSlicer SL1 / SL1S (`config.ini`, `prusaslicer.ini`, one PNG a layer),
-//!   read as layers and steps that reproduce PrusaSlicer 2.5's print-time model on the
-//!   machine the file describes;
-//! * [`control`]: the SLA control-file standard, schema v5 (the print-settings JSON and
-//!   `slices/`), read as layers and steps from its position and image settings, and the
-//!   standard's printer description (`control::hardware`);
-//! * [`nanodlp`]: NanoDLP plates (`meta.json`, `plate.json`, `profile.json`,
-//!   `options.json`, `info.json`, `1.png …`), read as layers and steps from the plate's
-//!   profile;
-//! * `imported.rs`: what the importers share (the machine record a file implies, the layer
-//!   record of an image, the job around them);
-//! * [`archive`]: zips, their entries inflated into memory only as a reader asks for
-//!   them, refusing anything unsafe (nothing is extracted), and written through a
-//!   temporary sibling.
-//!
-//! The form is found from the content, not the extension: a directory is a bundle; a zip
-//! holding `job.json` is a zipped bundle, one holding `config.ini` and `prusaslicer.ini`
-//! is SL1, one holding `plate.json` and `profile.json` a NanoDLP plate, one holding a
-//! top-level `.json` with `Header` and `Default layer settings` is a control file. A missing setting or a file that cannot be a job of the format is an
+//! `native.rs` is the bundle directory and its zip; [`sl1`], [`control`] and [`nanodlp`]
+//! the foreign formats; `imported.rs` what their importers share; [`archive`] the zip
+//! reader and writer. A missing setting or a file that cannot be a job of the format is an
 //! error naming the file, the entry and the key.
 
 pub mod archive;

@@ -286,11 +286,7 @@ mod tests {
         Rect { x0, y0, x1, y1 }
     }
 
-    const CURVES: [BlendCurve; 3] = [
-        BlendCurve::RaisedCosine,
-        BlendCurve::Smoothstep,
-        BlendCurve::Linear,
-    ];
+    const CURVES: [BlendCurve; 3] = BlendCurve::SYMMETRIC;
 
     #[test]
     fn two_by_one_seam_weights() {

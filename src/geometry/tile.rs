@@ -1,11 +1,7 @@
 //! Multi-projector tiling: one field coverage mask → one gray mask per projector
-//! (docs/GEOMETRY.md, "Tiling").
-//!
-//! Built once per job: per projector a fixed-point factor `F = round(f · 16 · 2¹⁶)` for the
-//! pixels whose irradiance share `f` ([`blend::shares`]) is below one, and a LUT from
-//! irradiance fraction to gray through its response ([`Response::inverse_lut`]). A pixel of
-//! coverage `v` becomes `lut[(v · F + 2¹⁵) >> 16]`; only a layer's lit box is written;
-//! mirror flags apply last.
+//! (docs/GEOMETRY.md, "Tiling", gives the fixed-point factors, the LUT and the rows).
+//! Built once per job from the shares of [`blend::shares`] and each projector's
+//! [`Response::inverse_lut`]; only a layer's lit box is written, mirror flags apply last.
 //! With light compensation every projector has its own [`Compensator`], all with one
 //! common target irradiance E* (the lowest each would choose alone), so the field is flat
 //! across the seam.

@@ -89,20 +89,15 @@ pub struct Summary {
 
 /// The largest `f` over `layers` and the first layer reaching it.
 fn extreme(layers: &[Layer], f: impl Fn(&Layer) -> f64) -> Extreme {
-    let mut best = Extreme {
-        value: f64::NEG_INFINITY,
-        layer: 0,
-    };
-    for l in layers {
+    let (value, layer) = layers.iter().fold((f64::NEG_INFINITY, 0), |best, l| {
         let v = f(l);
-        if v > best.value {
-            best = Extreme {
-                value: v,
-                layer: l.index as usize,
-            };
+        if v > best.0 {
+            (v, l.index as usize)
+        } else {
+            best
         }
-    }
-    best
+    });
+    Extreme { value, layer }
 }
 
 /// The summary of the bundle at `bundle` (as given) whose manifest is `m`.

@@ -621,9 +621,8 @@ mod tests {
                     .build()
                     .unwrap();
                 let m = pool.install(|| Mesh::from_soup(&soup, "test"));
-                assert_eq!(m.vertices, v, "case {case}, {threads} threads");
-                assert_eq!(m.triangles, t, "case {case}, {threads} threads");
-                assert_eq!(m.tri_edges, e, "case {case}, {threads} threads");
+                let got = (&m.vertices, &m.triangles, &m.tri_edges);
+                assert_eq!(got, (&v, &t, &e), "case {case}, {threads} threads");
                 let edges = e.iter().flatten().max().map_or(0, |&x| x as usize + 1);
                 assert_eq!(m.edge_count, edges);
             }
@@ -639,10 +638,8 @@ mod tests {
         s.push([[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]]); // repeated vertex: removed
         let m = Mesh::from_soup(&s, "test");
         let r = &m.report;
-        assert_eq!(r.open_edges, 3);
-        assert_eq!(r.backwards_edges, 3);
-        assert_eq!(r.degenerate_triangles, 1);
-        assert_eq!(r.triangles, 11);
+        let counts = (r.open_edges, r.backwards_edges, r.degenerate_triangles);
+        assert_eq!((counts, r.triangles), ((3, 3, 1), 11));
         assert!(!r.closed_manifold);
         assert!(!r.warnings().is_empty());
     }

@@ -169,22 +169,14 @@ struct FitRow {
     position: usize,
 }
 
-/// A fit of the two factors of E = P·S: P's form and coefficients, S per level.
+/// A fit of E = P·S: P's coefficients (in the form the caller fitted), S per level.
 struct FactorFit {
-    form: Form,
     /// Coefficients of P's polynomial, in the order of its basis.
     coef: Vec<f64>,
     /// S of each fitted level.
     s: Vec<f64>,
     /// Condition number of the scaled design matrix (0 when not checked).
     condition: f64,
-}
-
-impl FactorFit {
-    /// P at basis values `phi`.
-    fn p_at(&self, phi: &[f64]) -> f64 {
-        p_of(self.form, &self.coef, phi)
-    }
 }
 
 /// P of `form` with coefficients `coef` at basis values `phi`.
@@ -235,12 +227,7 @@ fn log_linear_fit(rows: &[&FitRow], nlev: usize) -> std::result::Result<FactorFi
     let coef = (0..m).map(|t| x[t] / norms[t]).collect();
     let mut s: Vec<f64> = (m..cols).map(|t| (x[t] / norms[t]).exp()).collect();
     s.push(1.0);
-    Ok(FactorFit {
-        form: Form::Exponential,
-        coef,
-        s,
-        condition,
-    })
+    Ok(FactorFit { coef, s, condition })
 }
 
 /// Least squares A·x ≈ b for a column-scaled A (columns of unit norm; at most 28 columns)
@@ -280,12 +267,8 @@ fn alternating_least_squares(
         s[r.level] += r.e.ln();
         cnt[r.level] += 1;
     }
-    for j in 0..nlev {
-        s[j] = if cnt[j] > 0 {
-            (s[j] / cnt[j] as f64).exp()
-        } else {
-            0.0
-        };
+    for (v, &c) in s.iter_mut().zip(&cnt) {
+        *v = if c > 0 { (*v / c as f64).exp() } else { 0.0 };
     }
     let smax = s.iter().cloned().fold(0.0, f64::max);
     s.iter_mut().for_each(|v| *v /= smax);
@@ -339,12 +322,7 @@ fn alternating_least_squares(
         }
         prev = obj;
     }
-    Ok(FactorFit {
-        form,
-        coef,
-        s,
-        condition,
-    })
+    Ok(FactorFit { coef, s, condition })
 }
 
 /// Cross-validated RMS relative error (%) of degree-`d` fits: zone positions are split
@@ -361,7 +339,7 @@ fn cv_rms(form: Form, rows_d: &[FitRow], nlev: usize, k: usize) -> Option<f64> {
         train.iter().for_each(|r| seen[r.level] = true);
         let fit = fit_form(form, &train, nlev).ok()?;
         for r in test.iter().filter(|r| seen[r.level]) {
-            let e = fit.p_at(&r.phi) * fit.s[r.level] / r.e - 1.0;
+            let e = p_of(form, &fit.coef, &r.phi) * fit.s[r.level] / r.e - 1.0;
             ss += e * e;
             n += 1;
         }
@@ -409,13 +387,8 @@ impl<'a> Setup<'a> {
     /// Checks that the readings can determine a model and finds the calibrated area.
     fn new(readings: &'a [Reading], path: &'a Path, opts: &FitOptions) -> Result<Setup<'a>> {
         let input_error = |m: String| Error::input(path, m);
-        let mut pos: BTreeMap<(i64, i64), usize> = BTreeMap::new();
-        for r in readings {
-            pos.insert(position_key(r), 0);
-        }
-        for (i, v) in pos.values_mut().enumerate() {
-            *v = i;
-        }
+        let keys: std::collections::BTreeSet<_> = readings.iter().map(position_key).collect();
+        let pos: BTreeMap<(i64, i64), usize> = keys.into_iter().zip(0..).collect();
         let npos = pos.len();
         let positions = count(
             npos as u64,

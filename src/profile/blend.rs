@@ -49,26 +49,28 @@ pub enum BlendCurve {
     None,
 }
 
-fn d_alpha() -> f64 {
-    0.9
+/// The EEHM parameters' defaults (the paper's tuned values), as serde's `default` takes them.
+macro_rules! defaults {
+    ($($name:ident = $value:expr),*) => { $(fn $name() -> f64 { $value })* };
 }
-fn d_p() -> f64 {
-    0.75
-}
-fn d_lambda() -> f64 {
-    1.25
-}
-fn d_beta() -> f64 {
-    0.75
-}
-fn d_m() -> f64 {
-    1.1
-}
-fn d_n() -> f64 {
-    0.83
-}
+defaults!(
+    d_alpha = 0.9,
+    d_p = 0.75,
+    d_lambda = 1.25,
+    d_beta = 0.75,
+    d_m = 1.1,
+    d_n = 0.83
+);
 
 impl BlendCurve {
+    /// The curves whose ramps sum to one across an overlap without normalization.
+    #[cfg(test)]
+    pub(crate) const SYMMETRIC: [BlendCurve; 3] = [
+        BlendCurve::RaisedCosine,
+        BlendCurve::Smoothstep,
+        BlendCurve::Linear,
+    ];
+
     /// The EEHM curve with the paper's parameters (Zhang et al. 2024).
     pub fn eehm() -> Self {
         BlendCurve::Eehm {
@@ -169,12 +171,7 @@ impl BlendCurve {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    const CURVES: [BlendCurve; 3] = [
-        BlendCurve::RaisedCosine,
-        BlendCurve::Smoothstep,
-        BlendCurve::Linear,
-    ];
+    const CURVES: [BlendCurve; 3] = BlendCurve::SYMMETRIC;
 
     #[test]
     fn ramps_go_from_zero_to_one_and_pairs_sum_to_one() {

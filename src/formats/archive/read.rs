@@ -1,23 +1,14 @@
 //! Reading a zip archive from elsewhere, safely, without extracting anything to the
-//! disk: its central directory checked when it is opened, each entry inflated only when a
-//! reader asks for it, into memory.
+//! disk (docs/EXECUTOR.md, "What it reads", lists what is refused).
 //!
-//! An archive is input like any other file, so it is read as if hostile. Refused when it
-//! is opened, each with one line naming the archive and the entry ([`Error::Archive`]): a
-//! file that is not a zip or is truncated; more than [`Limits::max_entries`] entries; an
-//! entry name that is not UTF-8, holds a backslash, a NUL or a drive letter, is absolute,
-//! or has an empty, `.` or `..` component; two entries with the same name; an encrypted
-//! entry; a method other than stored or deflated; a symbolic link; an entry whose declared
-//! size, or the sum of the declared sizes, passes [`Limits::max_entry_bytes`] /
-//! [`Limits::max_total_bytes`]. Directory entries are checked and then left out.
-//!
-//! The entries a job does not use are never inflated, so an archive holds in memory its
-//! own bytes and the entries the job reads: the settings the readers parse
-//! ([`Archive::get`], inflated once and kept) and each image while it is read
-//! ([`Archive::read`], [`Archive::into_source`]: inflated again at each read, not kept).
-//! The declared sizes are not trusted: an entry is inflated through a reader that stops
-//! one byte past its declared size, and one that does not inflate to exactly that size,
-//! or fails its CRC, is refused when it is read.
+//! An archive is input like any other file, so it is read as if hostile: its central
+//! directory is checked when it is opened, against [`Limits`], and each refusal is one line
+//! naming the archive and the entry ([`Error::Archive`]); directory entries are checked and
+//! then left out. Entries are inflated into memory only when a reader asks for them: the
+//! settings once, kept ([`Archive::get`]); an image at each read, not kept
+//! ([`Archive::read`], [`Archive::into_source`]). Declared sizes are not trusted: an entry
+//! that does not inflate to exactly its declared size, or fails its CRC, is refused when
+//! it is read.
 
 use crate::bundle::BundleSource;
 use crate::error::{Error, Result};

@@ -1,13 +1,8 @@
-//! Writing a zip archive atomically: entries go into a hidden temporary sibling
-//! `.NAME.tmp-PID` of the destination, which is renamed over it only when the archive is
-//! complete; dropping the writer before [`ZipOut::finish`] (an error, an interrupt)
-//! removes the temporary file, so a failed or interrupted run leaves nothing and an older
-//! file at the path is left as it was.
-//!
-//! Entries are written *stored* (PNG data is already deflated; deflating it again costs
-//! time and gains a few per cent at most) or *deflated* (text: manifests, settings), with
-//! the zip's fixed "no date" time stamp (1980-01-01 00:00), so the same entries always give
-//! the same bytes.
+//! Writing a zip archive atomically through a hidden temporary sibling `.NAME.tmp-PID`,
+//! renamed over the destination only by [`ZipOut::finish`]; dropping the writer before
+//! (an error, an interrupt) removes it, so an older file at the path stays as it was.
+//! Entries are stored (PNG data is deflated already) or deflated (text), with the zip's
+//! fixed "no date" time stamp, so the same entries always give the same bytes.
 //!
 //! A write that fails (a full disk) is one error naming the destination: the file goes
 //! through [`Quiet`], which after its first error takes every later write without doing
@@ -267,12 +262,15 @@ mod tests {
     fn writes_entries_in_order_stored_or_deflated() {
         let d = scratch("order");
         let p = d.join("a.zip");
-        let mut z = ZipOut::create(&p, None).unwrap();
-        z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
-            .unwrap();
-        z.add("masks/00000.png", &[7u8; 100], Method::Stored)
-            .unwrap();
-        z.finish().unwrap();
+        let write = || {
+            let mut z = ZipOut::create(&p, None).unwrap();
+            z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
+                .unwrap();
+            z.add("masks/00000.png", &[7u8; 100], Method::Stored)
+                .unwrap();
+            z.finish().unwrap();
+        };
+        write();
         assert_eq!(names(&d), ["a.zip"]);
         let mut a = zip::ZipArchive::new(File::open(&p).unwrap()).unwrap();
         assert_eq!(a.name_for_index(0).unwrap().unwrap(), "job.json");
@@ -283,12 +281,7 @@ mod tests {
         drop(e);
         // The same entries give the same bytes.
         let first = std::fs::read(&p).unwrap();
-        let mut z = ZipOut::create(&p, None).unwrap();
-        z.add("job.json", b"{\"a\": 1}\n", Method::Deflated)
-            .unwrap();
-        z.add("masks/00000.png", &[7u8; 100], Method::Stored)
-            .unwrap();
-        z.finish().unwrap();
+        write();
         assert_eq!(std::fs::read(&p).unwrap(), first);
         let _ = std::fs::remove_dir_all(&d);
     }

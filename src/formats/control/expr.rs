@@ -349,11 +349,15 @@ mod tests {
     use super::*;
     use serde_json::json;
 
+    fn eval(v: Value, vars: &Map<String, Value>) -> std::result::Result<Value, String> {
+        resolve(&v, vars, &mut Budget::new(1 << 20))
+    }
+
     #[test]
     fn expressions_keep_their_type_and_text_interpolates() {
         let vars = json!({"n": 3, "t": 400, "f": 1.5, "dir": "slices", "on": true});
         let vars = vars.as_object().unwrap();
-        let r = |v: Value| resolve(&v, vars, &mut Budget::new(1 << 20)).unwrap();
+        let r = |v: Value| eval(v, vars).unwrap();
         assert_eq!(r(json!("${n}")), json!(3));
         assert_eq!(r(json!("${t * f}")), json!(600.0));
         assert_eq!(r(json!("${(n + 1) * 2 - -1}")), json!(9));
@@ -363,10 +367,7 @@ mod tests {
         assert_eq!(r(json!("img_${n}_${f}.png")), json!("img_3_1.5.png"));
         assert_eq!(r(json!({"a": ["${n}", 2, "x"]})), json!({"a": [3, 2, "x"]}));
         for bad in ["${m}", "${n +}", "${(n}", "${n / 0}", "${dir * 2}", "x ${n"] {
-            assert!(
-                resolve(&json!(bad), vars, &mut Budget::new(1 << 20)).is_err(),
-                "{bad}"
-            );
+            assert!(eval(json!(bad), vars).is_err(), "{bad}");
         }
     }
 
@@ -381,7 +382,7 @@ mod tests {
             deep("-", ""),
             format!("${{2{}}}", "**2".repeat(100_000)),
         ] {
-            let err = resolve(&json!(e), &vars, &mut Budget::new(1 << 20)).unwrap_err();
+            let err = eval(json!(e), &vars).unwrap_err();
             assert!(
                 err.contains("nested deeper than 100 levels"),
                 "{}",
@@ -389,26 +390,12 @@ mod tests {
             );
         }
         // Within the bound it evaluates.
-        assert_eq!(
-            resolve(
-                &json!(deep("(", ")")
-                    .replace(&"(".repeat(99_950), "")
-                    .replace(&")".repeat(99_950), "")),
-                &vars,
-                &mut Budget::new(1 << 20)
-            )
-            .unwrap(),
-            json!(1)
-        );
+        let within = deep("(", ")")
+            .replace(&"(".repeat(99_950), "")
+            .replace(&")".repeat(99_950), "");
+        assert_eq!(eval(json!(within), &vars).unwrap(), json!(1));
         // A long flat expression is no nesting.
-        assert_eq!(
-            resolve(
-                &json!(format!("${{0{}}}", "+1".repeat(100_000))),
-                &vars,
-                &mut Budget::new(1 << 20)
-            )
-            .unwrap(),
-            json!(100_000)
-        );
+        let flat = format!("${{0{}}}", "+1".repeat(100_000));
+        assert_eq!(eval(json!(flat), &vars).unwrap(), json!(100_000));
     }
 }

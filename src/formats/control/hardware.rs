@@ -1,18 +1,12 @@
-//! The control-file standard's description of a printer (`hardware_config.json`; the
-//! standard's repository has `example_validation_code/hardware_config/
-//! hardware_config_example.json`): the build-platform axis `stages.bp_stage` names (its
-//! controller's `default_axis`: travel, limits, counts per mm, speed, acceleration,
-//! `bottom_position`), the `light_engines` (each one's `resolution`, `leds_nm`,
-//! `grayscale_correction_image`), whether an XY stage (`stages.xy_stage`) and a vacuum
-//! controller (`mks`) exist, and the schema versions it reads. An engine's own mirroring
-//! (`mirror_long_axis`, `mirror_short_axis`) is how the printer shows every image, not a
-//! limit a job can break: it is not read.
+//! The control-file standard's description of a printer (`hardware_config.json`;
+//! docs/EXECUTOR.md, "Checking against the real machine", says what is read and checked):
+//! the build-platform axis, the light engines, whether an XY stage and a vacuum controller
+//! exist, and the schema versions it reads. An engine's own mirroring is how the printer
+//! shows every image, not a limit a job can break: it is not read.
 //!
 //! [`Hardware::machine`] is the machine record a job runs on there (the stage; the rest is
-//! the job's own: the description states no pixel size, shutter or DMD latency), and
-//! [`Hardware::check`] what a job asks that the printer lacks, the rules of the
-//! standard's `printer_compatibility.py` and more: each finding names the layer, the image
-//! and the description's key.
+//! the job's own), and [`Hardware::check`] what a job asks that the printer lacks, each
+//! finding naming the layer, the image and the description's key.
 
 use crate::bundle::Machine;
 use crate::error::{Error, Result};

@@ -177,3 +177,30 @@ pub(crate) fn cannot_carry(m: &Manifest) -> Vec<Warning> {
     }
     warnings
 }
+
+/// Settings of the standard with the usual defaults (image `a.png`, light engine `e`), a
+/// layer group `g` of two layers and `layers`.
+#[cfg(test)]
+fn test_settings(layers: Value) -> Value {
+    json!({
+        "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
+        "Default layer settings": {
+            "Number of duplications": 1,
+            "Position settings": {
+                "Layer thickness (um)": 10, "Distance up (mm)": 0.3,
+                "Initial wait (ms)": 0, "BP up speed (mm/sec)": 2,
+                "BP up acceleration (mm/sec^2)": 20, "Up wait (ms)": 0,
+                "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 10,
+                "Final wait (ms)": 0
+            },
+            "Image settings": {
+                "Image file": "a.png", "Layer exposure time (ms)": 100,
+                "Light engine": "e", "Light engine power setting": 100,
+                "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
+                "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
+            }
+        },
+        "Named layer groups": {"g": [{}, {}]},
+        "Layers": layers
+    })
+}

@@ -1,38 +1,13 @@
-//! Reading an SLA control-file zip as a job.
+//! Reading an SLA control-file zip as a job (docs/EXECUTOR.md, "Imported jobs": the
+//! checks, how settings resolve, the steps of a layer and the machine the file implies).
 //!
-//! ## What is read
-//! The settings are checked as the standard's validator checks them: named layer groups
-//! and `${...}` expressions over `Variables` expanded (`expr.rs`; a group's with its call's
-//! variables), then the whole object validated against the standard's schema
-//! (`schema.rs`), then what the schema cannot say: every named setting a layer or image
-//! uses exists, named settings inherit without a circle, the job has layers and at most
-//! [`MAX_LAYERS`] layer records (duplications counted, refused before any is made), the
-//! expansion makes at most 64 MiB plus 16 times the entry's size (text interpolation and
-//! group calls repeat what they name). A layer's position setting is its own key, else
-//! that of its `Using named position settings`, else the default; an image's setting is
-//! its own key, else its `Using named image settings` (without one, the layer's `Using
-//! named default image settings`), else the default.
-//!
-//! ## Steps
-//! Every layer (each duplication counted) is: `Initial wait`, a move up by `Distance up`
-//! at the up speed and acceleration, `Up wait`, a move down to the layer's top (the
-//! previous top + `Layer thickness`) at the down speed and acceleration, then for each
-//! image `Wait before exposure`, the exposure, `Wait after exposure`, and last `Final
-//! wait`. The standard exposes a layer's images one after another: each image is a layer
-//! record of its own, the first with the layer's thickness and its position steps, each
-//! further one 0 µm thick at the same height (the standard's "0 um layer").
-//!
-//! ## The machine
-//! Each light engine the images name (`Light engine`, also the older form `NAME (405 nm)`)
-//! at each image offset (`Image x/y offset (um)`) and mirroring (`Mirror image long/short
-//! axis`, the long axis being the image's longer side) is a projector, in the order the
-//! images first use them, with the wavelength and power setting they ask for and the size
-//! of the first image shown on it. The file states no pixel size (dmdsl's own export
-//! writes `pixel_mm P` in `Header.Comment`, read back here), no stage travel, speed or
-//! acceleration limit and no position resolution: those keys are `unstated` stand-ins
-//! (1 µm pixels, the job's own highest position and fastest moves, 0.1 µm steps), and no
-//! check is made against them. What is not simulated (special techniques) is a note of
-//! the job.
+//! The settings are expanded (`expr.rs`), validated against the standard's schema
+//! (`schema.rs`), then checked for what the schema cannot say; the expansion and the layer
+//! records are bounded ([`MAX_LAYERS`], `EXPANSION_BYTES`) before anything is made. Each
+//! image is a layer record of its own, the first with the layer's thickness and position
+//! steps, each further one 0 µm thick at the same height (the standard's "0 um layer").
+//! What the file does not state (pixel size, stage limits and resolution) is an
+//! `unstated` stand-in that no check is made against.
 
 use super::expr::{resolve, Budget};
 use super::Position;
@@ -783,6 +758,7 @@ pub(crate) fn import(archive: Archive, entry: &str, sha256: &str) -> Result<Job>
 
 #[cfg(test)]
 mod tests {
+    use super::super::test_settings as settings;
     use super::*;
     use serde_json::json;
     use std::io::Write;
@@ -806,30 +782,6 @@ mod tests {
             crate::formats::archive::read::read_zip(path, bytes, &Default::default()).unwrap();
         let entry = settings_entry(&archive).unwrap();
         import(archive, &entry, "0")
-    }
-
-    fn settings(layers: Value) -> Value {
-        json!({
-            "Header": {"Schema version": "5.0.0", "Image directory": "slices"},
-            "Default layer settings": {
-                "Number of duplications": 1,
-                "Position settings": {
-                    "Layer thickness (um)": 10, "Distance up (mm)": 0.3,
-                    "Initial wait (ms)": 0, "BP up speed (mm/sec)": 2,
-                    "BP up acceleration (mm/sec^2)": 20, "Up wait (ms)": 0,
-                    "BP down speed (mm/sec)": 1, "BP down acceleration (mm/sec^2)": 10,
-                    "Final wait (ms)": 0
-                },
-                "Image settings": {
-                    "Image file": "a.png", "Layer exposure time (ms)": 100,
-                    "Light engine": "e", "Light engine power setting": 100,
-                    "Light engine wavelength (nm)": 365, "Relative focus position (um)": 0,
-                    "Wait before exposure (ms)": 0, "Wait after exposure (ms)": 0
-                }
-            },
-            "Named layer groups": {"g": [{}, {}]},
-            "Layers": layers
-        })
     }
 
     #[test]

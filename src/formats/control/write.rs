@@ -1,13 +1,7 @@
-//! Writing a job as a control-file zip (docs/FORMATS.md has the mapping in full):
-//! - one `Layers` entry per run of identical consecutive layers ("Number of duplications":
-//!   same images, exposures, thickness and position settings); only the images an entry
-//!   names are in the zip;
-//! - "Position settings" from the layer's planned steps ([`position`]), "Layer thickness
-//!   (um)" the layer's;
-//! - "Image settings list": one image per projector (its mask; with several projectors,
-//!   "Light engine" names it and "Image x/y offset (um)" place it), each exposed for the
-//!   layer's exposure; an exposure over the schema's 10 000 ms is split into equal
-//!   exposures of the same image.
+//! Writing a job as a control-file zip (docs/FORMATS.md has the mapping in full): one
+//! `Layers` entry per run of identical consecutive layers, holding only the images it
+//! names; "Position settings" from the layer's planned steps ([`position`]); one image per
+//! projector, an exposure over the schema's 10 000 ms split into equal exposures.
 
 use super::WAVELENGTH_NM;
 use super::{n, Position, EXPOSURE_MAX_MS, IMAGES, POWER_SETTING, SCHEMA_VERSION, SETTINGS};

@@ -1,22 +1,12 @@
-//! NanoDLP plates (`part.nanodlp`): the zip NanoDLP imports and exports, from NanoDLP's
-//! format documentation ("NanoDLP / ZIP File Format", docs.nanodlp.com) and the readers
-//! and writers of UVtools (`NanoDLPFile.cs`) and mslicer (`nanodlp_format`): `meta.json`
-//! (who wrote it), `plate.json` (the plate: layer count, bounds, estimate),
-//! `profile.json` (the resin profile the plate prints with), `options.json` (the slicer's
-//! options: the display's pixels and pixel size, mirroring; also as `slicer.json`, the name
-//! UVtools reads), `info.json` (per layer: solid area, largest and smallest area, their
-//! count, the lit box in pixels), the layer images `1.png … N.png` and the preview
-//! `3d.png`.
+//! NanoDLP plates (`part.nanodlp`), the zip NanoDLP imports and exports (docs/FORMATS.md,
+//! "nanodlp", names its entries and sources).
 //!
-//! A plate says a layer's steps as NanoDLP runs them ([`Plate`]): a move to the layer's
-//! position, `WaitBeforePrint`, the cure (`CureTime`), `WaitAfterPrint`, a lift by
-//! `WaitHeight` and `TopWait` there, one set of these for the first `SupportLayerNumber`
-//! layers (the `Support…` keys) and one for the others. Stage speeds are the printer's
-//! own (its machine settings), not the plate's: dmdsl records the job's as the profile's
-//! custom values `DmdslUpSpeed`, `DmdslUpAccel`, `DmdslDownSpeed`, `DmdslDownAccel` (and
-//! `DmdslSupport…`), which NanoDLP keeps as variables and acts on only if a code field
-//! uses them. [`mod@read`] imports a plate, `write.rs` writes a job as one and says what
-//! it cannot carry.
+//! A plate says a layer's steps as NanoDLP runs them ([`Plate`]): one set of settings for
+//! the first `SupportLayerNumber` layers (the `Support…` keys) and one for the others.
+//! Stage speeds are the printer's own, not the plate's: dmdsl records the job's as the
+//! profile's custom values `Dmdsl…`, which NanoDLP keeps as variables and acts on only if
+//! a code field uses them. [`mod@read`] imports a plate, `write.rs` writes a job as one and
+//! says what it cannot carry.
 
 pub mod read;
 mod write;

@@ -1,17 +1,9 @@
-//! Reading a NanoDLP plate as a job.
-//!
-//! The layers are the images `1.png … N.png` (`0.png … N−1.png` when the plate holds a
-//! `0.png`), N from `plate.json`'s `LayersCount`; each layer's steps are the plate's
-//! ([`Plate::layers`]) from `profile.json` (`override.json`'s keys win, as NanoDLP applies
-//! them). The display is `options.json`'s (or `slicer.json`'s): `PWidth` × `PHeight`
-//! pixels of `XPixelSize` mm, mirrored left-right when `ImageMirror` is 1. A layer's area
-//! is `info.json`'s `TotalSolidArea` when the plate has one (`plate.json`'s `PrintEst` is
-//! NanoDLP's, at the printer's speeds, and not compared). The stage's speeds are dmdsl's custom values when the plate
-//! has them; a plate without them states none (NanoDLP moves at the printer's own speeds):
-//! its moves are timed at 1 mm/s and 10 mm/s², `unstated`, and a note says so. What
-//! NanoDLP computes while it prints (`DynamicCureTime`, `DynamicSpeed`, `DynamicLift`,
-//! `DynamicWait`, `TransitionalLayer` fading) is not evaluated: a note names it, and the
-//! plate's static settings are used. A missing or mistyped setting is an error naming the
+//! Reading a NanoDLP plate as a job (docs/EXECUTOR.md, "Imported jobs"): the images
+//! `1.png … N.png` (or from `0.png`), each layer's steps the plate's ([`Plate::layers`]),
+//! the display of `options.json` (or `slicer.json`). Without dmdsl's custom speed values
+//! the moves are timed at 1 mm/s and 10 mm/s², `unstated`, with a note; what NanoDLP
+//! computes while it prints (the `Dynamic…` fields, `TransitionalLayer`) is not
+//! evaluated, and a note names it. A missing or mistyped setting is an error naming the
 //! entry and the key.
 
 use super::{Group, Plate, INFO, KEYS, OPTIONS, PLATE, PROFILE, SLICER, SPEEDS};

@@ -1,26 +1,12 @@
-//! Prusa SL1 / SL1S, the zip PrusaSlicer 2.5 writes (`SL1Archive::export_print` in
-//! PrusaSlicer's `src/libslic3r/Format/SL1.cpp`): `config.ini` (the printer's keys:
-//! `expTime`, `expTimeFirst`, `numFade`, `layerHeight`, `printTime`, `jobDir`, …),
-//! `prusaslicer.ini` (the slicer's configuration: display size, pixels and orientation,
-//! tilt times, `area_fill`, `material_print_speed`, …), one 8-bit gray PNG a layer,
-//! `<jobDir>NNNNN.png`, and the thumbnails.
+//! Prusa SL1 / SL1S, the zip PrusaSlicer 2.5 writes (docs/FORMATS.md, "sl1, sl1s"):
+//! `config.ini`, `prusaslicer.ini`, one 8-bit gray PNG a layer and the thumbnails.
 //!
-//! The model both directions share is PrusaSlicer 2.5's print-time estimate
-//! (`SLAPrint::Steps::merge_slices_and_eval_stats`, the source of `printTime`):
-//! * exposure (`Scheme`): `expTimeFirst` for the first 3 layers; then a counter starting
-//!   at `expTimeFirst` steps down by `(expTimeFirst − expTime) / (numFade + 1)` for each
-//!   later layer while it is above `expTime` and gives that layer the stepped value;
-//!   `expTime` after that. The estimate steps in floating point: the counter can stop a
-//!   hair above `expTime` and step once more, giving one layer less than `expTime`
-//!   (`fixtures/sl1/cube3mm.sl1`: 3.82 s instead of 6 s), or less than nothing
-//!   (`cylinder_hole.sl1s`: −1.83 s). The printer's firmware computes its own fade.
-//! * tilt (`Model`): a layer is fast when its area is at most `area_fill` % of the
-//!   display's (`display_width × display_height`); its tilt takes `fast_tilt_time` or
-//!   `slow_tilt_time`, or `slow_tilt_time` / `high_viscosity_tilt_time` for every layer
-//!   with `material_print_speed` `slow` / `high_viscosity`;
-//! * a delay before the exposure: 3 s (slow material), 3.5 s (high viscosity), 1 s for a
-//!   slow layer otherwise;
-//! * the tower: 5 s per mm of layer height.
+//! Both directions share PrusaSlicer 2.5's print-time estimate, the source of `printTime`
+//! (docs/EXECUTOR.md, "Imported jobs", gives it in full): the exposure of `Scheme` and the
+//! tilt, delay and tower of `Model`. Its fade counter steps in floating point, so it can
+//! stop a hair above `expTime` and step once more: one layer less than `expTime`
+//! (`fixtures/sl1/cube3mm.sl1`: 3.82 s instead of 6 s), or less than nothing
+//! (`cylinder_hole.sl1s`: −1.83 s). The printer's firmware computes its own fade.
 //!
 //! [`mod@read`] imports a file as layers and steps that take what the estimate gives them;
 //! `write.rs` writes a job as one, fitting the scheme to the job's exposures; what the

@@ -1,22 +1,13 @@
-//! Reading a PrusaSlicer SL1 / SL1S file (as PrusaSlicer 2.5 writes it) as a job.
+//! Reading a PrusaSlicer SL1 / SL1S file (as PrusaSlicer 2.5 writes it) as a job
+//! (docs/EXECUTOR.md, "Imported jobs").
 //!
-//! The projector is the display as the masks show it (portrait displays store the image
-//! turned: `display_pixels_y` wide and `display_pixels_x` high), pixels
-//! `display_width / display_pixels_x` mm, mirrored as `display_mirror_x/y` say (the
-//! masks are stored mirrored, as dmdsl's export writes them). Each layer becomes: a move of the tower to the layer's top (`(i + 1) ×
-//! layerHeight`), a wait, and the exposure, so that the layer takes what PrusaSlicer 2.5's
-//! estimate gives it (the model of [`super`]). A layer the estimate gives a negative
-//! exposure is exposed for 0 s and its wait shortened by the rest, so the layer still
-//! takes what the estimate says.
-//!
-//! The tilt counts a layer's area as the mask's coverage (pixel values / 255 × pixel
-//! area); PrusaSlicer measures the polygons it rasterized, so a layer within a few pixels
-//! of the `area_fill` threshold may count fast here and slow there. The layer record's
-//! area is the pixels lit at least half (light-compensated masks' grays are not
-//! coverage), the job's resin volume `usedMaterial`. The tower's speed, acceleration and
-//! resolution are the file's no more than the steps are: `unstated`. The job's estimate
-//! (`totals.print_time_s`) is the file's `printTime`, so the executor's estimate check
-//! compares the simulation with PrusaSlicer's own figure.
+//! Each layer is a move of the tower to the layer's top, a wait and the exposure, timed
+//! so that the layer takes what PrusaSlicer 2.5's estimate gives it (the model of
+//! [`super`]); a negative estimated exposure is 0 s of light with the wait shortened by
+//! the rest. The tilt counts a layer's area as the mask's coverage (PrusaSlicer measures
+//! its polygons: a layer within a few pixels of `area_fill` may count otherwise); the
+//! layer record's area is the pixels lit at least half. The job's estimate is the file's
+//! `printTime`, so the executor compares the simulation with PrusaSlicer's own figure.
 //!
 //! A missing or unreadable key is an error naming the file and the key; a missing,
 //! undecodable or wrongly sized mask is a violation of the layer in the report (a layer

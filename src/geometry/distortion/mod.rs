@@ -1,15 +1,13 @@
 //! Distortion pre-warp from a measured correction table (docs/GEOMETRY.md, "Distortion
-//! correction").
+//! correction", gives the table, the fit and the densification).
 //!
-//! A table row `x_mm,y_mm,seen_x_mm,seen_y_mm` says: light the uncorrected projector aimed
-//! at build-plane point (x, y) landed at (seen_x, seen_y). Read backwards, every row samples
-//! the correction G (wanted point → point to aim at): G(seen) = (x, y), fitted directly as
-//! a least-squares polynomial (degree by leave-one-out, `polynomial`) plus `κ ×` a
-//! natural-neighbour interpolant of its residuals (`residual`; κ by leave-one-out, so pure
-//! noise gets κ ≈ 0), in `correction`. Section contours are pre-warped vertex by vertex,
-//! edges cut into pieces of at most [`SEG_MM`] and split until the warped polyline is
-//! within [`SAG_PX`] of the warped curve (`warp`); a warped point outside the projector's
-//! field is an error naming it. `table` reads the measured pairs, `plot` draws the map.
+//! Every row of the table samples the correction G (wanted point → point to aim at),
+//! fitted as a least-squares polynomial (`polynomial`) plus `κ ×` a natural-neighbour
+//! interpolant of its residuals (`residual`), in `correction`. Section contours are
+//! pre-warped vertex by vertex, edges cut into pieces of at most [`SEG_MM`] and split until
+//! the warped polyline is within [`SAG_PX`] of the warped curve (`warp`); a warped point
+//! outside the projector's field is an error naming it. `table` reads the measured pairs,
+//! `plot` draws the map.
 
 mod correction;
 mod plot;

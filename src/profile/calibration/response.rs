@@ -1,12 +1,9 @@
 //! The gray response S(g): relative irradiance as a function of the pixel value g shown by
 //! a mirror (255 = fully on), and its inverse on the 8-bit levels (docs/CALIBRATION.md,
-//! "Model"). Stored as a polynomial in the pixel value or the attenuation 255 − g on an
-//! explicit valid range, or as a table of points joined by a not-a-knot spline or a
-//! monotone PCHIP, valid from its first point to its last; a table's first point may be
-//! [0, 0] (mirror off), S below the next point then a monotone cubic from (0, 0) meeting
-//! the curve with the measured points' three-point end slope (at most 3× the secant).
-//! Outside its valid range S is never used, except that pixel value 0 (mirror off) gives
-//! S(0) = 0.
+//! "Model" and "Fitting" give its forms and the segment from (0, 0)). A table's first
+//! point may be [0, 0]; the cubic below its next point meets the curve with the measured
+//! points' three-point end slope, at most 3× the secant. Outside its valid range S is never
+//! used, except that pixel value 0 (mirror off) gives S(0) = 0.
 
 use serde::{Deserialize, Serialize};
 
