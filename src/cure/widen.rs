@@ -493,7 +493,10 @@ mod tests {
     }
 
     /// As [`drawn`], over the section `below` (`None`: on the platform).
-    fn drawn_on(section: &[Contour], below: Option<&[Contour]>) -> (Mask, Mask, Widening, CureModel) {
+    fn drawn_on(
+        section: &[Contour],
+        below: Option<&[Contour]>,
+    ) -> (Mask, Mask, Widening, CureModel) {
         let profile = Profile::default_profile();
         let model = CureModel::from_profile(&profile).expect("the default profile has a PSF");
         let raster = Rasterizer::new(profile.field());
@@ -516,7 +519,9 @@ mod tests {
                 .as_ref()
                 .is_none_or(|u| px.iter().any(|&k| u.data[k] > 0))
         };
-        let wd = widen(&model, &mut m, lit, section, &small, &saved, shift, t, &mut rests);
+        let wd = widen(
+            &model, &mut m, lit, section, &small, &saved, shift, t, &mut rests,
+        );
         (plain, m, wd, model)
     }
 

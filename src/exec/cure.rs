@@ -208,11 +208,7 @@ impl Light {
                 Light::Linear(t) => data.extend(row.iter().map(|&g| t[g as usize])),
                 Light::Compensated { s, inv_full } => {
                     let inv = &inv_full[r * w + c0..r * w + c1];
-                    data.extend(
-                        row.iter()
-                            .zip(inv)
-                            .map(|(&g, &i)| compensated(s, g, i)),
-                    )
+                    data.extend(row.iter().zip(inv).map(|(&g, &i)| compensated(s, g, i)))
                 }
             }
         }

@@ -347,8 +347,10 @@ fn draw(
             // compensated.
             Some(job) => {
                 let held = job.lower_layers().min(layer.lower.len());
-                let lower: Vec<&[Contour]> =
-                    layer.lower[..held].iter().map(|s| &s.contours[..]).collect();
+                let lower: Vec<&[Contour]> = layer.lower[..held]
+                    .iter()
+                    .map(|s| &s.contours[..])
+                    .collect();
                 let mut rests = super::beneath::Beneath::new(ctx, layer);
                 let (m, c) = job.draw(
                     ctx.raster,

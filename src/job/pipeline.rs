@@ -404,7 +404,11 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
                 _ => Some(&sections[k - 1]),
             }
             .map(|c| &c.section),
-            lower: lower_sections(block, k, p.ctx.cure.filter(|c| c.corrects()).map_or(0, |_| WINDOW)),
+            lower: lower_sections(
+                block,
+                k,
+                p.ctx.cure.filter(|c| c.corrects()).map_or(0, |_| WINDOW),
+            ),
             upper: upper_sections(block, k, p.ctx.cure.map_or(0, |c| c.upper_layers())),
             above: p.layers - 1 - index,
         };
