@@ -128,12 +128,15 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
     for (g, r) in region.iter().zip(cur) {
         regions[*g as usize].push(*r);
     }
-    let islands: Vec<Vec<Run>> = regions
+    let mut islands: Vec<Vec<Run>> = regions
         .into_iter()
         .zip(shared)
         .filter(|(r, k)| *k < MIN_SHARED_PX || (s.firm_hold && !firm(r, prev)))
         .map(|(r, _)| r)
         .collect();
+    if s.firm_hold {
+        islands.extend(cut_off(cur, prev));
+    }
     let mut down = if l == first {
         Vec::new()
     } else {
@@ -159,6 +162,34 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
 fn firm(region: &[Run], below: &[Run]) -> bool {
     !runs::has_interior(region)
         || runs::has_interior(&runs::minus(region, &runs::minus(region, below)))
+}
+
+/// The parts of a layer `cur` that hang from the rest of their region by a neck a pixel or
+/// two wide and rest on nothing firm below: the components of its pixels whose four
+/// neighbours are lit (its erosion by a pixel) that share no such pixel with the layer
+/// below `below`. The cure correction, moving edges in, cuts such a neck, and the part
+/// it held would cure loose.
+fn cut_off(cur: &[Run], below: &[Run]) -> Vec<Vec<Run>> {
+    let core = runs::eroded(cur);
+    if core.is_empty() {
+        return Vec::new();
+    }
+    let (part, n) = components(&core);
+    let mut rests = vec![false; n];
+    for (g, k) in part
+        .iter()
+        .zip(runs::shared_pixels(&core, &runs::eroded(below)))
+    {
+        rests[*g as usize] |= k > 0;
+    }
+    let mut out: Vec<Vec<Run>> = vec![Vec::new(); n];
+    for (g, r) in part.iter().zip(&core) {
+        if !rests[*g as usize] {
+            out[*g as usize].push(*r);
+        }
+    }
+    out.retain(|p| !p.is_empty());
+    out
 }
 
 /// The pixel of a region farthest from its outside (chamfer distance, 3-4 weights; the
@@ -460,6 +491,30 @@ mod tests {
             },
         );
         assert!(pts.iter().any(|p| p.island && p.layer == 1), "{pts:?}");
+    }
+
+    #[test]
+    fn a_part_hanging_by_a_thin_neck_over_nothing_gets_a_point_with_the_correction() {
+        // A block on the layer below; beside it, over nothing, a square joined to it by a
+        // neck one pixel wide (which the correction cuts).
+        let below: Vec<Run> = (20..40).map(|r| [r, 20, 40]).collect();
+        let mut top = below.clone();
+        top.extend((20..40).map(|r| [r, 60, 80]));
+        top.push([30, 40, 60]);
+        let top = runs::union(&top, &[]);
+        let masks = vec![below, top];
+        for firm_hold in [false, true] {
+            let s = Spread {
+                first_on_pad: true,
+                firm_hold,
+                ..spread()
+            };
+            let pts = place(&masks, 0, &s);
+            let held = pts
+                .iter()
+                .any(|p| p.island && p.layer == 1 && (60..80).contains(&p.col_row[0]));
+            assert_eq!(held, firm_hold, "firm hold {firm_hold}: {pts:?}");
+        }
     }
 
     #[test]

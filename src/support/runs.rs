@@ -82,20 +82,47 @@ pub fn shared_pixels(a: &[Run], b: &[Run]) -> Vec<u32> {
 /// Whether a pixel of `runs` has its four neighbours in `runs` too (the set survives an
 /// erosion by one pixel).
 pub fn has_interior(runs: &[Run]) -> bool {
-    let row = |r: u32| {
-        let lo = runs.partition_point(|x| x[0] < r);
-        &runs[lo..lo + runs[lo..].partition_point(|x| x[0] == r)]
-    };
     runs.iter().any(|&[r, a, b]| {
         // The run's columns whose left and right neighbours are in it.
         let (lo, hi) = (a + 1, b.saturating_sub(1));
         r > 0
             && hi > lo
-            && row(r - 1).iter().any(|u| {
+            && row_of(runs, r - 1).iter().any(|u| {
                 let (x0, x1) = (u[1].max(lo), u[2].min(hi));
-                x0 < x1 && row(r + 1).iter().any(|d| d[1].max(x0) < d[2].min(x1))
+                x0 < x1
+                    && row_of(runs, r + 1)
+                        .iter()
+                        .any(|d| d[1].max(x0) < d[2].min(x1))
             })
     })
+}
+
+/// The runs of row `r`.
+fn row_of(runs: &[Run], r: u32) -> &[Run] {
+    let lo = runs.partition_point(|x| x[0] < r);
+    &runs[lo..lo + runs[lo..].partition_point(|x| x[0] == r)]
+}
+
+/// The pixels of `runs` whose four neighbours are in `runs` too (an erosion by one pixel).
+pub fn eroded(runs: &[Run]) -> Vec<Run> {
+    let mut out = Vec::new();
+    for &[r, a, b] in runs {
+        let (lo, hi) = (a + 1, b.saturating_sub(1));
+        if r == 0 || hi <= lo {
+            continue;
+        }
+        for u in row_of(runs, r - 1) {
+            let (x0, x1) = (u[1].max(lo), u[2].min(hi));
+            for d in row_of(runs, r + 1)
+                .iter()
+                .filter(|d| d[1].max(x0) < d[2].min(x1))
+            {
+                out.push([r, d[1].max(x0), d[2].min(x1)]);
+            }
+        }
+    }
+    // In order, and no two touch: the pieces of a row lie inside runs that do not.
+    out
 }
 
 /// The union of two run sets.
@@ -215,6 +242,19 @@ mod tests {
                 ga[i] && (c - cx).powi(2) + (r - cy).powi(2) <= rad * rad
             });
             assert_eq!(any_within(&a, cx, cy, rad), brute_near, "seed {seed}");
+            // Dense grids, so that some pixels keep their four neighbours.
+            let gd = grid(seed + 2000, w, h, 85);
+            let inner: Vec<bool> = (0..w * h)
+                .map(|i| {
+                    let (c, r) = ((i % w) as i64, (i / w) as i64);
+                    [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]
+                        .iter()
+                        .all(|(dx, dy)| at(&gd, c + dx, r + dy))
+                })
+                .collect();
+            let d = runs_of(&gd, w);
+            assert_eq!(eroded(&d), runs_of(&inner, w), "seed {seed}");
+            assert_eq!(has_interior(&d), inner.contains(&true));
         }
     }
 }
