@@ -1,10 +1,11 @@
 //! Whether every layer rests on the one below, from the masks alone: the regions of each
 //! layer's lit pixels on the field that share no lit pixel with the layer below
 //! ([`crate::bundle::regions`], from the runs the verification collected as it decoded
-//! the masks). A job compiled with supports (`supports` in its manifest) must have none
-//! as large as a support head's contact ([`smallest_held_mm2`]): each layer that has some
-//! is an `unsupported-region` violation. Any other job (no supports asked, or imported)
-//! gets the warning `run.unsupported-regions`.
+//! the masks); on a cure-corrected job, those of them that rest on nothing by what cures
+//! (`cured`). A job compiled with supports (`supports` in its manifest) must have none as
+//! large as a support head's contact ([`smallest_held_mm2`]): each layer that has some is
+//! an `unsupported-region` violation. Any other job (no supports asked, or imported) gets
+//! the warning `run.unsupported-regions`.
 
 mod cured;
 
