@@ -515,7 +515,7 @@ impl CureJob {
         let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
         let (k, n, first, at) = t.on_nothing;
         let (first, at) = (first?, at?);
-        Some(
+        Some(with_features(
             Warning::new(
                 "cure.features-on-nothing",
                 format!(
@@ -527,15 +527,10 @@ impl CureJob {
                     where_is(&at, first, what_at),
                     plural(k, "it", "they"),
                 ),
-            )
-            .with("features", k)
-            .with("layers", n)
-            .with("first_layer", first)
-            .with("x_mm", at.x_mm)
-            .with("y_mm", at.y_mm)
-            .with("width_mm", at.width_mm)
-            .with("height_mm", at.height_mm),
-        )
+            ),
+            (k, n, first),
+            &at,
+        ))
     }
 
     /// The warning naming the narrow features drawn wider so they cure, if any; `what_at`
@@ -545,7 +540,8 @@ impl CureJob {
         let (first, at) = (t.first_layer?, t.first?);
         let (k, n, wall_mm) = (t.features, t.layers, t.wall_mm);
         Some(
-            Warning::new(
+            with_features(
+                Warning::new(
                 "cure.features-widened",
                 format!(
                     "cure: {k} {} too thin to cure {} drawn wider so that {}, in {n} {} (first: layer {first}, at {}{}); {} cured size is the smallest the machine makes, larger than the part's",
@@ -560,14 +556,10 @@ impl CureJob {
                     },
                     plural(k, "its", "their"),
                 ),
+            ),
+                (k, n, first),
+                &at,
             )
-            .with("features", k)
-            .with("layers", n)
-            .with("first_layer", first)
-            .with("x_mm", at.x_mm)
-            .with("y_mm", at.y_mm)
-            .with("width_mm", at.width_mm)
-            .with("height_mm", at.height_mm)
             .with("wall_mm", wall_mm),
         )
     }
@@ -580,7 +572,8 @@ impl CureJob {
         let (k, n, m) = (t.features, t.layers, self.held_back as u64);
         let thick = crate::round::plane_mm((m + 1) as f64 * self.model.layer_mm);
         Some(
-            Warning::new(
+            with_features(
+                Warning::new(
                 "cure.features-dropped",
                 format!(
                     "cure: the xyz correction leaves out {k} flat {} over nothing thinner than {} layers ({} {} in {n} {}; first: layer {first}, at {}): {} at least {} layers ({} mm) thick",
@@ -594,15 +587,11 @@ impl CureJob {
                     m + 1,
                     number(thick),
                 ),
+            ),
+                (k, n, first),
+                &at,
             )
-            .with("features", k)
             .with("pixels", t.pixels)
-            .with("layers", n)
-            .with("first_layer", first)
-            .with("x_mm", at.x_mm)
-            .with("y_mm", at.y_mm)
-            .with("width_mm", at.width_mm)
-            .with("height_mm", at.height_mm)
             .with("held_back_layers", m),
         )
     }
@@ -995,6 +984,18 @@ fn prediction(layers: &[Layer], hist: &Histogram, pixel_mm: f64) -> CurePredicti
 /// What a message about a point (mm) of a layer (index) names besides the position, as
 /// words to follow it (", in b.stl"), or nothing ([`super::manifest::PlacedPart::what_at`]).
 pub(super) type WhatAt<'a> = dyn Fn([f64; 2], u64) -> Option<String> + 'a;
+
+/// `w` with the fields of a count of features: `features` (k), `layers` (n),
+/// `first_layer` and the first one's box `x_mm`, `y_mm`, `width_mm`, `height_mm`.
+fn with_features(w: Warning, (k, n, first): (u64, u64, u64), at: &FeatureBox) -> Warning {
+    w.with("features", k)
+        .with("layers", n)
+        .with("first_layer", first)
+        .with("x_mm", at.x_mm)
+        .with("y_mm", at.y_mm)
+        .with("width_mm", at.width_mm)
+        .with("height_mm", at.height_mm)
+}
 
 /// "x 12.3 mm, y 4.5 mm, 0.1 × 0.2 mm": a feature's centre and size, and what it is part
 /// of (`what_at` of layer `layer`).
