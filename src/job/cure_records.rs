@@ -83,14 +83,34 @@ struct WorstLayer {
 /// left as they were because they rest on nothing.
 #[derive(Debug, Clone, Default)]
 struct WidenedFeatures {
+    widened: Tally,
+    /// The first widened one's wall width, mm.
+    wall_mm: f64,
+    on_nothing: Tally,
+}
+
+/// Features of some kind over a job's layers: how many, in how many layers, and the
+/// lowest layer's first (the same in any order of the layers).
+#[derive(Debug, Clone, Copy, Default)]
+struct Tally {
     features: u64,
     layers: u64,
     first_layer: Option<u64>,
     first: Option<FeatureBox>,
-    /// The first one's wall width, mm.
-    wall_mm: f64,
-    /// Features over nothing (not widened), their layers, the lowest layer and its first.
-    on_nothing: (u64, u64, Option<u64>, Option<FeatureBox>),
+}
+
+impl Tally {
+    /// Counts `k` features of `layer`, the first at `first`; whether `layer` is now the
+    /// lowest.
+    fn add(&mut self, layer: u64, k: u32, first: FeatureBox) -> bool {
+        self.features += k as u64;
+        self.layers += 1;
+        let lowest = self.first_layer.is_none_or(|f| layer < f);
+        if lowest {
+            (self.first_layer, self.first) = (Some(layer), Some(first));
+        }
+        lowest
+    }
 }
 
 /// Points along a drawn contour at which its edges' moves are solved, px apart at most.
@@ -491,20 +511,12 @@ impl CureJob {
         let mut t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
         let layer = index as u64;
         if let Some(first) = w.first {
-            t.features += w.features as u64;
-            t.layers += 1;
-            if t.first_layer.is_none_or(|f| layer < f) {
-                t.first_layer = Some(layer);
-                t.first = Some(first);
+            if t.widened.add(layer, w.features, first) {
                 t.wall_mm = w.wall_mm;
             }
         }
         if let (k, Some(first)) = w.on_nothing {
-            let o = &mut t.on_nothing;
-            (o.0, o.1) = (o.0 + k as u64, o.1 + 1);
-            if o.2.is_none_or(|f| layer < f) {
-                (o.2, o.3) = (Some(layer), Some(first));
-            }
+            t.on_nothing.add(layer, k, first);
         }
     }
 
@@ -513,8 +525,8 @@ impl CureJob {
     /// [`CureJob::widened_warning`].
     pub fn on_nothing_warning(&self, what_at: &WhatAt) -> Option<Warning> {
         let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
-        let (k, n, first, at) = t.on_nothing;
-        let (first, at) = (first?, at?);
+        let o = t.on_nothing;
+        let (first, at, k, n) = (o.first_layer?, o.first?, o.features, o.layers);
         Some(with_features(
             Warning::new(
                 "cure.features-on-nothing",
@@ -537,8 +549,9 @@ impl CureJob {
     /// names what the first one is part of (words to follow its position).
     pub fn widened_warning(&self, what_at: &WhatAt) -> Option<Warning> {
         let t = self.widened.lock().unwrap_or_else(|p| p.into_inner());
-        let (first, at) = (t.first_layer?, t.first?);
-        let (k, n, wall_mm) = (t.features, t.layers, t.wall_mm);
+        let w = t.widened;
+        let (first, at) = (w.first_layer?, w.first?);
+        let (k, n, wall_mm) = (w.features, w.layers, t.wall_mm);
         Some(
             with_features(
                 Warning::new(
