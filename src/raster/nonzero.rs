@@ -2,6 +2,7 @@
 
 use super::{Mask, PixelBox, Rasterizer};
 use crate::slice::Contour;
+use std::ops::Range;
 
 /// Sub-scanlines per pixel row of the nonzero fallback rasterizer.
 const SUBLINES: usize = 32;
@@ -31,9 +32,15 @@ impl Rasterizer {
     /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for layers whose shells
     /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
     ///
-    /// `out` is zero outside `lit` (the box of every contour point), where the section has
-    /// no area: only that box is written.
-    pub(super) fn coverage_nonzero(&self, contours: &[Contour], out: &mut Mask, lit: PixelBox) {
+    /// Writes the rows `rows` (ascending, disjoint ranges) of `out` inside `lit` (the box of
+    /// every contour point, outside which the section has no area).
+    pub(super) fn coverage_nonzero(
+        &self,
+        contours: &[Contour],
+        out: &mut Mask,
+        lit: PixelBox,
+        rows: &[Range<usize>],
+    ) {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
         // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding).
@@ -54,7 +61,7 @@ impl Rasterizer {
             }
         }
         edges.sort_by(|a, b| a.2.total_cmp(&b.2));
-        for r in lit.rows() {
+        for r in rows.iter().flat_map(|rs| rs.clone()) {
             out.data[r * w..][lit.cols()].fill(0);
         }
         let mut diff = vec![0.0f64; w + 2];
@@ -64,7 +71,11 @@ impl Rasterizer {
         let mut xs: Vec<(f64, i32)> = Vec::new();
         let r_first = edges.first().map_or(h, |e| e.2.floor().max(0.0) as usize);
         let inv = 1.0 / SUBLINES as f64;
-        for r in r_first..h {
+        for r in rows
+            .iter()
+            .flat_map(|rs| rs.clone())
+            .filter(|&r| r >= r_first)
+        {
             if next >= edges.len() && active.is_empty() {
                 break;
             }

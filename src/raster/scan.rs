@@ -102,8 +102,10 @@ pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
 /// largest winding seen. Only the touched blocks are visited (between them every cell is
 /// zero and the value repeats), and each run of equal coverage is written once, when it
 /// ends (zero runs are left as they are). With `CHECK`, sets `outside` if a lit pixel lies
-/// outside `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it.
+/// outside `emit`'s area. With `lit`, appends the lit runs (coverage ≥ 50 %) to it. Appends
+/// each row's largest winding and coverage sum to `rows`.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,
     data: &mut [u8],
@@ -112,6 +114,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     emit: E,
     outside: &mut bool,
     mut lit: Option<&mut LitRuns>,
+    rows: &mut Vec<(f32, u64)>,
 ) -> (u64, f32) {
     let PixelBox {
         r0,
@@ -135,6 +138,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
             hi: 0,
         };
         let mut sum = 0.0f32;
+        let mut row_max = 0.0f32;
         // The current run: columns start.. of coverage `val`.
         let mut val = 0u8;
         let mut start = c0;
@@ -167,7 +171,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
                     // Cleared as it is read: the buffer is all zeros after the scan.
                     row[ks + i] = 0.0;
                     let v = sum.abs();
-                    max_winding = max_winding.max(v);
+                    row_max = row_max.max(v);
                     let nv = (v.min(1.0) * 255.0 + 0.5) as u8;
                     if nv != val {
                         sink.end(start, c, val);
@@ -199,11 +203,63 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
             }
         }
         lit_sum += sink.lit_sum;
+        max_winding = max_winding.max(row_max);
+        rows.push((row_max, sink.lit_sum));
         if CHECK && sink.lo < sink.hi {
             *outside |= r < area.r0 || r >= area.r1 || sink.lo < area.c0 || sink.hi > area.c1;
         }
     }
     (lit_sum, max_winding)
+}
+
+/// Writes rows `rows` of `span` again, which hold coverage (the nonzero fallback's), as
+/// [`scan_runs`] writes them: thresholded when `BIN`, through `emit`, `outside` set as there.
+/// Returns the sum of their coverage values and their lit runs (coverage ≥ 50 %), in order.
+pub(super) fn emit_rows<E: Emit, const BIN: bool, const CHECK: bool>(
+    data: &mut [u8],
+    w: usize,
+    (span, rows): (PixelBox, std::ops::Range<usize>),
+    emit: E,
+    outside: &mut bool,
+    lit: &mut Vec<[u32; 3]>,
+) -> u64 {
+    let area = emit.area();
+    let cols = span.c0..span.c1;
+    let mut coverage = vec![0u8; cols.len()];
+    let mut sum = 0;
+    for r in rows {
+        let dst = &mut data[r * w..(r + 1) * w];
+        coverage.copy_from_slice(&dst[cols.clone()]);
+        dst[cols.clone()].fill(0);
+        let mut sink = Runs::<E, BIN, CHECK> {
+            er: emit.row(r),
+            dst,
+            lit_sum: 0,
+            lo: usize::MAX,
+            hi: 0,
+        };
+        let mut start = 0;
+        for i in 1..=coverage.len() {
+            if i == coverage.len() || coverage[i] != coverage[start] {
+                let v = coverage[start];
+                sink.end(span.c0 + start, span.c0 + i, v);
+                if v >= 128 {
+                    match lit.last_mut() {
+                        Some(l) if l[0] == r as u32 && l[2] == (span.c0 + start) as u32 => {
+                            l[2] = (span.c0 + i) as u32
+                        }
+                        _ => lit.push([r as u32, (span.c0 + start) as u32, (span.c0 + i) as u32]),
+                    }
+                }
+                start = i;
+            }
+        }
+        sum += sink.lit_sum;
+        if CHECK && sink.lo < sink.hi {
+            *outside |= r < area.r0 || r >= area.r1 || sink.lo < area.c0 || sink.hi > area.c1;
+        }
+    }
+    sum
 }
 
 /// Bit i set where `cells[i]` (at most [`BLOCK`] cells) is nonzero. A whole block is one
