@@ -501,6 +501,7 @@ mod tests {
         let mut top = below.clone();
         top.extend((20..40).map(|r| [r, 60, 80]));
         top.push([30, 40, 60]);
+        top.sort_unstable();
         let top = runs::union(&top, &[]);
         let masks = vec![below, top];
         for firm_hold in [false, true] {

@@ -5,35 +5,54 @@
 /// A run of one row's pixels: `[row, first column, end column)`.
 pub type Run = [u32; 3];
 
-/// Sorts `runs` and merges those of a row that overlap or touch.
-fn normalized(mut runs: Vec<Run>) -> Vec<Run> {
-    runs.sort_unstable();
-    let mut out: Vec<Run> = Vec::with_capacity(runs.len());
-    for r in runs {
-        match out.last_mut() {
-            Some(l) if l[0] == r[0] && r[1] <= l[2] => l[2] = l[2].max(r[2]),
-            _ => out.push(r),
-        }
+/// Appends `r` to runs in order (by row, then first column), merging it with the last
+/// run when they overlap or touch.
+fn push_merged(out: &mut Vec<Run>, r: Run) {
+    match out.last_mut() {
+        Some(l) if l[0] == r[0] && r[1] <= l[2] => l[2] = l[2].max(r[2]),
+        _ => out.push(r),
     }
-    out
 }
 
 /// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, inside
-/// `width` × `height`.
+/// `width` × `height`. Row by row: each output row gathers the runs of the rows within
+/// `radius`, each widened by its half-chord, and merges them (a sort of a few runs).
 pub fn dilated(runs: &[Run], radius: f64, width: u32, height: u32) -> Vec<Run> {
-    let k = radius.floor() as i64;
-    let mut out = Vec::with_capacity(runs.len() * (2 * k as usize + 1));
-    for &[row, a, b] in runs {
-        for dy in -k..=k {
-            let r = row as i64 + dy;
-            if r < 0 || r >= height as i64 {
-                continue;
-            }
-            let w = (radius * radius - (dy * dy) as f64).sqrt().floor() as u32;
-            out.push([r as u32, a.saturating_sub(w), (b + w).min(width)]);
+    let (Some(first), Some(last)) = (runs.first(), runs.last()) else {
+        return Vec::new();
+    };
+    let k = radius.floor() as u32;
+    let half: Vec<u32> = (0..=k)
+        .map(|dy| (radius * radius - (dy * dy) as f64).sqrt().floor() as u32)
+        .collect();
+    let (lo, hi) = (first[0], last[0]);
+    // `starts[q - lo]..starts[q - lo + 1]`: the runs of row q.
+    let mut starts = Vec::with_capacity((hi - lo + 2) as usize);
+    let mut i = 0;
+    for q in lo..=hi + 1 {
+        while i < runs.len() && runs[i][0] < q {
+            i += 1;
+        }
+        starts.push(i);
+    }
+    let mut out = Vec::with_capacity(runs.len() * 2);
+    let mut row: Vec<[u32; 2]> = Vec::new();
+    for r in lo.saturating_sub(k)..(hi + k + 1).min(height) {
+        row.clear();
+        for q in r.saturating_sub(k).max(lo)..=(r + k).min(hi) {
+            let w = half[q.abs_diff(r) as usize];
+            let of_q = &runs[starts[(q - lo) as usize]..starts[(q - lo + 1) as usize]];
+            row.extend(
+                of_q.iter()
+                    .map(|&[_, a, b]| [a.saturating_sub(w), (b + w).min(width)]),
+            );
+        }
+        row.sort_unstable();
+        for &[a, b] in &row {
+            push_merged(&mut out, [r, a, b]);
         }
     }
-    normalized(out)
+    out
 }
 
 /// The pixels of `a` that are not in `b`.
@@ -125,9 +144,21 @@ pub fn eroded(runs: &[Run]) -> Vec<Run> {
     out
 }
 
-/// The union of two run sets.
+/// The union of two run sets (a merge of the two orders).
 pub fn union(a: &[Run], b: &[Run]) -> Vec<Run> {
-    normalized(a.iter().chain(b).copied().collect())
+    let mut out = Vec::with_capacity(a.len() + b.len());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() || j < b.len() {
+        let r = if j == b.len() || (i < a.len() && a[i] <= b[j]) {
+            i += 1;
+            a[i - 1]
+        } else {
+            j += 1;
+            b[j - 1]
+        };
+        push_merged(&mut out, r);
+    }
+    out
 }
 
 /// Whether pixel (`col`, `row`) is in `runs`.
