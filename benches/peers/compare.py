@@ -4,9 +4,10 @@
 Usage: compare.py DMDSL_BIN OUTDIR MODEL.stl [MODEL.stl ...]
 
 For each model: exports an .sl1 with prusa_sla.ini (next to this script), slices with
-`dmdsl slice --binary` and with anti-aliased masks, both with `--compensation off` (the
-geometry is compared, not the light compensation: a compensated edge pixel's gray is not
-proportional to its coverage), and counts pixels whose lit state (value >= 128, i.e. at
+`dmdsl slice --binary` and with anti-aliased masks, both with `--compensation off
+--cure-correction off` (the geometry is compared, not the light compensation, whose edge
+pixel's gray is not proportional to its coverage, nor the cure correction, which moves
+edges by what cures), and counts pixels whose lit state (value >= 128, i.e. at
 least half the pixel inside the section) differs from PrusaSlicer's, over all layers, as a
 fraction of PrusaSlicer's lit pixels. Needs prusa-slicer (apt) and Pillow.
 """
@@ -52,7 +53,8 @@ def main():
         res = {"model": name, "prusa_layers": len(ref), "prusa_lit_px": lit_px}
         for mode, extra in (("binary", ["--binary"]), ("aa", [])):
             b = os.path.join(out, f"{name}-{mode}.dmdjob")
-            subprocess.run([dmdsl, "slice", model, "-q", "--compensation", "off", "-o", b] + extra,
+            subprocess.run([dmdsl, "slice", model, "-q", "--compensation", "off",
+                            "--cure-correction", "off", "-o", b] + extra,
                            check=True)
             ours = list(dmdsl_layers(b))
             diff = 0
