@@ -221,8 +221,9 @@ mod tests {
         // reaching above the calibrated area: the unfused path) on a 40 × 30 mm field of
         // 0.2 mm pixels, every mode, dithering and binary/anti-aliased: the mask drawn with
         // the compensation in the scan equals coverage → threshold → `apply_in`, the lit
-        // area is that of the coverage, and the layers outside are counted alike.
-        use crate::raster::{threshold, CoverageMap, Rasterizer, Scratch};
+        // area and lit runs are those of the coverage, and the layers outside are counted
+        // alike.
+        use crate::raster::{threshold, CoverageMap, LitRuns, Rasterizer, Scratch};
         let (cal, field) = small_setup();
         let raster = Rasterizer::new(field);
         let mut rnd = rng(0x2545_f491_4f6c_dd1d);
@@ -251,12 +252,19 @@ mod tests {
             for binary in [false, true] {
                 let fused = Compensator::new(&cal, &field, mode, dither).unwrap();
                 let reference = Compensator::new(&cal, &field, mode, dither).unwrap();
-                let (mut s_fused, mut s_ref) = (Scratch::default(), Scratch::default());
+                let recording = || {
+                    let mut s = Scratch::default();
+                    s.record_runs = true;
+                    s
+                };
+                let (mut s_fused, mut s_ref) = (recording(), recording());
                 let mut in_scan = 0;
                 for (case, shapes) in layers.iter().enumerate() {
                     let mut want = raster.coverage(shapes, &mut s_ref);
                     let area = s_ref.lit_pixels(&want);
                     let lit = s_ref.lit_box();
+                    let (w, h) = (want.width as usize, want.height as usize);
+                    let runs = LitRuns::of_mask(&want, [0, h, 0, w]);
                     if binary {
                         threshold(&mut want);
                     }
@@ -265,6 +273,8 @@ mod tests {
                     let what = format!("{mode:?} {dither:?} binary {binary} case {case}");
                     assert!(got == want, "{what}: masks differ");
                     assert_eq!(s_fused.lit_pixels(&got), area, "{what}: lit area");
+                    assert_eq!(s_ref.lit_runs, runs, "{what}: lit runs of the coverage");
+                    assert_eq!(s_fused.lit_runs, runs, "{what}: lit runs");
                     in_scan += fused.fusable() as usize;
                     s_fused.recycle(got);
                     s_ref.recycle(want);
