@@ -1,7 +1,7 @@
 //! Calibration test jobs and their fits (docs/CALIBRATION.md): the working-curve windowpane
 //! ([`working_curve`]), the measurement sheets the user fills in ([`Sheet`]) and the
 //! least-squares fit of Jacobs' working curve Cd = Dp·ln(E/Ec) ([`fit_resin`]), the
-//! accuracy part ([`accuracy_part`], [`accuracy`]) and the blur job with the fit of the
+//! accuracy part ([`accuracy_part`], [`fn@accuracy`]) and the blur job with the fit of the
 //! point-spread function's σ ([`psf`]).
 
 use crate::error::{Error, Result};

@@ -1,6 +1,6 @@
 //! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
 //! deflate block whose back-references are runs (distance 1) and copies of one of the
-//! eight rows above (zone-compensated masks repeat rows, [`zlib_rows`]); the work grows with
+//! eight rows above (zone-compensated masks repeat rows, `zlib_rows`); the work grows with
 //! the number of runs, not of pixels.
 //!
 //! Invariants: a standard PNG; the bytes are deterministic and independent of the lit box

@@ -158,7 +158,7 @@ fn areas(p: &Profile) -> Vec<Rect> {
 }
 
 /// The blur job for `p`: at the centre and the four corners of each projector's area
-/// ([`areas`]), a cluster of lines and gaps of every width in [`WIDTHS_PX`], along x and
+/// (`areas`), a cluster of lines and gaps of every width in [`WIDTHS_PX`], along x and
 /// along y, [`FEATURE_LAYERS`] layers thick on a base plate [`BASE_LAYERS`] thick; every
 /// edge on a pixel boundary. The job exposes every layer alike (the caller sets it).
 pub fn pattern(p: &Profile) -> std::result::Result<PsfPattern, String> {

@@ -32,7 +32,7 @@ pub struct Segments {
 
 impl Segments {
     /// The edges of `contours` (build-plane mm) on a field `height_px` rows high of
-    /// `pixel_mm` pixels, with the grid index ([`Segments::near`], [`Segments::ray`]).
+    /// `pixel_mm` pixels, with the grid index ([`Segments::ray`]).
     pub fn new(contours: &[Contour], pixel_mm: f64, height_px: f64) -> Segments {
         let mut s = Segments::edges(contours, pixel_mm, height_px);
         s.index();

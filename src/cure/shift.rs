@@ -18,7 +18,7 @@
 //! light, [`CureModel::threshold`]); for a prism (every d_k = 0, infinitely many layers of
 //! the normal dose) that is the pixel-phase average of −σₑ·Φ⁻¹(T). It is clamped to
 //! [−[`OUT_PX`], the shift at which the layer's own light at the edge falls to
-//! [`NEAR`](super::check::NEAR)]: farther in, what cures at the section's edge is the
+//! [`NEAR`]]: farther in, what cures at the section's edge is the
 //! layers above's print-through, which no move of this layer's edge changes.
 
 use super::check::NEAR;
@@ -271,7 +271,7 @@ impl Coverage {
     }
 
     /// The distance from `p` along the unit direction `dir` to where the coverage first
-    /// crosses one half, if within `max` (steps of [`STEP_PX`], the crossing interpolated).
+    /// crosses one half, if within `max` (steps of `STEP_PX`, the crossing interpolated).
     pub fn crossing(&self, p: [f64; 2], dir: [f64; 2], max: f64) -> Option<f64> {
         let c0 = self.value(p) - 0.5;
         let (mut t, mut c) = (0.0, c0);

@@ -5,7 +5,7 @@
 //! fixed "no date" time stamp, so the same entries always give the same bytes.
 //!
 //! A write that fails (a full disk) is one error naming the destination: the file goes
-//! through [`Quiet`], which after its first error takes every later write without doing
+//! through `Quiet`, which after its first error takes every later write without doing
 //! it, so the zip library's own attempt to finish an archive it is dropped with (which
 //! prints to stderr when it fails) finds nothing to report.
 

@@ -1,7 +1,7 @@
 //! NanoDLP plates (`part.nanodlp`), the zip NanoDLP imports and exports (docs/FORMATS.md,
 //! "nanodlp", names its entries and sources).
 //!
-//! A plate says a layer's steps as NanoDLP runs them ([`Plate`]): one set of settings for
+//! A plate says a layer's steps as NanoDLP runs them (`Plate`): one set of settings for
 //! the first `SupportLayerNumber` layers (the `Support…` keys) and one for the others.
 //! Stage speeds are the printer's own, not the plate's: dmdsl records the job's as the
 //! profile's custom values `Dmdsl…`, which NanoDLP keeps as variables and acts on only if

@@ -1,5 +1,5 @@
 //! Reading a NanoDLP plate as a job (docs/EXECUTOR.md, "Imported jobs"): the images
-//! `1.png … N.png` (or from `0.png`), each layer's steps the plate's ([`Plate::layers`]),
+//! `1.png … N.png` (or from `0.png`), each layer's steps the plate's (`Plate::layers`),
 //! the display of `options.json` (or `slicer.json`). Without dmdsl's custom speed values
 //! the moves are timed at 1 mm/s and 10 mm/s², `unstated`, with a note; what NanoDLP
 //! computes while it prints (the `Dynamic…` fields, `TransitionalLayer`) is not

@@ -6,7 +6,7 @@
 //! (`islands.rs`; layer 0 rests on the platform).
 //!
 //! A layer whose section equals the layer below's once collinear points are left out (a
-//! prism, [`COLLINEAR_MM`]) takes the layer below's analysis with no islands
+//! prism, `COLLINEAR_MM`) takes the layer below's analysis with no islands
 //! ([`Analyser`]). Overlapping shells are not merged: an edge of one inside another counts
 //! as boundary, so the max fill distance is then a lower bound.
 
@@ -75,7 +75,7 @@ pub enum Analysed {
     /// The layer's analysis.
     Done(LayerAnalysis),
     /// The layer's section equals the layer below's (collinear points left out, see
-    /// [`COLLINEAR_MM`]), whose analysis this analyser does not have: the layer's analysis
+    /// `COLLINEAR_MM`), whose analysis this analyser does not have: the layer's analysis
     /// is that one with no islands (every region rests on itself). See
     /// [`Analysed::resolve`].
     SameAsBelow,
@@ -194,7 +194,7 @@ impl Analyser {
     }
 
     /// Whether layer `index`'s section (`cur`) equals the layer below's (`prev`) once
-    /// collinear points are left out (see [`COLLINEAR_MM`]); then
+    /// collinear points are left out (see `COLLINEAR_MM`); then
     /// [`Analyser::simplified_section`] is that section. The answer is kept for the
     /// following [`Analyser::analyse_or_defer`] of the same layer.
     pub fn equals_below(
