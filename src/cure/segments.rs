@@ -215,6 +215,7 @@ impl Segments {
             cells: Vec::new(),
         };
         grid.index();
+        let rows = grid.row_lists();
         let contour_of = |i: usize| self.starts.partition_point(|&s| s <= i) - 1;
         let mut out = Vec::with_capacity(self.segs.len());
         let mut interior = Vec::with_capacity(self.segs.len());
@@ -229,7 +230,7 @@ impl Segments {
                     let at = |t: f64| [0, 1].map(|k| s.a[k] + t * (s.b[k] - s.a[k]));
                     let mid = at((w[0] + w[1]) / 2.0);
                     let beyond = [0, 1].map(|k| mid[k] + 1e-3 * s.n[k]);
-                    interior.push(grid.winding(beyond) != 0);
+                    interior.push(grid.winding(&rows, beyond) != 0);
                     out.push(Segment {
                         a: at(w[0]),
                         b: at(w[1]),
@@ -305,21 +306,28 @@ impl Segments {
         ts.dedup_by(|b, a| *b - *a < 1e-9);
     }
 
-    /// The nonzero winding number of the edges (indexed) at `p`: signed crossings of the
-    /// ray from `p` along +u, through the cells of `p`'s row.
-    fn winding(&self, p: [f64; 2]) -> i32 {
-        let (c0, r) = self.cell(p[0], p[1]);
+    /// Per row of the grid, the edges that reach into it (each once).
+    fn row_lists(&self) -> Vec<Vec<u32>> {
+        let mut rows = vec![Vec::new(); self.rows];
+        for (i, s) in self.segs.iter().enumerate() {
+            let (_, r0) = self.cell(0.0, s.a[1].min(s.b[1]));
+            let (_, r1) = self.cell(0.0, s.a[1].max(s.b[1]));
+            rows[r0..=r1].iter_mut().for_each(|l| l.push(i as u32));
+        }
+        rows
+    }
+
+    /// The nonzero winding number of the edges at `p`: signed crossings of the ray from `p`
+    /// along +u, among the edges of `p`'s grid row (`rows`, [`Segments::row_lists`]).
+    fn winding(&self, rows: &[Vec<u32>], p: [f64; 2]) -> i32 {
+        let (_, r) = self.cell(p[0], p[1]);
         let mut w = 0;
-        let mut counted: Vec<u32> = Vec::new();
-        for c in c0..self.cols {
-            for &j in &self.cells[r * self.cols + c] {
-                let s = &self.segs[j as usize];
-                if (s.a[1] <= p[1]) != (s.b[1] <= p[1]) && !counted.contains(&j) {
-                    let t = (p[1] - s.a[1]) / (s.b[1] - s.a[1]);
-                    if s.a[0] + t * (s.b[0] - s.a[0]) > p[0] {
-                        counted.push(j);
-                        w += if s.b[1] > s.a[1] { 1 } else { -1 };
-                    }
+        for &j in &rows[r] {
+            let s = &self.segs[j as usize];
+            if (s.a[1] <= p[1]) != (s.b[1] <= p[1]) {
+                let t = (p[1] - s.a[1]) / (s.b[1] - s.a[1]);
+                if s.a[0] + t * (s.b[0] - s.a[0]) > p[0] {
+                    w += if s.b[1] > s.a[1] { 1 } else { -1 };
                 }
             }
         }
