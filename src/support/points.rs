@@ -74,13 +74,18 @@ struct Needs {
 /// The support points of the part whose lit pixels per layer are `masks` (layers below
 /// `first` are empty).
 pub fn place(masks: &[Vec<Run>], first: usize, s: &Spread) -> Vec<Point> {
+    // Each layer's erosion (for the necks), once: it is its own and the next one's below.
+    let cores: Vec<Vec<Run>> = match s.firm_hold {
+        true => masks.par_iter().map(|m| runs::eroded(m)).collect(),
+        false => Vec::new(),
+    };
     let needs: Vec<Needs> = (0..masks.len())
         .into_par_iter()
         .map(|l| {
             if l < first {
                 Needs::default()
             } else {
-                needs(masks, first, l, s)
+                needs((masks, &cores), first, l, s)
             }
         })
         .collect();
@@ -112,8 +117,8 @@ pub fn place(masks: &[Vec<Run>], first: usize, s: &Spread) -> Vec<Point> {
     placed.points
 }
 
-/// What layer `l` needs.
-fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
+/// What layer `l` needs (`cores`: each layer's erosion, with the firm hold).
+fn needs((masks, cores): (&[Vec<Run>], &[Vec<Run>]), first: usize, l: usize, s: &Spread) -> Needs {
     let cur = &masks[l];
     if cur.is_empty() || (l == first && s.first_on_pad) {
         return Needs::default();
@@ -135,7 +140,8 @@ fn needs(masks: &[Vec<Run>], first: usize, l: usize, s: &Spread) -> Needs {
         .map(|(r, _)| r)
         .collect();
     if s.firm_hold {
-        islands.extend(cut_off(cur, prev));
+        let below: &[Run] = if l == first { &[] } else { &cores[l - 1] };
+        islands.extend(cut_off(&cores[l], below));
     }
     let mut down = if l == first {
         Vec::new()
@@ -164,26 +170,22 @@ fn firm(region: &[Run], below: &[Run]) -> bool {
         || runs::has_interior(&runs::minus(region, &runs::minus(region, below)))
 }
 
-/// The parts of a layer `cur` that hang from the rest of their region by a neck a pixel or
-/// two wide and rest on nothing firm below: the components of its pixels whose four
-/// neighbours are lit (its erosion by a pixel) that share no such pixel with the layer
-/// below `below`. The cure correction, moving edges in, cuts such a neck, and the part
-/// it held would cure loose.
-fn cut_off(cur: &[Run], below: &[Run]) -> Vec<Vec<Run>> {
-    let core = runs::eroded(cur);
+/// The parts of a layer that hang from the rest of their region by a neck a pixel or two
+/// wide and rest on nothing firm below: the components of its pixels whose four
+/// neighbours are lit (its erosion by a pixel, `core`) that share no such pixel with the
+/// layer below (its erosion `below`). The cure correction, moving edges in, cuts such a
+/// neck, and the part it held would cure loose.
+fn cut_off(core: &[Run], below: &[Run]) -> Vec<Vec<Run>> {
     if core.is_empty() {
         return Vec::new();
     }
-    let (part, n) = components(&core);
+    let (part, n) = components(core);
     let mut rests = vec![false; n];
-    for (g, k) in part
-        .iter()
-        .zip(runs::shared_pixels(&core, &runs::eroded(below)))
-    {
+    for (g, k) in part.iter().zip(runs::shared_pixels(core, below)) {
         rests[*g as usize] |= k > 0;
     }
     let mut out: Vec<Vec<Run>> = vec![Vec::new(); n];
-    for (g, r) in part.iter().zip(&core) {
+    for (g, r) in part.iter().zip(core) {
         if !rests[*g as usize] {
             out[*g as usize].push(*r);
         }

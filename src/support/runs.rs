@@ -123,20 +123,23 @@ fn row_of(runs: &[Run], r: u32) -> &[Run] {
 }
 
 /// The pixels of `runs` whose four neighbours are in `runs` too (an erosion by one pixel).
+/// One pass over the rows, each beside the rows above and below it.
 pub fn eroded(runs: &[Run]) -> Vec<Run> {
     let mut out = Vec::new();
-    for &[r, a, b] in runs {
-        let (lo, hi) = (a + 1, b.saturating_sub(1));
-        if r == 0 || hi <= lo {
+    let rows: Vec<&[Run]> = runs.chunk_by(|x, y| x[0] == y[0]).collect();
+    for k in 1..rows.len().saturating_sub(1) {
+        let (up, row, down) = (rows[k - 1], rows[k], rows[k + 1]);
+        let r = row[0][0];
+        if up[0][0] + 1 != r || down[0][0] != r + 1 {
             continue;
         }
-        for u in row_of(runs, r - 1) {
-            let (x0, x1) = (u[1].max(lo), u[2].min(hi));
-            for d in row_of(runs, r + 1)
-                .iter()
-                .filter(|d| d[1].max(x0) < d[2].min(x1))
-            {
-                out.push([r, d[1].max(x0), d[2].min(x1)]);
+        for &[_, a, b] in row {
+            let (lo, hi) = (a + 1, b.saturating_sub(1));
+            for u in up.iter().filter(|_| hi > lo) {
+                let (x0, x1) = (u[1].max(lo), u[2].min(hi));
+                for d in down.iter().filter(|d| d[1].max(x0) < d[2].min(x1)) {
+                    out.push([r, d[1].max(x0), d[2].min(x1)]);
+                }
             }
         }
     }
