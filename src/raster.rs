@@ -6,8 +6,9 @@
 //!
 //! * Anti-aliased masks (the default) hold the exact fraction of each pixel's area
 //!   inside the section, `round(255 · coverage)`, computed analytically with a signed-area
-//!   accumulation buffer. Layers whose shells overlap (winding above 1 somewhere) are
-//!   redone with an exact-span nonzero-winding scanline fill on 32 sub-scanlines per row.
+//!   accumulation buffer. The rows where shells overlap (winding above 1), and a row either
+//!   side, are redone with an exact-span nonzero-winding scanline fill on 32 sub-scanlines
+//!   per row.
 //! * Binary masks (`--binary`) threshold that coverage at 50 %.
 //!
 //! Why not tiny-skia: docs/ARCHITECTURE.md (it is the reference renderer of
@@ -281,10 +282,11 @@ impl Rasterizer {
     /// The mask of a layer as it is written: coverage, thresholded at 50 % when `binary`
     /// (as [`threshold`] does), then mapped through `map` (light compensation) when given.
     ///
-    /// The scan applies the map as it writes each value, unless the map is not
-    /// [`CoverageMap::fusable`] or the shells overlap (nonzero fallback): then the finished
-    /// (thresholded) coverage goes through [`CoverageMap::apply`], with the same bytes. The
-    /// lit area ([`Scratch::lit_pixels`]) is that of the coverage, before threshold and map.
+    /// The scan applies the map as it writes each value (the rows where shells overlap, drawn
+    /// again by the nonzero rule, are written the same way), unless the map is not
+    /// [`CoverageMap::fusable`]: then the finished (thresholded) coverage goes through
+    /// [`CoverageMap::apply`], with the same bytes. The lit area ([`Scratch::lit_pixels`]) is
+    /// that of the coverage, before threshold and map.
     #[inline(never)]
     pub fn render<M: CoverageMap>(
         &self,

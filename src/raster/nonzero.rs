@@ -29,7 +29,7 @@ fn add_span(cover: &mut [f64], diff: &mut [f64], xa: f64, xb: f64, wgt: f64) {
 
 impl Rasterizer {
     /// Nonzero-winding coverage by analytic spans on [`SUBLINES`] sub-scanlines per pixel
-    /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for layers whose shells
+    /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for the rows where shells
     /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
     ///
     /// Writes the rows `rows` (ascending, disjoint ranges) of `out` inside `lit` (the box of
