@@ -24,6 +24,7 @@ pub mod engine;
 pub mod held_back;
 pub mod islands;
 pub mod kernel;
+pub mod loose;
 pub mod model;
 pub mod plots;
 pub mod predict;

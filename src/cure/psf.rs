@@ -69,6 +69,55 @@ impl Psf {
         4.0 * self.sigma_px
     }
 
+    /// The pixels either side of a pixel whose light [`Psf::cures_in`] counts at its
+    /// centre: ⌈4σ⌉ + 1.
+    pub fn reach_whole_px(&self) -> usize {
+        self.reach_px().ceil() as usize + 1
+    }
+
+    /// Whether each pixel of the window `rows` × `cols` (row-major) cures: the light of
+    /// the pixels around it (`light(row, col)`, relative irradiance, asked from
+    /// [`Psf::reach_whole_px`] before the window's first row and column to as far past
+    /// its ends; `None` before row or column 0), blurred by the PSF and integrated over
+    /// each lit pixel, reaches `t` at the pixel's centre.
+    pub fn cures_in(
+        &self,
+        rows: std::ops::Range<usize>,
+        cols: std::ops::Range<usize>,
+        t: f32,
+        light: impl Fn(Option<usize>, Option<usize>) -> f32,
+    ) -> Vec<bool> {
+        let r = self.reach_whole_px();
+        let w: Vec<f32> = (0..=2 * r)
+            .map(|k| self.axis_weight(k as f64 - r as f64 + 0.5) as f32)
+            .collect();
+        let (ww, wh) = (cols.len(), rows.len());
+        let (pw, ph) = (ww + 2 * r, wh + 2 * r);
+        let mut lit = vec![0f32; pw * ph];
+        for y in 0..ph {
+            let fr = (rows.start + y).checked_sub(r);
+            for x in 0..pw {
+                lit[y * pw + x] = light(fr, (cols.start + x).checked_sub(r));
+            }
+        }
+        // Across, then down.
+        let mut across = vec![0f32; ww * ph];
+        for y in 0..ph {
+            for x in 0..ww {
+                across[y * ww + x] = (0..=2 * r).map(|d| w[d] * lit[y * pw + x + d]).sum();
+            }
+        }
+        (0..wh)
+            .flat_map(|y| (0..ww).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                (0..=2 * r)
+                    .map(|d| w[d] * across[(y + d) * ww + x])
+                    .sum::<f32>()
+                    >= t
+            })
+            .collect()
+    }
+
     /// The standard deviation of the light across a straight anti-aliased edge: the PSF and
     /// a pixel's box (variance 1/12) together, √(σ² + 1/12).
     #[cfg(test)]

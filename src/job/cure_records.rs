@@ -65,6 +65,13 @@ pub(super) struct CureJob {
     /// The narrow features drawn wider, over the layers drawn so far (sums and the lowest
     /// layer's first feature: the same in any order).
     widened: Mutex<WidenedFeatures>,
+    /// The largest piece of a corrected layer judged for curing loose
+    /// ([`cure::loose`]): a support head's contact, pixels; 0 without supports (the
+    /// islands warning reports what rests on nothing).
+    loose_max_px: usize,
+    /// A hybrid job's continuous dose against a normal layer's (the layer height at the
+    /// continuous speed): whether a layer prints continuously is planned after it is drawn.
+    continuous: Option<f64>,
 }
 
 /// The layer with the largest mean absolute edge error: what its picture shows, in the
@@ -125,6 +132,9 @@ pub(super) struct LayerCorrection {
     /// The layer's own light at which a feature that the layers above repeat cures (the
     /// narrow features' widening aims at it).
     pub threshold: f64,
+    /// The layer's own light at which its resin cures: the model's edge threshold over
+    /// the layer's dose against the normal layer's (what `run` judges loose pieces by).
+    pub cures_at: f64,
 }
 
 /// The narrow features of one layer the XY correction drew wider so they cure, and those
@@ -166,6 +176,8 @@ pub(super) struct CureDrawn {
     pub dropped: Vec<(usize, LayerDropped)>,
     /// The narrow features drawn wider so they cure (`cure::widen`).
     pub widened: Option<LayerWidened>,
+    /// The corrected coverage, for the next layer's loose pieces (`cure::loose`).
+    pub drawn: Option<cure::loose::Drawn>,
 }
 
 /// The dropped features of one layer (the last layer of their runs), build-plane mm.
@@ -257,6 +269,17 @@ impl CureJob {
             worst: Mutex::new(None),
             dropped: Mutex::new(DroppedFeatures::default()),
             widened: Mutex::new(WidenedFeatures::default()),
+            loose_max_px: match &profile.supports {
+                s if s.enabled => {
+                    let r = 0.5 * s.head_front_diameter_mm / model.pixel_mm;
+                    (std::f64::consts::PI * r * r).floor() as usize
+                }
+                _ => 0,
+            },
+            continuous: profile.hybrid.as_ref().map(|h| {
+                let s = model.layer_mm / h.continuous_speed_mm_s.get();
+                s / profile.exposure.layer_s.get()
+            }),
         }))
     }
 
@@ -275,6 +298,18 @@ impl CureJob {
     /// planned).
     fn ratio(&self, k: usize) -> f64 {
         self.exposure.layer_exposure_s(k) / self.exposure.layer_s.get()
+    }
+
+    /// The dose of layer `index` against a normal layer's that its loose pieces are judged
+    /// by: [`CureJob::ratio`], or in a hybrid job the continuous dose where it is smaller
+    /// and the layer may print continuously (past the bottom and transition layers).
+    fn loose_ratio(&self, index: usize) -> f64 {
+        let e = &self.exposure;
+        let free = (e.bottom_layers + e.transition_layers) as usize;
+        match self.continuous {
+            Some(c) if index >= free => self.ratio(index).min(c),
+            _ => self.ratio(index),
+        }
     }
 
     /// Layer `index`'s correction (`None` with `off`): the edges of its drawn `section`
@@ -330,6 +365,7 @@ impl CureJob {
             segs,
             shifts,
             threshold: self.model.threshold(0.5 * self.model.layer_mm, Some(0)) / all,
+            cures_at: self.model.edge_threshold() / self.loose_ratio(index),
         })
     }
 
@@ -365,11 +401,13 @@ impl CureJob {
     /// most the coverage of the nearest [`CureJob::held_back`] of the `lower` sections,
     /// the layers below, nearest first: a downward-facing surface is drawn only from its
     /// held-back layers on; narrow features the correction starves are then drawn back and
-    /// wider, `cure::widen`, unless `rests` says they rest on nothing), then thresholds
-    /// (`binary`) and compensates (`comp`) it in place. With `xyz` it also finds the flat features
-    /// the correction drops whose runs of lit layers end in the layer below (from
-    /// [`CureJob::lower_layers`] sections below) or, when `top` (the job's last layer), in
-    /// this one.
+    /// wider, `cure::widen`, unless `rests` says they rest on nothing; in a job with
+    /// supports, pieces that would cure loose on `below`, the layer below as drawn, are
+    /// drawn dark, `cure::loose`, and the layer is kept as drawn for the next), then
+    /// thresholds (`binary`) and compensates (`comp`) it in place. With `xyz` it also finds
+    /// the flat features the correction drops whose runs of lit layers end in the layer
+    /// below (from [`CureJob::lower_layers`] sections below) or, when `top` (the job's last
+    /// layer), in this one.
     #[allow(clippy::too_many_arguments)]
     pub fn draw(
         &self,
@@ -379,6 +417,7 @@ impl CureJob {
         corr: Option<&LayerCorrection>,
         lower: &[&[Contour]],
         rests: &mut dyn FnMut(&[usize]) -> bool,
+        below: Option<&cure::loose::Drawn>,
         top: bool,
         scratch: &mut Scratch,
         binary: bool,
@@ -469,6 +508,7 @@ impl CureJob {
             }
             LayerWidened::of(&wd)
         });
+        let drawn = corr.and_then(|c| self.loose(raster, section, (&mut m, drawn_lit), c, below));
         let (p, h) = (self.model.pixel_mm, m.height);
         let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
             .into_iter()
@@ -485,8 +525,35 @@ impl CureJob {
                 outside,
                 dropped,
                 widened,
+                drawn,
             },
         )
+    }
+
+    /// In a job with supports, draws dark the pieces of the corrected coverage `m` (lit
+    /// box `lit`) of `section` that would cure loose on `below` (`cure::loose`), and
+    /// returns the layer as drawn, for the next; `None` without supports.
+    fn loose(
+        &self,
+        raster: &Rasterizer,
+        section: &[Contour],
+        (m, lit): (&mut Mask, PixelBox),
+        c: &LayerCorrection,
+        below: Option<&cure::loose::Drawn>,
+    ) -> Option<cure::loose::Drawn> {
+        if self.loose_max_px == 0 {
+            return None;
+        }
+        let psf = cure::Psf {
+            sigma_px: self.model.sigma_px,
+        };
+        let mut exact = || LOWER.with(|s| raster.coverage(section, &mut s.borrow_mut()));
+        let judge = (&psf, c.cures_at as f32);
+        let max = self.loose_max_px;
+        for k in cure::loose::loose_pieces(m, lit, judge, max, below, &mut exact) {
+            m.data[k] = 0;
+        }
+        Some(cure::loose::Drawn::of(m, lit, c.cures_at as f32))
     }
 
     /// Counts the features dropped at layer `index` ([`CureDrawn::dropped`]) into the

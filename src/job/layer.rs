@@ -109,6 +109,8 @@ pub(super) struct BlockWorker {
     pub analyser: Analyser,
     /// The masks of the previous layer.
     previous: Option<PreviousLayerMasks>,
+    /// The previous layer's corrected coverage (`crate::cure::loose`), with its index.
+    corrected: Option<(usize, crate::cure::loose::Drawn)>,
 }
 
 /// A layer's section as it is drawn: without collinear points when it equals the layer
@@ -172,12 +174,20 @@ pub(super) fn layer_masks(
             if let Some((m, _)) = drawing.coverage.take() {
                 scratch.recycle(m);
             }
+            // The masks of the layer below shown again: so is its coverage.
+            match (&mut worker.corrected, reused.1) {
+                (Some((k, _)), Origin::PreviousLayer) if *k + 1 == i => *k = i,
+                (c, _) => *c = None,
+            }
             reused
         }
-        None => (
-            draw(ctx, scratch, layer, &mut drawing, same)?,
-            Origin::Drawn,
-        ),
+        None => {
+            let below = worker.corrected.take().filter(|(k, _)| k + 1 == i);
+            let below = below.as_ref().map(|b| &b.1);
+            let (m, corrected) = draw(ctx, scratch, layer, &mut drawing, same, below)?;
+            worker.corrected = corrected.map(|c| (i, c));
+            (m, Origin::Drawn)
+        }
     };
     if drawn.outside && origin != Origin::Drawn {
         if let Some(o) = ctx.optics {
@@ -326,21 +336,25 @@ fn drawing(
 }
 
 /// Draws layer `layer`'s masks from `drawing`; when the layer equals the layer below's
-/// (`same`) they are offered to the recent prism masks.
+/// (`same`) they are offered to the recent prism masks. `below`: the layer below as
+/// drawn by this worker (its corrected coverage), against which the job's pieces that
+/// would cure loose are found (`crate::cure::loose`); returned with the masks: this layer
+/// as drawn, for the next.
 fn draw(
     ctx: &LayerContext,
     scratch: &mut Scratch,
     layer: &LayerInput,
     drawing: &mut Drawing,
     same: bool,
-) -> Result<Arc<DrawnMasks>> {
+    below: Option<&crate::cure::loose::Drawn>,
+) -> Result<(Arc<DrawnMasks>, Option<crate::cure::loose::Drawn>)> {
     let area_scale = drawing.warped.as_ref().map_or(1.0, |w| w.1);
     // Coverage (thresholded when binary), compensated while it is drawn: coverage → gray
     // through S⁻¹(coverage·E*/P) (docs/CALIBRATION.md).
     let comp = ctx.optics.map(|o| &o.compensator);
     let coverage = drawing.coverage.take();
     let drawn_section = drawing.drawn();
-    let (mut field_mask, lit_pixels, outside, dropped, widened) =
+    let (mut field_mask, lit_pixels, outside, dropped, widened, corrected) =
         match ctx.cure.filter(|c| c.active()) {
             // The cure correction works on the coverage (the relative irradiance the
             // compensation then delivers): drawn and corrected, then thresholded and
@@ -359,18 +373,19 @@ fn draw(
                     drawing.corr.as_ref(),
                     &lower,
                     &mut |px| rests.rests(px),
+                    below,
                     layer.above == 0,
                     scratch,
                     ctx.binary,
                     comp,
                 );
-                (m, c.lit_pixels, c.outside, c.dropped, c.widened)
+                (m, c.lit_pixels, c.outside, c.dropped, c.widened, c.drawn)
             }
             None => {
                 let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
                 let lit = scratch.lit_pixels(&m);
                 let outside = comp.is_some() && scratch.reported_outside();
-                (m, lit, outside, Vec::new(), None)
+                (m, lit, outside, Vec::new(), None, None)
             }
         };
     if let Some(d) = ctx.dose {
@@ -443,7 +458,7 @@ fn draw(
     if let Some(recent) = recent {
         recent.put(&drawing.section, &masks);
     }
-    Ok(masks)
+    Ok((masks, corrected))
 }
 
 /// Writes layer `i`'s mask files and returns their records.

@@ -15,6 +15,7 @@
 use crate::bundle::machine::Machine;
 use crate::bundle::regions::Run;
 use crate::bundle::{BundleSource, Manifest};
+use crate::cure::loose::{judged, labels, Cured, Window};
 use crate::cure::Psf;
 use crate::exec::cure::{decode, model_of, ratios, Light};
 use std::cell::RefCell;
@@ -33,29 +34,10 @@ pub(super) struct CureJudge<'a> {
     field: [usize; 2],
     threshold: f32,
     ratios: Vec<f32>,
-    /// `weights[d + reach]`: the light at a pixel's centre from a lit pixel `d` away
-    /// along one axis.
-    weights: Vec<f32>,
-    reach: usize,
+    psf: Psf,
     /// The masks read last, by layer.
     recent: RefCell<Vec<(usize, Rc<Vec<u8>>)>>,
 }
-
-/// What cures of a candidate region.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Cured {
-    /// Meets the layer below or a resting region of its layer.
-    Rests,
-    /// Rests on nothing (or could not be told within the window).
-    Free,
-    /// None of its pixels cures.
-    Nothing,
-}
-
-/// A window's pixel as the flood sees it.
-const OUT: u8 = 0;
-const OWN: u8 = 1;
-const RESTING: u8 = 2;
 
 impl<'a> CureJudge<'a> {
     /// The judge of `manifest`'s job, or `None` when its masks are judged by gray alone:
@@ -76,10 +58,6 @@ impl<'a> CureJudge<'a> {
         let psf = Psf {
             sigma_px: model.sigma_px,
         };
-        let reach = psf.reach_px().ceil() as usize + 1;
-        let weights = (0..=2 * reach)
-            .map(|k| psf.axis_weight(k as f64 - reach as f64 + 0.5) as f32)
-            .collect();
         Some(CureJudge {
             source,
             manifest,
@@ -90,8 +68,7 @@ impl<'a> CureJudge<'a> {
             field: [f.width_px as usize, f.height_px as usize],
             threshold: model.edge_threshold() as f32,
             ratios: ratios(manifest),
-            weights,
-            reach,
+            psf,
             recent: RefCell::new(Vec::new()),
         })
     }
@@ -148,62 +125,13 @@ impl<'a> CureJudge<'a> {
         rests: &[bool],
         masks: [&[u8]; 2],
     ) -> Cured {
-        let own = || cur.iter().zip(region).filter(move |(_, &k)| k == g);
-        let (mut r0, mut c0, mut r1, mut c1) = (usize::MAX, usize::MAX, 0, 0);
-        for (run, _) in own() {
-            let [r, a, b] = run.map(|v| v as usize);
-            (r0, r1, c0, c1) = (r0.min(r), r1.max(r + 1), c0.min(a), c1.max(b));
-        }
-        let m = 2 * self.reach + 2;
-        let [fw, fh] = self.field;
-        let rows = r0.saturating_sub(m)..(r1 + m).min(fh);
-        let cols = c0.saturating_sub(m)..(c1 + m).min(fw);
-        let (ww, wh) = (cols.len(), rows.len());
+        let Window { rows, cols } = Window::of((cur, region), g, &self.psf, self.field);
+        let ww = cols.len();
         // The candidate's own pixels and those of resting regions of its layer.
-        let mut label = vec![OUT; ww * wh];
-        for (run, &k) in cur.iter().zip(region) {
-            let r = run[0] as usize;
-            if !rows.contains(&r) || !(k == g || rests[k as usize]) {
-                continue;
-            }
-            let a = (run[1] as usize).max(cols.start);
-            let b = (run[2] as usize).min(cols.end);
-            let v = if k == g { OWN } else { RESTING };
-            for c in a..b {
-                label[(r - rows.start) * ww + c - cols.start] = v;
-            }
-        }
+        let label = labels((cur, region), g, rests, &rows, &cols);
         let cured_here = self.cured(masks[0], i, &rows, &cols);
         let cured_below = self.cured(masks[1], i - 1, &rows, &cols);
-        let mut seen = vec![false; ww * wh];
-        let mut stack: Vec<usize> = (0..ww * wh)
-            .filter(|&k| label[k] == OWN && cured_here[k])
-            .collect();
-        if stack.is_empty() {
-            return Cured::Nothing;
-        }
-        for &k in &stack {
-            seen[k] = true;
-        }
-        while let Some(k) = stack.pop() {
-            if cured_below[k] || label[k] == RESTING {
-                return Cured::Rests;
-            }
-            let (x, y) = (k % ww, k / ww);
-            let next = [
-                (x > 0).then(|| k - 1),
-                (x + 1 < ww).then(|| k + 1),
-                (y > 0).then(|| k - ww),
-                (y + 1 < wh).then(|| k + ww),
-            ];
-            for n in next.into_iter().flatten() {
-                if cured_here[n] && !seen[n] {
-                    seen[n] = true;
-                    stack.push(n);
-                }
-            }
-        }
-        Cured::Free
+        judged(&label, &cured_here, &cured_below, ww)
     }
 
     /// Whether each pixel of the field window `rows` × `cols` cures under layer `i`'s
@@ -215,40 +143,13 @@ impl<'a> CureJudge<'a> {
         rows: &std::ops::Range<usize>,
         cols: &std::ops::Range<usize>,
     ) -> Vec<bool> {
-        let r = self.reach;
-        let (ww, wh) = (cols.len(), rows.len());
-        let (pw, ph) = (ww + 2 * r, wh + 2 * r);
-        // The light over the window and the blur's reach around it (0 off the masks).
-        let mut light = vec![0f32; pw * ph];
-        for y in 0..ph {
-            let Some(fr) = (rows.start + y).checked_sub(r) else {
-                continue;
-            };
-            for x in 0..pw {
-                let Some(fc) = (cols.start + x).checked_sub(r) else {
-                    continue;
-                };
-                if let Some(k) = self.mask_index(fr, fc) {
-                    light[y * pw + x] = self.light.at(k, mask[k]);
-                }
-            }
-        }
-        let w = &self.weights;
-        // Across, then down.
-        let mut across = vec![0f32; ww * ph];
-        for y in 0..ph {
-            for x in 0..ww {
-                across[y * ww + x] = (0..=2 * r).map(|d| w[d] * light[y * pw + x + d]).sum();
-            }
-        }
         let t = self.threshold / self.ratios.get(i).copied().unwrap_or(1.0);
-        (0..wh)
-            .flat_map(|y| (0..ww).map(move |x| (x, y)))
-            .map(|(x, y)| {
-                let b: f32 = (0..=2 * r).map(|d| w[d] * across[(y + d) * ww + x]).sum();
-                b >= t
-            })
-            .collect()
+        // 0 off the masks.
+        let light = |fr: Option<usize>, fc: Option<usize>| {
+            let k = fr.zip(fc).and_then(|(r, c)| self.mask_index(r, c));
+            k.map_or(0.0, |k| self.light.at(k, mask[k]))
+        };
+        self.psf.cures_in(rows.clone(), cols.clone(), t, light)
     }
 
     /// The index into the projector's mask of field pixel (row `fr`, column `fc`), `None`
