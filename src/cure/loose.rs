@@ -86,6 +86,10 @@ pub fn loose_pieces(
     below: Option<&Drawn>,
     exact: &mut dyn FnMut() -> Mask,
 ) -> Vec<usize> {
+    // A block's first layer: the layer below is another worker's.
+    let Some(under) = below else {
+        return Vec::new();
+    };
     let w = m.width as usize;
     let runs = lit_runs(m.width, &m.data, lit.rows(), lit.cols());
     let (ids, n) = components(&runs);
@@ -93,23 +97,23 @@ pub fn loose_pieces(
     for (r, &g) in runs.iter().zip(&ids) {
         size[g as usize] += (r[2] - r[1]) as usize;
     }
-    if size.iter().all(|&s| s > max_px) {
+    // Resting: the larger pieces, and the candidates one of whose pixels is lit below.
+    let mut rests: Vec<bool> = size.iter().map(|&s| s > max_px).collect();
+    if rests.iter().all(|&r| r) {
         return Vec::new();
     }
-    let Some(under) = below else {
-        return Vec::new();
-    };
-    let lit_below = |k: usize| under.at(k) >= LIT_GRAY;
+    for (r, &g) in runs.iter().zip(&ids) {
+        let row = r[0] as usize * w;
+        if !rests[g as usize] && (r[1]..r[2]).any(|c| under.at(row + c as usize) >= LIT_GRAY) {
+            rests[g as usize] = true;
+        }
+    }
     let pixels = |g: u32| {
         runs.iter()
             .zip(&ids)
             .filter(move |(_, &k)| k == g)
             .flat_map(move |(r, _)| (r[1]..r[2]).map(move |c| r[0] as usize * w + c as usize))
     };
-    // Resting: the larger pieces, and the candidates one of whose pixels is lit below.
-    let mut rests: Vec<bool> = (0..n as u32)
-        .map(|g| size[g as usize] > max_px || pixels(g).any(lit_below))
-        .collect();
     let mut exact_m: Option<Mask> = None;
     let mut out = Vec::new();
     let judge = Judge {
