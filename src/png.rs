@@ -1,7 +1,8 @@
 //! A fast PNG encoder specialised for masks: 8-bit grayscale, filter 0, one fixed-Huffman
 //! deflate block whose back-references are runs (distance 1) and copies of one of the
 //! eight rows above (zone-compensated masks repeat rows, `zlib_rows`); the work grows with
-//! the number of runs, not of pixels.
+//! the number of runs, not of pixels. The same runs give the image's lit pixels ([`Lit`]:
+//! count, sum, box), so the slicer's record of a mask takes no pass of its own.
 //!
 //! Invariants: a standard PNG; the bytes are deterministic and independent of the lit box
 //! the caller gives; a test pins the stream to an obvious bit-by-bit encoder of the same rule.
@@ -53,21 +54,61 @@ impl PixelBox {
 
 /// Encodes `data` (row-major, `width × height` bytes) as an 8-bit grayscale PNG.
 pub fn encode_gray8(width: u32, height: u32, data: &[u8]) -> Vec<u8> {
-    encode_gray8_in(width, height, data, PixelBox::ALL)
+    encode_gray8_in(width, height, data, PixelBox::ALL).0
 }
 
 /// Like [`encode_gray8`] for a mask known to be zero outside `lit_box`: only the box is
-/// scanned. The bytes are the same as `encode_gray8`'s.
-pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) -> Vec<u8> {
+/// scanned. The bytes are the same as `encode_gray8`'s; with them come the image's
+/// [`Lit`] pixels, counted from the runs the encoder codes.
+pub fn encode_gray8_in(width: u32, height: u32, data: &[u8], lit_box: PixelBox) -> (Vec<u8>, Lit) {
     assert_eq!(data.len(), width as usize * height as usize, "mask size");
     let w = width as usize;
     encode_rows(width, height, |r| &data[r * w..(r + 1) * w], lit_box)
 }
 
+/// The nonzero pixels of an image: how many, the sum of all its values and their box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Lit {
+    /// Number of nonzero pixels.
+    pub count: u64,
+    /// Sum of the pixel values.
+    pub sum: u64,
+    /// The box of the nonzero pixels, `[c0, r0, c1, r1]` (ends exclusive); `None` when no
+    /// pixel is lit.
+    pub lit_box: Option<[u32; 4]>,
+}
+
+/// The nonzero pixels of one row: count, value sum, first and one past the last column
+/// (`first == end` when none).
+#[derive(Clone, Copy, Default)]
+struct RowLit {
+    count: u64,
+    sum: u64,
+    first: usize,
+    end: usize,
+}
+
+impl Lit {
+    /// Adds row `r`'s pixels.
+    #[inline(always)]
+    fn add(&mut self, r: usize, row: RowLit) {
+        if row.count == 0 {
+            return;
+        }
+        self.count += row.count;
+        self.sum += row.sum;
+        let (r, c0, c1) = (r as u32, row.first as u32, row.end as u32);
+        self.lit_box = Some(match self.lit_box {
+            None => [c0, r, c1, r + 1],
+            Some([a0, b0, a1, _]) => [a0.min(c0), b0, a1.max(c1), r + 1],
+        });
+    }
+}
+
 /// [`encode_gray8`] of the image whose row `r` (`width` bytes) is `row(r)`, without the
 /// image in one piece (the same bytes).
 pub fn encode_gray8_rows<'a>(width: u32, height: u32, row: impl Fn(usize) -> &'a [u8]) -> Vec<u8> {
-    encode_rows(width, height, row, PixelBox::ALL)
+    encode_rows(width, height, row, PixelBox::ALL).0
 }
 
 #[inline(always)]
@@ -76,8 +117,8 @@ fn encode_rows<'a>(
     height: u32,
     row: impl Fn(usize) -> &'a [u8],
     lit_box: PixelBox,
-) -> Vec<u8> {
-    let idat = zlib_rows(width as usize, height as usize, row, lit_box);
+) -> (Vec<u8>, Lit) {
+    let (idat, lit) = zlib_rows(width as usize, height as usize, row, lit_box);
     let mut out = Vec::with_capacity(idat.len() + 64);
     out.extend_from_slice(b"\x89PNG\r\n\x1a\n");
     let mut ihdr = Vec::with_capacity(13);
@@ -87,7 +128,7 @@ fn encode_rows<'a>(
     chunk(&mut out, b"IHDR", &ihdr);
     chunk(&mut out, b"IDAT", &idat);
     chunk(&mut out, b"IEND", &[]);
-    out
+    (out, lit)
 }
 
 /// The Adler-32 of an image's PNG scanlines of filter type 0 (each row of `width` bytes
@@ -490,17 +531,28 @@ fn emit_copy(bits: &mut Bits, mut k: usize, dist: (u32, u32)) {
 /// Codes one image row as runs: its filter byte and the zeros left of the box `c0..c1`,
 /// the box's bytes `row`, the zeros right of it (runs merge exactly as if the whole row
 /// had been scanned, so the stream does not depend on the box). Returns the row's
-/// [`signature`] when it has at least [`COPY_MIN_RUNS`] runs.
+/// [`signature`] when it has at least [`COPY_MIN_RUNS`] runs, and its lit pixels.
 #[inline(always)]
-fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Option<u64> {
+fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> (Option<u64>, RowLit) {
     runs.push(0, 1 + c0);
     // The box's runs, and the value and length of its last one.
     let (mut inbox, mut lv, mut lk) = (0usize, 0u8, 0usize);
+    let mut lit = RowLit::default();
     let mut i = 0;
     while i < row.len() {
         let v = row[i];
         let k = run_len(&row[i..], v);
         runs.push(v, k);
+        if v != 0 {
+            if lit.count == 0 {
+                lit.first = c0 + i;
+            }
+            (lit.count, lit.sum, lit.end) = (
+                lit.count + k as u64,
+                lit.sum + (v as u64) * k as u64,
+                c0 + i + k,
+            );
+        }
         (inbox, lv, lk) = (inbox + 1, v, k);
         i += k;
     }
@@ -511,13 +563,14 @@ fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Opti
     // the zero runs of the box that merge with those.
     let lead = row.first() == Some(&0);
     let runs_in_row = 1 + inbox + (w > c1) as usize - lead as usize - (w > c1 && lv == 0) as usize;
-    (runs_in_row >= COPY_MIN_RUNS).then(|| {
+    let sig = (runs_in_row >= COPY_MIN_RUNS).then(|| {
         signature(
             runs_in_row,
             1 + c0 + if lead { run_len(row, 0) } else { 0 },
             1 + c1 - if lv == 0 { lk } else { 0 },
         )
-    })
+    });
+    (sig, lit)
 }
 
 /// The zlib stream of the PNG scanlines (each row preceded by filter byte 0); row `r` of
@@ -528,14 +581,15 @@ fn push_row(runs: &mut Runs, row: &[u8], w: usize, c0: usize, c1: usize) -> Opti
 /// A row is coded as runs while it is scanned; when its [`signature`] and bytes equal a
 /// row above, its codes are taken back and the copy written instead. After a copy the
 /// next row is first compared with the rows above as it is (rows repeat in stretches). A
-/// copy adds its bytes to the Adler-32 from its source row's [`AdlerDelta`].
+/// copy adds its bytes to the Adler-32 from its source row's [`AdlerDelta`], and its lit
+/// pixels from its source row's.
 #[inline(always)]
 fn zlib_rows<'a>(
     w: usize,
     h: usize,
     row_of: impl Fn(usize) -> &'a [u8],
     lit_box: PixelBox,
-) -> Vec<u8> {
+) -> (Vec<u8>, Lit) {
     let PixelBox { r0, r1, c0, c1 } = lit_box;
     let (c0, c1) = (c0.min(w), c1.min(w).max(c0.min(w)));
     let mut bits = Bits {
@@ -558,6 +612,8 @@ fn zlib_rows<'a>(
     // bytes add to the Adler-32 once a copy needed it.
     let mut last = [0u64; COPY_ROWS];
     let mut delta: [Option<AdlerDelta>; COPY_ROWS] = [None; COPY_ROWS];
+    // The lit pixels of those rows, and of the image.
+    let (mut row_lit, mut lit) = ([RowLit::default(); COPY_ROWS], Lit::default());
     let max_back = COPY_ROWS.min(MAX_DISTANCE / (w + 1));
     // Whether the last row was a copy: then this row is first compared with the rows
     // above as it is (the scan would find the same row: the nearest equal one).
@@ -568,16 +624,19 @@ fn zlib_rows<'a>(
             // filter byte 0, then an empty row: both continue the zero run
             runs.push(0, 1 + w);
             (last[slot], delta[slot], copied) = (0, None, false);
+            row_lit[slot] = RowLit::default();
             continue;
         }
         let row = &row_of(r)[c0..c1];
         // The row as a copy of the row `j` above (ring slots `from` and `to`).
-        let copy_of = |runs: &mut Runs, ring: (&mut [u64], &mut [Option<AdlerDelta>]), j: usize| {
+        let copy_of = |runs: &mut Runs,
+                       ring: (&mut [u64], &mut [Option<AdlerDelta>], &mut [RowLit]),
+                       j: usize| {
             let (from, to) = ((r - j) % COPY_ROWS, slot);
             let d = *ring.1[from].get_or_insert_with(|| AdlerDelta::of_row(w, c0, row));
             runs.adler.add(d);
             emit_copy(&mut runs.bits, w + 1, distance_bits(j * (w + 1)));
-            (ring.0[to], ring.1[to]) = (ring.0[from], Some(d));
+            (ring.0[to], ring.1[to], ring.2[to]) = (ring.0[from], Some(d), ring.2[from]);
         };
         if copied {
             let back = (1..=max_back.min(r - r0))
@@ -585,7 +644,8 @@ fn zlib_rows<'a>(
             if let Some(j) = back {
                 runs.end();
                 runs.k = 0;
-                copy_of(&mut runs, (&mut last, &mut delta), j);
+                copy_of(&mut runs, (&mut last, &mut delta, &mut row_lit), j);
+                lit.add(r, row_lit[slot]);
                 continue;
             }
         }
@@ -598,9 +658,9 @@ fn zlib_rows<'a>(
             runs.k,
         );
         let adler = (runs.adler.a, runs.adler.b, runs.adler.pending);
-        let sig = push_row(&mut runs, row, w, c0, c1);
-        delta[slot] = None;
-        copied = false;
+        let (sig, this) = push_row(&mut runs, row, w, c0, c1);
+        (delta[slot], row_lit[slot], copied) = (None, this, false);
+        lit.add(r, this);
         let Some(sig) = sig.filter(|_| max_back > 0) else {
             last[slot] = 0;
             continue;
@@ -622,7 +682,7 @@ fn zlib_rows<'a>(
             (runs.adler.a, runs.adler.b, runs.adler.pending) = adler;
             runs.end();
             runs.k = 0;
-            copy_of(&mut runs, (&mut last, &mut delta), j);
+            copy_of(&mut runs, (&mut last, &mut delta, &mut row_lit), j);
             copied = true;
         }
     }
@@ -634,7 +694,7 @@ fn zlib_rows<'a>(
     let mut out = bits.finish();
     let ad = (((adler.b % ADLER_MOD) as u32) << 16) | (adler.a % ADLER_MOD) as u32;
     out.extend_from_slice(&ad.to_be_bytes());
-    out
+    (out, lit)
 }
 
 #[cfg(test)]
@@ -814,8 +874,9 @@ mod tests {
         ] {
             for k in 0..11 {
                 let d = image(w, h, k, &mut rnd);
-                let png = encode_gray8(w as u32, h as u32, &d);
+                let (png, counted) = encode_gray8_in(w as u32, h as u32, &d, PixelBox::ALL);
                 assert!(png == reference_png(w, h, &d), "{w}x{h} image {k}");
+                assert_eq!(counted, lit_of(w, &d), "{w}x{h} image {k}");
                 let by_rows = encode_gray8_rows(w as u32, h as u32, |r| &d[r * w..(r + 1) * w]);
                 assert!(by_rows == png, "{w}x{h} image {k}: by rows");
                 assert!(decode(&png) == (w as u32, h as u32, d), "{w}x{h} image {k}");
@@ -882,9 +943,10 @@ mod tests {
         ] {
             for zones in [false, true] {
                 let d = repeated_rows(w, h, zones, &mut rnd);
-                let png = encode_gray8(w as u32, h as u32, &d);
+                let (png, counted) = encode_gray8_in(w as u32, h as u32, &d, PixelBox::ALL);
                 assert!(png == reference_png(w, h, &d), "{w}x{h} {zones}");
                 assert!(decode(&png).2 == d, "{w}x{h} {zones}");
+                assert_eq!(counted, lit_of(w, &d), "{w}x{h} {zones}");
                 // The lit box does not change the bytes.
                 let lit: Vec<(usize, usize)> = (0..w * h)
                     .filter(|&i| d[i] != 0)
@@ -895,7 +957,8 @@ mod tests {
                     let c1 = lit.iter().map(|p| p.1).max().unwrap() + 1;
                     let lit_box = PixelBox::new(r0, r1 + 1, c0, c1);
                     let boxed = encode_gray8_in(w as u32, h as u32, &d, lit_box);
-                    assert!(boxed == png, "{w}x{h} {zones}: boxed");
+                    assert!(boxed.0 == png, "{w}x{h} {zones}: boxed");
+                    assert_eq!(boxed.1, counted, "{w}x{h} {zones}: boxed");
                 }
             }
         }
@@ -915,10 +978,29 @@ mod tests {
             row[440..520].fill(210 + (r % 4 == 0) as u8);
             row[600] = 60;
         }
-        let png = encode_gray8(w as u32, h as u32, &d);
+        let (png, counted) = encode_gray8_in(w as u32, h as u32, &d, PixelBox::ALL);
         assert!(png == reference_png(w, h, &d));
         assert!(decode(&png).2 == d);
         assert!(png.len() < 4600 + 400 * 12, "{}", png.len());
+        assert_eq!(counted, lit_of(w, &d));
+    }
+
+    /// The nonzero pixels of `d` (`w` wide), pixel by pixel.
+    fn lit_of(w: usize, d: &[u8]) -> Lit {
+        let lit: Vec<usize> = (0..d.len()).filter(|&i| d[i] != 0).collect();
+        let (cols, rows) = (lit.iter().map(|i| i % w), lit.iter().map(|i| i / w));
+        Lit {
+            count: lit.len() as u64,
+            sum: d.iter().map(|&v| v as u64).sum(),
+            lit_box: (!lit.is_empty()).then(|| {
+                [
+                    cols.clone().min().unwrap() as u32,
+                    rows.clone().min().unwrap() as u32,
+                    cols.max().unwrap() as u32 + 1,
+                    rows.max().unwrap() as u32 + 1,
+                ]
+            }),
+        }
     }
 
     #[test]
@@ -938,7 +1020,9 @@ mod tests {
             [50, 120, 0, 300],
         ] {
             let b = PixelBox::new(r0, r1, c0, c1);
-            assert_eq!(encode_gray8_in(w as u32, h as u32, &d, b), full, "{b:?}");
+            let (png, counted) = encode_gray8_in(w as u32, h as u32, &d, b);
+            assert_eq!(png, full, "{b:?}");
+            assert_eq!(counted, lit_of(w, &d), "{b:?}");
         }
     }
 

@@ -1,8 +1,9 @@
 //! What a mask shows, as its record in the manifest ([`MaskPixels`], `masks[].pixels` from
 //! version 4): the count of its lit (nonzero) pixels, their box in the field and the sum
-//! of its pixel values. The slicer records them as it draws each mask; the executor
-//! recounts them from the decoded file, so a mask edited and re-hashed still disagrees
-//! with its record. The row scans are vectorized: a dark row costs one OR over it.
+//! of its pixel values. The slicer counts them from the runs its PNG encoder codes
+//! ([`MaskPixels::of_encoded`]); the executor recounts them from the decoded file, so a
+//! mask edited and re-hashed still disagrees with its record. The executor's row scans
+//! are vectorized: a dark row costs one OR over it.
 
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
@@ -34,14 +35,21 @@ impl MaskPixels {
         }
     }
 
+    /// The pixels of a mask as the PNG encoder coded it: the `lit` pixels it counted and
+    /// the Adler-32 its `png` ends with (the same record as [`MaskPixels::of_gray8`] of
+    /// the mask).
+    pub(crate) fn of_encoded(png: &[u8], lit: crate::png::Lit) -> MaskPixels {
+        MaskPixels {
+            lit_px: lit.count,
+            lit_box_px: lit.lit_box,
+            gray_sum: lit.sum,
+            adler32: crate::png::scanlines_adler32_of(png),
+        }
+    }
+
     /// [`MaskPixels::of_gray8`] but for [`MaskPixels::adler32`] (0: the caller's to set)
     /// of an image known to be zero outside `rows` × `cols`: only that box is visited.
-    pub fn of_gray8_in(
-        width: u32,
-        data: &[u8],
-        rows: Range<usize>,
-        cols: Range<usize>,
-    ) -> MaskPixels {
+    fn of_gray8_in(width: u32, data: &[u8], rows: Range<usize>, cols: Range<usize>) -> MaskPixels {
         let mut px = MaskPixels::default();
         let w = width as usize;
         if w == 0 || cols.is_empty() {
@@ -204,6 +212,9 @@ mod tests {
         assert_eq!(px, want(4, [2, 1, 5, 4], 32));
         let boxed = MaskPixels::of_gray8_in(6, &data, 1..4, 2..5);
         assert_eq!(MaskPixels { adler32, ..boxed }, px);
+        // The record the slicer takes from the encoder is the same.
+        let (png, lit) = crate::png::encode_gray8_in(6, 4, &data, crate::png::PixelBox::ALL);
+        assert_eq!(MaskPixels::of_encoded(&png, lit), px);
         let dark = MaskPixels::of_gray8(6, &[0; 24]);
         assert_eq!((dark.lit_px, dark.lit_box_px, dark.gray_sum), (0, None, 0));
         let placed = |mirror| px.placed([6, 4], [100, 10], mirror);

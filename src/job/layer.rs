@@ -412,10 +412,9 @@ fn draw(
         };
         let (png, pixels) = match &view {
             Cow::Borrowed(m) => {
-                let png = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
-                let px = MaskPixels::of_gray8_in(m.width, &m.data, b.rows(), b.cols());
-                let adler32 = crate::png::scanlines_adler32_of(&png);
-                (png, MaskPixels { adler32, ..px })
+                let (png, lit) = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
+                let px = MaskPixels::of_encoded(&png, lit);
+                (png, px)
             }
             Cow::Owned(m) => {
                 let place = (
@@ -423,13 +422,9 @@ fn draw(
                     p.offset_px,
                     [p.mirror_x, p.mirror_y],
                 );
-                let png = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
-                let px = MaskPixels::of_gray8_in(m.width, &m.data, b.rows(), b.cols());
-                let adler32 = crate::png::scanlines_adler32_of(&png);
-                (
-                    png,
-                    MaskPixels { adler32, ..px }.placed(place.0, place.1, place.2),
-                )
+                let (png, lit) = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
+                let px = MaskPixels::of_encoded(&png, lit);
+                (png, px.placed(place.0, place.1, place.2))
             }
         };
         let sha = bundle::sha256_hex(&png);
