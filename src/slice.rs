@@ -208,7 +208,8 @@ impl<'m> Slicer<'m> {
             .active
             .par_chunks(chunk)
             .map(|tris| {
-                let mut out = Vec::new();
+                // A triangle is cut by a few planes of a window: room for four each.
+                let mut out = Vec::with_capacity(4 * tris.len());
                 for &ti in tris {
                     let ti = ti as usize;
                     let t = &mesh.triangles[ti];
@@ -234,7 +235,12 @@ impl<'m> Slicer<'m> {
                 out
             })
             .collect();
-        let mut segs: Vec<Vec<Seg>> = vec![Vec::new(); range.len()];
+        // Each layer's segments, its list sized first.
+        let mut count = vec![0usize; range.len()];
+        for (i, _) in parts.iter().flatten() {
+            count[*i as usize] += 1;
+        }
+        let mut segs: Vec<Vec<Seg>> = count.into_iter().map(Vec::with_capacity).collect();
         for part in parts {
             for (i, s) in part {
                 segs[i as usize].push(s);
