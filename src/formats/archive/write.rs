@@ -11,7 +11,7 @@
 
 use crate::error::{Error, Result};
 use std::fs::File;
-use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -31,13 +31,22 @@ pub struct ZipOut<'a> {
     cancel: Option<&'a AtomicBool>,
 }
 
-/// The archive's file, which keeps its first write error (in `failed`) and from then on
-/// only counts what it is asked to write: the writes and seeks after a failure succeed
-/// (at a position kept as if they had been done) without touching the file. The position
-/// is followed from the start, so it is right whenever the failure comes (an error of
-/// the file, or the archive dropped unfinished).
+/// The archive's file behind a write buffer that holds the file's last bytes (from `base`)
+/// and follows the position itself: the zip library asks for its position and goes back
+/// to patch each entry's header once the entry is written, and those seeks and patches
+/// land in the buffer instead of flushing it (a `BufWriter` flushes on every seek: three
+/// system calls per entry). A patch of bytes already written goes to the file.
+///
+/// It keeps its first write error (in `failed`) and from then on only counts what it is
+/// asked to write: the writes and seeks after a failure succeed (at a position kept as if
+/// they had been done) without touching the file. The position is followed from the
+/// start, so it is right whenever the failure comes (an error of the file, or the archive
+/// dropped unfinished).
 struct Quiet {
-    file: BufWriter<File>,
+    file: File,
+    /// The bytes at `base..` not written to the file yet.
+    buf: Vec<u8>,
+    base: u64,
     failed: Arc<Mutex<Option<std::io::Error>>>,
     /// The position, as if every write had been done.
     at: u64,
@@ -46,6 +55,17 @@ struct Quiet {
 }
 
 impl Quiet {
+    fn new(file: File, failed: Arc<Mutex<Option<std::io::Error>>>) -> Quiet {
+        Quiet {
+            file,
+            buf: Vec::with_capacity(BUFFER_BYTES),
+            base: 0,
+            failed,
+            at: 0,
+            end: 0,
+        }
+    }
+
     fn failed(&self) -> bool {
         self.failed.lock().map_or(true, |f| f.is_some())
     }
@@ -63,39 +83,83 @@ impl Quiet {
         self.end = self.end.max(at);
         at
     }
+
+    /// Writes `bytes` at file offset `at`.
+    fn write_at(&mut self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
+        self.file.seek(SeekFrom::Start(at))?;
+        self.file.write_all(bytes)
+    }
+
+    /// Writes the buffer to the file; the buffer then starts at the position.
+    fn drain(&mut self) -> std::io::Result<()> {
+        if !self.buf.is_empty() {
+            let buf = std::mem::take(&mut self.buf);
+            let written = self.write_at(self.base, &buf);
+            self.buf = buf;
+            self.buf.clear();
+            written?;
+        }
+        self.base = self.at;
+        Ok(())
+    }
+
+    /// Writes `bytes` at the position: into the buffer when the position lies in it or
+    /// at its end, else to the file.
+    fn put(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        let at = self.at;
+        let in_buf = at.checked_sub(self.base).map(|k| k as usize);
+        match in_buf.filter(|&k| k <= self.buf.len()) {
+            Some(k) => {
+                let over = (self.buf.len() - k).min(bytes.len());
+                self.buf[k..k + over].copy_from_slice(&bytes[..over]);
+                self.buf.extend_from_slice(&bytes[over..]);
+                if self.buf.len() >= BUFFER_BYTES {
+                    self.at = self.base + self.buf.len() as u64;
+                    self.drain()?;
+                    self.at = at;
+                }
+                Ok(())
+            }
+            // Before the buffer: bytes written already.
+            None if at < self.base => self.write_at(at, bytes),
+            // Past its end (a gap): the buffer goes out first.
+            None => {
+                self.drain()?;
+                self.base = at;
+                self.buf.extend_from_slice(bytes);
+                Ok(())
+            }
+        }
+    }
+
+    /// The file, with everything written.
+    fn into_file(mut self) -> std::io::Result<File> {
+        if !self.failed() {
+            self.at = self.end;
+            self.drain()?;
+        }
+        Ok(self.file)
+    }
 }
 
 impl Write for Quiet {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        let n = match self.failed() {
-            true => buf.len(),
-            false => self.file.write(buf).unwrap_or_else(|e| {
-                self.keep(e);
-                buf.len()
-            }),
-        };
-        self.moved(self.at + n as u64);
-        Ok(n)
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
         if !self.failed() {
-            if let Err(e) = self.file.flush() {
+            if let Err(e) = self.put(buf) {
                 self.keep(e);
             }
         }
+        self.moved(self.at + buf.len() as u64);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
         Ok(())
     }
 }
 
 impl Seek for Quiet {
     fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
-        if !self.failed() {
-            match self.file.seek(to) {
-                Ok(at) => return Ok(self.moved(at)),
-                Err(e) => self.keep(e),
-            }
-        }
         let at = match to {
             SeekFrom::Start(n) => n,
             SeekFrom::Current(d) => self.at.saturating_add_signed(d),
@@ -155,12 +219,7 @@ impl<'a> ZipOut<'a> {
         })?;
         let file = File::create(&tmp).map_err(|e| crate::output::write_error(dest, e))?;
         let failed = Arc::new(Mutex::new(None));
-        let zip = ZipWriter::new(Quiet {
-            file: BufWriter::with_capacity(BUFFER_BYTES, file),
-            failed: failed.clone(),
-            at: 0,
-            end: 0,
-        });
+        let zip = ZipWriter::new(Quiet::new(file, failed.clone()));
         Ok(ZipOut {
             dest: dest.to_path_buf(),
             tmp,
@@ -209,7 +268,7 @@ impl<'a> ZipOut<'a> {
     /// Writes the central directory, flushes the file to disk and renames it into place.
     pub fn finish(mut self) -> Result<PathBuf> {
         let zip = self.zip.take().expect("open until finished");
-        let finished = zip.finish().map(|q| q.file.into_inner());
+        let finished = zip.finish().map(Quiet::into_file);
         let failed = |e: std::io::Error| {
             let _ = std::fs::remove_file(&self.tmp);
             Error::io(&self.dest, e)
@@ -217,7 +276,7 @@ impl<'a> ZipOut<'a> {
         match (finished, self.error()) {
             (Ok(Ok(file)), None) => drop(file),
             (_, Some(e)) => return Err(failed(e)),
-            (Ok(Err(e)), None) => return Err(failed(e.into_error())),
+            (Ok(Err(e)), None) => return Err(failed(e)),
             (Err(e), None) => return Err(failed(std::io::Error::other(e.to_string()))),
         }
         std::fs::rename(&self.tmp, &self.dest).map_err(|e| Error::io(&self.dest, e))?;
@@ -283,6 +342,46 @@ mod tests {
         let first = std::fs::read(&p).unwrap();
         write();
         assert_eq!(std::fs::read(&p).unwrap(), first);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn the_buffer_writes_what_the_zip_library_writes_to_a_file() {
+        // Small entries (their headers patched in the buffer), entries bigger than the
+        // buffer (patched in the file) and a deflated one, against the zip library on a
+        // plain file.
+        let d = scratch("patched");
+        let mut bits = crate::test_support::xorshift_bits(0x21b_5eed);
+        let entries: Vec<(String, Vec<u8>, Method)> = [10, 5000, 3 * BUFFER_BYTES / 2, 7, BUFFER_BYTES - 40, 0, 2 * BUFFER_BYTES + 3]
+            .iter()
+            .enumerate()
+            .map(|(i, &n)| {
+                let bytes: Vec<u8> = (0..n).map(|_| bits() as u8).collect();
+                let method = [Method::Stored, Method::Deflated][(i == 3) as usize];
+                (format!("e{i}.bin"), bytes, method)
+            })
+            .collect();
+        let ours = d.join("ours.zip");
+        let mut z = ZipOut::create(&ours, None).unwrap();
+        for (name, bytes, method) in &entries {
+            z.add(name, bytes, *method).unwrap();
+        }
+        z.finish().unwrap();
+        let theirs = d.join("theirs.zip");
+        let mut z = ZipWriter::new(File::create(&theirs).unwrap());
+        for (name, bytes, method) in &entries {
+            let options = SimpleFileOptions::default()
+                .compression_method(match method {
+                    Method::Stored => CompressionMethod::Stored,
+                    Method::Deflated => CompressionMethod::Deflated,
+                })
+                .last_modified_time(DateTime::default())
+                .unix_permissions(0o644);
+            z.start_file(name.as_str(), options).unwrap();
+            z.write_all(bytes).unwrap();
+        }
+        z.finish().unwrap();
+        assert!(std::fs::read(&ours).unwrap() == std::fs::read(&theirs).unwrap());
         let _ = std::fs::remove_dir_all(&d);
     }
 
