@@ -90,52 +90,44 @@ impl Quiet {
         self.file.write_all(bytes)
     }
 
-    /// Writes the buffer to the file; the buffer then starts at the position.
+    /// Writes the buffer to the file; it then starts where it ended.
     fn drain(&mut self) -> std::io::Result<()> {
-        if !self.buf.is_empty() {
-            let buf = std::mem::take(&mut self.buf);
-            let written = self.write_at(self.base, &buf);
-            self.buf = buf;
-            self.buf.clear();
-            written?;
-        }
-        self.base = self.at;
-        Ok(())
+        let buf = std::mem::take(&mut self.buf);
+        let written = self.write_at(self.base, &buf);
+        self.base += buf.len() as u64;
+        self.buf = buf;
+        self.buf.clear();
+        written
     }
 
-    /// Writes `bytes` at the position: into the buffer when the position lies in it or
-    /// at its end, else to the file.
+    /// Writes `bytes` at the position: what lies before the buffer to the file, the rest
+    /// into the buffer (past its end, a gap, only once the buffer is written).
     fn put(&mut self, bytes: &[u8]) -> std::io::Result<()> {
-        let at = self.at;
-        let in_buf = at.checked_sub(self.base).map(|k| k as usize);
-        match in_buf.filter(|&k| k <= self.buf.len()) {
-            Some(k) => {
-                let over = (self.buf.len() - k).min(bytes.len());
-                self.buf[k..k + over].copy_from_slice(&bytes[..over]);
-                self.buf.extend_from_slice(&bytes[over..]);
-                if self.buf.len() >= BUFFER_BYTES {
-                    self.at = self.base + self.buf.len() as u64;
-                    self.drain()?;
-                    self.at = at;
-                }
-                Ok(())
-            }
-            // Before the buffer: bytes written already.
-            None if at < self.base => self.write_at(at, bytes),
-            // Past its end (a gap): the buffer goes out first.
-            None => {
-                self.drain()?;
-                self.base = at;
-                self.buf.extend_from_slice(bytes);
-                Ok(())
-            }
+        let before = (self.base.saturating_sub(self.at) as usize).min(bytes.len());
+        if before > 0 {
+            self.write_at(self.at, &bytes[..before])?;
         }
+        let (at, bytes) = (self.at + before as u64, &bytes[before..]);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if at > self.base + self.buf.len() as u64 {
+            self.drain()?;
+            self.base = at;
+        }
+        let k = (at - self.base) as usize;
+        let over = (self.buf.len() - k).min(bytes.len());
+        self.buf[k..k + over].copy_from_slice(&bytes[..over]);
+        self.buf.extend_from_slice(&bytes[over..]);
+        if self.buf.len() >= BUFFER_BYTES {
+            self.drain()?;
+        }
+        Ok(())
     }
 
     /// The file, with everything written.
     fn into_file(mut self) -> std::io::Result<File> {
         if !self.failed() {
-            self.at = self.end;
             self.drain()?;
         }
         Ok(self.file)
@@ -382,6 +374,36 @@ mod tests {
         }
         z.finish().unwrap();
         assert!(std::fs::read(&ours).unwrap() == std::fs::read(&theirs).unwrap());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn the_buffer_writes_what_a_file_would_hold() {
+        // Appends, patches before, across and inside the buffer, seeks past the end.
+        let d = scratch("quiet");
+        let mut bits = crate::test_support::xorshift_bits(0x0a11_5eed);
+        let mut rnd = |n: u64| bits() % n.max(1);
+        let path = d.join("q.bin");
+        let failed = Arc::new(Mutex::new(None));
+        let mut q = Quiet::new(File::create(&path).unwrap(), failed.clone());
+        let mut want = std::io::Cursor::new(Vec::new());
+        for _ in 0..400 {
+            let end = want.get_ref().len() as u64;
+            let to = match rnd(4) {
+                0 => SeekFrom::Start(rnd(end + 1)),
+                1 => SeekFrom::End(-(rnd(end.min(BUFFER_BYTES as u64 * 2) + 1) as i64)),
+                2 => SeekFrom::Current(0),
+                _ => SeekFrom::End(rnd(3) as i64),
+            };
+            assert_eq!(q.seek(to).unwrap(), want.seek(to).unwrap());
+            let n = [rnd(40), rnd(5000), rnd(BUFFER_BYTES as u64 / 3)][rnd(3) as usize];
+            let bytes: Vec<u8> = (0..n).map(|_| rnd(256) as u8).collect();
+            q.write_all(&bytes).unwrap();
+            want.write_all(&bytes).unwrap();
+        }
+        assert!(failed.lock().unwrap().is_none());
+        drop(q.into_file().unwrap());
+        assert!(std::fs::read(&path).unwrap() == want.into_inner());
         let _ = std::fs::remove_dir_all(&d);
     }
 
