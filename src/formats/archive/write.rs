@@ -344,15 +344,23 @@ mod tests {
         // plain file.
         let d = scratch("patched");
         let mut bits = crate::test_support::xorshift_bits(0x21b_5eed);
-        let entries: Vec<(String, Vec<u8>, Method)> = [10, 5000, 3 * BUFFER_BYTES / 2, 7, BUFFER_BYTES - 40, 0, 2 * BUFFER_BYTES + 3]
-            .iter()
-            .enumerate()
-            .map(|(i, &n)| {
-                let bytes: Vec<u8> = (0..n).map(|_| bits() as u8).collect();
-                let method = [Method::Stored, Method::Deflated][(i == 3) as usize];
-                (format!("e{i}.bin"), bytes, method)
-            })
-            .collect();
+        let entries: Vec<(String, Vec<u8>, Method)> = [
+            10,
+            5000,
+            3 * BUFFER_BYTES / 2,
+            7,
+            BUFFER_BYTES - 40,
+            0,
+            2 * BUFFER_BYTES + 3,
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| {
+            let bytes: Vec<u8> = (0..n).map(|_| bits() as u8).collect();
+            let method = [Method::Stored, Method::Deflated][(i == 3) as usize];
+            (format!("e{i}.bin"), bytes, method)
+        })
+        .collect();
         let ours = d.join("ours.zip");
         let mut z = ZipOut::create(&ours, None).unwrap();
         for (name, bytes, method) in &entries {
