@@ -34,8 +34,8 @@ pub struct ZipOut<'a> {
 /// The archive's file behind a write buffer that holds the file's last bytes (from `base`)
 /// and follows the position itself: the zip library asks for its position and goes back
 /// to patch each entry's header once the entry is written, and those seeks and patches
-/// land in the buffer instead of flushing it (a `BufWriter` flushes on every seek: three
-/// system calls per entry). A patch of bytes already written goes to the file.
+/// land in the buffer instead of flushing it (a `BufWriter` flushes on every seek: about
+/// eight system calls per entry). A patch of bytes already written goes to the file.
 ///
 /// It keeps its first write error (in `failed`) and from then on only counts what it is
 /// asked to write: the writes and seeks after a failure succeed (at a position kept as if
