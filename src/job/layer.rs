@@ -410,22 +410,16 @@ fn draw(
             // The field mask is zero outside the rasterizer's lit box.
             None => projector_view_in(&field_mask, p, scratch.lit_box()),
         };
-        let (png, pixels) = match &view {
-            Cow::Borrowed(m) => {
-                let (png, lit) = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
-                let px = MaskPixels::of_encoded(&png, lit);
-                (png, px)
-            }
-            Cow::Owned(m) => {
-                let place = (
-                    [p.width_px, p.height_px],
-                    p.offset_px,
-                    [p.mirror_x, p.mirror_y],
-                );
-                let (png, lit) = crate::png::encode_gray8_in(m.width, m.height, &m.data, b);
-                let px = MaskPixels::of_encoded(&png, lit);
-                (png, px.placed(place.0, place.1, place.2))
-            }
+        let (png, lit) = crate::png::encode_gray8_in(view.width, view.height, &view.data, b);
+        let pixels = MaskPixels::of_encoded(&png, lit);
+        // A projector's own view is counted in its pixels: its box placed in the field.
+        let pixels = match &view {
+            Cow::Borrowed(_) => pixels,
+            Cow::Owned(_) => pixels.placed(
+                [p.width_px, p.height_px],
+                p.offset_px,
+                [p.mirror_x, p.mirror_y],
+            ),
         };
         let sha = bundle::sha256_hex(&png);
         pngs.push((png, sha, k as u32, pixels));
