@@ -27,7 +27,7 @@ mod view;
 use accum::{line, Accum};
 pub use pool::ScratchPool;
 pub use scan::map_words;
-use scan::{emit_rows, scan_runs, Mapped, Plain};
+use scan::{emit_rows, scan_runs, Mapped, Plain, Rows};
 use std::ops::Range;
 #[cfg(any(test, feature = "internals"))]
 pub use view::projector_view;
@@ -75,6 +75,18 @@ impl Mask {
     pub fn lit_pixels_in(&self, lit_box: PixelBox) -> f64 {
         box_sum(self, lit_box) as f64 / 255.0
     }
+}
+
+/// A mask kept inside its lit box only ([`Rasterizer::coverage_boxed`]): the box with a
+/// border of one zero pixel all round, its rows `lit.c1 − lit.c0 + 2` bytes apart,
+/// preceded by `lit.c0` zero bytes. The pixel of row `r`, column `c` (field coordinates)
+/// lies at `lit.c0 + (r − lit.r0 + 1)·(lit.c1 − lit.c0 + 2) + (c − lit.c0 + 1)`.
+#[derive(Debug, Clone, Default)]
+pub struct Boxed {
+    /// The bytes.
+    pub data: Vec<u8>,
+    /// The lit box: zero outside it (empty when nothing was drawn; `data` is then empty).
+    pub lit: PixelBox,
 }
 
 /// The lit pixels of a mask (coverage at least 50 %, the pixels a binary mask lights) as
@@ -221,10 +233,25 @@ impl Scratch {
     }
 
     fn zeroed(&mut self, w: usize, h: usize) -> Vec<u8> {
+        self.zeroed_outside(w, h, PixelBox::EMPTY)
+    }
+
+    /// A `w × h` buffer that is zero outside `keep` (inside it, any values: the caller
+    /// writes every pixel of `keep`).
+    fn zeroed_outside(&mut self, w: usize, h: usize, keep: PixelBox) -> Vec<u8> {
         match self.spare.pop() {
-            Some((mut v, PixelBox { r0, r1, c0, c1 })) if v.len() == w * h => {
-                for r in r0..r1 {
-                    v[r * w + c0..r * w + c1].fill(0);
+            Some((mut v, old)) if v.len() == w * h => {
+                // The recycled buffer's lit box, but for the part of it `keep` covers.
+                let clamp = |c: usize| c.clamp(old.c0, old.c1);
+                let (kc0, kc1) = (clamp(keep.c0), clamp(keep.c1.max(keep.c0)));
+                for r in old.rows() {
+                    let row = &mut v[r * w..(r + 1) * w];
+                    if keep.rows().contains(&r) {
+                        row[old.c0..kc0].fill(0);
+                        row[kc1..old.c1].fill(0);
+                    } else {
+                        row[old.cols()].fill(0);
+                    }
                 }
                 v
             }
@@ -256,9 +283,10 @@ impl Rasterizer {
         self.render::<NoMap>(contours, scratch, false, None)
     }
 
-    /// A [`Rasterizer::coverage`] mask again without drawing it: `paint` writes its lit box,
-    /// the scratch is left as that call left it (`drawn`, [`Scratch::drawn`] after it).
-    /// `None` when only one of `drawn` and the scratch records lit runs.
+    /// A [`Rasterizer::coverage`] mask again without drawing it: `paint` writes every pixel
+    /// of its lit box (the mask it is given is zero outside that box, anything inside), the
+    /// scratch is left as that call left it (`drawn`, [`Scratch::drawn`] after it). `None`
+    /// when only one of `drawn` and the scratch records lit runs.
     pub fn redraw(
         &self,
         scratch: &mut Scratch,
@@ -269,7 +297,7 @@ impl Rasterizer {
             return None;
         }
         let (w, h) = (self.field.width_px, self.field.height_px);
-        let data = scratch.zeroed(w as usize, h as usize);
+        let data = scratch.zeroed_outside(w as usize, h as usize, drawn.0);
         let mut m = Mask {
             width: w,
             height: h,
@@ -306,16 +334,90 @@ impl Rasterizer {
             height: h as u32,
             data: scratch.zeroed(w, h),
         };
+        let Some(bounds) = self.begin(contours, scratch) else {
+            return out;
+        };
+        let (outside, mapped) = self.scan_into(
+            contours,
+            scratch,
+            (binary, map),
+            bounds,
+            (&mut out.data, Rows::field(w)),
+        );
+        let lit = scratch.lit;
+        scratch.reported_outside = match (map, mapped) {
+            (Some(m), false) => m.apply(&mut out, lit),
+            (Some(m), true) if outside => {
+                m.lit_outside(&out, lit);
+                true
+            }
+            _ => false,
+        };
+        out
+    }
+
+    /// The [`coverage`](Self::coverage) mask of the section inside its lit box only, written
+    /// into `buf` (its allocation reused) as a [`Boxed`] mask; the scratch is left as
+    /// `coverage` leaves it ([`Scratch::lit_box`], [`Scratch::drawn`]). The same values,
+    /// without a field-sized buffer to clear and copy out of.
+    pub fn coverage_boxed(
+        &self,
+        contours: &[Contour],
+        scratch: &mut Scratch,
+        mut buf: Vec<u8>,
+    ) -> Boxed {
+        buf.clear();
+        let Some(bounds) = self.begin(contours, scratch) else {
+            return Boxed {
+                data: buf,
+                lit: PixelBox::EMPTY,
+            };
+        };
+        let lit = self.lit_of(bounds);
+        buf.resize(Rows::boxed_len(lit), 0);
+        self.scan_into::<NoMap>(
+            contours,
+            scratch,
+            (false, None),
+            bounds,
+            (&mut buf, Rows::boxed(lit)),
+        );
+        Boxed { data: buf, lit }
+    }
+
+    /// Resets the scratch's record of the last mask drawn; the box [`bounds`](Self::bounds)
+    /// of `contours` (`None` when there are none).
+    fn begin(&self, contours: &[Contour], scratch: &mut Scratch) -> Option<[usize; 4]> {
         scratch.lit = PixelBox::EMPTY;
         scratch.lit_sum = Some(0);
         scratch.lit_runs.runs.clear();
-        if contours.is_empty() {
-            return out;
-        }
-        let [r0, r1, c0, c1] = self.bounds(contours);
-        let acc = &mut Accum::of_box(&mut scratch.acc, &mut scratch.touched, [r0, r1, c0, c1]);
+        scratch.reported_outside = false;
+        (!contours.is_empty()).then(|| self.bounds(contours))
+    }
+
+    /// The lit box of a section whose [`bounds`](Self::bounds) are `[r0, r1, c0, c1]`.
+    fn lit_of(&self, [r0, r1, c0, c1]: [usize; 4]) -> PixelBox {
+        PixelBox::new(r0, r1, c0, c1.min(self.field.width_px as usize))
+    }
+
+    /// Draws `contours` (their box `bounds`) into `out` (zero there, rows laid out as
+    /// `layout` says): the scan, thresholded (`binary`) and through the map when it is
+    /// fusable, and the rows where shells overlap drawn again by the nonzero rule. Records
+    /// the lit box, sum and runs in the scratch. Returns whether a lit pixel lies outside
+    /// the map's area and whether the map was applied.
+    fn scan_into<M: CoverageMap>(
+        &self,
+        contours: &[Contour],
+        scratch: &mut Scratch,
+        (binary, map): (bool, Option<&M>),
+        bounds: [usize; 4],
+        (out, layout): (&mut [u8], Rows),
+    ) -> (bool, bool) {
+        let [r0, r1, c0, c1] = bounds;
+        let w = self.field.width_px as usize;
+        let acc = &mut Accum::of_box(&mut scratch.acc, &mut scratch.touched, bounds);
         self.accumulate(contours, acc);
-        let lit = PixelBox::new(r0, r1, c0, c1.min(w));
+        let lit = self.lit_of(bounds);
         scratch.lit = lit;
         let fused = map.filter(|m| m.fusable());
         let mut outside = false;
@@ -334,8 +436,7 @@ impl Rasterizer {
                 let e = $emit;
                 let (sum, max) = scan_runs::<_, $bin, $check>(
                     acc,
-                    &mut out.data,
-                    w,
+                    (&mut *out, layout),
                     lit,
                     e,
                     &mut outside,
@@ -344,11 +445,10 @@ impl Rasterizer {
                 );
                 if max > OVERLAP {
                     redo = overlapping_rows(rows, lit);
-                    self.coverage_nonzero(contours, &mut out, lit, &redo);
+                    self.coverage_nonzero(contours, (&mut *out, layout), lit, &redo);
                     for rs in &redo {
                         redone.0 += emit_rows::<_, $bin, $check>(
-                            &mut out.data,
-                            w,
+                            (&mut *out, layout),
                             (lit, rs.clone()),
                             $emit,
                             &mut outside,
@@ -387,16 +487,7 @@ impl Rasterizer {
             }
         }
         scratch.lit_sum = Some(lit_sum);
-        let mapped = fused.is_some();
-        scratch.reported_outside = match (map, mapped) {
-            (Some(m), false) => m.apply(&mut out, lit),
-            (Some(m), true) if outside => {
-                m.lit_outside(&out, lit);
-                true
-            }
-            _ => false,
-        };
-        out
+        (outside, fused.is_some())
     }
 
     /// The rows `r0..r1` and columns `c0..c1` that [`accumulate`](Self::accumulate) writes
@@ -758,6 +849,123 @@ mod tests {
                     "case {case} row {row}"
                 );
             }
+        }
+    }
+
+    /// Fixed-seed random sections (stars, some crossing the field's edges; pairs of
+    /// overlapping stars, drawn by the nonzero fallback; none) drawn straight into their
+    /// box with one scratch and one reused buffer: each equals the field-sized coverage
+    /// mask inside the box, every other byte is zero, and the scratch records the same lit
+    /// box, sum and runs.
+    #[test]
+    fn boxed_coverage_is_the_coverage_inside_its_box() {
+        let f = field();
+        let (fw, fh) = (1024.0 * f.pixel_mm, 768.0 * f.pixel_mm);
+        let r = Rasterizer::new(f);
+        let mut rnd = xorshift(0x5851_f42d_4c95_7f2d);
+        let mut boxed = Scratch {
+            record_runs: true,
+            ..Scratch::default()
+        };
+        let mut buf = Vec::new();
+        let mut overlapped = 0;
+        for case in 0..60 {
+            let (cx, cy) = (rnd() * fw, rnd() * fh);
+            let rmax = 0.2 + rnd() * if case % 4 == 0 { 40.0 } else { 8.0 };
+            let mut star = |dx: f64| {
+                let n = 3 + (rnd() * 60.0) as usize;
+                closed(n, true, |a| {
+                    let rad = rmax * (0.3 + 0.7 * rnd());
+                    [cx + dx + rad * a.cos(), cy + rad * a.sin()]
+                })
+            };
+            let shapes = match case % 5 {
+                0 => vec![star(0.0), star(0.5 * rmax)],
+                4 if case == 9 => Vec::new(),
+                _ => vec![star(0.0)],
+            };
+            let mut plain = Scratch {
+                record_runs: true,
+                ..Scratch::default()
+            };
+            let m = r.coverage(&shapes, &mut plain);
+            let b = r.coverage_boxed(&shapes, &mut boxed, std::mem::take(&mut buf));
+            let lit = plain.lit_box();
+            assert_eq!((b.lit, boxed.lit_box()), (lit, lit), "case {case}");
+            assert_eq!(boxed.lit_pixels(&m), plain.lit_pixels(&m), "case {case}");
+            assert_eq!(boxed.lit_runs, plain.lit_runs, "case {case}");
+            overlapped += plain.rows.iter().any(|r| r.0 > OVERLAP) as usize;
+            let w = m.width as usize;
+            let stride = lit.c1 - lit.c0 + 2;
+            let mut want = vec![
+                0u8;
+                if lit == PixelBox::EMPTY {
+                    0
+                } else {
+                    Rows::boxed_len(lit)
+                }
+            ];
+            for row in lit.rows() {
+                for c in lit.cols() {
+                    want[lit.c0 + (row - lit.r0 + 1) * stride + c - lit.c0 + 1] =
+                        m.data[row * w + c];
+                }
+            }
+            assert!(b.data == want, "case {case}: boxed coverage differs");
+            let outside = m.data.iter().enumerate().filter(|&(k, &v)| {
+                v != 0 && !(lit.rows().contains(&(k / w)) && lit.cols().contains(&(k % w)))
+            });
+            assert_eq!(outside.count(), 0, "case {case}: lit outside the box");
+            buf = b.data;
+        }
+        assert!(
+            overlapped >= 5,
+            "{overlapped} cases drawn by the nonzero rule"
+        );
+    }
+
+    /// A mask drawn again into a recycled buffer whose lit box overlaps its own in part
+    /// (left of it, right, inside, around, apart): `paint` writes only its box, the rest is
+    /// zero as in a mask drawn afresh.
+    #[test]
+    fn redraw_clears_what_the_paint_does_not_write() {
+        let r = Rasterizer::new(field());
+        let shapes = [
+            rect(10.0, 10.0, 20.0, 20.0),
+            rect(15.0, 12.0, 30.0, 18.0),
+            rect(5.0, 5.0, 12.0, 25.0),
+            rect(12.0, 14.0, 14.0, 16.0),
+            rect(1.0, 1.0, 40.0, 40.0),
+            rect(50.0, 30.0, 60.0, 40.0),
+            rect(12.0, 14.0, 14.0, 16.0),
+        ];
+        let mut s = Scratch::default();
+        for pair in shapes.windows(2) {
+            let fresh = r.coverage(&[pair[1].clone()], &mut Scratch::default());
+            let drawn = {
+                let mut t = Scratch::default();
+                let _ = r.coverage(&[pair[1].clone()], &mut t);
+                t.drawn()
+            };
+            let lit = drawn.0;
+            let first = r.coverage(&[pair[0].clone()], &mut s);
+            s.recycle(first);
+            let w = fresh.width as usize;
+            let again = r
+                .redraw(&mut s, &drawn, |m| {
+                    for row in lit.rows() {
+                        let k = row * w;
+                        m.data[k..][lit.cols()].copy_from_slice(&fresh.data[k..][lit.cols()]);
+                    }
+                })
+                .expect("no runs either way");
+            assert!(
+                again.data == fresh.data,
+                "{:?} after {:?}",
+                pair[1],
+                pair[0]
+            );
+            s.recycle(again);
         }
     }
 

@@ -25,7 +25,8 @@ use super::check::NEAR;
 use super::psf::{phi, Psf};
 use super::segments::Segments;
 use super::CureModel;
-use crate::raster::{Mask, PixelBox};
+use crate::raster::{Boxed, Mask, PixelBox, Rasterizer, Scratch};
+use crate::slice::Contour;
 
 /// Steps of the profile's table per pixel.
 const STEPS: f64 = 256.0;
@@ -188,7 +189,9 @@ pub struct Coverage {
     at: [f64; 2],
     /// Columns and rows kept, the border included.
     size: [usize; 2],
+    /// The kept rows from `data[start]` on.
     data: Vec<u8>,
+    start: usize,
 }
 
 /// Buffers of dropped coverages, for the next ones: a job draws thousands, each the size of
@@ -235,16 +238,40 @@ impl Coverage {
             at: [lit.c0 as f64 - 1.0, lit.r0 as f64 - 1.0],
             size,
             data,
+            start: 0,
         }
     }
 
-    /// Writes the coverage mask it was made of back into `m` (zero outside the lit box).
+    /// The coverage of the section `contours` drawn by `raster` straight into its box (the
+    /// values [`Coverage::of`] keeps of [`Rasterizer::coverage`]'s mask; the scratch is left
+    /// as that call leaves it).
+    pub fn draw(raster: &Rasterizer, contours: &[Contour], scratch: &mut Scratch) -> Coverage {
+        let spare = lock_spare().pop().unwrap_or_default();
+        let Boxed { data, lit } = raster.coverage_boxed(contours, scratch, spare);
+        if lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
+            // Nothing kept (the buffer goes back to the spares).
+            return Coverage {
+                data,
+                ..Coverage::default()
+            };
+        }
+        // The box's rows with their border start `lit.c0` bytes in (`Boxed`).
+        Coverage {
+            at: [lit.c0 as f64 - 1.0, lit.r0 as f64 - 1.0],
+            size: [lit.c1 - lit.c0 + 2, lit.r1 - lit.r0 + 2],
+            data,
+            start: lit.c0,
+        }
+    }
+
+    /// Writes the coverage mask it was made of back into `m`: every pixel of its lit box
+    /// (`m` is zero outside that box).
     pub fn paint(&self, m: &mut Mask) {
         let (w, cols) = (m.width as usize, self.size[0].saturating_sub(2));
         let (c0, r0) = ((self.at[0] + 1.0) as usize, (self.at[1] + 1.0) as usize);
         for k in 0..self.size[1].saturating_sub(2) {
             m.data[(r0 + k) * w + c0..][..cols]
-                .copy_from_slice(&self.data[(k + 1) * self.size[0] + 1..][..cols]);
+                .copy_from_slice(&self.data[self.start + (k + 1) * self.size[0] + 1..][..cols]);
         }
     }
 
@@ -263,7 +290,7 @@ impl Coverage {
         }
         let (fx, fy) = ((x - cx as f64) as f32, (y - cy as f64) as f32);
         let k = cy * self.size[0] + cx;
-        let v = |k: usize| self.data[k] as f32;
+        let v = |k: usize| self.data[self.start + k] as f32;
         let (a, b) = (v(k), v(k + 1));
         let (c, d) = (v(k + self.size[0]), v(k + self.size[0] + 1));
         let top = a + fx * (b - a);
@@ -708,6 +735,42 @@ fn bisect((mut a, mut b): (f64, f64), tol: f64, up: impl Fn(f64) -> bool) -> f64
 mod tests {
     use super::*;
     use crate::cure::psf::phi_inv;
+
+    /// A coverage drawn straight into its box reads and paints as the one kept of the
+    /// field-sized coverage mask: a ring, a section at the field's corner, none.
+    #[test]
+    fn a_coverage_drawn_into_its_box_is_the_one_kept_of_the_mask() {
+        use crate::test_support::{closed, rect};
+        let field = crate::profile::Profile::default_profile().field();
+        let raster = Rasterizer::new(field);
+        let ring = vec![
+            closed(40, true, |a| [20.0 + 7.3 * a.cos(), 15.0 + 7.3 * a.sin()]),
+            closed(40, false, |a| [20.0 + 3.1 * a.cos(), 15.0 + 3.1 * a.sin()]),
+        ];
+        let corner = vec![rect(-1.0, -1.0, 2.03, 1.51)];
+        let mut scratch = Scratch::default();
+        for shapes in [ring, corner, Vec::new()] {
+            let mut plain = Scratch::default();
+            let m = raster.coverage(&shapes, &mut plain);
+            let kept = Coverage::of(&m, plain.lit_box());
+            let drawn = Coverage::draw(&raster, &shapes, &mut scratch);
+            // The ring spans columns 200..430 and rows 417..648, the corner's section
+            // columns 0..32 and rows 744..768 (and beyond the field).
+            for i in 0..340 {
+                for j in 0..290 {
+                    let p = [-2.0 + i as f64 * 1.37, 380.0 + j as f64 * 1.37];
+                    assert_eq!(drawn.value(p), kept.value(p), "{p:?}");
+                }
+            }
+            let (mut a, mut b) = (
+                Mask::zeros(m.width, m.height),
+                Mask::zeros(m.width, m.height),
+            );
+            drawn.paint(&mut a);
+            kept.paint(&mut b);
+            assert!(a == m && b == m);
+        }
+    }
 
     /// The profile against a brute-force average: edges at 1000 positions in their pixel,
     /// the light of each summed pixel by pixel, the crossing found on a fine grid.

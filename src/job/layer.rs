@@ -293,13 +293,9 @@ fn drawing(
         .map(|(d, c)| {
             c.coverage(|| {
                 let s = warp(&c.section.contours, i + 1 + d)?;
-                let m = ctx
-                    .raster
-                    .coverage(s.as_deref().unwrap_or(&c.section.contours), scratch);
-                let coverage = Coverage::of(&m, scratch.lit_box());
-                let drawn = scratch.drawn();
-                scratch.recycle(m);
-                Ok((coverage, drawn))
+                let contours = s.as_deref().unwrap_or(&c.section.contours);
+                let coverage = Coverage::draw(ctx.raster, contours, scratch);
+                Ok((coverage, scratch.drawn()))
             })
         })
         .collect::<Result<Vec<_>>>()?;

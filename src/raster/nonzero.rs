@@ -1,6 +1,7 @@
 //! The exact nonzero-winding fallback for layers whose shells overlap.
 
-use super::{Mask, PixelBox, Rasterizer};
+use super::scan::Rows;
+use super::{PixelBox, Rasterizer};
 use crate::slice::Contour;
 use std::ops::Range;
 
@@ -32,12 +33,13 @@ impl Rasterizer {
     /// row: exact horizontally, 1/(2·SUBLINES) px vertically. Used for the rows where shells
     /// overlap, where [`coverage`](Self::coverage)'s signed-area accumulation over-counts.
     ///
-    /// Writes the rows `rows` (ascending, disjoint ranges) of `out` inside `lit` (the box of
-    /// every contour point, outside which the section has no area).
+    /// Writes the rows `rows` (ascending, disjoint ranges) of `out` (laid out as `layout`
+    /// says) inside `lit` (the box of every contour point, outside which the section has no
+    /// area).
     pub(super) fn coverage_nonzero(
         &self,
         contours: &[Contour],
-        out: &mut Mask,
+        (out, layout): (&mut [u8], Rows),
         lit: PixelBox,
         rows: &[Range<usize>],
     ) {
@@ -62,7 +64,7 @@ impl Rasterizer {
         }
         edges.sort_by(|a, b| a.2.total_cmp(&b.2));
         for r in rows.iter().flat_map(|rs| rs.clone()) {
-            out.data[r * w..][lit.cols()].fill(0);
+            layout.row(out, r)[lit.cols()].fill(0);
         }
         let mut diff = vec![0.0f64; w + 2];
         let mut cover = vec![0.0f64; w + 1];
@@ -121,7 +123,7 @@ impl Rasterizer {
                 }
             }
             // Columns left of the box hold no span: `run` is 0 there.
-            let dst = &mut out.data[r * w..][lit.cols()];
+            let dst = &mut layout.row(out, r)[lit.cols()];
             let mut run = 0.0;
             for (col, d) in lit.cols().zip(dst) {
                 run += diff[col];

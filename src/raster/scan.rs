@@ -4,6 +4,52 @@
 use super::accum::{Accum, BLOCK};
 use super::{CoverageMap, LitRuns, PixelBox};
 
+/// Where a mask's rows lie in its buffer: the pixel of row `r`, column `c` (field
+/// coordinates) at `(r - row0)·stride + skip + c`; a row's slice reaches column `end`.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Rows {
+    stride: usize,
+    row0: usize,
+    skip: usize,
+    end: usize,
+}
+
+impl Rows {
+    /// A field-sized mask `w` pixels wide.
+    pub(super) fn field(w: usize) -> Rows {
+        Rows {
+            stride: w,
+            row0: 0,
+            skip: 0,
+            end: w,
+        }
+    }
+
+    /// The box `lit` with a border of one pixel, preceded by `lit.c0` bytes (so that a
+    /// row's slice is indexed by field columns): see [`super::Boxed`].
+    pub(super) fn boxed(lit: PixelBox) -> Rows {
+        let stride = lit.c1 - lit.c0 + 2;
+        Rows {
+            stride,
+            row0: lit.r0,
+            skip: stride + 1,
+            end: lit.c1,
+        }
+    }
+
+    /// Bytes of a buffer holding rows `lit.r0..lit.r1` in the [`Rows::boxed`] layout.
+    pub(super) fn boxed_len(lit: PixelBox) -> usize {
+        lit.c0 + (lit.r1 - lit.r0 + 2) * (lit.c1 - lit.c0 + 2)
+    }
+
+    /// Row `r` of `data`, indexed by field column.
+    #[inline(always)]
+    pub(super) fn row<'d>(&self, data: &'d mut [u8], r: usize) -> &'d mut [u8] {
+        let s = (r - self.row0) * self.stride + self.skip;
+        &mut data[s..s + self.end]
+    }
+}
+
 /// How [`scan_runs`] writes runs of equal (thresholded) coverage into a mask row.
 pub(super) trait Emit {
     /// Per-row state.
@@ -97,7 +143,8 @@ pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
 }
 
 /// The prefix-sum scan of the accumulation buffer over the pixels of `span`: writes the
-/// coverage (thresholded when `BIN`) through `emit`, clears the buffer and its block marks
+/// coverage (thresholded when `BIN`) through `emit` into the rows of `data` (zero there)
+/// laid out as `layout` says, clears the buffer and its block marks
 /// as it reads them, and returns the sum of the coverage values (before threshold) and the
 /// largest winding seen. Only the touched blocks are visited (between them every cell is
 /// zero and the value repeats), and each run of equal coverage is written once, when it
@@ -108,8 +155,7 @@ pub fn map_words(data: &mut [u8], full: &[u8], edge: impl Fn(usize, u8) -> u8) {
 #[allow(clippy::too_many_arguments)]
 pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
     acc: &mut Accum,
-    data: &mut [u8],
-    w: usize,
+    (data, layout): (&mut [u8], Rows),
     span: PixelBox,
     emit: E,
     outside: &mut bool,
@@ -132,7 +178,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
         let marks = &mut acc.touched[k * words..(k + 1) * words];
         let mut sink = Runs::<E, BIN, CHECK> {
             er: emit.row(r),
-            dst: &mut data[r * w..(r + 1) * w],
+            dst: layout.row(data, r),
             lit_sum: 0,
             lo: usize::MAX,
             hi: 0,
@@ -216,8 +262,7 @@ pub(super) fn scan_runs<E: Emit, const BIN: bool, const CHECK: bool>(
 /// [`scan_runs`] writes them: thresholded when `BIN`, through `emit`, `outside` set as there.
 /// Returns the sum of their coverage values and their lit runs (coverage ≥ 50 %), in order.
 pub(super) fn emit_rows<E: Emit, const BIN: bool, const CHECK: bool>(
-    data: &mut [u8],
-    w: usize,
+    (data, layout): (&mut [u8], Rows),
     (span, rows): (PixelBox, std::ops::Range<usize>),
     emit: E,
     outside: &mut bool,
@@ -228,7 +273,7 @@ pub(super) fn emit_rows<E: Emit, const BIN: bool, const CHECK: bool>(
     let mut coverage = vec![0u8; cols.len()];
     let mut sum = 0;
     for r in rows {
-        let dst = &mut data[r * w..(r + 1) * w];
+        let dst = layout.row(data, r);
         coverage.copy_from_slice(&dst[cols.clone()]);
         dst[cols.clone()].fill(0);
         let mut sink = Runs::<E, BIN, CHECK> {
