@@ -110,7 +110,8 @@ impl Sink for Checker<'_> {
         let (i, t, what) = (s.layer, s.t0, s.kind.name());
         let mut push = |kind, msg| self.violations.push(violation(Some(i), t, kind, msg));
         let moving = s.motion != Motion::Still && s.from_mm != s.to_mm;
-        let (from, to) = (fixed(s.from_mm, 4), fixed(s.to_mm, 4));
+        // The positions as messages print them (formatted only for a message).
+        let (from, to) = (|| fixed(s.from_mm, 4), || fixed(s.to_mm, 4));
         if s.light {
             let exposing = matches!(
                 s.kind,
@@ -123,6 +124,7 @@ impl Sink for Checker<'_> {
                 );
             }
             if moving && layer.mode == Mode::Layered {
+                let (from, to) = (from(), to());
                 let msg = format!("light on while the stage moves from {from} to {to} mm in layer {i}, which is planned as layered");
                 push(Kind::LightDuringMove, msg);
             }
@@ -139,7 +141,7 @@ impl Sink for Checker<'_> {
         let (lo, hi) = (m.travel_min_mm, m.travel_max_mm);
         let out = |p: f64| p < lo - 1e-9 || (*travel && p > hi + 1e-9);
         if (moving || s.kind == SegKind::Home) && (out(s.from_mm) || out(s.to_mm)) {
-            let (lo, hi) = (number(lo), number(hi));
+            let (lo, hi, from, to) = (number(lo), number(hi), from(), to());
             let msg = format!(
                 "layer {i}: {what} from {from} to {to} mm leaves the {travel_is} [{lo}, {hi}] mm"
             );
@@ -167,7 +169,7 @@ impl Sink for Checker<'_> {
             push(Kind::Accel, msg);
         }
         if s.kind == SegKind::Expose && (s.from_mm - layer.z_mm).abs() > m.half_step_mm() + 1e-9 {
-            let z = number(layer.z_mm);
+            let (z, from) = (number(layer.z_mm), from());
             let msg = format!("layer {i} exposed with the stage at {from} mm, its z_mm is {z}");
             push(Kind::Position, msg);
         }
@@ -178,9 +180,9 @@ impl Sink for Checker<'_> {
             return;
         };
         let (i, at) = (r.index, Some(r.index));
-        let (z, expected) = (number(layer.z_mm), self.prev_z + layer.thickness_mm);
+        let (z, expected) = (|| number(layer.z_mm), self.prev_z + layer.thickness_mm);
         if (layer.z_mm - expected).abs() > 1e-6 {
-            let top = fixed(expected, 6);
+            let (z, top) = (z(), fixed(expected, 6));
             let msg =
                 format!("layer {i}: z_mm {z} but the layers' thicknesses put its top at {top} mm");
             self.push(at, r.start_s, Kind::Position, msg);
@@ -193,8 +195,9 @@ impl Sink for Checker<'_> {
         if let Some(e) = r.last_sweep_end_mm {
             if (e - layer.z_mm).abs() > self.machine.half_step_mm() + 1e-9 {
                 let msg = format!(
-                    "layer {i}'s sweep ends at {} mm, its z_mm is {z}",
-                    fixed(e, 4)
+                    "layer {i}'s sweep ends at {} mm, its z_mm is {}",
+                    fixed(e, 4),
+                    z()
                 );
                 self.push(at, end, Kind::Position, msg);
             }
