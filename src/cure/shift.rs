@@ -300,7 +300,12 @@ impl Coverage {
     /// The distance from `p` along the unit direction `dir` to where the coverage first
     /// crosses one half, if within `max` (steps of `STEP_PX`, the crossing interpolated).
     pub fn crossing(&self, p: [f64; 2], dir: [f64; 2], max: f64) -> Option<f64> {
-        let c0 = self.value(p) - 0.5;
+        self.crossing_from((p, self.value(p)), dir, max)
+    }
+
+    /// [`Coverage::crossing`] from `p` whose coverage `v` is known.
+    fn crossing_from(&self, (p, v): ([f64; 2], f64), dir: [f64; 2], max: f64) -> Option<f64> {
+        let c0 = v - 0.5;
         let (mut t, mut c) = (0.0, c0);
         while t < max {
             let t1 = (t + STEP_PX).min(max);
@@ -317,10 +322,11 @@ impl Coverage {
     /// nearest crossing of half coverage along it, either way), within `reach`: beyond,
     /// `reach` outside and `-reach` inside.
     pub fn distance_along(&self, p: [f64; 2], n: [f64; 2], reach: f64) -> f64 {
-        let inside = self.value(p) >= 0.5;
+        let v = self.value(p);
+        let inside = v >= 0.5;
         // Inside, the edge lies outward (+n); outside, inward (−n).
         let dir = if inside { n } else { [-n[0], -n[1]] };
-        match self.crossing(p, dir, reach) {
+        match self.crossing_from((p, v), dir, reach) {
             Some(t) if inside => -t,
             Some(t) => t,
             None if inside => -reach,
