@@ -11,18 +11,15 @@
 use super::segments::Segments;
 use super::shift::{EdgeProfile, EdgeShifts};
 use crate::cure::model::CureModel;
-use crate::cure::psf::Psf;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
 
 /// The inward move of a prism's edges (every layer above lit alike, the normal dose)
 /// that puts the cured edge on the section, px (negative: outward): the pixel-phase
-/// averaged growth at the prism's threshold ([`EdgeProfile::growth`]).
-pub fn edge_shift_px(model: &CureModel) -> f64 {
-    let psf = Psf {
-        sigma_px: model.sigma_px,
-    };
-    EdgeProfile::new(&psf).growth(model.edge_threshold())
+/// averaged growth at the prism's threshold ([`EdgeProfile::growth`]; `profile`, the
+/// model's PSF's).
+pub fn edge_shift_px(model: &CureModel, profile: &EdgeProfile) -> f64 {
+    profile.growth(model.edge_threshold())
 }
 
 /// Area of the unit pixel centred at the origin on the side `n·p ≤ u` of a line with

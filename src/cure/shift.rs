@@ -86,13 +86,13 @@ impl EdgeProfile {
             xs.iter().map(|&x| (phi(x / s), phi((x - 1.0) / s))).unzip();
         // ḡ at lights y = Φ(z), z from 6 down to −6 (the growth increasing).
         let zs: Vec<f64> = (0..=384).map(|k| 6.0 - k as f64 / 32.0).collect();
+        let ys: Vec<f64> = zs.iter().map(|&z| phi(z)).collect();
         let mut growth = vec![0.0; zs.len()];
         for k in 0..PHASES {
             let phase = (k as f64 + 0.5) / PHASES as f64;
             let light = |i: usize| 1.0 - a[i] + phase * (a[i] - b[i]);
             let mut i = 0;
-            for (g, &z) in growth.iter_mut().zip(&zs) {
-                let y = phi(z);
+            for (g, &y) in growth.iter_mut().zip(&ys) {
                 while i + 2 < nx && light(i + 1) >= y {
                     i += 1;
                 }

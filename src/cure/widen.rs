@@ -482,6 +482,14 @@ mod tests {
     use crate::profile::Profile;
     use crate::raster::{Rasterizer, Scratch};
 
+    /// [`super::super::edge_shift_px`] of `model`.
+    fn prism_shift(model: &CureModel) -> f64 {
+        let psf = Psf {
+            sigma_px: model.sigma_px,
+        };
+        super::super::edge_shift_px(model, &crate::cure::shift::EdgeProfile::new(&psf))
+    }
+
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Contour {
         vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
     }
@@ -500,7 +508,7 @@ mod tests {
         let profile = Profile::default_profile();
         let model = CureModel::from_profile(&profile).expect("the default profile has a PSF");
         let raster = Rasterizer::new(profile.field());
-        let shift = super::super::edge_shift_px(&model);
+        let shift = prism_shift(&model);
         let mut scratch = Scratch::default();
         let mut m = raster.coverage(section, &mut scratch);
         let lit = scratch.lit_box();
@@ -664,7 +672,7 @@ mod tests {
         let square = rect(100.3 * p, 100.6 * p, 130.3 * p, 130.6 * p);
         let pin = rect(200.3 * p, 100.6 * p, 203.3 * p, 103.6 * p);
         let model = CureModel::from_profile(&Profile::default_profile()).unwrap();
-        let shift = super::super::edge_shift_px(&model);
+        let shift = prism_shift(&model);
         let small = small_features(&model, &[square.clone(), pin.clone()], 768.0, shift);
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].contours, vec![1]);
@@ -680,7 +688,7 @@ mod tests {
         let mut hole = rect(101.0 * p, 101.0 * p, 159.0 * p, 159.0 * p);
         hole.reverse();
         let model = CureModel::from_profile(&Profile::default_profile()).unwrap();
-        let shift = super::super::edge_shift_px(&model);
+        let shift = prism_shift(&model);
         let small = small_features(&model, &[outer.clone(), hole], 768.0, shift);
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].contours, vec![0, 1]);

@@ -227,9 +227,12 @@ impl CureJob {
             return Ok(None);
         };
         let correction = opts.correction.unwrap_or(Correction::Xy);
+        let edge = cure::shift::EdgeProfile::new(&cure::Psf {
+            sigma_px: model.sigma_px,
+        });
         let shift_px = match correction {
             Correction::Off => 0.0,
-            _ => cure::edge_shift_px(&model),
+            _ => cure::edge_shift_px(&model, &edge),
         };
         // The print-through under a flat surface with many layers above, in whole layers.
         let held_back = match correction {
@@ -256,9 +259,7 @@ impl CureJob {
         Ok(Some(CureJob {
             model,
             sources: sources.map(|(k, v)| (k.to_string(), v)).into(),
-            profile: cure::shift::EdgeProfile::new(&cure::Psf {
-                sigma_px: model.sigma_px,
-            }),
+            profile: edge,
             exposure: profile.exposure.clone(),
             walls: std::sync::OnceLock::new(),
             model_height_px: profile.field().height_px as f64,
