@@ -8,6 +8,7 @@
 //! edge keep their exact coverage, so interiors stay flat. The light compensation maps the
 //! corrected coverage to grays as it maps any coverage: one target dose for both.
 
+use super::floor_index;
 use super::segments::Segments;
 use super::shift::{EdgeProfile, EdgeShifts};
 use crate::cure::model::CureModel;
@@ -109,7 +110,7 @@ pub(super) fn nearest_edges(
         for (i, s) in segs.segs.iter().enumerate() {
             let (reach, (a, b)) = (reach_of(i), (s.a[1], s.b[1]));
             // (Truncation floors the non-negative values: `floor` is a libm call.)
-            let r0 = (a.min(b) - reach - 0.5).max(lit.r0 as f64) as usize;
+            let r0 = floor_index((a.min(b) - reach - 0.5).max(lit.r0 as f64));
             let r1 = ceil(a.max(b) + reach - 0.5).min(lit.r1);
             if r0 < r1 {
                 for k in (r0 - lit.r0) / strip..(r1 - lit.r0).div_ceil(strip) {
@@ -138,7 +139,7 @@ pub(super) fn nearest_edges(
                         continue;
                     }
                     let (x0, x1) = (a[0] + t0 * dx, a[0] + t1 * dx);
-                    let c0 = (x0.min(x1) - reach - 0.5).max(lit.c0 as f64) as usize;
+                    let c0 = floor_index((x0.min(x1) - reach - 0.5).max(lit.c0 as f64));
                     let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
                     for c in c0..c1 {
                         let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
@@ -168,7 +169,7 @@ pub(super) fn nearest_edges(
 /// ⌈x⌉ for x ≥ 0 (0 below).
 #[inline]
 fn ceil(x: f64) -> usize {
-    let t = x.max(0.0) as usize;
+    let t = floor_index(x.max(0.0));
     t + ((t as f64) < x) as usize
 }
 

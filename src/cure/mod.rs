@@ -35,6 +35,13 @@ pub mod shift;
 pub mod widen;
 pub mod width;
 
+/// ⌊x⌋ of a non-negative `x` as an index (`x as usize` below 2⁶³, in fewer instructions:
+/// x86-64 converts floats to signed integers), 0 for NaN; the hot loops' conversion.
+#[inline(always)]
+pub(crate) fn floor_index(x: f64) -> usize {
+    x as i64 as usize
+}
+
 pub use check::run_layers;
 pub use correct::{correct_coverage, edge_shift_px};
 pub use engine::Engine;
@@ -69,5 +76,28 @@ impl Correction {
             Correction::Xy => "xy",
             Correction::Xyz => "xyz",
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// `floor_index` is `as usize` for every non-negative value below 2⁶³ (whole, halves,
+    /// just below a whole, large), and 0 for NaN.
+    #[test]
+    fn floor_index_is_the_usize_conversion() {
+        let values = [
+            0.0,
+            0.3,
+            1.0,
+            1.0 - 1e-16,
+            2.5,
+            767.999_999,
+            3e9,
+            2f64.powi(53) + 2.0,
+        ];
+        for x in values.into_iter().chain((0..1000).map(|k| k as f64 * 0.37)) {
+            assert_eq!(super::floor_index(x), x as usize, "{x}");
+        }
+        assert_eq!(super::floor_index(f64::NAN), 0);
     }
 }

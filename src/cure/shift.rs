@@ -24,7 +24,7 @@
 use super::check::NEAR;
 use super::psf::{phi, Psf};
 use super::segments::Segments;
-use super::CureModel;
+use super::{floor_index, CureModel};
 use crate::raster::{Boxed, Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::Contour;
 
@@ -139,7 +139,7 @@ impl EdgeProfile {
         let nu = (2.0 * SPAN_PX * PHASE_STEPS) as usize + 1;
         let fu = ((u + SPAN_PX) * PHASE_STEPS).clamp(0.0, (nu - 1) as f64 - 1e-9);
         let fp = (phase * PHASES as f64).clamp(0.0, PHASES as f64 - 1e-9);
-        let (k, j) = (fu as usize, fp as usize);
+        let (k, j) = (floor_index(fu), floor_index(fp));
         let (tu, tp) = (fu - k as f64, fp - j as f64);
         let at = |j: usize, k: usize| self.phased[j * nu + k];
         let row = |j: usize| at(j, k) + tu * (at(j, k + 1) - at(j, k));
@@ -154,7 +154,7 @@ impl EdgeProfile {
         if f <= 0.0 {
             return self.light[0];
         }
-        let k = f as usize;
+        let k = floor_index(f);
         if k + 1 >= self.light.len() {
             return *self.light.last().expect("a table");
         }
@@ -166,7 +166,7 @@ impl EdgeProfile {
     #[inline]
     pub fn light_slope(&self, u: f64) -> (f64, f64) {
         let f = ((u + SPAN_PX) * STEPS).clamp(0.0, (self.light.len() - 1) as f64 - 1e-9);
-        let k = f as usize;
+        let k = floor_index(f);
         let (a, b) = (self.light[k], self.light[k + 1]);
         (a + (f - k as f64) * (b - a), (b - a) * STEPS)
     }
@@ -284,7 +284,7 @@ impl Coverage {
         if !(x >= 0.0 && y >= 0.0) {
             return 0.0;
         }
-        let (cx, cy) = (x as usize, y as usize);
+        let (cx, cy) = (floor_index(x), floor_index(y));
         if cx + 1 >= self.size[0] || cy + 1 >= self.size[1] {
             return 0.0;
         }

@@ -113,8 +113,10 @@ pub(super) fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f
     };
     let dxdy = (xb - xa) / (yb - ya);
     let mut x = xa;
-    let r_start = floor_nn(ya) as usize;
-    let r_end = (ceil_nn(yb) as usize).min(h);
+    // (Through u32: the values are whole and below 2²⁴, and converting to u32 takes fewer
+    // instructions than to usize.)
+    let r_start = floor_nn(ya) as u32 as usize;
+    let r_end = (ceil_nn(yb) as u32 as usize).min(h);
     for r in r_start..r_end {
         let top = (r as f32).max(ya);
         let bot = ((r + 1) as f32).min(yb);
@@ -129,8 +131,8 @@ pub(super) fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f
         let lf = floor_nn(lx);
         let rc = ceil_nn(rx);
         // Box columns: the arithmetic above stays in field coordinates.
-        let li = lf as usize - accum.col0;
-        let ri = rc as usize - accum.col0;
+        let li = lf as u32 as usize - accum.col0;
+        let ri = rc as u32 as usize - accum.col0;
         accum.mark(r - accum.row0, li, ri.max(li + 1));
         let acc = &mut *accum.cells;
         if ri <= li + 1 {
