@@ -8,9 +8,9 @@
 //! edge keep their exact coverage, so interiors stay flat. The light compensation maps the
 //! corrected coverage to grays as it maps any coverage: one target dose for both.
 
-use super::floor_index;
 use super::segments::Segments;
 use super::shift::{EdgeProfile, EdgeShifts};
+use super::{floor_index, index_f64};
 use crate::cure::model::CureModel;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
@@ -67,7 +67,7 @@ pub fn correct_coverage(
     let mut changed = 0;
     nearest_edges(segs, (lit, STRIP), reach, |r, c, i| {
         let s = &segs.segs[i];
-        let p = [c as f64 + 0.5, r as f64 + 0.5];
+        let p = [index_f64(c) + 0.5, index_f64(r) + 0.5];
         // Signed distance of the centre outside the edge's line.
         let sd = (p[0] - s.a[0]) * s.n[0] + (p[1] - s.a[1]) * s.n[1];
         let shift = shifts.of_edge(i);
@@ -127,7 +127,7 @@ pub(super) fn nearest_edges(
                 let (r2, (dx, dy)) = (reach * reach, (b[0] - a[0], b[1] - a[1]));
                 let l2 = dx * dx + dy * dy;
                 for r in (r0 as usize).max(s0)..(r1 as usize).min(s1) {
-                    let v = r as f64 + 0.5;
+                    let v = index_f64(r) + 0.5;
                     // The part of the edge within `reach` of the row, then its columns.
                     let (t0, t1) = if dy.abs() > 1e-12 {
                         let (p, q) = ((v - reach - a[1]) / dy, (v + reach - a[1]) / dy);
@@ -142,7 +142,7 @@ pub(super) fn nearest_edges(
                     let c0 = floor_index((x0.min(x1) - reach - 0.5).max(lit.c0 as f64));
                     let c1 = ceil(x0.max(x1) + reach - 0.5).min(lit.c1);
                     for c in c0..c1 {
-                        let (wx, wy) = (c as f64 + 0.5 - a[0], v - a[1]);
+                        let (wx, wy) = (index_f64(c) + 0.5 - a[0], v - a[1]);
                         let t = if l2 > 0.0 {
                             ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
                         } else {
@@ -170,7 +170,7 @@ pub(super) fn nearest_edges(
 #[inline]
 fn ceil(x: f64) -> usize {
     let t = floor_index(x.max(0.0));
-    t + ((t as f64) < x) as usize
+    t + (index_f64(t) < x) as usize
 }
 
 /// The nearest edge (squared distance, edge) of the pixels near the section's edges, kept per thread from layer

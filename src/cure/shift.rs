@@ -24,7 +24,7 @@
 use super::check::NEAR;
 use super::psf::{phi, Psf};
 use super::segments::Segments;
-use super::{floor_index, CureModel};
+use super::{floor_index, index_f64, CureModel};
 use crate::raster::{Boxed, Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::Contour;
 
@@ -140,7 +140,7 @@ impl EdgeProfile {
         let fu = ((u + SPAN_PX) * PHASE_STEPS).clamp(0.0, (nu - 1) as f64 - 1e-9);
         let fp = (phase * PHASES as f64).clamp(0.0, PHASES as f64 - 1e-9);
         let (k, j) = (floor_index(fu), floor_index(fp));
-        let (tu, tp) = (fu - k as f64, fp - j as f64);
+        let (tu, tp) = (fu - index_f64(k), fp - index_f64(j));
         let at = |j: usize, k: usize| self.phased[j * nu + k];
         let row = |j: usize| at(j, k) + tu * (at(j, k + 1) - at(j, k));
         row(j) + tp * (row(j + 1) - row(j))
@@ -158,7 +158,7 @@ impl EdgeProfile {
         if k + 1 >= self.light.len() {
             return *self.light.last().expect("a table");
         }
-        let t = f - k as f64;
+        let t = f - index_f64(k);
         self.light[k] + t * (self.light[k + 1] - self.light[k])
     }
 
@@ -168,7 +168,7 @@ impl EdgeProfile {
         let f = ((u + SPAN_PX) * STEPS).clamp(0.0, (self.light.len() - 1) as f64 - 1e-9);
         let k = floor_index(f);
         let (a, b) = (self.light[k], self.light[k + 1]);
-        (a + (f - k as f64) * (b - a), (b - a) * STEPS)
+        (a + (f - index_f64(k)) * (b - a), (b - a) * STEPS)
     }
 
     /// ḡ(y): how far outside a drawn straight edge the light falls to `y` (of a full
@@ -288,7 +288,7 @@ impl Coverage {
         if cx + 1 >= self.size[0] || cy + 1 >= self.size[1] {
             return 0.0;
         }
-        let (fx, fy) = ((x - cx as f64) as f32, (y - cy as f64) as f32);
+        let (fx, fy) = ((x - index_f64(cx)) as f32, (y - index_f64(cy)) as f32);
         let k = cy * self.size[0] + cx;
         let v = |k: usize| self.data[self.start + k] as f32;
         let (a, b) = (v(k), v(k + 1));

@@ -118,8 +118,9 @@ pub(super) fn line(accum: &mut Accum, h: usize, x0: f32, y0: f32, x1: f32, y1: f
     let r_start = floor_nn(ya) as u32 as usize;
     let r_end = (ceil_nn(yb) as u32 as usize).min(h);
     for r in r_start..r_end {
-        let top = (r as f32).max(ya);
-        let bot = ((r + 1) as f32).min(yb);
+        // (Through i64: one instruction, where from usize it takes several.)
+        let top = (r as i64 as f32).max(ya);
+        let bot = ((r + 1) as i64 as f32).min(yb);
         let dy = bot - top;
         if dy <= 0.0 {
             continue;
