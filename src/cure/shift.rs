@@ -165,7 +165,7 @@ impl EdgeProfile {
     /// P(u) and its derivative.
     #[inline]
     pub fn light_slope(&self, u: f64) -> (f64, f64) {
-        let f = ((u + SPAN_PX) * STEPS).clamp(0.0, (self.light.len() - 1) as f64 - 1e-9);
+        let f = ((u + SPAN_PX) * STEPS).clamp(0.0, index_f64(self.light.len() - 1) - 1e-9);
         let k = floor_index(f);
         let (a, b) = (self.light[k], self.light[k + 1]);
         (a + (f - index_f64(k)) * (b - a), (b - a) * STEPS)
