@@ -43,12 +43,7 @@ fn main() {
         let t = Instant::now();
         let covered: Vec<Coverage> = sections
             .iter()
-            .map(|s| {
-                let m = raster.coverage(&s.contours, &mut scratch);
-                let c = Coverage::of(&m, scratch.lit_box());
-                scratch.recycle(m);
-                c
-            })
+            .map(|s| Coverage::draw(&raster, &s.contours, &mut scratch))
             .collect();
         let t_index = t.elapsed().as_secs_f64();
         let (mut t_cov, mut t_solve, mut t_cor) = (0.0, 0.0, 0.0);

@@ -25,7 +25,7 @@ use super::check::NEAR;
 use super::psf::{phi, Psf};
 use super::segments::Segments;
 use super::{floor_index, index_f64, CureModel};
-use crate::raster::{Boxed, Mask, PixelBox, Rasterizer, Scratch};
+use crate::raster::{Boxed, Mask, Rasterizer, Scratch};
 use crate::slice::Contour;
 
 /// Steps of the profile's table per pixel.
@@ -216,8 +216,10 @@ impl Drop for Coverage {
 const STEP_PX: f64 = 1.0;
 
 impl Coverage {
-    /// The coverage mask `m` inside `lit` (zero outside it).
-    pub fn of(m: &Mask, lit: PixelBox) -> Coverage {
+    /// The coverage mask `m` inside `lit` (zero outside it): what [`Coverage::draw`] draws,
+    /// kept of a field-sized mask (its tests' reference).
+    #[cfg(test)]
+    pub fn of(m: &Mask, lit: crate::raster::PixelBox) -> Coverage {
         if lit.r0 >= lit.r1 || lit.c0 >= lit.c1 {
             return Coverage::default();
         }
@@ -243,8 +245,8 @@ impl Coverage {
     }
 
     /// The coverage of the section `contours` drawn by `raster` straight into its box (the
-    /// values [`Coverage::of`] keeps of [`Rasterizer::coverage`]'s mask; the scratch is left
-    /// as that call leaves it).
+    /// values of [`Rasterizer::coverage`]'s mask inside its lit box; the scratch is left as
+    /// that call leaves it).
     pub fn draw(raster: &Rasterizer, contours: &[Contour], scratch: &mut Scratch) -> Coverage {
         let spare = lock_spare().pop().unwrap_or_default();
         let Boxed { data, lit } = raster.coverage_boxed(contours, scratch, spare);

@@ -300,20 +300,20 @@ fn drawing(
         })
         .collect::<Result<Vec<_>>>()?;
     // The section as cut (not one without its collinear points) is drawn as a layer below
-    // drew it for its look-ahead, if one did; else its coverage is offered to them.
-    let mine = layer.cut.take_own().filter(|_| !same);
+    // drew it for its look-ahead, if one did; else here, and its coverage is offered to
+    // them. The layer's mask is painted from it.
     let drawn = warped.as_ref().map_or(&section, |w| &w.0);
-    let again = mine
-        .as_ref()
-        .and_then(|c| ctx.raster.redraw(scratch, &c.1, |m| c.0.paint(m)));
-    let m = match again {
+    let own = match layer.cut.take_own().filter(|_| !same) {
+        Some(mine) => mine,
+        None => Arc::new((Coverage::draw(ctx.raster, drawn, scratch), scratch.drawn())),
+    };
+    let m = match ctx.raster.redraw(scratch, &own.1, |m| own.0.paint(m)) {
         Some(m) => m,
         None => ctx
             .raster
             .render::<crate::optics::Compensator>(drawn, scratch, false, None),
     };
     let lit = scratch.lit_box();
-    let own = mine.unwrap_or_else(|| Arc::new((Coverage::of(&m, lit), scratch.drawn())));
     if !same {
         layer.cut.offer(&own);
     }
