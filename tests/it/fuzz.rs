@@ -22,9 +22,8 @@
 //! replaced, bytes mutated) and checks a job against it; every `control` input is
 //! validated against the standard's schema first.
 //!
-//! CI runs 10⁴ inputs per target (seconds) and fewer for the archive targets (1500, 150,
-//! 800, 150, 150) and `hardware` (2000, 7 s), which add 12 to 22 s in all in a debug build on 2 cores shared with other
-//! builds (three runs; one: 4.9, 5.6, 3.0 and 3.2 s). A long run
+//! CI runs 10⁴ inputs per target and fewer for the archive targets (1500, 150, 800, 150,
+//! 150) and `hardware` (2000): about 6 s in all in the test build on 2 cores. A long run
 //! (docs/BENCHMARKS.md, "Fuzzing"):
 //!
 //! ```sh
@@ -311,7 +310,7 @@ fn targets() -> Vec<Target> {
     let nanodlp = vec![as_plate(&sl1[0])];
     let all: Vec<Vec<u8>> = [&sl1[..], &control, &zipped, &nanodlp].concat();
     // Each input of an archive target opens and replays a whole job: their counts keep
-    // them to about 20 s in all in a debug build on 2 cores.
+    // them to a few seconds in all in the test build on 2 cores.
     let zips = |name, seeds, runs| Target {
         name,
         parse: archive,
