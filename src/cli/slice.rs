@@ -234,21 +234,11 @@ struct Part {
     output: Option<PathBuf>,
 }
 
-/// What every part of one call shares.
+/// What every part of one call shares: the options of each part's job but for its input
+/// and output, and whether to show a progress line.
 struct Job<'a> {
-    profile: &'a Profile,
-    layer_height_mm: Option<Positive>,
-    binary: Option<bool>,
-    transform: Transform,
-    placement: PlacementMode,
-    optics: crate::optics::OpticsOptions,
-    distortion: DistortionChoice,
-    cure: crate::job::CureOptions,
-    cancel: &'a AtomicBool,
+    options: SliceOptions<'a>,
     show_progress: bool,
-    format: Option<crate::formats::Format>,
-    plate: Option<job::Plate>,
-    supports_stl: Option<PathBuf>,
 }
 
 impl Job<'_> {
@@ -273,24 +263,12 @@ impl Job<'_> {
             input: part.input.clone(),
             input_bytes: bytes,
             output: part.output.clone(),
-            profile: self.profile.clone(),
-            layer_height_mm: self.layer_height_mm,
-            binary: self.binary,
-            transform: self.transform,
-            placement: self.placement,
-            optics: self.optics,
             progress: if self.show_progress {
                 Some(&progress)
             } else {
                 None
             },
-            cancel: Some(self.cancel),
-            distortion: self.distortion.clone(),
-            format: self.format,
-            cure: self.cure.clone(),
-            plate: self.plate.clone(),
-            dose: None,
-            supports_stl: self.supports_stl.clone(),
+            ..self.options.clone()
         };
         job::slice_to_bundle(&opts)
     }
@@ -339,8 +317,14 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             crate::Error::Usage(format!("--layer-height must be a number > 0, got {v}"))
         })?),
     };
-    let job = Job {
-        profile: &profile,
+    let options = SliceOptions {
+        profile,
+        // Each part's own, set by `Job::slice`.
+        input: PathBuf::new(),
+        input_bytes: None,
+        output: None,
+        progress: None,
+        dose: None,
         layer_height_mm,
         binary: a.binary.then_some(true),
         transform: transform(&a)?,
@@ -364,10 +348,13 @@ pub(crate) fn slice(a: SliceArgs, quiet: bool) -> anyhow::Result<u8> {
             }),
             plots: a.cure.cure_plots.clone(),
         },
-        cancel: &cancel,
+        cancel: Some(&cancel),
         format: a.format,
         plate: plate(&a)?,
         supports_stl: a.plate.supports_stl.clone(),
+    };
+    let job = Job {
+        options,
         show_progress: !quiet && !a.json && std::io::stderr().is_terminal(),
     };
     if let [part] = &parts[..] {
@@ -416,7 +403,11 @@ fn slice_each(
     let (mut failed, mut denied) = (0, 0);
     for (i, part) in parts.iter().enumerate() {
         let input = part.input.display().to_string();
-        let result = if job.cancel.load(Ordering::Relaxed) {
+        let result = if job
+            .options
+            .cancel
+            .is_some_and(|c| c.load(Ordering::Relaxed))
+        {
             Err(crate::Error::Interrupted)
         } else {
             job.slice(part, None, &format!(" {input}"))

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 /// Options of [`slice_to_bundle`](super::slice_to_bundle).
+#[derive(Clone)]
 pub struct SliceOptions<'a> {
     /// The model file.
     pub input: PathBuf,
