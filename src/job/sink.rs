@@ -30,7 +30,8 @@ enum Stored {
 pub(super) struct Kept {
     files: HashMap<String, Stored>,
     in_memory: u64,
-    spill: Option<File>,
+    /// The spill file (its position is shared: a read seeks and reads under the lock).
+    spill: Option<Mutex<File>>,
     spill_len: u64,
 }
 
@@ -79,8 +80,8 @@ impl BundleSource for Sink {
                 .read(rel)
                 .map(|b| Cow::Owned(b.into_owned())),
             Sink::Memory { kept, .. } => {
-                let mut k = kept.lock().unwrap_or_else(|e| e.into_inner());
-                k.read(rel).map(Cow::Owned)
+                let k = kept.lock().unwrap_or_else(|e| e.into_inner());
+                k.read(rel).map(|b| Cow::Owned(b.into_owned()))
             }
         }
     }
@@ -94,19 +95,21 @@ impl BundleSource for Sink {
 }
 
 impl Kept {
-    /// The bytes of file `rel`.
-    fn read(&mut self, rel: &str) -> std::io::Result<Vec<u8>> {
+    /// The bytes of file `rel` (those in memory not copied).
+    fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
         match self.files.get(rel) {
-            Some(Stored::Memory(b)) => Ok(b.clone()),
+            Some(Stored::Memory(b)) => Ok(Cow::Borrowed(b)),
             Some(&Stored::Spilled(at, n)) => {
-                let f = self
+                let mut f = self
                     .spill
-                    .as_mut()
-                    .expect("spilled files have a spill file");
+                    .as_ref()
+                    .expect("spilled files have a spill file")
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner());
                 let mut buf = vec![0; n as usize];
                 f.seek(SeekFrom::Start(at))
                     .and_then(|_| f.read_exact(&mut buf))?;
-                Ok(buf)
+                Ok(Cow::Owned(buf))
             }
             None => Err(std::io::Error::new(
                 std::io::ErrorKind::NotFound,
@@ -124,9 +127,14 @@ impl Kept {
             Stored::Memory(bytes.to_vec())
         } else {
             if self.spill.is_none() {
-                self.spill = Some(spill_file(out)?);
+                self.spill = Some(Mutex::new(spill_file(out)?));
             }
-            let f = self.spill.as_mut().expect("just made");
+            let f = self
+                .spill
+                .as_mut()
+                .expect("just made")
+                .get_mut()
+                .unwrap_or_else(|e| e.into_inner());
             let at = self.spill_len;
             f.seek(SeekFrom::Start(at))
                 .and_then(|_| f.write_all(bytes))
@@ -169,7 +177,7 @@ fn spill_file(out: &Path) -> Result<File> {
 /// The files a [`Sink::Memory`] kept, read back for the exporter.
 pub(super) struct MemoryFiles {
     out: PathBuf,
-    kept: Mutex<Kept>,
+    kept: Kept,
 }
 
 impl MemoryFiles {
@@ -177,15 +185,14 @@ impl MemoryFiles {
     pub(super) fn new(out: &Path, kept: Mutex<Kept>) -> MemoryFiles {
         MemoryFiles {
             out: out.into(),
-            kept,
+            kept: kept.into_inner().unwrap_or_else(|e| e.into_inner()),
         }
     }
 }
 
 impl BundleSource for MemoryFiles {
     fn read(&self, rel: &str) -> std::io::Result<Cow<'_, [u8]>> {
-        let mut k = self.kept.lock().unwrap_or_else(|e| e.into_inner());
-        k.read(rel).map(Cow::Owned)
+        self.kept.read(rel)
     }
 
     fn shown(&self, rel: &str) -> PathBuf {
