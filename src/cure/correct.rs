@@ -10,7 +10,7 @@
 
 use super::segments::Segments;
 use super::shift::{EdgeProfile, EdgeShifts};
-use super::{floor_index, index_f64};
+use super::{floor_index, index_f64, round_to_u8};
 use crate::cure::model::CureModel;
 use crate::raster::Mask;
 use crate::raster::PixelBox;
@@ -76,9 +76,7 @@ pub fn correct_coverage(
             return;
         }
         let m = r * w + c;
-        let v = (mask.data[m] as f64 + 255.0 * delta)
-            .round()
-            .clamp(0.0, 255.0) as u8;
+        let v = round_to_u8(mask.data[m] as f64 + 255.0 * delta);
         if v != mask.data[m] {
             mask.data[m] = v;
             changed += 1;

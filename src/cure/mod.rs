@@ -49,6 +49,17 @@ pub(crate) fn index_f64(i: usize) -> f64 {
     i as i64 as f64
 }
 
+/// `x.round().clamp(0.0, 255.0) as u8`, without the libm call `f64::round` is on the
+/// baseline x86-64 target: truncation through `i64` (saturating) and the exact fractional
+/// part against one half (half away from zero, as `round`; a negative value clamps to 0
+/// either way, NaN gives 0 as `as u8` does).
+#[inline(always)]
+pub(crate) fn round_to_u8(x: f64) -> u8 {
+    let t = x as i64;
+    let up = (x - t as f64 >= 0.5) as i64;
+    t.saturating_add(up).clamp(0, 255) as u8
+}
+
 pub use check::run_layers;
 pub use correct::{correct_coverage, edge_shift_px};
 pub use engine::Engine;
@@ -90,6 +101,46 @@ impl Correction {
 mod tests {
     /// `floor_index` is `as usize` for every non-negative value below 2⁶³ (whole, halves,
     /// just below a whole, large), and 0 for NaN; `index_f64` is `as f64`.
+    #[test]
+    fn round_to_u8_is_round_then_clamp() {
+        let mut vals = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            0.49999999999999994,
+            1.5,
+            2.5,
+            254.5,
+            255.49999999999997,
+            255.5,
+            -0.7,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            2f64.powi(63),
+            2f64.powi(53) + 1.0,
+        ];
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..100_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            vals.push(f64::from_bits(s));
+            vals.push((s % 1_000_000) as f64 / 1000.0 - 300.0);
+            vals.push((s % 2048) as f64 * 0.25 - 256.0);
+        }
+        for x in vals {
+            assert_eq!(
+                super::round_to_u8(x),
+                x.round().clamp(0.0, 255.0) as u8,
+                "{x}"
+            );
+        }
+    }
+
     #[test]
     fn floor_index_and_index_f64_are_the_usize_conversions() {
         let values = [

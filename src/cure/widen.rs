@@ -311,7 +311,7 @@ pub fn widen(
                     continue;
                 }
                 let delta = halfplane_coverage(n, -(sd - d)) - halfplane_coverage(n, -sd);
-                let v = (orig[b.1] as f64 + 255.0 * delta).round().clamp(0.0, 255.0) as u8;
+                let v = super::round_to_u8(orig[b.1] as f64 + 255.0 * delta);
                 mask.data[b.0] = v.max(cv);
             }
             reached = peak(mask);
