@@ -99,8 +99,8 @@ impl Correction {
 
 #[cfg(test)]
 mod tests {
-    /// `floor_index` is `as usize` for every non-negative value below 2⁶³ (whole, halves,
-    /// just below a whole, large), and 0 for NaN; `index_f64` is `as f64`.
+    /// `round_to_u8` is `round().clamp(0, 255) as u8` on halves, ±0, NaN, ±∞, values past
+    /// 2⁶³ and fixed-seed values (any bit pattern, and the range the correction meets).
     #[test]
     fn round_to_u8_is_round_then_clamp() {
         let mut vals = vec![
@@ -141,6 +141,8 @@ mod tests {
         }
     }
 
+    /// `floor_index` is `as usize` for every non-negative value below 2⁶³ (whole, halves,
+    /// just below a whole, large), and 0 for NaN; `index_f64` is `as f64`.
     #[test]
     fn floor_index_and_index_f64_are_the_usize_conversions() {
         let values = [
