@@ -642,6 +642,14 @@ pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
     (sections, s.stats)
 }
 
+/// The box [x0, y0, x1, y1] of the points of `contours`, mm (x0 > x1 without points).
+pub fn bounds<'a>(contours: impl IntoIterator<Item = &'a Contour>) -> [f64; 4] {
+    let none = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    (contours.into_iter().flatten()).fold(none, |b, p| {
+        [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
+    })
+}
+
 /// Signed area of a contour (positive when counter-clockwise).
 pub fn signed_area(c: &Contour) -> f64 {
     let mut a = 0.0;

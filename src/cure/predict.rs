@@ -342,13 +342,8 @@ pub fn vanished_contours(samples: &[EdgeSample], outer: &[bool]) -> Vec<usize> {
 
 /// The bounding box of a contour (build-plane mm), its centre and size rounded to 1 µm.
 pub fn contour_box(contour: &Contour) -> FeatureBox {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in contour {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    let [x0, y0, x1, y1] = crate::slice::bounds([contour]);
+    let (lo, hi) = ([x0, y0], [x1, y1]);
     let r = crate::round::plane_mm;
     FeatureBox {
         x_mm: r(0.5 * (lo[0] + hi[0])),

@@ -342,22 +342,7 @@ impl Segments {
 pub fn contours_may_meet(contours: &[Contour]) -> bool {
     let mut boxes: [Vec<[f64; 4]>; 2] = [Vec::new(), Vec::new()];
     for c in contours {
-        let b = c.iter().fold(
-            [
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-            ],
-            |b, p| {
-                [
-                    b[0].min(p[0]),
-                    b[1].max(p[0]),
-                    b[2].min(p[1]),
-                    b[3].max(p[1]),
-                ]
-            },
-        );
+        let b = crate::slice::bounds([c]);
         boxes[usize::from(crate::slice::signed_area(c) < 0.0)].push(b);
     }
     boxes.iter_mut().any(|group| {
@@ -366,8 +351,8 @@ pub fn contours_may_meet(contours: &[Contour]) -> bool {
             let a = group[i];
             group[i + 1..]
                 .iter()
-                .take_while(|b| b[0] <= a[1])
-                .any(|b| b[2] <= a[3] && a[2] <= b[3])
+                .take_while(|b| b[0] <= a[2])
+                .any(|b| b[1] <= a[3] && a[1] <= b[3])
         })
     })
 }

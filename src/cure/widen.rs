@@ -39,7 +39,7 @@ use crate::cure::model::CureModel;
 use crate::cure::psf::{AxisTable, Psf};
 use crate::raster::Mask;
 use crate::raster::PixelBox;
-use crate::slice::{signed_area, Contour};
+use crate::slice::{bounds, signed_area, Contour};
 
 /// The light a narrow feature is drawn to reach: T·(1 + `MARGIN`) (room for the 8-bit
 /// grays and the compensation's rounding).
@@ -97,7 +97,7 @@ pub fn small_features(
     let limit_mm = 2.0 * (shift_px.max(0.0) + 4.0 * model.sigma_px) * p;
     let areas: Vec<f64> = contours.iter().map(signed_area).collect();
     let lengths: Vec<f64> = contours.iter().map(perimeter).collect();
-    let boxes: Vec<[f64; 4]> = contours.iter().map(bounds).collect();
+    let boxes: Vec<[f64; 4]> = contours.iter().map(|c| bounds([c])).collect();
     // Each hole's outer contour: the smallest one around its first point.
     let mut area = areas.clone();
     let mut length = lengths.clone();
@@ -358,21 +358,7 @@ pub fn widen(
 /// light (the executor checks that a mask lights nothing more than 1 px outside the
 /// section's box, which the record holds rounded to 1 µm).
 pub fn within_section_box(contours: &[Contour], pixel_mm: f64, height_px: f64) -> PixelBox {
-    let mut b = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for c in contours {
-        let cb = bounds(c);
-        b = [
-            b[0].min(cb[0]),
-            b[1].min(cb[1]),
-            b[2].max(cb[2]),
-            b[3].max(cb[3]),
-        ];
-    }
+    let b = bounds(contours);
     if b[0] > b[2] {
         return PixelBox::EMPTY;
     }
@@ -438,23 +424,6 @@ fn perimeter(c: &Contour) -> f64 {
             (dx * dx + dy * dy).sqrt()
         })
         .sum()
-}
-
-/// [x0, y0, x1, y1] of a contour.
-fn bounds(c: &Contour) -> [f64; 4] {
-    let mut b = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for p in c {
-        b[0] = b[0].min(p[0]);
-        b[1] = b[1].min(p[1]);
-        b[2] = b[2].max(p[0]);
-        b[3] = b[3].max(p[1]);
-    }
-    b
 }
 
 fn inside_box(b: &[f64; 4], q: [f64; 2]) -> bool {
