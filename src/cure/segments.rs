@@ -201,10 +201,12 @@ impl Segments {
 
 impl Segments {
     /// The edges split where edges of other contours cross them, each piece flagged when
-    /// it lies inside the section (material just beyond it: the nonzero winding of all the
-    /// contours there is not 0), as the edges of a support within the part, or of shells
-    /// that overlap, do. Pieces keep their edge's normal and contour; the boundary of the
-    /// union is the unflagged pieces.
+    /// it lies inside the section (material on both sides of it: the nonzero winding of
+    /// all the contours there is not 0), as the edges of a support within the part, or of
+    /// shells that overlap, do. Pieces keep their contour and their edge's normal, turned
+    /// round where the material lies only beyond the edge (a shell of a defective mesh that
+    /// runs backwards, filled with winding −1); the boundary of the union is the unflagged
+    /// pieces, their normals pointing out of it.
     pub fn union_pieces(&self) -> (Segments, Vec<bool>) {
         let mut grid = Segments {
             segs: self.segs.clone(),
@@ -229,12 +231,20 @@ impl Segments {
                 for w in ts.windows(2) {
                     let at = |t: f64| [0, 1].map(|k| s.a[k] + t * (s.b[k] - s.a[k]));
                     let mid = at((w[0] + w[1]) / 2.0);
-                    let beyond = [0, 1].map(|k| mid[k] + 1e-3 * s.n[k]);
-                    interior.push(grid.winding(&rows, beyond) != 0);
+                    let lit = |d: f64| {
+                        let p = [0, 1].map(|k| mid[k] + d * s.n[k]);
+                        grid.winding(&rows, p) != 0
+                    };
+                    let (beyond, behind) = (lit(1e-3), lit(-1e-3));
+                    interior.push(beyond && behind);
+                    let n = match beyond && !behind {
+                        true => [-s.n[0], -s.n[1]],
+                        false => s.n,
+                    };
                     out.push(Segment {
                         a: at(w[0]),
                         b: at(w[1]),
-                        n: s.n,
+                        n,
                     });
                 }
             }
@@ -339,11 +349,21 @@ impl Segments {
 /// touch or nest with the same orientation: two shells that overlap or meet, whose edges
 /// inside the union [`Segments::union_pieces`] must hold. Decided on their boxes (touching
 /// boxes count), per orientation: an outline and the holes inside it never ask for it.
+/// Also when a clockwise contour lies in no counter-clockwise one's box: a hole outside
+/// every outline is a shell that runs backwards (a defective mesh), whose edges'
+/// normals point into its material until [`Segments::union_pieces`] turns them.
 pub fn contours_may_meet(contours: &[Contour]) -> bool {
     let mut boxes: [Vec<[f64; 4]>; 2] = [Vec::new(), Vec::new()];
     for c in contours {
         let b = crate::slice::bounds([c]);
         boxes[usize::from(crate::slice::signed_area(c) < 0.0)].push(b);
+    }
+    let within = |b: &[f64; 4], a: &[f64; 4]| {
+        a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3]
+    };
+    let [outlines, holes] = &boxes;
+    if holes.iter().any(|h| !outlines.iter().any(|o| within(h, o))) {
+        return true;
     }
     boxes.iter_mut().any(|group| {
         group.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]));
@@ -430,6 +450,27 @@ mod tests {
         assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), sq(3.0, 3.0, 4.0)]));
         assert!(contours_may_meet(&[sq(0.0, 0.0, 10.0), sq(2.0, 2.0, 3.0)]));
         assert!(!contours_may_meet(&[sq(0.0, 0.0, 4.0)]));
+        // A shell that runs backwards: a hole outside every outline.
+        assert!(contours_may_meet(&[hole(0.0, 0.0, 4.0)]));
+        assert!(contours_may_meet(&[sq(0.0, 0.0, 4.0), hole(5.0, 0.0, 4.0)]));
+    }
+
+    /// A shell that runs backwards (clockwise outline, counter-clockwise hole: winding −1,
+    /// lit by the nonzero rule) bounds the union: its pieces' normals turn round to point
+    /// out of the material, where the same shell running forwards has them.
+    #[test]
+    fn union_pieces_turn_the_normals_of_a_shell_that_runs_backwards() {
+        let outline: Contour = vec![[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]];
+        let hole: Contour = vec![[4.0, 4.0], [6.0, 4.0], [6.0, 6.0], [4.0, 6.0]];
+        let back = Segments::edges(&[outline.clone(), hole.clone()], 1.0, 100.0);
+        let fwd: Vec<Contour> = [outline, hole].map(|c| c.into_iter().rev().collect()).into();
+        for (segs, turn) in [(back, -1.0), (Segments::edges(&fwd, 1.0, 100.0), 1.0)] {
+            let (pieces, interior) = segs.union_pieces();
+            assert!(interior.iter().all(|&i| !i) && pieces.segs.len() == segs.segs.len());
+            for (p, s) in pieces.segs.iter().zip(&segs.segs) {
+                assert_eq!(p.n, s.n.map(|v| turn * v));
+            }
+        }
     }
 
     /// A support overlapping a part's edge: the pieces inside the other shape are flagged,

@@ -570,3 +570,66 @@ fn the_correction_moves_only_the_outline_of_shells_that_cross_or_touch() {
     }
     assert!(layers > 10);
 }
+
+#[test]
+fn a_shell_that_runs_backwards_is_corrected_as_it_would_be_facing_out() {
+    // A box whose facets all face inwards beside one that faces out (the mesh's volume
+    // stays positive, so the mesh is not turned round as a whole): filled by the nonzero
+    // rule the inside-out box is lit all the same, and its edges move in as the same box
+    // facing out would (left where they were drawn, they put the layers' cured edges up
+    // to 0.13 px outside their sections, the prediction sampling only the other box).
+    let dir = tempdir("cure-backwards");
+    let near = box_tris([10.03, 10.01, 0.0], [18.03, 18.01, 0.5]);
+    let far = box_tris([20.02, 10.05, 0.0], [25.02, 15.05, 0.5]);
+    let turned: Vec<_> = far.iter().map(|t| [t[0], t[2], t[1]]).collect();
+    write_stl(&dir.join("out.stl"), &[near.clone(), far].concat());
+    write_stl(&dir.join("back.stl"), &[near, turned].concat());
+    for name in ["out", "back"] {
+        let stl = format!("{name}.stl");
+        let job = format!("{name}.dmdjob");
+        let args = [
+            "slice",
+            &stl,
+            "--keep-position",
+            "--compensation",
+            "off",
+            "--predict",
+            "-q",
+            "-o",
+            &job,
+        ];
+        let o = run_in(&dir, &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j: Value =
+            serde_json::from_slice(&std::fs::read(dir.join(&job).join("job.json")).unwrap())
+                .unwrap();
+        let p = &j["cure"]["predicted"];
+        assert!(
+            p["edge_offset_px"]["max"].as_f64().unwrap() < 0.1,
+            "{name}: {p}"
+        );
+    }
+    let mut layers = 0;
+    for e in std::fs::read_dir(dir.join("out.dmdjob/masks")).unwrap() {
+        let e = e.unwrap();
+        let (_, _, out) = read_gray(&e.path());
+        let (_, _, back) = read_gray(&dir.join("back.dmdjob/masks").join(e.file_name()));
+        // Equal but for a gray level, and at most the far box's corners (where the
+        // moves are interpolated from points along the contour, which runs the other way).
+        let apart = |d: u8| {
+            out.iter()
+                .zip(&back)
+                .filter(|(a, b)| a.abs_diff(**b) > d)
+                .count()
+        };
+        assert!(
+            apart(1) <= 4 && apart(0) <= 8,
+            "{:?}: {} {}",
+            e.file_name(),
+            apart(0),
+            apart(1)
+        );
+        layers += 1;
+    }
+    assert_eq!(layers, 10);
+}
