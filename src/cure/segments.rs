@@ -206,8 +206,9 @@ impl Segments {
     /// shells that overlap, do. Pieces keep their contour and their edge's normal, turned
     /// round where the material lies only beyond the edge (a shell of a defective mesh that
     /// runs backwards, filled with winding −1); the boundary of the union is the unflagged
-    /// pieces, their normals pointing out of it.
-    pub fn union_pieces(&self) -> (Segments, Vec<bool>) {
+    /// pieces, their normals pointing out of it. Last, per contour, whether it runs
+    /// backwards: most of its length on the boundary has its normal turned.
+    pub fn union_pieces(&self) -> (Segments, Vec<bool>, Vec<bool>) {
         let mut grid = Segments {
             segs: self.segs.clone(),
             starts: self.starts.clone(),
@@ -223,24 +224,23 @@ impl Segments {
         let mut interior = Vec::with_capacity(self.segs.len());
         let mut starts = Vec::with_capacity(self.starts.len());
         let (mut ts, mut seen) = (Vec::new(), vec![usize::MAX; self.segs.len()]);
+        let mut backwards = Vec::with_capacity(self.starts.len());
         for (own, w) in self.starts.windows(2).enumerate() {
             starts.push(out.len());
+            let mut turned = 0.0;
             for i in w[0]..w[1] {
                 self.split(&grid, (i, own), (&mut ts, &mut seen), &contour_of);
                 let s = &self.segs[i];
                 for w in ts.windows(2) {
                     let at = |t: f64| [0, 1].map(|k| s.a[k] + t * (s.b[k] - s.a[k]));
                     let mid = at((w[0] + w[1]) / 2.0);
-                    let lit = |d: f64| {
-                        let p = [0, 1].map(|k| mid[k] + d * s.n[k]);
-                        grid.winding(&rows, p) != 0
-                    };
+                    let lit = |d| grid.winding(&rows, [0, 1].map(|k| mid[k] + d * s.n[k])) != 0;
                     let (beyond, behind) = (lit(1e-3), lit(-1e-3));
                     interior.push(beyond && behind);
-                    let n = match beyond && !behind {
-                        true => [-s.n[0], -s.n[1]],
-                        false => s.n,
-                    };
+                    let len = (w[1] - w[0]) * (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);
+                    let turn = beyond && !behind;
+                    turned += [-len, 0.0, len][usize::from(beyond) + usize::from(turn)];
+                    let n = if turn { s.n.map(|v| -v) } else { s.n };
                     out.push(Segment {
                         a: at(w[0]),
                         b: at(w[1]),
@@ -248,6 +248,7 @@ impl Segments {
                     });
                 }
             }
+            backwards.push(turned > 0.0);
         }
         starts.push(out.len());
         let pieces = Segments {
@@ -258,13 +259,13 @@ impl Segments {
             rows: self.rows,
             cells: Vec::new(),
         };
-        (pieces, interior)
+        (pieces, interior, backwards)
     }
 
     /// The outline of the union of the contours' shells, with the grid index: the pieces
     /// of [`Segments::union_pieces`] with no material beyond them, by contour.
     pub fn union_outline(&self) -> Segments {
-        let (pieces, interior) = self.union_pieces();
+        let (pieces, interior, _) = self.union_pieces();
         let mut out = Segments {
             segs: Vec::with_capacity(pieces.segs.len()),
             starts: vec![0],
@@ -465,7 +466,7 @@ mod tests {
         let back = Segments::edges(&[outline.clone(), hole.clone()], 1.0, 100.0);
         let fwd: Vec<Contour> = [outline, hole].map(|c| c.into_iter().rev().collect()).into();
         for (segs, turn) in [(back, -1.0), (Segments::edges(&fwd, 1.0, 100.0), 1.0)] {
-            let (pieces, interior) = segs.union_pieces();
+            let (pieces, interior, _) = segs.union_pieces();
             assert!(interior.iter().all(|&i| !i) && pieces.segs.len() == segs.segs.len());
             for (p, s) in pieces.segs.iter().zip(&segs.segs) {
                 assert_eq!(p.n, s.n.map(|v| turn * v));
@@ -480,7 +481,7 @@ mod tests {
         let part: Contour = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
         let support: Contour = vec![[8.0, 4.0], [12.0, 4.0], [12.0, 6.0], [8.0, 6.0]];
         let segs = Segments::edges(&[part, support], 1.0, 100.0);
-        let (pieces, interior) = segs.union_pieces();
+        let (pieces, interior, _) = segs.union_pieces();
         assert_eq!(pieces.starts, vec![0, 6, 12]);
         let len = |s: &Segment| (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);
         let (mut inside, mut outline) = (0.0, 0.0);
@@ -503,7 +504,7 @@ mod tests {
         // Shapes apart: nothing split, nothing flagged.
         let apart: Contour = vec![[20.0, 4.0], [22.0, 4.0], [22.0, 6.0], [20.0, 6.0]];
         let square: Contour = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
-        let (pieces, interior) = Segments::edges(&[square, apart], 1.0, 100.0).union_pieces();
+        let (pieces, interior, _) = Segments::edges(&[square, apart], 1.0, 100.0).union_pieces();
         assert_eq!(pieces.segs.len(), 8);
         assert!(interior.iter().all(|&i| !i));
     }

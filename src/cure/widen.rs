@@ -62,6 +62,8 @@ pub struct SmallFeature {
     pub wall_mm: f64,
     /// The pixels its outer contour's bounding box touches.
     pixels: PixelBox,
+    /// Whether its contours run backwards (drawn turned round).
+    backwards: bool,
 }
 
 /// What [`widen`] did to a layer.
@@ -86,16 +88,20 @@ pub struct Widening {
 
 /// The small features of the section `contours` (build-plane mm) for the correction's
 /// move `shift_px` on a field `height_px` rows high: outer contours (with their holes)
-/// with 2A/P < 2·(s* + 4σ) px.
+/// with 2A/P < 2·(s* + 4σ) px. The contours flagged in `backwards` (if any) run
+/// backwards (a defective mesh's shell): their outlines run clockwise, their holes not.
 pub fn small_features(
     model: &CureModel,
-    contours: &[Contour],
+    (contours, backwards): (&[Contour], &[bool]),
     height_px: f64,
     shift_px: f64,
 ) -> Vec<SmallFeature> {
     let p = model.pixel_mm;
     let limit_mm = 2.0 * (shift_px.max(0.0) + 4.0 * model.sigma_px) * p;
-    let areas: Vec<f64> = contours.iter().map(signed_area).collect();
+    let turned = |k: usize| backwards.get(k) == Some(&true);
+    let areas: Vec<f64> = (contours.iter().enumerate())
+        .map(|(k, c)| if turned(k) { -signed_area(c) } else { signed_area(c) })
+        .collect();
     let lengths: Vec<f64> = contours.iter().map(perimeter).collect();
     let boxes: Vec<[f64; 4]> = contours.iter().map(|c| bounds([c])).collect();
     // Each hole's outer contour: the smallest one around its first point.
@@ -137,6 +143,7 @@ pub fn small_features(
             at: super::predict::contour_box(c),
             wall_mm,
             pixels,
+            backwards: turned(o),
         });
     }
     out
@@ -265,7 +272,8 @@ pub fn widen(
             continue;
         }
         let (nb, orig) = (&saved.boxes[k].0, &saved.boxes[k].1);
-        let own: Vec<Contour> = f.contours.iter().map(|&c| contours[c].clone()).collect();
+        let mut own: Vec<Contour> = f.contours.iter().map(|&c| contours[c].clone()).collect();
+        own.iter_mut().filter(|_| f.backwards).for_each(|c| c.reverse());
         let segs = Segments::simplified(&own, model.pixel_mm, mask.height as f64, 0.01);
         // The pixels near the feature's edges: index in the mask, in the box, the edge's
         // normal and the centre's signed distance outside its line.
@@ -482,7 +490,7 @@ mod tests {
         let mut m = raster.coverage(section, &mut scratch);
         let lit = scratch.lit_box();
         let h = m.height as f64;
-        let small = small_features(&model, section, h, shift);
+        let small = small_features(&model, (section, &[]), h, shift);
         let saved = Uncorrected::take(&m, &small, shift);
         let segs = Segments::simplified(section, model.pixel_mm, h, 0.01);
         let shifts = super::super::shift::EdgeShifts::uniform(&segs, shift);
@@ -642,7 +650,7 @@ mod tests {
         let pin = rect(200.3 * p, 100.6 * p, 203.3 * p, 103.6 * p);
         let model = CureModel::from_profile(&Profile::default_profile()).unwrap();
         let shift = prism_shift(&model);
-        let small = small_features(&model, &[square.clone(), pin.clone()], 768.0, shift);
+        let small = small_features(&model, (&[square.clone(), pin.clone()], &[]), 768.0, shift);
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].contours, vec![1]);
         let (plain, wide, wd, _) = drawn(&[square, pin]);
@@ -658,9 +666,9 @@ mod tests {
         hole.reverse();
         let model = CureModel::from_profile(&Profile::default_profile()).unwrap();
         let shift = prism_shift(&model);
-        let small = small_features(&model, &[outer.clone(), hole], 768.0, shift);
+        let small = small_features(&model, (&[outer.clone(), hole], &[]), 768.0, shift);
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].contours, vec![0, 1]);
-        assert!(small_features(&model, &[outer], 768.0, shift).is_empty());
+        assert!(small_features(&model, (&[outer], &[]), 768.0, shift).is_empty());
     }
 }

@@ -129,6 +129,8 @@ pub(super) struct LayerCorrection {
     pub segs: Segments,
     /// Their moves.
     pub shifts: cure::shift::EdgeShifts,
+    /// Per contour, whether it runs backwards ([`Segments::union_pieces`]; empty: none).
+    pub backwards: Vec<bool>,
     /// The layer's own light at which a feature that the layers above repeat cures (the
     /// narrow features' widening aims at it).
     pub threshold: f64,
@@ -332,12 +334,12 @@ impl CureJob {
         let h = self.model_height_px;
         let segs = Segments::simplified(section, self.model.pixel_mm, h, 0.01);
         let overlapping = overlapping || cure::segments::contours_may_meet(section);
-        let (segs, interior) = match overlapping {
+        let (segs, interior, backwards) = match overlapping {
             true => {
-                let (pieces, interior) = segs.union_pieces();
-                (pieces, Some(interior))
+                let (pieces, interior, backwards) = segs.union_pieces();
+                (pieces, Some(interior), backwards)
             }
-            false => (segs, None),
+            false => (segs, None, Vec::new()),
         };
         let mut pairs = Vec::new();
         let layers = index + above + 1;
@@ -365,6 +367,7 @@ impl CureJob {
         Some(LayerCorrection {
             segs,
             shifts,
+            backwards,
             threshold: self.model.threshold(0.5 * self.model.layer_mm, Some(0)) / all,
             cures_at: self.model.edge_threshold() / self.loose_ratio(index),
         })
@@ -447,10 +450,9 @@ impl CureJob {
         // Small features (geometry only) and their uncorrected coverage, for the narrow
         // ones the correction would starve.
         let inward = corr.map_or(0.0, |c| c.shifts.range().1);
-        let small = match corr {
-            Some(_) => widen::small_features(&self.model, section, m.height as f64, inward),
-            None => Vec::new(),
-        };
+        let small = corr.map_or(Vec::new(), |c| {
+            widen::small_features(&self.model, (section, &c.backwards), m.height as f64, inward)
+        });
         let mut saved = (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, inward));
         if let Some(c) = corr {
             let within = widen::within_section_box(section, self.model.pixel_mm, m.height as f64);

@@ -141,6 +141,29 @@ fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
 }
 
 #[test]
+fn a_pin_whose_facets_face_inwards_is_drawn_wider_as_well() {
+    // The pin above with its facets turned inwards (a shell that runs backwards; the block
+    // keeps the mesh's volume positive): filled all the same, and found as narrow.
+    let dir = tempdir("cure-widen-backwards-pin");
+    let p = P as f32;
+    let (x0, y0) = (400.0 * p, 300.0 * p);
+    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
+    let pin = box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]);
+    tris.extend(pin.iter().map(|t| [t[0], t[2], t[1]]));
+    let model = dir.join("pin.stl");
+    write_stl(&model, &tris);
+    let xy = slice(&dir, &model, "xy.dmdjob", "xy");
+    assert!(
+        warnings_of(&xy, "cure.features-vanish").is_empty(),
+        "{}",
+        xy["warnings"]
+    );
+    let w = warnings_of(&xy, "cure.features-widened");
+    assert_eq!(w.len(), 1, "{}", xy["warnings"]);
+    assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
+}
+
+#[test]
 fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_changed() {
     let dir = tempdir("cure-widen-wall");
     let p = P as f32;
