@@ -15,9 +15,11 @@
 //!    mid-plane cures where A_i·D₀·exp(−h/(2Dp)) ≥ Ec. One accumulation buffer the size of
 //!    the field, whatever the layer count ([`Engine`]).
 //! 4. Per layer: the cured area (where the layer's own light is at least [`NEAR`]: farther
-//!    out it is the print-through of the layers above) against the section's, the drawn
-//!    perimeter (Σ|∇| of the relative irradiance by central differences: exact for a
-//!    monotone anti-aliased edge at any angle) and so the mean edge offset; the islands
+//!    out it is the print-through of the layers above; with `xyz` also where one of the
+//!    held-back layers above lights it, [`Engine::count_held_back`]) against the
+//!    section's, the drawn perimeter (Σ|∇| of the relative irradiance by central
+//!    differences: exact for a monotone anti-aliased edge at any angle; with `xyz` the
+//!    largest of the held-back layers' and its own) and so the mean edge offset; the islands
 //!    (4-connected pixels of relative irradiance ≥ [`LIT`]) that do not cure ("vanished")
 //!    or that one cured region joins ("merged"); the print-through below downward-facing
 //!    pixels (lit, over a pixel that is dark in the layer below, as are its 4 neighbours).
@@ -45,13 +47,15 @@ pub(super) const CHUNK: usize = 8;
 /// `irradiance(i)` gives layer i's relative irradiance (called in parallel, a chunk of
 /// layers ahead of the recurrence), `ratio[i]` its dose ratio. `observe(i, engine)` is
 /// called right after layer i is evaluated, with its irradiance when `track` (the engine
-/// then holds the light that reaches layer i's top, [`Engine::irradiance`]).
+/// then holds the light that reaches layer i's top, [`Engine::irradiance`]). With
+/// `held_back` layers (`xyz`), a layer's cured area also takes what they light
+/// ([`Engine::count_held_back`]).
 pub fn run_layers(
     model: &CureModel,
     (w, h): (usize, usize),
     ratio: &[f32],
     irradiance: &(dyn Fn(usize) -> Result<Irradiance> + Sync),
-    track: bool,
+    (track, held_back): (bool, usize),
     observe: &mut (dyn FnMut(usize, &Engine, &Irradiance) + Send),
 ) -> Result<Vec<LayerOut>> {
     let n = ratio.len();
@@ -72,6 +76,7 @@ pub fn run_layers(
     };
     let mut engine = Engine::new(w, h, model);
     engine.track_irradiance(track);
+    engine.count_held_back(held_back);
     let mut outs: Vec<LayerOut> = vec![LayerOut::default(); n];
     let mut hi = n;
     let mut cur = if n > 0 { prepare(n)? } else { Vec::new() };

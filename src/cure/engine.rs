@@ -60,6 +60,24 @@ pub struct Engine {
     irr: Vec<f32>,
     /// The pixel box where `irr` may be nonzero.
     irr_box: Option<[usize; 4]>,
+    /// With [`Engine::count_held_back`]: what a layer's cured area takes in beyond its
+    /// own light.
+    held: Option<Held>,
+}
+
+/// A layer's cured area with `xyz`: a downward-facing surface is drawn M layers late, to
+/// cure by the light of the layers above, so a sample counts where the layer's own light
+/// or that of one of the M layers above it is at least [`NEAR`].
+struct Held {
+    /// M.
+    layers: u32,
+    /// Layers processed, this one included.
+    step: u32,
+    /// Per sample, the step at which its own light last reached [`NEAR`] (`u32::MAX`:
+    /// never).
+    lit_at: Vec<u32>,
+    /// The sample boxes and perimeters of the last M layers, nearest last.
+    recent: std::collections::VecDeque<(Option<[usize; 4]>, f64)>,
 }
 
 impl Engine {
@@ -83,7 +101,20 @@ impl Engine {
             intervals: Vec::new(),
             irr: Vec::new(),
             irr_box: None,
+            held: None,
         }
+    }
+
+    /// Counts in a layer's cured area the samples the `layers` layers above it light to
+    /// [`NEAR`] as well (`xyz` draws a downward-facing surface that many layers late, to
+    /// cure by their light), and takes the largest of their perimeters (0: its own only).
+    pub fn count_held_back(&mut self, layers: usize) {
+        self.held = (layers > 0).then(|| Held {
+            layers: layers as u32,
+            step: 0,
+            lit_at: vec![u32::MAX; self.acc.len()],
+            recent: Default::default(),
+        });
     }
 
     /// Keeps the unblurred light of the layers above as well ([`Engine::irradiance`]).
@@ -178,6 +209,10 @@ impl Engine {
         }
         let mut out = LayerOut::default();
         if cur.is_empty() {
+            if self.held.is_some() {
+                (out.cured_samples, out.perimeter_px) = self.held_cured(cur);
+                self.held_lit(cur);
+            }
             return out;
         }
         let sbox = cur.sbox;
@@ -193,6 +228,12 @@ impl Engine {
         self.add_own(cur, ratio);
         out.cured_samples = self.cured_samples(cur);
         out.perimeter_px = cur.perimeter_px;
+        if self.held.is_some() {
+            let (more, perimeter) = self.held_cured(cur);
+            out.cured_samples += more;
+            out.perimeter_px = out.perimeter_px.max(perimeter);
+            self.held_lit(cur);
+        }
         self.islands(cur, &mut out);
         if let Some(below) = below {
             out.print_through_mm = self.print_through(cur, below);
@@ -341,6 +382,80 @@ impl Engine {
             }
         }
         whole as f64 + frac
+    }
+
+    /// The cured samples ([`Engine::cured_samples`]'s fractions) that `cur`'s own light
+    /// does not reach to [`NEAR`] but one of the [`Held`] layers above does, and the
+    /// largest of those layers' perimeters.
+    fn held_cured(&mut self, cur: &Prepared) -> (f64, f64) {
+        let (sw, sh) = (self.sw, self.acc.len() / self.sw);
+        let held = self.held.as_mut().expect("counting held-back layers");
+        held.step += 1;
+        let (step, m) = (held.step, held.layers);
+        let perimeter = held.recent.iter().map(|r| r.1).fold(0.0, f64::max);
+        let Some([x0, y0, x1, y1]) = held.recent.iter().filter_map(|r| r.0).reduce(|a, b| {
+            [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+        }) else {
+            return (0.0, perimeter);
+        };
+        // Counted already: the samples of `cur`'s spans where its own light reaches NEAR.
+        let own = |x: usize, y: usize| {
+            let [a, b, c, d] = cur.sbox;
+            if cur.is_empty() || !(a..c).contains(&x) || !(b..d).contains(&y) {
+                return false;
+            }
+            let (sa, sb) = cur.spans[y - b];
+            (sa as usize..sb as usize).contains(&(x - a)) && cur.own[(y - b) * (c - a) + x - a] >= NEAR
+        };
+        let (t, acc) = (self.mid / self.scale, &self.acc);
+        let at = |x: usize, y: usize| if x < sw && y < sh { acc[y * sw + x] } else { 0.0 };
+        let mut sum = 0.0;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let lit = held.lit_at[y * sw + x];
+                if lit == u32::MAX || step - lit > m || own(x, y) {
+                    continue;
+                }
+                // As `cured_samples` counts a sample (wrapping: 0 beyond the field).
+                let a = at(x, y);
+                let n = [at(x.wrapping_sub(1), y), at(x + 1, y)];
+                let v = [at(x, y.wrapping_sub(1)), at(x, y + 1)];
+                let side = a >= t;
+                if [n[0], n[1], v[0], v[1]].iter().all(|&u| (u >= t) == side) {
+                    sum += side as u8 as f64;
+                    continue;
+                }
+                let g = (0.5 * (n[1] - n[0])).hypot(0.5 * (v[1] - v[0]));
+                sum += if g > 0.0 {
+                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
+                } else {
+                    side as u8 as f64
+                };
+            }
+        }
+        (sum, perimeter)
+    }
+
+    /// Marks the samples `cur`'s own light reaches to [`NEAR`] as lit at this step, and
+    /// keeps its box and perimeter among the [`Held`] layers'.
+    fn held_lit(&mut self, cur: &Prepared) {
+        let sw = self.sw;
+        let held = self.held.as_mut().expect("counting held-back layers");
+        let sbox = (!cur.is_empty()).then_some(cur.sbox);
+        if let Some([x0, y0, x1, _]) = sbox {
+            let bw = x1 - x0;
+            for (r, &(a, b)) in cur.spans.iter().enumerate() {
+                for x in a as usize..b as usize {
+                    if cur.own[r * bw + x] >= NEAR {
+                        held.lit_at[(y0 + r) * sw + x0 + x] = held.step;
+                    }
+                }
+            }
+        }
+        held.recent.push_back((sbox, cur.perimeter_px));
+        if held.recent.len() > held.layers as usize {
+            held.recent.pop_front();
+        }
     }
 
     /// Islands of `cur` (4-connected lit pixels): which cure nowhere, which one cured
@@ -822,5 +937,27 @@ mod tests {
         let want = m.print_through_mm(Some(199));
         assert!((got - want).abs() < 1e-4, "{got} vs {want}");
         assert!(out[2].print_through_mm.is_none());
+    }
+
+    /// Counting held-back layers (`xyz`), a layer drawn narrower than its section takes
+    /// in what the layers above cure through it, up to M layers above: a 30 px square
+    /// drawn from layer 4 on over a 10 px one (M = 4 with the defaults) cures through
+    /// layer 0's mid-plane.
+    #[test]
+    fn held_back_layers_cure_through_the_layer_and_count_in_its_area() {
+        let m = model();
+        let (w, h) = (50, 50);
+        let small = rect(w, h, [20, 20, 30, 30], 1.0);
+        let big = rect(w, h, [10, 10, 40, 40], 1.0);
+        let mut stack: Vec<(Vec<f32>, f32)> = (0..4).map(|_| (small.clone(), 1.0)).collect();
+        stack.extend((0..60).map(|_| (big.clone(), 1.0)));
+        let area = |held: usize| {
+            let mut e = Engine::new(w, h, &m);
+            e.count_held_back(held);
+            run(&mut e, &m, w, h, &stack)[0].cured_samples / (SUB * SUB) as f64
+        };
+        let (own, three, four) = (area(0), area(3), area(4));
+        assert!(own > 100.0 && own < 200.0 && three == own, "{own} {three}");
+        assert!((800.0..950.0).contains(&four), "{four}");
     }
 }

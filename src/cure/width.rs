@@ -74,7 +74,7 @@ pub fn printed_width_px(model: &CureModel, f: &Straight) -> f64 {
         (width, height),
         &vec![1.0; layers],
         &|_| Ok(irr.clone()),
-        true,
+        (true, 0),
         &mut observe,
     )
     .expect("the layers' irradiance is at hand");

@@ -113,7 +113,7 @@ pub fn check(
             Some(m) => irradiance_of(source, &m.file, size, &light),
             None => Ok(Irradiance::default()),
         },
-        false,
+        (false, manifest.cure.as_ref().map_or(0, |c| c.held_back_layers as usize)),
         &mut |_, _, _| {},
     )?;
     let field_h = manifest.machine.field().height_px as f64;

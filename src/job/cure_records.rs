@@ -799,7 +799,7 @@ impl CureJob {
                 };
                 crate::exec::cure::irradiance_of(source, &file, (w, h), &light)
             },
-            true,
+            (true, self.held_back),
             &mut observe,
         )?;
         if let Some(err) = failed {

@@ -492,6 +492,20 @@ fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
         (with - cad).abs() <= H,
         "cured bottom {with} mm, CAD {cad} mm"
     );
+    // `run --cure` counts what the layers above cure through the held-back layers (60 on,
+    // drawn dark) in their cured areas.
+    let o = run_in(&dir, &["run", "xyz.dmdjob", "--cure", "--json"]);
+    let run: Value = serde_json::from_slice(&o.stdout).unwrap();
+    for l in &run["cure"]["per_layer"].as_array().unwrap()[60..60 + held as usize] {
+        let (cured, section) = (
+            l["cured_mm2"].as_f64().unwrap(),
+            l["section_mm2"].as_f64().unwrap(),
+        );
+        assert!(
+            cured > 0.95 * section && l["perimeter_mm"].as_f64() > Some(0.0),
+            "{l}"
+        );
+    }
     // The held-back masks do not depend on the thread count.
     let again = dir.join("t3");
     std::fs::create_dir_all(&again).unwrap();
