@@ -644,10 +644,12 @@ pub fn slice(mesh: &Mesh, h: f64, n: usize) -> (Vec<Section>, SliceStats) {
 
 /// The box [x0, y0, x1, y1] of the points of `contours`, mm (x0 > x1 without points).
 pub fn bounds<'a>(contours: impl IntoIterator<Item = &'a Contour>) -> [f64; 4] {
-    let none = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-    (contours.into_iter().flatten()).fold(none, |b, p| {
-        [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
-    })
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in contours.into_iter().flatten() {
+        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+    }
+    [lo[0], lo[1], hi[0], hi[1]]
 }
 
 /// Signed area of a contour (positive when counter-clockwise).

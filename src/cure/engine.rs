@@ -393,8 +393,12 @@ impl Engine {
         held.step += 1;
         let (step, m) = (held.step, held.layers);
         let perimeter = held.recent.iter().map(|r| r.1).fold(0.0, f64::max);
-        let Some([x0, y0, x1, y1]) = held.recent.iter().filter_map(|r| r.0).reduce(|a, b| {
-            [a[0].min(b[0]), a[1].min(b[1]), a[2].max(b[2]), a[3].max(b[3])]
+        let boxes = held.recent.iter().filter_map(|r| r.0);
+        let Some([x0, y0, x1, y1]) = boxes.reduce(|a, b| {
+            [0, 1, 2, 3].map(|k| match k {
+                0 | 1 => a[k].min(b[k]),
+                _ => a[k].max(b[k]),
+            })
         }) else {
             return (0.0, perimeter);
         };
@@ -405,10 +409,17 @@ impl Engine {
                 return false;
             }
             let (sa, sb) = cur.spans[y - b];
-            (sa as usize..sb as usize).contains(&(x - a)) && cur.own[(y - b) * (c - a) + x - a] >= NEAR
+            (sa as usize..sb as usize).contains(&(x - a))
+                && cur.own[(y - b) * (c - a) + x - a] >= NEAR
         };
         let (t, acc) = (self.mid / self.scale, &self.acc);
-        let at = |x: usize, y: usize| if x < sw && y < sh { acc[y * sw + x] } else { 0.0 };
+        let at = |x: usize, y: usize| {
+            if x < sw && y < sh {
+                acc[y * sw + x]
+            } else {
+                0.0
+            }
+        };
         let mut sum = 0.0;
         for y in y0..y1 {
             for x in x0..x1 {

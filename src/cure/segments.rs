@@ -359,9 +359,8 @@ pub fn contours_may_meet(contours: &[Contour]) -> bool {
         let b = crate::slice::bounds([c]);
         boxes[usize::from(crate::slice::signed_area(c) < 0.0)].push(b);
     }
-    let within = |b: &[f64; 4], a: &[f64; 4]| {
-        a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3]
-    };
+    let within =
+        |b: &[f64; 4], a: &[f64; 4]| a[0] <= b[0] && a[1] <= b[1] && b[2] <= a[2] && b[3] <= a[3];
     let [outlines, holes] = &boxes;
     if holes.iter().any(|h| !outlines.iter().any(|o| within(h, o))) {
         return true;
@@ -464,7 +463,9 @@ mod tests {
         let outline: Contour = vec![[0.0, 0.0], [0.0, 10.0], [10.0, 10.0], [10.0, 0.0]];
         let hole: Contour = vec![[4.0, 4.0], [6.0, 4.0], [6.0, 6.0], [4.0, 6.0]];
         let back = Segments::edges(&[outline.clone(), hole.clone()], 1.0, 100.0);
-        let fwd: Vec<Contour> = [outline, hole].map(|c| c.into_iter().rev().collect()).into();
+        let fwd: Vec<Contour> = [outline, hole]
+            .map(|c| c.into_iter().rev().collect())
+            .into();
         for (segs, turn) in [(back, -1.0), (Segments::edges(&fwd, 1.0, 100.0), 1.0)] {
             let (pieces, interior, _) = segs.union_pieces();
             assert!(interior.iter().all(|&i| !i) && pieces.segs.len() == segs.segs.len());

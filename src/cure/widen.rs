@@ -100,7 +100,7 @@ pub fn small_features(
     let limit_mm = 2.0 * (shift_px.max(0.0) + 4.0 * model.sigma_px) * p;
     let turned = |k: usize| backwards.get(k) == Some(&true);
     let areas: Vec<f64> = (contours.iter().enumerate())
-        .map(|(k, c)| if turned(k) { -signed_area(c) } else { signed_area(c) })
+        .map(|(k, c)| [1.0, -1.0][usize::from(turned(k))] * signed_area(c))
         .collect();
     let lengths: Vec<f64> = contours.iter().map(perimeter).collect();
     let boxes: Vec<[f64; 4]> = contours.iter().map(|c| bounds([c])).collect();
@@ -273,7 +273,9 @@ pub fn widen(
         }
         let (nb, orig) = (&saved.boxes[k].0, &saved.boxes[k].1);
         let mut own: Vec<Contour> = f.contours.iter().map(|&c| contours[c].clone()).collect();
-        own.iter_mut().filter(|_| f.backwards).for_each(|c| c.reverse());
+        if f.backwards {
+            own.iter_mut().for_each(|c| c.reverse());
+        }
         let segs = Segments::simplified(&own, model.pixel_mm, mask.height as f64, 0.01);
         // The pixels near the feature's edges: index in the mask, in the box, the edge's
         // normal and the centre's signed distance outside its line.

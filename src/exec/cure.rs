@@ -113,12 +113,20 @@ pub fn check(
             Some(m) => irradiance_of(source, &m.file, size, &light),
             None => Ok(Irradiance::default()),
         },
-        (false, manifest.cure.as_ref().map_or(0, |c| c.held_back_layers as usize)),
+        (false, held_back(manifest)),
         &mut |_, _, _| {},
     )?;
     let field_h = manifest.machine.field().height_px as f64;
     let to_mm = to_build_plane(proj, model.pixel_mm, field_h);
     Ok(crate::cure::summarize(manifest, model, &to_mm, outs))
+}
+
+/// The layers `manifest`'s `xyz` correction holds downward-facing surfaces back by.
+fn held_back(manifest: &Manifest) -> usize {
+    manifest
+        .cure
+        .as_ref()
+        .map_or(0, |c| c.held_back_layers as usize)
 }
 
 /// How a mask's gray turns into relative irradiance.

@@ -450,8 +450,9 @@ impl CureJob {
         // Small features (geometry only) and their uncorrected coverage, for the narrow
         // ones the correction would starve.
         let inward = corr.map_or(0.0, |c| c.shifts.range().1);
+        let rows = m.height as f64;
         let small = corr.map_or(Vec::new(), |c| {
-            widen::small_features(&self.model, (section, &c.backwards), m.height as f64, inward)
+            widen::small_features(&self.model, (section, &c.backwards), rows, inward)
         });
         let mut saved = (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, inward));
         if let Some(c) = corr {
