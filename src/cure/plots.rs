@@ -81,7 +81,7 @@ pub fn outline_picture(
     let u0 = (centre[0] - VIEW_PX / 2.0).floor().max(0.0);
     let v0 = (centre[1] - VIEW_PX * 0.375).floor().max(0.0);
     let (vw, vh) = (VIEW_PX, VIEW_PX * 0.75);
-    let top = 70.0;
+    let top = 90.0;
     let (w, h) = ((vw * ZOOM) as u32, (vh * ZOOM + top + 30.0) as u32);
     let mut c = Canvas::new(w, h, [255; 3]);
     let to = |u: f64, v: f64| (((u - u0) * ZOOM) as f32, ((v - v0) * ZOOM + top) as f32);
@@ -126,20 +126,19 @@ pub fn outline_picture(
         ),
         TITLE,
     );
-    c.text(
-        12.0,
-        38.0,
-        &format!(
-            "PSF σ = {} px; the mid-plane cures at {:.3} of a full pixel's light, its layer's and the layers above's; view {} × {} px of {:.4} mm, around the largest counted error",
+    let sub = [
+        format!(
+            "PSF σ = {} px; the mid-plane cures at {:.3} of a full pixel's light, its layer's and the layers above's;",
             model.sigma_px,
             model.threshold(0.5 * model.layer_mm, Some(0)),
-            vw,
-            vh,
-            model.pixel_mm
         ),
-        LABEL,
-    );
+        format!("view {vw} × {vh} px of {:.4} mm, around the largest counted error", model.pixel_mm),
+    ];
+    for (k, line) in sub.iter().enumerate() {
+        c.text(12.0, 38.0 + 20.0 * k as f32, line, LABEL);
+    }
     let scale: TextStyle = SMALL;
+    c.fill_rect(0.0, h as f32 - 30.0, w as f32, 30.0, [255; 3], 255);
     c.text(
         12.0,
         h as f32 - 22.0,
