@@ -292,9 +292,17 @@ pub fn summarize(
     samples: &[EdgeSample],
     contours: &[Contour],
 ) -> (LayerCure, Histogram) {
-    let outer: Vec<bool> = contours
-        .iter()
-        .map(|c| crate::slice::signed_area(c) > 0.0)
+    // Outlines run counter-clockwise, but those of a shell that runs backwards.
+    let turned = match super::segments::contours_may_meet(contours) {
+        true => {
+            Segments::edges(contours, model.pixel_mm, 0.0)
+                .union_pieces()
+                .2
+        }
+        false => Vec::new(),
+    };
+    let outer: Vec<bool> = (contours.iter().enumerate())
+        .map(|(k, c)| (crate::slice::signed_area(c) > 0.0) != (turned.get(k) == Some(&true)))
         .collect();
     let mut hist = Histogram::default();
     let (mut n, mut sum, mut abs, mut max) = (0u64, 0.0, 0.0, 0.0f64);

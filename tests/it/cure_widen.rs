@@ -150,7 +150,7 @@ fn a_pin_whose_facets_face_inwards_is_drawn_wider_as_well() {
     let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
     let pin = box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]);
     tris.extend(pin.iter().map(|t| [t[0], t[2], t[1]]));
-    let model = dir.join("pin.stl");
+    let model = dir.join("back.stl");
     write_stl(&model, &tris);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
     assert!(
@@ -161,6 +161,15 @@ fn a_pin_whose_facets_face_inwards_is_drawn_wider_as_well() {
     let w = warnings_of(&xy, "cure.features-widened");
     assert_eq!(w.len(), 1, "{}", xy["warnings"]);
     assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
+    // Uncorrected, the prediction finds it vanish as it does the forward pin.
+    let (forward, _) = tiny_pin_part(&dir);
+    let [back, fwd] = [&model, &forward].map(|m| {
+        let off = slice(&dir, m, "off.dmdjob", "off");
+        let v = warnings_of(&off, "cure.features-vanish");
+        assert_eq!(v.len(), 1, "{}", off["warnings"]);
+        v[0]["fields"].clone()
+    });
+    assert_eq!(back, fwd);
 }
 
 #[test]
