@@ -319,25 +319,9 @@ impl Engine {
                 if own[x - x0] < NEAR {
                     return 0.0;
                 }
-                let a = row[x];
                 let l = if x > 0 { row[x - 1] } else { 0.0 };
                 let r = if x + 1 < sw { row[x + 1] } else { 0.0 };
-                let (u, d) = (up[x], down[x]);
-                let side = a >= t;
-                if side {
-                    if l >= t && r >= t && u >= t && d >= t {
-                        return 1.0;
-                    }
-                } else if l < t && r < t && u < t && d < t {
-                    return 0.0;
-                }
-                let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
-                let g = (gx * gx + gy * gy).sqrt();
-                if g > 0.0 {
-                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
-                } else {
-                    side as u8 as f64
-                }
+                cured_fraction(row[x], [l, r, up[x], down[x]], t)
             };
             // The span less the samples that cure whole ([`Kernel::inner`]): by groups,
             // the samples at the field's edge one by one.
@@ -427,21 +411,9 @@ impl Engine {
                 if lit == u32::MAX || step - lit > m || own(x, y) {
                     continue;
                 }
-                // As `cured_samples` counts a sample (wrapping: 0 beyond the field).
-                let a = at(x, y);
-                let n = [at(x.wrapping_sub(1), y), at(x + 1, y)];
-                let v = [at(x, y.wrapping_sub(1)), at(x, y + 1)];
-                let side = a >= t;
-                if [n[0], n[1], v[0], v[1]].iter().all(|&u| (u >= t) == side) {
-                    sum += side as u8 as f64;
-                    continue;
-                }
-                let g = (0.5 * (n[1] - n[0])).hypot(0.5 * (v[1] - v[0]));
-                sum += if g > 0.0 {
-                    (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
-                } else {
-                    side as u8 as f64
-                };
+                // Neighbours beyond the field (wrapping) are 0, as `cured_samples` has them.
+                let (l, u) = (at(x.wrapping_sub(1), y), at(x, y.wrapping_sub(1)));
+                sum += cured_fraction(at(x, y), [l, at(x + 1, y), u, at(x, y + 1)], t);
             }
         }
         (sum, perimeter)
@@ -679,6 +651,28 @@ impl Engine {
         }
         self.intervals = iv;
         best.map(|a| self.dp_mm * ((a * self.scale) as f64 / self.bottom as f64).ln())
+    }
+}
+
+/// The fraction of a sample's cell on the cured side, from its light `a` and its left,
+/// right, upper and lower neighbours' against the threshold `t`: 0 or 1 when all five lie
+/// on one side, else clamp(½ + (a − t)/|∇|) (central differences).
+#[inline(always)]
+fn cured_fraction(a: f32, [l, r, u, d]: [f32; 4], t: f32) -> f64 {
+    let side = a >= t;
+    if side {
+        if l >= t && r >= t && u >= t && d >= t {
+            return 1.0;
+        }
+    } else if l < t && r < t && u < t && d < t {
+        return 0.0;
+    }
+    let (gx, gy) = (0.5 * (r - l), 0.5 * (d - u));
+    let g = (gx * gx + gy * gy).sqrt();
+    if g > 0.0 {
+        (0.5 + (a - t) / g).clamp(0.0, 1.0) as f64
+    } else {
+        side as u8 as f64
     }
 }
 

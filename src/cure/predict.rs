@@ -152,21 +152,25 @@ pub fn light<T: Copy + Into<f32>>(
 /// `height_px` rows high) where the resin at a point of the layer's mid-plane cures where
 /// both of `margin`'s values are at least 0: the light less the threshold, and the layer's
 /// own light less the least that makes it the layer's edge. A feature whose inside the
-/// layer does not light (held back) does not vanish: it is not drawn.
+/// layer does not light (held back) does not vanish: it is not drawn. With them, per
+/// contour whether it runs backwards ([`Segments::union_pieces`]; empty: none does).
 pub fn edge_samples(
     model: &CureModel,
     margin: &dyn Fn([f64; 2]) -> [f64; 2],
     height_px: f64,
     contours: &[Contour],
-) -> Vec<EdgeSample> {
+) -> (Vec<EdgeSample>, Vec<bool>) {
     let psf = Psf {
         sigma_px: model.sigma_px,
     };
     // Where shells cross, touch or nest (supports in the part), the edges inside their
     // union bound nothing that cures: only the union's outline is sampled.
-    let segs = match super::segments::contours_may_meet(contours) {
+    let (segs, backwards) = match super::segments::contours_may_meet(contours) {
         true => Segments::edges(contours, model.pixel_mm, height_px).union_outline(),
-        false => Segments::new(contours, model.pixel_mm, height_px),
+        false => (
+            Segments::new(contours, model.pixel_mm, height_px),
+            Vec::new(),
+        ),
     };
     // Far enough for the cured edge of any sensible model (the light falls from 1 to 0
     // within a pixel and the PSF's reach on either side).
@@ -253,7 +257,7 @@ pub fn edge_samples(
             });
         }
     }
-    out
+    (out, backwards)
 }
 
 /// The root of `f` in `[a, b]` with `f(a) = fa ≥ 0 > f(b) = fb` (Illinois regula falsi,
@@ -285,24 +289,17 @@ fn root(f: &impl Fn(f64) -> f64, mut a: f64, mut b: f64, mut fa: f64, mut fb: f6
     0.5 * (a + b)
 }
 
-/// The layer's figures from its samples of the section `contours`, with the first
-/// vanished feature's bounding box.
+/// The layer's figures from its samples of the section `contours` (flagged when they run
+/// backwards, as [`edge_samples`] gives them), with the first vanished feature's bounding
+/// box.
 pub fn summarize(
     model: &CureModel,
     samples: &[EdgeSample],
-    contours: &[Contour],
+    (contours, backwards): (&[Contour], &[bool]),
 ) -> (LayerCure, Histogram) {
     // Outlines run counter-clockwise, but those of a shell that runs backwards.
-    let turned = match super::segments::contours_may_meet(contours) {
-        true => {
-            Segments::edges(contours, model.pixel_mm, 0.0)
-                .union_pieces()
-                .2
-        }
-        false => Vec::new(),
-    };
     let outer: Vec<bool> = (contours.iter().enumerate())
-        .map(|(k, c)| (crate::slice::signed_area(c) > 0.0) != (turned.get(k) == Some(&true)))
+        .map(|(k, c)| (crate::slice::signed_area(c) > 0.0) != (backwards.get(k) == Some(&true)))
         .collect();
     let mut hist = Histogram::default();
     let (mut n, mut sum, mut abs, mut max) = (0u64, 0.0, 0.0, 0.0f64);

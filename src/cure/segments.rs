@@ -263,9 +263,10 @@ impl Segments {
     }
 
     /// The outline of the union of the contours' shells, with the grid index: the pieces
-    /// of [`Segments::union_pieces`] with no material beyond them, by contour.
-    pub fn union_outline(&self) -> Segments {
-        let (pieces, interior, _) = self.union_pieces();
+    /// of [`Segments::union_pieces`] with no material beyond them, by contour; and per
+    /// contour whether it runs backwards.
+    pub fn union_outline(&self) -> (Segments, Vec<bool>) {
+        let (pieces, interior, backwards) = self.union_pieces();
         let mut out = Segments {
             segs: Vec::with_capacity(pieces.segs.len()),
             starts: vec![0],
@@ -283,7 +284,7 @@ impl Segments {
             out.starts.push(out.segs.len());
         }
         out.index();
-        out
+        (out, backwards)
     }
 
     /// The fractions of edge `i` (of contour `own`) where edges of other contours cross
@@ -467,8 +468,9 @@ mod tests {
             .map(|c| c.into_iter().rev().collect())
             .into();
         for (segs, turn) in [(back, -1.0), (Segments::edges(&fwd, 1.0, 100.0), 1.0)] {
-            let (pieces, interior, _) = segs.union_pieces();
+            let (pieces, interior, backwards) = segs.union_pieces();
             assert!(interior.iter().all(|&i| !i) && pieces.segs.len() == segs.segs.len());
+            assert_eq!(backwards, [turn < 0.0; 2]);
             for (p, s) in pieces.segs.iter().zip(&segs.segs) {
                 assert_eq!(p.n, s.n.map(|v| turn * v));
             }

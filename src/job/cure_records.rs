@@ -974,8 +974,9 @@ impl LayerLight {
                 predict::light(&self.own.data, o2 - o0, &psf, &table, at) - near,
             ]
         };
-        let samples = predict::edge_samples(m, &margin, self.height as f64, &self.framed);
-        let (c, h) = predict::summarize(m, &samples, &self.drawn);
+        let (samples, backwards) =
+            predict::edge_samples(m, &margin, self.height as f64, &self.framed);
+        let (c, h) = predict::summarize(m, &samples, (&self.drawn, &backwards));
         (c, h, samples)
     }
 }

@@ -97,13 +97,19 @@ pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]]) {
 /// the cure threshold) at field pixel (400, 300) beside a 100 px block, 0.3 mm (6 layers)
 /// tall, written to `dir/pin.stl`: the STL and the pin's corner (build-plane mm).
 pub fn tiny_pin_part(dir: &Path) -> (std::path::PathBuf, [f64; 2]) {
+    let (tris, corner) = tiny_pin_tris();
+    let model = dir.join("pin.stl");
+    write_stl(&model, &tris);
+    (model, corner)
+}
+
+/// The triangles of [`tiny_pin_part`] (the pin's 12 last) and the pin's corner.
+pub fn tiny_pin_tris() -> (Vec<[[f32; 3]; 3]>, [f64; 2]) {
     let p = 65.0f32 / 1024.0; // the default pixel, 0.0634765625 mm
     let (x0, y0) = (400.0 * p, 300.0 * p);
     let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
     tris.extend(box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]));
-    let model = dir.join("pin.stl");
-    write_stl(&model, &tris);
-    (model, [x0 as f64, y0 as f64])
+    (tris, [x0 as f64, y0 as f64])
 }
 
 /// Triangles of an axis-aligned box [lo, hi], outward facing.

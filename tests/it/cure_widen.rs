@@ -145,11 +145,9 @@ fn a_pin_whose_facets_face_inwards_is_drawn_wider_as_well() {
     // The pin above with its facets turned inwards (a shell that runs backwards; the block
     // keeps the mesh's volume positive): filled all the same, and found as narrow.
     let dir = tempdir("cure-widen-backwards-pin");
-    let p = P as f32;
-    let (x0, y0) = (400.0 * p, 300.0 * p);
-    let mut tris = box_tris([200.0 * p, 200.0 * p, 0.0], [300.0 * p, 300.0 * p, 0.3]);
-    let pin = box_tris([x0, y0, 0.0], [x0 + 0.02, y0 + 0.02, 0.3]);
-    tris.extend(pin.iter().map(|t| [t[0], t[2], t[1]]));
+    let (mut tris, _) = tiny_pin_tris();
+    let pin = tris.len() - 12;
+    tris[pin..].iter_mut().for_each(|t| t.swap(1, 2));
     let model = dir.join("back.stl");
     write_stl(&model, &tris);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
