@@ -82,8 +82,8 @@ fn plate(c: &Compensator, f: &Field) -> Vec<u8> {
     m.data
 }
 
-/// The issue's per-pixel limit: 3 %, or 5 % where one gray step of the mask moves
-/// irradiance by more than 2 %.
+/// The per-pixel limit the calibration is held to (docs/CALIBRATION.md): 3 %, or 5 %
+/// where one gray step of the mask moves irradiance by more than 2 %.
 fn pixel_limit(mask: &[u8], s: ResponseFn) -> f64 {
     let coarse = mask
         .iter()
@@ -96,11 +96,11 @@ fn pixel_limit(mask: &[u8], s: ResponseFn) -> f64 {
 }
 
 /// Held-out sets (one fixed seed each, none used to tune the method): every zone-mode
-/// zone-mean spread within 2.5 % and every pixel-mode per-pixel spread within the issue's
+/// zone-mean spread within 2.5 % and every pixel-mode per-pixel spread within its
 /// limit (3 %, or 5 % where one gray step moves irradiance by more than 2 %).
 /// Quarter-resolution field (0.254 mm pixels) to keep the debug build fast.
 #[test]
-fn held_out_sets_are_flattened_within_the_issue_limits() {
+fn held_out_sets_are_flattened_within_the_calibration_limits() {
     let f = field(4);
     // Four of the eight field × response pairs (fits are slow in a debug build); the
     // ignored `sweep_report` runs all eight with three seeds each.
