@@ -114,14 +114,32 @@ pub fn tiny_pin_tris() -> (Vec<[[f32; 3]; 3]>, [f64; 2]) {
 
 /// Triangles of an axis-aligned box [lo, hi], outward facing.
 pub fn box_tris(lo: [f32; 3], hi: [f32; 3]) -> Vec<[[f32; 3]; 3]> {
-    let p = |i: usize| {
+    hexahedron(|i| {
         [
             if i & 1 == 0 { lo[0] } else { hi[0] },
             if i & 2 == 0 { lo[1] } else { hi[1] },
             if i & 4 == 0 { lo[2] } else { hi[2] },
         ]
-    };
-    // Faces as quads (CCW from outside), corner indices by bit pattern xyz.
+    })
+}
+
+/// Triangles of a square frustum centred on `centre` (x, y), standing on the platform:
+/// half-width `bottom` at z = 0 and `top` at z = `height`, outward facing.
+pub fn frustum_tris(centre: [f32; 2], bottom: f32, top: f32, height: f32) -> Vec<[[f32; 3]; 3]> {
+    hexahedron(|i| {
+        let half = if i & 4 == 0 { bottom } else { top };
+        let side = |bit: usize| if i & bit == 0 { -half } else { half };
+        [
+            centre[0] + side(1),
+            centre[1] + side(2),
+            if i & 4 == 0 { 0.0 } else { height },
+        ]
+    })
+}
+
+/// Triangles of a solid of six quadrilateral faces whose corner `i` is `p(i)` (bits of
+/// `i`: x, y, z high), the faces counter-clockwise from outside.
+fn hexahedron(p: impl Fn(usize) -> [f32; 3]) -> Vec<[[f32; 3]; 3]> {
     let quads = [
         [0, 2, 3, 1], // z = lo
         [4, 5, 7, 6], // z = hi

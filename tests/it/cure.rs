@@ -534,6 +534,52 @@ fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
     assert!(px.iter().filter(|&&v| v == 255).count() > 90 * 90);
 }
 
+/// A part that widens upwards (a square frustum on its small end, 45° sides): `xyz` draws
+/// each layer only where the layers below it also hold the section, so its masks light less
+/// than the section's largest inscribed circle would; `run` takes that for the Z
+/// correction's and passes the job `slice` wrote.
+#[test]
+fn a_part_that_widens_upwards_sliced_with_xyz_runs_clean() {
+    let dir = tempdir("cure-z-widens");
+    let model = dir.join("frustum.stl");
+    write_stl(&model, &frustum_tris([20.0, 20.0], 2.0, 4.0, 2.0));
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            model.to_str().unwrap(),
+            "-q",
+            "--cure-correction",
+            "xyz",
+            "-o",
+            "f.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("f.dmdjob/job.json")).unwrap()).unwrap();
+    let (p, shift) = (
+        job["cure"]["pixel_mm"].as_f64().unwrap(),
+        job["cure"]["shift_px"].as_f64().unwrap(),
+    );
+    // Layers whose lit box is narrower than the pixels wholly inside the section's
+    // largest inscribed circle (less the correction's move) span.
+    let narrower = job["layers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|l| {
+            let b = &l["masks"][0]["pixels"]["lit_box_px"];
+            let width = b[2].as_f64().unwrap() - b[0].as_f64().unwrap();
+            let r = l["max_fill_distance_mm"].as_f64().unwrap() / p - shift;
+            width < 2.0 * (r - std::f64::consts::SQRT_2)
+        })
+        .count();
+    assert!(narrower > 10, "{narrower}");
+    let o = run_in(&dir, &["run", "-q", "f.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
+}
+
 #[test]
 fn the_correction_moves_only_the_outline_of_shells_that_cross_or_touch() {
     // Two crossing boxes and a box touching one along a face: their edges inside the

@@ -221,10 +221,11 @@ impl ContentRule {
             }
         }
         // The pixels wholly inside the largest inscribed circle are lit: the lit box is at
-        // least as wide and as high as the circle less a pixel diagonal on each side.
+        // least as wide and as high as the circle less a pixel diagonal on each side (not
+        // when held back: the layers below may hold less of the section).
         let inner = 2.0 * (self.inner_radius_px(layer) - 1e-3);
         let (w, h) = (got[2] - got[0], got[3] - got[1]);
-        if w < inner || h < inner {
+        if (w < inner || h < inner) && !self.held_back {
             let (lit, r) = (lit_text(b), number(layer.max_fill_distance_mm));
             return at(format!("its masks light {lit} of the field ({w}x{h} px), less than the section's largest inscribed circle (max_fill_distance_mm {r}) leaves lit ({inner:.1} px across)"));
         }
@@ -376,6 +377,21 @@ mod tests {
         );
         assert_eq!(
             found(&verify_one(&dir, &dark, |m| m.cure = cure(4))),
+            vec![]
+        );
+        // Lit over less than the section's largest inscribed circle (a section 10 px high
+        // holds a circle of 5 px; 4 × 4 px lit): what the layers below hold.
+        let small = lit_png(18, 8, 22, 12);
+        let inscribed = |m: &mut Manifest, held: u32| {
+            m.layers[0].max_fill_distance_mm = 5.0 * PX;
+            m.cure = cure(held);
+        };
+        assert_eq!(
+            found(&verify_one(&dir, &small, |m| inscribed(m, 0))),
+            content(&[0])
+        );
+        assert_eq!(
+            found(&verify_one(&dir, &small, |m| inscribed(m, 4))),
             vec![]
         );
         // Light outside the section's box is still found.
