@@ -312,8 +312,6 @@ pub(crate) fn rescale(m: &mut Manifest, pixel_mm: f64) {
 /// What a decoded mask shows: its lit pixels.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct MaskFigures {
-    /// Sum of the pixel values / 255 (the lit area in pixels, coverage counted).
-    pub coverage_px: f64,
     /// Pixels of value 128 or more (lit at least half): the area's estimate, also of
     /// light-compensated masks, whose grays are not coverage.
     pub half_px: u64,
@@ -346,7 +344,7 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
             .into_luma8()
             .into_raw();
     }
-    let (mut sum, mut half) = (0u64, 0u64);
+    let mut half = 0u64;
     let mut b = [u32::MAX, u32::MAX, 0, 0];
     for (r, row) in buf.chunks_exact(w.max(1) as usize).enumerate() {
         // Most rows are dark: one vectorized OR over the row says so.
@@ -358,7 +356,6 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
         };
         let last = row.iter().rposition(|&v| v != 0).unwrap_or(first);
         let lit = &row[first..=last];
-        sum += u64::from(lit.iter().map(|&v| u32::from(v)).sum::<u32>());
         half += lit.iter().filter(|&&v| v >= 128).count() as u64;
         b = [
             b[0].min(first as u32),
@@ -372,7 +369,6 @@ pub(crate) fn mask_figures(bytes: &[u8], buf: &mut Vec<u8>) -> Option<(u32, u32,
         w,
         h,
         MaskFigures {
-            coverage_px: sum as f64 / 255.0,
             half_px: half,
             lit_box,
         },
@@ -397,10 +393,7 @@ mod tests {
         let mut buf = Vec::new();
         let good = png();
         let (w, h, f) = mask_figures(&good, &mut buf).unwrap();
-        assert_eq!(
-            (w, h, f.coverage_px, f.lit_box),
-            (4, 3, 1.0, Some([1, 2, 2, 3]))
-        );
+        assert_eq!((w, h, f.half_px, f.lit_box), (4, 3, 1, Some([1, 2, 2, 3])));
         // The header (CRC right) says 2³¹ − 1 pixels square: nothing is allocated for it.
         let mut huge = good.clone();
         huge[16..24].copy_from_slice(&[0x7f, 0xff, 0xff, 0xff, 0x7f, 0xff, 0xff, 0xff]);

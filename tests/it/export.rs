@@ -397,6 +397,25 @@ fn an_sl1_of_the_same_part_and_settings_says_what_prusaslicers_says() {
     );
 }
 
+/// A plate over half the display (PrusaSlicer's `area_fill`) prints with the slow tilt: the
+/// SL1's `printTime` counts it so, and `run` on the file, which measures each layer's area
+/// from its mask (light-compensated: its grays add up to a fifth less), agrees.
+#[test]
+fn an_sl1_of_a_plate_over_half_the_display_runs_clean() {
+    let d = tempdir("export-sl1-slow");
+    let model = d.join("plate.stl");
+    write_stl(&model, &box_tris([5.0, 5.0, 0.0], [55.0, 40.0, 0.2]));
+    let o = run_in(
+        &d,
+        &["slice", model.to_str().unwrap(), "-q", "-o", "plate.sl1"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let config = String::from_utf8(zip_entries(&d.join("plate.sl1"))[0].1.clone()).unwrap();
+    assert!(config.contains("numFast = 0\n"), "{config}");
+    let o = run_in(&d, &["run", "-q", "plate.sl1"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
+}
+
 #[test]
 fn the_schemas_name_the_formats_the_code_has() {
     let names: Vec<&str> = dmdsl::formats::Format::ALL.map(|f| f.name()).to_vec();

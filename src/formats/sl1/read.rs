@@ -4,9 +4,10 @@
 //! Each layer is a move of the tower to the layer's top, a wait and the exposure, timed
 //! so that the layer takes what PrusaSlicer 2.5's estimate gives it (the model of
 //! [`super`]); a negative estimated exposure is 0 s of light with the wait shortened by
-//! the rest. The tilt counts a layer's area as the mask's coverage (PrusaSlicer measures
-//! its polygons: a layer within a few pixels of `area_fill` may count otherwise); the
-//! layer record's area is the pixels lit at least half. The job's estimate is the file's
+//! the rest. The tilt counts a layer's area, as the layer record does, as the pixels lit at
+//! least half (PrusaSlicer measures its polygons: a layer within a few pixels of
+//! `area_fill` may count otherwise; the sum of a compensated mask's grays would count a
+//! fifth less). The job's estimate is the file's
 //! `printTime`, so the executor compares the simulation with PrusaSlicer's own figure.
 //!
 //! A missing or unreadable key is an error naming the file and the key; a missing,
@@ -240,7 +241,7 @@ fn layers(s: &Settings, archive: &Archive, names: &[String], machine: &Machine) 
     for (i, ((name, image), exp)) in refs.iter().zip(&images).zip(exposures).enumerate() {
         let area_mm2 = image
             .1
-            .map_or(0.0, |(_, _, f)| f.coverage_px * s.pixel_area_mm2);
+            .map_or(0.0, |(_, _, f)| f.half_px as f64 * s.pixel_area_mm2);
         let (overhead, _fast) = s.model.overhead_s(area_mm2);
         let z = (i + 1) as f64 * layer_mm;
         let prev = i as f64 * layer_mm;
