@@ -10,7 +10,7 @@
 //! * the candidates are the 4-connected pieces of lit pixels (gray ≥ [`LIT_GRAY`]) of
 //!   the corrected coverage no larger than a support head's contact, none of whose pixels
 //!   is lit in the layer below (larger pieces are the islands analysis' and the
-//!   supports');
+//!   supports', but for the bridges below);
 //! * a candidate rests when what cures of it (the light, coverage / 255, blurred by the
 //!   PSF, at least the layer's threshold), grown through what cures of its layer, meets
 //!   what cures of the layer below, a larger piece or a candidate that rests;
@@ -21,6 +21,11 @@
 //!   it).
 //!
 //! The job draws loose pieces dark: a speck that would cure loose is left out of the part.
+//! A larger piece none of whose pixels lies on a pixel fully lit in the layer below (which
+//! the grays show lit whatever the compensation: `run` reads the grays) is joined back
+//! when the exact coverage joins it, through lit pixels within its window, to such a
+//! pixel (the correction cut the neck that held it): a shortest such path is drawn at
+//! full light, a bridge.
 
 use crate::bundle::regions::{components, lit_runs, Run, LIT_GRAY};
 use crate::cure::Psf;
@@ -73,11 +78,21 @@ pub const OWN: u8 = 1;
 /// A pixel of a piece that rests.
 pub const RESTING: u8 = 2;
 
-/// The mask indices of the lit pixels of the loose pieces of the corrected coverage `m`
-/// (lit box `lit`; see the module docs). `psf`, `t`: the blur and the relative light at
-/// which the layer's resin cures (the model's edge threshold over the layer's dose
+/// What [`loose_pieces`] finds in a corrected layer, as mask indices.
+#[derive(Debug, Default, PartialEq)]
+pub struct Loose {
+    /// The lit pixels of the loose pieces: to draw dark.
+    pub dark: Vec<usize>,
+    /// The bridges that join the larger pieces the correction split off back to what rests:
+    /// to draw at full light.
+    pub bridges: Vec<usize>,
+}
+
+/// The loose pieces of the corrected coverage `m` (lit box `lit`; see the module docs) and
+/// the bridges of its larger split-off pieces. `psf`, `t`: the blur and the relative light
+/// at which the layer's resin cures (the model's edge threshold over the layer's dose
 /// against the normal layer's); `max_px`: the largest candidate, pixels; `exact`: the
-/// layer's coverage before the correction, drawn when a candidate needs it.
+/// layer's coverage before the correction, drawn when a piece needs it.
 pub fn loose_pieces(
     m: &Mask,
     lit: PixelBox,
@@ -85,10 +100,11 @@ pub fn loose_pieces(
     max_px: usize,
     below: Option<&Drawn>,
     exact: &mut dyn FnMut() -> Mask,
-) -> Vec<usize> {
+) -> Loose {
+    let mut out = Loose::default();
     // A block's first layer: the layer below is another worker's.
     let Some(under) = below else {
-        return Vec::new();
+        return out;
     };
     let w = m.width as usize;
     let runs = lit_runs(m.width, &m.data, lit.rows(), lit.cols());
@@ -97,16 +113,18 @@ pub fn loose_pieces(
     for (r, &g) in runs.iter().zip(&ids) {
         size[g as usize] += (r[2] - r[1]) as usize;
     }
-    // Resting: the larger pieces, and the candidates one of whose pixels is lit below.
-    let mut rests: Vec<bool> = size.iter().map(|&s| s > max_px).collect();
-    if rests.iter().all(|&r| r) {
-        return Vec::new();
-    }
+    // Resting: the pieces one of whose pixels is lit below; to the candidates, the larger
+    // pieces as well.
+    let mut on_below = vec![false; n];
     for (r, &g) in runs.iter().zip(&ids) {
         let row = r[0] as usize * w;
-        if !rests[g as usize] && (r[1]..r[2]).any(|c| under.at(row + c as usize) >= LIT_GRAY) {
-            rests[g as usize] = true;
+        if !on_below[g as usize] && (r[1]..r[2]).any(|c| under.at(row + c as usize) >= LIT_GRAY) {
+            on_below[g as usize] = true;
         }
+    }
+    let mut rests: Vec<bool> = (0..n).map(|g| on_below[g] || size[g] > max_px).collect();
+    if on_below.iter().all(|&r| r) {
+        return out;
     }
     let pixels = |g: u32| {
         runs.iter()
@@ -115,7 +133,6 @@ pub fn loose_pieces(
             .flat_map(move |(r, _)| (r[1]..r[2]).map(move |c| r[0] as usize * w + c as usize))
     };
     let mut exact_m: Option<Mask> = None;
-    let mut out = Vec::new();
     let judge = Judge {
         m,
         under,
@@ -124,21 +141,39 @@ pub fn loose_pieces(
         runs: &runs,
         ids: &ids,
     };
+    let window = |g: usize| Window::of((&runs, &ids), g as u32, psf, [w, m.height as usize]);
     for g in 0..n {
         if rests[g] {
             continue;
         }
-        let win = Window::of((&runs, &ids), g as u32, psf, [w, m.height as usize]);
+        let win = window(g);
         match judge.cured(g as u32, &win, &rests) {
             Cured::Rests => rests[g] = true,
             Cured::Nothing => {}
             Cured::Free => {
                 let e = exact_m.get_or_insert_with(&mut *exact);
-                if judge.split_off(g as u32, &win, e) {
-                    out.extend(pixels(g as u32));
+                if judge.joining_path(g as u32, &win, e, LIT_GRAY).is_some() {
+                    out.dark.extend(pixels(g as u32));
                 }
             }
         }
+    }
+    // The larger pieces none of whose pixels lies on a pixel fully lit below (what the
+    // grays then show lit whatever the compensation), bridged to one.
+    let mut on_full = vec![false; n];
+    for (r, &g) in runs.iter().zip(&ids) {
+        let row = r[0] as usize * w;
+        if (r[1]..r[2]).any(|c| under.at(row + c as usize) == u8::MAX) {
+            on_full[g as usize] = true;
+        }
+    }
+    for g in (0..n).filter(|&g| size[g] > max_px && !on_full[g]) {
+        let e = exact_m.get_or_insert_with(&mut *exact);
+        out.bridges.extend(
+            judge
+                .joining_path(g as u32, &window(g), e, u8::MAX)
+                .unwrap_or_default(),
+        );
     }
     out
 }
@@ -187,11 +222,15 @@ pub fn labels(
 /// that cure, whether it meets one where the layer below cures (`below`) or a resting
 /// piece.
 pub fn judged(label: &[u8], cures: &[bool], below: &[bool], ww: usize) -> Cured {
-    let seeds = (0..label.len()).filter(|&k| label[k] == OWN && cures[k]);
-    match flood(ww, seeds, cures, |k| below[k] || label[k] == RESTING) {
-        None => Cured::Nothing,
-        Some(true) => Cured::Rests,
-        Some(false) => Cured::Free,
+    let seeds: Vec<usize> = (0..label.len())
+        .filter(|&k| label[k] == OWN && cures[k])
+        .collect();
+    if seeds.is_empty() {
+        return Cured::Nothing;
+    }
+    match shortest_path(ww, &seeds, cures, |k| below[k] || label[k] == RESTING) {
+        Some(_) => Cured::Rests,
+        None => Cured::Free,
     }
 }
 
@@ -258,51 +297,69 @@ impl Judge<'_> {
         judged(&label, &cures, &below, cols.len())
     }
 
-    /// Whether the exact coverage `exact` joins candidate `g`, through lit pixels within
-    /// `win`, to a pixel lit in the layer below.
-    fn split_off(&self, g: u32, win: &Window, exact: &Mask) -> bool {
+    /// The shortest path (mask indices) by which the exact coverage `exact` joins piece
+    /// `g`, through its 4-connected lit pixels within `win`, to a pixel lit in the layer
+    /// below: the path's pixels that are not the piece's (none when a pixel of the piece is
+    /// lit below), or `None` when it does not join them.
+    fn joining_path(&self, g: u32, win: &Window, exact: &Mask, full: u8) -> Option<Vec<usize>> {
         let w = self.m.width as usize;
         let ww = win.cols.len();
         let at = |k: usize| (k / w - win.rows.start) * ww + (k % w - win.cols.start);
         let lit: Vec<bool> = win.indices(w).map(|k| exact.data[k] >= LIT_GRAY).collect();
-        let lit_below: Vec<bool> = win
-            .indices(w)
-            .map(|k| self.under.at(k) >= LIT_GRAY)
-            .collect();
-        let own = self
+        let own: Vec<usize> = self
             .runs
             .iter()
             .zip(self.ids)
             .filter(|(_, &k)| k == g)
             .flat_map(|(r, _)| (r[1]..r[2]).map(move |c| r[0] as usize * w + c as usize))
             .map(at)
-            .filter(|&k| lit[k]);
-        flood(ww, own, &lit, |k| lit_below[k]) == Some(true)
+            .filter(|&k| lit[k])
+            .collect();
+        let goal = |k: usize| {
+            let (r, c) = (k / ww + win.rows.start, k % ww + win.cols.start);
+            self.under.at(r * w + c) >= full
+        };
+        let path = shortest_path(ww, &own, &lit, goal)?;
+        let mut mine = vec![false; lit.len()];
+        own.iter().for_each(|&k| mine[k] = true);
+        Some(
+            path.into_iter()
+                .filter(|&k| !mine[k])
+                .map(|k| (k / ww + win.rows.start) * w + k % ww + win.cols.start)
+                .collect(),
+        )
     }
 }
 
-/// Floods from `seeds` through the 4-connected pixels of `through` (a window `ww`
-/// wide): `None` without seeds, else whether it reaches a pixel where `goal` holds.
-fn flood(
+/// The shortest path from `seeds` through the 4-connected pixels of `through` (a window
+/// `ww` wide) to a pixel where `goal` holds, seed first (breadth first: the first seed and
+/// neighbour in order among equals); `None` when there is none.
+fn shortest_path(
     ww: usize,
-    seeds: impl Iterator<Item = usize>,
+    seeds: &[usize],
     through: &[bool],
     goal: impl Fn(usize) -> bool,
-) -> Option<bool> {
-    let mut seen = vec![false; through.len()];
-    let mut stack: Vec<usize> = seeds.collect();
-    if stack.is_empty() {
-        return None;
-    }
-    for &k in &stack {
-        seen[k] = true;
-    }
-    let wh = through.len() / ww;
-    while let Some(k) = stack.pop() {
-        if goal(k) {
-            return Some(true);
+) -> Option<Vec<usize>> {
+    // Each reached pixel's predecessor (a seed its own); `UNSEEN` before it is reached.
+    const UNSEEN: usize = usize::MAX;
+    let mut from = vec![UNSEEN; through.len()];
+    let mut queue = std::collections::VecDeque::new();
+    for &k in seeds {
+        if from[k] == UNSEEN {
+            from[k] = k;
+            queue.push_back(k);
         }
-        let (x, y) = (k % ww, k / ww);
+    }
+    while let Some(k) = queue.pop_front() {
+        if goal(k) {
+            let mut path = vec![k];
+            while from[path[path.len() - 1]] != path[path.len() - 1] {
+                path.push(from[path[path.len() - 1]]);
+            }
+            path.reverse();
+            return Some(path);
+        }
+        let (x, y, wh) = (k % ww, k / ww, through.len() / ww);
         let next = [
             (x > 0).then(|| k - 1),
             (x + 1 < ww).then(|| k + 1),
@@ -310,13 +367,13 @@ fn flood(
             (y + 1 < wh).then(|| k + ww),
         ];
         for n in next.into_iter().flatten() {
-            if through[n] && !seen[n] {
-                seen[n] = true;
-                stack.push(n);
+            if through[n] && from[n] == UNSEEN {
+                from[n] = k;
+                queue.push_back(n);
             }
         }
     }
-    Some(false)
+    None
 }
 
 #[cfg(test)]
@@ -334,12 +391,22 @@ mod tests {
     }
 
     /// A block lit on the layer below and in this layer, corrected; `extra` adds this
-    /// layer's other pixels, `exact` its coverage before the correction.
+    /// layer's other pixels, `exact` its coverage before the correction. The loose pixels.
     fn judge(
         extra: &[(usize, usize, u8)],
         exact: &[(usize, usize, u8)],
         below: bool,
     ) -> Vec<(usize, usize)> {
+        found(extra, exact, below).0
+    }
+
+    /// [`judge`]'s loose pixels and bridges.
+    #[allow(clippy::type_complexity)]
+    fn found(
+        extra: &[(usize, usize, u8)],
+        exact: &[(usize, usize, u8)],
+        below: bool,
+    ) -> (Vec<(usize, usize)>, Vec<(usize, usize)>) {
         let mut m = Mask::zeros(W, W);
         block(&mut m, 10..30, 10..30, 255);
         let mut e = m.clone();
@@ -360,10 +427,13 @@ mod tests {
         let under = below.then(|| Drawn::of(&under, lit, 0.3));
         let psf = Psf { sigma_px: 0.5 };
         let mut exact = || e.clone();
-        let px = loose_pieces(&m, lit, (&psf, 0.3), 31, under.as_ref(), &mut exact);
-        px.iter()
-            .map(|&k| (k / W as usize, k % W as usize))
-            .collect()
+        let found = loose_pieces(&m, lit, (&psf, 0.3), 31, under.as_ref(), &mut exact);
+        let rc = |px: Vec<usize>| {
+            px.iter()
+                .map(|&k| (k / W as usize, k % W as usize))
+                .collect()
+        };
+        (rc(found.dark), rc(found.bridges))
     }
 
     /// A sliver from the block's corner to (33, 35) in the exact coverage.
@@ -397,15 +467,27 @@ mod tests {
     }
 
     #[test]
-    fn a_piece_larger_than_a_heads_contact_is_not_judged() {
-        // 7 × 5 pixels past three dark rows, joined to the block by the sliver.
+    fn a_piece_larger_than_a_heads_contact_split_off_is_bridged_back() {
+        // 7 × 5 pixels past three dark rows, joined to the block by the sliver: not drawn
+        // dark, but joined back by a shortest path through the sliver to the block's
+        // corner (29, 29), 6 pixels from the piece's corner (33, 31).
         let piece: Vec<_> = (33..40)
             .flat_map(|r| (31..36).map(move |c| (r, c, 255)))
             .collect();
         let mut exact = sliver();
         exact.extend(piece.iter().copied());
-        assert!(judge(&piece, &exact, true).is_empty());
-        // Smaller than the contact, it is.
-        assert_eq!(judge(&piece[..30], &exact, true).len(), 30);
+        assert_eq!(
+            found(&piece, &exact, true),
+            (
+                vec![],
+                vec![(33, 30), (33, 29), (32, 29), (31, 29), (30, 29), (29, 29)]
+            )
+        );
+        // An island of the section (nothing joins it) is left to the supports; on the
+        // platform nothing is judged.
+        assert_eq!(found(&piece, &piece, true), (vec![], vec![]));
+        assert_eq!(found(&piece, &exact, false), (vec![], vec![]));
+        // Smaller than the contact, it is drawn dark.
+        assert_eq!(found(&piece[..30], &exact, true).0.len(), 30);
     }
 }

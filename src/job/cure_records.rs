@@ -554,8 +554,12 @@ impl CureJob {
         let mut exact = || LOWER.with(|s| raster.coverage(section, &mut s.borrow_mut()));
         let judge = (&psf, c.cures_at as f32);
         let max = self.loose_max_px;
-        for k in cure::loose::loose_pieces(m, lit, judge, max, below, &mut exact) {
+        let found = cure::loose::loose_pieces(m, lit, judge, max, below, &mut exact);
+        for k in found.dark {
             m.data[k] = 0;
+        }
+        for k in found.bridges {
+            m.data[k] = 255;
         }
         Some(cure::loose::Drawn::of(m, lit, c.cures_at as f32))
     }

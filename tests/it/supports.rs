@@ -545,6 +545,29 @@ fn bunny_and_a_plate_of_copies_with_supports_run_clean() {
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
 }
 
+/// At 0.025 mm layers the cure correction cuts the neck that joins a 55-pixel piece of the
+/// bunny's overhang (layer 247) to the region over a support's head: the slicer draws the
+/// neck back, and `run` finds nothing resting on nothing.
+#[test]
+fn a_neck_the_correction_cuts_is_drawn_back_and_the_fine_bunny_runs_clean() {
+    let dir = tempdir("supports-neck");
+    let bunny = fixture("bunny00.stl");
+    let args = [
+        bunny.to_str().unwrap(),
+        "--supports",
+        "--layer-height",
+        "0.025",
+        "-q",
+    ];
+    slice(&dir, &args, "f.dmdjob");
+    let r = run_in(&dir, &["run", "f.dmdjob", "--json"]);
+    assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
+    assert_no_regions(
+        &serde_json::from_slice(&r.stdout).unwrap(),
+        "bunny00, 0.025 mm",
+    );
+}
+
 #[test]
 fn a_head_too_thin_to_cure_is_named_as_a_support_head() {
     let dir = tempdir("supports-thin-head");
