@@ -113,19 +113,26 @@ pub fn loose_pieces(
     for (r, &g) in runs.iter().zip(&ids) {
         size[g as usize] += (r[2] - r[1]) as usize;
     }
-    // Resting: the pieces one of whose pixels is lit below; to the candidates, the larger
-    // pieces as well.
-    let mut on_below = vec![false; n];
+    // Per piece, whether one of its pixels lies on a pixel lit below, and on one fully lit
+    // (which the grays show lit whatever the compensation).
+    let (mut on_lit, mut on_full) = (vec![false; n], vec![false; n]);
     for (r, &g) in runs.iter().zip(&ids) {
         let row = r[0] as usize * w;
-        if !on_below[g as usize] && (r[1]..r[2]).any(|c| under.at(row + c as usize) >= LIT_GRAY) {
-            on_below[g as usize] = true;
+        let g = g as usize;
+        for c in r[1]..r[2] {
+            if on_full[g] {
+                break;
+            }
+            let v = under.at(row + c as usize);
+            on_lit[g] |= v >= LIT_GRAY;
+            on_full[g] = v == u8::MAX;
         }
     }
-    let mut rests: Vec<bool> = (0..n).map(|g| on_below[g] || size[g] > max_px).collect();
-    if on_below.iter().all(|&r| r) {
+    if on_full.iter().all(|&f| f) {
         return out;
     }
+    // Resting: the pieces on a lit pixel; to the candidates, the larger pieces as well.
+    let mut rests: Vec<bool> = (0..n).map(|g| on_lit[g] || size[g] > max_px).collect();
     let pixels = |g: u32| {
         runs.iter()
             .zip(&ids)
@@ -158,15 +165,7 @@ pub fn loose_pieces(
             }
         }
     }
-    // The larger pieces none of whose pixels lies on a pixel fully lit below (what the
-    // grays then show lit whatever the compensation), bridged to one.
-    let mut on_full = vec![false; n];
-    for (r, &g) in runs.iter().zip(&ids) {
-        let row = r[0] as usize * w;
-        if (r[1]..r[2]).any(|c| under.at(row + c as usize) == u8::MAX) {
-            on_full[g as usize] = true;
-        }
-    }
+    // The larger pieces on no pixel fully lit below, bridged to one.
     for g in (0..n).filter(|&g| size[g] > max_px && !on_full[g]) {
         let e = exact_m.get_or_insert_with(&mut *exact);
         out.bridges.extend(
@@ -298,9 +297,9 @@ impl Judge<'_> {
     }
 
     /// The shortest path (mask indices) by which the exact coverage `exact` joins piece
-    /// `g`, through its 4-connected lit pixels within `win`, to a pixel lit in the layer
-    /// below: the path's pixels that are not the piece's (none when a pixel of the piece is
-    /// lit below), or `None` when it does not join them.
+    /// `g`, through its 4-connected lit pixels within `win`, to a pixel of the layer below
+    /// of coverage `full` or more: the path's pixels that are not the piece's (none when a
+    /// pixel of the piece is one), or `None` when it does not join them.
     fn joining_path(&self, g: u32, win: &Window, exact: &Mask, full: u8) -> Option<Vec<usize>> {
         let w = self.m.width as usize;
         let ww = win.cols.len();
