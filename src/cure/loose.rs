@@ -91,13 +91,15 @@ pub struct Loose {
 /// The loose pieces of the corrected coverage `m` (lit box `lit`; see the module docs) and
 /// the bridges of its larger split-off pieces. `psf`, `t`: the blur and the relative light
 /// at which the layer's resin cures (the model's edge threshold over the layer's dose
-/// against the normal layer's); `max_px`: the largest candidate, pixels; `exact`: the
-/// layer's coverage before the correction, drawn when a piece needs it.
+/// against the normal layer's); `max_px`: the largest candidate, pixels; `bridge`: whether
+/// to bridge the larger pieces (not where the Z correction holds layers back: their dark
+/// pixels are meant); `exact`: the layer's coverage before the correction, drawn when a
+/// piece needs it.
 pub fn loose_pieces(
     m: &Mask,
     lit: PixelBox,
     (psf, t): (&Psf, f32),
-    max_px: usize,
+    (max_px, bridge): (usize, bool),
     below: Option<&Drawn>,
     exact: &mut dyn FnMut() -> Mask,
 ) -> Loose {
@@ -166,7 +168,7 @@ pub fn loose_pieces(
         }
     }
     // The larger pieces on no pixel fully lit below, bridged to one.
-    for g in (0..n).filter(|&g| size[g] > max_px && !on_full[g]) {
+    for g in (0..n).filter(|&g| bridge && size[g] > max_px && !on_full[g]) {
         let e = exact_m.get_or_insert_with(&mut *exact);
         out.bridges.extend(
             judge
@@ -396,15 +398,16 @@ mod tests {
         exact: &[(usize, usize, u8)],
         below: bool,
     ) -> Vec<(usize, usize)> {
-        found(extra, exact, below).0
+        found(extra, exact, below, true).0
     }
 
-    /// [`judge`]'s loose pixels and bridges.
+    /// [`judge`]'s loose pixels and bridges (`bridge`: whether to draw them).
     #[allow(clippy::type_complexity)]
     fn found(
         extra: &[(usize, usize, u8)],
         exact: &[(usize, usize, u8)],
         below: bool,
+        bridge: bool,
     ) -> (Vec<(usize, usize)>, Vec<(usize, usize)>) {
         let mut m = Mask::zeros(W, W);
         block(&mut m, 10..30, 10..30, 255);
@@ -426,7 +429,14 @@ mod tests {
         let under = below.then(|| Drawn::of(&under, lit, 0.3));
         let psf = Psf { sigma_px: 0.5 };
         let mut exact = || e.clone();
-        let found = loose_pieces(&m, lit, (&psf, 0.3), 31, under.as_ref(), &mut exact);
+        let found = loose_pieces(
+            &m,
+            lit,
+            (&psf, 0.3),
+            (31, bridge),
+            under.as_ref(),
+            &mut exact,
+        );
         let rc = |px: Vec<usize>| {
             px.iter()
                 .map(|&k| (k / W as usize, k % W as usize))
@@ -476,17 +486,18 @@ mod tests {
         let mut exact = sliver();
         exact.extend(piece.iter().copied());
         assert_eq!(
-            found(&piece, &exact, true),
+            found(&piece, &exact, true, true),
             (
                 vec![],
                 vec![(33, 30), (33, 29), (32, 29), (31, 29), (30, 29), (29, 29)]
             )
         );
         // An island of the section (nothing joins it) is left to the supports; on the
-        // platform nothing is judged.
-        assert_eq!(found(&piece, &piece, true), (vec![], vec![]));
-        assert_eq!(found(&piece, &exact, false), (vec![], vec![]));
+        // platform nothing is judged; without bridges (xyz) it stays as it is.
+        assert_eq!(found(&piece, &piece, true, true), (vec![], vec![]));
+        assert_eq!(found(&piece, &exact, false, true), (vec![], vec![]));
+        assert_eq!(found(&piece, &exact, true, false), (vec![], vec![]));
         // Smaller than the contact, it is drawn dark.
-        assert_eq!(found(&piece[..30], &exact, true).0.len(), 30);
+        assert_eq!(found(&piece[..30], &exact, true, true).0.len(), 30);
     }
 }

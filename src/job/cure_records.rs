@@ -553,7 +553,7 @@ impl CureJob {
         };
         let mut exact = || LOWER.with(|s| raster.coverage(section, &mut s.borrow_mut()));
         let judge = (&psf, c.cures_at as f32);
-        let max = self.loose_max_px;
+        let max = (self.loose_max_px, self.held_back == 0);
         let found = cure::loose::loose_pieces(m, lit, judge, max, below, &mut exact);
         for k in found.dark {
             m.data[k] = 0;
