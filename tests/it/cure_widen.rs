@@ -47,6 +47,19 @@ fn peak(b: &Path, layer: usize, u: [f64; 2], v: [f64; 2]) -> f64 {
     best
 }
 
+/// The one `cure.features-widened` warning of the slice summary `v`, which names no
+/// feature that vanishes.
+fn widened_only(v: &Value) -> &Value {
+    assert!(
+        warnings_of(v, "cure.features-vanish").is_empty(),
+        "{}",
+        v["warnings"]
+    );
+    let w = warnings_of(v, "cure.features-widened");
+    assert_eq!(w.len(), 1, "{}", v["warnings"]);
+    w[0]
+}
+
 #[test]
 fn a_pin_under_a_pixel_is_widened_with_xy_and_cures() {
     let dir = tempdir("cure-widen-pin");
@@ -108,15 +121,9 @@ fn a_pin_that_would_not_cure_uncorrected_is_drawn_wider_and_cures() {
     // A 0.02 mm pin at pixel (400, 300): uncorrected it cures nowhere (`cure_dropped.rs`).
     let (model, _) = tiny_pin_part(&dir);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
-    assert!(
-        warnings_of(&xy, "cure.features-vanish").is_empty(),
-        "{}",
-        xy["warnings"]
-    );
-    let w = warnings_of(&xy, "cure.features-widened");
-    assert_eq!(w.len(), 1, "{}", xy["warnings"]);
-    assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
-    assert_eq!(w[0]["fields"]["width_mm"], 0.02, "{}", w[0]);
+    let w = widened_only(&xy);
+    assert_eq!(w["fields"]["features"], 6, "{}", w);
+    assert_eq!(w["fields"]["width_mm"], 0.02, "{}", w);
     let (u, v) = (400.0 + 0.01 / P, ROWS - 300.0 - 0.01 / P);
     let l = peak(
         &dir.join("xy.dmdjob"),
@@ -151,14 +158,8 @@ fn a_pin_whose_facets_face_inwards_is_drawn_wider_as_well() {
     let model = dir.join("back.stl");
     write_stl(&model, &tris);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
-    assert!(
-        warnings_of(&xy, "cure.features-vanish").is_empty(),
-        "{}",
-        xy["warnings"]
-    );
-    let w = warnings_of(&xy, "cure.features-widened");
-    assert_eq!(w.len(), 1, "{}", xy["warnings"]);
-    assert_eq!(w[0]["fields"]["features"], 6, "{}", w[0]);
+    let w = widened_only(&xy);
+    assert_eq!(w["fields"]["features"], 6, "{}", w);
     // Uncorrected, the prediction finds it vanish as it does the forward pin.
     let (forward, _) = tiny_pin_part(&dir);
     let [back, fwd] = [&model, &forward].map(|m| {
@@ -183,18 +184,12 @@ fn a_thin_wall_is_widened_with_xy_and_cures_and_the_block_beside_it_is_not_chang
     let model = dir.join("wall.stl");
     write_stl(&model, &tris);
     let xy = slice(&dir, &model, "xy.dmdjob", "xy");
-    assert!(
-        warnings_of(&xy, "cure.features-vanish").is_empty(),
-        "{}",
-        xy["warnings"]
-    );
     // The two bottom layers, at twice the exposure, cure it as drawn; the two above are
     // widened.
-    let w = warnings_of(&xy, "cure.features-widened");
-    assert_eq!(w.len(), 1, "{}", xy["warnings"]);
-    assert_eq!(w[0]["fields"]["features"], 2, "{}", w[0]);
-    assert_eq!(w[0]["fields"]["first_layer"], 2, "{}", w[0]);
-    assert_eq!(w[0]["fields"]["width_mm"], 0.04, "{}", w[0]);
+    let w = widened_only(&xy);
+    assert_eq!(w["fields"]["features"], 2, "{}", w);
+    assert_eq!(w["fields"]["first_layer"], 2, "{}", w);
+    assert_eq!(w["fields"]["width_mm"], 0.04, "{}", w);
     // Along the wall, away from its ends, the light peaks above T.
     let t = threshold();
     let u = 400.3 + 0.02 / P;
@@ -232,18 +227,12 @@ fn with_xyz_a_narrow_bar_is_widened_only_above_its_held_back_layers() {
     let model = dir.join("bar.stl");
     write_stl(&model, &tris);
     let v = slice(&dir, &model, "xyz.dmdjob", "xyz");
-    assert!(
-        warnings_of(&v, "cure.features-vanish").is_empty(),
-        "{}",
-        v["warnings"]
-    );
     // Below its top layers the bar cures from the light of the layers above it too: only
     // the last two, with little light above, are widened.
-    let w = warnings_of(&v, "cure.features-widened");
-    assert_eq!(w.len(), 1, "{}", v["warnings"]);
-    let f = &w[0]["fields"];
-    assert_eq!(f["first_layer"], 28, "{}", w[0]);
-    assert_eq!(f["features"], 2, "{}", w[0]);
+    let w = widened_only(&v);
+    let f = &w["fields"];
+    assert_eq!(f["first_layer"], 28, "{}", w);
+    assert_eq!(f["features"], 2, "{}", w);
     let o = run_in(&dir, &["run", "xyz.dmdjob"]);
     assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
     // A held-back layer stays dark there.
