@@ -379,10 +379,12 @@ impl Engine {
         let perimeter = held.recent.iter().map(|r| r.1).fold(0.0, f64::max);
         let boxes = held.recent.iter().filter_map(|r| r.0);
         let Some([x0, y0, x1, y1]) = boxes.reduce(|a, b| {
-            [0, 1, 2, 3].map(|k| match k {
-                0 | 1 => a[k].min(b[k]),
-                _ => a[k].max(b[k]),
-            })
+            [
+                a[0].min(b[0]),
+                a[1].min(b[1]),
+                a[2].max(b[2]),
+                a[3].max(b[3]),
+            ]
         }) else {
             return (0.0, perimeter);
         };
