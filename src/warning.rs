@@ -114,6 +114,8 @@ pub const CODES: &[Code] = &[
         "the xy correction left features too thin to cure as it drew them, not wider, because they rest on nothing in the layer below (widened, they would cure loose; the sections do not light them, so no support reaches them): they will be missing from the part", "thicken these features in the model so that they are lit, or give them something to rest on"),
     code("cure.features-dropped", Warn, "features, pixels, layers, first_layer, x_mm, y_mm, width_mm, height_mm, held_back_layers",
         "the xyz correction leaves out flat features over nothing thinner than its held-back layers plus one (a tab, a thin plate): they will be missing from the part", "use --cure-correction xy, or make these features thicker"),
+    code("cure.layers-uncorrected", Warn, "layers, first_layer, uncorrected",
+        "in a job with supports, the correction moved in or broke up the first layers of thin features so that regions of the layer above would rest on nothing: these layers (uncorrected: their indices) are drawn without it, their edges where the section's are (outside by the cure's growth, a fraction of a pixel)", "nothing to do if these layers' size is acceptable; otherwise thicken the thin features in the model, or orient the part so that they do not start over supports"),
     code("cure.features-merge", Warn, "contours, layers, first_layer",
         "the cure model predicts that cure reaches across gaps of these layers (slots or holes narrower than the blur): neighbouring features join", "widen the gaps in the model or lower the exposure"),
     code("optics.outside-calibrated-area", Note, "layers, area_mm, beyond_mm, extrapolate_mm",

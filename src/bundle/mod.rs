@@ -137,6 +137,11 @@ pub struct Cure {
     /// Layers of downward-facing surfaces held back (`xyz`).
     #[serde(default)]
     pub held_back_layers: u32,
+    /// The layers drawn without the correction (XY and Z, as with "off"): corrected, they
+    /// left a region of the layer above that a job with supports must hold on nothing
+    /// (docs/CURE.md, "Layers drawn uncorrected").
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub uncorrected_layers: Vec<u64>,
     /// The predicted cure (`slice --predict`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted: Option<CurePrediction>,

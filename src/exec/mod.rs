@@ -40,6 +40,7 @@ mod violation;
 #[cfg(any(test, feature = "internals"))]
 pub mod testutil;
 
+use crate::bundle::regions::Run;
 use crate::bundle::Machine as MachineRecord;
 use crate::bundle::{BundleSource, Manifest, MANIFEST};
 use crate::error::{Error, Result};
@@ -560,6 +561,22 @@ pub fn replay(manifest: &Manifest) -> Vec<Violation> {
     let mut violations = checker.finish(outcome.total_s, outcome.fault.is_none());
     violations.extend(outcome.invalid_steps.iter().cloned());
     violations
+}
+
+/// The `unsupported-region` violations [`run`] finds in a job with supports before it is
+/// written (`source`: its files so far; `runs`: each layer's lit runs on the field, as
+/// [`crate::bundle::regions::lit_runs`] finds them in its masks), one per layer, in layer
+/// order: regions as large as a support head's contact that rest on nothing in the layer
+/// below (on a corrected job, by what cures). Empty for a job without supports.
+pub fn unheld_regions<R: AsRef<[Run]>>(
+    source: &dyn BundleSource,
+    manifest: &Manifest,
+    runs: &[Option<R>],
+) -> Vec<Violation> {
+    if manifest.supports.is_none() {
+        return Vec::new();
+    }
+    printable::check(source, manifest, &manifest.machine, runs).violations
 }
 
 #[cfg(test)]

@@ -109,6 +109,7 @@ pub fn cure_record(correction: &str) -> Cure {
         shift_px: 0.49,
         print_through_mm: m.print_through_mm(None),
         held_back_layers: 0,
+        uncorrected_layers: Vec::new(),
         predicted: None,
         dropped: None,
     }

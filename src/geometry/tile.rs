@@ -179,6 +179,13 @@ impl Tiler {
         Ok(tiler)
     }
 
+    /// Forgets what the projectors' compensation counted: the job's layers are made again.
+    pub fn reset_counts(&self) {
+        for o in &self.optics {
+            o.compensator.reset_counts();
+        }
+    }
+
     /// The compensation mode applied ("off" when none).
     pub fn compensation(&self) -> Mode {
         self.optics

@@ -72,6 +72,9 @@ pub(super) struct CureJob {
     /// A hybrid job's continuous dose against a normal layer's (the layer height at the
     /// continuous speed): whether a layer prints continuously is planned after it is drawn.
     continuous: Option<f64>,
+    /// The layers drawn as without the correction (sorted): corrected, they left a region
+    /// of the layer above on nothing ([`CureJob::drawn_plain`]).
+    plain: Vec<usize>,
 }
 
 /// The layer with the largest mean absolute edge error: what its picture shows, in the
@@ -283,7 +286,33 @@ impl CureJob {
                 let s = model.layer_mm / h.continuous_speed_mm_s.get();
                 s / profile.exposure.layer_s.get()
             }),
+            plain: Vec::new(),
         }))
+    }
+
+    /// The same job with `layers` drawn as without the correction, XY and Z (as
+    /// `--cure-correction off` draws them).
+    pub fn drawn_plain(mut self, mut layers: Vec<usize>) -> CureJob {
+        layers.sort_unstable();
+        layers.dedup();
+        self.plain = layers;
+        self
+    }
+
+    /// The layers drawn as without the correction.
+    pub fn plain(&self) -> &[usize] {
+        &self.plain
+    }
+
+    /// Whether layer `i`'s edges are moved ([`CureJob::corrects`], and not drawn plain).
+    pub fn corrects_at(&self, i: usize) -> bool {
+        self.corrects() && self.plain.binary_search(&i).is_err()
+    }
+
+    /// Whether layer `i` is drawn through [`CureJob::draw`] ([`CureJob::active`], and not
+    /// drawn plain).
+    pub fn active_at(&self, i: usize) -> bool {
+        self.active() && self.plain.binary_search(&i).is_err()
     }
 
     /// Whether layers are drawn through [`CureJob::draw`].
@@ -857,6 +886,7 @@ impl CureJob {
             shift_px: r(self.shift_px),
             print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
             held_back_layers: self.held_back as u32,
+            uncorrected_layers: self.plain.iter().map(|&i| i as u64).collect(),
             predicted: None,
             dropped: (self.held_back > 0).then(|| {
                 self.dropped

@@ -6,6 +6,7 @@ use super::cure_records::LayerCorrection;
 use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
 use super::pipeline::Cut;
 use super::sink::Sink;
+use crate::bundle::regions::{field_runs, lit_runs, Placement, Run};
 use crate::bundle::{self, MaskPixels, MaskRef};
 use crate::cure::shift::Coverage;
 use crate::error::Result;
@@ -13,7 +14,7 @@ use crate::geometry::distortion::{self, Correction};
 use crate::geometry::tile::Tiler;
 use crate::optics::JobOptics;
 use crate::plan::analysis::{Analysed, Analyser, LitRuns};
-use crate::profile::Profile;
+use crate::profile::{Profile, Projector};
 use crate::raster::{projector_view_in, Mask, PixelBox, Rasterizer, Scratch};
 use crate::slice::{Contour, Section};
 use std::borrow::Cow;
@@ -97,6 +98,8 @@ pub(super) struct LayerOutput {
     pub analysis_s: f64,
     /// The mask files written.
     pub masks: Vec<MaskRef>,
+    /// Its masks' lit runs on the field ([`DrawnMasks::field_runs`]; with supports).
+    pub field_runs: Option<Arc<[Run]>>,
     /// The layer's lit pixels, kept where another block needs them: for its own islands
     /// ([`Analysed::NeedsBelow`]) or those of the next layer (the last layer of a block).
     pub runs: Option<LitRuns>,
@@ -196,6 +199,7 @@ pub(super) fn layer_masks(
     }
     let masks = write_masks(ctx, &drawn, i)?;
     let area_mm2 = drawn.area_mm2;
+    let field_runs = drawn.field_runs.clone();
     if let Some(job) = ctx.cure {
         job.count_dropped(i, &drawn.dropped);
         job.count_widened(i, drawn.widened);
@@ -226,6 +230,7 @@ pub(super) fn layer_masks(
         analysis_s,
         masks,
         runs,
+        field_runs,
     })
 }
 
@@ -277,7 +282,7 @@ fn drawing(
         let s = distortion::area_scale(&section, &w);
         (w, s)
     });
-    let Some(job) = ctx.cure.filter(|c| c.corrects()) else {
+    let Some(job) = ctx.cure.filter(|c| c.corrects_at(i)) else {
         return Ok(Drawing {
             section,
             warped,
@@ -351,7 +356,7 @@ fn draw(
     let coverage = drawing.coverage.take();
     let drawn_section = drawing.drawn();
     let (mut field_mask, lit_pixels, outside, dropped, widened, corrected) =
-        match ctx.cure.filter(|c| c.active()) {
+        match ctx.cure.filter(|c| c.active_at(layer.index)) {
             // The cure correction works on the coverage (the relative irradiance the
             // compensation then delivers): drawn and corrected, then thresholded and
             // compensated.
@@ -395,6 +400,8 @@ fn draw(
         }
     }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
+    let supported = ctx.profile.supports.enabled;
+    let mut views = Vec::new();
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
     for (k, p) in ctx.profile.projector.iter().enumerate() {
         // The view and the box outside which it is zero.
@@ -419,7 +426,11 @@ fn draw(
         };
         let sha = bundle::sha256_hex(&png);
         pngs.push((png, sha, k as u32, pixels));
+        if supported && ctx.tiler.is_some() {
+            views.push((view.into_owned().data, p));
+        }
     }
+    let field_runs = supported.then(|| lit_on_field(&field_mask, scratch.lit_box(), &views));
     // Several projectors: the field's coverage for the cure prediction.
     let field = ctx.field.map(|_| super::encode_png(&field_mask));
     scratch.recycle(field_mask);
@@ -434,6 +445,7 @@ fn draw(
         dropped,
         widened,
         pngs,
+        field_runs,
         runs: if recent.is_some() {
             scratch.lit_runs.clone()
         } else {
@@ -444,6 +456,26 @@ fn draw(
         recent.put(&drawing.section, &masks);
     }
     Ok((masks, corrected))
+}
+
+/// The lit runs on the field of a layer's masks: with several projectors, their `views`'
+/// grays added up; else those of the field mask `m` (zero outside `lit`), which one
+/// projector's view only mirrors and offsets.
+fn lit_on_field(m: &Mask, lit: PixelBox, views: &[(Vec<u8>, &Projector)]) -> Arc<[Run]> {
+    if views.is_empty() {
+        return Arc::from(lit_runs(m.width, &m.data, lit.rows(), lit.cols()));
+    }
+    let masks: Vec<(&[u8], Placement)> = (views.iter())
+        .map(|(d, p)| {
+            let at = Placement {
+                size: [p.width_px, p.height_px],
+                offset: p.offset_px,
+                mirror: [p.mirror_x, p.mirror_y],
+            };
+            (&d[..], at)
+        })
+        .collect();
+    Arc::from(field_runs(&masks))
 }
 
 /// Writes layer `i`'s mask files and returns their records.

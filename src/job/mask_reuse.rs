@@ -33,6 +33,9 @@ pub(super) struct DrawnMasks {
     pub widened: Option<super::cure_records::LayerWidened>,
     /// PNG bytes, SHA-256, projector and pixels (placed in the field) of each mask.
     pub pngs: Vec<(Vec<u8>, String, u32, crate::bundle::MaskPixels)>,
+    /// The masks' lit runs on the field (gray at least half), in a job with supports:
+    /// what `dmdsl run` finds regions on nothing in (`crate::exec::unheld_regions`).
+    pub field_runs: Option<Arc<[crate::bundle::regions::Run]>>,
     /// The lit pixels (for the islands) when drawn from a simplified section, which
     /// [`RecentPrismMasks`] may hand to another worker; empty otherwise.
     pub runs: LitRuns,
@@ -129,6 +132,7 @@ mod tests {
             field: None,
             dropped: Vec::new(),
             widened: None,
+            field_runs: None,
             pngs: vec![(vec![tag; 3], format!("sha{tag}"), 0, Default::default())],
             runs: Default::default(),
         })

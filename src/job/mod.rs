@@ -14,7 +14,9 @@
 //! (windows → blocks → layers, and the bound on what waits), `layer.rs` (one layer's masks
 //! and analysis), `mask_reuse.rs` (masks of equal layers written again), `clock.rs`
 //! (per-thread CPU time), `optics_records.rs` (the light compensation's files and
-//! records) and `manifest.rs` (layer records, totals and the rest of the manifest).
+//! records), `manifest.rs` (layer records, totals and the rest of the manifest) and
+//! `unheld.rs` (a job with supports checked for regions on nothing before it is written,
+//! and made again with the layers that leave them drawn without the cure correction).
 
 mod beneath;
 mod clock;
@@ -29,6 +31,7 @@ mod placement;
 mod plate;
 mod sink;
 mod supported;
+mod unheld;
 
 pub use cure_records::CureOptions;
 pub use options::{default_output_as, SliceOptions, SliceSummary, SupportsSummary, Timings};
@@ -37,6 +40,7 @@ pub use pipeline::BLOCK;
 pub use placement::{place_mesh, PlacementMode, Transform};
 pub use plate::{Plate, MAX_COPIES, SPACING_MM};
 
+use crate::bundle::regions::Run;
 use crate::bundle::FitReport;
 use crate::bundle::{self, BundleWriter};
 use crate::error::{Error, Result};
@@ -57,7 +61,7 @@ use optics_records::WrittenGrayMap;
 use pipeline::Control;
 use sink::{MemoryFiles, Sink};
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 /// Encodes a mask as an 8-bit grayscale PNG (`png`; deterministic).
@@ -73,6 +77,22 @@ struct SetUp {
     tiler: Option<Tiler>,
     /// Lens distortion pre-warp.
     correction: Option<Correction>,
+}
+
+impl SetUp {
+    /// Forgets what making the layers counted (layers beyond the calibrated area,
+    /// extrapolated warps): they are made again.
+    fn reset_counts(&self) {
+        if let Some(o) = &self.optics {
+            o.compensator.reset_counts();
+        }
+        if let Some(t) = &self.tiler {
+            t.reset_counts();
+        }
+        if let Some(c) = &self.correction {
+            c.reset_counts();
+        }
+    }
 }
 
 /// Slices a model into a job bundle. See the module docs for the pipeline.
@@ -109,59 +129,22 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         Some(dir) => Some(MadeDirs::parents_of(&dir.join("plot"))?),
         None => None,
     };
-    let writer = open_bundle(&out, format, &profile, &setup)?;
-    // Several projectors' masks do not show the field's light: its coverage is kept for
-    // the cure prediction.
-    let field = (cure.as_ref().is_some_and(|c| c.predicts()) && setup.tiler.is_some())
-        .then(|| Sink::memory(&out));
-    let (sliced, gray_map) = make_layers(
-        &profile,
-        &setup,
-        &part,
-        (&writer, field.as_ref()),
-        &control,
-        (cure.as_ref(), opts.dose.as_ref()),
-    )?;
-
-    let t_finish = Instant::now();
-    let distortion_report = setup.correction.as_ref().map(Correction::report);
-    let mut warnings = part.mesh_warnings();
-    warnings.extend(slicing_warnings(&sliced.stats, distortion_report.as_ref()));
-    let analysis_cpu_s = sliced.layers.iter().map(|o| o.analysis_s).sum();
-    let mut planned = manifest::plan_layers(&profile, sliced.layers, &part)?;
-    warnings.append(&mut planned.warnings);
-    let mut optics = optics_records::optics_records(
-        setup.optics.as_ref(),
-        gray_map,
-        setup.tiler.as_ref(),
-        &writer,
-        &profile,
-    )?;
-    warnings.append(&mut optics.warnings);
-    if opts.dose.is_some() {
-        optics.compensation = "dose".into();
-    }
-    let predicted_at = warnings.len();
-    if let Some(c) = cure.as_ref() {
-        let what = what_at(&part, profile.slicing.layer_height_mm.get());
-        warnings.extend(c.dropped_warning(&what));
-        warnings.extend(c.widened_warning(&what));
-        warnings.extend(c.on_nothing_warning(&what));
-    }
-    let mut manifest = manifest::manifest(
-        &part,
-        &profile,
-        planned,
-        optics,
-        distortion_report.clone(),
-        warnings,
-    );
-    manifest.cure = cure.as_ref().map(|c| c.record());
-    if let Some(c) = cure.as_ref().filter(|c| c.predicts()) {
-        let files = (&writer, field.as_ref());
-        predict(c, &mut manifest, files, &part, &setup, predicted_at)?;
-    }
-    something_to_print(&manifest, part.path)?;
+    let inputs = JobInputs {
+        opts,
+        profile: &profile,
+        setup: &setup,
+        part: &part,
+        control: &control,
+        out: &out,
+        format,
+    };
+    let (made_job, cure) = unheld::made_held(&inputs, cure)?;
+    let Made {
+        writer,
+        manifest,
+        passes,
+        ..
+    } = made_job;
     replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);
@@ -171,7 +154,7 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     cure_plots(cure.as_ref(), opts, &manifest, made_plots)?;
     let mut warnings = manifest.warnings;
     warnings.extend(export_warnings);
-    let finish_s = t_finish.elapsed().as_secs_f64();
+    let finish_s = passes.finished.elapsed().as_secs_f64();
     Ok(SliceSummary {
         bundle,
         layers: part.layers,
@@ -181,16 +164,123 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
         totals: manifest.totals,
         timings: Timings {
             load_s,
-            slice_s: sliced.slice_s,
-            masks_s: sliced.masks_s,
-            analysis_cpu_s,
+            slice_s: passes.slice_s,
+            masks_s: passes.masks_s,
+            analysis_cpu_s: passes.analysis_cpu_s,
             finish_s,
             total_s: t0.elapsed().as_secs_f64(),
         }
         .rounded(),
-        distortion: distortion_report,
+        distortion: manifest.settings.distortion.clone(),
         cure: manifest.cure,
         supports: manifest.supports.as_ref().map(SupportsSummary::of),
+    })
+}
+
+/// What a job is made of, for each pass of [`make_job`].
+struct JobInputs<'a> {
+    opts: &'a SliceOptions<'a>,
+    profile: &'a Profile,
+    setup: &'a SetUp,
+    part: &'a PlacedPart<'a>,
+    control: &'a Control<'a>,
+    out: &'a Path,
+    format: Format,
+}
+
+/// The time the passes of [`make_job`] took.
+#[derive(Clone, Copy)]
+struct Passes {
+    slice_s: f64,
+    masks_s: f64,
+    analysis_cpu_s: f64,
+    /// When the last pass's layers were made.
+    finished: Instant,
+}
+
+/// A job made and planned, before it is written.
+struct Made {
+    /// Its files.
+    writer: Sink,
+    manifest: bundle::Manifest,
+    /// Each layer's masks' lit runs on the field, with supports.
+    field_runs: Vec<Option<Arc<[Run]>>>,
+    passes: Passes,
+}
+
+/// One pass of the pipeline: the job's layers made with `cure` into a new bundle, planned
+/// and (with `--predict`) their cure predicted.
+fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<Made> {
+    let JobInputs {
+        opts,
+        profile,
+        setup,
+        part,
+        control,
+        out,
+        format,
+    } = *inputs;
+    let writer = open_bundle(out, format, profile, setup)?;
+    // Several projectors' masks do not show the field's light: its coverage is kept for
+    // the cure prediction.
+    let field =
+        (cure.is_some_and(|c| c.predicts()) && setup.tiler.is_some()).then(|| Sink::memory(out));
+    let (mut sliced, gray_map) = make_layers(
+        profile,
+        setup,
+        part,
+        (&writer, field.as_ref()),
+        control,
+        (cure, opts.dose.as_ref()),
+    )?;
+    let finished = Instant::now();
+    let field_runs = sliced
+        .layers
+        .iter_mut()
+        .map(|o| o.field_runs.take())
+        .collect();
+    let distortion = setup.correction.as_ref().map(Correction::report);
+    let mut warnings = part.mesh_warnings();
+    warnings.extend(slicing_warnings(&sliced.stats, distortion.as_ref()));
+    let analysis_cpu_s = sliced.layers.iter().map(|o| o.analysis_s).sum();
+    let mut planned = manifest::plan_layers(profile, sliced.layers, part)?;
+    warnings.append(&mut planned.warnings);
+    let mut optics = optics_records::optics_records(
+        setup.optics.as_ref(),
+        gray_map,
+        setup.tiler.as_ref(),
+        &writer,
+        profile,
+    )?;
+    warnings.append(&mut optics.warnings);
+    if opts.dose.is_some() {
+        optics.compensation = "dose".into();
+    }
+    let predicted_at = warnings.len();
+    if let Some(c) = cure {
+        let what = what_at(part, profile.slicing.layer_height_mm.get());
+        warnings.extend(c.dropped_warning(&what));
+        warnings.extend(c.widened_warning(&what));
+        warnings.extend(c.on_nothing_warning(&what));
+        warnings.extend(unheld::plain_warning(c));
+    }
+    let mut manifest = manifest::manifest(part, profile, planned, optics, distortion, warnings);
+    manifest.cure = cure.map(|c| c.record());
+    if let Some(c) = cure.filter(|c| c.predicts()) {
+        let files = (&writer, field.as_ref());
+        predict(c, &mut manifest, files, part, setup, predicted_at)?;
+    }
+    something_to_print(&manifest, part.path)?;
+    Ok(Made {
+        writer,
+        manifest,
+        field_runs,
+        passes: Passes {
+            slice_s: sliced.slice_s,
+            masks_s: sliced.masks_s,
+            analysis_cpu_s,
+            finished,
+        },
     })
 }
 
@@ -315,7 +405,7 @@ fn replays_clean(manifest: &bundle::Manifest, path: &Path) -> Result<()> {
 /// Sets the machine up for the job (completing `profile`) and reads and places the model.
 /// The two are independent: they run side by side. Set-up errors are reported first.
 fn load_and_place<'a>(
-    opts: &'a SliceOptions,
+    opts: &'a SliceOptions<'a>,
     profile: &mut Profile,
     corrected: bool,
 ) -> Result<(SetUp, PlacedPart<'a>)> {

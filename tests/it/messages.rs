@@ -357,6 +357,11 @@ fn cure_optics_and_calibrate_messages_name_a_remedy() {
         "off",
     ];
     ws.extend(raised(&dir, &slot));
+    // Turned, with binary masks: two layers the correction leaves unheld are drawn plain.
+    let bunny = fixture("bunny00.stl");
+    let turned = [bunny.to_str().unwrap(), "--supports", "--rotate", "60,0,20"];
+    let turned = [&["slice"][..], &turned, &["--binary", "-o", "u.dmdjob"]].concat();
+    ws.extend(raised(&dir, &turned));
     // Within the default 5 mm extrapolation: a note with the distance.
     let within = raised(&dir, &["slice", "tall.stl", "-o", "a.dmdjob"]);
     let note = within
@@ -420,6 +425,7 @@ const OPTICS_CODES: &[&str] = &[
     "cure.features-widened",
     "cure.features-on-nothing",
     "cure.features-dropped",
+    "cure.layers-uncorrected",
     "cure.features-merge",
     "optics.outside-calibrated-area",
     "optics.beyond-extrapolation",

@@ -568,6 +568,48 @@ fn a_neck_the_correction_cuts_is_drawn_back_and_the_fine_bunny_runs_clean() {
     );
 }
 
+/// bunny00 turned 60° about x and 20° about z, with binary masks: the correction breaks
+/// up the first layers of a thin feature over a support (layers 159 and 160), and `run`
+/// finds a region on nothing above them. The slicer finds it before it writes the job,
+/// draws those layers without the correction and says so; `run` passes.
+#[test]
+fn layers_the_correction_leaves_unheld_are_drawn_uncorrected_and_the_job_runs_clean() {
+    let dir = tempdir("supports-plain");
+    let bunny = fixture("bunny00.stl");
+    let o = run_in(
+        &dir,
+        &[
+            "slice",
+            bunny.to_str().unwrap(),
+            "--supports",
+            "--rotate",
+            "60,0,20",
+            "--binary",
+            "--json",
+            "-o",
+            "b.dmdjob",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let w = &warnings_of(&v, "cure.layers-uncorrected")[0];
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("b.dmdjob/job.json")).unwrap()).unwrap();
+    let schemas = Schemas::load();
+    schemas.assert_valid("job.schema.json", &job);
+    schemas.assert_valid("slice-summary.schema.json", &v);
+    let plain = job["cure"]["uncorrected_layers"].as_array().unwrap();
+    assert!(!plain.is_empty() && plain.len() <= 4, "{plain:?}");
+    assert_eq!(w["fields"]["uncorrected"].as_array().unwrap(), plain, "{w}");
+    assert_eq!(w["fields"]["first_layer"], plain[0], "{w}");
+    let r = run_in(&dir, &["run", "b.dmdjob", "--json"]);
+    assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
+    assert_no_regions(
+        &serde_json::from_slice(&r.stdout).unwrap(),
+        "bunny00 turned, binary",
+    );
+}
+
 #[test]
 fn a_head_too_thin_to_cure_is_named_as_a_support_head() {
     let dir = tempdir("supports-thin-head");

@@ -52,11 +52,11 @@ pub struct Printability {
 
 /// The printability of `manifest`'s job whose layers' lit runs on `machine`'s field are
 /// `runs` (`None`: a layer not judged).
-pub fn check(
+pub fn check<R: AsRef<[Run]>>(
     dir: &dyn BundleSource,
     manifest: &Manifest,
     machine: &Machine,
-    runs: &[Option<Vec<Run>>],
+    runs: &[Option<R>],
 ) -> Printability {
     let field = machine.field();
     let p = field.pixel_mm;
@@ -77,6 +77,7 @@ pub fn check(
         let [Some(below), Some(cur)] = pair else {
             continue;
         };
+        let (below, cur) = (below.as_ref(), cur.as_ref());
         let Some((region, rests)) = resting_regions(cur, below) else {
             continue;
         };

@@ -121,6 +121,11 @@ impl Correction {
         }
     }
 
+    /// Forgets the extrapolated points counted: the job's layers are warped again.
+    pub fn reset_counts(&self) {
+        self.extrapolated.store(0, Ordering::Relaxed);
+    }
+
     /// The fit report (with the count of extrapolated points warped so far).
     pub fn report(&self) -> FitReport {
         let mut r = self.report.clone();

@@ -134,6 +134,12 @@ impl Compensator {
         f64::from_bits(self.beyond_bits.load(Ordering::Relaxed))
     }
 
+    /// Forgets the layers counted (and their reach): the job's layers are made again.
+    pub fn reset_counts(&self) {
+        self.layers_outside.store(0, Ordering::Relaxed);
+        self.beyond_bits.store(0, Ordering::Relaxed);
+    }
+
     /// Counts a layer lit outside the calibrated area whose mask repeats one already
     /// counted (its reach is that one's).
     pub fn count_outside(&self) {
