@@ -178,6 +178,13 @@ impl EdgeProfile {
         let tol = 2.0 * SPAN_PX / 2f64.powi(40);
         bisect((-SPAN_PX, SPAN_PX), tol, |m| self.light(m) >= y)
     }
+
+    /// The farthest inward move of an edge, px: where the layer's own light at the
+    /// section's edge falls to [`NEAR`] (farther in, what cures there is the layers
+    /// above's print-through).
+    pub fn inward_limit_px(&self) -> f64 {
+        self.growth(NEAR as f64)
+    }
 }
 
 /// A section's coverage (anti-aliased, 0 to 255 a pixel) inside its lit box, read at any
@@ -373,7 +380,7 @@ pub fn wall_shifts(
 ) -> Vec<f64> {
     let q = (-model.layer_mm / model.dp_mm).exp();
     let t0 = model.threshold(0.5 * model.layer_mm, Some(0));
-    let (lo, hi) = (-OUT_PX, profile.growth(NEAR as f64));
+    let (lo, hi) = (-OUT_PX, profile.inward_limit_px());
     let mut s = vec![0.0; layers];
     for i in (0..layers).rev() {
         let above: f64 = (i + 1..layers.min(i + 1 + LOOK_AHEAD + TAIL))
@@ -473,7 +480,7 @@ impl EdgeShifts {
         spacing: f64,
     ) -> EdgeShifts {
         let t0 = model.threshold(0.5 * model.layer_mm, Some(0));
-        let bounds = (-OUT_PX, profile.growth(NEAR as f64));
+        let bounds = (-OUT_PX, profile.inward_limit_px());
         let mut out = EdgeShifts::default();
         let mut at = Point {
             d: vec![0.0; look.upper.len()],

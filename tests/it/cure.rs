@@ -534,6 +534,45 @@ fn z_correction_puts_an_overhangs_cured_bottom_within_a_layer_of_the_cad() {
     assert!(px.iter().filter(|&&v| v == 255).count() > 90 * 90);
 }
 
+/// A 25 mm cube on an edge (turned 45° about x) with supports on the hybrid profile: the
+/// ridge's first layer is a strip under three pixels wide, which the correction leaves to
+/// the print-through of the wider layers above (its own light moved in past its edges), so
+/// its masks light a few pixels of a section of hundreds. `run` allows the correction that
+/// move and passes the job.
+#[test]
+fn a_cube_on_its_edge_whose_first_ridge_layer_the_layers_above_cure_runs_clean() {
+    let dir = tempdir("cure-ridge");
+    let model = dir.join("cube.stl");
+    write_stl(&model, &box_tris([0.0, 0.0, 0.0], [25.0, 25.0, 25.0]));
+    let args = [
+        "--supports",
+        "--profile",
+        "hybrid-bottomup",
+        "--rotate",
+        "45,0,0",
+    ];
+    let o = run_in(
+        &dir,
+        &[
+            &["slice", model.to_str().unwrap(), "-q", "-o", "c.dmdjob"][..],
+            &args,
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("c.dmdjob/job.json")).unwrap()).unwrap();
+    let p = job["cure"]["pixel_mm"].as_f64().unwrap();
+    // A layer lighting under a tenth of its section.
+    let starved = job["layers"].as_array().unwrap().iter().any(|l| {
+        let lit = l["masks"][0]["pixels"]["lit_px"].as_f64().unwrap();
+        lit < 0.1 * l["area_mm2"].as_f64().unwrap() / (p * p)
+    });
+    assert!(starved, "no layer left to the layers above");
+    let o = run_in(&dir, &["run", "-q", "c.dmdjob"]);
+    assert!(o.status.success(), "{}{}", stdout(&o), stderr(&o));
+}
+
 /// A part that widens upwards (a square frustum on its small end, 45° sides): `xyz` draws
 /// each layer only where the layers below it also hold the section, so its masks light less
 /// than the section's largest inscribed circle would; `run` takes that for the Z

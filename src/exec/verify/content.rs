@@ -21,7 +21,8 @@
 //!   and one for an area of a pixel or more. In every mode the pixels wholly inside the
 //!   section's largest inscribed circle (radius `max_fill_distance_mm`, less the
 //!   pre-warp's tolerance) are fully covered and lit: at least max(1, π(r/p − √2)²) of
-//!   them once r ≥ √2·p, spanning 2(r/p − √2) px across.
+//!   them once r ≥ √2·p, spanning 2(r/p − √2) px across. With the cure correction both
+//!   rules shrink by the farthest it may move an edge in ([`inward_px`]).
 //!
 //! With the Z correction (`cure.held_back_layers` > 0) a layer's masks light only what the
 //! layers below it also hold, so the last rule is not applied to such jobs.
@@ -34,6 +35,7 @@
 use super::{box_text, problem};
 use crate::bundle::machine::Machine;
 use crate::bundle::{BundleSource, Layer, Manifest, MaskPixels, MaskRef};
+use crate::cure::shift::EdgeProfile;
 use crate::exec::{Kind, Violation};
 use crate::text::number;
 
@@ -66,8 +68,20 @@ pub(super) struct ContentRule {
     exact_area: bool,
     /// Binary masks of one projector without compensation: every lit pixel is 255.
     binary: bool,
-    /// How far the cure correction moved the edges in, px (0 without it).
+    /// How far the cure correction may move the edges in, px (0 without it).
     shift_px: f64,
+}
+
+/// How far the cure correction `c` may move an edge in, px: its closed-form shift, or, where
+/// the layers above's print-through cures the section's edge (a thin first layer under
+/// thicker ones), as far as the layer's own light at the edge falls to nothing
+/// ([`EdgeProfile::inward_limit_px`]).
+fn inward_px(c: &crate::bundle::Cure) -> f64 {
+    let psf = crate::cure::Psf {
+        sigma_px: c.psf_sigma_px,
+    };
+    let limit = (c.psf_sigma_px > 0.0).then(|| EdgeProfile::new(&psf).inward_limit_px());
+    c.shift_px.max(limit.unwrap_or(0.0)).max(0.0)
 }
 
 impl ContentRule {
@@ -113,7 +127,7 @@ impl ContentRule {
                 .cure
                 .as_ref()
                 .filter(|_| corrected)
-                .map_or(0.0, |c| c.shift_px.max(0.0)),
+                .map_or(0.0, inward_px),
         }
     }
 
@@ -355,21 +369,50 @@ mod tests {
         verify(dir, &m)
     }
 
+    /// A cure record of a job corrected with `correction`, `held` layers held back.
+    fn cure_record(correction: &str, held: u32) -> crate::bundle::Cure {
+        serde_json::from_value(serde_json::json!({
+            "psf_sigma_px": 0.5, "pixel_mm": PX, "dp_mm": 0.15, "ec_mj_cm2": 10.0,
+            "overcure_mm": 0.03, "layer_mm": 0.1, "edge_threshold": 0.2,
+            "correction": correction, "shift_px": 0.49,
+            "print_through_mm": 0.2, "held_back_layers": held
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn a_corrected_thin_strip_may_be_left_to_the_print_through_of_the_layers_above() {
+        let dir = Scratch::new("strip");
+        // A strip about 2.9 px wide (its inscribed circle 1.45 px in radius) lit at 4 px:
+        // too few uncorrected, or moved in by the closed-form shift (0.49 px) alone, but
+        // the correction may move its edges in until the layer's own light there falls to
+        // nothing (1.46 px at σ = 0.5 px), where the layers above cure it.
+        let few = lit_png(18, 8, 20, 10);
+        let strip = |m: &mut Manifest, correction: &str| {
+            m.layers[0].max_fill_distance_mm = 1.45 * PX;
+            m.cure = Some(cure_record(correction, 0));
+        };
+        assert_eq!(
+            found(&verify_one(&dir, &few, |m| strip(m, "off"))),
+            content(&[0])
+        );
+        assert_eq!(found(&verify_one(&dir, &few, |m| strip(m, "xy"))), vec![]);
+        let mut c = cure_record("xy", 0);
+        c.psf_sigma_px = 0.0;
+        let v = verify_one(&dir, &few, |m| {
+            m.layers[0].max_fill_distance_mm = 1.45 * PX;
+            m.cure = Some(c.clone());
+        });
+        assert_eq!(found(&v), content(&[0]), "without a PSF: the shift alone");
+    }
+
     #[test]
     fn held_back_layers_may_light_less_than_their_section() {
         let dir = Scratch::new("held");
         // A section of 200 px whose mask lights nothing: the first layer of an overhang
         // the Z correction holds back.
         let dark = gray_png(64, 48, |_, _| 0);
-        let cure = |held: u32| -> Option<crate::bundle::Cure> {
-            serde_json::from_value(serde_json::json!({
-                "psf_sigma_px": 0.5, "pixel_mm": PX, "dp_mm": 0.15, "ec_mj_cm2": 10.0,
-                "overcure_mm": 0.03, "layer_mm": 0.1, "edge_threshold": 0.2,
-                "correction": if held > 0 { "xyz" } else { "xy" }, "shift_px": 0.49,
-                "print_through_mm": 0.2, "held_back_layers": held
-            }))
-            .unwrap()
-        };
+        let cure = |held: u32| Some(cure_record(if held > 0 { "xyz" } else { "xy" }, held));
         assert_eq!(found(&verify_one(&dir, &dark, |_| {})), content(&[0]));
         assert_eq!(
             found(&verify_one(&dir, &dark, |m| m.cure = cure(0))),
