@@ -90,12 +90,13 @@ fn unheld_error(
         ),
         None => "; `dmdsl run` would reject the job: orient the part so that the region rests on the layer below".into(),
     };
+    // From "layer N:" on: the mask file it names was not written.
+    let m = &first.message;
+    let from = first.layer.and_then(|l| m.find(&format!("layer {l}: ")));
+    let what = &m[from.unwrap_or(0)..];
     Error::Job {
         path: path.into(),
-        msg: format!(
-            "the supports do not hold every region: {}{more}{hint}",
-            first.message
-        ),
+        msg: format!("the supports do not hold every region: {what}{more}{hint}"),
     }
 }
 
@@ -104,21 +105,21 @@ fn unheld_error(
 pub(super) fn plain_warning(cure: &CureJob) -> Option<Warning> {
     let plain = cure.plain();
     let (&first, n) = (plain.first()?, plain.len() as u64);
-    // Consecutive layers as one span.
-    let mut spans: Vec<(usize, usize)> = Vec::new();
+    // Consecutive layers as one range.
+    let mut ranges: Vec<(usize, usize)> = Vec::new();
     for &l in plain {
-        match spans.last_mut() {
+        match ranges.last_mut() {
             Some(s) if s.1 + 1 == l => s.1 = l,
-            _ => spans.push((l, l)),
+            _ => ranges.push((l, l)),
         }
     }
     let shown = first_of(
-        spans.iter().map(|&(a, b)| match a == b {
+        ranges.iter().map(|&(a, b)| match a == b {
             true => a.to_string(),
             false => format!("{a}-{b}"),
         }),
-        (6, spans.len()),
-        ("span", "spans"),
+        (6, ranges.len()),
+        ("range", "ranges"),
     );
     let w = Warning::new(
         "cure.layers-uncorrected",
@@ -176,7 +177,7 @@ mod tests {
         };
         let e = unheld_error(Path::new("part.stl"), &first, 3, Some(&cure)).to_string();
         assert!(
-            e.starts_with("part.stl: the supports do not hold every region: p.dmdjob/masks/00041.png: layer 41: 1 region rests on nothing (and 2 more layers); with 4 layers drawn without the cure correction"),
+            e.starts_with("part.stl: the supports do not hold every region: layer 41: 1 region rests on nothing (and 2 more layers); with 4 layers drawn without the cure correction"),
             "{e}"
         );
         assert!(e.contains("--cure-correction off"), "{e}");
