@@ -12,14 +12,15 @@ use std::path::Path;
 
 /// Passes of the pipeline after the first, at most, that draw more layers plain before
 /// a job whose corrected masks leave regions on nothing is refused ([`made_held`]).
-const PLAIN_PASSES: usize = 3;
+const PLAIN_PASSES: usize = 4;
 
 /// Makes the job with `cure`. A job with supports whose corrected masks leave regions
 /// that `dmdsl run` finds on nothing ([`crate::exec::unheld_regions`]: the correction
 /// moved in or broke up the first layers of a thin feature, and what cures of the layer
-/// below misses what rests on it) is made again with each such layer and the one below
-/// drawn as without the correction ([`CureJob::drawn_plain`]), up to
-/// [`PLAIN_PASSES`] more times; a job that still has such regions, or any job with
+/// below misses what rests on it) is made again with the layer below each such layer
+/// (with the Z correction also the layers it held back) drawn as without the correction
+/// ([`CureJob::drawn_plain`]), and the layer itself once those are, up to [`PLAIN_PASSES`]
+/// more times; a job that still has such regions, or any job with
 /// supports and no correction that has some, is an error naming the first, so that no
 /// job `slice` writes fails `run` that way.
 pub(super) fn made_held(
@@ -36,10 +37,14 @@ pub(super) fn made_held(
         let more = |c: &CureJob| {
             let mut plain = c.plain().to_vec();
             let k = plain.len();
-            // The layer below, and with the Z correction the layers it held back.
+            // The layer below, and with the Z correction the layers it held back; the layer
+            // itself once those are plain.
             let span = 1 + c.held_back();
             for l in unheld.iter().filter_map(|v| v.layer) {
-                plain.extend(l.saturating_sub(span)..=l);
+                match plain.contains(&l.saturating_sub(1)) {
+                    true => plain.push(l),
+                    false => plain.extend(l.saturating_sub(span)..l),
+                }
             }
             plain.sort_unstable();
             plain.dedup();
@@ -124,7 +129,7 @@ pub(super) fn plain_warning(cure: &CureJob) -> Option<Warning> {
     let w = Warning::new(
         "cure.layers-uncorrected",
         format!(
-            "cure: {n} {} drawn without the cure correction ({} {}): corrected, {} left regions of the layer above on nothing that the supports do not hold",
+            "cure: {n} {} drawn without the cure correction ({} {}): corrected, {} left regions on nothing that the supports do not hold",
             plural(n, "layer", "layers"),
             plural(n, "layer", "layers"),
             shown.replace("; ", ", "),

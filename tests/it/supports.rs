@@ -569,9 +569,9 @@ fn a_neck_the_correction_cuts_is_drawn_back_and_the_fine_bunny_runs_clean() {
 }
 
 /// bunny00 turned 60° about x and 20° about z, with binary masks: the correction breaks
-/// up the first layers of a thin feature over a support (layers 159 and 160), and `run`
-/// finds a region on nothing above them. The slicer finds it before it writes the job,
-/// draws those layers without the correction and says so; `run` passes.
+/// up the first layer of a thin feature over a support (layer 159), and `run` finds a
+/// region on nothing above it. The slicer finds it before it writes the job, draws that
+/// layer without the correction and says so; `run` passes.
 #[test]
 fn layers_the_correction_leaves_unheld_are_drawn_uncorrected_and_the_job_runs_clean() {
     let dir = tempdir("supports-plain");
