@@ -51,7 +51,7 @@ for m in "$MODELS"/*.stl; do
       fi
       if grep -q "cure.layers-uncorrected" "$OUT/slice.txt"; then
         plain=$((plain + 1))
-        echo "UNCORRECTED $(basename "$m") [$a] .$ext: $(grep -o 'cure: [0-9]* layers\? drawn without the cure correction ([^)]*)' "$OUT/slice.txt")"
+        echo "UNCORRECTED $(basename "$m") [$a] .$ext: $(grep -o 'cure: [0-9]* layers\? ([^)]*) drawn [^:]*' "$OUT/slice.txt")"
       fi
       if ! "$BIN" run -q "$f" > /dev/null 2>&1; then
         bad=$((bad + 1))

@@ -137,17 +137,29 @@ pub struct Cure {
     /// Layers of downward-facing surfaces held back (`xyz`).
     #[serde(default)]
     pub held_back_layers: u32,
-    /// The layers drawn without the correction (XY and Z, as with "off"): corrected, they
-    /// left a region of the layer above that a job with supports must hold on nothing
-    /// (docs/CURE.md, "Layers drawn uncorrected").
+    /// The layers drawn whole without the correction (XY and Z, as with "off"):
+    /// corrected, they left a region of the layer above that a job with supports must hold
+    /// on nothing (docs/CURE.md, "Layers drawn uncorrected").
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub uncorrected_layers: Vec<u64>,
+    /// The windows of layers drawn without the correction around such regions.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub uncorrected_windows: Vec<UncorrectedWindow>,
     /// The predicted cure (`slice --predict`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted: Option<CurePrediction>,
     /// The flat features over nothing the Z correction drops whole (`xyz` only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dropped: Option<DroppedFeatures>,
+}
+
+/// A window of a layer drawn without the cure correction ([`Cure::uncorrected_windows`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UncorrectedWindow {
+    /// Its layer.
+    pub layer: u64,
+    /// Its pixels on the field: first column, first row, end column, end row (exclusive).
+    pub box_px: [u64; 4],
 }
 
 /// Flat features over nothing thinner than the held-back layers, which the Z correction

@@ -292,6 +292,8 @@ pub struct Region {
     pub pixels: u64,
     /// Centre of its pixels: column and row (pixel centres at +0.5; row 0 at the top).
     pub col_row: [f64; 2],
+    /// The box of its pixels: first column, first row, end column, end row (exclusive).
+    pub box_px: [u32; 4],
 }
 
 impl Region {
@@ -328,25 +330,31 @@ pub fn resting_regions(cur: &[Run], below: &[Run]) -> Option<(Vec<u32>, Vec<bool
 /// Size and centre of the regions of `cur` (each run's region in `region`) that `pick`
 /// selects, in region order.
 pub fn regions_of(cur: &[Run], region: &[u32], pick: &[bool]) -> Vec<Region> {
-    // Per region: pixels, Σ column centres, Σ row centres.
-    let mut sums = vec![(0u64, 0.0, 0.0); pick.len()];
+    // Per region: pixels, Σ column centres, Σ row centres, box.
+    let mut sums = vec![(0u64, 0.0, 0.0, [u32::MAX, u32::MAX, 0, 0]); pick.len()];
     for (&g, r) in region.iter().zip(cur) {
         let len = u64::from(r[2] - r[1]);
         let [row, c0, c1] = r.map(f64::from);
         let t = &mut sums[g as usize];
-        *t = (
-            t.0 + len,
-            t.1 + (c0 + c1) / 2.0 * (c1 - c0),
-            t.2 + (row + 0.5) * (c1 - c0),
-        );
+        let b = &mut t.3;
+        *b = [
+            b[0].min(r[1]),
+            b[1].min(r[0]),
+            b[2].max(r[2]),
+            b[3].max(r[0] + 1),
+        ];
+        t.0 += len;
+        t.1 += (c0 + c1) / 2.0 * (c1 - c0);
+        t.2 += (row + 0.5) * (c1 - c0);
     }
     (0..pick.len())
         .filter(|&g| pick[g])
         .map(|g| {
-            let (k, sc, sr) = sums[g];
+            let (k, sc, sr, box_px) = sums[g];
             Region {
                 pixels: k,
                 col_row: [sc / k as f64, sr / k as f64],
+                box_px,
             }
         })
         .collect()
@@ -486,14 +494,16 @@ mod tests {
                     1,
                     Region {
                         pixels: 6,
-                        col_row: [11.5, 3.0]
+                        col_row: [11.5, 3.0],
+                        box_px: [10, 2, 13, 4],
                     }
                 ),
                 (
                     4,
                     Region {
                         pixels: 1,
-                        col_row: [0.5, 9.5]
+                        col_row: [0.5, 9.5],
+                        box_px: [0, 9, 1, 10],
                     }
                 )
             ]

@@ -125,6 +125,31 @@ impl DroppedScan {
     }
 }
 
+/// Holds a layer's coverage `m` back to that of a layer below, `below`, inside `lit`:
+/// each pixel takes at most its coverage there.
+pub fn hold_back(m: &mut Mask, below: &Mask, lit: PixelBox) {
+    let w = m.width as usize;
+    for r in lit.rows() {
+        let (row, b) = (
+            &mut m.data[r * w..][lit.cols()],
+            &below.data[r * w..][lit.cols()],
+        );
+        row.iter_mut().zip(b).for_each(|(v, b)| *v = (*v).min(*b));
+    }
+}
+
+/// Whether each pixel of `m` inside `lit` (row-major) is lit (coverage ≥ 50 %); empty
+/// unless `wanted`.
+pub fn lit_pixels_of(m: &Mask, lit: PixelBox, wanted: bool) -> Vec<bool> {
+    if !wanted {
+        return Vec::new();
+    }
+    let w = m.width as usize;
+    lit.rows()
+        .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

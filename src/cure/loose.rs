@@ -59,6 +59,11 @@ impl Drawn {
         }
     }
 
+    /// The same box of `m`, drawn again after it (curing at the same threshold).
+    pub fn redrawn(self, m: &Mask) -> Drawn {
+        Drawn::of(m, self.lit, self.t)
+    }
+
     /// The coverage at mask index `k`.
     fn at(&self, k: usize) -> u8 {
         let (r, c) = (k / self.width, k % self.width);

@@ -563,20 +563,34 @@ pub fn replay(manifest: &Manifest) -> Vec<Violation> {
     violations
 }
 
-/// The `unsupported-region` violations [`run`] finds in a job with supports before it is
-/// written (`source`: its files so far; `runs`: each layer's lit runs on the field, as
-/// [`crate::bundle::regions::lit_runs`] finds them in its masks), one per layer, in layer
-/// order: regions as large as a support head's contact that rest on nothing in the layer
-/// below (on a corrected job, by what cures). Empty for a job without supports.
+/// The regions [`run`] finds on nothing in a job with supports ([`unheld_regions`]).
+#[derive(Debug, Default)]
+pub struct Unheld {
+    /// One `unsupported-region` violation per layer that has such regions, in layer order.
+    pub violations: Vec<Violation>,
+    /// Each such region: its layer and the box of its pixels on the field (first column,
+    /// first row, end column, end row).
+    pub regions: Vec<(usize, [u32; 4])>,
+}
+
+/// What [`run`] finds of a job with supports before it is written (`source`: its files
+/// so far; `runs`: each layer's lit runs on the field, as
+/// [`crate::bundle::regions::lit_runs`] finds them in its masks): the regions as large as
+/// a support head's contact that rest on nothing in the layer below (on a corrected job,
+/// by what cures). Empty for a job without supports.
 pub fn unheld_regions<R: AsRef<[Run]>>(
     source: &dyn BundleSource,
     manifest: &Manifest,
     runs: &[Option<R>],
-) -> Vec<Violation> {
+) -> Unheld {
     if manifest.supports.is_none() {
-        return Vec::new();
+        return Unheld::default();
     }
-    printable::check(source, manifest, &manifest.machine, runs).violations
+    let p = printable::check(source, manifest, &manifest.machine, runs);
+    Unheld {
+        violations: p.violations,
+        regions: p.held,
+    }
 }
 
 #[cfg(test)]

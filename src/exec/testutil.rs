@@ -110,6 +110,7 @@ pub fn cure_record(correction: &str) -> Cure {
         print_through_mm: m.print_through_mm(None),
         held_back_layers: 0,
         uncorrected_layers: Vec::new(),
+        uncorrected_windows: Vec::new(),
         predicted: None,
         dropped: None,
     }

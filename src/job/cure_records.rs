@@ -1,12 +1,13 @@
 //! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
 //! edge errors of all layers, and the manifest's record and warnings.
 
+use super::uncorrected::{Saved, Uncorrected};
 use crate::bundle::machine::Projector;
 use crate::bundle::{
     self, BundleSource, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
     Manifest,
 };
-use crate::cure::held_back::{Dropped, DroppedScan};
+use crate::cure::held_back::{self, Dropped, DroppedScan};
 use crate::cure::predict::{self, EdgeSample, Histogram};
 use crate::cure::psf::{AxisTable, Psf};
 use crate::cure::segments::Segments;
@@ -72,9 +73,9 @@ pub(super) struct CureJob {
     /// A hybrid job's continuous dose against a normal layer's (the layer height at the
     /// continuous speed): whether a layer prints continuously is planned after it is drawn.
     continuous: Option<f64>,
-    /// The layers drawn as without the correction (sorted): corrected, they left a region
+    /// Where layers are drawn as without the correction: corrected, they left a region
     /// of the layer above on nothing ([`CureJob::drawn_plain`]).
-    plain: Vec<usize>,
+    plain: Uncorrected,
 }
 
 /// The layer with the largest mean absolute edge error: what its picture shows, in the
@@ -286,33 +287,32 @@ impl CureJob {
                 let s = model.layer_mm / h.continuous_speed_mm_s.get();
                 s / profile.exposure.layer_s.get()
             }),
-            plain: Vec::new(),
+            plain: Uncorrected::default(),
         }))
     }
 
-    /// The same job with `layers` drawn as without the correction, XY and Z (as
+    /// The same job with `plain` drawn as without the correction, XY and Z (as
     /// `--cure-correction off` draws them).
-    pub fn drawn_plain(mut self, mut layers: Vec<usize>) -> CureJob {
-        layers.sort_unstable();
-        layers.dedup();
-        self.plain = layers;
+    pub fn drawn_plain(mut self, plain: Uncorrected) -> CureJob {
+        self.plain = plain;
         self
     }
 
-    /// The layers drawn as without the correction.
-    pub fn plain(&self) -> &[usize] {
+    /// Where layers are drawn as without the correction.
+    pub fn plain(&self) -> &Uncorrected {
         &self.plain
     }
 
-    /// Whether layer `i`'s edges are moved ([`CureJob::corrects`], and not drawn plain).
+    /// Whether layer `i`'s edges are moved ([`CureJob::corrects`], and it is not drawn
+    /// plain whole).
     pub fn corrects_at(&self, i: usize) -> bool {
-        self.corrects() && self.plain.binary_search(&i).is_err()
+        self.corrects() && !self.plain.whole(i)
     }
 
-    /// Whether layer `i` is drawn through [`CureJob::draw`] ([`CureJob::active`], and not
-    /// drawn plain).
+    /// Whether layer `i` is drawn through [`CureJob::draw`] ([`CureJob::active`], and it
+    /// is not drawn plain whole).
     pub fn active_at(&self, i: usize) -> bool {
-        self.active() && self.plain.binary_search(&i).is_err()
+        self.active() && !self.plain.whole(i)
     }
 
     /// Whether layers are drawn through [`CureJob::draw`].
@@ -440,13 +440,14 @@ impl CureJob {
     /// thresholds (`binary`) and compensates (`comp`) it in place. With `xyz` it also finds
     /// the flat features the correction drops whose runs of lit layers end in the layer
     /// below (from [`CureJob::lower_layers`] sections below) or, when `top` (the job's last
-    /// layer), in this one.
+    /// layer), in this one. In the layer's `plain` windows ([`Uncorrected::windows`]) the
+    /// coverage is drawn as without the correction.
     #[allow(clippy::too_many_arguments)]
     pub fn draw(
         &self,
         raster: &Rasterizer,
         section: &[Contour],
-        coverage: Option<(Mask, PixelBox)>,
+        (coverage, plain): (Option<(Mask, PixelBox)>, &[PixelBox]),
         corr: Option<&LayerCorrection>,
         lower: &[&[Contour]],
         rests: &mut dyn FnMut(&[usize]) -> bool,
@@ -470,7 +471,7 @@ impl CureJob {
         // The runs of lit layers ending in this layer (the top) or the one below end where
         // this layer's exact coverage is unlit: taken before the correction changes it.
         let mut ends_here = (held > 0 && top).then(|| DroppedScan::new(&m, lit, |_, _| false));
-        let here = lit_pixels_of(&m, lit, held > 0 && !lower.is_empty());
+        let here = held_back::lit_pixels_of(&m, lit, held > 0 && !lower.is_empty());
         let lit_here = |c: usize, r: usize| {
             lit.rows().contains(&r)
                 && lit.cols().contains(&c)
@@ -484,6 +485,7 @@ impl CureJob {
             widen::small_features(&self.model, (section, &c.backwards), rows, inward)
         });
         let mut saved = (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, inward));
+        let plain = (!plain.is_empty()).then(|| Saved::take(&m, plain));
         if let Some(c) = corr {
             let within = widen::within_section_box(section, self.model.pixel_mm, m.height as f64);
             cure::correct_coverage(&mut m, lit, &c.segs, &c.shifts, within);
@@ -495,13 +497,7 @@ impl CureJob {
                 for (j, below) in lower.iter().enumerate() {
                     let b = raster.coverage(below, s);
                     if j < held {
-                        for r in lit.rows() {
-                            let row = r * m.width as usize;
-                            for c in lit.cols() {
-                                let v = &mut m.data[row + c];
-                                *v = (*v).min(b.data[row + c]);
-                            }
-                        }
+                        held_back::hold_back(&mut m, &b, lit);
                         if let Some(t) = ends_here.as_mut() {
                             t.below(&b);
                         }
@@ -541,7 +537,12 @@ impl CureJob {
             }
             LayerWidened::of(&wd)
         });
-        let drawn = corr.and_then(|c| self.loose(raster, section, (&mut m, drawn_lit), c, below));
+        let mut drawn =
+            corr.and_then(|c| self.loose(raster, section, (&mut m, drawn_lit), c, below));
+        if let Some(p) = plain {
+            p.put_back(&mut m);
+            drawn = drawn.map(|d| d.redrawn(&m));
+        }
         let (p, h) = (self.model.pixel_mm, m.height);
         let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
             .into_iter()
@@ -886,7 +887,15 @@ impl CureJob {
             shift_px: r(self.shift_px),
             print_through_mm: crate::round::plane_mm(m.print_through_mm(None)),
             held_back_layers: self.held_back as u32,
-            uncorrected_layers: self.plain.iter().map(|&i| i as u64).collect(),
+            uncorrected_layers: (self.plain.whole_layers().into_iter())
+                .map(|i| i as u64)
+                .collect(),
+            uncorrected_windows: (self.plain.all_windows())
+                .map(|(i, b)| bundle::UncorrectedWindow {
+                    layer: i as u64,
+                    box_px: [b.c0, b.r0, b.c1, b.r1].map(|v| v as u64),
+                })
+                .collect(),
             predicted: None,
             dropped: (self.held_back > 0).then(|| {
                 self.dropped
@@ -896,18 +905,6 @@ impl CureJob {
             }),
         }
     }
-}
-
-/// Whether each pixel of `m` inside `lit` (row-major) is lit (coverage ≥ 50 %); empty
-/// unless `wanted`.
-fn lit_pixels_of(m: &Mask, lit: PixelBox, wanted: bool) -> Vec<bool> {
-    if !wanted {
-        return Vec::new();
-    }
-    let w = m.width as usize;
-    lit.rows()
-        .flat_map(|r| m.data[r * w..][lit.cols()].iter().map(|&v| v >= 128))
-        .collect()
 }
 
 /// The file of layer `i`'s field coverage in the store of a job of several projectors.

@@ -370,7 +370,7 @@ fn draw(
                 let (m, c) = job.draw(
                     ctx.raster,
                     drawn_section,
-                    coverage,
+                    (coverage, job.plain().windows(layer.index)),
                     drawing.corr.as_ref(),
                     &lower,
                     &mut |px| rests.rests(px),

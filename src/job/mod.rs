@@ -31,6 +31,7 @@ mod placement;
 mod plate;
 mod sink;
 mod supported;
+mod uncorrected;
 mod unheld;
 
 pub use cure_records::CureOptions;

@@ -1,28 +1,33 @@
 //! The regions the supports do not hold: a job with supports is checked as `dmdsl run`
-//! checks its masks before it is written, and the layers whose correction leaves a
-//! region of the layer above on nothing are drawn again without it (docs/CURE.md, "Layers
-//! drawn uncorrected").
+//! checks its masks before it is written, and where the correction leaves a region of
+//! the layer above on nothing the layers are drawn again without it, in windows around
+//! the region or whole ([`super::uncorrected`]; docs/CURE.md, "Layers drawn uncorrected").
 
 use super::cure_records::CureJob;
+use super::uncorrected::window_around;
 use super::{JobInputs, Made};
 use crate::error::{Error, Result};
 use crate::text::{first_of, plural};
 use crate::warning::Warning;
 use std::path::Path;
 
-/// Passes of the pipeline after the first, at most, that draw more layers plain before
-/// a job whose corrected masks leave regions on nothing is refused ([`made_held`]).
-const PLAIN_PASSES: usize = 4;
+/// Passes of the pipeline after the first, at most, that draw more of the job plain
+/// before a job whose corrected masks leave regions on nothing is refused
+/// ([`made_held`]): enough for the four steps of
+/// [`super::uncorrected::Uncorrected::hold`] and a region or two that a pass brings out.
+const PLAIN_PASSES: usize = 6;
 
 /// Makes the job with `cure`. A job with supports whose corrected masks leave regions
 /// that `dmdsl run` finds on nothing ([`crate::exec::unheld_regions`]: the correction
 /// moved in or broke up the first layers of a thin feature, and what cures of the layer
-/// below misses what rests on it) is made again with the layer below each such layer
-/// (with the Z correction also the layers it held back) drawn as without the correction
-/// ([`CureJob::drawn_plain`]), and the layer itself once those are, up to [`PLAIN_PASSES`]
-/// more times; a job that still has such regions, or any job with
-/// supports and no correction that has some, is an error naming the first, so that no
-/// job `slice` writes fails `run` that way.
+/// below misses what rests on it) is made again with more of it drawn as without the
+/// correction ([`CureJob::drawn_plain`]): a window around each such region in the layer
+/// below, then in the region's own layer, then those layers whole (with the Z correction
+/// whole from the first step, the layers it held back with the layer below:
+/// [`super::uncorrected::Uncorrected::hold`]), up to [`PLAIN_PASSES`] more times; a job
+/// that still has such regions, or any job with supports and no correction that has
+/// some, is an error naming the first, so that no job `slice` writes fails `run` that
+/// way.
 pub(super) fn made_held(
     inputs: &JobInputs,
     mut cure: Option<CureJob>,
@@ -31,30 +36,23 @@ pub(super) fn made_held(
     let mut pass = 0;
     loop {
         let unheld = crate::exec::unheld_regions(&made.writer, &made.manifest, &made.field_runs);
-        let Some(first) = unheld.first() else {
+        let Some(first) = unheld.violations.first() else {
             return Ok((made, cure));
         };
+        let f = made.manifest.machine.field();
+        let field = [f.width_px as usize, f.height_px as usize];
         let more = |c: &CureJob| {
-            let mut plain = c.plain().to_vec();
-            let k = plain.len();
-            // The layer below, and with the Z correction the layers it held back; the layer
-            // itself once those are plain.
-            let span = 1 + c.held_back();
-            for l in unheld.iter().filter_map(|v| v.layer) {
-                match plain.contains(&l.saturating_sub(1)) {
-                    true => plain.push(l),
-                    false => plain.extend(l.saturating_sub(span)..l),
-                }
+            let mut plain = c.plain().clone();
+            for &(l, b) in &unheld.regions {
+                plain.hold(c.plain(), l, window_around(b, field), c.held_back());
             }
-            plain.sort_unstable();
-            plain.dedup();
-            (plain.len() > k && pass < PLAIN_PASSES).then_some(plain)
+            (plain != *c.plain() && pass < PLAIN_PASSES).then_some(plain)
         };
         let Some(plain) = cure.as_ref().filter(|c| c.corrects()).and_then(more) else {
             return Err(unheld_error(
                 inputs.part.path,
                 first,
-                unheld.len(),
+                unheld.violations.len(),
                 cure.as_ref(),
             ));
         };
@@ -90,8 +88,8 @@ fn unheld_error(
     };
     let hint = match cure.filter(|c| c.corrects()) {
         Some(c) => format!(
-            "; with {} drawn without the cure correction the job still fails `dmdsl run`: slice with --cure-correction off, or orient the part so that the region rests on the layer below",
-            plural(c.plain().len() as u64, "one layer", &format!("{} layers", c.plain().len())),
+            "; with {} drawn without the cure correction, in part or whole, the job still fails `dmdsl run`: slice with --cure-correction off, or orient the part so that the region rests on the layer below",
+            plural(c.plain().layers().len() as u64, "one layer", &format!("{} layers", c.plain().layers().len())),
         ),
         None => "; `dmdsl run` would reject the job: orient the part so that the region rests on the layer below".into(),
     };
@@ -109,10 +107,43 @@ fn unheld_error(
 /// ([`CureJob::drawn_plain`]), if any.
 pub(super) fn plain_warning(cure: &CureJob) -> Option<Warning> {
     let plain = cure.plain();
-    let (&first, n) = (plain.first()?, plain.len() as u64);
-    // Consecutive layers as one range.
+    let layers = plain.layers();
+    let (&first, n) = (layers.first()?, layers.len() as u64);
+    let whole = plain.whole_layers();
+    let windows = plain.all_windows().count() as u64;
+    let scope = match (windows, whole.len()) {
+        (0, _) => "whole without the cure correction".to_string(),
+        (w, 0) => format!(
+            "without the cure correction in {w} {}",
+            plural(w, "window", "windows")
+        ),
+        (w, k) => format!(
+            "without the cure correction in {w} {} and {k} whole ({})",
+            plural(w, "window", "windows"),
+            ranges(&whole)
+        ),
+    };
+    let (it, layer) = (plural(n, "it", "they"), plural(n, "layer", "layers"));
+    let w = Warning::new(
+        "cure.layers-uncorrected",
+        format!(
+            "cure: {n} {layer} ({}) drawn {scope}: corrected, {it} left regions of the layer above on nothing that the supports do not hold",
+            ranges(&layers),
+        ),
+    );
+    Some(
+        w.with("layers", n)
+            .with("first_layer", first as u64)
+            .with("uncorrected", layers)
+            .with("windows", windows)
+            .with("whole", whole),
+    )
+}
+
+/// `layers` (sorted) as "layer 4" or "layers 4-6, 9", the first six ranges.
+fn ranges(layers: &[usize]) -> String {
     let mut ranges: Vec<(usize, usize)> = Vec::new();
-    for &l in plain {
+    for &l in layers {
         match ranges.last_mut() {
             Some(s) if s.1 + 1 == l => s.1 = l,
             _ => ranges.push((l, l)),
@@ -126,26 +157,18 @@ pub(super) fn plain_warning(cure: &CureJob) -> Option<Warning> {
         (6, ranges.len()),
         ("range", "ranges"),
     );
-    let w = Warning::new(
-        "cure.layers-uncorrected",
-        format!(
-            "cure: {n} {} drawn without the cure correction ({} {}): corrected, {} left regions on nothing that the supports do not hold",
-            plural(n, "layer", "layers"),
-            plural(n, "layer", "layers"),
-            shown.replace("; ", ", "),
-            plural(n, "it", "they"),
-        ),
-    );
-    Some(
-        w.with("layers", n)
-            .with("first_layer", first as u64)
-            .with("uncorrected", plain.to_vec()),
+    let n = layers.len() as u64;
+    format!(
+        "{} {}",
+        plural(n, "layer", "layers"),
+        shown.replace("; ", ", ")
     )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::job::uncorrected::Uncorrected;
     use crate::job::CureOptions;
     use crate::profile::Profile;
 
@@ -156,22 +179,69 @@ mod tests {
             .unwrap()
             .expect("the default machine has a PSF");
         assert!(plain_warning(&cure).is_none());
-        let cure = cure.drawn_plain(vec![12, 8, 9, 12, 40]);
-        assert_eq!(cure.plain(), [8, 9, 12, 40]);
+        let whole = Uncorrected::default().with_whole([12, 8, 9, 12, 40]);
+        let cure = cure.drawn_plain(whole.clone());
+        assert_eq!(cure.plain().layers(), [8, 9, 12, 40]);
         assert!(cure.corrects() && cure.corrects_at(7) && !cure.corrects_at(9));
         assert!(cure.active_at(10) && !cure.active_at(40));
         assert_eq!(cure.record().uncorrected_layers, [8, 9, 12, 40]);
+        assert!(cure.record().uncorrected_windows.is_empty());
         let w = plain_warning(&cure).unwrap();
         assert_eq!(w.code, "cure.layers-uncorrected");
         assert!(
             w.message.starts_with(
-                "cure: 4 layers drawn without the cure correction (layers 8-9, 12, 40)"
+                "cure: 4 layers (layers 8-9, 12, 40) drawn whole without the cure correction: corrected, they left regions of the layer above on nothing"
             ),
             "{}",
             w.message
         );
         assert_eq!(w.fields["first_layer"], 8);
         assert_eq!(w.fields["uncorrected"], serde_json::json!([8, 9, 12, 40]));
+        // Windows: a layer drawn with them is corrected elsewhere.
+        let at = window_around([100, 50, 110, 60], [1024, 768]);
+        let mut once = whole.clone();
+        once.hold(&whole, 31, at, 0);
+        let mut windows = once.clone();
+        windows.hold(&once, 31, at, 0);
+        let cure = CureJob::new(&profile, &CureOptions::default())
+            .unwrap()
+            .unwrap()
+            .drawn_plain(windows);
+        assert!(cure.corrects_at(30) && cure.active_at(31) && !cure.corrects_at(12));
+        let r = cure.record();
+        assert_eq!(r.uncorrected_layers, [8, 9, 12, 40]);
+        let boxes: Vec<_> = r
+            .uncorrected_windows
+            .iter()
+            .map(|w| (w.layer, w.box_px))
+            .collect();
+        assert_eq!(boxes, [(30, [92, 42, 118, 68]), (31, [92, 42, 118, 68])]);
+        let w = plain_warning(&cure).unwrap();
+        assert!(
+            w.message.starts_with(
+                "cure: 6 layers (layers 8-9, 12, 30-31, 40) drawn without the cure correction in 2 windows and 4 whole (layers 8-9, 12, 40): "
+            ),
+            "{}",
+            w.message
+        );
+        assert_eq!(
+            (&w.fields["windows"], &w.fields["whole"]),
+            (&serde_json::json!(2), &serde_json::json!([8, 9, 12, 40]))
+        );
+        let cure = CureJob::new(&profile, &CureOptions::default())
+            .unwrap()
+            .unwrap()
+            .drawn_plain(Uncorrected::default().with_whole([]));
+        assert!(plain_warning(&cure).is_none());
+        let mut one = Uncorrected::default();
+        one.hold(&Uncorrected::default(), 5, at, 0);
+        let cure = cure.drawn_plain(one);
+        let w = plain_warning(&cure).unwrap();
+        assert!(
+            w.message.starts_with("cure: 1 layer (layer 4) drawn without the cure correction in 1 window: corrected, it left"),
+            "{}",
+            w.message
+        );
 
         let first = crate::exec::Violation {
             layer: Some(41),
@@ -182,7 +252,7 @@ mod tests {
         };
         let e = unheld_error(Path::new("part.stl"), &first, 3, Some(&cure)).to_string();
         assert!(
-            e.starts_with("part.stl: the supports do not hold every region: layer 41: 1 region rests on nothing (and 2 more layers); with 4 layers drawn without the cure correction"),
+            e.starts_with("part.stl: the supports do not hold every region: layer 41: 1 region rests on nothing (and 2 more layers); with one layer drawn without the cure correction, in part or whole,"),
             "{e}"
         );
         assert!(e.contains("--cure-correction off"), "{e}");

@@ -569,27 +569,24 @@ fn a_neck_the_correction_cuts_is_drawn_back_and_the_fine_bunny_runs_clean() {
 }
 
 /// bunny00 turned 60° about x and 20° about z, with binary masks: the correction breaks
-/// up the first layer of a thin feature over a support (layer 159), and `run` finds a
-/// region on nothing above it. The slicer finds it before it writes the job, draws that
-/// layer without the correction and says so; `run` passes.
+/// up the first layer of a thin feature over a support (layer 160), and `run` finds a
+/// region on nothing above layer 159. The slicer finds it before it writes the job, draws
+/// layer 159 in a window around the region without the correction (as `--cure-correction
+/// off` draws it there, corrected elsewhere) and says so; `run` passes.
 #[test]
 fn layers_the_correction_leaves_unheld_are_drawn_uncorrected_and_the_job_runs_clean() {
     let dir = tempdir("supports-plain");
     let bunny = fixture("bunny00.stl");
-    let o = run_in(
-        &dir,
-        &[
-            "slice",
-            bunny.to_str().unwrap(),
-            "--supports",
-            "--rotate",
-            "60,0,20",
-            "--binary",
-            "--json",
-            "-o",
-            "b.dmdjob",
-        ],
-    );
+    let bunny = bunny.to_str().unwrap();
+    let args = [
+        "slice",
+        bunny,
+        "--supports",
+        "--rotate",
+        "60,0,20",
+        "--binary",
+    ];
+    let o = run_in(&dir, &[&args[..], &["--json", "-o", "b.dmdjob"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let v: Value = serde_json::from_slice(&o.stdout).unwrap();
     let w = &warnings_of(&v, "cure.layers-uncorrected")[0];
@@ -598,15 +595,62 @@ fn layers_the_correction_leaves_unheld_are_drawn_uncorrected_and_the_job_runs_cl
     let schemas = Schemas::load();
     schemas.assert_valid("job.schema.json", &job);
     schemas.assert_valid("slice-summary.schema.json", &v);
-    let plain = job["cure"]["uncorrected_layers"].as_array().unwrap();
-    assert!(!plain.is_empty() && plain.len() <= 4, "{plain:?}");
-    assert_eq!(w["fields"]["uncorrected"].as_array().unwrap(), plain, "{w}");
-    assert_eq!(w["fields"]["first_layer"], plain[0], "{w}");
+    // One window, no whole layer.
+    assert!(
+        job["cure"].get("uncorrected_layers").is_none(),
+        "{}",
+        job["cure"]
+    );
+    let windows = job["cure"]["uncorrected_windows"].as_array().unwrap();
+    assert_eq!(windows.len(), 1, "{windows:?}");
+    let layer = windows[0]["layer"].as_u64().unwrap();
+    assert_eq!(
+        w["fields"]["uncorrected"],
+        serde_json::json!([layer]),
+        "{w}"
+    );
+    assert_eq!(
+        (&w["fields"]["windows"], &w["fields"]["first_layer"]),
+        (&1.into(), &layer.into()),
+        "{w}"
+    );
     let r = run_in(&dir, &["run", "b.dmdjob", "--json"]);
     assert!(r.status.success(), "{}{}", stdout(&r), stderr(&r));
     assert_no_regions(
         &serde_json::from_slice(&r.stdout).unwrap(),
         "bunny00 turned, binary",
+    );
+    // In the window the layer is as without the correction; outside it, corrected.
+    let o = run_in(
+        &dir,
+        &[
+            &args[..],
+            &["--cure-correction", "off", "-q", "-o", "off.dmdjob"],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mask = |job: &str| read_gray(&dir.join(format!("{job}/masks/{layer:05}.png")));
+    let ((w_px, _, on), (_, _, off)) = (mask("b.dmdjob"), mask("off.dmdjob"));
+    let b: Vec<usize> = windows[0]["box_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let (mut inside, mut outside) = (0, 0);
+    for (k, (a, o)) in on.iter().zip(&off).enumerate() {
+        let (r, c) = (k / w_px as usize, k % w_px as usize);
+        if (b[1]..b[3]).contains(&r) && (b[0]..b[2]).contains(&c) {
+            assert_eq!(a, o, "row {r}, column {c}, in the window");
+            inside += usize::from(*a > 0);
+        } else {
+            outside += usize::from(a != o);
+        }
+    }
+    assert!(
+        inside > 0 && outside > 0,
+        "{inside} lit in the window, {outside} moved outside it"
     );
 }
 

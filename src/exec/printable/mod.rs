@@ -48,6 +48,9 @@ pub struct Printability {
     pub warning: Option<Warning>,
     /// One `unsupported-region` per layer that has such regions, for a job with supports.
     pub violations: Vec<Violation>,
+    /// The regions of `violations`: layer and the box of the region's pixels on the field
+    /// ([`Region::box_px`]).
+    pub held: Vec<(usize, [u32; 4])>,
 }
 
 /// The printability of `manifest`'s job whose layers' lit runs on `machine`'s field are
@@ -62,12 +65,13 @@ pub fn check<R: AsRef<[Run]>>(
     let p = field.pixel_mm;
     let mm = |(layer, g): (usize, Region)| {
         let [x_mm, y_mm] = g.at_mm(field.height_px, p);
-        UnsupportedRegion {
+        let at = UnsupportedRegion {
             layer,
             x_mm,
             y_mm,
             area_mm2: g.area_mm2(p),
-        }
+        };
+        (at, g.box_px)
     };
     // A corrected job's candidates judged by what cures; by gray alone when there is no
     // model to judge by.
@@ -95,6 +99,7 @@ pub fn check<R: AsRef<[Run]>>(
     if regions.is_empty() {
         return out;
     }
+    let (regions, boxes): (Vec<UnsupportedRegion>, Vec<[u32; 4]>) = regions.into_iter().unzip();
     // Without a model, a corrected job's masks are not judged for violations: the
     // correction moves edges in by up to a pixel and counts on the blur to close what
     // that opens (what they leave over nothing is the warning, and `run --cure` predicts
@@ -107,11 +112,11 @@ pub fn check<R: AsRef<[Run]>>(
     match manifest.supports.as_ref().filter(|_| !gray_only) {
         Some(s) => {
             let least = smallest_held_mm2(s);
-            let held: Vec<UnsupportedRegion> = regions
-                .iter()
-                .filter(|g| g.area_mm2 >= least)
-                .copied()
-                .collect();
+            let (held, boxes): (Vec<UnsupportedRegion>, Vec<_>) = (regions.iter().zip(boxes))
+                .filter(|(g, _)| g.area_mm2 >= least)
+                .map(|(g, b)| (*g, (g.layer, b)))
+                .unzip();
+            out.held = boxes;
             out.violations = by_layer(&held)
                 .iter()
                 .map(|l| violation(dir, manifest, l, least))
