@@ -133,28 +133,17 @@ fn encode_rows<'a>(
 
 /// The Adler-32 of an image's PNG scanlines of filter type 0 (each row of `width` bytes
 /// after a 0 byte): what a zlib stream of the unfiltered image ends with, so what the
-/// IDAT of [`encode_gray8`] ends with ([`scanlines_adler32_of`]). Computed by runs of
-/// equal bytes, a row of zeros at once.
+/// IDAT of [`encode_gray8`] ends with ([`scanlines_adler32_of`]). Vectorized
+/// (`simd-adler32`): a compensated mask's rows are runs of a few equal grays at most.
 pub fn scanlines_adler32(width: u32, data: &[u8]) -> u32 {
-    let mut ad = Adler {
-        a: 1,
-        b: 0,
-        pending: 0,
-    };
+    let mut ad = simd_adler32::Adler32::new();
     for row in data.chunks(width.max(1) as usize) {
-        if row.iter().fold(0, |a, &v| a | v) == 0 {
-            ad.run(0, row.len() as u64 + 1);
-            continue;
-        }
-        ad.run(0, 1);
-        let mut i = 0;
-        while i < row.len() {
-            let k = run_len(&row[i..], row[i]);
-            ad.run(row[i], k as u64);
-            i += k;
-        }
+        // The filter byte 0: b += a.
+        let (a, b) = (ad.finish() & 0xffff, ad.finish() >> 16);
+        ad = simd_adler32::Adler32::from_checksum(((b + a) % ADLER_MOD as u32) << 16 | a);
+        ad.write(row);
     }
-    (((ad.b % ADLER_MOD) as u32) << 16) | (ad.a % ADLER_MOD) as u32
+    ad.finish()
 }
 
 /// The Adler-32 at the end of the zlib stream of `png`, a PNG as [`encode_gray8`] writes
@@ -1099,6 +1088,13 @@ mod tests {
                 assert_eq!(scanlines_adler32(w as u32, &d), want);
                 assert_eq!(scanlines_adler32_of(&png), want);
             }
+        }
+        // Every byte value; a field of 255s long enough for the sums to wrap many times.
+        let every: Vec<u8> = (0..=255u8).cycle().take(257 * 300).collect();
+        for (w, d) in [(257, every), (3840, vec![255u8; 3840 * 2160])] {
+            let plain = d.chunks(w).flat_map(|row| [0].iter().chain(row).copied());
+            let (a, b) = adler_bytewise(plain);
+            assert_eq!(scanlines_adler32(w as u32, &d), (b << 16 | a) as u32);
         }
     }
 
