@@ -66,6 +66,13 @@ pub struct SmallFeature {
     backwards: bool,
 }
 
+impl SmallFeature {
+    /// The pixels its outer contour's bounding box touches.
+    pub fn pixels(&self) -> PixelBox {
+        self.pixels
+    }
+}
+
 /// What [`widen`] did to a layer.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Widening {

@@ -1,7 +1,7 @@
 //! The cure model in a job: each layer's correction and prediction (`crate::cure`), the
 //! edge errors of all layers, and the manifest's record and warnings.
 
-use super::uncorrected::{Saved, Uncorrected};
+use super::uncorrected::{covered, Saved, Uncorrected};
 use crate::bundle::machine::Projector;
 use crate::bundle::{
     self, BundleSource, CurePrediction, DroppedFeatures, EdgeError, FeatureBox, Layer, LayerCure,
@@ -477,13 +477,14 @@ impl CureJob {
                 && lit.cols().contains(&c)
                 && here[(r - lit.r0) * lit.cols().len() + (c - lit.c0)]
         };
-        // Small features (geometry only) and their uncorrected coverage, for the narrow
-        // ones the correction would starve.
+        // Small features (geometry only; not those plain windows draw, as `off` would) and
+        // their uncorrected coverage, for the narrow ones the correction would starve.
         let inward = corr.map_or(0.0, |c| c.shifts.range().1);
         let rows = m.height as f64;
-        let small = corr.map_or(Vec::new(), |c| {
+        let mut small = corr.map_or(Vec::new(), |c| {
             widen::small_features(&self.model, (section, &c.backwards), rows, inward)
         });
+        small.retain(|f| !covered(plain, f.pixels()));
         let mut saved = (!small.is_empty()).then(|| widen::Uncorrected::take(&m, &small, inward));
         let plain = (!plain.is_empty()).then(|| Saved::take(&m, plain));
         if let Some(c) = corr {
@@ -537,12 +538,11 @@ impl CureJob {
             }
             LayerWidened::of(&wd)
         });
-        let mut drawn =
-            corr.and_then(|c| self.loose(raster, section, (&mut m, drawn_lit), c, below));
-        if let Some(p) = plain {
-            p.put_back(&mut m);
-            drawn = drawn.map(|d| d.redrawn(&m));
-        }
+        let drawn = corr.and_then(|c| self.loose(raster, section, (&mut m, drawn_lit), c, below));
+        let drawn = match plain {
+            Some(p) => p.put_back(&mut m, drawn),
+            None => drawn,
+        };
         let (p, h) = (self.model.pixel_mm, m.height);
         let dropped: Vec<(usize, LayerDropped)> = [(1, ends_below), (0, ends_here)]
             .into_iter()

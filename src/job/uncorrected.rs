@@ -2,6 +2,7 @@
 //! around the regions their correction left on nothing, and whole layers where a window
 //! is not enough ([`super::unheld`]; docs/CURE.md, "Layers drawn uncorrected").
 
+use crate::cure::loose::Drawn;
 use crate::raster::{Mask, PixelBox};
 use std::collections::BTreeMap;
 
@@ -113,6 +114,11 @@ fn overlaps(a: &PixelBox, b: &PixelBox) -> bool {
     a.r0 < b.r1 && b.r0 < a.r1 && a.c0 < b.c1 && b.c0 < a.c1
 }
 
+/// Whether one of `windows` holds every pixel of `b`.
+pub fn covered(windows: &[PixelBox], b: PixelBox) -> bool {
+    windows.iter().any(|w| contains(w, &b))
+}
+
 /// Whether `outer` holds every pixel of `inner`.
 fn contains(outer: &PixelBox, inner: &PixelBox) -> bool {
     outer.r0 <= inner.r0 && outer.c0 <= inner.c0 && inner.r1 <= outer.r1 && inner.c1 <= outer.c1
@@ -154,8 +160,14 @@ impl Saved {
         Saved { windows }
     }
 
-    /// Puts the saved coverage back into `m`.
-    pub fn put_back(&self, m: &mut Mask) {
+    /// Puts the saved coverage back into `m`, and redraws `drawn`, the layer as drawn for
+    /// the next layer's loose pieces, from it.
+    pub fn put_back(&self, m: &mut Mask, drawn: Option<Drawn>) -> Option<Drawn> {
+        self.put_back_in(m);
+        drawn.map(|d| d.redrawn(m))
+    }
+
+    fn put_back_in(&self, m: &mut Mask) {
         let w = m.width as usize;
         for (b, data) in &self.windows {
             let n = b.cols().len();
@@ -238,6 +250,68 @@ mod tests {
         assert_eq!(u.whole_layers(), [16, 17, 18, 19, 20]);
     }
 
+    /// A pin too thin to cure is drawn wider by the correction, but not in a plain window:
+    /// there the layer is its coverage before the correction, and nothing is counted as
+    /// widened.
+    #[test]
+    fn a_window_draws_as_off_and_widens_nothing() {
+        use crate::cure::shift::Coverage;
+        use crate::job::cure_records::CureJob;
+        use crate::job::CureOptions;
+        use crate::raster::{Rasterizer, Scratch};
+        let profile = crate::profile::Profile::default_profile();
+        let job = CureJob::new(&profile, &CureOptions::default())
+            .unwrap()
+            .unwrap();
+        let raster = Rasterizer::new(profile.field());
+        let p = profile.field().pixel_mm;
+        let rect = |c0: f64, r0: f64, c1: f64, r1: f64| {
+            let [x0, x1, y0, y1] = [c0 * p, c1 * p, (768.0 - r1) * p, (768.0 - r0) * p];
+            vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+        };
+        // A 0.3 px pin at column 400, row 300, between two blocks.
+        let section = [
+            rect(100.0, 100.0, 120.0, 120.0),
+            rect(400.6, 300.1, 400.9, 300.4),
+            rect(500.0, 400.0, 520.0, 420.0),
+        ];
+        let own = Coverage::draw(&raster, &section, &mut Scratch::default());
+        let corr = job.correction_of((10, 20), (&section, false), &own, &[]);
+        let draw = |windows: &[PixelBox]| {
+            let s = &mut Scratch::default();
+            let c = (None, windows);
+            let r = &mut |_: &[usize]| true;
+            job.draw(
+                &raster,
+                &section,
+                c,
+                corr.as_ref(),
+                &[],
+                r,
+                None,
+                false,
+                s,
+                false,
+                None,
+            )
+        };
+        let (_, corrected) = draw(&[]);
+        assert_eq!(corrected.widened.map(|w| w.features), Some(1));
+        let window = PixelBox::new(290, 310, 390, 410);
+        let (m, plain) = draw(&[window]);
+        assert!(plain.widened.is_none());
+        let off = raster.coverage(&section, &mut Scratch::default());
+        let (corrected, _) = draw(&[]);
+        let w = m.width as usize;
+        for r in 0..m.height as usize {
+            for c in 0..w {
+                let inside = window.rows().contains(&r) && window.cols().contains(&c);
+                let want = if inside { &off } else { &corrected };
+                assert_eq!(m.data[r * w + c], want.data[r * w + c], "({r}, {c})");
+            }
+        }
+    }
+
     #[test]
     fn the_saved_coverage_goes_back_into_its_windows_only() {
         let (w, h) = (8usize, 6usize);
@@ -253,7 +327,7 @@ mod tests {
             data: vec![0; w * h],
             ..m0
         };
-        saved.put_back(&mut m);
+        assert!(saved.put_back(&mut m, None).is_none());
         for r in 0..h {
             for c in 0..w {
                 let inside = windows
