@@ -14,9 +14,10 @@
 //! (windows → blocks → layers, and the bound on what waits), `layer.rs` (one layer's masks
 //! and analysis), `mask_reuse.rs` (masks of equal layers written again), `clock.rs`
 //! (per-thread CPU time), `optics_records.rs` (the light compensation's files and
-//! records), `manifest.rs` (layer records, totals and the rest of the manifest) and
+//! records), `manifest.rs` (layer records, totals and the rest of the manifest),
 //! `unheld.rs` (a job with supports checked for regions on nothing before it is written,
-//! and made again with the layers that leave them drawn without the cure correction).
+//! and made again with what leaves them drawn without the cure correction) and
+//! `uncorrected.rs` (where: windows around those regions, or whole layers).
 
 mod beneath;
 mod clock;
