@@ -143,10 +143,17 @@ pub fn slice_to_bundle(opts: &SliceOptions) -> Result<SliceSummary> {
     let (made_job, cure) = unheld::made_held(&inputs, cure)?;
     let Made {
         writer,
-        manifest,
+        mut manifest,
+        field,
+        predicted_at,
         passes,
         ..
     } = made_job;
+    // Once, on the pass that is written.
+    if let Some(c) = cure.as_ref().filter(|c| c.predicts()) {
+        let files = (&writer, field.as_ref());
+        predict(c, &mut manifest, files, &part, &setup, predicted_at)?;
+    }
     replays_clean(&manifest, part.path)?;
     if control.cancelled() {
         return Err(Error::Interrupted);
@@ -207,11 +214,15 @@ struct Made {
     manifest: bundle::Manifest,
     /// Each layer's masks' lit runs on the field, with supports.
     field_runs: Vec<Option<Arc<[Run]>>>,
+    /// The field's coverage of a job of several projectors, for `--predict`.
+    field: Option<Sink>,
+    /// Where the prediction's warnings go among the manifest's.
+    predicted_at: usize,
     passes: Passes,
 }
 
-/// One pass of the pipeline: the job's layers made with `cure` into a new bundle, planned
-/// and (with `--predict`) their cure predicted.
+/// One pass of the pipeline: the job's layers made with `cure` into a new bundle and
+/// planned (the cure is predicted on the pass that is written, not here).
 fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<Made> {
     let JobInputs {
         opts,
@@ -268,15 +279,13 @@ fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<
     }
     let mut manifest = manifest::manifest(part, profile, planned, optics, distortion, warnings);
     manifest.cure = cure.map(|c| c.record());
-    if let Some(c) = cure.filter(|c| c.predicts()) {
-        let files = (&writer, field.as_ref());
-        predict(c, &mut manifest, files, part, setup, predicted_at)?;
-    }
     something_to_print(&manifest, part.path)?;
     Ok(Made {
         writer,
         manifest,
         field_runs,
+        field,
+        predicted_at,
         passes: Passes {
             slice_s: sliced.slice_s,
             masks_s: sliced.masks_s,
