@@ -163,21 +163,13 @@ impl Saved {
     /// Puts the saved coverage back into `m`, and redraws `drawn`, the layer as drawn for
     /// the next layer's loose pieces, from it.
     pub fn put_back(&self, m: &mut Mask, drawn: Option<Drawn>) -> Option<Drawn> {
-        self.put_back_in(m);
-        drawn.map(|d| d.redrawn(m))
-    }
-
-    fn put_back_in(&self, m: &mut Mask) {
         let w = m.width as usize;
-        for (b, data) in &self.windows {
-            let n = b.cols().len();
-            if n == 0 {
-                continue;
-            }
-            for (r, row) in b.rows().zip(data.chunks_exact(n)) {
+        for (b, data) in self.windows.iter().filter(|(b, _)| !b.cols().is_empty()) {
+            for (r, row) in b.rows().zip(data.chunks_exact(b.cols().len())) {
                 m.data[r * w..][b.cols()].copy_from_slice(row);
             }
         }
+        drawn.map(|d| d.redrawn(m))
     }
 }
 
