@@ -218,8 +218,12 @@ impl Segments {
             cells: Vec::new(),
         };
         grid.index();
-        let rows = grid.row_lists();
-        let contour_of = |i: usize| self.starts.partition_point(|&s| s <= i) - 1;
+        let rows = RowIndex::of(&self.segs);
+        let mut contour = vec![0u32; self.segs.len()];
+        for (k, w) in self.starts.windows(2).enumerate() {
+            contour[w[0]..w[1]].fill(k as u32);
+        }
+        let contour_of = |i: usize| contour[i] as usize;
         let mut out = Vec::with_capacity(self.segs.len());
         let mut interior = Vec::with_capacity(self.segs.len());
         let mut starts = Vec::with_capacity(self.starts.len());
@@ -234,8 +238,9 @@ impl Segments {
                 for w in ts.windows(2) {
                     let at = |t: f64| [0, 1].map(|k| s.a[k] + t * (s.b[k] - s.a[k]));
                     let mid = at((w[0] + w[1]) / 2.0);
-                    let lit = |d| grid.winding(&rows, [0, 1].map(|k| mid[k] + d * s.n[k])) != 0;
-                    let (beyond, behind) = (lit(1e-3), lit(-1e-3));
+                    let off = |d: f64| [0, 1].map(|k| mid[k] + d * s.n[k]);
+                    let (beyond, behind) = rows.windings(off(1e-3), off(-1e-3));
+                    let (beyond, behind) = (beyond != 0, behind != 0);
                     interior.push(beyond && behind);
                     let len = (w[1] - w[0]) * (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);
                     let turn = beyond && !behind;
@@ -317,34 +322,110 @@ impl Segments {
         ts.sort_by(f64::total_cmp);
         ts.dedup_by(|b, a| *b - *a < 1e-9);
     }
+}
 
-    /// Per row of the grid, the edges that reach into it (each once).
-    fn row_lists(&self) -> Vec<Vec<u32>> {
-        let mut rows = vec![Vec::new(); self.rows];
-        for (i, s) in self.segs.iter().enumerate() {
-            let (_, r0) = self.cell(0.0, s.a[1].min(s.b[1]));
-            let (_, r1) = self.cell(0.0, s.a[1].max(s.b[1]));
-            rows[r0..=r1].iter_mut().for_each(|l| l.push(i as u32));
+/// A section's edges by rows one pixel high, for winding numbers: each edge is listed in
+/// every row its span of v meets, so a row holds every edge that a ray along it can cross
+/// and few others; within a row, by their largest u, right to left, so that a ray stops
+/// at the first edge that ends left of it.
+struct RowIndex {
+    /// v of the top of row 0.
+    v0: f64,
+    /// Per row, where its entries begin in `ends` (and the total at the end).
+    start: Vec<u32>,
+    /// The rows' edges: [a.u, a.v, b.u, b.v].
+    ends: Vec<[f64; 4]>,
+}
+
+impl RowIndex {
+    fn of(segs: &[Segment]) -> RowIndex {
+        let v0 = segs
+            .iter()
+            .fold(f64::INFINITY, |m, s| m.min(s.a[1]).min(s.b[1]));
+        let v1 = segs.iter().fold(v0, |m, s| m.max(s.a[1]).max(s.b[1]));
+        let rows = if segs.is_empty() {
+            1
+        } else {
+            (v1 - v0) as usize + 1
+        };
+        let mut index = RowIndex {
+            v0,
+            start: vec![0; rows + 1],
+            ends: Vec::new(),
+        };
+        let span = |s: &Segment| index.row(s.a[1].min(s.b[1]))..=index.row(s.a[1].max(s.b[1]));
+        let spans: Vec<_> = segs.iter().map(span).collect();
+        for r in &spans {
+            index.start[r.start() + 1..=r.end() + 1]
+                .iter_mut()
+                .for_each(|n| *n += 1);
         }
-        rows
-    }
-
-    /// The nonzero winding number of the edges at `p`: signed crossings of the ray from `p`
-    /// along +u, among the edges of `p`'s grid row (`rows`, [`Segments::row_lists`]).
-    fn winding(&self, rows: &[Vec<u32>], p: [f64; 2]) -> i32 {
-        let (_, r) = self.cell(p[0], p[1]);
-        let mut w = 0;
-        for &j in &rows[r] {
-            let s = &self.segs[j as usize];
-            if (s.a[1] <= p[1]) != (s.b[1] <= p[1]) {
-                let t = (p[1] - s.a[1]) / (s.b[1] - s.a[1]);
-                if s.a[0] + t * (s.b[0] - s.a[0]) > p[0] {
-                    w += if s.b[1] > s.a[1] { 1 } else { -1 };
-                }
+        for k in 1..index.start.len() {
+            index.start[k] += index.start[k - 1];
+        }
+        index.ends = vec![[0.0; 4]; *index.start.last().unwrap_or(&0) as usize];
+        let mut fill = index.start.clone();
+        for (s, r) in segs.iter().zip(spans) {
+            for k in r {
+                index.ends[fill[k] as usize] = [s.a[0], s.a[1], s.b[0], s.b[1]];
+                fill[k] += 1;
             }
         }
-        w
+        let right = |e: &[f64; 4]| e[0].max(e[2]);
+        for r in index.start.windows(2) {
+            index.ends[r[0] as usize..r[1] as usize]
+                .sort_unstable_by(|a, b| right(b).total_cmp(&right(a)));
+        }
+        index
     }
+
+    /// The row of v (rows beyond the ends clamped to them).
+    fn row(&self, v: f64) -> usize {
+        ((v - self.v0).max(0.0) as usize).min(self.start.len() - 2)
+    }
+
+    /// The nonzero winding numbers of the edges at `p` and at `q`: signed crossings of the
+    /// rays from them along +u.
+    fn windings(&self, p: [f64; 2], q: [f64; 2]) -> (i32, i32) {
+        let (rp, rq) = (self.row(p[1]), self.row(q[1]));
+        if rp != rq {
+            return (self.winding(p), self.winding(q));
+        }
+        let ends = &self.ends[self.start[rp] as usize..self.start[rp + 1] as usize];
+        let left = p[0].min(q[0]) - LEFT_OF;
+        ends.iter()
+            .take_while(|e| e[0].max(e[2]) >= left)
+            .fold((0, 0), |(a, b), e| (a + crossing(e, p), b + crossing(e, q)))
+    }
+
+    /// The winding number at `p`, as [`RowIndex::windings`].
+    fn winding(&self, p: [f64; 2]) -> i32 {
+        let r = self.row(p[1]);
+        let ends = &self.ends[self.start[r] as usize..self.start[r + 1] as usize];
+        ends.iter()
+            .take_while(|e| e[0].max(e[2]) >= p[0] - LEFT_OF)
+            .map(|e| crossing(e, p))
+            .sum()
+    }
+}
+
+/// An edge that ends this far (px) left of a point cannot cross the ray from it along +u,
+/// rounding included (where [`crossing`] puts the crossing is within a few ulps of the
+/// edge's span).
+const LEFT_OF: f64 = 1e-6;
+
+/// What the edge `e` ([a.u, a.v, b.u, b.v]) adds to the winding number at `p`: ±1 when it
+/// crosses the ray from `p` along +u (upward +1), else 0.
+#[inline(always)]
+fn crossing(e: &[f64; 4], p: [f64; 2]) -> i32 {
+    let [au, av, bu, bv] = *e;
+    if (av <= p[1]) != (bv <= p[1]) {
+        let t = (p[1] - av) / (bv - av);
+        if au + t * (bu - au) > p[0] {
+            return if bv > av { 1 } else { -1 };
+        }
+    }
+    0
 }
 
 /// Whether two contours of `contours` (a section, filled by the nonzero rule) may cross,
@@ -510,6 +591,64 @@ mod tests {
         let (pieces, interior, _) = Segments::edges(&[square, apart], 1.0, 100.0).union_pieces();
         assert_eq!(pieces.segs.len(), 8);
         assert!(interior.iter().all(|&i| !i));
+    }
+
+    /// The row index's winding numbers are those of every edge's crossing: at random
+    /// points, at the edges' end points (rows' and spans' ends) and just off their ends.
+    #[test]
+    fn windings_match_every_edge() {
+        let mut rnd = crate::test_support::xorshift(7);
+        // Random star-shaped contours, both orientations, overlapping.
+        let contours: Vec<Contour> = (0..12)
+            .map(|k| {
+                let (cx, cy, r) = (20.0 * rnd(), 20.0 * rnd(), 1.0 + 6.0 * rnd());
+                let n = 3 + (rnd() * 30.0) as usize;
+                let mut c: Contour = (0..n)
+                    .map(|i| {
+                        let a = std::f64::consts::TAU * i as f64 / n as f64;
+                        let f = r * (0.4 + 0.6 * rnd());
+                        [cx + f * a.cos(), cy + f * a.sin()]
+                    })
+                    .collect();
+                if k % 3 == 0 {
+                    c.reverse();
+                }
+                c
+            })
+            .collect();
+        let segs = Segments::edges(&contours, 0.05, 600.0);
+        let index = RowIndex::of(&segs.segs);
+        let every = |p: [f64; 2]| -> i32 {
+            let e = segs.segs.iter().map(|s| [s.a[0], s.a[1], s.b[0], s.b[1]]);
+            e.map(|e| crossing(&e, p)).sum()
+        };
+        let mut points: Vec<[f64; 2]> = (0..3000)
+            .map(|_| [600.0 * rnd() - 100.0, 600.0 * rnd() + 100.0])
+            .collect();
+        for s in &segs.segs {
+            for p in [s.a, s.b] {
+                for d in [
+                    [0.0, 0.0],
+                    [-1e-3, 0.0],
+                    [1e-3, 0.0],
+                    [0.0, 1e-9],
+                    [0.0, -1e-9],
+                ] {
+                    points.push([p[0] + d[0], p[1] + d[1]]);
+                }
+            }
+        }
+        let mut nonzero = 0;
+        for (k, &p) in points.iter().enumerate() {
+            let q = points[(k * 7 + 1) % points.len()];
+            let near = [p[0] + 1e-3, p[1] - 1e-3];
+            assert_eq!(index.winding(p), every(p), "{p:?}");
+            assert_eq!(index.windings(p, q), (every(p), every(q)), "{p:?} {q:?}");
+            assert_eq!(index.windings(p, near), (every(p), every(near)), "{p:?}");
+            nonzero += usize::from(every(p) != 0);
+        }
+        assert!(nonzero > 1000, "{nonzero}");
+        assert_eq!(RowIndex::of(&[]).windings([1.0, 2.0], [3.0, 4.0]), (0, 0));
     }
 
     /// The grid's ray casts find what testing every edge finds.
