@@ -97,7 +97,6 @@ pub fn generate(
     let pad_layers = ((s.pad_thickness_mm / layer_mm).round() as usize).max(1);
     let spread = points::Spread {
         width: field.width_px,
-        height: field.height_px,
         cover_px: cover_mm / px,
         min_apart_px: s.pillar_diameter_mm / px,
         reach_layers: (cover_mm * tan / layer_mm).ceil() as usize,

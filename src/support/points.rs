@@ -42,10 +42,8 @@ pub struct Point {
 /// How points are spread, in pixels and layers.
 #[derive(Debug, Clone, Copy)]
 pub struct Spread {
-    /// Field size, pixels.
+    /// Field width, pixels.
     pub width: u32,
-    /// Field size, pixels.
-    pub height: u32,
     /// A point covers pixels this close, pixels.
     pub cover_px: f64,
     /// Points of the same reach are never closer, pixels.
@@ -149,10 +147,7 @@ fn needs((masks, cores): (&[Vec<Run>], &[Vec<Run>]), first: usize, l: usize, s: 
         let fresh = runs::minus(cur, prev);
         let j = LOOK_BACK.min(l - first);
         let reach = j as f64 * s.self_px + 1.0;
-        runs::minus(
-            &fresh,
-            &runs::dilated(&masks[l - j], reach, s.width, s.height),
-        )
+        runs::beyond(&fresh, &masks[l - j], reach, s.width)
     };
     for i in &islands {
         down = runs::union(&down, i);
@@ -373,7 +368,6 @@ mod tests {
     fn spread() -> Spread {
         Spread {
             width: 200,
-            height: 200,
             cover_px: 10.0,
             min_apart_px: 5.0,
             reach_layers: 10,

@@ -14,10 +14,24 @@ fn push_merged(out: &mut Vec<Run>, r: Run) {
     }
 }
 
-/// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, inside
-/// `width` × `height`. Row by row: each output row gathers the runs of the rows within
-/// `radius`, each widened by its half-chord, and merges them (a sort of a few runs).
-pub fn dilated(runs: &[Run], radius: f64, width: u32, height: u32) -> Vec<Run> {
+/// The pixels of `a` farther than `radius` pixels (centre to centre) from every pixel of
+/// `runs`: `a` less the dilation of `runs` ([`dilated_rows`]), made in `a`'s rows only.
+pub fn beyond(a: &[Run], runs: &[Run], radius: f64, width: u32) -> Vec<Run> {
+    let mut rows: Vec<u32> = a.iter().map(|r| r[0]).collect();
+    rows.dedup();
+    minus(a, &dilated_rows(runs, radius, width, rows))
+}
+
+/// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, less than
+/// `width` to the right, in the rows `rows` (increasing) only. Row by row: each output row
+/// gathers the runs of the rows within `radius`, each widened by its half-chord, and
+/// merges them (a sort of a few runs).
+fn dilated_rows(
+    runs: &[Run],
+    radius: f64,
+    width: u32,
+    rows: impl IntoIterator<Item = u32>,
+) -> Vec<Run> {
     let (Some(first), Some(last)) = (runs.first(), runs.last()) else {
         return Vec::new();
     };
@@ -37,7 +51,7 @@ pub fn dilated(runs: &[Run], radius: f64, width: u32, height: u32) -> Vec<Run> {
     }
     let mut out = Vec::with_capacity(runs.len() * 2);
     let mut row: Vec<[u32; 2]> = Vec::new();
-    for r in lo.saturating_sub(k)..(hi + k + 1).min(height) {
+    for r in rows {
         row.clear();
         for q in r.saturating_sub(k).max(lo)..=(r + k).min(hi) {
             let w = half[q.abs_diff(r) as usize];
@@ -242,7 +256,7 @@ mod tests {
                     && g[r as usize * w + c as usize]
             };
             let radius = 1.0 + (seed % 5) as f64 * 0.7;
-            let dil = dilated(&a, radius, w as u32, h as u32);
+            let dil = dilated_rows(&a, radius, w as u32, 0..h as u32);
             let k = radius.floor() as i64;
             let brute_dil: Vec<bool> = (0..w * h)
                 .map(|i| {
@@ -255,6 +269,8 @@ mod tests {
                 })
                 .collect();
             assert_eq!(dil, runs_of(&brute_dil, w), "seed {seed}");
+            let far: Vec<bool> = gb.iter().zip(&brute_dil).map(|(&x, &d)| x && !d).collect();
+            assert_eq!(beyond(&b, &a, radius, w as u32), runs_of(&far, w));
             let diff: Vec<bool> = ga.iter().zip(&gb).map(|(&x, &y)| x && !y).collect();
             assert_eq!(minus(&a, &b), runs_of(&diff, w));
             let uni: Vec<bool> = ga.iter().zip(&gb).map(|(&x, &y)| x || y).collect();
