@@ -2,7 +2,9 @@
 """Compares the job.json (and the masks/ and optics/ files) that two dmdsl binaries write.
 
 Usage: compare_jobs.py [--pixels] REF_BIN NEW_BIN OUTDIR CASE...
-  CASE = MODEL.stl[,ARG,ARG...]   (extra `dmdsl slice` arguments, comma-separated)
+  CASE = MODEL.stl[,ARG,ARG...]   (extra `dmdsl slice` arguments, comma-separated; a
+                                   comma inside an argument written as ';', e.g.
+                                   'bunny00.stl,--rotate=60;0;20')
 
 For each case: every value of job.json that differs (path, ref, new; for numbers the
 relative difference), and whether the masks/ and optics/ files are byte-identical.
@@ -63,7 +65,7 @@ def main():
     os.makedirs(outdir, exist_ok=True)
     bad = 0
     for case in cases:
-        model, *args = case.split(",")
+        model, *args = (a.replace(";", ",") for a in case.split(","))
         res = []
         for tag, b in (("ref", ref), ("new", new)):
             d = os.path.join(outdir, tag + ".dmdjob")
