@@ -45,7 +45,12 @@ impl Rasterizer {
     ) {
         let w = self.field.width_px as usize;
         let h = self.field.height_px as usize;
-        // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding).
+        // Edges in pixel coordinates: (x at y_top, dx/dy, y_top, y_bottom, winding); those
+        // that reach the rows drawn.
+        let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+            return;
+        };
+        let (top, bottom) = (first.start as f64, last.end as f64);
         let mut edges: Vec<(f64, f64, f64, f64, i32)> = Vec::new();
         for c in contours {
             for i in 0..c.len() {
@@ -59,7 +64,9 @@ impl Rasterizer {
                 } else {
                     (-1, x1, y1, x0, y0)
                 };
-                edges.push((xa, (xb - xa) / (yb - ya), ya, yb, dir));
+                if ya < bottom && yb > top {
+                    edges.push((xa, (xb - xa) / (yb - ya), ya, yb, dir));
+                }
             }
         }
         edges.sort_by(|a, b| a.2.total_cmp(&b.2));
