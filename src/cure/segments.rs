@@ -27,7 +27,10 @@ pub struct Segments {
     origin: [f64; 2],
     cols: usize,
     rows: usize,
-    cells: Vec<Vec<u32>>,
+    /// The grid's cells, row by row: cell k's edges are `cell_edges[cells[k]..cells[k + 1]]`
+    /// (empty without the index).
+    cells: Vec<u32>,
+    cell_edges: Vec<u32>,
 }
 
 impl Segments {
@@ -94,22 +97,47 @@ impl Segments {
             cols: ((hi[0] - lo[0]) / CELL) as usize + 1,
             rows: ((hi[1] - lo[1]) / CELL) as usize + 1,
             cells: Vec::new(),
+            cell_edges: Vec::new(),
         }
     }
 
     /// Builds the grid index.
     fn index(&mut self) {
-        let mut cells = vec![Vec::new(); self.cols * self.rows];
-        for (i, sg) in self.segs.iter().enumerate() {
-            let (c0, r0) = self.cell(sg.a[0].min(sg.b[0]), sg.a[1].min(sg.b[1]));
-            let (c1, r1) = self.cell(sg.a[0].max(sg.b[0]), sg.a[1].max(sg.b[1]));
-            for r in r0..=r1 {
-                for c in c0..=c1 {
-                    cells[r * self.cols + c].push(i as u32);
+        let spans: Vec<_> = (self.segs.iter())
+            .map(|sg| {
+                let (c0, r0) = self.cell(sg.a[0].min(sg.b[0]), sg.a[1].min(sg.b[1]));
+                let (c1, r1) = self.cell(sg.a[0].max(sg.b[0]), sg.a[1].max(sg.b[1]));
+                (c0..=c1, r0..=r1)
+            })
+            .collect();
+        let mut cells = vec![0u32; self.cols * self.rows + 1];
+        for (cs, rs) in &spans {
+            for r in rs.clone() {
+                for c in cs.clone() {
+                    cells[r * self.cols + c + 1] += 1;
                 }
             }
         }
-        self.cells = cells;
+        for k in 1..cells.len() {
+            cells[k] += cells[k - 1];
+        }
+        let mut fill = cells.clone();
+        let mut cell_edges = vec![0u32; *cells.last().unwrap_or(&0) as usize];
+        for (i, (cs, rs)) in spans.into_iter().enumerate() {
+            for r in rs {
+                for c in cs.clone() {
+                    let k = &mut fill[r * self.cols + c];
+                    cell_edges[*k as usize] = i as u32;
+                    *k += 1;
+                }
+            }
+        }
+        (self.cells, self.cell_edges) = (cells, cell_edges);
+    }
+
+    /// The edges listed in cell `k` (row-major) of the grid.
+    fn in_cell(&self, k: usize) -> &[u32] {
+        &self.cell_edges[self.cells[k] as usize..self.cells[k + 1] as usize]
     }
 
     fn cell(&self, u: f64, v: f64) -> (usize, usize) {
@@ -161,7 +189,7 @@ impl Segments {
             let idx = c[1] * self.cols + c[0];
             if idx != last {
                 last = idx;
-                for &i in &self.cells[idx] {
+                for &i in self.in_cell(idx) {
                     let i = i as usize;
                     if i != skip {
                         if let Some(d) = self.crossing(i, p, dir) {
@@ -216,6 +244,7 @@ impl Segments {
             cols: self.cols,
             rows: self.rows,
             cells: Vec::new(),
+            cell_edges: Vec::new(),
         };
         grid.index();
         let rows = RowIndex::of(&self.segs);
@@ -263,6 +292,7 @@ impl Segments {
             cols: self.cols,
             rows: self.rows,
             cells: Vec::new(),
+            cell_edges: Vec::new(),
         };
         (pieces, interior, backwards)
     }
@@ -279,6 +309,7 @@ impl Segments {
             cols: pieces.cols,
             rows: pieces.rows,
             cells: Vec::new(),
+            cell_edges: Vec::new(),
         };
         for w in pieces.starts.windows(2) {
             out.segs.extend(
@@ -310,7 +341,7 @@ impl Segments {
         let (c1, r1) = grid.cell(s.a[0].max(s.b[0]), s.a[1].max(s.b[1]));
         for r in r0..=r1 {
             for c in c0..=c1 {
-                for &j in &grid.cells[r * grid.cols + c] {
+                for &j in grid.in_cell(r * grid.cols + c) {
                     let j = j as usize;
                     if seen[j] != i && contour_of(j) != own {
                         seen[j] = i;
