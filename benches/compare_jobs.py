@@ -10,7 +10,7 @@ For each case: every value of job.json that differs (path, ref, new; for numbers
 relative difference), and whether the masks/ and optics/ files are byte-identical.
 With --pixels (for a change of the PNG encoding: other bytes, the same images) PNG files
 are compared decoded (Pillow), the SHA-256 fields of job.json are left out, and the PNG
-bytes of both are totalled. Exit status 1 if anything differs.
+bytes of both are totalled. Exit status 1 if anything differs or a binary refuses a case.
 """
 import hashlib, json, os, shutil, subprocess, sys
 
@@ -84,6 +84,12 @@ def main():
         else:
             same_files = fa == fb
         name = os.path.basename(model) + " " + " ".join(args)
+        if ra not in (0, 1) or rb not in (0, 1):
+            # A case both binaries refuse compares nothing: never "same".
+            bad += 1
+            first = (ea or eb).decode(errors="replace").splitlines()[:1]
+            print(f"FAIL {name}: rc {ra}/{rb}: {first[0] if first else ''}")
+            continue
         if pixels:
             sa, sb = (sum(v[1] for k, v in f.items() if k.endswith(".png")) for f in (fa, fb))
             name += f" (PNG bytes {sa} -> {sb}, {100 * (sb / max(sa, 1) - 1):+.1f} %)"
