@@ -1,5 +1,7 @@
 //! A layer's section in pixel coordinates with a grid index of its edges: outward
-//! normals, ray casts (feature widths) and nearest edges (the correction's band).
+//! normals, ray casts (feature widths) and nearest edges (the correction's band); where
+//! shells or supports overlap, the pieces of the edges on the outline of their union
+//! (winding numbers counted over the edges of one-pixel rows).
 
 use crate::slice::Contour;
 
