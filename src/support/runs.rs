@@ -22,8 +22,8 @@ pub fn beyond(a: &[Run], runs: &[Run], radius: f64, width: u32) -> Vec<Run> {
     minus(a, &dilated_rows(runs, radius, width, rows))
 }
 
-/// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, less than
-/// `width` to the right, in the rows `rows` (increasing) only. Row by row: each output row
+/// The pixels within `radius` pixels (centre to centre) of a pixel of `runs`, left of
+/// column `width`, in the rows `rows` (increasing) only. Row by row: each output row
 /// gathers the runs of the rows within `radius`, each widened by its half-chord, and
 /// merges them (a sort of a few runs).
 fn dilated_rows(
