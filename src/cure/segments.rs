@@ -105,36 +105,16 @@ impl Segments {
 
     /// Builds the grid index.
     fn index(&mut self) {
-        let spans: Vec<_> = (self.segs.iter())
-            .map(|sg| {
+        let cols = self.cols;
+        let listed: Vec<_> = (self.segs.iter().enumerate())
+            .map(|(i, sg)| {
                 let (c0, r0) = self.cell(sg.a[0].min(sg.b[0]), sg.a[1].min(sg.b[1]));
                 let (c1, r1) = self.cell(sg.a[0].max(sg.b[0]), sg.a[1].max(sg.b[1]));
-                (c0..=c1, r0..=r1)
+                let cells = (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * cols + c));
+                (cells, i as u32)
             })
             .collect();
-        let mut cells = vec![0u32; self.cols * self.rows + 1];
-        for (cs, rs) in &spans {
-            for r in rs.clone() {
-                for c in cs.clone() {
-                    cells[r * self.cols + c + 1] += 1;
-                }
-            }
-        }
-        for k in 1..cells.len() {
-            cells[k] += cells[k - 1];
-        }
-        let mut fill = cells.clone();
-        let mut cell_edges = vec![0u32; *cells.last().unwrap_or(&0) as usize];
-        for (i, (cs, rs)) in spans.into_iter().enumerate() {
-            for r in rs {
-                for c in cs.clone() {
-                    let k = &mut fill[r * self.cols + c];
-                    cell_edges[*k as usize] = i as u32;
-                    *k += 1;
-                }
-            }
-        }
-        (self.cells, self.cell_edges) = (cells, cell_edges);
+        (self.cells, self.cell_edges) = buckets(cols * self.rows, &listed);
     }
 
     /// The edges listed in cell `k` (row-major) of the grid.
@@ -381,29 +361,15 @@ impl RowIndex {
         } else {
             (v1 - v0) as usize + 1
         };
-        let mut index = RowIndex {
-            v0,
-            start: vec![0; rows + 1],
-            ends: Vec::new(),
-        };
-        let span = |s: &Segment| index.row(s.a[1].min(s.b[1]))..=index.row(s.a[1].max(s.b[1]));
-        let spans: Vec<_> = segs.iter().map(span).collect();
-        for r in &spans {
-            index.start[r.start() + 1..=r.end() + 1]
-                .iter_mut()
-                .for_each(|n| *n += 1);
-        }
-        for k in 1..index.start.len() {
-            index.start[k] += index.start[k - 1];
-        }
-        index.ends = vec![[0.0; 4]; *index.start.last().unwrap_or(&0) as usize];
-        let mut fill = index.start.clone();
-        for (s, r) in segs.iter().zip(spans) {
-            for k in r {
-                index.ends[fill[k] as usize] = [s.a[0], s.a[1], s.b[0], s.b[1]];
-                fill[k] += 1;
-            }
-        }
+        let row = |v: f64| row_at(v0, rows, v);
+        let listed: Vec<_> = (segs.iter())
+            .map(|s| {
+                let span = row(s.a[1].min(s.b[1]))..=row(s.a[1].max(s.b[1]));
+                (span, [s.a[0], s.a[1], s.b[0], s.b[1]])
+            })
+            .collect();
+        let (start, ends) = buckets(rows, &listed);
+        let mut index = RowIndex { v0, start, ends };
         let right = |e: &[f64; 4]| e[0].max(e[2]);
         for r in index.start.windows(2) {
             index.ends[r[0] as usize..r[1] as usize]
@@ -412,9 +378,9 @@ impl RowIndex {
         index
     }
 
-    /// The row of v (rows beyond the ends clamped to them).
+    /// The row of v.
     fn row(&self, v: f64) -> usize {
-        ((v - self.v0).max(0.0) as usize).min(self.start.len() - 2)
+        row_at(self.v0, self.start.len() - 1, v)
     }
 
     /// The nonzero winding numbers of the edges at `p` and at `q`: signed crossings of the
@@ -440,6 +406,36 @@ impl RowIndex {
             .map(|e| crossing(e, p))
             .sum()
     }
+}
+
+/// The row of v among `rows` rows one pixel high from `v0` (beyond the ends: the end rows).
+fn row_at(v0: f64, rows: usize, v: f64) -> usize {
+    ((v - v0).max(0.0) as usize).min(rows - 1)
+}
+
+/// Lists each item's value in the buckets (of `n`) its iterator names, in item order:
+/// where each bucket's entries begin in the list (and the total at the end), and the list.
+fn buckets<I, T>(n: usize, items: &[(I, T)]) -> (Vec<u32>, Vec<T>)
+where
+    I: Iterator<Item = usize> + Clone,
+    T: Copy + Default,
+{
+    let mut start = vec![0u32; n + 1];
+    for (at, _) in items {
+        at.clone().for_each(|k| start[k + 1] += 1);
+    }
+    for k in 1..start.len() {
+        start[k] += start[k - 1];
+    }
+    let mut fill = start.clone();
+    let mut list = vec![T::default(); start[n] as usize];
+    for (at, v) in items {
+        for k in at.clone() {
+            list[fill[k] as usize] = *v;
+            fill[k] += 1;
+        }
+    }
+    (start, list)
 }
 
 /// An edge that ends this far (px) left of a point cannot cross the ray from it along +u,
