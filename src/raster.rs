@@ -156,8 +156,8 @@ pub struct Scratch {
     /// The last [`Rasterizer::coverage`] mask's lit box ([`Scratch::lit_box`]).
     lit: PixelBox,
     /// Whether the last [`Rasterizer::render`] reported its layer to the map as lit
-    /// outside the map's area.
-    reported_outside: bool,
+    /// outside the map's area, and what the map made of it (how far it reaches).
+    reported_outside: Option<f64>,
     /// Per row of the last scan's box: its largest winding and its coverage sum.
     rows: Vec<(f32, u64)>,
 }
@@ -185,9 +185,9 @@ impl Scratch {
     }
 
     /// Whether the last [`Rasterizer::render`] with a map reported its layer as lit
-    /// outside the map's area ([`CoverageMap::lit_outside`]): a caller repeating that
-    /// layer's mask without drawing it reports it again.
-    pub fn reported_outside(&self) -> bool {
+    /// outside the map's area ([`CoverageMap::lit_outside`]), with what the map returned:
+    /// a caller repeating that layer's mask without drawing it reports it again.
+    pub fn reported_outside(&self) -> Option<f64> {
         self.reported_outside
     }
 
@@ -304,7 +304,7 @@ impl Rasterizer {
             data,
         };
         paint(&mut m);
-        (scratch.lit, scratch.lit_sum, scratch.reported_outside) = (drawn.0, drawn.1, false);
+        (scratch.lit, scratch.lit_sum, scratch.reported_outside) = (drawn.0, drawn.1, None);
         let runs = drawn.2.as_ref().map_or(&[][..], |r| &r.runs);
         scratch.lit_runs.runs.clear();
         scratch.lit_runs.runs.extend_from_slice(runs);
@@ -347,11 +347,8 @@ impl Rasterizer {
         let lit = scratch.lit;
         scratch.reported_outside = match (map, mapped) {
             (Some(m), false) => m.apply(&mut out, lit),
-            (Some(m), true) if outside => {
-                m.lit_outside(&out, lit);
-                true
-            }
-            _ => false,
+            (Some(m), true) if outside => Some(m.lit_outside(&out, lit)),
+            _ => None,
         };
         out
     }
@@ -391,7 +388,7 @@ impl Rasterizer {
         scratch.lit = PixelBox::EMPTY;
         scratch.lit_sum = Some(0);
         scratch.lit_runs.runs.clear();
-        scratch.reported_outside = false;
+        scratch.reported_outside = None;
         (!contours.is_empty()).then(|| self.bounds(contours))
     }
 
@@ -625,8 +622,9 @@ pub trait CoverageMap {
     /// outside it.
     fn area(&self) -> PixelBox;
     /// Called once for each layer the scan mapped that is lit outside [`area`](Self::area),
-    /// with its mapped mask `m` (zero outside `lit_box`).
-    fn lit_outside(&self, m: &Mask, lit_box: PixelBox);
+    /// with its mapped mask `m` (zero outside `lit_box`); returns how far it reaches (for
+    /// [`Scratch::reported_outside`]).
+    fn lit_outside(&self, m: &Mask, lit_box: PixelBox) -> f64;
     /// What the map needs for one row (looked up once per row, not per pixel).
     type Row<'a>: Copy
     where
@@ -636,9 +634,10 @@ pub trait CoverageMap {
     /// Writes columns a..b of a mask row `dst` (zero there) for coverage `v` (1..=255):
     /// what coverage `v` becomes in each of those columns.
     fn fill(row: Self::Row<'_>, dst: &mut [u8], a: usize, b: usize, v: u8);
-    /// Maps a finished coverage mask in place; it is zero outside `lit_box`. Returns
-    /// whether the layer is lit outside [`area`](Self::area) (and reported as such).
-    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> bool;
+    /// Maps a finished coverage mask in place; it is zero outside `lit_box`. Returns,
+    /// for a layer lit outside [`area`](Self::area) (and reported as such), what
+    /// [`lit_outside`](Self::lit_outside) returns.
+    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> Option<f64>;
 }
 
 /// No map (the [`Rasterizer::coverage`] and [`Rasterizer::binary`] masks).
@@ -651,7 +650,7 @@ impl CoverageMap for NoMap {
     fn area(&self) -> PixelBox {
         match *self {}
     }
-    fn lit_outside(&self, _: &Mask, _: PixelBox) {
+    fn lit_outside(&self, _: &Mask, _: PixelBox) -> f64 {
         match *self {}
     }
     type Row<'a> = ();
@@ -659,7 +658,7 @@ impl CoverageMap for NoMap {
         match *self {}
     }
     fn fill(_: (), _: &mut [u8], _: usize, _: usize, _: u8) {}
-    fn apply(&self, _: &mut Mask, _: PixelBox) -> bool {
+    fn apply(&self, _: &mut Mask, _: PixelBox) -> Option<f64> {
         match *self {}
     }
 }

@@ -174,8 +174,9 @@ impl LayerWidened {
 pub(super) struct CureDrawn {
     /// Lit area of the section's coverage (before the correction), pixels.
     pub lit_pixels: f64,
-    /// Whether the compensation found the layer lit outside its calibrated area.
-    pub outside: bool,
+    /// Whether the compensation found the layer lit outside its calibrated area, and how
+    /// far it reaches, mm.
+    pub outside: Option<f64>,
     /// The flat features the Z correction drops whose runs of lit layers end in the layer
     /// below (`(1, …)`) or, for the job's top layer, in this one (`(0, …)`); only those
     /// with pixels.
@@ -551,7 +552,7 @@ impl CureJob {
         if binary {
             crate::raster::threshold_in(&mut m, drawn_lit);
         }
-        let outside = comp.is_some_and(|c| c.apply_in(&mut m, drawn_lit));
+        let outside = comp.and_then(|c| c.apply_in(&mut m, drawn_lit));
         (
             m,
             CureDrawn {

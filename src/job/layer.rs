@@ -192,9 +192,9 @@ pub(super) fn layer_masks(
             (m, Origin::Drawn)
         }
     };
-    if drawn.outside && origin != Origin::Drawn {
-        if let Some(o) = ctx.optics {
-            o.compensator.count_outside();
+    if let (Some(beyond), Some(o)) = (drawn.outside, ctx.optics) {
+        if origin != Origin::Drawn {
+            o.compensator.count_outside(beyond);
         }
     }
     let masks = write_masks(ctx, &drawn, i)?;
@@ -385,7 +385,7 @@ fn draw(
             None => {
                 let m = ctx.raster.render(drawn_section, scratch, ctx.binary, comp);
                 let lit = scratch.lit_pixels(&m);
-                let outside = comp.is_some() && scratch.reported_outside();
+                let outside = comp.and(scratch.reported_outside());
                 (m, lit, outside, Vec::new(), None, None)
             }
         };

@@ -17,8 +17,9 @@ use std::sync::{Arc, Mutex};
 /// repeat.
 pub(super) struct DrawnMasks {
     /// Whether drawing them reported the layer to the light compensation as reaching
-    /// outside the calibrated area (a copy reports it again: every such layer counts).
-    pub outside: bool,
+    /// outside the calibrated area, and how far, mm (a copy reports it again: every such
+    /// layer counts).
+    pub outside: Option<f64>,
     /// Lit area, mm².
     pub area_mm2: f64,
     /// The cure correction's moves of the edges they were drawn with (empty without).
@@ -126,7 +127,7 @@ mod tests {
 
     fn masks(tag: u8) -> Arc<DrawnMasks> {
         Arc::new(DrawnMasks {
-            outside: tag % 2 == 1,
+            outside: (tag % 2 == 1).then_some(tag as f64),
             area_mm2: tag as f64,
             shifts: Vec::new(),
             field: None,
@@ -167,7 +168,7 @@ mod tests {
         assert!(cache.get(&square(0.0), &[]).is_none());
         cache.put(&square(0.0), &masks(0));
         let got = cache.get(&square(0.0), &[]).expect("hit");
-        assert_eq!((got.area_mm2, got.outside), (0.0, false));
+        assert_eq!((got.area_mm2, got.outside), (0.0, None));
         assert!(cache.get(&square(0.5), &[]).is_none());
         // A second put of the same section keeps the first entry (same bytes anyway).
         cache.put(&square(0.0), &masks(9));
@@ -183,7 +184,7 @@ mod tests {
         for k in 1..=RECENT_PRISM_MASKS as u8 {
             let m = cache.get(&square(k as f64), &[]).expect("kept");
             assert_eq!(m.pngs[0].0, vec![k; 3]);
-            assert_eq!(m.outside, k % 2 == 1);
+            assert_eq!(m.outside.is_some(), k % 2 == 1);
         }
     }
 

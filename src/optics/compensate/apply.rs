@@ -18,9 +18,9 @@ impl Compensator {
     /// ([`map_words`]): full coverage takes the gray map, other coverage the zone's table
     /// for the row (zone mode) or a search from the full-coverage level (pixel mode).
     ///
-    /// Returns whether the layer reaches outside the calibrated area (it is then counted
-    /// in [`layers_outside`](Self::layers_outside)).
-    pub fn apply_in(&self, m: &mut Mask, lit_box: PixelBox) -> bool {
+    /// Returns, for a layer that reaches outside the calibrated area (it is then counted
+    /// in [`layers_outside`](Self::layers_outside)), how far, mm.
+    pub fn apply_in(&self, m: &mut Mask, lit_box: PixelBox) -> Option<f64> {
         assert_eq!(
             (m.width as usize, m.height as usize),
             (self.w, self.h),
@@ -30,7 +30,7 @@ impl Compensator {
         let (br0, bc0) = (lit_box.r0, lit_box.c0);
         let (br1, bc1) = (lit_box.r1.min(self.h), lit_box.c1.min(w));
         if br0 >= br1 || bc0 >= bc1 {
-            return false;
+            return None;
         }
         let outside = self.lit_outside(m, PixelBox::new(br0, br1, bc0, bc1));
         match (self.mode, self.dither) {
@@ -54,10 +54,7 @@ impl Compensator {
             }
             (Mode::Off, _) => {}
         }
-        if outside {
-            self.record_outside(m, PixelBox::new(br0, br1, bc0, bc1));
-        }
-        outside
+        outside.then(|| self.record_outside(m, PixelBox::new(br0, br1, bc0, bc1)))
     }
 
     /// Whether any nonzero pixel of the box lies outside the calibrated area (only the
@@ -125,8 +122,8 @@ impl crate::raster::CoverageMap for Compensator {
         self.calibrated
     }
 
-    fn lit_outside(&self, m: &Mask, lit_box: PixelBox) {
-        self.record_outside(m, lit_box);
+    fn lit_outside(&self, m: &Mask, lit_box: PixelBox) -> f64 {
+        self.record_outside(m, lit_box)
     }
 
     type Row<'a> = CompRow<'a>;
@@ -172,7 +169,7 @@ impl crate::raster::CoverageMap for Compensator {
         }
     }
 
-    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> bool {
+    fn apply(&self, m: &mut Mask, lit_box: PixelBox) -> Option<f64> {
         self.apply_in(m, lit_box)
     }
 }

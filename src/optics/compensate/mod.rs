@@ -140,17 +140,19 @@ impl Compensator {
         self.beyond_bits.store(0, Ordering::Relaxed);
     }
 
-    /// Counts a layer lit outside the calibrated area whose mask repeats one already
-    /// counted (its reach is that one's).
-    pub fn count_outside(&self) {
+    /// Counts a layer lit outside the calibrated area whose mask repeats one counted
+    /// before, in this pass or the last: `beyond_mm`, that one's reach
+    /// ([`Compensator::beyond_mm`]; what recording it returned).
+    pub fn count_outside(&self, beyond_mm: f64) {
         self.layers_outside.fetch_add(1, Ordering::Relaxed);
+        self.beyond_bits
+            .fetch_max(beyond_mm.to_bits(), Ordering::Relaxed);
     }
 
     /// Counts the layer of mask `m` (zero outside `lit_box`) as lit outside the calibrated
     /// area and records how far its lit pixel centres reach (rows outside the area whole,
-    /// the others left and right of it).
-    fn record_outside(&self, m: &Mask, lit_box: PixelBox) {
-        self.count_outside();
+    /// the others left and right of it); returns that reach, mm.
+    fn record_outside(&self, m: &Mask, lit_box: PixelBox) -> f64 {
         let (PixelBox { r0, r1, c0, c1 }, cal, w) = (lit_box, self.calibrated, self.w);
         let ([ax0, ay0, ax1, ay1], p, c1) = (self.area_mm, self.pixel_mm, c1.min(w));
         let mut beyond = 0.0f64;
@@ -171,7 +173,7 @@ impl Compensator {
                 beyond = beyond.max(dx).max(ay0 - y).max(y - ay1);
             }
         }
-        self.beyond_bits
-            .fetch_max(beyond.to_bits(), Ordering::Relaxed);
+        self.count_outside(beyond);
+        beyond
     }
 }
