@@ -1,6 +1,7 @@
 //! One layer's work in a block: its masks (drawn, or written again from an equal layer's,
 //! see [`mask_reuse`](super::mask_reuse)), their files, and the layer's analysis.
 
+use super::again::LayerCounts;
 use super::clock::ThreadClock;
 use super::cure_records::LayerCorrection;
 use super::mask_reuse::{DrawnMasks, PreviousLayerMasks, RecentPrismMasks};
@@ -51,6 +52,8 @@ pub(super) struct LayerContext<'a> {
     pub field: Option<&'a Sink>,
     /// Pixel values the drawn masks are scaled to (255 = as drawn): the doses of a test job.
     pub dose: Option<&'a Mask>,
+    /// The pass before, whose blocks drawn alike are taken as it made them.
+    pub again: Option<&'a super::again::Again>,
 }
 
 impl LayerContext<'_> {
@@ -87,6 +90,7 @@ pub(super) struct LayerInput<'a> {
 }
 
 /// What a worker made of one layer.
+#[derive(Clone)]
 pub(super) struct LayerOutput {
     /// Lit area, mm².
     pub area_mm2: f64,
@@ -103,6 +107,8 @@ pub(super) struct LayerOutput {
     /// The layer's lit pixels, kept where another block needs them: for its own islands
     /// ([`Analysed::NeedsBelow`]) or those of the next layer (the last layer of a block).
     pub runs: Option<LitRuns>,
+    /// What drawing it counted into the job's totals.
+    pub counts: LayerCounts,
 }
 
 /// What a block's worker carries from one layer to the next.
@@ -192,18 +198,11 @@ pub(super) fn layer_masks(
             (m, Origin::Drawn)
         }
     };
-    if let (Some(beyond), Some(o)) = (drawn.outside, ctx.optics) {
-        if origin != Origin::Drawn {
-            o.compensator.count_outside(beyond);
-        }
-    }
+    let counts = LayerCounts::of(&drawn);
+    counts.count(ctx, i, origin == Origin::Drawn);
     let masks = write_masks(ctx, &drawn, i)?;
     let area_mm2 = drawn.area_mm2;
     let field_runs = drawn.field_runs.clone();
-    if let Some(job) = ctx.cure {
-        job.count_dropped(i, &drawn.dropped);
-        job.count_widened(i, drawn.widened);
-    }
     worker.previous = Some(PreviousLayerMasks {
         index: i,
         simplified: same && reuse,
@@ -231,6 +230,7 @@ pub(super) fn layer_masks(
         masks,
         runs,
         field_runs,
+        counts,
     })
 }
 

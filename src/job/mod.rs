@@ -16,9 +16,11 @@
 //! (per-thread CPU time), `optics_records.rs` (the light compensation's files and
 //! records), `manifest.rs` (layer records, totals and the rest of the manifest),
 //! `unheld.rs` (a job with supports checked for regions on nothing before it is written,
-//! and made again with what leaves them drawn without the cure correction) and
-//! `uncorrected.rs` (where: windows around those regions, or whole layers).
+//! and made again with what leaves them drawn without the cure correction),
+//! `uncorrected.rs` (where: windows around those regions, or whole layers) and `again.rs`
+//! (a pass made again takes the blocks it draws alike from the pass before).
 
+mod again;
 mod beneath;
 mod clock;
 mod cure_records;
@@ -219,11 +221,28 @@ struct Made {
     /// Where the prediction's warnings go among the manifest's.
     predicted_at: usize,
     passes: Passes,
+    /// Each layer's record as the pipeline made it, where a pass may be made again from
+    /// this one ([`again::may_make_again`]).
+    layers: Option<Vec<layer::LayerOutput>>,
 }
 
-/// One pass of the pipeline: the job's layers made with `cure` into a new bundle and
-/// planned (the cure is predicted on the pass that is written, not here).
-fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<Made> {
+impl Made {
+    /// What the next pass takes from this one: its files and, where it may
+    /// ([`again::may_make_again`]), its layers drawn with `plain` drawn plain.
+    fn again(self, plain: uncorrected::Uncorrected) -> (Sink, Option<again::Again>) {
+        let again = (self.layers).map(|l| again::Again::new(plain, l));
+        (self.writer, again)
+    }
+}
+
+/// One pass of the pipeline: the job's layers made with `cure` into a new bundle (or,
+/// made `again`, into the pass before's, taking its blocks drawn alike) and planned (the
+/// cure is predicted on the pass that is written, not here).
+fn make_job(
+    inputs: &JobInputs,
+    cure: Option<&cure_records::CureJob>,
+    again: Option<(Sink, Option<again::Again>)>,
+) -> Result<Made> {
     let JobInputs {
         opts,
         profile,
@@ -233,7 +252,10 @@ fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<
         out,
         format,
     } = *inputs;
-    let writer = open_bundle(out, format, profile, setup)?;
+    let (writer, again) = match again {
+        Some(a) => a,
+        None => (open_bundle(out, format, profile, setup)?, None),
+    };
     // Several projectors' masks do not show the field's light: its coverage is kept for
     // the cure prediction.
     let field =
@@ -244,9 +266,12 @@ fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<
         part,
         (&writer, field.as_ref()),
         control,
-        (cure, opts.dose.as_ref()),
+        (cure, opts.dose.as_ref(), again.as_ref()),
     )?;
     let finished = Instant::now();
+    let tiled_or_warped = (setup.tiler.is_some(), setup.correction.is_some());
+    let layers = again::may_make_again(profile.supports.enabled, cure, tiled_or_warped)
+        .then(|| sliced.layers.clone());
     let field_runs = sliced
         .layers
         .iter_mut()
@@ -292,6 +317,7 @@ fn make_job(inputs: &JobInputs, cure: Option<&cure_records::CureJob>) -> Result<
             analysis_cpu_s,
             finished,
         },
+        layers,
     })
 }
 
@@ -540,7 +566,11 @@ fn make_layers(
     part: &PlacedPart,
     (writer, field_store): (&Sink, Option<&Sink>),
     control: &Control,
-    (cure, dose): (Option<&cure_records::CureJob>, Option<&Mask>),
+    (cure, dose, again): (
+        Option<&cure_records::CureJob>,
+        Option<&Mask>,
+        Option<&again::Again>,
+    ),
 ) -> Result<(pipeline::PipelineOutput, Option<WrittenGrayMap>)> {
     let h = profile.slicing.layer_height_mm.get();
     let field = profile.field();
@@ -562,6 +592,7 @@ fn make_layers(
         cure,
         field: field_store,
         dose,
+        again,
     };
     let gray_map = OnceLock::new();
     let sliced = pipeline::run(

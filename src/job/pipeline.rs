@@ -390,6 +390,9 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
     let mut worker = BlockWorker::default();
     let sections = &block.sections;
     let last = block.ks.end - 1;
+    // Drawn as the pass before drew it: taken from that pass.
+    let first = block.start + block.ks.start;
+    let again = (p.ctx.again).filter(|a| a.serves(p.ctx.cure, first..first + block.ks.len()));
     for k in block.ks.clone() {
         if p.stopped() {
             return Err(Error::Interrupted);
@@ -412,9 +415,13 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
             upper: upper_sections(block, k, p.ctx.cure.map_or(0, |c| c.upper_layers())),
             above: p.layers - 1 - index,
         };
-        let mut out = layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?;
-        // The next block's first layer counts its islands over these.
-        if k == last && index + 1 < p.layers && out.runs.is_none() {
+        let mut out = match again {
+            Some(a) => a.layer(p.ctx, &layer),
+            None => layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?,
+        };
+        // The next block's first layer counts its islands over these (a block taken from
+        // the pass before has them from there).
+        if k == last && index + 1 < p.layers && out.runs.is_none() && again.is_none() {
             out.runs = worker.analyser.last_runs().cloned();
         }
         let _ = p.slots[index].set(out);

@@ -118,9 +118,13 @@ impl Kept {
         }
     }
 
-    /// Keeps `bytes` as file `rel`: in memory while under `budget`, else in the spill file
-    /// (created beside `out` and, on Unix, unlinked at once).
+    /// Keeps `bytes` as file `rel` (in place of a file of that name written before): in
+    /// memory while under `budget`, else in the spill file (created beside `out` and, on
+    /// Unix, unlinked at once).
     fn put(&mut self, out: &Path, rel: &str, bytes: &[u8], budget: u64) -> Result<()> {
+        if let Some(Stored::Memory(old)) = self.files.get(rel) {
+            self.in_memory -= old.len() as u64;
+        }
         let n = bytes.len() as u64;
         let stored = if self.in_memory + n <= budget {
             self.in_memory += n;
@@ -228,5 +232,18 @@ mod tests {
             assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
         }
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_file_written_again_replaces_the_first_and_its_share_of_the_budget() {
+        let out = std::env::temp_dir().join("never-made.sl1");
+        let mut k = Kept::default();
+        for round in 0..5u8 {
+            k.put(&out, "masks/00000.png", &[round; 600], 1000).unwrap();
+        }
+        // Five writes of 600 bytes fit a budget of 1000: each replaced the last.
+        assert!(k.spill.is_none());
+        assert_eq!(k.in_memory, 600);
+        assert_eq!(&*k.read("masks/00000.png").unwrap(), &[4u8; 600][..]);
     }
 }

@@ -45,6 +45,12 @@ impl Uncorrected {
         }
     }
 
+    /// Whether layer `i` is drawn here as in `other`: in the same windows, whole in both,
+    /// or corrected in both.
+    pub fn same_at(&self, other: &Uncorrected, i: usize) -> bool {
+        self.layers.get(&i) == other.layers.get(&i)
+    }
+
     /// Every window, by layer.
     pub fn all_windows(&self) -> impl Iterator<Item = (usize, PixelBox)> + '_ {
         (self.layers.iter())

@@ -32,7 +32,7 @@ pub(super) fn made_held(
     inputs: &JobInputs,
     mut cure: Option<CureJob>,
 ) -> Result<(Made, Option<CureJob>)> {
-    let mut made = super::make_job(inputs, cure.as_ref())?;
+    let mut made = super::make_job(inputs, cure.as_ref(), None)?;
     let mut pass = 0;
     loop {
         let unheld = crate::exec::unheld_regions(&made.writer, &made.manifest, &made.field_runs);
@@ -57,11 +57,12 @@ pub(super) fn made_held(
             ));
         };
         let spent = made.passes;
-        // The first pass's files go (a directory bundle's staging directory with them).
-        drop(made);
+        // The next pass writes over this one's files, taking the blocks it draws alike.
+        let tried = cure.as_ref().map(|c| c.plain().clone()).unwrap_or_default();
+        let again = made.again(tried);
         inputs.setup.reset_counts();
         cure = CureJob::new(inputs.profile, &inputs.opts.cure)?.map(|c| c.drawn_plain(plain));
-        made = super::make_job(inputs, cure.as_ref())?;
+        made = super::make_job(inputs, cure.as_ref(), Some(again))?;
         made.passes.slice_s += spent.slice_s;
         made.passes.masks_s += spent.masks_s;
         made.passes.analysis_cpu_s += spent.analysis_cpu_s;

@@ -1,0 +1,150 @@
+//! A job made again with more of it drawn as without the cure correction
+//! ([`super::unheld`]) takes the blocks whose layers draw alike from the pass before: a
+//! layer's masks depend on its section, the sections around it, and where the layers of
+//! its own block up to it are drawn plain ([`super::uncorrected::Uncorrected`]: the
+//! loose-piece step carries the layer below as drawn only within a block, whose first
+//! layer starts without it). So a block none of whose layers changed how it is drawn
+//! gets the same bytes: its files stay as the pass before wrote them, its layers'
+//! records are that pass's, and what drawing them counted into the job's totals is
+//! counted again. Only where the pass before's counts can be replayed: one projector, no
+//! distortion correction, no Z correction (the layers it holds back look below the block).
+
+use super::cure_records::{CureJob, LayerDropped, LayerWidened};
+use super::layer::{LayerContext, LayerInput, LayerOutput};
+use super::mask_reuse::DrawnMasks;
+use super::uncorrected::Uncorrected;
+use std::ops::Range;
+
+/// What drawing a layer counted into the job's totals, counted again when the layer is
+/// taken from the pass before.
+#[derive(Debug, Clone, Default)]
+pub(super) struct LayerCounts {
+    /// The light compensation's reach outside the calibrated area ([`DrawnMasks::outside`]).
+    outside: Option<f64>,
+    /// The flat features the Z correction dropped ([`DrawnMasks::dropped`]).
+    dropped: Vec<(usize, LayerDropped)>,
+    /// The narrow features drawn wider ([`DrawnMasks::widened`]).
+    widened: Option<LayerWidened>,
+}
+
+impl LayerCounts {
+    /// What `drawn` counts.
+    pub fn of(drawn: &DrawnMasks) -> LayerCounts {
+        LayerCounts {
+            outside: drawn.outside,
+            dropped: drawn.dropped.clone(),
+            widened: drawn.widened,
+        }
+    }
+
+    /// Counts layer `i` into the job's totals; the compensation's only unless `drawn` (it
+    /// counted the layer as it drew it).
+    pub fn count(&self, ctx: &LayerContext, i: usize, drawn: bool) {
+        if let (Some(beyond), Some(o), false) = (self.outside, ctx.optics, drawn) {
+            o.compensator.count_outside(beyond);
+        }
+        if let Some(job) = ctx.cure {
+            job.count_dropped(i, &self.dropped);
+            job.count_widened(i, self.widened);
+        }
+    }
+}
+
+/// The pass before: where it drew layers plain, and each layer's record as its pipeline
+/// made it (before the planning).
+pub(super) struct Again {
+    plain: Uncorrected,
+    layers: Vec<LayerOutput>,
+}
+
+impl Again {
+    /// The pass that drew `plain` plain and made `layers`.
+    pub fn new(plain: Uncorrected, layers: Vec<LayerOutput>) -> Again {
+        Again { plain, layers }
+    }
+
+    /// Whether the block of `layers` is drawn by `cure` as the pass before drew it.
+    pub fn serves(&self, cure: Option<&CureJob>, layers: Range<usize>) -> bool {
+        let now = cure.map(CureJob::plain);
+        layers
+            .into_iter()
+            .all(|i| i < self.layers.len() && now.is_some_and(|p| p.same_at(&self.plain, i)))
+    }
+
+    /// Layer `layer` as the pass before made it: its files are in place; the coverage it
+    /// would have looked at is let go, and its counts are counted again.
+    pub fn layer(&self, ctx: &LayerContext, layer: &LayerInput) -> LayerOutput {
+        let i = layer.index;
+        if ctx.cure.is_some_and(|c| c.corrects_at(i)) {
+            let _ = layer.cut.take_own();
+            layer.upper.iter().for_each(|c| c.release());
+        }
+        let kept = &self.layers[i];
+        kept.counts.count(ctx, i, false);
+        LayerOutput {
+            analysis_s: 0.0,
+            ..kept.clone()
+        }
+    }
+}
+
+/// Whether a pass of the job may be made again from the one before ([`Again`]): with
+/// supports (only their jobs are made again), the XY correction alone, one projector and
+/// no distortion correction.
+pub(super) fn may_make_again(
+    supports: bool,
+    cure: Option<&CureJob>,
+    (tiled, distorted): (bool, bool),
+) -> bool {
+    let possible = cure.is_some_and(|c| c.corrects() && c.held_back() == 0);
+    supports && possible && !tiled && !distorted && !from_scratch()
+}
+
+/// Whether every pass is made whole (the tests' reference for what taking blocks from the
+/// pass before must not change).
+#[cfg(test)]
+fn from_scratch() -> bool {
+    tests::FROM_SCRATCH.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+#[cfg(not(test))]
+fn from_scratch() -> bool {
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::job::{slice_to_bundle, SliceOptions, Transform};
+    use crate::profile::Profile;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    pub(super) static FROM_SCRATCH: AtomicBool = AtomicBool::new(false);
+
+    #[test]
+    fn a_job_made_again_from_the_pass_before_is_the_job_made_whole() {
+        // bunny00 turned, binary, with supports: the first pass leaves a region on
+        // nothing, the second draws a window of one layer plain (tests/it/supports.rs).
+        let dir = crate::test_support::scratch("again", "bunny");
+        let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bunny00.stl");
+        let mut profile = Profile::default_profile();
+        profile.supports.enabled = true;
+        let job = |name: &str| {
+            let mut o = SliceOptions::new(bunny, dir.join(name), profile.clone());
+            o.transform = Transform {
+                rotate_deg: [60.0, 0.0, 20.0],
+                ..Transform::default()
+            };
+            o.binary = Some(true);
+            let s = slice_to_bundle(&o).unwrap();
+            let codes: Vec<_> = s.warnings.iter().map(|w| w.code.as_str()).collect();
+            assert!(codes.contains(&"cure.layers-uncorrected"), "{codes:?}");
+            std::fs::read(dir.join(name)).unwrap()
+        };
+        let again = job("again.dmdjob.zip");
+        FROM_SCRATCH.store(true, Ordering::Relaxed);
+        let whole = job("whole.dmdjob.zip");
+        FROM_SCRATCH.store(false, Ordering::Relaxed);
+        assert!(again == whole, "the two jobs differ");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
