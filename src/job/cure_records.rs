@@ -316,6 +316,13 @@ impl CureJob {
         self.active() && !self.plain.whole(i)
     }
 
+    /// Whether layer `i`'s masks may be those of another layer with the same section, or
+    /// serve one: not with the Z correction (what it holds back depends on the layers
+    /// below), nor where the layer is drawn plain in part or whole.
+    pub fn shares_masks_at(&self, i: usize) -> bool {
+        self.held_back == 0 && !self.plain.has(i)
+    }
+
     /// Whether layers are drawn through [`CureJob::draw`].
     pub fn active(&self) -> bool {
         self.corrects() || self.held_back > 0

@@ -175,8 +175,9 @@ pub(super) fn layer_masks(
         .analyser
         .equals_below(i, &layer.section.contours, below);
     let mut analysis_s = clock.elapsed_s();
-    // Held back surfaces depend on the layers below: equal sections may not share masks.
-    let reuse = ctx.cure.is_none_or(|c| c.held_back() == 0);
+    // Held back surfaces depend on the layers below, and a layer drawn plain in part or
+    // whole is drawn unlike its section's other layers: equal sections may not share masks.
+    let reuse = shares_masks(ctx, i);
     let mut drawing = drawing(ctx, worker, scratch, layer, same)?;
     let (drawn, origin) = match reusable(ctx, worker, i, same && reuse, &drawing) {
         Some(reused) => {
@@ -232,6 +233,12 @@ pub(super) fn layer_masks(
         field_runs,
         counts,
     })
+}
+
+/// Whether layer `i` may share its masks with a layer of the same section
+/// ([`super::cure_records::CureJob::shares_masks_at`]).
+fn shares_masks(ctx: &LayerContext, i: usize) -> bool {
+    ctx.cure.is_none_or(|c| c.shares_masks_at(i))
 }
 
 /// Masks drawn already for layer `i`'s section, when it equals (`same`) the layer below's
@@ -436,7 +443,7 @@ fn draw(
     scratch.recycle(field_mask);
     let recent = ctx
         .recent
-        .filter(|_| same && ctx.cure.is_none_or(|c| c.held_back() == 0));
+        .filter(|_| same && shares_masks(ctx, layer.index));
     let masks = Arc::new(DrawnMasks {
         outside,
         area_mm2,

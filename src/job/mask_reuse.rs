@@ -2,7 +2,9 @@
 //! once collinear points are left out (a prism; `plan::analysis`) is drawn from that
 //! simplified section, so equal layers get equal masks, and the bytes drawn for one serve
 //! the next. The same section draws the same bytes, so reuse changes only the speed, never
-//! the output, whichever worker drew them first.
+//! the output, whichever worker drew them first. A layer drawn as without the cure
+//! correction, in windows or whole (`super::uncorrected`), is drawn unlike the other
+//! layers of its section: it neither takes masks nor gives them.
 //!
 //! Two caches: each worker keeps its previous layer's masks ([`PreviousLayerMasks`], for
 //! the layers of its block after the first), and the workers share the masks of the last

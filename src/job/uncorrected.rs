@@ -45,6 +45,11 @@ impl Uncorrected {
         }
     }
 
+    /// Whether layer `i` is drawn uncorrected, in windows or whole.
+    pub fn has(&self, i: usize) -> bool {
+        self.layers.contains_key(&i)
+    }
+
     /// Whether layer `i` is drawn here as in `other`: in the same windows, whole in both,
     /// or corrected in both.
     pub fn same_at(&self, other: &Uncorrected, i: usize) -> bool {

@@ -209,6 +209,10 @@ mod tests {
             .unwrap()
             .drawn_plain(windows);
         assert!(cure.corrects_at(30) && cure.active_at(31) && !cure.corrects_at(12));
+        // A layer drawn plain, in windows or whole, shares its masks with no other.
+        assert!(cure.shares_masks_at(29) && cure.shares_masks_at(32));
+        assert!(!cure.shares_masks_at(30) && !cure.shares_masks_at(31));
+        assert!(!cure.shares_masks_at(12));
         let r = cure.record();
         assert_eq!(r.uncorrected_layers, [8, 9, 12, 40]);
         let boxes: Vec<_> = r
