@@ -6,8 +6,9 @@
 //! layer starts without it). So a block none of whose layers changed how it is drawn
 //! gets the same bytes: its files stay as the pass before wrote them, its layers'
 //! records are that pass's, and what drawing them counted into the job's totals is
-//! counted again. Only where the pass before's counts can be replayed: one projector, no
-//! distortion correction, no Z correction (the layers it holds back look below the block).
+//! counted again. Only where the pass before's counts can be replayed: one projector and
+//! no distortion correction (the Z correction looks at the sections below, not at how
+//! they were drawn).
 
 use super::cure_records::{CureJob, LayerDropped, LayerWidened};
 use super::layer::{LayerContext, LayerInput, LayerOutput};
@@ -89,14 +90,14 @@ impl Again {
 }
 
 /// Whether a pass of the job may be made again from the one before ([`Again`]): with
-/// supports (only their jobs are made again), the XY correction alone, one projector and
-/// no distortion correction.
+/// supports (only their jobs are made again), the cure correction, one projector and no
+/// distortion correction.
 pub(super) fn may_make_again(
     supports: bool,
     cure: Option<&CureJob>,
     (tiled, distorted): (bool, bool),
 ) -> bool {
-    let possible = cure.is_some_and(|c| c.corrects() && c.held_back() == 0);
+    let possible = cure.is_some_and(|c| c.corrects());
     supports && possible && !tiled && !distorted && !from_scratch()
 }
 
@@ -120,21 +121,21 @@ mod tests {
 
     pub(super) static FROM_SCRATCH: AtomicBool = AtomicBool::new(false);
 
-    #[test]
-    fn a_job_made_again_from_the_pass_before_is_the_job_made_whole() {
-        // bunny00 turned, binary, with supports: the first pass leaves a region on
-        // nothing, the second draws a window of one layer plain (tests/it/supports.rs).
-        let dir = crate::test_support::scratch("again", "bunny");
+    /// Slices bunny00 with supports, turned by `rotate_deg`, with `args` set on the
+    /// options, once taking blocks from the pass before and once making every pass whole;
+    /// both jobs must be made again (`cure.layers-uncorrected`) and their files the same.
+    fn made_again_and_whole(tag: &str, rotate_deg: [f64; 3], args: impl Fn(&mut SliceOptions)) {
+        let dir = crate::test_support::scratch("again", tag);
         let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bunny00.stl");
         let mut profile = Profile::default_profile();
         profile.supports.enabled = true;
         let job = |name: &str| {
             let mut o = SliceOptions::new(bunny, dir.join(name), profile.clone());
             o.transform = Transform {
-                rotate_deg: [60.0, 0.0, 20.0],
+                rotate_deg,
                 ..Transform::default()
             };
-            o.binary = Some(true);
+            args(&mut o);
             let s = slice_to_bundle(&o).unwrap();
             let codes: Vec<_> = s.warnings.iter().map(|w| w.code.as_str()).collect();
             assert!(codes.contains(&"cure.layers-uncorrected"), "{codes:?}");
@@ -144,7 +145,23 @@ mod tests {
         FROM_SCRATCH.store(true, Ordering::Relaxed);
         let whole = job("whole.dmdjob.zip");
         FROM_SCRATCH.store(false, Ordering::Relaxed);
-        assert!(again == whole, "the two jobs differ");
+        assert!(again == whole, "{tag}: the two jobs differ");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_job_made_again_from_the_pass_before_is_the_job_made_whole() {
+        // The first pass leaves a region on nothing; the second draws a window of one
+        // layer plain (tests/it/supports.rs).
+        made_again_and_whole("xy", [60.0, 0.0, 20.0], |o| o.binary = Some(true));
+    }
+
+    #[test]
+    fn with_the_z_correction_too() {
+        // At half size: five layers drawn whole in each of two places.
+        made_again_and_whole("xyz", [0.0, 45.0, 0.0], |o| {
+            o.transform.scale = [0.5; 3];
+            o.cure.correction = Some(crate::cure::Correction::Xyz)
+        });
     }
 }
