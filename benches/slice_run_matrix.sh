@@ -7,7 +7,7 @@
 #
 # usage: benches/slice_run_matrix.sh BIN MODELS_DIR OUTDIR
 # Exits 1 when some job was refused or failed. Every job takes a few seconds (the eight
-# shared models, 19 combinations, two outputs each: about 12 minutes on 2 cores).
+# shared models, 19 combinations, two outputs each: about 6 minutes on 2 cores).
 BIN=$1; MODELS=$2; OUT=$3
 if [ -z "$BIN" ] || [ -z "$MODELS" ] || [ -z "$OUT" ]; then
   echo "usage: $0 BIN MODELS_DIR OUTDIR" >&2; exit 2
