@@ -120,11 +120,14 @@ mod tests {
     use std::sync::atomic::{AtomicBool, Ordering};
 
     pub(super) static FROM_SCRATCH: AtomicBool = AtomicBool::new(false);
+    /// One test at a time sets [`FROM_SCRATCH`] (test threads share it).
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
     /// Slices bunny00 with supports, turned by `rotate_deg`, with `args` set on the
     /// options, once taking blocks from the pass before and once making every pass whole;
     /// both jobs must be made again (`cure.layers-uncorrected`) and their files the same.
     fn made_again_and_whole(tag: &str, rotate_deg: [f64; 3], args: impl Fn(&mut SliceOptions)) {
+        let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
         let dir = crate::test_support::scratch("again", tag);
         let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bunny00.stl");
         let mut profile = Profile::default_profile();
