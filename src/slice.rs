@@ -124,6 +124,8 @@ pub struct Slicer<'m> {
     support_edges: u32,
     /// The part's contours are offset by this, mm ([`Slicer::with_offset`]).
     offset_mm: f64,
+    /// The layers cut, when not all ([`Slicer::only`]).
+    wanted: Option<Vec<bool>>,
 }
 
 impl<'m> Slicer<'m> {
@@ -161,6 +163,7 @@ impl<'m> Slicer<'m> {
             stats: SliceStats::default(),
             support_edges: u32::MAX,
             offset_mm: 0.0,
+            wanted: None,
         }
     }
 
@@ -177,6 +180,14 @@ impl<'m> Slicer<'m> {
     /// `xy_offset_mm`); support contours are not offset.
     pub fn with_offset(mut self, d_mm: f64) -> Self {
         self.offset_mm = d_mm;
+        self
+    }
+
+    /// Cuts only the layers `wanted` holds true for (indexed by layer); the others come
+    /// back empty and count no repairs (a job made again needs only the sections around
+    /// the layers it draws again).
+    pub fn only(mut self, wanted: Vec<bool>) -> Self {
+        self.wanted = Some(wanted);
         self
     }
 
@@ -202,7 +213,7 @@ impl<'m> Slicer<'m> {
         let zmax = &self.zmax;
         self.active.retain(|&t| zmax[t as usize] > z_lo);
 
-        let (mesh, h) = (self.mesh, self.h);
+        let (mesh, h, wanted) = (self.mesh, self.h, self.wanted.as_deref());
         let chunk = 4096;
         let parts: Vec<Vec<(u32, Seg)>> = self
             .active
@@ -224,7 +235,7 @@ impl<'m> Slicer<'m> {
                     let hi = ((zmax / h - 0.5).ceil().max(-1.0) + 1.0) as usize;
                     for i in lo..hi.min(range.end) {
                         let z = plane_z(i, h);
-                        if !(zmin <= z && zmax > z) {
+                        if !(zmin <= z && zmax > z) || wanted.is_some_and(|w| !w[i]) {
                             continue;
                         }
                         if let Some(s) = cut_triangle(mesh, ti, t, &v, z) {
@@ -247,7 +258,12 @@ impl<'m> Slicer<'m> {
             }
         }
         let (support, d) = (self.support_edges, self.offset_mm);
-        let sections: Vec<Section> = segs.par_iter().map(|s| chain(s, support, d)).collect();
+        let sections: Vec<Section> = (segs.par_iter().enumerate())
+            .map(|(k, s)| match wanted {
+                Some(w) if !w[range.start + k] => Section::default(),
+                _ => chain(s, support, d),
+            })
+            .collect();
         for s in &sections {
             if s.joined_chains + s.dropped_chains > 0 {
                 self.stats.repaired_layers += 1;
@@ -796,5 +812,28 @@ mod tests {
                 assert_eq!(all[a + k].contours, y.contours, "layer {}", a + k);
             }
         }
+    }
+
+    #[test]
+    fn only_the_wanted_layers_are_cut_and_counted() {
+        // A cube with a hole in one side: every layer is repaired.
+        let mut soup = cube(10.0, [0.0; 3]);
+        soup.remove(10);
+        let m = Mesh::from_soup(&soup, "t");
+        let (all, stats) = slice(&m, 1.0, 10);
+        assert_eq!(stats.repaired_layers, 10);
+        let wanted: Vec<bool> = (0..10).map(|i| i % 3 == 1).collect();
+        let mut s = Slicer::new(&m, 1.0, 10).only(wanted.clone());
+        let some: Vec<Section> = [0..4, 4..10]
+            .into_iter()
+            .flat_map(|r| s.window(r))
+            .collect();
+        for (i, (a, b)) in all.iter().zip(&some).enumerate() {
+            match wanted[i] {
+                true => assert_eq!(a.contours, b.contours, "layer {i}"),
+                false => assert!(b.contours.is_empty(), "layer {i}"),
+            }
+        }
+        assert_eq!(s.stats.repaired_layers, 3);
     }
 }

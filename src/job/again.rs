@@ -6,14 +6,17 @@
 //! layer starts without it). So a block none of whose layers changed how it is drawn
 //! gets the same bytes: its files stay as the pass before wrote them, its layers'
 //! records are that pass's, and what drawing them counted into the job's totals is
-//! counted again. Only where the pass before's counts can be replayed: one projector and
-//! no distortion correction (the Z correction looks at the sections below, not at how
-//! they were drawn).
+//! counted again. The slicer cuts only the sections the blocks drawn again look at, and
+//! the slicing's repair counts are the pass before's. Only where the pass before's counts
+//! can be replayed: one projector and no distortion correction (the Z correction looks at
+//! the sections below, not at how they were drawn).
 
 use super::cure_records::{CureJob, LayerDropped, LayerWidened};
 use super::layer::{LayerContext, LayerInput, LayerOutput};
 use super::mask_reuse::DrawnMasks;
+use super::pipeline::{BLOCK, WINDOW};
 use super::uncorrected::Uncorrected;
+use crate::slice::SliceStats;
 use std::ops::Range;
 
 /// What drawing a layer counted into the job's totals, counted again when the layer is
@@ -51,17 +54,45 @@ impl LayerCounts {
     }
 }
 
-/// The pass before: where it drew layers plain, and each layer's record as its pipeline
-/// made it (before the planning).
+/// The pass before: where it drew layers plain, each layer's record as its pipeline made
+/// it (before the planning), and the slicing's repair counts.
 pub(super) struct Again {
     plain: Uncorrected,
     layers: Vec<LayerOutput>,
+    stats: SliceStats,
 }
 
 impl Again {
-    /// The pass that drew `plain` plain and made `layers`.
-    pub fn new(plain: Uncorrected, layers: Vec<LayerOutput>) -> Again {
-        Again { plain, layers }
+    /// The pass that drew `plain` plain and made `layers`, slicing with `stats`.
+    pub fn new(plain: Uncorrected, (layers, stats): (Vec<LayerOutput>, SliceStats)) -> Again {
+        Again {
+            plain,
+            layers,
+            stats,
+        }
+    }
+
+    /// The slicing's repair counts over every layer (the pass before's: the sections do
+    /// not change).
+    pub fn stats(&self) -> SliceStats {
+        self.stats
+    }
+
+    /// The layers whose sections the blocks that `cure` draws otherwise look at: their
+    /// own, the [`WINDOW`] below (the layer below, the rests of narrow features, the Z
+    /// correction's) and the correction's layers above.
+    pub fn wanted(&self, cure: Option<&CureJob>) -> Vec<bool> {
+        let n = self.layers.len();
+        let above = cure.map_or(0, CureJob::upper_layers);
+        let mut wanted = vec![false; n];
+        for b in (0..n).step_by(BLOCK) {
+            let end = (b + BLOCK).min(n);
+            if !self.serves(cure, b..end) {
+                let from = b.saturating_sub(WINDOW);
+                wanted[from..(end + above).min(n)].fill(true);
+            }
+        }
+        wanted
     }
 
     /// Whether the block of `layers` is drawn by `cure` as the pass before drew it.

@@ -221,9 +221,9 @@ struct Made {
     /// Where the prediction's warnings go among the manifest's.
     predicted_at: usize,
     passes: Passes,
-    /// Each layer's record as the pipeline made it, where a pass may be made again from
-    /// this one ([`again::may_make_again`]).
-    layers: Option<Vec<layer::LayerOutput>>,
+    /// Each layer's record as the pipeline made it, and the slicing's repair counts,
+    /// where a pass may be made again from this one ([`again::may_make_again`]).
+    layers: Option<(Vec<layer::LayerOutput>, SliceStats)>,
 }
 
 impl Made {
@@ -270,8 +270,11 @@ fn make_job(
     )?;
     let finished = Instant::now();
     let tiled_or_warped = (setup.tiler.is_some(), setup.correction.is_some());
+    if let Some(a) = &again {
+        sliced.stats = a.stats();
+    }
     let layers = again::may_make_again(profile.supports.enabled, cure, tiled_or_warped)
-        .then(|| sliced.layers.clone());
+        .then(|| (sliced.layers.clone(), sliced.stats));
     let field_runs = sliced
         .layers
         .iter_mut()
@@ -595,19 +598,18 @@ fn make_layers(
         again,
     };
     let gray_map = OnceLock::new();
-    let sliced = pipeline::run(
-        &ctx,
-        part.slicer(h, profile.accuracy.xy_offset_mm),
-        n,
-        control,
-        || {
-            // The gray map depends on the set-up only: written while the masks are made (its
-            // encoding would otherwise wait for the last layer).
-            if let Some(o) = ctx.optics {
-                let _ = gray_map.set(optics_records::write_gray_map(o, writer, profile));
-            }
-        },
-    )?;
+    let slicer = part.slicer(h, profile.accuracy.xy_offset_mm);
+    let slicer = match again {
+        Some(a) => slicer.only(a.wanted(cure)),
+        None => slicer,
+    };
+    let sliced = pipeline::run(&ctx, slicer, n, control, || {
+        // The gray map depends on the set-up only: written while the masks are made (its
+        // encoding would otherwise wait for the last layer).
+        if let Some(o) = ctx.optics {
+            let _ = gray_map.set(optics_records::write_gray_map(o, writer, profile));
+        }
+    })?;
     Ok((sliced, gray_map.into_inner()))
 }
 

@@ -31,7 +31,7 @@ use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::Instant;
 
 /// Layers sliced at a time: memory depends on this, not on the number of layers.
-const WINDOW: usize = 32;
+pub(super) const WINDOW: usize = 32;
 /// Consecutive layers one worker processes in order. Its first layer's analysis scans the
 /// layer below again (islands) and cannot copy the analysis of an equal layer below
 /// (prisms): larger blocks do that less often, smaller ones balance the workers better at
