@@ -54,6 +54,10 @@ impl LayerCounts {
     }
 }
 
+// The pipeline's blocks start at multiples of BLOCK (windows of WINDOW layers split into
+// blocks), as `Again::wanted` walks them.
+const _: () = assert!(WINDOW.is_multiple_of(BLOCK));
+
 /// The pass before: where it drew layers plain, each layer's record as its pipeline made
 /// it (before the planning), and the slicing's repair counts.
 pub(super) struct Again {
