@@ -16,9 +16,12 @@
 //! pool's other workers (a slicer blocked on a bounded channel would hold a worker idle
 //! and deadlock a pool of one thread).
 //!
-//! The first error (or Ctrl-C, `cancel`) stops the slicing before its next window and
-//! every block before its next layer. Each layer's result goes to its own slot, so the
-//! output never depends on which worker made it or when.
+//! An error at a layer stops the layers above it: each block before its next layer above
+//! the failed one, the slicing once no block below that layer waits for its next window.
+//! The layers below are still made, and a lower layer's error replaces a higher one's: the
+//! error reported is the lowest failing layer's, whichever worker failed first (Ctrl-C,
+//! `cancel`, stops everything). Each layer's result goes to its own slot, so the output
+//! never depends on which worker made it or when.
 
 use super::layer::{layer_masks, BlockWorker, LayerContext, LayerInput, LayerOutput};
 use crate::cure::shift::Coverage;
@@ -154,7 +157,7 @@ pub(super) fn run<'a>(
         slots: (0..layers).map(|_| OnceLock::new()).collect(),
         scratch: ScratchPool::default(),
         backlog: Backlog::default(),
-        stop: AtomicBool::new(false),
+        stop_at: AtomicUsize::new(usize::MAX),
         failure: Mutex::new(None),
         done: AtomicUsize::new(0),
     };
@@ -182,33 +185,35 @@ struct Pipeline<'a> {
     slots: Vec<OnceLock<LayerOutput>>,
     scratch: ScratchPool,
     backlog: Backlog<'a>,
-    /// Set by the first error: the rest stops.
-    stop: AtomicBool,
-    /// The first real error (others may just be the stop it caused).
-    failure: Mutex<Option<Error>>,
+    /// The lowest layer that failed (`usize::MAX` while none did): the layers from there
+    /// up are not made.
+    stop_at: AtomicUsize,
+    /// The lowest failed layer and its error.
+    failure: Mutex<Option<(usize, Error)>>,
     /// Layers done, for the progress report.
     done: AtomicUsize,
 }
 
 impl Pipeline<'_> {
-    fn stopped(&self) -> bool {
-        self.stop.load(Ordering::Relaxed) || self.control.cancelled()
+    /// Whether layer `index` is not to be made: a layer at or below it failed, or the
+    /// caller asked to stop.
+    fn stopped_at(&self, index: usize) -> bool {
+        index >= self.stop_at.load(Ordering::Relaxed) || self.control.cancelled()
     }
 
-    /// Stops the rest, keeping the first real error.
-    fn fail(&self, e: Error) {
-        self.stop.store(true, Ordering::Relaxed);
+    /// Layer `index` failed with `e`: stops the layers above it, keeping the lowest
+    /// layer's error.
+    fn fail(&self, index: usize, e: Error) {
+        self.stop_at.fetch_min(index, Ordering::Relaxed);
         let mut f = lock(&self.failure);
-        if f.as_ref()
-            .is_none_or(|old| matches!(old, Error::Interrupted))
-        {
-            *f = Some(e);
+        if f.as_ref().is_none_or(|(old, _)| index < *old) {
+            *f = Some((index, e));
         }
     }
 
     /// Every layer's output once the pool is done, or the first error.
     fn finish(self, masks_s: f64) -> Result<PipelineOutput> {
-        if let Some(e) = self.failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        if let Some((_, e)) = self.failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
         }
         if self.control.cancelled() {
@@ -318,7 +323,10 @@ impl<'a> Backlog<'a> {
 /// (see the module docs).
 fn feed<'s, 'a: 's>(scope: &rayon::ScopeFifo<'s>, p: &'s Pipeline<'a>, mut cursor: Cursor<'a>) {
     loop {
-        if cursor.next >= p.layers || p.stopped() {
+        // Past a failed layer, only blocks below it that wait for this window need it.
+        let stop_at = p.stop_at.load(Ordering::Relaxed);
+        let needed = cursor.next < stop_at || cursor.waiting.iter().any(|b| b.first() < stop_at);
+        if cursor.next >= p.layers || !needed || p.control.cancelled() {
             p.backlog.finish(cursor);
             return;
         }
@@ -369,6 +377,13 @@ struct Block {
     ks: Range<usize>,
 }
 
+impl Block {
+    /// The block's first layer.
+    fn first(&self) -> usize {
+        self.start + self.ks.start
+    }
+}
+
 fn run_block<'s, 'a: 's>(scope: &rayon::ScopeFifo<'s>, p: &'s Pipeline<'a>, block: Block) {
     // Counts the block's layers off even if it panics (the panic reaches the caller when
     // the scope ends; the slicing task must not stay parked).
@@ -377,13 +392,11 @@ fn run_block<'s, 'a: 's>(scope: &rayon::ScopeFifo<'s>, p: &'s Pipeline<'a>, bloc
         p,
         layers: block.ks.len(),
     };
-    if let Err(e) = make_block(p, &block) {
-        p.fail(e);
-    }
+    make_block(p, &block);
 }
 
-/// Makes a block's layers in order.
-fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
+/// Makes a block's layers in order, up to the first that fails or is stopped.
+fn make_block(p: &Pipeline, block: &Block) {
     // Scratch buffers (megabytes) outlive blocks: fresh ones would page-fault on every
     // block.
     let mut scratch = p.scratch.take();
@@ -391,13 +404,13 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
     let sections = &block.sections;
     let last = block.ks.end - 1;
     // Drawn as the pass before drew it: taken from that pass.
-    let first = block.start + block.ks.start;
+    let first = block.first();
     let again = (p.ctx.again).filter(|a| a.serves(p.ctx.cure, first..first + block.ks.len()));
     for k in block.ks.clone() {
-        if p.stopped() {
-            return Err(Error::Interrupted);
-        }
         let index = block.start + k;
+        if p.stopped_at(index) {
+            return;
+        }
         let layer = LayerInput {
             index,
             section: &sections[k].section,
@@ -417,7 +430,10 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
         };
         let mut out = match again {
             Some(a) => a.layer(p.ctx, &layer),
-            None => layer_masks(p.ctx, &mut worker, &mut scratch, &layer)?,
+            None => match layer_masks(p.ctx, &mut worker, &mut scratch, &layer) {
+                Ok(out) => out,
+                Err(e) => return p.fail(index, e),
+            },
         };
         // The next block's first layer counts its islands over these (a block taken from
         // the pass before has them from there).
@@ -430,7 +446,6 @@ fn make_block(p: &Pipeline, block: &Block) -> Result<()> {
             progress(d, p.layers);
         }
     }
-    Ok(())
 }
 
 /// The sections of the `m` layers below layer `k` of `block`'s window (nearest first;
@@ -472,7 +487,7 @@ struct Leaving<'x, 's, 'a: 's> {
 impl Drop for Leaving<'_, '_, '_> {
     fn drop(&mut self) {
         if std::thread::panicking() {
-            self.p.stop.store(true, Ordering::Relaxed);
+            self.p.stop_at.store(0, Ordering::Relaxed);
         }
         if let Some(cursor) = self.p.backlog.leave(self.layers) {
             let p = self.p;

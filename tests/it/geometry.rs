@@ -486,6 +486,39 @@ fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
     }
 }
 
+#[test]
+fn an_unreachable_part_names_its_lowest_failing_layer_at_any_thread_count() {
+    // A column in reach, and from layer 7 (z 0.35 mm) a slab out to x = 0.3 mm, beyond
+    // the barrel's reach: every layer from 7 up fails, and so does a layer below whose
+    // cure correction looks up at them. On 8 threads the block of layers 8–15 fails at
+    // once while the block below is still at work: the error must still be the lowest
+    // layer's, as one thread finds it.
+    let dir = tempdir("geom-lowest");
+    let mut tris = box_tris([20.0, 20.0, 0.0], [30.0, 28.0, 1.0]);
+    tris.extend(box_tris([0.3, 20.0, 0.35], [40.0, 28.0, 1.0]));
+    write_stl(&dir.join("part.stl"), &tris);
+    write_table(&dir.join("barrel.csv"), Lens::Radial(-0.05), 0.0, 1);
+    let args = [
+        "slice",
+        "part.stl",
+        "--keep-position",
+        "--distortion",
+        "barrel.csv",
+        "-o",
+        "x.dmdjob",
+    ];
+    let one = run_threads(&dir, &args, "1");
+    assert_eq!(one.status.code(), Some(2));
+    let e = stderr(&one);
+    assert!(e.contains("part.stl: layer 7: build-plane point ("), "{e}");
+    for _ in 0..3 {
+        let o = run_threads(&dir, &args, "8");
+        assert_eq!(o.status.code(), Some(2));
+        assert_eq!(stderr(&o), e);
+        assert!(!dir.join("x.dmdjob").exists());
+    }
+}
+
 /// Slices a 30 × 20 mm plate across the seam of `tiled-2x1` (field columns ~788..1260; the
 /// overlap is 992..1024) with `profile`; returns the two projector masks of layer 0.
 fn tiled_plate(dir: &Path, profile: &str, out: &str) -> (Vec<u8>, Vec<u8>) {
