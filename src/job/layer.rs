@@ -281,11 +281,11 @@ fn drawing(
         layer.section.contours.clone()
     };
     // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
-    let warp = |c: &[Contour], k: usize| match ctx.correction {
-        Some(w) => w.warp_section(c, ctx.model, k).map(Some),
-        None => Ok(None),
+    let warped = match ctx.correction {
+        Some(w) => Some(w.warp_layer(&section, ctx.model, i)?),
+        None => None,
     };
-    let warped = warp(&section, i)?.map(|w| {
+    let warped = warped.map(|w| {
         let s = distortion::area_scale(&section, &w);
         (w, s)
     });
@@ -304,7 +304,10 @@ fn drawing(
         .enumerate()
         .map(|(d, c)| {
             c.coverage(|| {
-                let s = warp(&c.section.contours, i + 1 + d)?;
+                let s = match ctx.correction {
+                    Some(w) => Some(w.warp_section(&c.section.contours, ctx.model, i + 1 + d)?),
+                    None => None,
+                };
                 let contours = s.as_deref().unwrap_or(&c.section.contours);
                 let coverage = Coverage::draw(ctx.raster, contours, scratch);
                 Ok((coverage, scratch.drawn()))

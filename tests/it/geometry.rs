@@ -487,6 +487,51 @@ fn bad_tables_and_unreachable_parts_exit_2_with_one_line() {
 }
 
 #[test]
+fn a_job_warped_beyond_its_table_is_the_same_at_any_thread_count() {
+    // A table measured over the middle of the field only: the bunny's edges are warped by
+    // extrapolation, and the count of such points (the cure correction's layers warp the
+    // sections above them too) must not depend on which worker warped a section first.
+    let dir = tempdir("geom-threads");
+    let mut t = String::from("x_mm,y_mm,seen_x_mm,seen_y_mm\n");
+    for j in 0..6 {
+        for i in 0..8 {
+            let (x, y) = (15.0 + 5.0 * i as f64, 12.0 + 5.0 * j as f64);
+            t.push_str(&format!(
+                "{x},{y},{},{}\n",
+                x + 0.001 * i as f64,
+                y + 0.001 * j as f64
+            ));
+        }
+    }
+    std::fs::write(dir.join("inner.csv"), t).unwrap();
+    let bunny = fixture("bunny00.stl");
+    let job = |threads: &str| {
+        let out = format!("t{threads}.dmdjob.zip");
+        let args = [
+            "slice",
+            bunny.to_str().unwrap(),
+            "--distortion",
+            "inner.csv",
+            "-o",
+            &out,
+        ];
+        let o = run_threads(&dir, &args, threads);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            stderr(&o).contains("[distortion.extrapolated]"),
+            "{}",
+            stderr(&o)
+        );
+        std::fs::read(dir.join(out)).unwrap()
+    };
+    let one = job("1");
+    assert!(
+        job("3") == one,
+        "the job on 3 threads differs from the job on one"
+    );
+}
+
+#[test]
 fn an_unreachable_part_names_its_lowest_failing_layer_at_any_thread_count() {
     // A column in reach, and from layer 7 (z 0.35 mm) a slab out to x = 0.3 mm, beyond
     // the barrel's reach: every layer from 7 up fails, and so does a layer below whose

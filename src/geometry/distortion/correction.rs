@@ -126,7 +126,7 @@ impl Correction {
         self.extrapolated.store(0, Ordering::Relaxed);
     }
 
-    /// The fit report (with the count of extrapolated points warped so far).
+    /// The fit report (with the count of extrapolated points of the layers warped so far).
     pub fn report(&self) -> FitReport {
         let mut r = self.report.clone();
         r.extrapolated_points = self.extrapolated.load(Ordering::Relaxed);
@@ -138,13 +138,36 @@ impl Correction {
         Warper::new(self)
     }
 
-    /// Warps a layer's contours; an unreachable point is an [`Error::Job`] naming the
-    /// model, the layer and the point.
+    /// Warps layer `layer`'s own section as its masks are drawn, counting its points
+    /// outside the measured area into the report (so each layer counts once, whichever
+    /// other layer warped its section to look at it); an unreachable point is an
+    /// [`Error::Job`] naming the model, the layer and the point.
+    pub fn warp_layer(
+        &self,
+        contours: &[Contour],
+        model: &Path,
+        layer: usize,
+    ) -> Result<Vec<Contour>> {
+        self.warp(contours, model, layer, true)
+    }
+
+    /// Warps layer `layer`'s section for another layer or the prediction to look at: as
+    /// [`warp_layer`](Self::warp_layer), without counting.
     pub fn warp_section(
         &self,
         contours: &[Contour],
         model: &Path,
         layer: usize,
+    ) -> Result<Vec<Contour>> {
+        self.warp(contours, model, layer, false)
+    }
+
+    fn warp(
+        &self,
+        contours: &[Contour],
+        model: &Path,
+        layer: usize,
+        counted: bool,
     ) -> Result<Vec<Contour>> {
         let mut w = self.warper();
         let out = w.warp(contours).map_err(|u| Error::Job {
@@ -154,8 +177,10 @@ impl Correction {
                 u.target[0], u.target[1], self.report.source, u.aim[0], u.aim[1], self.field_mm[0], self.field_mm[1]
             ),
         });
-        self.extrapolated
-            .fetch_add(w.extrapolated(), Ordering::Relaxed);
+        if counted && out.is_ok() {
+            self.extrapolated
+                .fetch_add(w.extrapolated(), Ordering::Relaxed);
+        }
         out
     }
 }

@@ -238,3 +238,25 @@ fn unreachable_target_is_reported() {
     let ok = vec![[20.0, 20.0], [23.0, 20.0], [23.0, 23.0], [20.0, 23.0]];
     assert!(c.warp_section(&[ok], Path::new("part.stl"), 4).is_ok());
 }
+
+#[test]
+fn only_a_layers_own_warp_counts_its_extrapolated_points() {
+    // A table measured over the middle of the field only: a square near the corner lies
+    // outside the area it measured, but within the projector's reach.
+    let mut t = table(0.0, 0.0, 0.0, 1);
+    t.pairs
+        .retain(|p| (10.0..=55.0).contains(&p.aim[0]) && (10.0..=40.0).contains(&p.aim[1]));
+    let c = Correction::fit(&t, [W, H], P).unwrap();
+    let sq = vec![[2.0, 2.0], [5.0, 2.0], [5.0, 5.0], [2.0, 5.0]];
+    let model = Path::new("part.stl");
+    // Looked at by other layers (or the prediction) as often as may be: not counted.
+    for _ in 0..3 {
+        c.warp_section(std::slice::from_ref(&sq), model, 4).unwrap();
+    }
+    assert_eq!(c.report().extrapolated_points, 0);
+    c.warp_layer(std::slice::from_ref(&sq), model, 4).unwrap();
+    let once = c.report().extrapolated_points;
+    assert!(once >= 4, "{once}");
+    c.warp_layer(&[sq], model, 5).unwrap();
+    assert_eq!(c.report().extrapolated_points, 2 * once);
+}
