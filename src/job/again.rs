@@ -8,8 +8,9 @@
 //! records are that pass's, and what drawing them counted into the job's totals is
 //! counted again. The slicer cuts only the sections the blocks drawn again look at, and
 //! the slicing's repair counts are the pass before's. Only where the pass before's counts
-//! can be replayed: one projector and no distortion correction (the Z correction looks at
-//! the sections below, not at how they were drawn).
+//! can be replayed: one projector (the Z correction looks at the sections below, not at
+//! how they were drawn; a distortion correction's extrapolated points are each layer's
+//! own warp's).
 
 use super::cure_records::{CureJob, LayerDropped, LayerWidened};
 use super::layer::{LayerContext, LayerInput, LayerOutput};
@@ -29,15 +30,18 @@ pub(super) struct LayerCounts {
     dropped: Vec<(usize, LayerDropped)>,
     /// The narrow features drawn wider ([`DrawnMasks::widened`]).
     widened: Option<LayerWidened>,
+    /// The distortion pre-warp's extrapolated points (each layer's own warp counts them).
+    extrapolated: u64,
 }
 
 impl LayerCounts {
-    /// What `drawn` counts.
-    pub fn of(drawn: &DrawnMasks) -> LayerCounts {
+    /// What `drawn` counts, and the `extrapolated` points of the layer's pre-warp.
+    pub fn of(drawn: &DrawnMasks, extrapolated: u64) -> LayerCounts {
         LayerCounts {
             outside: drawn.outside,
             dropped: drawn.dropped.clone(),
             widened: drawn.widened,
+            extrapolated,
         }
     }
 
@@ -117,6 +121,9 @@ impl Again {
         }
         let kept = &self.layers[i];
         kept.counts.count(ctx, i, false);
+        if let Some(w) = ctx.correction {
+            w.count_extrapolated(kept.counts.extrapolated);
+        }
         LayerOutput {
             analysis_s: 0.0,
             ..kept.clone()
@@ -125,15 +132,10 @@ impl Again {
 }
 
 /// Whether a pass of the job may be made again from the one before ([`Again`]): with
-/// supports (only their jobs are made again), the cure correction, one projector and no
-/// distortion correction.
-pub(super) fn may_make_again(
-    supports: bool,
-    cure: Option<&CureJob>,
-    (tiled, distorted): (bool, bool),
-) -> bool {
+/// supports (only their jobs are made again), the cure correction and one projector.
+pub(super) fn may_make_again(supports: bool, cure: Option<&CureJob>, tiled: bool) -> bool {
     let possible = cure.is_some_and(|c| c.corrects());
-    supports && possible && !tiled && !distorted && !from_scratch()
+    supports && possible && !tiled && !from_scratch()
 }
 
 /// Whether every pass is made whole (the tests' reference for what taking blocks from the
@@ -160,8 +162,14 @@ mod tests {
 
     /// Slices bunny00 with supports, turned by `rotate_deg`, with `args` set on the
     /// options, once taking blocks from the pass before and once making every pass whole;
-    /// both jobs must be made again (`cure.layers-uncorrected`) and their files the same.
-    fn made_again_and_whole(tag: &str, rotate_deg: [f64; 3], args: impl Fn(&mut SliceOptions)) {
+    /// both jobs must be made again (`cure.layers-uncorrected`), warn `codes` too, and
+    /// their files be the same.
+    fn made_again_and_whole(
+        tag: &str,
+        rotate_deg: [f64; 3],
+        codes: &[&str],
+        args: impl Fn(&mut SliceOptions),
+    ) {
         let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
         let dir = crate::test_support::scratch("again", tag);
         let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bunny00.stl");
@@ -175,8 +183,10 @@ mod tests {
             };
             args(&mut o);
             let s = slice_to_bundle(&o).unwrap();
-            let codes: Vec<_> = s.warnings.iter().map(|w| w.code.as_str()).collect();
-            assert!(codes.contains(&"cure.layers-uncorrected"), "{codes:?}");
+            let warned: Vec<_> = s.warnings.iter().map(|w| w.code.as_str()).collect();
+            for code in codes.iter().chain(&["cure.layers-uncorrected"]) {
+                assert!(warned.contains(code), "{tag}: {warned:?}");
+            }
             std::fs::read(dir.join(name)).unwrap()
         };
         let again = job("again.dmdjob.zip");
@@ -191,15 +201,44 @@ mod tests {
     fn a_job_made_again_from_the_pass_before_is_the_job_made_whole() {
         // The first pass leaves a region on nothing; the second draws a window of one
         // layer plain (tests/it/supports.rs).
-        made_again_and_whole("xy", [60.0, 0.0, 20.0], |o| o.binary = Some(true));
+        made_again_and_whole("xy", [60.0, 0.0, 20.0], &[], |o| o.binary = Some(true));
     }
 
     #[test]
     fn with_the_z_correction_too() {
         // At half size: five layers drawn whole in each of two places.
-        made_again_and_whole("xyz", [0.0, 45.0, 0.0], |o| {
+        made_again_and_whole("xyz", [0.0, 45.0, 0.0], &[], |o| {
             o.transform.scale = [0.5; 3];
             o.cure.correction = Some(crate::cure::Correction::Xyz)
         });
+    }
+
+    #[test]
+    fn with_a_distortion_correction_too() {
+        // A table measured over the field's right half only: the points of the part's
+        // left half are warped by extrapolation, and the blocks taken from the pass
+        // before count theirs again.
+        let dir = crate::test_support::scratch("again", "table");
+        let table = dir.join("half.csv");
+        let mut t = String::from("x_mm,y_mm,seen_x_mm,seen_y_mm\n");
+        for j in 0..9 {
+            for i in 0..7 {
+                let (x, y) = (30.0 + 5.0 * i as f64, 5.0 + 5.0 * j as f64);
+                let seen = [x + 0.002 * i as f64, y + 0.001 * j as f64];
+                t.push_str(&format!("{x},{y},{},{}\n", seen[0], seen[1]));
+            }
+        }
+        std::fs::write(&table, t).unwrap();
+        made_again_and_whole(
+            "warped",
+            [0.0, 45.0, 0.0],
+            &["distortion.extrapolated"],
+            |o| {
+                o.transform.scale = [0.5; 3];
+                o.cure.correction = Some(crate::cure::Correction::Xyz);
+                o.distortion = crate::geometry::distortion::DistortionChoice::Table(table.clone());
+            },
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -129,6 +129,8 @@ struct Drawing {
     section: Vec<Contour>,
     /// The pre-warped section and its area's scale, with a distortion correction.
     warped: Option<(Vec<Contour>, f64)>,
+    /// The pre-warp's points outside the area its table measured (counted as it warped).
+    extrapolated: u64,
     /// The section's coverage (drawn ahead of the masks for the XY correction) and its
     /// lit box.
     coverage: Option<(Mask, PixelBox)>,
@@ -199,7 +201,7 @@ pub(super) fn layer_masks(
             (m, Origin::Drawn)
         }
     };
-    let counts = LayerCounts::of(&drawn);
+    let counts = LayerCounts::of(&drawn, drawing.extrapolated);
     counts.count(ctx, i, origin == Origin::Drawn);
     let masks = write_masks(ctx, &drawn, i)?;
     let area_mm2 = drawn.area_mm2;
@@ -281,18 +283,19 @@ fn drawing(
         layer.section.contours.clone()
     };
     // Distortion pre-warp (geometry::distortion): rasterize where the projector must aim.
-    let warped = match ctx.correction {
-        Some(w) => Some(w.warp_layer(&section, ctx.model, i)?),
-        None => None,
+    let (warped, extrapolated) = match ctx.correction {
+        Some(w) => {
+            let (c, n) = w.warp_layer(&section, ctx.model, i)?;
+            let s = distortion::area_scale(&section, &c);
+            (Some((c, s)), n)
+        }
+        None => (None, 0),
     };
-    let warped = warped.map(|w| {
-        let s = distortion::area_scale(&section, &w);
-        (w, s)
-    });
     let Some(job) = ctx.cure.filter(|c| c.corrects_at(i)) else {
         return Ok(Drawing {
             section,
             warped,
+            extrapolated,
             coverage: None,
             corr: None,
         });
@@ -341,6 +344,7 @@ fn drawing(
     Ok(Drawing {
         section,
         warped,
+        extrapolated,
         coverage: Some((m, lit)),
         corr,
     })

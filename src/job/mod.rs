@@ -269,11 +269,11 @@ fn make_job(
         (cure, opts.dose.as_ref(), again.as_ref()),
     )?;
     let finished = Instant::now();
-    let tiled_or_warped = (setup.tiler.is_some(), setup.correction.is_some());
+    let tiled = setup.tiler.is_some();
     if let Some(a) = &again {
         sliced.stats = a.stats();
     }
-    let layers = again::may_make_again(profile.supports.enabled, cure, tiled_or_warped)
+    let layers = again::may_make_again(profile.supports.enabled, cure, tiled)
         .then(|| (sliced.layers.clone(), sliced.stats));
     let field_runs = sliced
         .layers

@@ -140,15 +140,21 @@ impl Correction {
 
     /// Warps layer `layer`'s own section as its masks are drawn, counting its points
     /// outside the measured area into the report (so each layer counts once, whichever
-    /// other layer warped its section to look at it); an unreachable point is an
-    /// [`Error::Job`] naming the model, the layer and the point.
+    /// other layer warped its section to look at it): the warped section and that count.
+    /// An unreachable point is an [`Error::Job`] naming the model, the layer and the point.
     pub fn warp_layer(
         &self,
         contours: &[Contour],
         model: &Path,
         layer: usize,
-    ) -> Result<Vec<Contour>> {
+    ) -> Result<(Vec<Contour>, u64)> {
         self.warp(contours, model, layer, true)
+    }
+
+    /// Counts `n` extrapolated points of a layer into the report, as warping it did (a
+    /// layer taken as an earlier pass of the job drew it).
+    pub fn count_extrapolated(&self, n: u64) {
+        self.extrapolated.fetch_add(n, Ordering::Relaxed);
     }
 
     /// Warps layer `layer`'s section for another layer or the prediction to look at: as
@@ -159,7 +165,7 @@ impl Correction {
         model: &Path,
         layer: usize,
     ) -> Result<Vec<Contour>> {
-        self.warp(contours, model, layer, false)
+        self.warp(contours, model, layer, false).map(|(c, _)| c)
     }
 
     fn warp(
@@ -168,7 +174,7 @@ impl Correction {
         model: &Path,
         layer: usize,
         counted: bool,
-    ) -> Result<Vec<Contour>> {
+    ) -> Result<(Vec<Contour>, u64)> {
         let mut w = self.warper();
         let out = w.warp(contours).map_err(|u| Error::Job {
             path: model.into(),
@@ -177,11 +183,11 @@ impl Correction {
                 u.target[0], u.target[1], self.report.source, u.aim[0], u.aim[1], self.field_mm[0], self.field_mm[1]
             ),
         });
+        let n = w.extrapolated();
         if counted && out.is_ok() {
-            self.extrapolated
-                .fetch_add(w.extrapolated(), Ordering::Relaxed);
+            self.count_extrapolated(n);
         }
-        out
+        out.map(|c| (c, n))
     }
 }
 
