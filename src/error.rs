@@ -137,3 +137,51 @@ impl Error {
         }
     }
 }
+
+/// The results of a parallel iterator collected in order, or the error of the first item
+/// (in the iterator's order) that failed. Rayon's own `collect` into a `Result` returns
+/// whichever error a worker met first, so the same input could be refused with one
+/// message or another from run to run.
+pub(crate) fn in_order<T: Send, C: FromIterator<T>>(
+    items: impl rayon::iter::IndexedParallelIterator<Item = Result<T>>,
+) -> Result<C> {
+    let all: Vec<Result<T>> = items.collect();
+    all.into_iter().collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rayon::prelude::*;
+
+    #[test]
+    fn the_first_failing_item_in_order_is_the_error_whichever_fails_first() {
+        // Item 2 fails late, item 6 at once: in order, item 2's error is the one.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        let fail = |i: usize| Error::Job {
+            path: format!("part{i}.stl").into(),
+            msg: "bad".into(),
+        };
+        let r: Result<Vec<usize>> = pool.install(|| {
+            in_order(
+                (0..8usize)
+                    .into_par_iter()
+                    .with_max_len(1)
+                    .map(|i| match i {
+                        2 => {
+                            std::thread::sleep(std::time::Duration::from_millis(100));
+                            Err(fail(i))
+                        }
+                        6 => Err(fail(i)),
+                        _ => Ok(i),
+                    }),
+            )
+        });
+        assert_eq!(r.unwrap_err().to_string(), "part2.stl: bad");
+        let ok: Result<Vec<usize>> = in_order((0..8usize).into_par_iter().map(Ok));
+        assert_eq!(ok.unwrap(), (0..8).collect::<Vec<_>>());
+    }
+}

@@ -63,16 +63,11 @@ pub fn run_layers(
     let prepare = |hi: usize| -> Result<Vec<(Irradiance, Prepared)>> {
         // Layers hi−1 down to hi−CHUNK (top first).
         let lo = hi.saturating_sub(CHUNK);
-        (lo..hi)
-            .rev()
-            .collect::<Vec<_>>()
-            .par_iter()
-            .map(|&i| {
-                let irr = irradiance(i)?;
-                let p = kernel.prepare(&irr, ratio[i]);
-                Ok((if track { irr } else { Irradiance::default() }, p))
-            })
-            .collect()
+        crate::error::in_order((lo..hi).into_par_iter().rev().map(|i| {
+            let irr = irradiance(i)?;
+            let p = kernel.prepare(&irr, ratio[i]);
+            Ok((if track { irr } else { Irradiance::default() }, p))
+        }))
     };
     let mut engine = Engine::new(w, h, model);
     engine.track_irradiance(track);

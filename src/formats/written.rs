@@ -77,19 +77,16 @@ pub(super) fn survey<'m>(
         uses.entry(o.gray_map.as_str()).or_insert((1, false));
     }
     let names: Vec<(&str, bool)> = uses.iter().map(|(f, u)| (*f, u.1)).collect();
-    let seen: Vec<Written> = names
-        .par_iter()
-        .map(|&(rel, pixels)| {
-            let whole = files.0.file(rel)?;
-            let n = png_len(&whole);
-            let sha = (n < whole.len()).then(|| sha256_hex(&whole[..n]));
-            let px = pixels
-                .then(|| crate::picture::read_mask(files, rel))
-                .transpose()?
-                .map(|g| MaskPixels::of_gray8(g.width(), g.as_raw()));
-            Ok((n as u64, sha, px))
-        })
-        .collect::<Result<_>>()?;
+    let seen: Vec<Written> = crate::error::in_order(names.par_iter().map(|&(rel, pixels)| {
+        let whole = files.0.file(rel)?;
+        let n = png_len(&whole);
+        let sha = (n < whole.len()).then(|| sha256_hex(&whole[..n]));
+        let px = pixels
+            .then(|| crate::picture::read_mask(files, rel))
+            .transpose()?
+            .map(|g| MaskPixels::of_gray8(g.width(), g.as_raw()));
+        Ok((n as u64, sha, px))
+    }))?;
     let seen: HashMap<&str, Written> = names.iter().map(|n| n.0).zip(seen).collect();
     let bytes = uses.iter().map(|(f, u)| u.0 * seen[f].0).sum();
     let changed = seen.values().any(|w| w.1.is_some() || w.2.is_some());

@@ -36,26 +36,22 @@ pub struct Mark {
 /// below's. Errors: a mask that cannot be read.
 pub fn regions(b: &Bundle) -> Result<Vec<(usize, Region)>> {
     let m = &b.manifest;
-    let runs: Vec<Option<Vec<Run>>> = m
-        .layers
-        .par_iter()
-        .map(|l| {
-            let mut images = Vec::with_capacity(l.masks.len());
-            for mask in &l.masks {
-                let p = &m.machine.projector[mask.projector as usize];
-                let img = read_mask(b.files.as_ref(), &mask.file)?;
-                if img.dimensions() != (p.width_px, p.height_px) {
-                    // A mask not of its projector's size is not placed (the preview
-                    // refuses it too).
-                    return Ok(None);
-                }
-                images.push((img.into_raw(), Placement::of(p)));
+    let runs: Vec<Option<Vec<Run>>> = crate::error::in_order(m.layers.par_iter().map(|l| {
+        let mut images = Vec::with_capacity(l.masks.len());
+        for mask in &l.masks {
+            let p = &m.machine.projector[mask.projector as usize];
+            let img = read_mask(b.files.as_ref(), &mask.file)?;
+            if img.dimensions() != (p.width_px, p.height_px) {
+                // A mask not of its projector's size is not placed (the preview
+                // refuses it too).
+                return Ok(None);
             }
-            let masks: Vec<(&[u8], Placement)> =
-                images.iter().map(|(d, at)| (d.as_slice(), *at)).collect();
-            Ok(Some(field_runs(&masks)))
-        })
-        .collect::<Result<_>>()?;
+            images.push((img.into_raw(), Placement::of(p)));
+        }
+        let masks: Vec<(&[u8], Placement)> =
+            images.iter().map(|(d, at)| (d.as_slice(), *at)).collect();
+        Ok(Some(field_runs(&masks)))
+    }))?;
     Ok(unsupported_regions(&runs))
 }
 

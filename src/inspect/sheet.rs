@@ -89,13 +89,10 @@ pub fn contact_sheet(
         let tw = (edge as u64 * crop.width() as u64 / crop.height() as u64).max(1) as u32;
         (tw, edge)
     };
-    let thumbs: Vec<GrayImage> = layers
-        .par_iter()
-        .map(|&l| {
-            let c = layer_cells(manifest, l, masks, crop, tw, th)?;
-            Ok(GrayImage::from_raw(c.width, c.height, c.mean).expect("sizes agree"))
-        })
-        .collect::<Result<_>>()?;
+    let thumbs: Vec<GrayImage> = crate::error::in_order(layers.par_iter().map(|&l| {
+        let c = layer_cells(manifest, l, masks, crop, tw, th)?;
+        Ok(GrayImage::from_raw(c.width, c.height, c.mean).expect("sizes agree"))
+    }))?;
     let (tw, th) = thumbs.first().map_or((tw, th), |t| (t.width(), t.height()));
 
     let label_h = text::line_height(SMALL.size).ceil() as u32 + 4;

@@ -130,11 +130,8 @@ pub(super) fn place_plate<'a>(
     profile: &Profile,
     first: (String, Mesh),
 ) -> Result<PlacedPart<'a>> {
-    let rest: Vec<(String, Mesh)> = plate
-        .more
-        .par_iter()
-        .map(|p| read_model(p, None))
-        .collect::<Result<_>>()?;
+    let rest: Vec<(String, Mesh)> =
+        crate::error::in_order(plate.more.par_iter().map(|p| read_model(p, None)))?;
     let paths = std::iter::once(&opts.input).chain(&plate.more);
     let parts: Vec<Loaded> = paths
         .zip(std::iter::once(first).chain(rest))

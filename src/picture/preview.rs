@@ -150,14 +150,12 @@ fn voxels(manifest: &Manifest, masks: &dyn BundleSource) -> Result<Voxels> {
     let slab_layers: Vec<(usize, usize)> = (0..nz)
         .map(|j| (j * step, ((j + 1) * step).min(n) - 1))
         .collect();
-    let planes: Vec<(u32, u32, Vec<u8>)> = slab_layers
-        .par_iter()
-        .map(|&(a, b)| {
+    let planes: Vec<(u32, u32, Vec<u8>)> =
+        crate::error::in_order(slab_layers.par_iter().map(|&(a, b)| {
             let c = layer_cells(manifest, (a + b) / 2, masks, crop, want.0, want.1)?;
             let occ = c.lit.iter().map(|&l| u8::from(l >= 0.5)).collect();
             Ok((c.width, c.height, occ))
-        })
-        .collect::<Result<_>>()?;
+        }))?;
     let (nx, ny) = planes.first().map_or(want, |p| (p.0, p.1));
     let (nx, ny) = (nx as usize, ny as usize);
     // Cells come row 0 at the top (back of the field); voxels count y from the front.

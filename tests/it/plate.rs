@@ -299,6 +299,22 @@ fn a_plate_that_cannot_be_made_is_one_line_naming_the_part_and_nothing_is_writte
         assert_eq!(e.trim_end().lines().count(), 1, "{args:?}: {e}");
         assert!(!dir.join("bad.dmdjob").exists(), "{args:?}");
     }
+    // Several parts that cannot be read: the first of them named, whichever thread read
+    // which first.
+    std::fs::write(dir.join("cut.stl"), "solid x\n").unwrap();
+    std::fs::write(dir.join("junk.stl"), "junk").unwrap();
+    let args = [
+        "slice", cube, "cut.stl", "junk.stl", "cut.stl", "junk.stl", "--plate",
+    ];
+    let args = [&args[..], &["-o", "bad.dmdjob"]].concat();
+    for _ in 0..4 {
+        let o = run_threads(&dir, &args, "4");
+        assert_eq!(o.status.code(), Some(2));
+        let e = stderr(&o);
+        assert!(e.starts_with("dmdsl: error: cut.stl: "), "{e}");
+        assert_eq!(e.trim_end().lines().count(), 1, "{e}");
+        assert!(!dir.join("bad.dmdjob").exists());
+    }
     // How much room is missing, in mm: 40 cubes of 10.156 mm in rows of five, 3 mm apart.
     let o = run_in(&dir, &["slice", cube, "--copies", "40", "-o", "bad.dmdjob"]);
     assert!(
