@@ -179,6 +179,14 @@ impl Tiler {
         Ok(tiler)
     }
 
+    /// Counts a layer whose projector `k` mask reaches `beyond_mm` outside its calibrated
+    /// area, as rendering it did (a layer that shows the masks of another).
+    pub fn count_outside(&self, k: usize, beyond_mm: f64) {
+        if let Some(o) = self.optics.get(k) {
+            o.compensator.count_outside(beyond_mm);
+        }
+    }
+
     /// Forgets what the projectors' compensation counted: the job's layers are made again.
     pub fn reset_counts(&self) {
         for o in &self.optics {
@@ -221,10 +229,11 @@ impl Tiler {
     }
 
     /// Projector `k`'s gray mask of a field coverage mask that is zero outside `lit`,
-    /// and the box of the projector mask outside which it is zero (or black, when the
-    /// response gives a gray above zero for no light: then the whole mask). Only that box
-    /// is written.
-    pub fn render(&self, k: usize, field: &Mask, lit: PixelBox) -> (Mask, PixelBox) {
+    /// the box of the projector mask outside which it is zero (or black, when the
+    /// response gives a gray above zero for no light: then the whole mask), and how far,
+    /// mm, the mask reaches outside the projector's calibrated area, if it does (counted by
+    /// its compensation). Only that box is written.
+    pub fn render(&self, k: usize, field: &Mask, lit: PixelBox) -> (Mask, PixelBox, Option<f64>) {
         let t = &self.tiles[k];
         let (w, h) = t.rect.size();
         let black = t.lut[0];
@@ -252,14 +261,12 @@ impl Tiler {
                 None => Self::gray_row(t, r, b.c0, src, dst),
             }
         }
-        if let Some(o) = compensated {
-            o.compensator.apply_in(&mut out, b);
-        }
+        let outside = compensated.and_then(|o| o.compensator.apply_in(&mut out, b));
         if !t.view.mirror_x && !t.view.mirror_y {
-            return (out, b);
+            return (out, b, outside);
         }
         let (view, b) = crate::raster::projector_view_in(&out, &t.view, b);
-        (view.into_owned(), b)
+        (view.into_owned(), b, outside)
     }
 
     /// Columns `c0..` of row `r` of tile `t` without compensation: coverage × F through
@@ -406,7 +413,7 @@ mod tests {
                 }
             }
             for k in 0..2 {
-                let (m, b) = t.render(k, &field, lit);
+                let (m, b, _) = t.render(k, &field, lit);
                 assert!(m == whole(&t, k, &field), "{k} {mx} {my}");
                 for (i, &v) in m.data.iter().enumerate() {
                     let (r, c) = (i / 64, i % 64);

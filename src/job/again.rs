@@ -24,8 +24,9 @@ use std::ops::Range;
 /// taken from the pass before.
 #[derive(Debug, Clone, Default)]
 pub(super) struct LayerCounts {
-    /// The light compensation's reach outside the calibrated area ([`DrawnMasks::outside`]).
-    outside: Option<f64>,
+    /// Per projector, the light compensation's reach outside the calibrated area
+    /// ([`DrawnMasks::outside`]).
+    outside: Vec<Option<f64>>,
     /// The flat features the Z correction dropped ([`DrawnMasks::dropped`]).
     dropped: Vec<(usize, LayerDropped)>,
     /// The narrow features drawn wider ([`DrawnMasks::widened`]).
@@ -38,7 +39,7 @@ impl LayerCounts {
     /// What `drawn` counts, and the `extrapolated` points of the layer's pre-warp.
     pub fn of(drawn: &DrawnMasks, extrapolated: u64) -> LayerCounts {
         LayerCounts {
-            outside: drawn.outside,
+            outside: drawn.outside.clone(),
             dropped: drawn.dropped.clone(),
             widened: drawn.widened,
             extrapolated,
@@ -48,8 +49,16 @@ impl LayerCounts {
     /// Counts layer `i` into the job's totals; the compensation's only unless `drawn` (it
     /// counted the layer as it drew it).
     pub fn count(&self, ctx: &LayerContext, i: usize, drawn: bool) {
-        if let (Some(beyond), Some(o), false) = (self.outside, ctx.optics, drawn) {
-            o.compensator.count_outside(beyond);
+        let reached = self.outside.iter().enumerate();
+        for (k, beyond) in reached
+            .filter_map(|(k, b)| Some((k, (*b)?)))
+            .filter(|_| !drawn)
+        {
+            match (ctx.tiler, ctx.optics) {
+                (Some(t), _) => t.count_outside(k, beyond),
+                (None, Some(o)) => o.compensator.count_outside(beyond),
+                (None, None) => {}
+            }
         }
         if let Some(job) = ctx.cure {
             job.count_dropped(i, &self.dropped);

@@ -414,6 +414,11 @@ fn draw(
         }
     }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
+    // Per projector: the tiler compensates each projector's view as it renders it.
+    let mut outside = match ctx.tiler {
+        Some(_) => Vec::with_capacity(ctx.profile.projector.len()),
+        None => vec![outside],
+    };
     let supported = ctx.profile.supports.enabled;
     let mut views = Vec::new();
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
@@ -421,7 +426,8 @@ fn draw(
         // The view and the box outside which it is zero.
         let (view, b) = match ctx.tiler {
             Some(t) => {
-                let (m, b) = t.render(k, &field_mask, scratch.lit_box());
+                let (m, b, beyond) = t.render(k, &field_mask, scratch.lit_box());
+                outside.push(beyond);
                 (Cow::Owned(m), b)
             }
             // The field mask is zero outside the rasterizer's lit box.

@@ -18,10 +18,10 @@ use std::sync::{Arc, Mutex};
 /// What drawing one section gave: its masks' files and what writing them again must
 /// repeat.
 pub(super) struct DrawnMasks {
-    /// Whether drawing them reported the layer to the light compensation as reaching
-    /// outside the calibrated area, and how far, mm (a copy reports it again: every such
-    /// layer counts).
-    pub outside: Option<f64>,
+    /// Per projector, whether drawing them reported the layer to its light compensation
+    /// as reaching outside the calibrated area, and how far, mm (a copy reports it again:
+    /// every such layer counts).
+    pub outside: Vec<Option<f64>>,
     /// Lit area, mm².
     pub area_mm2: f64,
     /// The cure correction's moves of the edges they were drawn with (empty without).
@@ -129,7 +129,7 @@ mod tests {
 
     fn masks(tag: u8) -> Arc<DrawnMasks> {
         Arc::new(DrawnMasks {
-            outside: (tag % 2 == 1).then_some(tag as f64),
+            outside: vec![(tag % 2 == 1).then_some(tag as f64)],
             area_mm2: tag as f64,
             shifts: Vec::new(),
             field: None,
@@ -170,7 +170,7 @@ mod tests {
         assert!(cache.get(&square(0.0), &[]).is_none());
         cache.put(&square(0.0), &masks(0));
         let got = cache.get(&square(0.0), &[]).expect("hit");
-        assert_eq!((got.area_mm2, got.outside), (0.0, None));
+        assert_eq!((got.area_mm2, &got.outside[..]), (0.0, &[None][..]));
         assert!(cache.get(&square(0.5), &[]).is_none());
         // A second put of the same section keeps the first entry (same bytes anyway).
         cache.put(&square(0.0), &masks(9));
@@ -186,7 +186,7 @@ mod tests {
         for k in 1..=RECENT_PRISM_MASKS as u8 {
             let m = cache.get(&square(k as f64), &[]).expect("kept");
             assert_eq!(m.pngs[0].0, vec![k; 3]);
-            assert_eq!(m.outside.is_some(), k % 2 == 1);
+            assert_eq!(m.outside[0].is_some(), k % 2 == 1);
         }
     }
 

@@ -764,6 +764,39 @@ fn calibrated_tiled(dir: &Path, name: &str, blocks: [String; 2]) -> dmdsl::profi
 }
 
 #[test]
+fn every_tiled_layer_lit_outside_a_projectors_calibrated_area_counts() {
+    // A prism 40 layers tall reaching 3 mm above p0's calibrated area: without the cure
+    // correction each layer but a block's first shows the masks of the layer below, and
+    // is counted all the same.
+    let dir = tempdir("geom-outside");
+    let block = calibration_block(0.03, -0.02, GAMMA).replace(
+        "area_mm = [0.0, 0.0, 65.0, 48.75]\nextrapolate_mm = 0.0",
+        "area_mm = [0.0, 0.0, 65.0, 45.0]\nextrapolate_mm = 5.0",
+    );
+    calibrated_tiled(&dir, "o.toml", [block.clone(), block]);
+    let tall = box_tris([10.0, 40.0, 0.0], [50.0, 48.0, 2.0]);
+    write_stl(&dir.join("tall.stl"), &tall);
+    let args = [
+        "slice",
+        "tall.stl",
+        "--keep-position",
+        "--profile",
+        "o.toml",
+    ];
+    let args = [
+        &args[..],
+        &["--cure-correction", "off", "-q", "-o", "t.dmdjob"],
+    ]
+    .concat();
+    let job = slice(&dir, &args);
+    assert_eq!(job["layers"].as_array().unwrap().len(), 40);
+    let notes = warnings_of(&job, "optics.outside-calibrated-area");
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert_eq!(notes[0]["fields"]["projector"], "p0");
+    assert_eq!(notes[0]["fields"]["layers"], 40, "{}", notes[0]);
+}
+
+#[test]
 fn tiled_blend_goes_through_a_nonlinear_response() {
     let dir = tempdir("geom-gamma");
     let blk = calibration_block(0.0, 0.0, GAMMA);
