@@ -12,6 +12,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The bundle directory `dir`.
 pub(super) fn open_dir(dir: &Path) -> Result<Job> {
+    if !dir.join(MANIFEST).is_file() {
+        return Err(crate::error::Error::Bundle {
+            path: dir.into(),
+            msg: format!("not a job: a directory without `{MANIFEST}` (a bundle directory holds `{MANIFEST}` and `masks/`)"),
+        });
+    }
     Ok(Job {
         path: dir.into(),
         format: Format::Dmdjob,

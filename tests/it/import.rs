@@ -368,6 +368,22 @@ fn hostile_not_a_zip() {
 }
 
 #[test]
+fn a_directory_that_is_not_a_bundle_is_named_as_such() {
+    let dir = tempdir("not-a-bundle");
+    std::fs::create_dir(dir.join("parts")).unwrap();
+    for cmd in ["run", "inspect"] {
+        let o = run_in(&dir, &[cmd, "parts"]);
+        assert_eq!(o.status.code(), Some(2), "{cmd}");
+        let e = stderr(&o);
+        assert!(
+            e.starts_with("dmdsl: error: parts: not a job: a directory without `job.json`"),
+            "{cmd}: {e}"
+        );
+        assert_eq!(e.trim_end().lines().count(), 1, "{cmd}: {e}");
+    }
+}
+
+#[test]
 fn hostile_truncated_archive() {
     let b = std::fs::read(fixture("sl1/cube3mm.sl1")).unwrap();
     refused(
