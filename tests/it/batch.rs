@@ -643,6 +643,7 @@ fn an_interrupt_stops_every_part_at_once() {
         .current_dir(&dir)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
+        .stoppable()
         .spawn()
         .unwrap();
     let staging = || {

@@ -388,3 +388,28 @@ pub fn predicted_cure(dir: &Path, out: &str, extra: &[&str]) -> serde_json::Valu
         serde_json::from_slice(&std::fs::read(dir.join(out).join("job.json")).unwrap()).unwrap();
     j["cure"]["predicted"].clone()
 }
+
+/// A command whose child starts with the stop signals (SIGINT, SIGTERM, SIGHUP) at their
+/// default disposition: dmdsl leaves a signal ignored when it starts ignored (under
+/// `nohup`, in a background job of a shell), and the tests that send them must not depend
+/// on how the test run itself was started.
+pub trait Stoppable {
+    /// Resets the stop signals in the child before it runs.
+    fn stoppable(&mut self) -> &mut Self;
+}
+
+impl Stoppable for Command {
+    fn stoppable(&mut self) -> &mut Self {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: signal() is async-signal-safe, and nothing else runs in the child
+        // between fork and exec.
+        unsafe {
+            self.pre_exec(|| {
+                for s in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+                    libc::signal(s, libc::SIG_DFL);
+                }
+                Ok(())
+            })
+        }
+    }
+}

@@ -252,6 +252,7 @@ fn an_interrupted_one_file_slice_leaves_nothing() {
         .current_dir(&d)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
+        .stoppable()
         .spawn()
         .unwrap();
     // Wait until the job is under way (its output directory made), then interrupt it.

@@ -39,6 +39,7 @@ fn start_long_slice(dir: &Path, out: &str) -> Child {
         ])
         .current_dir(dir)
         .stderr(Stdio::piped())
+        .stoppable()
         .spawn()
         .unwrap();
     let prefix = format!(".{out}.tmp-{}", child.id());

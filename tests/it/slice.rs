@@ -786,6 +786,7 @@ fn ctrl_c_leaves_nothing_behind() {
         ])
         .current_dir(&dir)
         .stderr(std::process::Stdio::piped())
+        .stoppable()
         .spawn()
         .unwrap();
     // Wait until the job is writing masks into its staging directory, then interrupt it.
