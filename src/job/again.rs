@@ -7,10 +7,10 @@
 //! gets the same bytes: its files stay as the pass before wrote them, its layers'
 //! records are that pass's, and what drawing them counted into the job's totals is
 //! counted again. The slicer cuts only the sections the blocks drawn again look at, and
-//! the slicing's repair counts are the pass before's. Only where the pass before's counts
-//! can be replayed: one projector (the Z correction looks at the sections below, not at
-//! how they were drawn; a distortion correction's extrapolated points are each layer's
-//! own warp's).
+//! the slicing's repair counts are the pass before's (the Z correction looks at the
+//! sections below, not at how they were drawn; a distortion correction's extrapolated
+//! points are each layer's own warp's). Not for a job of several projectors: the field's
+//! coverage it keeps for `--predict` is not carried from one pass to the next.
 
 use super::cure_records::{CureJob, LayerDropped, LayerWidened};
 use super::layer::{LayerContext, LayerInput, LayerOutput};
@@ -49,15 +49,11 @@ impl LayerCounts {
     /// Counts layer `i` into the job's totals; the compensation's only unless `drawn` (it
     /// counted the layer as it drew it).
     pub fn count(&self, ctx: &LayerContext, i: usize, drawn: bool) {
-        let reached = self.outside.iter().enumerate();
-        for (k, beyond) in reached
-            .filter_map(|(k, b)| Some((k, (*b)?)))
-            .filter(|_| !drawn)
-        {
-            match (ctx.tiler, ctx.optics) {
-                (Some(t), _) => t.count_outside(k, beyond),
-                (None, Some(o)) => o.compensator.count_outside(beyond),
-                (None, None) => {}
+        for (k, beyond) in self.outside.iter().enumerate().filter(|_| !drawn) {
+            match (beyond, ctx.tiler, ctx.optics) {
+                (Some(b), Some(t), _) => t.count_outside(k, *b),
+                (Some(b), None, Some(o)) => o.compensator.count_outside(*b),
+                _ => {}
             }
         }
         if let Some(job) = ctx.cure {

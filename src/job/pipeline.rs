@@ -211,7 +211,7 @@ impl Pipeline<'_> {
         }
     }
 
-    /// Every layer's output once the pool is done, or the first error.
+    /// Every layer's output once the pool is done, or the lowest failing layer's error.
     fn finish(self, masks_s: f64) -> Result<PipelineOutput> {
         if let Some((_, e)) = self.failure.into_inner().unwrap_or_else(|p| p.into_inner()) {
             return Err(e);
