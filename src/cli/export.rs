@@ -61,10 +61,11 @@ pub(crate) fn machine_arg(
         return Ok((None, None));
     };
     let path = Path::new(arg);
-    if path.is_file()
-        && path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    // A .json name is a hardware description, also when it cannot be read (the error
+    // names the file, not a profile).
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
     {
         return Ok((None, Some(Hardware::read(path)?)));
     }

@@ -669,6 +669,13 @@ fn a_control_file_for_a_described_printer_names_its_engine_and_is_refused_when_i
     );
     let o = run_in(&dir, &["run", "hw.zip", "--machine", hw]);
     assert!(o.status.success(), "{}", stdout(&o));
+    // A hardware description that is not there is named as a file, not as a profile.
+    let o = run_in(&dir, &["run", "hw.zip", "--machine", "missing.json"]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.starts_with("dmdsl: error: missing.json: "), "{e}");
+    assert!(!e.contains("profile"), "{e}");
+    assert_eq!(e.trim_end().lines().count(), 1, "{e}");
     // export --machine: the same names; a job the printer cannot run (the default
     // projector's size) refused.
     let o = run_in(
