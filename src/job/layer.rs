@@ -414,11 +414,8 @@ fn draw(
         }
     }
     let area_mm2 = lit_pixels * ctx.px_area_mm2 * area_scale;
-    // Per projector: the tiler compensates each projector's view as it renders it.
-    let mut outside = match ctx.tiler {
-        Some(_) => Vec::with_capacity(ctx.profile.projector.len()),
-        None => vec![outside],
-    };
+    // Per projector (the tiler compensates each projector's view as it renders it).
+    let mut outside: Vec<_> = ctx.tiler.is_none().then_some(outside).into_iter().collect();
     let supported = ctx.profile.supports.enabled;
     let mut views = Vec::new();
     let mut pngs = Vec::with_capacity(ctx.profile.projector.len());
