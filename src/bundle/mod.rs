@@ -258,10 +258,11 @@ pub struct LayerCure {
     pub offset_px: Option<f64>,
 }
 
-/// Who wrote the bundle.
+/// Who wrote the job's layers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Generator {
-    /// Program name, "dmdsl".
+    /// Program name: "dmdsl" for a job it sliced; an imported job's file's writer as the
+    /// file names it (e.g. "PrusaSlicer-2.5.0"), its version then empty.
     pub name: String,
     /// Program version.
     pub version: String,
@@ -589,12 +590,15 @@ pub struct Layer {
     /// Area of the section, mm² (from anti-aliased coverage).
     pub area_mm2: f64,
     /// Largest distance from a point of the section to its boundary (DisMax-Min of the
-    /// hybrid continuous/layered method: the radius of the largest inscribed circle), mm.
-    #[serde(default)]
-    pub max_fill_distance_mm: f64,
-    /// Connected regions of the section that do not rest on the layer below.
-    #[serde(default)]
-    pub islands: u32,
+    /// hybrid continuous/layered method: the radius of the largest inscribed circle), mm;
+    /// `None` (absent) when the job does not know it: an imported job, whose file carries
+    /// images, not sections.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_fill_distance_mm: Option<f64>,
+    /// Connected regions of the section that do not rest on the layer below; `None`
+    /// (absent) when the job does not know them (an imported job).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub islands: Option<u32>,
     /// Bounding box of the section in build-plane mm, `[[x_min, y_min], [x_max, y_max]]`;
     /// `null` for an empty section.
     #[serde(default)]
@@ -753,7 +757,10 @@ impl Manifest {
             let figures = [
                 ("thickness_mm", l.thickness_mm),
                 ("exposure_s", l.exposure_s),
-                ("max_fill_distance_mm", l.max_fill_distance_mm),
+                (
+                    "max_fill_distance_mm",
+                    l.max_fill_distance_mm.unwrap_or(0.0),
+                ),
                 ("time_s", l.time_s),
             ];
             for (k, v) in figures {

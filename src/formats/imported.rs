@@ -133,8 +133,9 @@ pub(crate) fn layer(
         exposure_s: exposure_s.unwrap_or(0.0),
         area_mm2: area_mm2
             .unwrap_or_else(|| fig.map_or(0.0, |f| f.half_px as f64 * pixel_area_mm2)),
-        max_fill_distance_mm: 0.0,
-        islands: 0,
+        // The file's images are not sections: no inscribed circle or islands to state.
+        max_fill_distance_mm: None,
+        islands: None,
         bbox_mm,
         masks: vec![MaskRef {
             file: file.into(),

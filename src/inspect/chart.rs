@@ -1,5 +1,7 @@
 //! The per-layer chart: the manifest's figures of every layer against the layer number, in
-//! stacked panels sharing the x axis, each with its quantity and unit.
+//! stacked panels sharing the x axis, each with its quantity and unit. The figures of the
+//! sections (fill distance, islands) have no panel for a job that does not know them (an
+//! imported one).
 
 use crate::bundle::{Layer, Manifest, Mode};
 use crate::plot::{Band, Chart, Panel, Series, Style};
@@ -18,13 +20,14 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         Some(r) if n > 0 => &manifest.layers[*r.start()..=(*r.end()).min(n - 1)],
         _ => &manifest.layers,
     };
-    // Each layer's value held over its width on the x axis (layer i spans i ± 0.5).
-    let series = |f: &dyn Fn(&Layer) -> f64| {
+    // Each layer's value held over its width on the x axis (layer i spans i ± 0.5); none
+    // for a layer without it.
+    let series = |f: &dyn Fn(&Layer) -> Option<f64>| {
         let points = layers.iter().flat_map(|l| {
-            let (x, v) = (l.index as f64, f(l));
-            [(x - 0.5, v), (x + 0.5, v)]
+            let x = l.index as f64;
+            f(l).map(|v| [(x - 0.5, v), (x + 0.5, v)])
         });
-        Series::new("", LINE, Style::Line, points.collect())
+        Series::new("", LINE, Style::Line, points.flatten().collect())
     };
     // Continuous (swept) layers of a hybrid job, shaded in every panel.
     let mut bands = Vec::new();
@@ -41,6 +44,10 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         bands: bands.clone(),
         y_from_zero: true,
     };
+    // A section's figure has a panel unless every layer lacks it.
+    let known = |y_label: &str, s: Series| {
+        (layers.is_empty() || !s.points.is_empty()).then(|| panel(y_label, s))
+    };
     let which = match (layers.first(), layers.last()) {
         (Some(a), Some(b)) if layers.len() < n => {
             format!("layers {}–{} of {n}", a.index, b.index)
@@ -52,15 +59,45 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         x_label: "layer number (0 = first layer, on the platform)".into(),
         width: 1200,
         height: 1100,
-        panels: vec![
-            panel("section area (mm²)", series(&|l| l.area_mm2)),
-            panel("exposure (s)", series(&|l| l.exposure_s)),
-            panel(
+        panels: [
+            Some(panel("section area (mm²)", series(&|l| Some(l.area_mm2)))),
+            Some(panel("exposure (s)", series(&|l| Some(l.exposure_s)))),
+            known(
                 "largest fill distance (mm)",
                 series(&|l| l.max_fill_distance_mm),
             ),
-            panel("layer time (s)", series(&|l| l.time_s)),
-            panel("islands on nothing (count)", series(&|l| l.islands as f64)),
-        ],
+            Some(panel("layer time (s)", series(&|l| Some(l.time_s)))),
+            known(
+                "islands on nothing (count)",
+                series(&|l| l.islands.map(f64::from)),
+            ),
+        ]
+        .into_iter()
+        .flatten()
+        .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn labels(m: &Manifest) -> Vec<String> {
+        let chart = layer_chart("t", m, None);
+        chart.panels.into_iter().map(|p| p.y_label).collect()
+    }
+
+    #[test]
+    fn a_job_without_sections_has_no_panels_for_their_figures() {
+        let mut m = crate::exec::testutil::two_layer_topdown();
+        assert_eq!(labels(&m).len(), 5);
+        for l in &mut m.layers {
+            (l.max_fill_distance_mm, l.islands) = (None, None);
+        }
+        let got = labels(&m);
+        assert_eq!(got.len(), 3, "{got:?}");
+        assert!(got
+            .iter()
+            .all(|l| !l.contains("fill") && !l.contains("islands")));
     }
 }

@@ -23,10 +23,10 @@ pub struct Extremes {
     pub area_mm2: Extreme,
     /// Longest exposure, s.
     pub exposure_s: Extreme,
-    /// Largest fill distance, mm.
-    pub max_fill_distance_mm: Extreme,
-    /// Most islands resting on nothing.
-    pub islands: Extreme,
+    /// Largest fill distance, mm (`None`: the job does not know it, an imported one).
+    pub max_fill_distance_mm: Option<Extreme>,
+    /// Most islands resting on nothing (`None`: the job does not know them).
+    pub islands: Option<Extreme>,
     /// Longest layer time, s.
     pub time_s: Extreme,
 }
@@ -83,21 +83,29 @@ pub struct Summary {
     /// for people says so (the JSON keeps the numbers; `notes` says why).
     #[serde(skip)]
     pub unmeasured: bool,
+    /// True when the job's layers come from a file's images, not from sections (an
+    /// imported job, or a bundle exported from one).
+    #[serde(skip)]
+    pub imported: bool,
     /// The pictures written.
     pub pictures: Vec<String>,
 }
 
 /// The largest `f` over `layers` and the first layer reaching it.
 fn extreme(layers: &[Layer], f: impl Fn(&Layer) -> f64) -> Extreme {
-    let (value, layer) = layers.iter().fold((f64::NEG_INFINITY, 0), |best, l| {
-        let v = f(l);
-        if v > best.0 {
-            (v, l.index as usize)
-        } else {
-            best
-        }
-    });
-    Extreme { value, layer }
+    known_extreme(layers, |l| Some(f(l))).expect("a job with layers")
+}
+
+/// The largest `f` over the layers that have it and the first layer reaching it (`None`
+/// when no layer has it).
+fn known_extreme(layers: &[Layer], f: impl Fn(&Layer) -> Option<f64>) -> Option<Extreme> {
+    layers.iter().fold(None, |best, l| match f(l) {
+        Some(v) if best.is_none_or(|b: Extreme| v > b.value) => Some(Extreme {
+            value: v,
+            layer: l.index as usize,
+        }),
+        _ => best,
+    })
 }
 
 /// The summary of the bundle at `bundle` (as given) whose manifest is `m`.
@@ -111,8 +119,8 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
     let extremes = (!l.is_empty()).then(|| Extremes {
         area_mm2: extreme(l, |l| l.area_mm2),
         exposure_s: extreme(l, |l| l.exposure_s),
-        max_fill_distance_mm: extreme(l, |l| l.max_fill_distance_mm),
-        islands: extreme(l, |l| l.islands as f64),
+        max_fill_distance_mm: known_extreme(l, |l| l.max_fill_distance_mm),
+        islands: known_extreme(l, |l| l.islands.map(f64::from)),
         time_s: extreme(l, |l| l.time_s),
     });
     Summary {
@@ -136,6 +144,7 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         extremes,
         notes: Vec::new(),
         unmeasured: !m.machine.states("projector[].pixel_mm"),
+        imported: !l.is_empty() && l.iter().all(|l| l.max_fill_distance_mm.is_none()),
         pictures: Vec::new(),
     }
 }
@@ -155,11 +164,9 @@ pub fn render_human(s: &Summary) -> String {
     let (n, h, tall) = (s.layers, s.layer_height_mm, s.height_mm);
     let (source, profile) = (&s.source, &s.profile);
     // An imported job's profile is a placeholder name: say where its machine comes from.
-    let origin = match profile.as_str() {
-        "sla-control-import" | "nanodlp-import" | "sl1-import" => {
-            format!("imported from {source}, for the machine that file states")
-        }
-        _ => format!("sliced from {source} for {profile}"),
+    let origin = match s.imported {
+        true => format!("imported from {source}, for the machine that file states"),
+        false => format!("sliced from {source} for {profile}"),
     };
     let _ = writeln!(
         o,
@@ -204,13 +211,18 @@ pub fn render_human(s: &Summary) -> String {
     }
     if let Some(e) = &s.extremes {
         let rows = [
-            ("largest area", &e.area_mm2, 2, " mm²"),
-            ("longest exposure", &e.exposure_s, 2, " s"),
-            ("largest fill distance", &e.max_fill_distance_mm, 3, " mm"),
-            ("most islands", &e.islands, 0, ""),
-            ("longest layer time", &e.time_s, 2, " s"),
+            ("largest area", Some(e.area_mm2), 2, " mm²"),
+            ("longest exposure", Some(e.exposure_s), 2, " s"),
+            ("largest fill distance", e.max_fill_distance_mm, 3, " mm"),
+            ("most islands", e.islands, 0, ""),
+            ("longest layer time", Some(e.time_s), 2, " s"),
         ];
         for (what, x, decimals, unit) in rows {
+            // An imported job's file holds images, not the sections these come from.
+            let Some(x) = x else {
+                let _ = writeln!(o, "  {what:<22} {:>12}", "not in the file");
+                continue;
+            };
             let value = match s.unmeasured && what == "largest area" {
                 true => "not measured".to_string(),
                 false => format!("{:.decimals$}{unit}", x.value),

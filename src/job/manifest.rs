@@ -158,8 +158,8 @@ pub(super) fn plan_layers(
             mode: p.mode,
             exposure_s: p.exposure_s,
             area_mm2: info.area_mm2,
-            max_fill_distance_mm: info.max_fill_distance_mm,
-            islands: a.islands,
+            max_fill_distance_mm: Some(info.max_fill_distance_mm),
+            islands: Some(a.islands),
             bbox_mm: a
                 .bbox_mm
                 .map(|b| b.map(|corner| corner.map(round::plane_mm))),

@@ -315,6 +315,44 @@ fn inspect_reads_imported_jobs() {
     );
 }
 
+#[test]
+fn an_imported_job_states_no_section_figures() {
+    // A file's images are not sections: it has no fill distances or islands to report,
+    // and neither has a bundle exported from it.
+    let dir = tempdir("import-sections");
+    let sl1 = fixture("sl1/cube3mm.sl1");
+    let o = run_in(
+        &dir,
+        &["export", sl1.to_str().unwrap(), "-o", "cube.dmdjob", "-q"],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let job: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("cube.dmdjob/job.json")).unwrap()).unwrap();
+    let schemas = crate::schema::Schemas::load();
+    schemas.assert_valid("job.schema.json", &job);
+    for l in job["layers"].as_array().unwrap() {
+        assert!(l.get("max_fill_distance_mm").is_none() && l.get("islands").is_none());
+    }
+    for job in [sl1.to_str().unwrap(), "cube.dmdjob"] {
+        let (code, s) = json_run(&dir, &["inspect", job]);
+        assert_eq!(code, 0, "{s}");
+        schemas.assert_valid("inspect-summary.schema.json", &s);
+        let e = &s["extremes"];
+        assert!(
+            e["max_fill_distance_mm"].is_null() && e["islands"].is_null(),
+            "{e}"
+        );
+        assert!(e["area_mm2"]["value"].as_f64().unwrap() > 0.0, "{e}");
+        let out = stdout(&run_in(&dir, &["inspect", job, "--chart", "c.png"]));
+        assert!(out.contains("imported from cube3mm.sl1"), "{out}");
+        for what in ["largest fill distance", "most islands"] {
+            let line = out.lines().find(|l| l.contains(what)).unwrap_or_default();
+            assert!(line.contains("not in the file"), "{out}");
+        }
+        assert!(dir.join("c.png").is_file());
+    }
+}
+
 /// Runs `dmdsl run FILE` on archive bytes `bytes` in a fresh directory and checks the
 /// refusal: exit code 2, one line naming the archive and each of `words`, nothing else
 /// written there.

@@ -84,6 +84,12 @@ fn inward_px(c: &crate::bundle::Cure) -> f64 {
     c.shift_px.max(limit.unwrap_or(0.0)).max(0.0)
 }
 
+/// The layer's largest inscribed circle's radius, mm (0 when the job does not know it:
+/// no pixel is then required lit by it).
+fn fill_mm(layer: &Layer) -> f64 {
+    layer.max_fill_distance_mm.unwrap_or(0.0)
+}
+
 impl ContentRule {
     /// The rule for `manifest`'s masks shown by `machine`; `native`: a job dmdsl sliced.
     pub(super) fn of(manifest: &Manifest, machine: &Machine, native: bool) -> ContentRule {
@@ -148,7 +154,7 @@ impl ContentRule {
             // Edges moved in by the cure correction shrink a section whose largest
             // inscribed circle has radius r by up to ((r − shift) / r)² (a layer of small
             // round features, such as support heads, the most).
-            let r = layer.max_fill_distance_mm / p;
+            let r = fill_mm(layer) / p;
             let shrink = if self.shift_px > 0.0 && r > 0.0 {
                 ((r - self.shift_px).max(0.0) / r).powi(2)
             } else {
@@ -158,7 +164,7 @@ impl ContentRule {
         }
         // Pixels wholly inside the largest inscribed circle (less the correction's move)
         // are fully covered.
-        let r = (layer.max_fill_distance_mm - self.warp_mm) / p - self.shift_px;
+        let r = (fill_mm(layer) - self.warp_mm) / p - self.shift_px;
         if r >= std::f64::consts::SQRT_2 {
             let inner = self.inner_radius_px(layer);
             min = min.max((std::f64::consts::PI * inner * inner).max(1.0));
@@ -170,7 +176,7 @@ impl ContentRule {
     /// (moved by the pre-warp, shrunk by the cure correction), whose every pixel lies wholly
     /// inside the section, px (0 when there is none).
     fn inner_radius_px(&self, layer: &Layer) -> f64 {
-        let r = (layer.max_fill_distance_mm - self.warp_mm) / self.pixel_mm - self.shift_px;
+        let r = (fill_mm(layer) - self.warp_mm) / self.pixel_mm - self.shift_px;
         (r - std::f64::consts::SQRT_2).max(0.0)
     }
 
@@ -240,7 +246,7 @@ impl ContentRule {
         let inner = 2.0 * (self.inner_radius_px(layer) - 1e-3);
         let (w, h) = (got[2] - got[0], got[3] - got[1]);
         if (w < inner || h < inner) && !self.held_back {
-            let (lit, r) = (lit_text(b), number(layer.max_fill_distance_mm));
+            let (lit, r) = (lit_text(b), number(fill_mm(layer)));
             return at(format!("its masks light {lit} of the field ({w}x{h} px), less than the section's largest inscribed circle (max_fill_distance_mm {r}) leaves lit ({inner:.1} px across)"));
         }
         if (count as f64) < min {
@@ -345,7 +351,7 @@ mod tests {
         says(&v, 0, "layer 0: settings.binary is true, but its masks hold grays other than 0 and 255 (264 lit pixel(s), gray sum 59192)");
         // A section 11 px high holds a circle of 5.5 px: 4.1 px wholly lit around its centre.
         for l in &mut m.layers {
-            l.max_fill_distance_mm = 5.5 * PX;
+            l.max_fill_distance_mm = Some(5.5 * PX);
         }
         m.settings.binary = false;
         m.settings.compensation = "zone".into();
@@ -389,7 +395,7 @@ mod tests {
         // nothing (1.46 px at σ = 0.5 px), where the layers above cure it.
         let few = lit_png(18, 8, 20, 10);
         let strip = |m: &mut Manifest, correction: &str| {
-            m.layers[0].max_fill_distance_mm = 1.45 * PX;
+            m.layers[0].max_fill_distance_mm = Some(1.45 * PX);
             m.cure = Some(cure_record(correction, 0));
         };
         assert_eq!(
@@ -400,7 +406,7 @@ mod tests {
         let mut c = cure_record("xy", 0);
         c.psf_sigma_px = 0.0;
         let v = verify_one(&dir, &few, |m| {
-            m.layers[0].max_fill_distance_mm = 1.45 * PX;
+            m.layers[0].max_fill_distance_mm = Some(1.45 * PX);
             m.cure = Some(c.clone());
         });
         assert_eq!(found(&v), content(&[0]), "without a PSF: the shift alone");
@@ -426,7 +432,7 @@ mod tests {
         // holds a circle of 5 px; 4 × 4 px lit): what the layers below hold.
         let small = lit_png(18, 8, 22, 12);
         let inscribed = |m: &mut Manifest, held: u32| {
-            m.layers[0].max_fill_distance_mm = 5.0 * PX;
+            m.layers[0].max_fill_distance_mm = Some(5.0 * PX);
             m.cure = cure(held);
         };
         assert_eq!(
