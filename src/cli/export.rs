@@ -268,10 +268,10 @@ pub(crate) fn export(a: ExportArgs, quiet: bool) -> anyhow::Result<u8> {
     } else if !quiet && !refused {
         super::print_warnings(&warnings, "");
         println!(
-            "{}: {} of {} layers from {}",
+            "{}: {} of {} from {}",
             printable(&a.output),
             format.name(),
-            manifest.layers.len(),
+            crate::text::count(manifest.layers.len() as u64, "layer", "layers"),
             printable(&a.bundle)
         );
     }

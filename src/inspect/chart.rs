@@ -52,7 +52,7 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         (Some(a), Some(b)) if layers.len() < n => {
             format!("layers {}–{} of {n}", a.index, b.index)
         }
-        _ => format!("{n} layers"),
+        _ => crate::text::count(n as u64, "layer", "layers"),
     };
     Chart {
         title: format!("{name}: figures of each layer ({which})"),

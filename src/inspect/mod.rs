@@ -32,9 +32,9 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
     let rings = marks::largest_per_layer(b, &regions);
     let m = &b.manifest;
     let title = format!(
-        "{}: the part as its masks build it ({} layers, {:.2} mm tall)",
+        "{}: the part as its masks build it ({}, {:.2} mm tall)",
         b.name(),
-        m.layers.len(),
+        count(m.layers.len() as u64, "layer", "layers"),
         m.totals.height_mm
     );
     let note = "Lit mask pixels stacked layer on layer, seen from the front right and above; \

@@ -105,9 +105,9 @@ pub fn contact_sheet(
     let top = GAP + title_h + 6 + 2 * (note_h + 2) + 10;
     let field = manifest.machine.field();
     let title = format!(
-        "{name}: layer masks, {} of {} layers ({how})",
+        "{name}: layer masks, {} of {} ({how})",
         layers.len(),
-        manifest.layers.len()
+        crate::text::count(manifest.layers.len() as u64, "layer", "layers")
     );
     let p = field.pixel_mm;
     let note1 = if manifest.machine.projector.len() > 1 {

@@ -2,7 +2,7 @@
 //! per-layer extremes, from the manifest alone.
 
 use crate::bundle::{Layer, Manifest};
-use crate::text::{hms, number};
+use crate::text::{count, hms, number};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -170,8 +170,9 @@ pub fn render_human(s: &Summary) -> String {
     };
     let _ = writeln!(
         o,
-        "{}{format}: {n} layers of {} mm, {tall:.2} mm tall; {origin}{projectors}",
+        "{}{format}: {} of {} mm, {tall:.2} mm tall; {origin}{projectors}",
         s.bundle,
+        count(n as u64, "layer", "layers"),
         number(h)
     );
     let continuous = s.continuous_layers.map_or(String::new(), |c| {

@@ -127,6 +127,27 @@ fn summary_numbers_are_the_manifests() {
     assert!(!stdout(&o).contains("light compensation"), "{}", stdout(&o));
 }
 
+#[test]
+fn a_job_of_one_layer_says_one_layer() {
+    let dir = tempdir("inspect-one");
+    write_stl(
+        &dir.join("plate.stl"),
+        &box_tris([10.0, 10.0, 0.0], [40.0, 20.0, 1.0]),
+    );
+    ok(&run_in(
+        &dir,
+        &["slice", "plate.stl", "--layer-height", "1", "-q"],
+    ));
+    let o = run_in(&dir, &["inspect", "plate.dmdjob"]);
+    ok(&o);
+    let out = stdout(&o);
+    assert!(out.starts_with("plate.dmdjob: 1 layer of 1 mm,"), "{out}");
+    let o = run_in(&dir, &["export", "plate.dmdjob", "-o", "plate.sl1"]);
+    ok(&o);
+    let out = stdout(&o);
+    assert!(out.starts_with("plate.sl1: sl1 of 1 layer from"), "{out}");
+}
+
 /// The x ranges of the thumbnails in row `y` of a contact sheet: runs of gray pixels (a
 /// thumbnail is gray on black; the sheet's background is not a gray).
 fn thumbnails_in_row(img: &image::RgbImage, y: u32) -> Vec<(u32, u32)> {
