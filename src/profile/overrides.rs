@@ -61,8 +61,8 @@ impl Override {
             .entry(parts[0].to_string())
             .or_insert_with(|| toml::Value::Table(toml::Table::new()));
         let mut path = parts[0].to_string();
-        for part in &parts[1..] {
-            here = step(here, part, &path)?;
+        for (k, part) in parts.iter().enumerate().skip(1) {
+            here = step(here, (part, &parts[k + 1..]), &path)?;
             path = format!("{path}.{part}");
         }
         *here = self.value.clone();
@@ -70,11 +70,12 @@ impl Override {
     }
 }
 
-/// The value at `part` inside `v` (the value at `path`): a key of a section (created, as
-/// an empty section, if missing) or the index of a list entry.
+/// The value at `part` inside `v` (the value at `path`; `rest` the key's parts after
+/// `part`): a key of a section (created, as an empty section, if missing) or the index of
+/// a list entry.
 fn step<'v>(
     v: &'v mut toml::Value,
-    part: &str,
+    (part, rest): (&str, &[&str]),
     path: &str,
 ) -> std::result::Result<&'v mut toml::Value, String> {
     match v {
@@ -83,13 +84,23 @@ fn step<'v>(
             .or_insert_with(|| toml::Value::Table(toml::Table::new()))),
         toml::Value::Array(a) => {
             let n = a.len();
-            match part.parse::<usize>() {
+            let index = part.parse::<usize>();
+            match index {
                 Ok(i) if i < n => Ok(&mut a[i]),
-                _ => Err(format!(
-                    "`{path}` is a list of {}; name one by its index, 0 to {}, as in {path}.0.{part}",
-                    crate::text::count(n as u64, "entry", "entries"),
-                    n.saturating_sub(1)
-                )),
+                _ if n == 0 => Err(format!("`{path}` is an empty list")),
+                _ => {
+                    // The key with its first entry's index: in place of the index given,
+                    // or before the key named.
+                    let mut example = vec![path, "0"];
+                    example.extend(index.is_err().then_some(part));
+                    example.extend_from_slice(rest);
+                    Err(format!(
+                        "`{path}` is a list of {}; name one by its index, 0 to {}, as in {}",
+                        crate::text::count(n as u64, "entry", "entries"),
+                        n - 1,
+                        example.join(".")
+                    ))
+                }
             }
         }
         _ => Err(format!("`{path}` is a value, not a section with keys")),
@@ -207,6 +218,10 @@ mod tests {
             (
                 "projector.pixel_mm=0.05",
                 "--set projector.pixel_mm=0.05: `projector` is a list of 1 entry; name one by its index, 0 to 0, as in projector.0.pixel_mm",
+            ),
+            (
+                "projector.3.width_px=10",
+                "--set projector.3.width_px=10: `projector` is a list of 1 entry; name one by its index, 0 to 0, as in projector.0.width_px",
             ),
             (
                 "name.x=1",
