@@ -59,15 +59,15 @@ impl FromStr for FaultSpec {
         let names = FaultKind::ALL.map(|k| k.name()).join(", ");
         let (k, l) = s
             .split_once('@')
-            .ok_or_else(|| format!("fault {s:?}: expected KIND@LAYER (kinds: {names})"))?;
+            .ok_or_else(|| format!("--fault {s}: expected KIND@LAYER (kinds: {names})"))?;
         let kind = FaultKind::ALL
             .into_iter()
             .find(|f| f.name() == k.trim())
-            .ok_or_else(|| format!("fault {s:?}: unknown kind {k:?} (kinds: {names})"))?;
+            .ok_or_else(|| format!("--fault {s}: unknown kind {k:?} (kinds: {names})"))?;
         let layer = l
             .trim()
             .parse::<usize>()
-            .map_err(|_| format!("fault {s:?}: layer {l:?} is not a layer index"))?;
+            .map_err(|_| format!("--fault {s}: layer {l:?} is not a layer index"))?;
         Ok(FaultSpec { kind, layer })
     }
 }
@@ -373,7 +373,7 @@ mod tests {
         assert_eq!(f, fault(FaultKind::ShutterStuck, 12));
         let err = |s: &str| s.parse::<FaultSpec>().unwrap_err();
         assert!(err("stall").contains("KIND@LAYER"));
-        assert!(err("jam@1").contains("unknown kind"));
-        assert!("limit@-1".parse::<FaultSpec>().is_err());
+        assert!(err("jam@1").starts_with("--fault jam@1: unknown kind"));
+        assert!(err("limit@-1").starts_with("--fault limit@-1: layer"));
     }
 }
