@@ -22,6 +22,19 @@ use std::path::{Path, PathBuf};
 /// Size of the `--preview` picture's image, px (a title band goes above it).
 pub const PREVIEW_SIZE: (u32, u32) = (960, 720);
 
+/// The title of the `--preview` picture of the job `m` named `name`.
+fn preview_title(name: &str, m: &crate::bundle::Manifest) -> String {
+    let what = match &m.source.parts {
+        Some(parts) if parts.len() > 1 => "the parts as their masks build them",
+        _ => "the part as its masks build it",
+    };
+    let (n, tall) = (m.layers.len() as u64, m.totals.height_mm);
+    format!(
+        "{name}: {what} ({}, {tall:.2} mm tall)",
+        count(n, "layer", "layers")
+    )
+}
+
 /// The `--preview` picture: [`crate::picture::preview()`] under a title saying what it shows, with the
 /// largest region of each layer that rests on nothing below ringed ([`marks`]) and the
 /// job's supports drawn.
@@ -31,12 +44,7 @@ pub fn preview_picture(b: &Bundle) -> Result<Canvas> {
     let regions = marks::regions(b)?;
     let rings = marks::largest_per_layer(b, &regions);
     let m = &b.manifest;
-    let title = format!(
-        "{}: the part as its masks build it ({}, {:.2} mm tall)",
-        b.name(),
-        count(m.layers.len() as u64, "layer", "layers"),
-        m.totals.height_mm
-    );
+    let title = preview_title(&b.name(), m);
     let note = "Lit mask pixels stacked layer on layer, seen from the front right and above; \
                 lines on the build plate every 10 mm.";
     let held = if m.supports.is_some() {
@@ -139,5 +147,36 @@ impl Bundle {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| self.path.display().to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_preview_title_counts_parts_and_layers() {
+        let mut m = crate::exec::testutil::two_layer_topdown();
+        m.totals.height_mm = 0.1;
+        assert_eq!(
+            preview_title("a.dmdjob", &m),
+            "a.dmdjob: the part as its masks build it (2 layers, 0.10 mm tall)"
+        );
+        m.layers.truncate(1);
+        let copy = |copy| crate::bundle::PlatePart {
+            file: "a.stl".into(),
+            sha256: String::new(),
+            copy,
+            copies: 2,
+            triangles: 12,
+            bbox_mm: [[0.0; 3], [1.0; 3]],
+            translate_mm: [0.0; 3],
+            placed_bbox_mm: [[0.0; 3], [1.0; 3]],
+        };
+        m.source.parts = Some(vec![copy(1), copy(2)]);
+        assert_eq!(
+            preview_title("a.dmdjob", &m),
+            "a.dmdjob: the parts as their masks build them (1 layer, 0.10 mm tall)"
+        );
     }
 }
