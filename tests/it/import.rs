@@ -334,6 +334,7 @@ fn an_imported_job_states_no_section_figures() {
         assert!(l.get("max_fill_distance_mm").is_none() && l.get("islands").is_none());
     }
     for job in [sl1.to_str().unwrap(), "cube.dmdjob"] {
+        let _ = std::fs::remove_file(dir.join("c.png"));
         let (code, s) = json_run(&dir, &["inspect", job]);
         assert_eq!(code, 0, "{s}");
         schemas.assert_valid("inspect-summary.schema.json", &s);
