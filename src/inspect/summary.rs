@@ -83,10 +83,6 @@ pub struct Summary {
     /// for people says so (the JSON keeps the numbers; `notes` says why).
     #[serde(skip)]
     pub unmeasured: bool,
-    /// True when the job's layers come from a file's images, not from sections (an
-    /// imported job, or a bundle exported from one).
-    #[serde(skip)]
-    pub imported: bool,
     /// The pictures written.
     pub pictures: Vec<String>,
 }
@@ -144,7 +140,6 @@ pub fn summarize(bundle: &str, m: &Manifest) -> Summary {
         extremes,
         notes: Vec::new(),
         unmeasured: !m.machine.states("projector[].pixel_mm"),
-        imported: !l.is_empty() && l.iter().all(|l| l.max_fill_distance_mm.is_none()),
         pictures: Vec::new(),
     }
 }
@@ -164,7 +159,10 @@ pub fn render_human(s: &Summary) -> String {
     let (n, h, tall) = (s.layers, s.layer_height_mm, s.height_mm);
     let (source, profile) = (&s.source, &s.profile);
     // An imported job's profile is a placeholder name: say where its machine comes from.
-    let origin = match s.imported {
+    // Its layers come from a file's images, not from sections (also in a bundle exported
+    // from it): no layer knows its fill distance.
+    let imported = (s.extremes.as_ref()).is_some_and(|e| e.max_fill_distance_mm.is_none());
+    let origin = match imported {
         true => format!("imported from {source}, for the machine that file states"),
         false => format!("sliced from {source} for {profile}"),
     };

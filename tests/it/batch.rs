@@ -382,6 +382,10 @@ fn set_overrides_profile_keys_and_refuses_what_a_profile_file_would() {
             "exposure.layer_s=0",
             "dmdsl: error: profile xu2010-topdown: --set exposure.layer_s=0: must be a finite number > 0, got 0",
         ),
+        (
+            "projector.3.width_px=10",
+            "dmdsl: error: profile xu2010-topdown: --set projector.3.width_px=10: `projector` is a list of 1 entry; name one by its index, 0 to 0, as in projector.0.width_px",
+        ),
         ("exposure", "dmdsl: error: --set exposure: expected section.key=value"),
     ] {
         let o = run_in(&dir, &["slice", cube, "-o", "x.dmdjob", "--set", set, "--json"]);

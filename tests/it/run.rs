@@ -429,7 +429,7 @@ fn unreadable_bundles_and_bad_options_exit_2() {
         (vec!["run", "nope.dmdjob"], "nope.dmdjob: does not exist"),
         (
             vec!["run", "box.dmdjob", "--fault", "jam@1"],
-            "unknown kind",
+            "dmdsl: error: --fault jam@1: unknown kind \"jam\"",
         ),
         (
             vec!["run", "box.dmdjob", "--fault", "stall@9"],
