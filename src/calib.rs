@@ -360,17 +360,23 @@ pub fn fit_resin(s: &Sheet) -> Result<ResinFit> {
     // Var(b) = s²(1/n + x̄²/Sxx), Cov(Dp, b) = −x̄ s²/Sxx; ln Ec = −b/Dp by the delta method.
     let (vd, vb, cov) = (s2 / sxx, s2 * (1.0 / n + mx * mx / sxx), -mx * s2 / sxx);
     let vl = vb / (dp * dp) + b * b * vd / dp.powi(4) - 2.0 * b * cov / dp.powi(3);
-    let crit = lnc.exp();
+    let crit = crate::round::significant(lnc.exp(), 6);
+    // Written to 6 significant digits (standard errors to 3, lengths to 1 nm), not with the
+    // fit's rounding noise.
+    let (sig, nm) = (crate::round::significant, |x| crate::round::decimals(x, 6));
     Ok(ResinFit {
         sheet: s.file_name(),
         sheet_sha256: s.sha256.clone(),
-        dp_mm: dp,
-        dp_se_mm: vd.sqrt(),
+        dp_mm: sig(dp, 6),
+        dp_se_mm: sig(vd.sqrt(), 3),
         ec_mj_cm2: absolute.then_some(crit),
         critical_exposure_s: (!absolute).then_some(crit),
-        critical_se: crit * vl.max(0.0).sqrt(),
-        residuals,
-        residual_rms_mm: (ss / n).sqrt(),
+        critical_se: sig(crit * vl.max(0.0).sqrt(), 3),
+        residuals: residuals
+            .iter()
+            .map(|r| [r[0], r[1], r[2], nm(r[3])])
+            .collect(),
+        residual_rms_mm: nm((ss / n).sqrt()),
     })
 }
 

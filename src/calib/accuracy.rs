@@ -7,6 +7,7 @@ use super::{push_box, push_frame, stl_file, Sheet};
 use crate::error::{Error, Result};
 use crate::plot::{Chart, Panel, Series, Style};
 use crate::profile::{Accuracy, Profile};
+use crate::round;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -266,11 +267,13 @@ pub fn accuracy(s: &Sheet, tolerance: f64) -> Result<AccuracyReport> {
             continue;
         };
         let rms = ((&a * &x - &b).norm_squared() / r.len() as f64).sqrt();
+        // To 1e-6 and 1 nm: a least-squares fit carries noise in its last digits (a zero
+        // offset comes out as 1e-17), which the correction file would otherwise keep.
         fits.push(AxisFit {
             axis,
-            scale: x[0],
-            offset_mm: x[1],
-            residual_rms_mm: rms,
+            scale: round::decimals(x[0], 6),
+            offset_mm: round::decimals(x[1], 6),
+            residual_rms_mm: round::decimals(rms, 6),
         });
     }
     Ok(AccuracyReport {
@@ -318,7 +321,7 @@ impl AccuracyFit {
         for f in &fits {
             let k = "XYZ".find(f.axis).unwrap_or(2);
             let s0 = printed_with.scale[k];
-            scale[k] = s0 / f.scale;
+            scale[k] = round::decimals(s0 / f.scale, 6);
             if k < 2 {
                 offsets.push(printed_with.xy_offset_mm - f.offset_mm * s0 / (2.0 * f.scale));
             } else {
@@ -328,7 +331,7 @@ impl AccuracyFit {
         let xy_offset_mm = if offsets.is_empty() {
             printed_with.xy_offset_mm
         } else {
-            offsets.iter().sum::<f64>() / offsets.len() as f64
+            round::decimals(offsets.iter().sum::<f64>() / offsets.len() as f64, 6)
         };
         AccuracyFit {
             sheet: sheet.file_name(),

@@ -399,9 +399,9 @@ pub fn fit_psf(s: &Sheet, model: &CureModel) -> Result<PsfFit> {
             .iter()
             .map(|&w| ModelWidth {
                 drawn_px: w,
-                drawn_mm: w as f64 * model.pixel_mm,
-                line_mm: predict(model, p.psf_sigma_px, Drawn::Line, w, layers),
-                gap_mm: predict(model, p.psf_sigma_px, Drawn::Gap, w, layers),
+                drawn_mm: nm(w as f64 * model.pixel_mm),
+                line_mm: nm(predict(model, p.psf_sigma_px, Drawn::Line, w, layers)),
+                gap_mm: nm(predict(model, p.psf_sigma_px, Drawn::Gap, w, layers)),
             })
             .collect();
     }
@@ -447,7 +447,8 @@ fn fit_one(s: &Sheet, model: &CureModel, name: String, rows: &[Row]) -> Result<P
     if k == 0 || k == N - 1 {
         return Err(edge(grid[k]));
     }
-    let sigma = golden(&ssr, grid[k - 1], grid[k + 1], 1e-5);
+    // To the search's tolerance: the file keeps what the fit knows, not its last digits.
+    let sigma = crate::round::decimals(golden(&ssr, grid[k - 1], grid[k + 1], 1e-5), 5);
     if sigma <= lo * 1.001 || sigma >= hi * 0.999 {
         return Err(edge(sigma));
     }
@@ -482,19 +483,24 @@ fn fit_one(s: &Sheet, model: &CureModel, name: String, rows: &[Row]) -> Result<P
             .into(),
             drawn_px: r.3,
             printed_mm: r.5,
-            predicted_mm: p,
-            residual_mm: r.5 - p,
+            predicted_mm: nm(p),
+            residual_mm: nm(r.5 - p),
         })
         .collect();
     Ok(ProjectorPsf {
         name,
         psf_sigma_px: sigma,
-        psf_sigma_se_px: (ss / (n - 1.0) / jj).sqrt(),
+        psf_sigma_se_px: crate::round::significant((ss / (n - 1.0) / jj).sqrt(), 3),
         measured: rows.len(),
-        residual_rms_mm: (ss / n).sqrt(),
+        residual_rms_mm: nm((ss / n).sqrt()),
         residuals,
         model: Vec::new(),
     })
+}
+
+/// A length in a fit file, mm: to 1 nm.
+fn nm(x: f64) -> f64 {
+    crate::round::decimals(x, 6)
 }
 
 /// The minimum of `f` in `[a, b]` by golden-section search, to `tol`.

@@ -299,7 +299,7 @@ pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result
         );
     }
     for f in &report.fits {
-        println!("{}: measured = {:.5}·nominal ± {:+.4} mm (− for holes and slots), residual RMS {:.4} mm", f.axis, f.scale, f.offset_mm, f.residual_rms_mm);
+        println!("{}", fit_line(f));
     }
     let [sx, sy, sz] = correction.scale;
     println!(
@@ -320,6 +320,24 @@ pub(crate) fn calibrate_accuracy(a: AccuracyArgs, quiet: bool) -> anyhow::Result
         None => println!("(-o FILE writes it for dmdsl slice --accuracy FILE)"),
     }
     Ok(0)
+}
+
+/// An axis's fit as `calibrate accuracy` prints it: outer sizes grow by the offset, holes
+/// and slots (X and Y only) shrink by it.
+fn fit_line(f: &crate::calib::accuracy::AxisFit) -> String {
+    let sign = |o: f64| if o < 0.0 { '−' } else { '+' };
+    let (o, mag) = (f.offset_mm, f.offset_mm.abs());
+    let holes = match f.axis {
+        'Z' => String::new(),
+        _ => format!(" (holes and slots: {} {mag:.4} mm)", sign(-o)),
+    };
+    format!(
+        "{}: measured = {:.5}·nominal {} {mag:.4} mm{holes}, residual RMS {:.4} mm",
+        f.axis,
+        f.scale,
+        sign(o),
+        f.residual_rms_mm
+    )
 }
 
 /// Slices the test job `o` and writes its measurement sheet beside it (`.csv`; a symbolic

@@ -413,3 +413,19 @@ impl Stoppable for Command {
         }
     }
 }
+
+/// Asserts that every decimal number in the fit file `text` has at most 7 significant
+/// digits: a fit is written to what it knows, not with its floating-point noise.
+pub fn assert_rounded_numbers(text: &str) {
+    for line in text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.contains("sha256"))
+    {
+        for word in line.split([' ', ',', '[', ']']) {
+            if word.contains('.') && word.parse::<f64>().is_ok() {
+                let digits = word.trim_start_matches(['-', '0', '.']).replace('.', "");
+                assert!(digits.len() <= 7 && !word.contains('e'), "{word}: {line}");
+            }
+        }
+    }
+}

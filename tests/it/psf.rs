@@ -208,6 +208,7 @@ fn blur_job_runs_exports_and_its_sheet_is_fitted_back_to_sigma() {
         "{out}"
     );
     let t = std::fs::read_to_string(dir.join("psf.toml")).unwrap();
+    assert_rounded_numbers(&t);
     let (sigma, se) = sigma_of(&t, "p0");
     eprintln!("σ {sigma:.4} ± {se:.4} px (chosen {chosen})");
     assert!((sigma - chosen).abs() < 0.01, "σ {sigma}");

@@ -80,6 +80,7 @@ fn relative_working_curve_is_fitted_back_and_the_job_runs_and_exports() {
         "{out}"
     );
     let t = std::fs::read_to_string(dir.join("resin.toml")).unwrap();
+    assert_rounded_numbers(&t);
     let (fdp, ftc) = (key(&t, "dp_mm"), key(&t, "critical_exposure_s"));
     eprintln!("relative: Dp {fdp:.5} mm (chosen {dp}), Tc {ftc:.4} s (chosen {tc})");
     assert!((fdp - dp).abs() < 0.05 * dp, "Dp {fdp}");
@@ -332,7 +333,14 @@ fn accuracy_part_runs_exports_and_its_sheet_is_fitted_back() {
             .unwrap();
         let w: Vec<&str> = l.split_whitespace().collect();
         let scale: f64 = w[3].trim_end_matches("·nominal").parse().unwrap();
-        let offset: f64 = w[5].parse().unwrap();
+        // "X: measured = 1.01000·nominal + 0.0400 mm (holes and slots: − 0.0400 mm), …"
+        let sign = match w[4] {
+            "+" => 1.0,
+            "−" => -1.0,
+            s => panic!("{s}: {l}"),
+        };
+        let offset: f64 = sign * w[5].parse::<f64>().unwrap();
+        assert_eq!(l.contains("holes and slots"), *axis != "Z", "{l}");
         eprintln!(
             "{axis}: scale {scale:.5} (chosen {}), offset {offset:+.4} mm (chosen {})",
             fit[k].0, fit[k].1
@@ -424,6 +432,10 @@ fn accuracy_correction_is_fitted_applied_recorded_and_refined() {
         assert!((scale[k] - 1.0 / m[k]).abs() < 2e-4, "{k}: {text}");
     }
     assert!((offset - want_offset).abs() < 2e-4, "{text}");
+    // Written to 1e-6 (1 nm for lengths): a Z printed without offset has none, not the
+    // fit's rounding noise (3e-16).
+    assert_eq!(v["z_offset_mm"].as_float(), Some(0.0), "{text}");
+    assert_rounded_numbers(&text);
 
     // Applied by slice: a 10 × 6 × 4 mm box drawn scaled and offset, the job records it.
     let part = dir.join("box.stl");
