@@ -213,20 +213,20 @@ pub fn render_human(s: &Summary) -> String {
             ("largest area", Some(e.area_mm2), 2, " mm²"),
             ("longest exposure", Some(e.exposure_s), 2, " s"),
             ("largest fill distance", e.max_fill_distance_mm, 3, " mm"),
-            ("most islands", e.islands, 0, ""),
+            ("most islands on nothing", e.islands, 0, ""),
             ("longest layer time", Some(e.time_s), 2, " s"),
         ];
         for (what, x, decimals, unit) in rows {
             // An imported job's file holds images, not the sections these come from.
             let Some(x) = x else {
-                let _ = writeln!(o, "  {what:<22} {:>12}", "not in the file");
+                let _ = writeln!(o, "  {what:<23} {:>12}", "not in the file");
                 continue;
             };
             let value = match s.unmeasured && what == "largest area" {
                 true => "not measured".to_string(),
                 false => format!("{:.decimals$}{unit}", x.value),
             };
-            let _ = writeln!(o, "  {what:<22} {value:>12}  layer {}", x.layer);
+            let _ = writeln!(o, "  {what:<23} {value:>12}  layer {}", x.layer);
         }
     }
     for p in &s.pictures {

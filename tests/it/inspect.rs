@@ -113,6 +113,8 @@ fn summary_numbers_are_the_manifests() {
         "{out}"
     );
     assert!(out.contains("largest area"), "{out}");
+    // Islands are the regions on nothing in the layer below, not all regions.
+    assert!(out.contains("most islands on nothing "), "{out}");
     assert!(out.contains("estimated print time"), "{out}");
     // The default profile's zone compensation, and what it looks like in a mask.
     assert_eq!(s["compensation"], "zone");
