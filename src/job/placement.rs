@@ -2,7 +2,7 @@
 
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::profile::Profile;
+use crate::profile::{Profile, MAX_LAYERS};
 use crate::slice;
 use crate::text::number;
 use std::path::Path;
@@ -204,10 +204,6 @@ pub fn placement(
     };
     Ok(t)
 }
-
-/// The most layers a job may have. At 1 µm layers that is a part 1 m tall; a larger count
-/// comes from a far-off vertex or a mistyped layer height, and would write a mask per layer.
-pub const MAX_LAYERS: usize = 1_000_000;
 
 /// Places a loaded mesh on the profile's field by `mode` (translating it) and returns the
 /// translation and the number of layers of height `h`. A part that does not fit the field,

@@ -219,6 +219,10 @@ pub struct Dmd {
     pub load_s: NonNegative,
 }
 
+/// The most layers a job may have. At 1 µm layers that is a part 1 m tall; a larger count
+/// comes from a far-off vertex or a mistyped layer height, and would write a mask per layer.
+pub const MAX_LAYERS: usize = 1_000_000;
+
 /// Exposure times.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -383,6 +387,17 @@ impl Profile {
             ));
         }
         check_travel(s.travel_min_mm, s.travel_max_mm, s.home_mm)?;
+        let e = &self.exposure;
+        for (key, n) in [
+            ("bottom_layers", e.bottom_layers),
+            ("transition_layers", e.transition_layers),
+        ] {
+            if n as usize > MAX_LAYERS {
+                return Err(format!(
+                    "exposure.{key} = {n} is more layers than a job may have ({MAX_LAYERS})"
+                ));
+            }
+        }
         if let Some(d) = &self.distortion {
             d.validate()?;
         }

@@ -441,6 +441,11 @@ fn exposure_and_bottom_layers_reach_the_manifest() {
             ["--exposure", "-2"],
             "--exposure must be a number of seconds > 0, got -2",
         ),
+        // Beyond any job's layers (their sum with the transition layers overflowed).
+        (
+            ["--bottom-layers", "4294967295"],
+            "profile xu2010-topdown: --bottom-layers 4294967295: exposure.bottom_layers = 4294967295 is more layers than a job may have (1000000)",
+        ),
         (
             ["--bottom-layers", "-1"],
             "--bottom-layers must be a whole number >= 0, got -1",
@@ -455,6 +460,8 @@ fn exposure_and_bottom_layers_reach_the_manifest() {
         let o = run_in(&dir, &a);
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         assert!(stderr(&o).contains(expect), "{args:?}: {}", stderr(&o));
+        assert_eq!(stderr(&o).lines().count(), 1, "{args:?}: {}", stderr(&o));
+        assert!(!dir.join("x.dmdjob").exists(), "{args:?}");
     }
 }
 
