@@ -4,7 +4,7 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::profile::{Profile, MAX_LAYERS};
 use crate::slice;
-use crate::text::number;
+use crate::text::{fixed, number};
 use std::path::Path;
 
 /// Where the part goes on the build plane.
@@ -152,8 +152,9 @@ pub fn placement(
         return Err(Error::Job {
             path: path.into(),
             msg: format!(
-                "part is {:.3} x {:.3} mm but the build field is {:.3} x {:.3} mm",
-                size[0], size[1], field_w, field_h
+                "part is {} x {} mm but the build field is {field_w:.3} x {field_h:.3} mm",
+                fixed(size[0], 3),
+                fixed(size[1], 3)
             ),
         });
     }
@@ -171,9 +172,10 @@ pub fn placement(
                 return Err(Error::Job {
                     path: path.into(),
                     msg: format!(
-                        "with --position {},{} the part spans x {x0:.3}..{x1:.3}, y {y0:.3}..{y1:.3} mm, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
+                        "with --position {},{} the part spans {}, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
                         number(x),
-                        number(y)
+                        number(y),
+                        spans([x0, y0], [x1, y1])
                     ),
                 });
             }
@@ -185,8 +187,8 @@ pub fn placement(
                 return Err(Error::Job {
                     path: path.into(),
                     msg: format!(
-                        "with --keep-position the part spans x {:.3}..{:.3}, y {:.3}..{:.3} mm, outside the build field 0..{:.3} x 0..{:.3} mm",
-                        lo[0], hi[0], lo[1], hi[1], field_w, field_h
+                        "with --keep-position the part spans {}, outside the build field 0..{field_w:.3} x 0..{field_h:.3} mm",
+                        spans([lo[0], lo[1]], [hi[0], hi[1]])
                     ),
                 });
             }
@@ -194,8 +196,8 @@ pub fn placement(
                 return Err(Error::Job {
                     path: path.into(),
                     msg: format!(
-                        "with --keep-position the part reaches below the build plane (z min {:.3} mm)",
-                        lo[2]
+                        "with --keep-position the part reaches below the build plane (z min {} mm)",
+                        fixed(lo[2], 3)
                     ),
                 });
             }
@@ -203,6 +205,13 @@ pub fn placement(
         }
     };
     Ok(t)
+}
+
+/// A part's extent on the build plane for a message: `x 7.000..11.000, y 3.000..5.000 mm`
+/// (a far-off vertex in scientific notation, not hundreds of digits).
+fn spans(lo: [f64; 2], hi: [f64; 2]) -> String {
+    let [x0, y0, x1, y1] = [lo[0], lo[1], hi[0], hi[1]].map(|v| fixed(v, 3));
+    format!("x {x0}..{x1}, y {y0}..{y1} mm")
 }
 
 /// Places a loaded mesh on the profile's field by `mode` (translating it) and returns the
@@ -296,6 +305,14 @@ mod tests {
             e,
             "p.stl: with --position 9,4 the part spans x 7.000..11.000, y 3.000..5.000 mm, outside the build field 0..10.000 x 0..8.000 mm"
         );
+        // Far off: a short line, not the hundreds of digits of 1e308.
+        let e = placement(p, BOX, 10.0, 8.0, PlacementMode::At([1e308, 0.0]))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "p.stl: with --position 1e308,0 the part spans x 1.0000e308..1.0000e308, y -1.000..1.000 mm, outside the build field 0..10.000 x 0..8.000 mm"
+        );
     }
 
     #[test]
@@ -354,5 +371,12 @@ mod tests {
                 "{e}"
             );
         }
+        // A far-off vertex: a short line, not 31 digits.
+        let far = [[0.0; 3], [1e30, 1.0, 1.0]];
+        let e = placement(Path::new("p.stl"), far, 3.0, 8.0, PlacementMode::Center).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "p.stl: part is 1.0000e30 x 1.000 mm but the build field is 3.000 x 8.000 mm"
+        );
     }
 }
