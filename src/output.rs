@@ -6,10 +6,11 @@
 //! A reader sees the old file or the whole new one; a failed write leaves nothing, and an
 //! error names the output, never the temporary file.
 //!
-//! One rule for every output, bundles and one-file jobs included: a symbolic link at the
-//! output path is refused ([`refuse_link`]). Renaming a new file over it would replace the
-//! link itself, not the file it points to, and writing through it would not be atomic
-//! where the file is; the path it points to is the output to give.
+//! One rule for every output, bundles and one-file jobs included: a symbolic link or a
+//! special file (a device such as `/dev/null`, a FIFO, a socket) at the output path is
+//! refused ([`refuse_special`]). Renaming a new file over it would replace the link or the
+//! device node itself, not what it leads to, and writing through it would not be atomic;
+//! for a link, the path it points to is the output to give.
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -48,12 +49,21 @@ pub fn write_error(path: &Path, e: std::io::Error) -> Error {
     }
 }
 
-/// Refuses an output at `path` that is a symbolic link (see the module docs), naming
-/// where it points.
-pub fn refuse_link(path: &Path) -> Result<()> {
-    let link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
-    if !link {
+/// Refuses an output at `path` that is a symbolic link, naming where it points, or a
+/// special file, naming its kind (see the module docs).
+pub fn refuse_special(path: &Path) -> Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
         return Ok(());
+    };
+    let t = meta.file_type();
+    if !t.is_symlink() {
+        return match special_kind(&t) {
+            None => Ok(()),
+            Some(kind) => Err(Error::Bundle {
+                path: path.into(),
+                msg: format!("is {kind}, not a file; refusing to replace it"),
+            }),
+        };
     }
     let to = std::fs::read_link(path)
         .map(|t| format!(" (to {})", t.display()))
@@ -64,13 +74,31 @@ pub fn refuse_link(path: &Path) -> Result<()> {
     })
 }
 
+/// What a special file is (`a character device`, ...), or `None` for a file or a directory.
+fn special_kind(t: &std::fs::FileType) -> Option<&'static str> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let kinds = [
+            (t.is_char_device(), "a character device"),
+            (t.is_block_device(), "a block device"),
+            (t.is_fifo(), "a FIFO"),
+            (t.is_socket(), "a socket"),
+        ];
+        if let Some((_, kind)) = kinds.into_iter().find(|k| k.0) {
+            return Some(kind);
+        }
+    }
+    (!t.is_file() && !t.is_dir()).then_some("a special file")
+}
+
 /// Writes `bytes` to `path` through a temporary sibling renamed into place; on failure
 /// the temporary file is removed and `path` is left as it was. A symbolic link at `path`
-/// is refused ([`refuse_link`]).
+/// is refused ([`refuse_special`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = temp_sibling(path)
         .ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
-    refuse_link(path)?;
+    refuse_special(path)?;
     std::fs::write(&tmp, bytes)
         .and_then(|_| std::fs::rename(&tmp, path))
         .map_err(|e| {

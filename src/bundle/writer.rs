@@ -106,7 +106,7 @@ fn check_replaceable(dest: &Path) -> Result<bool> {
         Err(e) => return Err(Error::io(dest, e)),
         Ok(m) => m,
     };
-    crate::output::refuse_link(dest)?;
+    crate::output::refuse_special(dest)?;
     let manifest = if meta.is_dir() {
         manifest_json(dest)
     } else {

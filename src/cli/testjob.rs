@@ -348,7 +348,7 @@ pub(super) fn slice_with_sheet(
 ) -> anyhow::Result<(crate::job::SliceSummary, PathBuf)> {
     let output = o.output.as_ref().expect("a test job names its output");
     let sheet_path = output.with_extension("csv");
-    crate::output::refuse_link(&sheet_path)?;
+    crate::output::refuse_special(&sheet_path)?;
     let s = crate::job::slice_to_bundle(o)?;
     crate::output::write_atomic(&sheet_path, sheet.as_bytes())?;
     Ok((s, sheet_path))

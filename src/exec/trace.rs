@@ -56,7 +56,7 @@ impl TraceWriter {
     ) -> Result<Self> {
         let tmp = crate::output::temp_sibling(path)
             .ok_or_else(|| Error::Usage(format!("--trace {}: not a file name", path.display())))?;
-        crate::output::refuse_link(path)?;
+        crate::output::refuse_special(path)?;
         let f = File::create(&tmp).map_err(|e| crate::output::write_error(path, e))?;
         let mut w = BufWriter::with_capacity(1 << 16, f);
         let err = writeln!(w, "{HEADER}").err();

@@ -148,13 +148,13 @@ fn header(cal: &Calibration, input: &Path) -> String {
 
 /// Writes `files` (path, bytes) all-or-nothing: each goes to a temporary sibling first and
 /// is renamed into place only when every file was written. A symbolic link at a path is
-/// refused ([`crate::output::refuse_link`]); an error names the file, not its temporary
+/// refused ([`crate::output::refuse_special`]); an error names the file, not its temporary
 /// sibling.
 pub(crate) fn write_all(files: &[(PathBuf, Vec<u8>)]) -> Result<()> {
     let tmp: Vec<PathBuf> = files
         .iter()
         .map(|(p, _)| {
-            crate::output::refuse_link(p)?;
+            crate::output::refuse_special(p)?;
             crate::output::temp_sibling(p)
                 .ok_or_else(|| Error::Usage(format!("{}: not a file name", p.display())))
         })

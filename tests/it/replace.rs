@@ -178,6 +178,70 @@ fn a_symlink_output_is_refused_and_its_target_left_alone() {
     assert!(after == before);
 }
 
+/// A device, a FIFO or a socket at an output path is refused, whatever the output:
+/// renaming over it would replace the node itself (as root, `--trace /dev/null` would
+/// replace /dev/null with the trace). A FIFO stands in for a device here.
+#[cfg(unix)]
+#[test]
+fn a_special_file_output_is_refused_and_left_alone() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempdir("replace-fifo");
+    assert!(slice_cube(&dir, "real.dmdjob").status.success());
+    for name in ["pipe.csv", "pipe.sl1", "pipe.png", "pipe.dmdjob"] {
+        let made = std::process::Command::new("mkfifo")
+            .arg(dir.join(name))
+            .status()
+            .unwrap();
+        assert!(made.success());
+    }
+    let m = fixture("measurements.csv");
+    let m = m.to_str().unwrap();
+    let cases: [(&[&str], &str); 5] = [
+        (&["run", "real.dmdjob", "--trace", "pipe.csv"], "pipe.csv"),
+        (&["run", "real.dmdjob", "--plot", "pipe.png"], "pipe.png"),
+        (&["export", "real.dmdjob", "-o", "pipe.sl1"], "pipe.sl1"),
+        (
+            &["calibrate", m, "-o", "pipe.csv", "--no-plots"],
+            "pipe.csv",
+        ),
+        (
+            &["inspect", "real.dmdjob", "--chart", "pipe.png"],
+            "pipe.png",
+        ),
+    ];
+    for (args, name) in cases {
+        let o = run_in(&dir, args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert_eq!(
+            stderr(&o),
+            format!("dmdsl: error: {name}: is a FIFO, not a file; refusing to replace it\n"),
+            "{args:?}"
+        );
+    }
+    let o = slice_cube(&dir, "pipe.dmdjob");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(
+        stderr(&o),
+        "dmdsl: error: pipe.dmdjob: is a FIFO, not a file; refusing to replace it\n"
+    );
+    for name in ["pipe.csv", "pipe.sl1", "pipe.png", "pipe.dmdjob"] {
+        let t = std::fs::symlink_metadata(dir.join(name))
+            .unwrap()
+            .file_type();
+        assert!(t.is_fifo(), "{name}");
+    }
+    assert_eq!(
+        names(&dir),
+        [
+            "pipe.csv",
+            "pipe.dmdjob",
+            "pipe.png",
+            "pipe.sl1",
+            "real.dmdjob"
+        ]
+    );
+}
+
 /// A write that fails (a full disk: here a file-size limit, `RLIMIT_FSIZE`, which fails
 /// writes past it with EFBIG as a full disk does with ENOSPC) is one error line naming the
 /// output, exit 2, and leaves nothing: a one-file job (the zip library printed its own

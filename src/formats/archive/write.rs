@@ -180,7 +180,7 @@ pub enum Method {
 }
 
 /// Refuses an archive at `dest` before any work is done: a path without a file name, a
-/// directory in the way, or a symbolic link ([`crate::output::refuse_link`]).
+/// directory in the way, a symbolic link or a device ([`crate::output::refuse_special`]).
 pub fn check_dest(dest: &Path) -> Result<()> {
     let refuse = |msg: &str| Error::Bundle {
         path: dest.into(),
@@ -194,7 +194,7 @@ pub fn check_dest(dest: &Path) -> Result<()> {
             "is a directory; refusing to replace it with an archive",
         ));
     }
-    crate::output::refuse_link(dest)
+    crate::output::refuse_special(dest)
 }
 
 impl<'a> ZipOut<'a> {
