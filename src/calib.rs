@@ -400,6 +400,7 @@ impl ResinFit {
                 self.sheet, self.dp_mm,
             ),
             x_label: format!("ln(E / 1 {unit}), E = dose (as exposure time when in s)"),
+            x_whole: false,
             width: 1000,
             height: 700,
             panels: vec![Panel {

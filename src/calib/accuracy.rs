@@ -415,6 +415,7 @@ impl AccuracyFit {
                 self.sheet, self.scale[0], self.scale[1], self.scale[2], self.xy_offset_mm
             ),
             x_label: "nominal size (mm)".into(),
+            x_whole: false,
             width: 1000,
             height: 300 + 250 * self.fits.len() as u32,
             panels,

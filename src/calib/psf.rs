@@ -572,6 +572,7 @@ impl PsfFit {
         Chart {
             title: format!("{}: printed against drawn width, {} layers thick, Gaussian PSF fitted under the cure model", self.sheet, self.layers),
             x_label: "drawn width (mm)".into(),
+            x_whole: false,
             width: 1000,
             height: 300 + 400 * self.projector.len() as u32,
             panels,

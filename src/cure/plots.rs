@@ -23,6 +23,7 @@ pub fn error_chart(name: &str, layers: &[Layer]) -> Chart {
     Chart {
         title: format!("{name}: predicted cured edge against the section, per layer"),
         x_label: "layer number (0 = first layer, on the platform)".into(),
+        x_whole: true,
         width: 1200,
         height: 800,
         panels: vec![

@@ -269,6 +269,7 @@ impl PlotCollector {
         Chart {
             title: title.to_string(),
             x_label: format!("time from the start of the job ({unit})"),
+            x_whole: false,
             width: 1400,
             height: 600,
             panels: vec![Panel {

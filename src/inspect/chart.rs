@@ -49,6 +49,9 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         (layers.is_empty() || !s.points.is_empty()).then(|| panel(y_label, s))
     };
     let which = match (layers.first(), layers.last()) {
+        (Some(a), Some(b)) if layers.len() < n && a.index == b.index => {
+            format!("layer {} of {n}", a.index)
+        }
         (Some(a), Some(b)) if layers.len() < n => {
             format!("layers {}–{} of {n}", a.index, b.index)
         }
@@ -57,6 +60,7 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
     Chart {
         title: format!("{name}: figures of each layer ({which})"),
         x_label: "layer number (0 = first layer, on the platform)".into(),
+        x_whole: true,
         width: 1200,
         height: 1100,
         panels: [
@@ -85,6 +89,15 @@ mod tests {
     fn labels(m: &Manifest) -> Vec<String> {
         let chart = layer_chart("t", m, None);
         chart.panels.into_iter().map(|p| p.y_label).collect()
+    }
+
+    #[test]
+    fn a_range_of_layers_is_titled_by_it_on_whole_layer_numbers() {
+        let m = crate::exec::testutil::two_layer_topdown();
+        let title = |r| layer_chart("t", &m, Some(r)).title;
+        assert_eq!(title(1..=1), "t: figures of each layer (layer 1 of 2)");
+        assert_eq!(title(0..=1), "t: figures of each layer (2 layers)");
+        assert!(layer_chart("t", &m, None).x_whole);
     }
 
     #[test]

@@ -311,6 +311,7 @@ fn response_chart(fit: &FitResult, s_max: f64, pixel_spread_pct: f64) -> Vec<u8>
             "Gray response S(g): valid {glo}–{ghi}, pixel mode spread {pixel_spread_pct:.2} %"
         ),
         x_label: "pixel value g (255 = mirror fully on)".into(),
+        x_whole: false,
         width: 900,
         height: 600,
         panels: vec![Panel {

@@ -249,6 +249,9 @@ mod tests {
         let t = ticks(-0.25, 48.75, 5, false);
         assert_eq!(t.values, vec![0.0, 10.0, 20.0, 30.0, 40.0]);
         assert_eq!(ticks(0.0, 2.106, 5, false).step, 0.5);
+        // One layer (its value held over ±0.5): one tick, on the layer's number.
+        assert_eq!(ticks(-0.5, 0.5, 9, true).values, vec![0.0]);
+        assert_eq!(ticks(2.5, 5.5, 9, true).values, vec![3.0, 4.0, 5.0]);
     }
 
     #[test]

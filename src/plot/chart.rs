@@ -87,6 +87,8 @@ pub struct Chart {
     pub title: String,
     /// X axis label, with its unit.
     pub x_label: String,
+    /// The x values are whole numbers (layer numbers): ticks fall on whole numbers only.
+    pub x_whole: bool,
     /// Image width, px.
     pub width: u32,
     /// Image height, px.
@@ -141,7 +143,12 @@ impl Chart {
         let panel_h = ((bottom - top - PANEL_GAP * (n - 1.0)) / n).max(20.0);
 
         let xs = Scale::new(x_range.0, x_range.1, ml, ml + plot_w);
-        let x_ticks = axes::ticks(x_range.0, x_range.1, (plot_w / 110.0) as usize, false);
+        let x_ticks = axes::ticks(
+            x_range.0,
+            x_range.1,
+            (plot_w / 110.0) as usize,
+            self.x_whole,
+        );
         for (k, p) in self.panels.iter().enumerate() {
             let area = Area::new(ml, top + k as f32 * (panel_h + PANEL_GAP), plot_w, panel_h);
             let ys = Scale::new(y_ranges[k].0, y_ranges[k].1, area.bottom(), area.y);
@@ -420,6 +427,7 @@ mod tests {
         Chart {
             title: "Stage position".into(),
             x_label: "time (s)".into(),
+            x_whole: false,
             width: 640,
             height: 360,
             panels: vec![Panel {
