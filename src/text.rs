@@ -20,6 +20,19 @@ pub fn count(n: u64, one: &str, many: &str) -> String {
     format!("{n} {}", plural(n, one, many))
 }
 
+/// The layers `a` to `b`: "layers 3–7", or "layer 3" when they are one.
+///
+/// ```
+/// assert_eq!(dmdsl::text::layer_range(3, 7), "layers 3–7");
+/// assert_eq!(dmdsl::text::layer_range(3, 3), "layer 3");
+/// ```
+pub fn layer_range(a: u64, b: u64) -> String {
+    match a == b {
+        true => format!("layer {a}"),
+        false => format!("layers {a}–{b}"),
+    }
+}
+
 /// The first `shown` of `items` joined by "; ", then how many more of the `total` there
 /// are, in `one` / `many`: "layer 1 at …; layer 4 at …; 2 more layers".
 ///

@@ -77,7 +77,7 @@ pub(crate) fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<u8> {
         let how = match (a.every, &range) {
             (Some(k), _) => format!("every {}", ordinal(k)),
             (None, Some(r)) if layers.len() == r.end() - r.start() + 1 => {
-                format!("layers {}–{}", r.start(), r.end())
+                crate::text::layer_range(*r.start() as u64, *r.end() as u64)
             }
             (None, _) if layers.len() == n => "every layer".into(),
             (None, _) => "evenly spaced".into(),

@@ -49,11 +49,8 @@ pub fn layer_chart(name: &str, manifest: &Manifest, range: Option<RangeInclusive
         (layers.is_empty() || !s.points.is_empty()).then(|| panel(y_label, s))
     };
     let which = match (layers.first(), layers.last()) {
-        (Some(a), Some(b)) if layers.len() < n && a.index == b.index => {
-            format!("layer {} of {n}", a.index)
-        }
         (Some(a), Some(b)) if layers.len() < n => {
-            format!("layers {}–{} of {n}", a.index, b.index)
+            format!("{} of {n}", crate::text::layer_range(a.index, b.index))
         }
         _ => crate::text::count(n as u64, "layer", "layers"),
     };
