@@ -960,7 +960,7 @@ fn machine_option_checks_the_job_on_the_real_machine() {
     assert!(r["violations"][0]["message"]
         .as_str()
         .unwrap()
-        .contains("layer 0 has masks for 1 of the machine's 2 projector(s)"));
+        .contains("layer 0 has masks for 1 of the machine's 2 projectors"));
 
     // An unknown machine is a usage error.
     let o = run_in(&dir, &["run", "box.dmdjob", "--machine", "nope"]);

@@ -37,7 +37,7 @@ use crate::bundle::machine::Machine;
 use crate::bundle::{BundleSource, Layer, Manifest, MaskPixels, MaskRef};
 use crate::cure::shift::EdgeProfile;
 use crate::exec::{Kind, Violation};
-use crate::text::number;
+use crate::text::{count as count_of, number};
 
 /// Lit pixels a section's masks may miss below half its area (coverage masks), px².
 const AREA_SLACK_PX: f64 = 4.0;
@@ -200,7 +200,7 @@ impl ContentRule {
         let (count, area) = (px.lit_px, layer.area_mm2);
         if let (None, true, Some(b)) = (layer.bbox_mm, area <= 0.0, px.lit_box_px) {
             let lit = lit_text(b);
-            return at(format!("the layer has no section (bbox_mm null) but its masks light {count} pixel(s) ({lit} of the field)"));
+            return at(format!("the layer has no section (bbox_mm null) but its masks light {} ({lit} of the field)", count_of(count, "pixel", "pixels")));
         }
         let min = self.min_lit(layer);
         let Some(b) = px.lit_box_px else {
@@ -251,11 +251,11 @@ impl ContentRule {
         }
         if (count as f64) < min {
             let (lit_mm2, least) = (count as f64 * p * p, min.ceil());
-            return at(format!("its masks light {count} pixel(s) ({lit_mm2:.3} mm²), too few for the section's area {area:.3} mm² (at least {least:.0} expected)"));
+            return at(format!("its masks light {} ({lit_mm2:.3} mm²), too few for the section's area {area:.3} mm² (at least {least:.0} expected)", count_of(count, "pixel", "pixels")));
         }
         let g = px.gray_sum;
         if self.binary && g != 255 * count {
-            return at(format!("settings.binary is true, but its masks hold grays other than 0 and 255 ({count} lit pixel(s), gray sum {g})"));
+            return at(format!("settings.binary is true, but its masks hold grays other than 0 and 255 ({}, gray sum {g})", count_of(count, "lit pixel", "lit pixels")));
         }
         let shown = g as f64 / 255.0 * p * p;
         if self.exact_area && (shown - area).abs() > AREA_REL_TOL * area {
@@ -335,9 +335,9 @@ mod tests {
         says(
             &v,
             2,
-            "layer 3: the layer has no section (bbox_mm null) but its masks light 264 pixel(s)",
+            "layer 3: the layer has no section (bbox_mm null) but its masks light 264 pixels",
         );
-        says(&v, 3, "layer 5: its masks light 16 pixel(s) (0.064 mm²), too few for the section's area 0.935 mm² (at least 113 expected)");
+        says(&v, 3, "layer 5: its masks light 16 pixels (0.064 mm²), too few for the section's area 0.935 mm² (at least 113 expected)");
         says(&v, 4, "layer 6: its masks light columns 13..33, rows 5..14");
         says(&v, 6, "layer 8: its grays add up to 1.06372833 mm² (gray sum 67320 / 255 × pixel area), but the section's area is 0.935297199 mm²");
         assert_eq!(v.problems[0].file.as_deref(), Some("masks/00001.png"));
@@ -348,7 +348,7 @@ mod tests {
         m.settings.binary = true;
         let v = verify(&dir, &m);
         assert_eq!(found(&v), content(&[0, 1, 3, 6, 9]), "{:#?}", v.problems);
-        says(&v, 0, "layer 0: settings.binary is true, but its masks hold grays other than 0 and 255 (264 lit pixel(s), gray sum 59192)");
+        says(&v, 0, "layer 0: settings.binary is true, but its masks hold grays other than 0 and 255 (264 lit pixels, gray sum 59192)");
         // A section 11 px high holds a circle of 5.5 px: 4.1 px wholly lit around its centre.
         for l in &mut m.layers {
             l.max_fill_distance_mm = Some(5.5 * PX);

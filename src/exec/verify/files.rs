@@ -5,6 +5,7 @@ use super::{problem, problem_in};
 use crate::bundle::machine::{Machine, Projector};
 use crate::bundle::{sha256_hex, BundleSource, Manifest, MaskPixels, MANIFEST};
 use crate::exec::{Kind, Violation};
+use crate::text::count;
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder};
 use rayon::prelude::*;
@@ -33,7 +34,13 @@ pub(super) fn check_gray_maps(
         };
         let Some(proj) = machine.projector.get(o.projector as usize) else {
             let k = machine.projector.len();
-            bad(file, format!("{what}: the machine has {k} projector(s)"));
+            bad(
+                file,
+                format!(
+                    "{what}: the machine has {}",
+                    count(k as u64, "projector", "projectors")
+                ),
+            );
             continue;
         };
         if !is_inside(file) {
@@ -283,7 +290,7 @@ mod tests {
         ends(
             &v,
             1,
-            "gray map of projector 2: the machine has 2 projector(s)",
+            "gray map of projector 2: the machine has 2 projectors",
         );
         says(
             &v,

@@ -24,6 +24,7 @@ use super::{Kind, Violation};
 use crate::bundle::machine::{Machine, Projector};
 use crate::bundle::regions::{field_runs, lit_runs, placed as placed_runs, Placement, Run};
 use crate::bundle::{BundleSource, Manifest, MaskPixels, MaskRef, MANIFEST};
+use crate::text::count;
 use content::ContentRule;
 use files::{check_gray_maps, check_png, is_inside, PngCheck};
 use rayon::prelude::*;
@@ -276,7 +277,10 @@ fn against_record(
             true => format!("Adler-32 of its rows {:08x}", p.adler32),
             false => format!("gray sum {}", p.gray_sum),
         };
-        format!("{} lit pixel(s) ({b} of the field), {sum}", p.lit_px)
+        format!(
+            "{} ({b} of the field), {sum}",
+            count(p.lit_px, "lit pixel", "lit pixels")
+        )
     };
     let msg = format!(
         "layer {i}: the mask shows {}, but job.json records {} (the mask, or its projector's offset_px or mirroring, is not what the job was made with)",
@@ -336,7 +340,10 @@ fn check_structure<'m>(
         for m in &l.masks {
             let (f, k) = (m.file.as_str(), m.projector);
             if k as usize >= projectors {
-                let msg = format!("layer {i}: mask for projector {k}, but the machine has {projectors} projector(s)");
+                let msg = format!(
+                    "layer {i}: mask for projector {k}, but the machine has {}",
+                    count(projectors as u64, "projector", "projectors")
+                );
                 add(at, Kind::Manifest, (f, f), &msg);
                 incomplete.insert(i);
                 continue;
@@ -379,8 +386,9 @@ fn check_structure<'m>(
         // layer are exposed in turn): its records name one projector each.
         if seen.len() < projectors && !(shared_masks && seen.len() == 1) {
             let msg = format!(
-                "layer {i} has masks for {} of the machine's {projectors} projector(s)",
-                seen.len()
+                "layer {i} has masks for {} of the machine's {}",
+                seen.len(),
+                count(projectors as u64, "projector", "projectors")
             );
             add(at, Kind::Manifest, job, &msg);
             incomplete.insert(i);
