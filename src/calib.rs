@@ -55,9 +55,23 @@ pub fn working_curve(
     n: usize,
     [lo, hi]: [f64; 2],
 ) -> std::result::Result<WorkingCurve, String> {
-    if !((2..=64).contains(&n) && lo > 0.0 && hi > lo && hi.is_finite()) {
+    if !(2..=64).contains(&n) {
         return Err(format!(
-            "working curve: {n} windows over {lo}..{hi} s; give 2 to 64 windows and 0 < LO < HI"
+            "working curve: {}; give 2 to 64 windows",
+            crate::text::count(n as u64, "window", "windows")
+        ));
+    }
+    let (l, h) = (crate::text::number(lo), crate::text::number(hi));
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Err(format!(
+            "working curve: exposures {l}..{h} s; give 0 < LO < HI"
+        ));
+    }
+    // The longest window's exposure is the layer's.
+    if hi > crate::profile::MAX_DURATION_S {
+        return Err(format!(
+            "working curve: exposures {l}..{h} s; the longest is the layer's exposure, at most {} s",
+            crate::text::number(crate::profile::MAX_DURATION_S)
         ));
     }
     let f = p.field();

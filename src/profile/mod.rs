@@ -498,13 +498,16 @@ pub(crate) fn check_travel(min: f64, max: f64, home: f64) -> std::result::Result
 /// Physical ranges of the quantities a profile holds, by the unit its key ends with (every
 /// key carries its unit): durations, speeds, accelerations and lengths. A value outside is
 /// a typo or a unit mix-up (µm for mm, ms for s), and would plan a job that overflows.
+/// The longest duration a profile may give (a layer's exposure, a wait), s: about 11 days.
+pub const MAX_DURATION_S: f64 = 1e6;
+
 const UNIT_RANGES: [(&str, &str, f64, f64); 6] = [
     // (key suffix, what, smallest magnitude when not 0, largest magnitude)
     ("_pa_s", "a viscosity", 1e-6, 1e6),
     ("_mm_s2", "an acceleration", 1e-6, 1e6),
     ("_mm_s", "a speed", 1e-6, 1e4),
     ("steps_per_mm", "a stage resolution", 1e-3, 1e7),
-    ("_s", "a duration", 0.0, 1e6),
+    ("_s", "a duration", 0.0, MAX_DURATION_S),
     ("_mm", "a length", 0.0, 1e4),
 ];
 

@@ -241,20 +241,28 @@ fn bad_sheets_are_refused_in_one_line_naming_file_line_and_column() {
         &dir,
         &["calibrate", "resin", "s.csv", "-o", "r.toml"],
     ));
-    // A bad range writes no job and no sheet.
-    let o = run_in(
-        &dir,
-        &[
-            "testjob",
-            "working-curve",
-            "-o",
-            "w.dmdjob",
-            "--exposure",
-            "9..3",
-        ],
-    );
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(!dir.join("w.dmdjob").exists() && !dir.join("w.csv").exists());
+    // A bad range or count writes no job and no sheet, and says which it is.
+    for (args, want) in [
+        (
+            ["--exposure", "9..3"],
+            "working curve: exposures 9..3 s; give 0 < LO < HI",
+        ),
+        (
+            ["--exposure", "1e-9..1e9"],
+            "working curve: exposures 1e-9..1e9 s; the longest is the layer's exposure, at most 1000000 s",
+        ),
+        (
+            ["--windows", "1"],
+            "working curve: 1 window; give 2 to 64 windows",
+        ),
+    ] {
+        let mut a = vec!["testjob", "working-curve", "-o", "w.dmdjob"];
+        a.extend(args);
+        let o = run_in(&dir, &a);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert_eq!(stderr(&o), format!("dmdsl: error: {want}\n"));
+        assert!(!dir.join("w.dmdjob").exists() && !dir.join("w.csv").exists());
+    }
 }
 
 /// The accuracy sheet filled from measured = scale·nominal ± offset (per axis; − for holes
