@@ -479,8 +479,8 @@ fn render_cure(o: &mut String, c: &super::cure::CureCheck) {
     });
     let _ = writeln!(
         o,
-        "cure: edge offset {} px mean ({:.3} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
-        signed(c.signed_mean_px, 2), c.signed_mean_mm, c.edge_offset_px.p95, c.vanished, c.merged
+        "cure: edge offset {} px mean ({} mm), {:.2} px p95; {} vanished, {} merged; print-through {pt}{z}",
+        signed(c.signed_mean_px, 2), signed(c.signed_mean_mm, 3), c.edge_offset_px.p95, c.vanished, c.merged
     );
     if let Some((s, l)) = c.slicer.as_ref().and_then(|s| Some((s, s.max_diff_layer?))) {
         let islands = match s.vanish_disagreements.len() {
