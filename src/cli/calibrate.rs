@@ -105,6 +105,13 @@ pub(crate) fn calibrate(a: CalibrateArgs, quiet: bool) -> anyhow::Result<u8> {
     use crate::optics::{calib::FitOptions, Units};
     let policy = a.warnings.policy(&[])?;
     let field = Profile::resolve(&a.profile)?.field();
+    // A size that slice would refuse in the calibration file is refused before the fit.
+    for (flag, key, v) in [
+        ("--zone-mm", "zone_mm", a.zone_mm),
+        ("--extrapolate-mm", "extrapolate_mm", a.extrapolate_mm),
+    ] {
+        profile::check_unit(flag, key, v).map_err(crate::error::Error::Usage)?;
+    }
     let fit = FitOptions {
         units: if a.relative {
             Units::Relative

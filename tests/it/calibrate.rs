@@ -557,6 +557,20 @@ fn bad_measurements_are_one_line_errors_with_exit_2() {
     let o = run_in(&dir, &["calibrate", "nope.csv", "-o", "c.toml"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("nope.csv"));
+    // Sizes slice would refuse in the file it writes, refused before anything is written.
+    let m = fixture("measurements.csv");
+    for (flag, v) in [("--zone-mm", "1e9"), ("--extrapolate-mm", "1e300")] {
+        let args = ["calibrate", m.to_str().unwrap(), "-o", "c.toml", flag, v];
+        let o = run_in(&dir, &args);
+        assert_eq!(o.status.code(), Some(2), "{flag}");
+        let e = stderr(&o);
+        let want = "is not a length a machine has (0.0 to 10000.0; check its unit)\n";
+        assert!(
+            e.starts_with(&format!("dmdsl: error: {flag} = ")) && e.ends_with(want),
+            "{e}"
+        );
+        assert!(!dir.join("c.toml").exists() && !dir.join("c-response.png").exists());
+    }
 }
 
 #[test]
