@@ -219,14 +219,14 @@ pub fn render_human(s: &Summary) -> String {
         for (what, x, decimals, unit) in rows {
             // An imported job's file holds images, not the sections these come from.
             let Some(x) = x else {
-                let _ = writeln!(o, "  {what:<23} {:>12}", "not in the file");
+                let _ = writeln!(o, "  {what:<23} {:>17}", "not in the file");
                 continue;
             };
             let value = match s.unmeasured && what == "largest area" {
                 true => "not measured".to_string(),
                 false => format!("{:.decimals$}{unit}", x.value),
             };
-            let _ = writeln!(o, "  {what:<23} {value:>12}  layer {}", x.layer);
+            let _ = writeln!(o, "  {what:<23} {value:>17}  layer {}", x.layer);
         }
     }
     for p in &s.pictures {

@@ -346,9 +346,17 @@ fn an_imported_job_states_no_section_figures() {
         assert!(e["area_mm2"]["value"].as_f64().unwrap() > 0.0, "{e}");
         let out = stdout(&run_in(&dir, &["inspect", job, "--chart", "c.png"]));
         assert!(out.contains("imported from cube3mm.sl1"), "{out}");
-        for what in ["largest fill distance", "most islands"] {
+        // In the value column, where the known figures end (before their layer).
+        let area = out.lines().find(|l| l.contains("largest area")).unwrap();
+        let column = area.find("  layer").unwrap();
+        for what in ["largest fill distance", "most islands on nothing"] {
             let line = out.lines().find(|l| l.contains(what)).unwrap_or_default();
-            assert!(line.contains("not in the file"), "{out}");
+            assert!(line.ends_with(" not in the file"), "{out}");
+            assert_eq!(
+                line.chars().count(),
+                area[..column].chars().count(),
+                "{out}"
+            );
         }
         assert!(dir.join("c.png").is_file());
     }
