@@ -143,6 +143,17 @@ pub struct Difference {
     pub machine: String,
 }
 
+/// A profile key as the record's patterns name it: `projector.0.pixel_mm` is
+/// `projector[].pixel_mm` (as in `unstated` and [`NOT_COMPARED`]).
+fn key_pattern(key: &str) -> String {
+    key.split('.')
+        .fold(String::new(), |k, part| match part.parse::<u32>() {
+            Ok(_) => k + "[]",
+            Err(_) if k.is_empty() => part.to_string(),
+            Err(_) => format!("{k}.{part}"),
+        })
+}
+
 /// Keys [`Machine::differences`] leaves out (`[]` stands for every index): names, and what
 /// the job was made for rather than what runs it (its process, resin, normal exposure and
 /// its projectors' calibrations, which the executor takes from the job's own record).
@@ -235,7 +246,9 @@ impl Machine {
     }
 
     /// This record with `overrides` (`run --set`, profile key names: `projector.0.pixel_mm`)
-    /// applied, read back and validated; the keys set are stated from then on.
+    /// applied, read back and validated; the keys set are stated from then on. A key of
+    /// what the job was made for (`NOT_COMPARED`: its exposure, resin, process, a
+    /// projector's calibration) is refused: the executor takes those from the job.
     pub fn with_overrides(
         &self,
         overrides: &[crate::profile::Override],
@@ -245,6 +258,16 @@ impl Machine {
             origin: self.name.clone(),
             msg: format!("{}: {msg}", labels.join(", ")),
         };
+        for o in overrides {
+            let pattern = key_pattern(&o.key);
+            let of_job = |n: &&&str| pattern == ***n || pattern.starts_with(&format!("{n}."));
+            if let Some(n) = NOT_COMPARED.iter().find(of_job) {
+                return Err(crate::error::Error::Usage(format!(
+                    "{}: {n} is the job's, not the machine's: the run takes it from the job (slice again to change it)",
+                    o.label
+                )));
+            }
+        }
         let mut table = toml::Table::try_from(self).map_err(|e| error(e.to_string()))?;
         for o in overrides {
             o.apply(&mut table).map_err(&error)?;
@@ -254,15 +277,7 @@ impl Machine {
         m.validate().map_err(&error)?;
         m.sources = self.sources.clone();
         for o in overrides {
-            // `projector.0.pixel_mm` is `projector[].pixel_mm` in `unstated`.
-            let key = o
-                .key
-                .split('.')
-                .fold(String::new(), |k, part| match part.parse::<u32>() {
-                    Ok(_) => k + "[]",
-                    Err(_) if k.is_empty() => part.to_string(),
-                    Err(_) => format!("{k}.{part}"),
-                });
+            let key = key_pattern(&o.key);
             m.unstated.retain(|u| !u.starts_with(&key));
             m.sources.retain(|k, _| !k.starts_with(&o.key));
         }

@@ -451,6 +451,15 @@ fn unreadable_bundles_and_bad_options_exit_2() {
             vec!["run", "box.dmdjob", "--trace", "no/such/dir/t.csv"],
             "t.csv",
         ),
+        // What the job was made for is the job's: the run would ignore it.
+        (
+            vec!["run", "box.dmdjob", "--set", "exposure.layer_s=3"],
+            "dmdsl: error: --set exposure.layer_s=3: exposure is the job's, not the machine's: the run takes it from the job (slice again to change it)",
+        ),
+        (
+            vec!["run", "box.dmdjob", "--set", "projector.0.calibration.zone_mm=3"],
+            "--set projector.0.calibration.zone_mm=3: projector[].calibration is the job's",
+        ),
     ] {
         let o = run_in(&dir, &args);
         let e = stderr(&o);
