@@ -94,6 +94,8 @@ pub const CODES: &[Code] = &[
         "lifts or dips were shortened to end at the top of the stage travel", "check that the shortened moves still separate and recoat the layers; lower the lift or dip, or give the machine's real stage.travel_max_mm"),
     code("plan.beyond-lift-table", Warn, "slices, max_fill_distance_mm, table_max_mm, lift_mm",
         "slices have a max fill distance beyond the hybrid lift table; they use its last row's lift", "add a [[hybrid.olh]] row that reaches this fill distance"),
+    code("plan.bottom-layers-cover-job", Warn, "bottom_layers, transition_layers, layers_total",
+        "the profile's bottom and transition layers reach past the job's last layer: no layer is exposed the normal layer_s", "lower exposure.bottom_layers (--bottom-layers) and exposure.transition_layers to the layers that should bond to the build platform"),
     code("plan.unsupported-islands", Warn, "islands, layers, first_layer, largest_mm",
         "regions of a layer rest on nothing in the layer below and need supports (largest_mm: per layer with islands, its largest island as [layer, x, y, area], mm and mm²)", "slice with --supports to hold them, or orient the part so that they rest on the layer below"),
     code("run.unsupported-regions", Warn, "regions, layers, first_layer, largest_mm",

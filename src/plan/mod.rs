@@ -210,6 +210,7 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
             .with("lift_mm", lift),
         );
     }
+    warnings.extend(bottom_layers_cover_job(profile, layers));
     let with_islands: Vec<&LayerInfo> = layers.iter().filter(|l| l.islands > 0).collect();
     if let Some(first) = with_islands.first() {
         let islands = with_islands.iter().map(|l| l.islands as u64).sum::<u64>();
@@ -250,6 +251,43 @@ fn warnings(profile: &Profile, layers: &[LayerInfo], notes: &Notes) -> Vec<Warni
         );
     }
     warnings
+}
+
+/// The warning for a job none of whose layers gets the normal exposure: the profile's
+/// bottom and transition layers reach past its last layer (and the bottom exposure differs
+/// from the normal one).
+fn bottom_layers_cover_job(profile: &Profile, layers: &[LayerInfo]) -> Option<Warning> {
+    let e = &profile.exposure;
+    let (b, t) = (e.bottom_layers as usize, e.transition_layers as usize);
+    let last = layers.iter().map(|l| l.index).max()?;
+    if last >= b + t || e.bottom_s == e.layer_s {
+        return None;
+    }
+    let n = layers.len() as u64;
+    let what = if last < b {
+        format!(
+            "every layer is exposed bottom_s = {} s",
+            number(e.bottom_s.get())
+        )
+    } else {
+        format!(
+            "the last, on the ramp, is exposed {} s",
+            number(round::time_s(e.layer_exposure_s(last)))
+        )
+    };
+    Some(
+        Warning::new(
+            "plan.bottom-layers-cover-job",
+            format!(
+                "exposure.bottom_layers = {b} and transition_layers = {t} reach past the job's {n} {}: none is exposed the normal layer_s = {} s ({what})",
+                plural(n, "layer", "layers"),
+                number(e.layer_s.get()),
+            ),
+        )
+        .with("bottom_layers", b as u64)
+        .with("transition_layers", t as u64)
+        .with("layers_total", n),
+    )
 }
 
 /// The largest island of each layer that has any: `[layer, x_mm, y_mm, area_mm2]`.

@@ -344,3 +344,40 @@ fn a_layer_height_of_a_half_step_keeps_sweep_runs_unbroken() {
         swept / 0.06
     );
 }
+
+#[test]
+fn a_job_within_its_bottom_and_transition_layers_is_warned() {
+    // bottom-up: 4 bottom layers, then 4 ramping to the normal exposure.
+    let p = Profile::resolve("bottom-up").unwrap();
+    let (b, t) = (4, 4);
+    assert_eq!(
+        (p.exposure.bottom_layers, p.exposure.transition_layers),
+        (b, t)
+    );
+    let code = "plan.bottom-layers-cover-job";
+    let warned = |p: &Profile, n: usize| {
+        let plan = plan(p, &layers_of(n, 0.05, |_| (100.0, 3.0))).unwrap();
+        plan.warnings.into_iter().find(|w| w.code == code)
+    };
+    // Layer 8 is the first at the normal exposure: 9 layers reach it, 8 do not.
+    assert!(warned(&p, 9).is_none());
+    let w = warned(&p, 8).expect("8 layers never reach layer_s");
+    assert_eq!(w.fields["layers_total"], 8);
+    assert_eq!(w.fields["bottom_layers"], 4);
+    assert_eq!(w.fields["transition_layers"], 4);
+    assert!(
+        w.message.contains("the last, on the ramp, is exposed"),
+        "{}",
+        w.message
+    );
+    let w = warned(&p, 3).expect("3 layers are all bottom layers");
+    assert!(
+        w.message.contains("every layer is exposed bottom_s"),
+        "{}",
+        w.message
+    );
+    // A profile whose bottom exposure is the normal one (a working-curve job) is not.
+    let mut same = p.clone();
+    same.exposure.bottom_s = same.exposure.layer_s;
+    assert!(warned(&same, 3).is_none());
+}

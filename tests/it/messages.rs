@@ -215,6 +215,17 @@ fn mesh_plan_and_exposure_messages_name_a_remedy() {
             "hybrid.olh.2.up_to_mm=8",
         ],
     ));
+    ws.extend(raised(
+        &dir,
+        &[
+            "slice",
+            "small.stl",
+            "-o",
+            "bl.dmdjob",
+            "--bottom-layers",
+            "100",
+        ],
+    ));
     let island = fixture("island.stl");
     ws.extend(raised(
         &dir,
@@ -252,6 +263,7 @@ const PLAN_CODES: &[&str] = &[
     "plan.wait-capped",
     "plan.travel-clamped",
     "plan.beyond-lift-table",
+    "plan.bottom-layers-cover-job",
     "plan.unsupported-islands",
     "run.unsupported-regions",
     "exposure.implausible-dose",
