@@ -266,12 +266,14 @@ fn bottom_layers_cover_job(profile: &Profile, layers: &[LayerInfo]) -> Option<Wa
     let n = layers.len() as u64;
     let what = if last < b {
         format!(
-            "every layer is exposed bottom_s = {} s",
+            "{} exposed bottom_s = {} s",
+            plural(n, "it is", "every layer is"),
             number(e.bottom_s.get())
         )
     } else {
         format!(
-            "the last, on the ramp, is exposed {} s",
+            "{}, on the ramp, is exposed {} s",
+            plural(n, "it", "the last"),
             number(round::time_s(e.layer_exposure_s(last)))
         )
     };
@@ -279,8 +281,9 @@ fn bottom_layers_cover_job(profile: &Profile, layers: &[LayerInfo]) -> Option<Wa
         Warning::new(
             "plan.bottom-layers-cover-job",
             format!(
-                "exposure.bottom_layers = {b} and transition_layers = {t} reach past the job's {n} {}: none is exposed the normal layer_s = {} s ({what})",
+                "exposure.bottom_layers = {b} and transition_layers = {t} reach past the job's {n} {}: {} exposed the normal layer_s = {} s ({what})",
                 plural(n, "layer", "layers"),
+                plural(n, "it is not", "none is"),
                 number(e.layer_s.get()),
             ),
         )

@@ -376,6 +376,14 @@ fn a_job_within_its_bottom_and_transition_layers_is_warned() {
         "{}",
         w.message
     );
+    let w = warned(&p, 1).expect("1 layer is a bottom layer");
+    assert!(
+        w.message
+            .contains("1 layer: it is not exposed the normal layer_s")
+            && w.message.contains("(it is exposed bottom_s"),
+        "{}",
+        w.message
+    );
     // A profile whose bottom exposure is the normal one (a working-curve job) is not.
     let mut same = p.clone();
     same.exposure.bottom_s = same.exposure.layer_s;
