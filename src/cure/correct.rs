@@ -65,7 +65,8 @@ pub fn correct_coverage(
     let reach = |i: usize| std::f64::consts::FRAC_1_SQRT_2 + shifts.of_edge(i).abs();
     let w = mask.width as usize;
     let mut changed = 0;
-    nearest_edges(segs, (lit, STRIP), reach, |r, c, i| {
+    nearest_edges(segs, (lit, STRIP), reach, |(r, c, i), ahead| {
+        super::prefetch(&mask.data, ahead.0 * w + ahead.1);
         let s = &segs.segs[i];
         let p = [index_f64(c) + 0.5, index_f64(r) + 0.5];
         // Signed distance of the centre outside the edge's line.
@@ -89,15 +90,17 @@ pub fn correct_coverage(
 /// entries stay in cache).
 const STRIP: usize = 16;
 
-/// Calls `f(row, column, edge)` for every pixel of the box `lit` whose centre lies within
-/// `reach_of(edge)` px of an edge of `segs`, with the nearest of those edges' index (the
-/// first one at equal distances); only the pixels some edge comes near are visited, by
-/// strips of `strip` rows (in the order edges first reach them in each).
+/// Calls `f((row, column, edge), ahead)` for every pixel of the box `lit` whose centre lies
+/// within `reach_of(edge)` px of an edge of `segs`, with the nearest of those edges' index
+/// (the first one at equal distances); only the pixels some edge comes near are visited, by
+/// strips of `strip` rows (in the order edges first reach them in each). `ahead` is the
+/// (row, column) of a pixel `f` will be called with [`AHEAD`] calls later (or its own), for
+/// `f` to prefetch what it will read there.
 pub(super) fn nearest_edges(
     segs: &Segments,
     (lit, strip): (PixelBox, usize),
     reach_of: impl Fn(usize) -> f64,
-    mut f: impl FnMut(usize, usize, usize),
+    mut f: impl FnMut((usize, usize, usize), (usize, usize)),
 ) {
     let (bw, strip) = (lit.c1 - lit.c0, strip.clamp(1, (lit.r1 - lit.r0).max(1)));
     BAND.with(|band| {
@@ -149,20 +152,27 @@ pub(super) fn nearest_edges(
                         let (ex, ey) = (wx - t * dx, wy - t * dy);
                         let d2 = ex * ex + ey * ey;
                         if d2 < r2 {
-                            band.offer((r - s0) * bw + (c - lit.c0), d2 as f32, i as u32);
+                            band.offer([r - s0, c - lit.c0], bw, d2 as f32, i as u32);
                         }
                     }
                 }
             }
-            for &k in &band.touched {
-                let (_, i) = band.best[k as usize];
-                let (r, c) = (k as usize / bw, k as usize % bw);
-                f(r + s0, c + lit.c0, i as usize);
+            let at = |[r, c]: [u32; 2]| (r as usize + s0, c as usize + lit.c0);
+            let touched = band.touched();
+            for (j, &p) in touched.iter().enumerate() {
+                let (_, i) = band.best[p[0] as usize * bw + p[1] as usize];
+                let (r, c) = at(p);
+                let ahead = touched.get(j + AHEAD).map_or((r, c), |&a| at(a));
+                f((r, c, i as usize), ahead);
             }
-            band.reset();
+            band.reset(bw);
         }
     })
 }
+
+/// How many pixels ahead [`nearest_edges`] tells its callback of: about the misses a core
+/// keeps in flight.
+const AHEAD: usize = 8;
 
 /// ⌈x⌉ for x ≥ 0 (0 below).
 #[inline]
@@ -176,7 +186,11 @@ fn ceil(x: f64) -> usize {
 #[derive(Default)]
 struct Band {
     best: Vec<(f32, u32)>,
-    touched: Vec<u32>,
+    /// The entries of `best` written (row and column in the strip), in the order first
+    /// written: the first `count` (room for every entry, so an offer writes its slot
+    /// without a branch).
+    touched: Vec<[u32; 2]>,
+    count: usize,
     /// Per strip of rows, the edges that reach it and their rows.
     strips: Vec<Vec<(u32, u32, u32)>>,
 }
@@ -185,28 +199,40 @@ impl Band {
     fn prepare(&mut self, n: usize, strips: usize) {
         if self.best.len() < n {
             self.best.resize(n, (f32::INFINITY, u32::MAX));
+            // One more: an offer writes its entry past the last one before it counts it.
+            self.touched.resize(n + 1, [0, 0]);
         }
-        self.touched.clear();
+        self.count = 0;
         self.strips
             .resize_with(strips.max(self.strips.len()), Vec::new);
         self.strips[..strips].iter_mut().for_each(Vec::clear);
     }
 
-    fn offer(&mut self, k: usize, d: f32, i: u32) {
-        let slot = &mut self.best[k];
-        if slot.1 == u32::MAX {
-            self.touched.push(k as u32);
-        }
-        if d < slot.0 {
-            *slot = (d, i);
-        }
+    /// Offers edge `i` at squared distance `d` to the entry of row and column `at` of a
+    /// strip `bw` columns wide. Branch-free: whether an entry is new and whether an edge
+    /// is nearer follow no pattern a CPU predicts.
+    #[inline(always)]
+    fn offer(&mut self, at: [usize; 2], bw: usize, d: f32, i: u32) {
+        let slot = &mut self.best[at[0] * bw + at[1]];
+        self.touched[self.count] = [at[0] as u32, at[1] as u32];
+        self.count += (slot.1 == u32::MAX) as usize;
+        let nearer = d < slot.0;
+        *slot = (
+            if nearer { d } else { slot.0 },
+            if nearer { i } else { slot.1 },
+        );
     }
 
-    fn reset(&mut self) {
-        for &k in &self.touched {
-            self.best[k as usize] = (f32::INFINITY, u32::MAX);
+    fn touched(&self) -> &[[u32; 2]] {
+        &self.touched[..self.count]
+    }
+
+    /// Clears the entries written (of a strip `bw` columns wide).
+    fn reset(&mut self, bw: usize) {
+        for &[r, c] in &self.touched[..self.count] {
+            self.best[r as usize * bw + c as usize] = (f32::INFINITY, u32::MAX);
         }
-        self.touched.clear();
+        self.count = 0;
     }
 }
 
@@ -237,6 +263,79 @@ mod tests {
                 let want = inside as f64 / (k * k) as f64;
                 let got = halfplane_coverage(n, u);
                 assert!((got - want).abs() < 3e-3, "n {n:?} u {u}: {got} vs {want}");
+            }
+        }
+    }
+
+    /// [`nearest_edges`] against brute force over every pixel and edge: each pixel within
+    /// reach of an edge is called once, with the nearest (the first at equal distances),
+    /// and told of the pixel called [`AHEAD`] calls later; in boxes from a few pixels (every
+    /// entry of the band touched) to a few dozen, strips of 1 to 5 rows.
+    #[test]
+    fn nearest_edges_match_brute_force() {
+        let mut rnd = crate::test_support::xorshift(7);
+        for case in 0..60 {
+            let (w, h) = (1 + (rnd() * 30.0) as usize, 1 + (rnd() * 30.0) as usize);
+            let lit = PixelBox::new(3, 3 + h, 5, 5 + w);
+            let field_h = 40.0;
+            // Random polygons around the box (build-plane mm at 1 mm pixels).
+            let mut pt = || {
+                [
+                    3.0 + rnd() * (w as f64 + 4.0),
+                    field_h - 1.0 - rnd() * (h as f64 + 4.0),
+                ]
+            };
+            let contours: Vec<Vec<[f64; 2]>> = (0..1 + case % 3)
+                .map(|_| (0..3 + case % 4).map(|_| pt()).collect())
+                .collect();
+            let segs = Segments::new(&contours, 1.0, field_h);
+            let reach =
+                |i: usize| 0.4 + (i % 4) as f64 * 0.6 + if case % 7 == 0 { 40.0 } else { 0.0 };
+            let mut calls = Vec::new();
+            nearest_edges(&segs, (lit, 1 + case % 5), reach, |(r, c, i), ahead| {
+                calls.push(((r, c), i, ahead));
+            });
+            let mut want = std::collections::BTreeMap::new();
+            for r in lit.rows() {
+                for c in lit.cols() {
+                    let p = [c as f64 + 0.5, r as f64 + 0.5];
+                    let mut best: Option<(f32, usize)> = None;
+                    for (i, s) in segs.segs.iter().enumerate() {
+                        let (dx, dy) = (s.b[0] - s.a[0], s.b[1] - s.a[1]);
+                        let (wx, wy) = (p[0] - s.a[0], p[1] - s.a[1]);
+                        let l2 = dx * dx + dy * dy;
+                        let t = if l2 > 0.0 {
+                            ((wx * dx + wy * dy) / l2).clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        let d2 = (wx - t * dx).powi(2) + (wy - t * dy).powi(2);
+                        if d2 < reach(i) * reach(i) && best.is_none_or(|b| (d2 as f32) < b.0) {
+                            best = Some((d2 as f32, i));
+                        }
+                    }
+                    if let Some((_, i)) = best {
+                        want.insert((r, c), i);
+                    }
+                }
+            }
+            let got: std::collections::BTreeMap<_, _> =
+                calls.iter().map(|&(p, i, _)| (p, i)).collect();
+            assert_eq!(got.len(), calls.len(), "case {case}: a pixel called twice");
+            assert_eq!(got, want, "case {case}");
+            if case % 7 == 0 {
+                assert_eq!(calls.len(), w * h, "case {case}: every pixel");
+            }
+            // `ahead` is the pixel AHEAD calls later within the strip, else the pixel itself.
+            let strip = 1 + case % 5;
+            for (j, &(p, _, ahead)) in calls.iter().enumerate() {
+                let later = calls.get(j + AHEAD).map(|c| c.0);
+                let same_strip =
+                    |q: (usize, usize)| (q.0 - lit.r0) / strip == (p.0 - lit.r0) / strip;
+                match later.filter(|&q| same_strip(q)) {
+                    Some(q) => assert_eq!(ahead, q, "case {case}"),
+                    None => assert_eq!(ahead, p, "case {case}"),
+                }
             }
         }
     }

@@ -291,7 +291,7 @@ pub fn widen(
             &segs,
             (*nb, usize::MAX),
             |_| reach,
-            |r, c, i| {
+            |(r, c, i), _| {
                 let s = &segs.segs[i];
                 let sd = (c as f64 + 0.5 - s.a[0]) * s.n[0] + (r as f64 + 0.5 - s.a[1]) * s.n[1];
                 let j = (r - nb.r0) * (nb.c1 - nb.c0) + (c - nb.c0);

@@ -14,7 +14,7 @@ const FILE_LINES: usize = 1200;
 /// One function under `src/`, lines from its signature to its closing brace.
 const FN_LINES: usize = 120;
 /// All of `src/`, lines.
-const SRC_LINES: usize = 59_876;
+const SRC_LINES: usize = 60_011;
 
 /// Each function of `code` (already stripped of comments and literals) longer than
 /// `limit` lines: (first line, name, lines).
